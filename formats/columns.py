@@ -1,0 +1,220 @@
+"""Column/unit mapping for foreign CSVs: inferred from headers, given as options, or from a TOML profile.
+
+A mapping says, for each source column, which imutool column it becomes and the unit its values are in.
+Examples of headers understood: ``Gyroscope X (deg/s)``, ``acc_x_g``, ``mag_x_gauss``, ``Time [s]``,
+``ACC_Heave_SB [m/s2]``, ``gyr_z``. Columns that are not sensor axes are kept as plain channels under a
+cleaned name (``Heave [m]`` → ``heave`` in m), so labels such as ``movement`` survive.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from . import units as _units
+from .errors import ImutoolError
+
+try:  # Python 3.11+
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+_QUANTITY_WORDS = [
+    ("gyro", ("gyroscope", "gyro", "gyr", "angular_velocity", "angvel", "omega", "rate")),
+    ("accel", ("accelerometer", "acceleration", "accel", "acc", "linear_acceleration")),
+    ("mag", ("magnetometer", "magnetic_field", "magnetic", "mag", "compass")),
+    ("temp", ("temperature", "temp")),
+]
+_TIME_WORDS = ("time", "timestamp", "t", "stamp", "seconds", "time_s")
+_DEFAULT_UNIT = {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT", "temp": "degC", "time": "s"}
+_CANONICAL = {"time", "temp"} | {f"{q}_{a}" for q in ("gyro", "accel", "mag") for a in "xyz"}
+
+
+@dataclass
+class ColumnMap:
+    """How one source column becomes an imutool column."""
+
+    source: str
+    target: str
+    unit: str | None  # unit of the source values; None = dimensionless / unknown, kept as is
+    inferred: bool = True
+    unit_assumed: bool = False
+    scale: float = 1.0  # extra multiplier (counts → unit), applied before the unit conversion
+
+    def describe(self) -> str:
+        u = self.unit or "-"
+        note = " (unit assumed)" if self.unit_assumed else ""
+        sc = f" ×{self.scale:g}" if self.scale != 1.0 else ""
+        return f"{self.source!r} → {self.target} [{u}{sc}]{note}"
+
+
+@dataclass
+class Mapping:
+    columns: list[ColumnMap] = field(default_factory=list)
+    origin: str = "inferred"
+
+    def describe(self) -> list[str]:
+        return [c.describe() for c in self.columns]
+
+    def as_meta(self) -> str:
+        return "; ".join(f"{c.source}->{c.target}[{c.unit or '-'}{'' if c.scale == 1 else f'x{c.scale:g}'}]"
+                         for c in self.columns)
+
+
+def clean_name(header: str) -> str:
+    """A column name reduced to lower-case identifier form, units in brackets removed."""
+    h = re.sub(r"[\(\[\{].*?[\)\]\}]", "", header)
+    h = re.sub(r"[^0-9a-zA-Z]+", "_", h).strip("_").lower()
+    return h or "col"
+
+
+def _unit_in(header: str) -> str | None:
+    m = re.search(r"[\(\[\{]\s*([^\)\]\}]*)\s*[\)\]\}]", header)
+    if m:
+        return m.group(1).strip()
+    return None
+
+
+def _infer_one(header: str) -> ColumnMap:
+    explicit_unit = _unit_in(header)
+    name = clean_name(header)
+    tokens = [t for t in name.split("_") if t]
+    # time
+    if name in _TIME_WORDS or (tokens and tokens[0] in ("time", "timestamp") and len(tokens) <= 2):
+        unit = explicit_unit
+        if unit is None and len(tokens) == 2 and _units.is_known(tokens[1]):
+            unit = tokens[1]
+        if unit is None:
+            return ColumnMap(header, "time", "s", unit_assumed=True)
+        return ColumnMap(header, "time", unit)
+    axis = None
+    for t in tokens:
+        if t in ("x", "y", "z"):
+            axis = t
+    quantity = None
+    if axis is not None:
+        joined = "_".join(tokens)
+        for q, words in _QUANTITY_WORDS:
+            if q == "temp":
+                continue
+            if any(w == t for t in tokens for w in words) or any(joined.startswith(w) for w in words):
+                quantity = q
+                break
+    if quantity is None and any(t in ("temp", "temperature") for t in tokens) and len(tokens) <= 3:
+        quantity = "temp"
+    if quantity is None:
+        unit = explicit_unit if explicit_unit and _units.is_known(explicit_unit) else None
+        target = name
+        if header in _CANONICAL or re.fullmatch(r"[a-z_][a-z0-9_]*", header):
+            target = header
+        return ColumnMap(header, target, unit)
+    target = quantity if quantity == "temp" else f"{quantity}_{axis}"
+    unit = explicit_unit
+    if unit is None:
+        for t in tokens:
+            if t not in ("x", "y", "z") and _units.is_known(t) and t not in ("t", "n", "m", "c", "1", "-"):
+                unit = t
+        # short forms that clash with other words: acc_x_g, mag_x_t (tesla), temp_c
+        last = tokens[-1]
+        if unit is None and last in ("g", "t", "c") and last != axis:
+            unit = {"g": "g", "t": "T", "c": "degC"}[last]
+    if unit is None:
+        return ColumnMap(header, target, _DEFAULT_UNIT[quantity], unit_assumed=True)
+    return ColumnMap(header, target, unit)
+
+
+def infer_mapping(headers: list[str]) -> Mapping:
+    """Infer the mapping of a foreign header row; raises ImutoolError where two columns claim one target."""
+    cols = [_infer_one(h) for h in headers]
+    seen: dict[str, str] = {}
+    for c in cols:
+        if c.target in seen:
+            # keep both, make the later one unique rather than lose it
+            i = 2
+            while f"{c.target}_{i}" in seen:
+                i += 1
+            c.target = f"{c.target}_{i}"
+        seen[c.target] = c.source
+    for c in cols:
+        q = _expected_quantity(c.target)
+        if q and c.unit:
+            try:
+                _units.factor_to_si(c.unit, q)
+            except ImutoolError as e:
+                raise ImutoolError(f"column {c.source!r}: {e}") from None
+    return Mapping(cols, "inferred")
+
+
+def _expected_quantity(target: str) -> str | None:
+    base = target.split("_")[0]
+    return {"gyro": "angular_rate", "accel": "acceleration", "mag": "magnetic", "time": "time",
+            "temp": "temperature"}.get(base)
+
+
+def parse_mapping_option(spec: str, headers: list[str]) -> Mapping:
+    """Mapping from a command-line option: ``"Gyro X=gyro_x:deg/s, Acc Z=accel_z:g*0.001"``.
+
+    Each item is ``source=target[:unit][*scale]``; columns not named are inferred.
+    """
+    given: dict[str, ColumnMap] = {}
+    for item in filter(None, (s.strip() for s in spec.split(","))):
+        if "=" not in item:
+            raise ImutoolError(f"--columns item {item!r}: expected SOURCE=TARGET[:UNIT][*SCALE]")
+        src, rhs = (s.strip() for s in item.split("=", 1))
+        scale = 1.0
+        if "*" in rhs:
+            rhs, sc = rhs.split("*", 1)
+            try:
+                scale = float(sc)
+            except ValueError:
+                raise ImutoolError(f"--columns item {item!r}: scale {sc!r} is not a number") from None
+        target, _, unit = rhs.partition(":")
+        if src not in headers:
+            raise ImutoolError(f"--columns: no column {src!r} in the file (has: {', '.join(headers)})")
+        if unit:
+            _units.lookup(unit)
+        given[src] = ColumnMap(src, target.strip(), unit.strip() or None, inferred=False, scale=scale)
+    inferred = infer_mapping(headers)
+    cols = [given.get(c.source, c) for c in inferred.columns]
+    return Mapping(cols, "options")
+
+
+def load_profile(path: str) -> dict:
+    """Read a TOML sensor profile::
+
+        name = "x-io NGIMU"
+        [columns]
+        "Gyroscope X (deg/s)" = { to = "gyro_x", unit = "deg/s" }
+        "ax" = { to = "accel_x", unit = "counts", scale = 0.000598 }   # counts × scale → m/s²
+    """
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as e:
+        raise ImutoolError(f"cannot read profile: {e.strerror}", path=path) from None
+    except tomllib.TOMLDecodeError as e:
+        raise ImutoolError(f"not valid TOML: {e}", path=path) from None
+
+
+def mapping_from_profile(profile: dict, headers: list[str], path: str = "profile") -> Mapping:
+    cols_spec = profile.get("columns", {})
+    if not isinstance(cols_spec, dict):
+        raise ImutoolError("[columns] must be a table", path=path)
+    given: dict[str, ColumnMap] = {}
+    for src, spec in cols_spec.items():
+        if isinstance(spec, str):
+            spec = {"to": spec}
+        if not isinstance(spec, dict) or "to" not in spec:
+            raise ImutoolError(f"column {src!r}: expected {{ to = ..., unit = ... }}", path=path)
+        unit = spec.get("unit")
+        scale = float(spec.get("scale", 1.0))
+        if unit in ("counts", "count", "lsb"):
+            q = _expected_quantity(spec["to"])
+            unit = _DEFAULT_UNIT.get(spec["to"].split("_")[0]) if q else None
+        elif unit:
+            _units.lookup(unit)
+        if src not in headers:
+            raise ImutoolError(f"column {src!r} named in the profile is not in the file", path=path)
+        given[src] = ColumnMap(src, spec["to"], unit, inferred=False, scale=scale)
+    inferred = infer_mapping(headers)
+    return Mapping([given.get(c.source, c) for c in inferred.columns], f"profile {path}")

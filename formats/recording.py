@@ -1,0 +1,455 @@
+"""The recording: one in-memory model for every reader, writer and algorithm (DESIGN.md).
+
+A :class:`Recording` is ``time`` (float64 s), named channels of shape (N,) or (N, k), per-channel units and
+a metadata dict. Vector channels remember the CSV column names they came from (``gyro`` ← ``gyro_x,
+gyro_y, gyro_z``; ``q`` ← ``qw,qx,qy,qz``) so writing back reproduces the columns exactly.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import units as _units
+from .errors import ImutoolError
+from .frames import parse_axis_remap, quat_conjugate, quat_multiply, matrix_to_quat, rotation_about_axes
+
+# Canonical channels and the unit they carry in an imutool CSV (DESIGN.md).
+CANONICAL_UNITS = {
+    "gyro": "rad/s",
+    "accel": "m/s^2",
+    "mag": "uT",
+    "temp": "degC",
+    "roll": "deg",
+    "pitch": "deg",
+    "heading": "deg",
+    "heave": "m",
+    "heave_rate": "m/s",
+    "pos": "m",
+    "vel": "m/s",
+    "gyro_bias": "rad/s",
+    "q": "1",
+    "zvi": "1",
+}
+
+_VECTOR_SUFFIXES = (("_x", "_y", "_z"), ("_n", "_e", "_d"))
+_QUAT_SUFFIXES = ("w", "x", "y", "z")
+
+
+def canonical_unit(name: str) -> str | None:
+    """The unit a canonical channel name carries (``ref_`` prefix and ``_std`` suffix are transparent)."""
+    base = name[4:] if name.startswith("ref_") else name
+    if base.endswith("_std"):
+        base = base[:-4]
+    return CANONICAL_UNITS.get(base)
+
+
+def group_columns(names: list[str]) -> list[tuple[str, list[str]]]:
+    """Group CSV column names into channels: ``a_x,a_y,a_z`` → ``a``; ``qw..qz`` → ``q``; else scalars.
+
+    Returns (channel name, [column names]) in column order of first appearance.
+    """
+    present = set(names)
+    taken: set[str] = set()
+    out: list[tuple[str, list[str]]] = []
+    for n in names:
+        if n in taken:
+            continue
+        group = None
+        for sfx in _VECTOR_SUFFIXES:
+            for s in sfx:
+                if n.endswith(s) and len(n) > len(s):
+                    base = n[: -len(s)]
+                    cols = [base + t for t in sfx]
+                    if all(c in present and c not in taken for c in cols):
+                        group = (base, cols)
+                    break
+            if group:
+                break
+        if group is None and len(n) >= 2 and n[-1] in "wxyz" and n[:-1].endswith("q"):
+            base = n[:-1]
+            cols = [base + t for t in _QUAT_SUFFIXES]
+            if all(c in present and c not in taken for c in cols):
+                group = (base, cols)
+        if group is None:
+            group = (n, [n])
+        taken.update(group[1])
+        out.append(group)
+    return out
+
+
+def default_columns(name: str, width: int) -> list[str]:
+    """Column names for a channel of the given width."""
+    if width == 1:
+        return [name]
+    if width == 4 and (name == "q" or name.endswith("_q") or name.endswith("q")):
+        return [name + s for s in _QUAT_SUFFIXES]
+    if width == 3:
+        if name in ("pos", "vel") or name.endswith(("_pos", "_vel")) or name.startswith(("pos_", "vel_")):
+            return [name + s for s in _VECTOR_SUFFIXES[1]]
+        return [name + s for s in _VECTOR_SUFFIXES[0]]
+    return [f"{name}_{i}" for i in range(width)]
+
+
+@dataclass
+class TimeReport:
+    """What :meth:`Recording.validated` found and did (counts are of input rows)."""
+
+    n_rows: int = 0
+    duplicates: int = 0
+    duplicates_conflicting: int = 0
+    backwards: int = 0
+    nan_rows: int = 0
+    nan_by_channel: dict[str, int] = field(default_factory=dict)
+    gaps: list[tuple[float, float]] = field(default_factory=list)  # (start time, length s)
+    median_dt: float = float("nan")
+    actions: list[str] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "rows": self.n_rows,
+            "duplicate_timestamps": self.duplicates,
+            "duplicate_timestamps_with_different_data": self.duplicates_conflicting,
+            "backwards_steps": self.backwards,
+            "rows_with_nan": self.nan_rows,
+            "nan_by_channel": dict(self.nan_by_channel),
+            "gaps": [{"start_s": float(a), "length_s": float(b)} for a, b in self.gaps],
+            "median_dt_s": float(self.median_dt),
+            "actions": list(self.actions),
+        }
+
+
+@dataclass
+class Recording:
+    """Time series of sensor channels with units and metadata.
+
+    ``time`` is float64 seconds (strictly increasing after :meth:`validated`). ``channels`` maps a name to an
+    array of shape (N,) or (N, k). ``units`` maps a channel name to its unit (see :mod:`formats.units`).
+    ``meta`` holds sensor, frame, source file, rate, mounting, calibration applied, ...
+    ``columns`` maps a channel to its CSV column names (filled in automatically).
+    """
+
+    time: np.ndarray
+    channels: dict[str, np.ndarray] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    columns: dict[str, list[str]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.time = np.ascontiguousarray(self.time, dtype=np.float64)
+        if self.time.ndim != 1:
+            raise ImutoolError("time must be one-dimensional")
+        for name in list(self.channels):
+            self.channels[name] = self._check(name, self.channels[name])
+            self.columns.setdefault(name, default_columns(name, self._width(self.channels[name])))
+            if name not in self.units:
+                cu = canonical_unit(name)
+                if cu is not None:
+                    self.units[name] = cu
+
+    # -- basic access -------------------------------------------------------------------------------------
+    @staticmethod
+    def _width(a: np.ndarray) -> int:
+        return 1 if a.ndim == 1 else a.shape[1]
+
+    def _check(self, name: str, data: Any) -> np.ndarray:
+        a = np.asarray(data)
+        if a.dtype.kind not in "fiub":
+            raise ImutoolError(f"channel {name!r} is not numeric")
+        a = np.ascontiguousarray(a, dtype=np.float64) if a.dtype.kind == "f" or a.dtype.kind in "iub" else a
+        if a.ndim not in (1, 2) or a.shape[0] != self.time.shape[0]:
+            raise ImutoolError(
+                f"channel {name!r} has shape {a.shape}; expected ({self.time.shape[0]},) or "
+                f"({self.time.shape[0]}, k)"
+            )
+        return a
+
+    def __len__(self) -> int:
+        return int(self.time.shape[0])
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.channels
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.channels[name]
+        except KeyError:
+            raise ImutoolError(
+                f"channel {name!r} not in recording (has: {', '.join(self.channels) or 'none'})"
+            ) from None
+
+    def get(self, name: str, unit: str | None = None) -> np.ndarray:
+        """Channel values, converted to ``unit`` if given (e.g. ``rec.get('roll', 'rad')``)."""
+        a = self[name]
+        if unit is None:
+            return a
+        have = self.units.get(name)
+        if have is None:
+            raise ImutoolError(f"channel {name!r} has no unit; cannot convert to {unit!r}")
+        return _units.convert(a, have, unit)
+
+    def add(self, name: str, data: Any, unit: str | None = None, columns: list[str] | None = None) -> None:
+        """Add or replace a channel (unit defaults to the canonical unit of the name)."""
+        a = self._check(name, data)
+        self.channels[name] = a
+        self.columns[name] = list(columns) if columns else default_columns(name, self._width(a))
+        if unit is None:
+            unit = canonical_unit(name)
+        if unit is not None:
+            self.units[name] = unit
+        elif name in self.units:
+            del self.units[name]
+
+    def remove(self, name: str) -> None:
+        self.channels.pop(name, None)
+        self.units.pop(name, None)
+        self.columns.pop(name, None)
+
+    def copy(self) -> Recording:
+        return Recording(
+            self.time.copy(),
+            {k: v.copy() for k, v in self.channels.items()},
+            dict(self.units),
+            copy.deepcopy(self.meta),
+            {k: list(v) for k, v in self.columns.items()},
+        )
+
+    @property
+    def duration(self) -> float:
+        return float(self.time[-1] - self.time[0]) if len(self) > 1 else 0.0
+
+    @property
+    def rate_hz(self) -> float:
+        """Nominal sample rate: 1 / median time step (NaN for fewer than two samples)."""
+        if len(self) < 2:
+            return float("nan")
+        d = np.diff(self.time)
+        d = d[d > 0]
+        return float(1.0 / np.median(d)) if d.size else float("nan")
+
+    def column_names(self) -> list[str]:
+        out = ["time"]
+        for name in self.channels:
+            out.extend(self.columns[name])
+        return out
+
+    def select(self, rows: np.ndarray | slice) -> Recording:
+        """A new recording with the given rows (boolean mask, index array or slice)."""
+        return Recording(
+            self.time[rows],
+            {k: v[rows] for k, v in self.channels.items()},
+            dict(self.units),
+            copy.deepcopy(self.meta),
+            {k: list(v) for k, v in self.columns.items()},
+        )
+
+    def slice_time(self, start: float | None = None, end: float | None = None) -> Recording:
+        """Rows with start ≤ time < end (seconds, same time base as ``time``)."""
+        lo = 0 if start is None else int(np.searchsorted(self.time, start, side="left"))
+        hi = len(self) if end is None else int(np.searchsorted(self.time, end, side="left"))
+        return self.select(slice(lo, hi))
+
+    # -- validation ---------------------------------------------------------------------------------------
+    def validated(
+        self,
+        duplicates: str = "drop",
+        backwards: str = "error",
+        gap_factor: float = 3.0,
+        source: str | None = None,
+    ) -> tuple[Recording, TimeReport]:
+        """Check the time base and return (clean recording, report).
+
+        duplicates: ``drop`` keeps the first of rows sharing a timestamp (identical or not; conflicting ones
+        are counted separately), ``mean`` averages them, ``error`` refuses.
+        backwards: ``error`` refuses a time that goes backwards, ``sort`` sorts rows by time (stable),
+        ``drop`` drops rows earlier than the latest time seen.
+        gap_factor: a step longer than gap_factor × median step is reported as a gap (never filled here).
+        NaN values are counted per channel and kept (estimators skip them sample by sample).
+        """
+        src = source or self.meta.get("source", "recording")
+        rep = TimeReport(n_rows=len(self))
+        rec = self
+        t = rec.time
+        if not np.all(np.isfinite(t)):
+            bad = int(np.flatnonzero(~np.isfinite(t))[0])
+            raise ImutoolError(f"time is not finite at row {bad + 1}", path=src)
+        if len(rec) >= 2:
+            d = np.diff(t)
+            nb = int(np.count_nonzero(d < 0))
+            rep.backwards = nb
+            if nb:
+                if backwards == "error":
+                    i = int(np.flatnonzero(d < 0)[0])
+                    raise ImutoolError(
+                        f"time goes backwards at row {i + 2} ({t[i]:.6f} s → {t[i + 1]:.6f} s); "
+                        f"{nb} such steps (use --backwards sort|drop to accept)",
+                        path=src,
+                    )
+                if backwards == "sort":
+                    rec = rec.select(np.argsort(t, kind="stable"))
+                    rep.actions.append(f"sorted {nb} out-of-order rows by time")
+                elif backwards == "drop":
+                    keep = t >= np.maximum.accumulate(t)
+                    rec = rec.select(keep)
+                    rep.actions.append(f"dropped {int((~keep).sum())} rows earlier than the time before them")
+                else:
+                    raise ImutoolError(f"unknown backwards policy {backwards!r} (error, sort, drop)")
+            t = rec.time
+            same = np.diff(t) == 0
+            nd = int(np.count_nonzero(same))
+            rep.duplicates = nd
+            if nd:
+                idx = np.flatnonzero(same)
+                conflicting = 0
+                for a in rec.channels.values():
+                    x, y = a[idx], a[idx + 1]
+                    neq = ~((x == y) | (np.isnan(x) & np.isnan(y)))
+                    if neq.ndim > 1:
+                        neq = neq.any(axis=1)
+                    conflicting = max(conflicting, int(np.count_nonzero(neq)))
+                rep.duplicates_conflicting = conflicting
+                if duplicates == "error":
+                    raise ImutoolError(
+                        f"{nd} duplicate timestamps (first at row {idx[0] + 2}, t = {t[idx[0]]:.6f} s); "
+                        "use --duplicates drop|mean to accept",
+                        path=src,
+                    )
+                first = np.concatenate([[True], ~same])
+                if duplicates == "drop":
+                    rec = rec.select(first)
+                    rep.actions.append(
+                        f"dropped {nd} rows with a repeated timestamp ({conflicting} of them with different "
+                        "data; the first row of each timestamp kept)"
+                    )
+                elif duplicates == "mean":
+                    group = np.cumsum(first) - 1
+                    counts = np.bincount(group)
+                    chans = {}
+                    for k, a in rec.channels.items():
+                        a2 = a.reshape(len(a), -1)
+                        s = np.stack([np.bincount(group, a2[:, j]) for j in range(a2.shape[1])], axis=1)
+                        s /= counts[:, None]
+                        chans[k] = s.reshape((-1,) + a.shape[1:])
+                    rec = Recording(rec.time[first], chans, dict(rec.units), copy.deepcopy(rec.meta),
+                                    {k: list(v) for k, v in rec.columns.items()})
+                    rep.actions.append(f"averaged {nd} rows sharing a timestamp with their first row")
+                else:
+                    raise ImutoolError(f"unknown duplicates policy {duplicates!r} (drop, mean, error)")
+        t = rec.time
+        if len(rec) >= 2:
+            d = np.diff(t)
+            med = float(np.median(d))
+            rep.median_dt = med
+            gi = np.flatnonzero(d > gap_factor * med)
+            rep.gaps = [(float(t[i]), float(d[i])) for i in gi]
+        nan_any = np.zeros(len(rec), dtype=bool)
+        for k, a in rec.channels.items():
+            m = np.isnan(a) if a.dtype.kind == "f" else np.zeros(a.shape, dtype=bool)
+            if m.ndim > 1:
+                m = m.any(axis=1)
+            c = int(np.count_nonzero(m))
+            if c:
+                rep.nan_by_channel[k] = c
+            nan_any |= m
+        rep.nan_rows = int(np.count_nonzero(nan_any))
+        rec.meta["validation"] = rep.as_dict()
+        return rec, rep
+
+    # -- mounting -----------------------------------------------------------------------------------------
+    def mounted(
+        self,
+        remap: str | np.ndarray = "x,y,z",
+        misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        vector_channels: tuple[str, ...] = ("gyro", "accel", "mag"),
+    ) -> Recording:
+        """Transform sensor-axis channels into the vessel body frame (FRD).
+
+        body = R_mis · M · sensor, where M is the signed axis permutation (``"x,-y,-z"``) and R_mis the small
+        misalignment rotation Rz(yaw)·Ry(pitch)·Rx(roll) (degrees, body axes). Vector channels listed are
+        rotated; quaternion channels ``q``/``ref_q`` (sensor→NED) become body→NED: q_b = q_s ⊗ q(C)ᵀ with
+        C = R_mis·M. The mounting is recorded in ``meta['mounting']``.
+        """
+        m = parse_axis_remap(remap) if isinstance(remap, str) else np.asarray(remap, dtype=float)
+        r = rotation_about_axes(*np.radians(misalignment_deg)) @ m
+        out = self.copy()
+        for name in vector_channels:
+            if name in out.channels:
+                out.channels[name] = out.channels[name] @ r.T
+        qc = matrix_to_quat(r)  # rotates sensor vectors into body
+        for name in ("q", "ref_q"):
+            if name in out.channels and out.channels[name].shape[1:] == (4,):
+                out.channels[name] = quat_multiply(out.channels[name], quat_conjugate(qc))
+        spec = remap if isinstance(remap, str) else None
+        out.meta["mounting"] = {
+            "remap": spec if spec is not None else np.asarray(m).tolist(),
+            "misalignment_deg": [float(v) for v in misalignment_deg],
+            "matrix_sensor_to_body": r.tolist(),
+        }
+        out.meta["frame"] = "vessel body FRD (x bow, y starboard, z down)"
+        return out
+
+
+def parse_mounting(spec: str) -> tuple[str, tuple[float, float, float]]:
+    """Parse ``"x,-y,-z"`` or ``"x,-y,-z;0.5,-0.2,1.0"`` (remap; misalignment roll,pitch,yaw in deg)."""
+    remap, _, mis = spec.partition(";")
+    parse_axis_remap(remap)
+    angles = (0.0, 0.0, 0.0)
+    if mis.strip():
+        try:
+            vals = tuple(float(v) for v in re.split(r"[,\s]+", mis.strip()))
+        except ValueError:
+            raise ImutoolError(f"mounting {spec!r}: misalignment must be three numbers in degrees") from None
+        if len(vals) != 3:
+            raise ImutoolError(f"mounting {spec!r}: misalignment must be three numbers (roll,pitch,yaw deg)")
+        angles = vals  # type: ignore[assignment]
+    return remap, angles
+
+
+def merge(
+    recordings: list[Recording],
+    clock: Recording | np.ndarray | float | None = None,
+    prefixes: list[str] | None = None,
+) -> Recording:
+    """Merge recordings sampled on different clocks onto one clock by linear interpolation.
+
+    clock: a recording (its time base), an array of times, a rate in Hz (uniform grid over the common time
+    span), or None (the time base of the first recording). Only the time span all inputs cover is kept
+    (no extrapolation). Quaternion channels are interpolated component-wise and renormalised; channels whose
+    names clash get the given prefixes (or ``r1_``, ``r2_``...). Samples next to a NaN stay NaN.
+    """
+    if not recordings:
+        raise ImutoolError("merge: no recordings given")
+    t0 = max(float(r.time[0]) for r in recordings)
+    t1 = min(float(r.time[-1]) for r in recordings)
+    if t1 <= t0:
+        raise ImutoolError("merge: the recordings do not overlap in time")
+    if clock is None:
+        clock = recordings[0]
+    if isinstance(clock, Recording):
+        t = clock.time
+    elif np.isscalar(clock):
+        rate = float(clock)  # type: ignore[arg-type]
+        t = t0 + np.arange(int(np.floor((t1 - t0) * rate)) + 1) / rate
+    else:
+        t = np.asarray(clock, dtype=float)
+    t = t[(t >= t0) & (t <= t1)]
+    out = Recording(t, meta={"merged_from": [r.meta.get("source", "?") for r in recordings]})
+    seen: set[str] = set()
+    for i, r in enumerate(recordings):
+        for name, a in r.channels.items():
+            new = name
+            if name in seen:
+                new = (prefixes[i] if prefixes else f"r{i + 1}_") + name
+            seen.add(new)
+            a2 = a.reshape(len(a), -1).astype(float)
+            cols = np.stack([np.interp(t, r.time, a2[:, j]) for j in range(a2.shape[1])], axis=1)
+            if a.ndim == 1:
+                cols = cols[:, 0]
+            elif a.shape[1] == 4 and name.endswith("q"):
+                cols = cols / np.linalg.norm(cols, axis=1, keepdims=True)
+            out.add(new, cols, r.units.get(name), columns=None if new != name else r.columns.get(name))
+    return out

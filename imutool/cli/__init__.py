@@ -1,0 +1,105 @@
+"""The imutool command line: a thin click shell over the library.
+
+Commands are loaded lazily from ``imutool.cli.<module>`` so start-up stays fast and each capability owns
+its own command module. Errors are one line on stderr (exit status 2) unless ``--debug`` is given.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+
+from imutool import __version__
+
+# command name -> (module under imutool.cli, attribute, one-line help shown in `imutool --help`)
+COMMANDS: dict[str, tuple[str, str, str]] = {
+    "info": ("info", "info_cmd", "Summarise a recording: duration, rate, gaps, channels, units, ranges."),
+    "convert": ("convert", "convert_cmd", "Convert between CSV, ROS1/ROS2 bags and NMEA 0183."),
+    "plot": ("plot", "plot_cmd", "Plot channels of a recording to PNG/PDF."),
+    "simulate": ("simulate", "simulate_cmd", "Simulate a recording with truth columns (ref_*)."),
+    "filter": ("filter", "filter_cmd", "Estimate roll/pitch/heading: quaternion EKF, compass KF, baselines."),
+    "evaluate": ("evaluate", "evaluate_cmd", "Compare estimates with a reference: RMSE, max, lag, SNR."),
+    "calibrate": ("calibrate", "calibrate_group", "Calibrate magnetometer, deviation, gyro, accelerometer."),
+    "allan": ("allan", "allan_cmd", "Allan deviation: ARW/VRW, bias instability, rate random walk."),
+    "heave": ("heave", "heave_cmd", "Heave from acceleration: real-time and delayed."),
+    "zvi": ("zvi", "zvi_cmd", "Detect zero-velocity intervals (paper, SHOE, ARE, MV, MAG)."),
+    "ins": ("ins", "ins_cmd", "Strapdown INS with error-state EKF and zero-velocity updates."),
+    "gyrofree": ("gyrofree", "gyrofree_cmd", "Angular rate and attitude from an accelerometer array."),
+    "roll": ("roll", "roll_cmd", "Roll statistics per MSC.363(92): heel, period, amplitudes, peak hold."),
+    "report": ("report", "report_group", "Certification evidence reports (inclinometer, heading device)."),
+    "nmea": ("nmea", "nmea_cmd", "Write NMEA 0183 sentences (HRM, XDR, HDG, THS) to a file or port."),
+    "capture": ("capture", "capture_group", "Record serial NMEA, bridge frames, I2C or Modbus sensors."),
+}
+
+
+def _available(name: str) -> bool:
+    mod = COMMANDS[name][0]
+    return importlib.util.find_spec(f"imutool.cli.{mod}") is not None
+
+
+class LazyGroup(click.Group):
+    """A click group whose sub-commands are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return [n for n in COMMANDS if _available(n)]
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS or not _available(name):
+            return None
+        mod, attr, _ = COMMANDS[name]
+        return getattr(importlib.import_module(f"imutool.cli.{mod}"), attr)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        rows = [(n, COMMANDS[n][2]) for n in self.list_commands(ctx)]
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+             epilog="Example: imutool simulate ship-roll -o roll.csv && imutool filter roll.csv -o est.csv")
+@click.version_option(__version__, prog_name="imutool")
+@click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
+@click.pass_context
+def cli(ctx: click.Context, debug: bool) -> None:
+    """imutool — marine inertial sensors: capture, calibrate, reprocess, report.
+
+    Units inside are SI; angles are degrees at every user-facing surface. Body frame FRD (x bow,
+    y starboard, z down), world frame NED, quaternions [w,x,y,z] body→NED.
+    """
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console entry point: runs the CLI and turns errors into one clear line (exit status 2)."""
+    from formats.errors import ImutoolError
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in args
+    try:
+        cli.main(args=args, prog_name="imutool", standalone_mode=False)
+    except click.exceptions.Abort:
+        click.echo("imutool: aborted", err=True)
+        sys.exit(130)
+    except click.ClickException as e:
+        e.show()
+        sys.exit(e.exit_code)
+    except ImutoolError as e:
+        if debug:
+            raise
+        click.echo(f"imutool: error: {e}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        click.echo("imutool: interrupted", err=True)
+        sys.exit(130)
+    except BrokenPipeError:
+        sys.exit(0)
+    except Exception as e:  # an unexpected failure: still one line, the traceback with --debug
+        if debug:
+            raise
+        click.echo(f"imutool: internal error: {type(e).__name__}: {e} (run with --debug for details)", err=True)
+        sys.exit(3)
+    sys.exit(0)

@@ -1,0 +1,24 @@
+"""Shared test fixtures: the real recordings in ../shared/data (skipped with a reason where absent)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = Path(os.environ.get("IMUTOOL_SHARED_DATA", ROOT.parent / "shared" / "data"))
+
+
+def shared_data(*parts: str) -> Path:
+    """Path to a file in ../shared/data, or skip the test with a clear reason."""
+    p = SHARED_DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real recording not available: {p} (../shared/data is absent in a fresh clone)")
+    return p
+
+
+@pytest.fixture
+def shared():
+    return shared_data
