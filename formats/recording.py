@@ -16,7 +16,7 @@ import numpy as np
 
 from . import units as _units
 from .errors import ImutoolError
-from .frames import parse_axis_remap, quat_conjugate, quat_multiply, matrix_to_quat, rotation_about_axes
+from .frames import matrix_to_quat, parse_axis_remap, quat_conjugate, quat_multiply, rotation_about_axes
 
 # Canonical channels and the unit they carry in an imutool CSV (DESIGN.md).
 CANONICAL_UNITS = {

@@ -15,12 +15,12 @@ from formats.errors import ImutoolError
 # scenario name -> (module, function)
 SCENARIOS: dict[str, tuple[str, str]] = {
     "ship-roll": ("imutool.sim.ship", "ship_roll"),
-    "sea-state": ("imutool.sim.ship", "sea_state"),
     "turn": ("imutool.sim.ship", "turning_ship"),
-    "compass-swing": ("imutool.sim.ship", "compass_swing"),
-    "mag-sphere": ("imutool.sim.ship", "mag_sphere"),
     "static": ("imutool.sim.ship", "static"),
-    "heave-platform": ("imutool.sim.heave", "heave_platform"),
+    "sea-state": ("imutool.sim.sea", "sea_state"),
+    "heave-platform": ("imutool.sim.sea", "heave_platform"),
+    "compass-swing": ("imutool.sim.magnetic", "compass_swing"),
+    "mag-sphere": ("imutool.sim.magnetic", "mag_sphere"),
     "walk": ("imutool.sim.walk", "walk"),
     "accel-array": ("imutool.sim.accel_array", "accel_array"),
 }
@@ -39,7 +39,7 @@ def scenario(name: str) -> Callable[..., Recording]:
 
 def available() -> list[str]:
     out = []
-    for name, (mod, fn) in SCENARIOS.items():
+    for name, (mod, _fn) in SCENARIOS.items():
         if importlib.util.find_spec(mod) is not None:
             out.append(name)
     return out

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from formats import Recording
 from formats.frames import quat_to_matrix
 
 GRAVITY = 9.80665  # m/s², local gravity used by the simulator (NED: g points down, +z)
@@ -116,3 +117,66 @@ def sample_times(duration: float, rate_hz: float, rng: np.random.Generator, jitt
         keep[0] = True
         t = t[keep]
     return t
+
+
+def imu_recording(
+    t: np.ndarray,
+    q_true: np.ndarray,
+    accel_ned: np.ndarray,
+    rng: np.random.Generator,
+    gyro_errors: SensorErrors | None = MPU6050_GYRO,
+    accel_errors: SensorErrors | None = MPU6050_ACCEL,
+    mag_errors: SensorErrors | None = HMC5883L_MAG,
+    field_ned: np.ndarray | None = None,
+    gyro_true: np.ndarray | None = None,
+    gravity: float = GRAVITY,
+    meta: dict | None = None,
+) -> Recording:
+    """Build a 9-axis (or 6-axis with ``mag_errors=None``) recording with truth columns.
+
+    t (N,) s; q_true (N,4) body→NED; accel_ned (N,3) m/s² kinematic acceleration of the sensor in NED;
+    gyro_true (N,3) rad/s body rate (derived from q_true by finite differences when not given).
+    Truth columns: ref_q, ref_roll/ref_pitch/ref_heading (deg), ref_gyro (rad/s), ref_gyro_bias (rad/s),
+    ref_accel (m/s², error-free specific force) and ref_mag (µT, undistorted field in body axes).
+    """
+    from formats.frames import quat_conjugate, quat_multiply, quat_to_euler
+
+    t = np.asarray(t, dtype=float)
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if gyro_true is None:
+        dq = quat_multiply(quat_conjugate(q_true[:-1]), q_true[1:])
+        dq = np.where(dq[:, :1] < 0, -dq, dq)
+        ang = 2 * np.arctan2(np.linalg.norm(dq[:, 1:], axis=1), dq[:, 0])
+        s = np.linalg.norm(dq[:, 1:], axis=1)
+        axis = np.divide(dq[:, 1:], s[:, None], out=np.zeros_like(dq[:, 1:]), where=s[:, None] > 0)
+        w_mid = axis * (ang / np.diff(t))[:, None]
+        gyro_true = np.empty((len(t), 3))
+        gyro_true[1:-1] = 0.5 * (w_mid[1:] + w_mid[:-1])
+        gyro_true[0], gyro_true[-1] = w_mid[0], w_mid[-1]
+    f_true = specific_force(q_true, accel_ned, gravity)
+    roll, pitch, heading = quat_to_euler(q_true)
+    rec = Recording(t, meta=dict(meta or {}))
+    if gyro_errors is not None:
+        g, gb = gyro_errors.apply(gyro_true, fs, rng)
+        rec.add("gyro", g)
+    if accel_errors is not None:
+        a, _ = accel_errors.apply(f_true, fs, rng)
+        rec.add("accel", a)
+    if mag_errors is not None:
+        fld = earth_field_ned() if field_ned is None else np.asarray(field_ned, dtype=float)
+        m_true = field_in_body(q_true, fld)
+        m, _ = mag_errors.apply(m_true, fs, rng)
+        rec.add("mag", m)
+        rec.add("ref_mag", m_true, "uT")
+    rec.add("ref_roll", np.degrees(roll))
+    rec.add("ref_pitch", np.degrees(pitch))
+    rec.add("ref_heading", np.degrees(heading))
+    rec.add("ref_q", q_true)
+    rec.add("ref_gyro", gyro_true, "rad/s")
+    if gyro_errors is not None:
+        rec.add("ref_gyro_bias", gb)
+    rec.add("ref_accel", f_true, "m/s^2")
+    rec.meta.setdefault("rate_hz", round(fs, 6))
+    rec.meta.setdefault("frame", "body FRD (x bow, y starboard, z down); ref_q body->NED")
+    rec.meta.setdefault("source", "imutool simulator")
+    return rec
