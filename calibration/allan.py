@@ -1,0 +1,157 @@
+"""Allan deviation (overlapping) and the IEEE Std 952 noise terms of a gyro/accelerometer/magnetometer.
+
+Overlapping Allan variance of a rate signal y sampled at τ0, cluster time τ = m τ0, with θ_k = τ0 Σ_{i<k} y_i:
+
+    σ²(τ) = 1 / (2 τ² (N − 2m)) · Σ_k (θ_{k+2m} − 2 θ_{k+m} + θ_k)²
+
+computed from the cumulative sum in one pass per τ (numba kernel), on log-spaced τ. For long clusters the sum
+runs over every ``stride``-th k (stride = m // 8, still heavily overlapping: the variance of the estimate
+is barely changed while 24 h of 200 Hz data take seconds).
+
+Noise terms (σ²(τ) = N²/τ + (0.664 B)² + K² τ/3 near the flat part):
+  - N: angle (velocity) random walk, read on the slope −½ line at τ = 1 s (unit/√Hz = unit·√s … per √s);
+  - B: bias instability = min σ(τ) / 0.664 (= √(2 ln 2 / π));
+  - K: rate (acceleration) random walk, read on the slope +½ line at τ = 3 s (unit/√s).
+The lines are placed by a weighted non-negative least-squares fit of the three-term model to σ²(τ) (weights
+from the number of independent clusters), which is steadier than reading one point where the slope is ±½.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numba import njit
+from scipy.optimize import nnls
+
+from formats.errors import ImutoolError
+
+BI_FACTOR = 0.6643  # √(2 ln 2 / π)
+
+
+@njit(cache=True)
+def _avar_sum(theta: np.ndarray, m: int, stride: int) -> tuple:  # pragma: no cover - numba
+    n = theta.shape[0] - 2 * m
+    s = 0.0
+    cnt = 0
+    for k in range(0, n, stride):
+        d = theta[k + 2 * m] - 2.0 * theta[k + m] + theta[k]
+        s += d * d
+        cnt += 1
+    return s, cnt
+
+
+def tau_grid(n: int, dt: float, per_decade: int = 10) -> np.ndarray:
+    """Cluster sizes m (int, unique, log-spaced) from 1 to (n − 1) // 9 (at least ~9 clusters)."""
+    mmax = max(1, (n - 1) // 9)
+    m = np.unique(np.round(np.logspace(0, np.log10(mmax), int(per_decade * np.log10(max(mmax, 10))) + 1)))
+    return m.astype(np.int64)
+
+
+def allan_deviation(y: np.ndarray, rate_hz: float, per_decade: int = 10,
+                    m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Overlapping Allan deviation of a rate signal y (N,) or (N,k). Returns (τ s, σ(τ) (len τ, k), n_eff).
+
+    n_eff: number of independent clusters ≈ (N − 2m) / m, for the confidence of each point (σ relative
+    uncertainty ≈ 1 / √(2 n_eff)). NaN samples are refused (fill or cut them first).
+    """
+    y = np.asarray(y, dtype=float)
+    one = y.ndim == 1
+    y2 = y[:, None] if one else y
+    if not np.all(np.isfinite(y2)):
+        raise ImutoolError("Allan deviation: the signal has NaN/inf samples; cut them out first")
+    n = y2.shape[0]
+    if n < 20:
+        raise ImutoolError(f"Allan deviation needs at least 20 samples; got {n}")
+    dt = 1.0 / rate_hz
+    ms = tau_grid(n, dt, per_decade) if m is None else np.asarray(m, dtype=np.int64)
+    out = np.empty((len(ms), y2.shape[1]))
+    for j in range(y2.shape[1]):
+        col = y2[:, j] - np.mean(y2[:, j])  # removing the mean leaves σ unchanged and keeps θ small
+        theta = np.empty(n + 1)
+        theta[0] = 0.0
+        np.cumsum(col * dt, out=theta[1:])
+        for i, mm in enumerate(ms):
+            stride = max(1, int(mm) // 8)
+            s, cnt = _avar_sum(theta, int(mm), stride)
+            tau = mm * dt
+            out[i, j] = np.sqrt(s / (2.0 * tau * tau * max(cnt, 1)))
+    taus = ms * dt
+    n_eff = np.maximum((n - 2 * ms) / ms, 1.0)
+    return taus, (out[:, 0] if one else out), n_eff
+
+
+def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray) -> dict[str, float]:
+    """N (τ=1 line), B (min/0.664), K (τ=3 line) for one axis; plus tau of the minimum."""
+    a2 = adev ** 2
+    w = np.sqrt(n_eff) / a2  # relative weighting: each point's σ² has relative std ≈ 1/√(n_eff/2)
+    x = np.column_stack([1.0 / taus, np.ones_like(taus), taus / 3.0]) * w[:, None]
+    coef, _ = nnls(x, a2 * w)
+    n_, b0, k_ = np.sqrt(np.clip(coef, 0, None))
+    i = int(np.argmin(adev))
+    return {"N": float(n_), "B": float(adev[i] / BI_FACTOR), "K": float(k_), "tau_min_s": float(taus[i]),
+            "adev_min": float(adev[i]), "flat_B_fit": float(b0 / BI_FACTOR)}
+
+
+@dataclass
+class AllanResult:
+    """Allan deviation of one sensor channel (3 axes) with its noise terms."""
+
+    name: str
+    unit: str
+    taus: np.ndarray
+    adev: np.ndarray  # (len τ, 3)
+    n_eff: np.ndarray
+    terms: list[dict[str, float]] = field(default_factory=list)
+
+    def mean_term(self, key: str) -> float:
+        return float(np.mean([t[key] for t in self.terms]))
+
+    def summary(self) -> dict[str, Any]:
+        return {k: [t[k] for t in self.terms] for k in ("N", "B", "K", "tau_min_s")}
+
+
+def analyse(y: np.ndarray, rate_hz: float, name: str, unit: str, per_decade: int = 10) -> AllanResult:
+    taus, adev, n_eff = allan_deviation(y, rate_hz, per_decade)
+    adev2 = adev if adev.ndim == 2 else adev[:, None]
+    terms = [fit_noise_terms(taus, adev2[:, j], n_eff) for j in range(adev2.shape[1])]
+    return AllanResult(name, unit, taus, adev2, n_eff, terms)
+
+
+def plot_allan(results: list[AllanResult], path: str, title: str = "Allan deviation") -> None:
+    """Log-log Allan deviation per axis with the fitted N (slope −½), B (flat) and K (slope +½) lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from formats.atomic import atomic_path
+
+    fig, axs = plt.subplots(len(results), 1, figsize=(8, 4.2 * len(results)), squeeze=False)
+    for ax, r in zip(axs[:, 0], results):
+        for j, lab in enumerate("xyz"[: r.adev.shape[1]]):
+            t = r.terms[j]
+            c = f"C{j}"
+            ax.loglog(r.taus, r.adev[:, j], "-", color=c, lw=1.5,
+                      label=f"{lab}: N={t['N']:.3g}, B={t['B']:.3g}, K={t['K']:.3g}")
+            tt = r.taus
+            ax.loglog(tt, t["N"] / np.sqrt(tt), ":", color=c, lw=0.8)
+            ax.loglog(tt, t["K"] * np.sqrt(tt / 3.0), "--", color=c, lw=0.8)
+            ax.axhline(t["B"] * BI_FACTOR, color=c, lw=0.6, ls="-.")
+            ax.plot([1.0], [t["N"]], "o", color=c, ms=4)
+            ax.plot([3.0], [t["K"]], "s", color=c, ms=4)
+        lo, hi = np.nanmin(r.adev), np.nanmax(r.adev)
+        ax.set_ylim(lo / 3, hi * 3)
+        ax.set_xlabel("cluster time τ (s)")
+        ax.set_ylabel(f"σ(τ) ({r.unit})")
+        ax.set_title(f"{r.name}: N at τ=1 s (slope −½, dotted), B = min/0.664 (dash-dot), K at τ=3 s "
+                     "(slope +½, dashed)", fontsize=8)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    ext = str(path).rsplit(".", 1)[-1].lower()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=ext if ext in ("png", "pdf", "svg") else "png", dpi=100)
+    plt.close(fig)

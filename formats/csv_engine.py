@@ -1,0 +1,574 @@
+"""Compiled CSV engine: exact decimal ↔ float64 conversion over raw bytes (numba).
+
+Reading (:func:`parse_block`): one pass over the bytes of whole lines; fields split on the separator, blank
+and ``#`` lines skipped, CR before LF ignored, optional double quotes and spaces around a field ignored.
+A token with at most 19 significant digits is converted in the kernel:
+
+* Clinger's fast path — mantissa w ≤ 2^53 and |q| ≤ 22: ``w · 10^q`` (or ``w / 10^-q``) is one correctly
+  rounded IEEE operation on two exact doubles, hence exact;
+* otherwise the Eisel–Lemire algorithm (Lemire, "Number parsing at a gigabyte per second", 2021; Mushtak &
+  Lemire, "Fast number parsing without fallback", 2023): w normalised, multiplied by a 128-bit truncated
+  power of five, rounded to nearest-even — exact for every w < 2^64 without a fallback.
+
+Tokens with more than 19 significant digits (rare) are handed back to Python's ``float()`` (also exact).
+Result: every value is bit-identical to ``float(token)``. Empty field and ``nan`` = NaN; ``inf``/``infinity``
+accepted. A row with the wrong number of fields or a token that is not a number is counted and skipped.
+
+Writing (:func:`format_block`): for each finite value the 17-digit decimal D ≈ x·10^(16-E) is computed from a
+128-bit product (error < 1 unit), then the shortest of the 15-, 16- and 17-digit roundings that parses back
+(through the exact parser above) to the same double is written; 15 digits are always tried first, so values
+with a short decimal form (sensor readings, ``0.01``) come out as short as ``repr`` writes them. NaN is an
+empty field. Every written value round-trips bit-exactly.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# -- tables -------------------------------------------------------------------------------------------------
+_Q_MIN = -342  # smallest power of ten with a table entry
+_Q_MAX = 308
+_W_MIN = -350  # writer's range of 10^k (k = 16 - E, E in [-324, 308])
+_W_MAX = 350
+
+
+def _pow5_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """128-bit approximations T of 5^q, top bit set, as (hi, lo) uint64 and the exponent t: 5^q ≈ T·2^t.
+
+    q ≥ 0: T = 5^q truncated to 128 bits. q < 0: T = floor(2^b / 5^-q) + 1 (then truncated), the rounding
+    the Eisel–Lemire correctness argument assumes.
+    """
+    qs = range(_W_MIN, _W_MAX + 1)
+    hi = np.empty(len(qs), np.uint64)
+    lo = np.empty(len(qs), np.uint64)
+    tt = np.empty(len(qs), np.int64)
+    mask = (1 << 64) - 1
+    for i, q in enumerate(qs):
+        if q >= 0:
+            p = 5**q
+            n = p.bit_length()
+            c = p << (128 - n) if n <= 128 else p >> (n - 128)
+            t = n - 128
+        else:
+            p = 5**-q
+            z = p.bit_length()
+            if q >= -27:
+                b = z + 127
+                c = (1 << b) // p + 1
+                t = -b
+            else:
+                b = 2 * z + 128
+                c = (1 << b) // p + 1
+                t = -b
+                while c >= (1 << 128):
+                    c >>= 1
+                    t += 1
+        hi[i] = c >> 64
+        lo[i] = c & mask
+        tt[i] = t
+    return hi, lo, tt
+
+
+T_HI, T_LO, T_EXP = _pow5_table()
+POW10 = np.array([10.0**i for i in range(23)])
+POW2 = np.array([math.ldexp(1.0, k) for k in range(-1074, 972)])  # POW2[k + 1074] = 2^k, exact
+POW10_INT = np.array([10**i for i in range(20)], dtype=np.uint64)
+
+_U0 = np.uint64(0)
+_U1 = np.uint64(1)
+_U2 = np.uint64(2)
+_U3 = np.uint64(3)
+_U9 = np.uint64(9)
+_U10 = np.uint64(10)
+_U32 = np.uint64(32)
+_U63 = np.uint64(63)
+_U64 = np.uint64(64)
+_M32 = np.uint64(0xFFFFFFFF)
+_M9 = np.uint64(0x1FF)
+_TWO52 = np.uint64(1 << 52)
+_TWO53 = np.uint64(1 << 53)
+_MAXU = np.uint64(0xFFFFFFFFFFFFFFFF)
+_E16 = np.uint64(10**16)
+_E17 = np.uint64(10**17)
+
+
+@njit(cache=True, inline="always")
+def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
+    """Full 64×64 → 128-bit product (hi, lo)."""
+    a0 = a & _M32
+    a1 = a >> _U32
+    b0 = b & _M32
+    b1 = b >> _U32
+    p00 = a0 * b0
+    p01 = a0 * b1
+    p10 = a1 * b0
+    p11 = a1 * b1
+    mid = (p00 >> _U32) + (p01 & _M32) + (p10 & _M32)
+    lo = (mid << _U32) | (p00 & _M32)
+    hi = p11 + (p01 >> _U32) + (p10 >> _U32) + (mid >> _U32)
+    return hi, lo
+
+
+@njit(cache=True, inline="always")
+def _clz(w: np.uint64) -> int:
+    n = 0
+    if w == _U0:
+        return 64
+    if (w >> np.uint64(32)) == _U0:
+        n += 32
+        w <<= np.uint64(32)
+    if (w >> np.uint64(48)) == _U0:
+        n += 16
+        w <<= np.uint64(16)
+    if (w >> np.uint64(56)) == _U0:
+        n += 8
+        w <<= np.uint64(8)
+    if (w >> np.uint64(60)) == _U0:
+        n += 4
+        w <<= np.uint64(4)
+    if (w >> np.uint64(62)) == _U0:
+        n += 2
+        w <<= np.uint64(2)
+    if (w >> _U63) == _U0:
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) -> float:
+    """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""
+    if w == _U0:
+        return 0.0
+    if w <= _TWO53 and -22 <= q <= 22:
+        if q >= 0:
+            return float(w) * POW10[q]
+        return float(w) / POW10[-q]
+    if q < _Q_MIN:
+        return 0.0
+    if q > _Q_MAX:
+        return math.inf
+    lz = _clz(w)
+    w = w << np.uint64(lz)
+    i = q - _W_MIN
+    hi, lo = _mul128(w, t_hi[i])
+    if (hi & _M9) == _M9:
+        hi2, lo2 = _mul128(w, t_lo[i])
+        lo = lo + hi2
+        if hi2 > lo:
+            hi += _U1
+    upper = hi >> _U63
+    shift = upper + _U9
+    mant = hi >> shift
+    power2 = (((152170 + 65536) * q) >> 16) + 63 + int(upper) - lz + 1023
+    if power2 <= 0:
+        if -power2 + 1 >= 64:
+            return 0.0
+        mant >>= np.uint64(-power2 + 1)
+        mant += mant & _U1
+        mant >>= _U1
+        # mant < 2^52: subnormal; mant == 2^52: rounded up to the smallest normal (same formula)
+        return float(mant) * POW2[0]
+    if lo <= _U1 and -4 <= q <= 23 and (mant & _U3) == _U1:
+        if (mant << shift) == hi:
+            mant &= ~_U1
+    mant += mant & _U1
+    mant >>= _U1
+    if mant >= _TWO53:
+        mant = _TWO52
+        power2 += 1
+    if power2 >= 2047:
+        return math.inf
+    return float(mant) * POW2[power2 - 1075 + 1074]
+
+
+# -- reader -------------------------------------------------------------------------------------------------
+# status codes of a field
+_OK = 0
+_FALLBACK = 1
+_GARBAGE = 2
+
+
+@njit(cache=True, inline="always")
+def _lower(c: np.uint8) -> int:
+    c = int(c)
+    if 65 <= c <= 90:
+        return c + 32
+    return c
+
+
+@njit(cache=True)
+def _match_word(buf: np.ndarray, p: int, end: int, word: str) -> int:
+    """Length of ``word`` if buf[p:] starts with it (ASCII, case-insensitive), else 0."""
+    n = len(word)
+    if p + n > end:
+        return 0
+    for k in range(n):
+        if _lower(buf[p + k]) != ord(word[k]):
+            return 0
+    return n
+
+
+@njit(cache=True)
+def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: int, out: np.ndarray, row: int,
+                strict: bool, fb: np.ndarray, bad: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray) -> np.ndarray:
+    """Parse whole lines of ``buf[pos:end]`` into ``out[row:]`` (float64, ncol columns).
+
+    Returns int64 [pos, row, lines, nbad, nfb, stop] where ``lines`` counts the lines consumed (for line
+    numbers), ``stop`` is 0 (done), 1 (out full), 2 (fallback list full) or 3 (bad row under ``strict``).
+    ``fb`` rows get (row, col, start, stop) of tokens for Python's float(); ``bad`` rows get (line index,
+    reason: 1 = field count, 2 = not a number, fields found) for the first rows skipped (all are counted).
+    """
+    nrow_cap = out.shape[0]
+    nfb = 0
+    nbad = 0
+    lines = 0
+    stop = 0
+    fb_cap = fb.shape[0]
+    bad_cap = bad.shape[0]
+    while pos < end:
+        p = pos
+        while p < end and (buf[p] == 32 or buf[p] == 9):
+            p += 1
+        if p >= end:
+            pos = end
+            break
+        c0 = buf[p]
+        if c0 == 10 or c0 == 35 or (c0 == 13 and p + 1 < end and buf[p + 1] == 10):
+            while p < end and buf[p] != 10:
+                p += 1
+            pos = p + 1
+            lines += 1
+            continue
+        if row >= nrow_cap:
+            stop = 1
+            break
+        if nfb + ncol > fb_cap:
+            stop = 2
+            break
+        col = 0
+        status = _OK
+        nfb0 = nfb
+        while True:
+            # -- one field: spaces, optional quote, number, optional quote, spaces --
+            while p < end and (buf[p] == 32 or buf[p] == 9):
+                p += 1
+            quoted = False
+            if p < end and buf[p] == 34:
+                quoted = True
+                p += 1
+            start = p
+            neg = False
+            if p < end and (buf[p] == 45 or buf[p] == 43):
+                neg = buf[p] == 45
+                p += 1
+            w = _U0
+            nd = 0
+            q = 0
+            digits = 0
+            many = False
+            while p < end:
+                d = int(buf[p]) - 48
+                if d < 0 or d > 9:
+                    break
+                digits += 1
+                if w != _U0 or d != 0:
+                    if nd < 19:
+                        w = w * _U10 + np.uint64(d)
+                        nd += 1
+                    else:
+                        many = True
+                        q += 1
+                p += 1
+            if p < end and buf[p] == dec:
+                p += 1
+                while p < end:
+                    d = int(buf[p]) - 48
+                    if d < 0 or d > 9:
+                        break
+                    digits += 1
+                    if w != _U0 or d != 0:
+                        if nd < 19:
+                            w = w * _U10 + np.uint64(d)
+                            nd += 1
+                            q -= 1
+                        else:
+                            many = True
+                    else:
+                        q -= 1
+                    p += 1
+            fstat = _OK
+            val = np.nan
+            if digits > 0:
+                if p < end and (buf[p] == 101 or buf[p] == 69):
+                    p += 1
+                    eneg = False
+                    if p < end and (buf[p] == 45 or buf[p] == 43):
+                        eneg = buf[p] == 45
+                        p += 1
+                    ev = 0
+                    edig = 0
+                    while p < end:
+                        d = int(buf[p]) - 48
+                        if d < 0 or d > 9:
+                            break
+                        if ev < 100000:
+                            ev = ev * 10 + d
+                        edig += 1
+                        p += 1
+                    if edig == 0:
+                        fstat = _GARBAGE
+                    elif ev >= 100000:
+                        many = True
+                    q += -ev if eneg else ev
+                if fstat == _OK:
+                    if many:
+                        fstat = _FALLBACK
+                    else:
+                        val = decimal_to_double(w, q, t_hi, t_lo)
+                        if neg:
+                            val = -val
+            else:
+                n = _match_word(buf, p, end, "nan")
+                if n:
+                    p += n
+                else:
+                    n = _match_word(buf, p, end, "infinity")
+                    if n == 0:
+                        n = _match_word(buf, p, end, "inf")
+                    if n:
+                        p += n
+                        val = -math.inf if neg else math.inf
+                    elif p != start:  # a lone sign
+                        fstat = _GARBAGE
+            stop_tok = p
+            if quoted and p < end and buf[p] == 34:
+                p += 1
+            while p < end and (buf[p] == 32 or buf[p] == 9):
+                p += 1
+            if p < end and buf[p] != sep and buf[p] != 10 and buf[p] != 13:
+                fstat = _GARBAGE
+            if fstat == _GARBAGE:
+                status = _GARBAGE
+                break
+            if col < ncol:
+                out[row, col] = val
+                if fstat == _FALLBACK:
+                    fb[nfb, 0] = row
+                    fb[nfb, 1] = col
+                    fb[nfb, 2] = start
+                    fb[nfb, 3] = stop_tok
+                    nfb += 1
+            col += 1
+            if p < end and buf[p] == sep:
+                p += 1
+                continue
+            break
+        # rest of the line (a CR before LF, or garbage after a bad field)
+        while p < end and buf[p] != 10:
+            if buf[p] != 13:
+                if status == _OK:
+                    status = _GARBAGE
+            p += 1
+        pos = p + 1
+        lines += 1
+        if status == _OK and col != ncol:
+            status = 3
+        if status != _OK:
+            nfb = nfb0
+            if nbad < bad_cap:
+                bad[nbad, 0] = lines - 1
+                bad[nbad, 1] = 1 if status == 3 else 2
+                bad[nbad, 2] = col
+            nbad += 1
+            if strict:
+                stop = 3
+                break
+            continue
+        row += 1
+    if pos > end:
+        pos = end
+    res = np.empty(6, np.int64)
+    res[0] = pos
+    res[1] = row
+    res[2] = lines
+    res[3] = nbad
+    res[4] = nfb
+    res[5] = stop
+    return res
+
+
+# -- writer -------------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
+    """round((hi·2^64 + lo) / 2^s) for 1 ≤ s ≤ 127 (result assumed < 2^64)."""
+    s1 = s - 1
+    if s1 >= 64:
+        r = hi >> np.uint64(s1 - 64)
+    elif s1 == 0:
+        r = lo
+    else:
+        r = (hi << np.uint64(64 - s1)) | (lo >> np.uint64(s1))
+    return (r + _U1) >> _U1
+
+
+@njit(cache=True)
+def _digits17(ax: float, e10: int, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> np.uint64:
+    """≈ round(ax · 10^(16 - e10)) (within ±1), ax > 0 finite."""
+    f, e2 = math.frexp(ax)
+    m = np.uint64(f * 9007199254740992.0)  # 2^53; exact
+    e2 -= 53
+    k = 16 - e10
+    i = k - _W_MIN
+    h1, l1 = _mul128(m, t_hi[i])
+    h2, _l2 = _mul128(m, t_lo[i])
+    lo = l1 + h2
+    hi = h1
+    if lo < h2:
+        hi += _U1
+    s = -(t_exp[i] + e2 + k + 64)
+    if s <= 0:
+        return _MAXU
+    if s > 127:
+        return _U0
+    return _round_shift(hi, lo, s)
+
+
+@njit(cache=True)
+def shortest_digits(ax: float, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[np.uint64, int, int]:
+    """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed."""
+    e10 = int(math.floor(math.log10(ax)))
+    d = _digits17(ax, e10, t_hi, t_lo, t_exp)
+    if d >= _E17:
+        e10 += 1
+        d = _digits17(ax, e10, t_hi, t_lo, t_exp)
+    elif d < _E16:
+        e10 -= 1
+        d = _digits17(ax, e10, t_hi, t_lo, t_exp)
+    if d >= _E17 or d < _E16:
+        return _U0, 0, 0
+    for nd in (15, 16):
+        div = POW10_INT[17 - nd]
+        c = (d + div // _U2) // div
+        e = e10
+        if c >= POW10_INT[nd]:
+            c = c // _U10
+            e += 1
+        if decimal_to_double(c, e - nd + 1, t_hi, t_lo) == ax:
+            return c, nd, e
+    for delta in (0, -1, 1):
+        c = d + np.uint64(delta) if delta >= 0 else d - _U1
+        if decimal_to_double(c, e10 - 16, t_hi, t_lo) == ax:
+            return c, 17, e10
+    return _U0, 0, 0
+
+
+@njit(cache=True)
+def _emit(x: float, out: np.ndarray, p: int, tmp: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray,
+          t_exp: np.ndarray) -> int:
+    """Write x at out[p:]; returns the new position (-1: could not format; Python does it)."""
+    if x != x:
+        return p
+    if x < 0.0 or (x == 0.0 and math.copysign(1.0, x) < 0.0):
+        out[p] = 45
+        p += 1
+        ax = -x
+    else:
+        ax = x
+    if ax == 0.0:
+        out[p] = 48
+        return p + 1
+    if ax == math.inf:
+        out[p] = 105
+        out[p + 1] = 110
+        out[p + 2] = 102
+        return p + 3
+    c, nd, e = shortest_digits(ax, t_hi, t_lo, t_exp)
+    if nd == 0:
+        return -1
+    while nd > 1 and c % _U10 == _U0:
+        c = c // _U10
+        nd -= 1
+    for k in range(nd - 1, -1, -1):
+        tmp[k] = np.uint8(48 + int(c % _U10))
+        c = c // _U10
+    if -4 <= e < 16:
+        if e >= 0:
+            for k in range(nd):
+                if k == e + 1:
+                    out[p] = 46
+                    p += 1
+                out[p] = tmp[k]
+                p += 1
+            for k in range(nd, e + 1):
+                out[p] = 48
+                p += 1
+        else:
+            out[p] = 48
+            out[p + 1] = 46
+            p += 2
+            for k in range(-e - 1):
+                out[p] = 48
+                p += 1
+            for k in range(nd):
+                out[p] = tmp[k]
+                p += 1
+    else:
+        out[p] = tmp[0]
+        p += 1
+        if nd > 1:
+            out[p] = 46
+            p += 1
+            for k in range(1, nd):
+                out[p] = tmp[k]
+                p += 1
+        out[p] = 101
+        p += 1
+        if e < 0:
+            out[p] = 45
+            e = -e
+        else:
+            out[p] = 43
+        p += 1
+        if e >= 100:
+            out[p] = 48 + e // 100
+            p += 1
+        out[p] = 48 + (e // 10) % 10
+        out[p + 1] = 48 + e % 10
+        p += 2
+    return p
+
+
+MAX_FIELD_BYTES = 26  # sign, 17 digits, point, up to 4 leading zeros or 'e-308', separator
+
+
+@njit(cache=True)
+def format_block(data: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
+                 t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[int, int]:
+    """Format rows data[r0:r1] as CSV lines into ``out`` (needs (r1-r0)·ncol·MAX_FIELD_BYTES bytes).
+
+    Returns (bytes written, number of values that need Python's repr; their (row, col) go to ``fails``,
+    their field is left empty — the caller re-formats those rows).
+    """
+    ncol = data.shape[1]
+    tmp = np.empty(24, np.uint8)
+    p = 0
+    nf = 0
+    for r in range(r0, r1):
+        for j in range(ncol):
+            if j:
+                out[p] = sep
+                p += 1
+            q = _emit(data[r, j], out, p, tmp, t_hi, t_lo, t_exp)
+            if q < 0:
+                if nf < fails.shape[0]:
+                    fails[nf, 0] = r
+                    fails[nf, 1] = j
+                nf += 1
+            else:
+                p = q
+        out[p] = 10
+        p += 1
+    return p, nf

@@ -1,0 +1,1093 @@
+"""NMEA 0183 / IEC 61162-1 sentences: checksum, framing, decoding, writing, and whole-log reading.
+
+Units and signs at this surface (DESIGN.md, standards.md §2):
+
+- angles in degrees; heading clockwise from north in [0, 360); rate of turn in deg/min (+ = bow to starboard);
+- roll (= heel) positive **starboard down**, pitch positive **bow up**, heave in metres positive **up**;
+- HRM: heel + = starboard, port/starboard amplitudes and peak-hold values sent as positive numbers.
+
+Framing (``$``/``!`` + address + fields + ``*hh``) and checksums are done here; field decoding uses pynmea2's
+sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR, PASHR as ``ASHRATT``) and classes defined
+here, registered with pynmea2, where it lacks them (HRM, THS). One decoder per sentence type.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+import pynmea2
+from pynmea2 import TalkerSentence
+
+from .atomic import atomic_path
+from .errors import ImutoolError
+from .recording import Recording
+
+__all__ = [
+    "NmeaSentence",
+    "NmeaParseError",
+    "NmeaChecksumError",
+    "NmeaUnsupportedError",
+    "NmeaFieldError",
+    "XdrMapping",
+    "DEFAULT_XDR_MAP",
+    "SUPPORTED_TYPES",
+    "MAX_SENTENCE_LENGTH",
+    "checksum",
+    "format_sentence",
+    "hrm_sentence",
+    "xdr_sentence",
+    "xdr_roll_pitch",
+    "hdg_sentence",
+    "hdt_sentence",
+    "ths_sentence",
+    "rot_sentence",
+    "pashr_sentence",
+    "parse_sentence",
+    "decode",
+    "decode_checked",
+    "read_nmea",
+    "write_nmea",
+    "iter_sentences",
+]
+
+MAX_SENTENCE_LENGTH = 82  # characters including '$' and <CR><LF> (IEC 61162-1)
+CHECKSUM_POLICIES = ("require", "ignore", "accept-missing")
+TIME_SOURCES = ("auto", "stamp", "nmea", "index")
+THS_MODES = "AEMSV"  # autonomous, estimated (DR), manual, simulator, not valid
+_RESERVED = set("$!*,\\^~\r\n")
+
+
+# -- errors ---------------------------------------------------------------------------------------------------
+class NmeaParseError(ImutoolError):
+    """A line that is not a well-formed sentence (``kind`` = 'malformed')."""
+
+    kind = "malformed"
+
+    def __init__(self, message: str, *, sentence_type: str | None = None, path: str | None = None,
+                 line: int | None = None):
+        super().__init__(message, path=path, line=line)
+        self.sentence_type = sentence_type
+
+
+class NmeaChecksumError(NmeaParseError):
+    """Checksum wrong, or missing under ``checksum_policy='require'`` (``kind`` = 'bad_checksum')."""
+
+    kind = "bad_checksum"
+
+
+class NmeaUnsupportedError(NmeaParseError):
+    """Well-formed sentence of a type imutool does not decode (``kind`` = 'unsupported')."""
+
+    kind = "unsupported"
+
+
+class NmeaFieldError(NmeaParseError):
+    """A field that should hold a number holds something else (``kind`` = 'malformed')."""
+
+
+# -- pynmea2 types it lacks (standards.md §2.2, §2.4) -----------------------------------------------------------
+class HRM(TalkerSentence):
+    """IEC 61162-1 HRM: heel angle, roll period and roll amplitude (standards.md §2.2)."""
+
+    fields = (
+        ("Actual heel angle (deg, + starboard)", "heel", float),
+        ("Roll period (s)", "roll_period", float),
+        ("Roll amplitude port (deg, positive)", "amp_port", float),
+        ("Roll amplitude starboard (deg)", "amp_stbd", float),
+        ("Status A/V", "status"),
+        ("Roll peak hold port (deg)", "peak_port", float),
+        ("Roll peak hold starboard (deg)", "peak_stbd", float),
+        ("Peak hold reset time UTC hhmmss", "reset_time"),
+        ("Peak hold reset day", "reset_day", int),
+        ("Peak hold reset month", "reset_month", int),
+    )
+
+
+class THS(TalkerSentence):
+    """IEC 61162-1 THS: true heading and status (mode A/E/M/S/V; standards.md §2.4)."""
+
+    fields = (
+        ("Heading (deg true)", "heading", float),
+        ("Mode indicator", "mode"),
+    )
+
+
+# -- framing ------------------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class NmeaSentence:
+    """One framed sentence. ``talker`` is 2 characters ('P' for proprietary); ``formatter`` the rest of the
+    address ('HDT'; 'ASHR' for $PASHR); ``fields`` the comma-separated data fields; ``checksum_ok`` True/False,
+    or None when the sentence carried no checksum."""
+
+    talker: str
+    formatter: str
+    fields: list[str]
+    checksum_ok: bool | None
+    raw: str
+
+    @property
+    def type(self) -> str:
+        """Type key used for counting and decoding: 'HDT', 'XDR', 'PASHR', 'VDM'..."""
+        return "P" + self.formatter if self.talker == "P" else self.formatter
+
+    @property
+    def address(self) -> str:
+        return self.talker + self.formatter
+
+
+def checksum(body: str) -> str:
+    """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex."""
+    cs = 0
+    for ch in body:
+        cs ^= ord(ch)
+    return f"{cs & 0xFF:02X}"
+
+
+_ADDR_RE = re.compile(r"^(?:P[A-Z0-9]{1,9}|[A-Z0-9]{2}[A-Z0-9]{3})$")
+
+
+def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
+    """Frame and checksum-check one sentence (leading/trailing whitespace and CR/LF are ignored).
+
+    checksum_policy: ``require`` (a missing or wrong checksum raises :class:`NmeaChecksumError`),
+    ``accept-missing`` (a missing checksum is accepted, a wrong one raises), ``ignore`` (never raises for the
+    checksum; ``checksum_ok`` says what was found). Anything that is not ``$``/``!`` + address + fields raises
+    :class:`NmeaParseError` (a subclass of ImutoolError).
+    """
+    if checksum_policy not in CHECKSUM_POLICIES:
+        raise ImutoolError(f"unknown checksum policy {checksum_policy!r} ({', '.join(CHECKSUM_POLICIES)})")
+    if not isinstance(line, str):
+        raise NmeaParseError("not a text line")
+    s = line.strip()
+    if len(s) < 7 or s[0] not in "$!":
+        raise NmeaParseError("does not start with '$' or '!' followed by an address")
+    star = s.rfind("*")
+    cs_ok: bool | None
+    if star >= 0 and len(s) - star == 3 and re.fullmatch(r"[0-9A-Fa-f]{2}", s[star + 1:]):
+        body = s[1:star]
+        cs_ok = checksum(body) == s[star + 1:].upper()
+    else:
+        body = s[1:]
+        cs_ok = None
+    addr = body.split(",", 1)[0]
+    stype = ("P" + addr[1:] if addr[:1] == "P" else addr[2:]) if _ADDR_RE.match(addr) else None
+    if cs_ok is False and checksum_policy != "ignore":
+        raise NmeaChecksumError(f"checksum mismatch (got {s[star + 1:]}, computed {checksum(body)})",
+                                sentence_type=stype)
+    if cs_ok is None:
+        if "*" in body:
+            raise NmeaParseError("malformed checksum field", sentence_type=stype)
+        if checksum_policy == "require":
+            raise NmeaChecksumError("no checksum (checksum policy 'require')", sentence_type=stype)
+    if stype is None:
+        raise NmeaParseError(f"bad address field {addr[:12]!r}")
+    if "," not in body:
+        raise NmeaParseError("no data fields", sentence_type=stype)
+    bad = [c for c in body if not (" " <= c <= "~") or c in "$!*"]
+    if bad:
+        raise NmeaParseError(f"illegal character {bad[0]!r} inside the sentence (spliced line?)",
+                             sentence_type=stype)
+    fields = body.split(",")[1:]
+    if addr[0] == "P":
+        return NmeaSentence("P", addr[1:], fields, cs_ok, s)
+    return NmeaSentence(addr[:2], addr[2:], fields, cs_ok, s)
+
+
+# -- decoding -------------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class XdrMapping:
+    """One XDR transducer ID → imutool quantity ('roll' or 'pitch') with a sign (+1 or −1)."""
+
+    quantity: str
+    sign: float = 1.0
+
+
+# Transducer IDs are not standardised (standards.md §2.3). Keys are compared upper-case with spaces kept.
+DEFAULT_XDR_MAP: dict[str, XdrMapping] = {
+    "ROLL": XdrMapping("roll"),
+    "HEEL": XdrMapping("roll"),
+    "HEEL ANGLE": XdrMapping("roll"),
+    "PTCH": XdrMapping("pitch"),
+    "PITCH": XdrMapping("pitch"),
+    "TRIM": XdrMapping("pitch"),  # NMEA 0183 v4.11 XDR table lists "Trim" as an angular displacement id
+}
+
+
+def _normalise_xdr_map(xdr_map: dict[str, Any] | None) -> dict[str, XdrMapping]:
+    """Accept {id: XdrMapping | 'roll' | '-roll' | ('roll', -1)}; merged over the defaults unless empty dict."""
+    if xdr_map is None:
+        return DEFAULT_XDR_MAP
+    out: dict[str, XdrMapping] = {}
+    for k, v in xdr_map.items():
+        if isinstance(v, XdrMapping):
+            m = v
+        elif isinstance(v, str):
+            q = v.strip()
+            sign = -1.0 if q.startswith("-") else 1.0
+            m = XdrMapping(q.lstrip("+-"), sign)
+        else:
+            q, sign = v
+            m = XdrMapping(str(q), float(sign))
+        if m.quantity not in XDR_QUANTITIES or m.sign not in (1.0, -1.0):
+            raise ImutoolError(f"XDR map {k!r}: quantity must be one of {', '.join(XDR_QUANTITIES)} with sign ±1")
+        out[str(k).strip().upper()] = m
+    return out
+
+
+XDR_QUANTITIES = ("roll", "pitch", "heave")
+
+
+def _num(s: str | None, what: str, stype: str) -> float | None:
+    """Float of a field; None for an empty field; NmeaFieldError for garbage."""
+    if s is None:
+        return None
+    s = s.strip()
+    if s == "":
+        return None
+    try:
+        v = float(s)
+    except ValueError:
+        raise NmeaFieldError(f"{stype}: {what} field {s[:16]!r} is not a number", sentence_type=stype) from None
+    if not math.isfinite(v):
+        raise NmeaFieldError(f"{stype}: {what} field {s[:16]!r} is not finite", sentence_type=stype)
+    return v
+
+
+def _ew(value: float | None, letter: str | None, what: str, stype: str) -> float | None:
+    if value is None:
+        return None
+    letter = (letter or "").strip().upper()
+    if letter == "E":
+        return value
+    if letter == "W":
+        return -value
+    raise NmeaFieldError(f"{stype}: {what} direction {letter!r} is not E or W", sentence_type=stype)
+
+
+def _talker(s: NmeaSentence) -> Any:
+    cls = TalkerSentence.sentence_types.get(s.formatter)
+    return cls(s.talker, s.formatter, list(s.fields))
+
+
+def _dec_hdt(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    m = _talker(s)
+    h = _num(m.data[0] if m.data else None, "heading", "HDT")
+    return {} if h is None else {"heading_true": h}
+
+
+def _dec_hdm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    m = _talker(s)
+    h = _num(m.data[0] if m.data else None, "heading", "HDM")
+    return {} if h is None else {"heading_mag": h}
+
+
+def _dec_hdg(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """HDG: magnetic = sensor + deviation (E +); true = magnetic + variation (E +). Null fields = unknown."""
+    m = _talker(s)
+    d = list(m.data) + [""] * (5 - len(m.data))
+    h = _num(d[0], "heading", "HDG")
+    dev = _ew(_num(d[1], "deviation", "HDG"), d[2], "deviation", "HDG")
+    var = _ew(_num(d[3], "variation", "HDG"), d[4], "variation", "HDG")
+    out: dict[str, float] = {}
+    if h is not None:
+        out["heading_sensor"] = h
+    if dev is not None:
+        out["deviation"] = dev
+    if var is not None:
+        out["variation"] = var
+    if h is not None and dev is not None:
+        out["heading_mag"] = (h + dev) % 360.0
+        if var is not None:
+            out["heading_true"] = (h + dev + var) % 360.0
+    return out
+
+
+def _dec_rot(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """ROT: deg/min, negative = bow turns to port; status V (invalid) drops the value."""
+    m = _talker(s)
+    r = _num(m.data[0] if m.data else None, "rate of turn", "ROT")
+    status = (m.data[1] if len(m.data) > 1 else "").strip().upper()
+    if r is None or status == "V":
+        return {}
+    return {"rot": r}
+
+
+def _dec_ths(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """THS: true heading + mode. ``ths_mode`` is the mode letter's code point (chr(int(v)) gives it back);
+    mode V (not valid) drops the heading."""
+    m = _talker(s)
+    d = list(m.data) + [""] * (2 - len(m.data))
+    h = _num(d[0], "heading", "THS")
+    mode = d[1].strip().upper()
+    if mode and (len(mode) != 1 or mode not in THS_MODES):
+        raise NmeaFieldError(f"THS: mode {mode[:8]!r} is not one of {THS_MODES}", sentence_type="THS")
+    out: dict[str, float] = {}
+    if mode:
+        out["ths_mode"] = float(ord(mode))
+    if h is not None and mode != "V":
+        out["heading_true"] = h
+    return out
+
+
+def _dec_xdr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """XDR: groups of (type, value, unit, id); angular groups (type A, unit D or empty) whose id is in the map
+    become roll/pitch with the mapped sign (heave: type D, unit M). Unmapped ids are ignored.
+
+    A field count that is not a multiple of 4 (some devices emit a stray field, e.g. ``C,C,10.7,C,AIRTEMP``)
+    is re-aligned on the mapped ids (type, value, unit precede the id) and noted in ``problems``; a non-numeric
+    value of a mapped group (``-1.-3``) is noted in ``problems`` and skipped, other groups still decode.
+    """
+    f = s.fields
+    if len(f) % 4 == 0:
+        m = _talker(s)
+        groups = [tuple(m.get_transducer(i)) for i in range(m.num_transducers)]
+    else:
+        groups = [tuple(f[j - 3:j + 1]) for j in range(3, len(f)) if f[j].strip().upper() in xmap]
+        problems.append(f"XDR: {len(f)} fields is not a multiple of 4; groups re-aligned on transducer ids")
+    out: dict[str, float] = {}
+    for ttype, value, unit, tid in groups:
+        key = (tid or "").strip().upper()
+        mp = xmap.get(key)
+        if mp is None:
+            continue
+        ttype = (ttype or "").strip().upper()
+        unit = (unit or "").strip().upper()
+        if mp.quantity in ("roll", "pitch") and (ttype != "A" or unit not in ("D", "")):
+            problems.append(f"XDR: transducer {key} is type {ttype!r} unit {unit!r}, not an angle in degrees")
+            continue
+        if mp.quantity == "heave" and (ttype != "D" or unit not in ("M", "")):
+            problems.append(f"XDR: transducer {key} is type {ttype!r} unit {unit!r}, not a displacement in m")
+            continue
+        try:
+            v = _num(value, f"transducer {key}", "XDR")
+        except NmeaFieldError as e:
+            problems.append(str(e))
+            continue
+        if v is not None:
+            out[mp.quantity] = mp.sign * v
+    return out
+
+
+def _dec_pashr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """$PASHR attitude (OxTS/Applanix/RT300 layout): time, heading, 'T', roll, pitch, heave, accuracies...
+
+    Roll + starboard down, pitch + bow up, heave m + up (as the OxTS/Applanix manuals define it). Ashtech
+    command replies ($PASHR,ACK / POS / SAT ...) are not attitude: unsupported.
+    """
+    f = list(s.fields)
+    if len(f) < 6 or not re.fullmatch(r"\d{6}(\.\d*)?", f[0].strip()):
+        raise NmeaUnsupportedError("PASHR: not an attitude sentence (Ashtech reply)", sentence_type="PASHR")
+    m = pynmea2.ProprietarySentence.sentence_types["ASH"]("ASH", ["R"] + f)
+    d = list(m.data) + [""] * 12
+    out: dict[str, float] = {}
+    h = _num(d[2], "heading", "PASHR")
+    if h is not None and d[3].strip().upper() == "T":
+        out["heading_true"] = h
+    for idx, key in ((4, "roll"), (5, "pitch"), (6, "heave")):
+        v = _num(d[idx], key, "PASHR")
+        if v is not None:
+            out[key] = v
+    return out
+
+
+def _dec_hrm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """HRM (standards.md §2.2): status V drops the heel/period/amplitude values (peak hold kept)."""
+    m = _talker(s)
+    d = list(m.data) + [""] * (10 - len(m.data))
+    vals = {k: _num(d[i], k, "HRM") for i, k in ((0, "heel"), (1, "roll_period"), (2, "amp_port"),
+                                                  (3, "amp_stbd"), (5, "peak_port"), (6, "peak_stbd"))}
+    status = d[4].strip().upper()
+    if status not in ("A", "V", ""):
+        raise NmeaFieldError(f"HRM: status {status[:8]!r} is not A or V", sentence_type="HRM")
+    out: dict[str, float] = {}
+    for k, v in vals.items():
+        if v is None:
+            continue
+        if status == "V" and k in ("heel", "roll_period", "amp_port", "amp_stbd"):
+            continue
+        out[k] = v
+    rt = d[7].strip()
+    if rt:
+        if not re.fullmatch(r"\d{6}(\.\d*)?", rt):
+            raise NmeaFieldError(f"HRM: reset time {rt[:12]!r} is not hhmmss", sentence_type="HRM")
+        hh, mm, ss = int(rt[:2]), int(rt[2:4]), float(rt[4:])
+        out["peak_reset_time"] = hh * 3600.0 + mm * 60.0 + ss
+    day = _num(d[8], "reset day", "HRM")
+    mon = _num(d[9], "reset month", "HRM")
+    if day is not None:
+        out["peak_reset_day"] = day
+    if mon is not None:
+        out["peak_reset_month"] = mon
+    return out
+
+
+_DECODERS: dict[str, Callable[[NmeaSentence, dict[str, XdrMapping], list[str]], dict[str, float]]] = {
+    "HDT": _dec_hdt,
+    "HDM": _dec_hdm,
+    "HDG": _dec_hdg,
+    "ROT": _dec_rot,
+    "THS": _dec_ths,
+    "XDR": _dec_xdr,
+    "PASHR": _dec_pashr,
+    "HRM": _dec_hrm,
+}
+SUPPORTED_TYPES = tuple(_DECODERS)
+
+
+def decode(sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None) -> dict[str, float]:
+    """Named values of one sentence (degrees, deg/min, metres, seconds; signs as in the module docstring).
+
+    Keys: heading_true, heading_mag, heading_sensor, deviation, variation (E +), rot, roll, pitch, heave, heel,
+    roll_period, amp_port, amp_stbd, peak_port, peak_stbd, peak_reset_time (s of day), peak_reset_day,
+    peak_reset_month, ths_mode (code point of the letter). Only values present in the sentence are returned.
+    Raises NmeaUnsupportedError for other types and NmeaFieldError for a non-numeric value field (XDR: only
+    when no mapped group decoded; see :func:`decode_checked` for the partial case).
+    """
+    values, problems = decode_checked(sentence, xdr_map)
+    if problems and not values:
+        raise NmeaFieldError(problems[0], sentence_type=sentence.type if isinstance(sentence, NmeaSentence)
+                             else None)
+    return values
+
+
+def decode_checked(sentence: NmeaSentence | str,
+                   xdr_map: dict[str, Any] | None = None) -> tuple[dict[str, float], list[str]]:
+    """Like :func:`decode`, but returns (values, problems) where problems lists what was skipped (XDR)."""
+    if isinstance(sentence, str):
+        sentence = parse_sentence(sentence)
+    fn = _DECODERS.get(sentence.type)
+    if fn is None:
+        raise NmeaUnsupportedError(f"sentence type {sentence.type} is not decoded", sentence_type=sentence.type)
+    problems: list[str] = []
+    values = fn(sentence, _normalise_xdr_map(xdr_map), problems)
+    return values, problems
+
+
+# -- writing single sentences -------------------------------------------------------------------------------------
+def _fmt(v: Any, d: int | None) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (bool, np.bool_)):
+        return "A" if v else "V"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    x = float(v)
+    if not math.isfinite(x):
+        return ""
+    if d is None:
+        s = f"{x:.6f}".rstrip("0")
+        s = s + "0" if s.endswith(".") else s
+    else:
+        s = f"{x:.{d}f}"
+    if s.startswith("-") and float(s) == 0.0:
+        s = s[1:]
+    return s
+
+
+def format_sentence(talker: str, formatter: str, fields: Sequence[str | float | int | None],
+                    decimals: int | Sequence[int | None] | None = None) -> str:
+    """``$TTFFF,f1,f2,...*HH`` (no CR/LF). None/NaN → empty field; floats with ``decimals`` places (one int for
+    all or one per field; None → up to 6 places, trailing zeros trimmed). Raises ImutoolError if a field holds a
+    reserved character or the sentence would exceed 82 characters including CR/LF."""
+    addr = f"{talker}{formatter}"
+    if not (_ADDR_RE.match(addr)):
+        raise ImutoolError(f"bad NMEA address {addr!r} (talker 2 characters + 3-letter formatter, or P...)")
+    if decimals is None or isinstance(decimals, int):
+        decs: list[int | None] = [decimals] * len(fields)  # type: ignore[list-item]
+    else:
+        decs = list(decimals)
+        if len(decs) != len(fields):
+            raise ImutoolError(f"{addr}: {len(decs)} decimals for {len(fields)} fields")
+    parts = [_fmt(v, d) for v, d in zip(fields, decs, strict=True)]
+    for p in parts:
+        if any(c in _RESERVED or not (" " <= c <= "~") for c in p):
+            raise ImutoolError(f"{addr}: field {p[:20]!r} holds a reserved or non-printable character")
+    body = ",".join([addr] + parts)
+    out = f"${body}*{checksum(body)}"
+    if len(out) + 2 > MAX_SENTENCE_LENGTH:
+        raise ImutoolError(f"{addr}: sentence is {len(out) + 2} characters with CR/LF (limit 82)")
+    return out
+
+
+def _wrap360(h: float | None) -> float | None:
+    if h is None or not math.isfinite(h):
+        return None
+    w = math.fmod(h, 360.0)
+    w = w + 360.0 if w < 0 else w
+    return 0.0 if round(w, 1) >= 360.0 else w
+
+
+def _absnone(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else abs(v)
+
+
+def hrm_sentence(heel_deg: float | None, period_s: float | None, amp_port_deg: float | None,
+                 amp_stbd_deg: float | None, valid: bool, peak_port_deg: float | None = None,
+                 peak_stbd_deg: float | None = None, reset_utc: datetime | None = None, talker: str = "II") -> str:
+    """HRM (standards.md §2.2): heel + = starboard (deg), roll period (s), port and starboard amplitudes and
+    peak-hold values sent positive (deg; a negative port value is taken by magnitude), status A/V, peak-hold
+    reset time UTC as ``hhmmss`` (no fraction), day, month (no year). Naive datetimes are taken as UTC."""
+    if reset_utc is not None:
+        if reset_utc.tzinfo is not None:
+            reset_utc = reset_utc.astimezone(timezone.utc)
+        rt, rd, rm = reset_utc.strftime("%H%M%S"), f"{reset_utc.day:02d}", f"{reset_utc.month:02d}"
+    else:
+        rt = rd = rm = None
+    fields = [heel_deg, period_s, _absnone(amp_port_deg), _absnone(amp_stbd_deg), "A" if valid else "V",
+              _absnone(peak_port_deg), _absnone(peak_stbd_deg), rt, rd, rm]
+    return format_sentence(talker, "HRM", fields, [1, 1, 1, 1, None, 1, 1, None, None, None])
+
+
+def xdr_sentence(measurements: Sequence[tuple[str, float | None, str, str]], talker: str = "YX",
+                 decimals: int = 1) -> str:
+    """XDR with one group (type, value, unit, id) per measurement, e.g. ('A', -1.2, 'D', 'PTCH')."""
+    fields: list[Any] = []
+    decs: list[int | None] = []
+    for m in measurements:
+        if len(m) != 4:
+            raise ImutoolError(f"XDR measurement {m!r}: need (type, value, unit, id)")
+        fields.extend(m)
+        decs.extend([None, decimals, None, None])
+    return format_sentence(talker, "XDR", fields, decs)
+
+
+def xdr_roll_pitch(roll_deg: float | None, pitch_deg: float | None, roll_id: str = "ROLL", pitch_id: str = "PTCH",
+                   roll_sign: int = 1, pitch_sign: int = 1, talker: str = "YX", decimals: int = 1) -> str:
+    """XDR pitch + roll angular groups (Airmar layout: PTCH first, roll + starboard down, pitch + bow up),
+    each multiplied by its sign (use −1 for a receiver with the opposite convention)."""
+    def sg(v: float | None, s: int) -> float | None:
+        return None if v is None else s * v
+
+    return xdr_sentence([("A", sg(pitch_deg, pitch_sign), "D", pitch_id), ("A", sg(roll_deg, roll_sign), "D", roll_id)],
+                        talker=talker, decimals=decimals)
+
+
+def _ew_fields(v: float | None) -> tuple[float | None, str | None]:
+    if v is None or not math.isfinite(v):
+        return None, None
+    return abs(v), ("E" if v >= 0 else "W")
+
+
+def hdg_sentence(sensor_heading_deg: float | None, deviation_deg: float | None = None,
+                 variation_deg: float | None = None, talker: str = "HC") -> str:
+    """HDG: magnetic sensor heading (deg), deviation and variation with E/W (E positive; null when unknown).
+    Magnetic heading = sensor + E deviation; true = magnetic + E variation."""
+    dv, dd = _ew_fields(deviation_deg)
+    vv, vd = _ew_fields(variation_deg)
+    return format_sentence(talker, "HDG", [_wrap360(sensor_heading_deg), dv, dd, vv, vd], [1, 1, None, 1, None])
+
+
+def hdt_sentence(heading_deg: float | None, talker: str = "HE") -> str:
+    """HDT: true heading (deg) — still current, but THS carries validity and is preferred."""
+    return format_sentence(talker, "HDT", [_wrap360(heading_deg), "T"], [1, None])
+
+
+def ths_sentence(heading_deg: float | None, mode: str = "A", talker: str = "HE") -> str:
+    """THS: true heading (deg) + mode A/E/M/S/V (a missing heading forces V)."""
+    if mode not in THS_MODES or len(mode) != 1:
+        raise ImutoolError(f"THS mode {mode!r} must be one of {', '.join(THS_MODES)}")
+    h = _wrap360(heading_deg)
+    return format_sentence(talker, "THS", [h, mode if h is not None else "V"], [1, None])
+
+
+def rot_sentence(rate_deg_per_min: float | None, valid: bool = True, talker: str = "TI") -> str:
+    """ROT: rate of turn in deg/min (negative = bow to port), status A/V (a missing rate forces V)."""
+    ok = valid and rate_deg_per_min is not None and math.isfinite(rate_deg_per_min)
+    return format_sentence(talker, "ROT", [rate_deg_per_min, "A" if ok else "V"], [1, None])
+
+
+def pashr_sentence(time_utc_s: float | None, heading_deg: float | None, roll_deg: float | None,
+                   pitch_deg: float | None, heave_m: float | None, roll_std_deg: float | None = None,
+                   pitch_std_deg: float | None = None, heading_std_deg: float | None = None,
+                   aiding: int = 1, imu_status: int = 0) -> str:
+    """$PASHR attitude (OxTS/Applanix layout): UTC time of day (s) as hhmmss.sss, true heading, 'T', roll
+    (+ starboard down), pitch (+ bow up), heave (m, + up), 1-σ accuracies (deg), aiding and IMU status."""
+    if time_utc_s is not None and math.isfinite(time_utc_s):
+        tod = time_utc_s % 86400.0
+        ms = int(round(tod * 1000.0)) % 86_400_000
+        hh, rem = divmod(ms, 3_600_000)
+        mm, rem = divmod(rem, 60_000)
+        ts = f"{hh:02d}{mm:02d}{rem / 1000.0:06.3f}"
+    else:
+        ts = None
+    fields = [ts, _wrap360(heading_deg), "T", roll_deg, pitch_deg, heave_m, roll_std_deg, pitch_std_deg,
+              heading_std_deg, aiding, imu_status]
+    return format_sentence("P", "ASHR", fields, [None, 2, None, 2, 2, 2, 3, 3, 3, None, None])
+
+
+# -- reading whole logs -------------------------------------------------------------------------------------------
+_TAG_BLOCK_RE = re.compile(r"^\\([^\\]*)\\")
+_ISO_RE = re.compile(r"^(\d{4}-\d{2}-\d{2})[T ](\d{2}:\d{2}:\d{2}(?:\.\d+)?)(Z|[+-]\d{2}:?\d{2})?$")
+_TOD_RE = re.compile(r"^(\d{2})(\d{2})(\d{2}(?:\.\d+)?)$")
+
+
+def _parse_stamp(prefix: str) -> float | None:
+    """Seconds from a line prefix: Unix seconds or milliseconds, ISO 8601, or an NMEA 4 tag block ``c:``."""
+    p = prefix.strip().rstrip(";,: \t").strip()
+    if not p:
+        return None
+    m = _TAG_BLOCK_RE.match(p + ("\\" if p.startswith("\\") and not p.endswith("\\") else ""))
+    if p.startswith("\\"):
+        inner = p.strip("\\").split("*", 1)[0]
+        for part in inner.split(","):
+            if part.startswith("c:"):
+                try:
+                    v = float(part[2:])
+                except ValueError:
+                    return None
+                return v / 1000.0 if v > 1e11 else v
+        return None
+    del m
+    # Signal K multiplexed log: "1455631040123;N;$GPRMC..."  or "<stamp>;A;..."
+    p = p.split(";", 1)[0].strip()
+    try:
+        v = float(p)
+    except ValueError:
+        pass
+    else:
+        if not math.isfinite(v) or v < 0:
+            return None
+        return v / 1000.0 if v > 1e11 else v
+    mi = _ISO_RE.match(p)
+    if mi:
+        try:
+            tz = mi.group(3) or "+00:00"
+            tz = "+00:00" if tz == "Z" else tz
+            return datetime.fromisoformat(f"{mi.group(1)}T{mi.group(2)}{tz}").timestamp()
+        except ValueError:
+            return None
+    return None
+
+
+def _tod(field: str) -> float | None:
+    m = _TOD_RE.match(field.strip())
+    if not m:
+        return None
+    hh, mm, ss = int(m.group(1)), int(m.group(2)), float(m.group(3))
+    if hh > 23 or mm > 59 or ss >= 61:
+        return None
+    return hh * 3600.0 + mm * 60.0 + ss
+
+
+def _date_epoch(day: int, month: int, year: int) -> float | None:
+    try:
+        return datetime(year, month, day, tzinfo=timezone.utc).timestamp()
+    except (ValueError, OverflowError):
+        return None
+
+
+def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
+    """(UTC time of day s, date epoch s at 00:00 UTC) carried by RMC, GGA, GLL, ZDA or PASHR."""
+    f = s.fields
+    t = s.type
+    try:
+        if t == "RMC" and len(f) >= 9:
+            d = f[8].strip()
+            de = _date_epoch(int(d[:2]), int(d[2:4]), 2000 + int(d[4:6]) if int(d[4:6]) < 80 else 1900 + int(d[4:6])) \
+                if re.fullmatch(r"\d{6}", d) else None
+            return _tod(f[0]), de
+        if t == "ZDA" and len(f) >= 4:
+            de = None
+            if f[1].strip().isdigit() and f[2].strip().isdigit() and f[3].strip().isdigit():
+                de = _date_epoch(int(f[1]), int(f[2]), int(f[3]))
+            return _tod(f[0]), de
+        if t == "GGA" and f:
+            return _tod(f[0]), None
+        if t == "GLL" and len(f) >= 5:
+            return _tod(f[4]), None
+        if t == "PASHR" and f:
+            return _tod(f[0]), None
+    except ValueError:
+        pass
+    return None, None
+
+
+# Recording channels produced by read_nmea: decode key → (channel, unit)
+_CHANNELS: dict[str, tuple[str, str]] = {
+    "heading_true": ("heading", "deg"),
+    "heading_mag": ("heading_mag", "deg"),
+    "heading_sensor": ("heading_sensor", "deg"),
+    "deviation": ("deviation", "deg"),
+    "variation": ("variation", "deg"),
+    "rot": ("rot", "deg/min"),
+    "roll": ("roll", "deg"),
+    "heel": ("roll", "deg"),
+    "pitch": ("pitch", "deg"),
+    "heave": ("heave", "m"),
+    "roll_period": ("roll_period", "s"),
+    "amp_port": ("amp_port", "deg"),
+    "amp_stbd": ("amp_stbd", "deg"),
+    "peak_port": ("peak_port", "deg"),
+    "peak_stbd": ("peak_stbd", "deg"),
+    "ths_mode": ("ths_mode", "1"),
+}
+_MAX_BAD_LINES = 10
+
+
+def _empty_counts() -> dict[str, int]:
+    return {"parsed": 0, "partial": 0, "no_data": 0, "bad_checksum": 0, "malformed": 0, "unsupported": 0}
+
+
+def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map: dict[str, Any] | None = None,
+              time_source: str = "auto", nominal_rate_hz: float = 10.0, encoding: str = "latin-1") -> Recording:
+    """Read an NMEA 0183 log into a Recording of decoded channels (see :func:`decode`; HRM heel → ``roll``).
+
+    Lines: ``#`` comments, blank lines and non-NMEA text (e.g. gpsd JSON) are skipped; a line may carry a
+    timestamp prefix before the ``$``/``!`` (Unix s or ms, ISO 8601, ``stamp;X;`` Signal K style, or an NMEA 4
+    ``\\c:...\\`` tag block). Bad lines are counted per sentence type and never fatal.
+
+    Time base (``time_source``; ``auto`` takes the first available): ``stamp`` = the per-line prefixes (s);
+    ``nmea`` = UTC from RMC/GGA/GLL/ZDA/PASHR: sentences between two time fixes are placed linearly by their
+    position in the log (so every sentence gets its own, increasing time), extrapolated at the ends with the
+    mean spacing; Unix seconds when a date (RMC/ZDA) is known, else seconds of the UTC day;
+    ``index`` = sentence position / ``nominal_rate_hz``. The choice is in ``meta['time_source']``.
+
+    Rows: one per decoded sentence carrying a value (NaN in the channels that sentence does not supply);
+    sentences sharing an identical timestamp are merged into one row (later values win).
+    Raises ImutoolError when the file cannot be read or holds no usable sentence.
+    """
+    if time_source not in TIME_SOURCES:
+        raise ImutoolError(f"unknown time source {time_source!r} ({', '.join(TIME_SOURCES)})")
+    if checksum_policy not in CHECKSUM_POLICIES:
+        raise ImutoolError(f"unknown checksum policy {checksum_policy!r} ({', '.join(CHECKSUM_POLICIES)})")
+    if not (nominal_rate_hz > 0 and math.isfinite(nominal_rate_hz)):
+        raise ImutoolError(f"nominal rate must be a positive number of Hz, not {nominal_rate_hz!r}")
+    spath = os.fspath(path)
+    xmap = _normalise_xdr_map(xdr_map)
+    try:
+        with open(spath, encoding=encoding, errors="replace", newline="") as fh:
+            text = fh.read()
+    except OSError as e:
+        raise ImutoolError(f"cannot read: {e.strerror or e}", path=spath) from None
+    if "\x00" in text[:4096] and text.count("\x00") > len(text) // 10:
+        raise ImutoolError("binary file, not an NMEA text log", path=spath)
+
+    counts: dict[str, dict[str, int]] = {}
+    bad_lines: list[dict[str, Any]] = []
+    n_comment = n_other = n_prefix = 0
+    xdr_ids: Counter[str] = Counter()
+    rows_vals: list[dict[str, float]] = []
+    rows_pos: list[int] = []
+    rows_stamp: list[float | None] = []
+    anchors: list[tuple[int, float, float | None]] = []  # (position, tod, date epoch)
+    stamps_seen = 0
+    pos = -1
+
+    def bad(lineno: int, stype: str | None, kind: str, msg: str) -> None:
+        counts.setdefault(stype or "?", _empty_counts())[kind] += 1
+        if len(bad_lines) < _MAX_BAD_LINES:
+            bad_lines.append({"line": lineno, "type": stype or "?", "problem": kind, "detail": msg[:120]})
+
+    for lineno, line in enumerate(re.split(r"\r\n|\r|\n", text), start=1):
+        st = line.strip()
+        if not st:
+            continue
+        if st.startswith("#"):
+            n_comment += 1
+            continue
+        i_d, i_b = st.find("$"), st.find("!")
+        idx = min(i for i in (i_d, i_b) if i >= 0) if (i_d >= 0 or i_b >= 0) else -1
+        if idx < 0:
+            n_other += 1
+            continue
+        stamp = _parse_stamp(st[:idx]) if idx > 0 else None
+        if idx > 0 and stamp is None:
+            n_prefix += 1  # text before the sentence that is not a timestamp (spliced line?): sentence still tried
+        pos += 1
+        try:
+            s = parse_sentence(st[idx:], checksum_policy)
+        except NmeaParseError as e:
+            bad(lineno, e.sentence_type, e.kind, str(e))
+            continue
+        if stamp is not None:
+            stamps_seen += 1
+        stype = s.type
+        c = counts.setdefault(stype, _empty_counts())
+        tod, de = _nmea_time(s)
+        if tod is not None:
+            anchors.append((pos, tod, de))
+        if stype == "XDR":
+            if len(s.fields) % 4:
+                xdr_ids["(misaligned sentence)"] += 1
+            for k in range(len(s.fields) // 4 if len(s.fields) % 4 == 0 else 0):
+                xdr_ids[s.fields[4 * k + 3].strip()] += 1
+        try:
+            vals, problems = decode_checked(s, xmap)
+            if problems and not vals:
+                raise NmeaFieldError(problems[0], sentence_type=stype)
+        except NmeaUnsupportedError:
+            if tod is None:
+                c["unsupported"] += 1
+            else:
+                c["parsed"] += 1  # used for time only
+            continue
+        except NmeaParseError as e:
+            bad(lineno, stype, e.kind, str(e))
+            continue
+        except Exception as e:  # a pynmea2 surprise must never abort a whole log
+            bad(lineno, stype, "malformed", f"{type(e).__name__}: {e}")
+            continue
+        if not vals or set(vals) <= {"ths_mode", "peak_reset_time", "peak_reset_day", "peak_reset_month"} \
+                and "ths_mode" not in vals:
+            c["no_data"] += 1
+            continue
+        c["parsed"] += 1
+        if problems:
+            c["partial"] += 1
+            if len(bad_lines) < _MAX_BAD_LINES:
+                bad_lines.append({"line": lineno, "type": stype, "problem": "partial", "detail": problems[0][:120]})
+        rows_vals.append(vals)
+        rows_pos.append(pos)
+        rows_stamp.append(stamp)
+
+    n_pos = pos + 1
+    if not rows_vals:
+        summary = ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()) if any(v.values())) or "none"
+        raise ImutoolError(f"no usable NMEA sentence with heading/attitude data (sentence counts: {summary})",
+                           path=spath)
+
+    # -- time base
+    src = time_source
+    have_stamps = stamps_seen > 0 and all(x is not None for x in rows_stamp)
+    if src == "auto":
+        src = "stamp" if have_stamps else ("nmea" if anchors else "index")
+    t_meta: dict[str, Any] = {}
+    if src == "stamp":
+        if not have_stamps:
+            raise ImutoolError("time source 'stamp' asked for, but not every sentence line has a timestamp",
+                               path=spath)
+        t = np.array(rows_stamp, dtype=float)
+    elif src == "nmea":
+        if not anchors:
+            raise ImutoolError("time source 'nmea' asked for, but the log has no RMC/GGA/GLL/ZDA/PASHR time",
+                               path=spath)
+        t, t_meta = _nmea_times(np.array(rows_pos, dtype=float), anchors, nominal_rate_hz)
+    else:
+        t = np.array(rows_pos, dtype=float) / nominal_rate_hz
+        t_meta = {"nominal_rate_hz": nominal_rate_hz}
+
+    # -- rows: merge identical times, build channels
+    order_keys: list[str] = []
+    for v in rows_vals:
+        for k in v:
+            ch = _CHANNELS.get(k)
+            if ch and ch[0] not in order_keys:
+                order_keys.append(ch[0])
+    grp = np.concatenate([[True], np.diff(t) != 0]) if len(t) > 1 else np.array([True])
+    row_of = np.cumsum(grp) - 1
+    n_rows = int(row_of[-1]) + 1
+    data = {name: np.full(n_rows, np.nan) for name in order_keys}
+    for r, v in zip(row_of, rows_vals, strict=True):
+        for k, x in v.items():
+            ch = _CHANNELS.get(k)
+            if ch:
+                data[ch[0]][r] = x
+    units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
+    rec = Recording(t[grp], data, units)
+    rec.meta.update({
+        "source": spath,
+        "format": "nmea0183",
+        "time_source": src,
+        "time": t_meta,
+        "checksum_policy": checksum_policy,
+        "sentences": {k: counts[k] for k in sorted(counts)},
+        "bad_lines": bad_lines,
+        "lines": {"comment": n_comment, "not_nmea": n_other, "sentences": n_pos,
+                  "unrecognised_prefix": n_prefix},
+        "xdr_map": {k: (("-" if m.sign < 0 else "") + m.quantity) for k, m in xmap.items()},
+        "xdr_ids_seen": dict(xdr_ids),
+        "signs": "roll + starboard down, pitch + bow up, heave + up (m), heading deg true, rot deg/min",
+        "rows": "one per sentence carrying a value; identical timestamps merged",
+    })
+    if "ths_mode" in data:
+        rec.meta["ths_mode_codes"] = {str(float(ord(c))): c for c in THS_MODES}
+    return rec
+
+
+def _nmea_times(pos: np.ndarray, anchors: list[tuple[int, float, float | None]],
+                nominal_rate_hz: float) -> tuple[np.ndarray, dict[str, Any]]:
+    """Place sentences in time from the UTC fixes (see read_nmea). Returns (times, meta)."""
+    first_date = next((d for _, _, d in anchors if d is not None), None)
+    ap: list[float] = []
+    at: list[float] = []
+    date = first_date
+    prev = -math.inf
+    for p, tod, d in anchors:
+        if d is not None:
+            date = d
+        base = date if date is not None else 0.0
+        tt = base + tod
+        while tt < prev - 43200.0:  # midnight roll-over without a new date
+            tt += 86400.0
+        if ap and tt == at[-1]:
+            continue  # several sentences of one burst carry the same time: the first one anchors it
+        if tt < prev:
+            continue  # a time that goes backwards is not used as an anchor
+        ap.append(float(p))
+        at.append(tt)
+        prev = tt
+    pa, ta = np.array(ap), np.array(at)
+    if len(pa) >= 2:
+        slope = float((ta[-1] - ta[0]) / (pa[-1] - pa[0])) if pa[-1] > pa[0] else 1.0 / nominal_rate_hz
+    else:
+        slope = 1.0 / nominal_rate_hz
+    t = np.interp(pos, pa, ta)
+    lo, hi = pos < pa[0], pos > pa[-1]
+    t[lo] = ta[0] + (pos[lo] - pa[0]) * slope
+    t[hi] = ta[-1] + (pos[hi] - pa[-1]) * slope
+    meta = {
+        "anchors": len(pa),
+        "origin": "unix seconds (UTC)" if first_date is not None else "seconds of the UTC day (no date in log)",
+        "seconds_per_sentence_between_fixes": slope,
+    }
+    if first_date is not None:
+        meta["start_utc"] = datetime.fromtimestamp(float(t[0]), tz=timezone.utc).isoformat()
+    return t, meta
+
+
+# -- writing logs -------------------------------------------------------------------------------------------------
+WRITABLE = ("HDT", "THS", "HDG", "ROT", "XDR", "HRM", "PASHR")
+
+
+def _channel(rec: Recording, name: str, unit: str) -> np.ndarray | None:
+    if name not in rec.channels:
+        return None
+    a = rec[name]
+    if a.ndim != 1:
+        return None
+    if rec.units.get(name) and rec.units.get(name) != unit:
+        return np.asarray(rec.get(name, unit), dtype=float)
+    return np.asarray(a, dtype=float)
+
+
+def _f(a: np.ndarray | None, i: int) -> float | None:
+    if a is None:
+        return None
+    x = float(a[i])
+    return x if math.isfinite(x) else None
+
+
+def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz: float | None = None,
+                   talker: str | None = None, xdr_map: dict[str, Any] | None = None) -> Iterator[tuple[float, str]]:
+    """Yield (time s, sentence without CR/LF) from a Recording's channels: heading (true deg), heading_sensor /
+    heading_mag / deviation / variation (HDG), rot (deg/min; derived from heading when absent), roll, pitch
+    (deg), heave (m), HRM fields (roll, roll_period, amp_port, amp_stbd, peak_port, peak_stbd).
+
+    rate_hz: None writes every row; otherwise the rows nearest a uniform grid at that rate (decimation; no
+    interpolation, so values are the recorded ones). Rows whose needed channel is NaN emit nothing for that
+    sentence (THS/ROT/HRM emit an invalid-status sentence instead). Sentence order per row follows
+    ``sentences``. XDR ids/signs come from the first roll/pitch entries of ``xdr_map`` (default ROLL/PTCH, +).
+    """
+    sents = [s.upper() for s in sentences]
+    for s in sents:
+        if s not in WRITABLE:
+            raise ImutoolError(f"cannot write sentence type {s!r} (writable: {', '.join(WRITABLE)})")
+    n = len(rec)
+    if n == 0:
+        return
+    t = rec.time
+    if rate_hz is None:
+        rows = np.arange(n)
+    else:
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise ImutoolError(f"rate must be a positive number of Hz, not {rate_hz!r}")
+        grid = np.arange(t[0], t[-1] + 0.5 / rate_hz, 1.0 / rate_hz)
+        rows = np.unique(np.clip(np.searchsorted(t, grid, side="left"), 0, n - 1))
+    heading = _channel(rec, "heading", "deg")
+    hsensor = _channel(rec, "heading_sensor", "deg")
+    hmag = _channel(rec, "heading_mag", "deg")
+    dev = _channel(rec, "deviation", "deg")
+    var = _channel(rec, "variation", "deg")
+    roll = _channel(rec, "roll", "deg")
+    pitch = _channel(rec, "pitch", "deg")
+    heave = _channel(rec, "heave", "m")
+    rot = _channel(rec, "rot", "deg/min")
+    period = _channel(rec, "roll_period", "s")
+    amp_p, amp_s = _channel(rec, "amp_port", "deg"), _channel(rec, "amp_stbd", "deg")
+    peak_p, peak_s = _channel(rec, "peak_port", "deg"), _channel(rec, "peak_stbd", "deg")
+    ths_mode = _channel(rec, "ths_mode", "1")
+    if rot is None and heading is not None and "ROT" in sents and n >= 2:
+        unwrapped = np.degrees(np.unwrap(np.radians(np.nan_to_num(heading, nan=0.0))))
+        rot = np.gradient(unwrapped, t) * 60.0
+        rot[~np.isfinite(heading)] = np.nan
+    xm = _normalise_xdr_map(xdr_map)
+    rid = next((k for k, m in xm.items() if m.quantity == "roll"), "ROLL")
+    pid = next((k for k, m in xm.items() if m.quantity == "pitch"), "PTCH")
+    rsign = int(xm[rid].sign) if rid in xm else 1
+    psign = int(xm[pid].sign) if pid in xm else 1
+    tk = talker
+
+    for i in rows:
+        i = int(i)
+        ti = float(t[i])
+        for s in sents:
+            out: str | None = None
+            if s == "HDT":
+                h = _f(heading, i)
+                out = hdt_sentence(h, talker=tk or "HE") if h is not None else None
+            elif s == "THS":
+                if heading is not None:
+                    mode = "A"
+                    if ths_mode is not None and _f(ths_mode, i) is not None:
+                        mode = chr(int(ths_mode[i]))
+                        mode = mode if mode in THS_MODES else "A"
+                    out = ths_sentence(_f(heading, i), mode=mode, talker=tk or "HE")
+            elif s == "HDG":
+                hs = _f(hsensor, i)
+                d, v = _f(dev, i), _f(var, i)
+                if hs is None and hmag is not None and _f(hmag, i) is not None:
+                    hs = _f(hmag, i) - (d or 0.0)
+                    d = 0.0 if d is None else d
+                if hs is not None:
+                    out = hdg_sentence(hs, d, v, talker=tk or "HC")
+            elif s == "ROT":
+                if rot is not None:
+                    r = _f(rot, i)
+                    out = rot_sentence(r, valid=r is not None, talker=tk or "TI")
+            elif s == "XDR":
+                r, p = _f(roll, i), _f(pitch, i)
+                if r is not None or p is not None:
+                    out = xdr_roll_pitch(r, p, roll_id=rid, pitch_id=pid, roll_sign=rsign, pitch_sign=psign,
+                                         talker=tk or "YX")
+            elif s == "HRM":
+                r = _f(roll, i)
+                if r is not None or period is not None:
+                    pr = _f(period, i)
+                    out = hrm_sentence(r, pr, _f(amp_p, i), _f(amp_s, i), valid=r is not None,
+                                       peak_port_deg=_f(peak_p, i), peak_stbd_deg=_f(peak_s, i), talker=tk or "II")
+            elif s == "PASHR":
+                h, r, p, hv = _f(heading, i), _f(roll, i), _f(pitch, i), _f(heave, i)
+                if any(x is not None for x in (h, r, p, hv)):
+                    out = pashr_sentence(ti, h, r, p, hv)
+            if out is not None:
+                yield ti, out
+
+
+def write_nmea(rec: Recording, path: str | os.PathLike, sentences: Sequence[str] = ("HDT", "XDR"),
+               rate_hz: float | None = None, talker: str | None = None,
+               xdr_map: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write sentences (CRLF line ends, atomic) from a Recording; returns counts per sentence type.
+    See :func:`iter_sentences` for channels, decimation and talker defaults."""
+    spath = os.fspath(path)
+    counts: Counter[str] = Counter()
+    with atomic_path(spath) as tmp:
+        with open(tmp, "w", encoding="ascii", newline="") as fh:
+            for _, s in iter_sentences(rec, sentences, rate_hz, talker=talker, xdr_map=xdr_map):
+                fh.write(s + "\r\n")
+                addr = s[1:].split(",", 1)[0]
+                counts["P" + addr[1:] if addr.startswith("P") else addr[2:]] += 1
+        if not counts:  # raised inside the context: no output file is left behind
+            have = ", ".join(rec.channels) or "none"
+            raise ImutoolError(f"no sentence could be written: the recording lacks the channels for "
+                               f"{', '.join(sentences)} (has: {have})", path=spath)
+    return {"path": spath, "sentences": dict(counts), "total": int(sum(counts.values()))}

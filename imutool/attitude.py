@@ -1,0 +1,796 @@
+"""Quaternion EKF with gyro-bias states (roll paper, eq. 1–18), made robust, plus an RTS smoother.
+
+Frames and units: body FRD, world NED, q = [w, x, y, z] body→NED, gyro rad/s, accel m/s² (specific force:
+reads −g on z at rest), mag µT (any unit: only its direction and relative norm are used), time s.
+
+State (paper eq. 1): x = [q, b] with q the attitude and b the gyro bias (rad/s). The covariance is kept for the
+*error state* δx = [δθ, δb] (6×6): q_true = q ⊗ δq(δθ), δq ≈ [1, δθ/2] (body-frame small rotation), which is
+exactly the multiplicative correction of paper eq. 17. (The paper's 7×7 P over the four quaternion components
+is singular along the unit-norm constraint; the 3-parameter error state is the well-posed form of the same
+filter.)
+
+- Predict (eq. 2–6), every sample, with the real time step dt_k = t_k − t_{k−1} and the trapezoidal mean rate
+  ω = ½(ω_{k−1} + ω_k) − b: q ← q ⊗ exp(½ ω dt) (the exact exponential; paper eq. 5 is its first-order
+  truncation). Error-state transition F = [[Φ, −I dt], [0, I]], Φ = exp(−[ω×] dt); Q = diag(σ_g² dt I,
+  σ_b² dt I) (eq. 10). A step longer than ``gap_dt`` is a gap: the rotation is integrated over at most
+  ``gap_dt`` and the attitude variance grows by (gap_rate_sigma·dt)², so accel/mag re-converge after it.
+- Update (eq. 7–18) every ``update_every`` samples (paper: every 40th at 200 Hz; P is then propagated only at
+  update steps with the accumulated rotation Φ = ΔRᵀ, as in the paper's multi-rate scheme):
+  accelerometer z = a/‖a‖, ẑ = Rᵀ(q)·[0,0,−1], H = [[ẑ×], 0] (eq. 8–12), K = PHᵀS⁻¹ (eq. 14), δx = K y
+  (eq. 15), b += δb (16), q ← q ⊗ δq (17), P ← (I − KH)P (18).
+  Magnetometer, ``mag_mode``: "full" = the paper's normalised 3-vector (ẑ = Rᵀ m_ref); "heading" (default) =
+  the horizontal field direction only, a scalar heading innovation whose correction is projected onto the
+  world vertical, so magnetic disturbance never reaches roll/pitch (Joseph-form covariance update for the
+  projected gain); "off".
+- Robustness beyond the paper: accelerometer update skipped when | ‖a‖ − g | > accel_gate or its normalised
+  innovation squared exceeds accel_nis_gate (forced back in after reject_timeout s of continuous rejection);
+  magnetometer skipped when its norm or dip departs from the reference; rest detection (low rate, ‖a‖ ≈ g
+  for rest_time s) adds a zero-rate pseudo-measurement of the bias; optional GNSS compensation of the
+  kinematic acceleration: a_ned = SȮG·[cos χ, sin χ, 0] + SOG·r·[−sin χ, cos χ, 0] (χ = COG, r = the world
+  vertical rate from the gyro) is subtracted from the measured specific force (f = Rᵀ(a_ned − g_ned)).
+- NaN rows: a NaN gyro sample is replaced by the last good one (counted); NaN accel/mag skip that update.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from numba import njit
+
+from formats import Recording
+from formats.errors import ImutoolError
+from formats.frames import quat_multiply, quat_to_euler
+
+# ---- state vector layout (float64, carried between chunks) -------------------------------------------------
+S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)
+S_MREF, S_MNORM = 43, 46  # unit reference field in NED (3), reference norm
+S_TPREV, S_GPREV = 47, 48  # previous time, previous gyro (3)
+S_REST_T, S_AREJ_T, S_COUNT, S_INIT = 51, 52, 53, 54
+S_DQ = 55  # accumulated rotation since the last covariance propagation (4)
+S_TACC = 59  # accumulated time since the last covariance propagation
+S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
+STATE_SIZE = 66
+
+# ---- parameter vector layout ---------------------------------------------------------------------------------
+P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
+P_ACC_GATE, P_ACC_NIS, P_MAG_NORM_GATE, P_MAG_DIP_GATE = 4, 5, 6, 7
+P_GRAVITY, P_REST_GYRO, P_REST_ACC, P_REST_TIME, P_REST_NOISE = 8, 9, 10, 11, 12
+P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT = 13, 14, 15
+N_PARAMS = 16
+
+# ---- flag bits in the per-sample output -------------------------------------------------------------------
+F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
+
+
+@dataclass
+class EkfParams:
+    """Tuning of :func:`run_ekf`. Noise figures are one-sigma; every field is a CLI option of `imutool filter`."""
+
+    gyro_noise: float = 0.005  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
+    bias_rw: float = 2e-5  # rad/s/√s   bias random walk (process noise of b)
+    accel_noise: float = 0.05  # σ of the normalised accel direction per update (≈ rad)
+    mag_noise_deg: float = 5.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
+    accel_gate: float = 1.5  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
+    accel_nis_gate: float = 25.0  # reject accel when its normalised innovation squared exceeds this (≤ 0: off)
+    mag_norm_gate: float = 0.15  # reject mag when | ‖m‖/m_ref − 1 | exceeds this fraction (≤ 0: off)
+    mag_dip_gate_deg: float = 10.0  # reject mag when its dip differs from the reference by more (≤ 0: off)
+    gravity: float = 9.80665  # m/s²
+    rest_gyro: float = 0.05  # rad/s   rest when |ω − b| stays below this ...
+    rest_accel: float = 0.3  # m/s²    ... and | ‖a‖ − g | below this ...
+    rest_time: float = 1.0  # s       ... for this long (≤ 0: rest detection off)
+    rest_noise: float = 0.05  # rad/s   σ of the zero-rate pseudo-measurement at rest (per sample)
+    gap_factor: float = 5.0  # a step longer than gap_factor × median dt is a gap
+    gap_rate_sigma: float = 0.2  # rad/s  attitude variance growth over a gap: (σ·gap)²
+    reject_timeout: float = 3.0  # s  accel forced back in after this long continuously rejected
+    update_every: int = 1  # paper's multi-rate scheme: P propagation + update every N samples (1 = full rate)
+    mag_mode: str = "heading"  # heading | full | off
+    init_roll_pitch_sigma_deg: float = 5.0
+    init_heading_sigma_deg: float = 20.0
+    init_bias_sigma: float = 0.01  # rad/s
+    init_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad/s
+
+    def vector(self, dt_nominal: float) -> np.ndarray:
+        p = np.zeros(N_PARAMS)
+        p[P_GYRO_NOISE] = self.gyro_noise
+        p[P_BIAS_RW] = self.bias_rw
+        p[P_ACC_NOISE] = self.accel_noise
+        p[P_MAG_NOISE] = np.radians(self.mag_noise_deg)
+        p[P_ACC_GATE] = self.accel_gate
+        p[P_ACC_NIS] = self.accel_nis_gate
+        p[P_MAG_NORM_GATE] = self.mag_norm_gate
+        p[P_MAG_DIP_GATE] = np.radians(self.mag_dip_gate_deg)
+        p[P_GRAVITY] = self.gravity
+        p[P_REST_GYRO] = self.rest_gyro
+        p[P_REST_ACC] = self.rest_accel
+        p[P_REST_TIME] = self.rest_time
+        p[P_REST_NOISE] = self.rest_noise
+        p[P_GAP_DT] = self.gap_factor * dt_nominal
+        p[P_GAP_RATE] = self.gap_rate_sigma
+        p[P_REJ_TIMEOUT] = self.reject_timeout
+        return p
+
+    def mag_mode_code(self) -> int:
+        try:
+            return {"off": 0, "heading": 1, "full": 2}[self.mag_mode]
+        except KeyError:
+            raise ImutoolError(f"mag mode {self.mag_mode!r}: expected heading, full or off") from None
+
+
+# ================================================ numba kernels ================================================
+
+@njit(cache=True)
+def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
+    return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
+
+
+@njit(cache=True)
+def _rotvec_quat(x, y, z):
+    """Unit quaternion of the rotation vector (x, y, z) rad (exact exponential)."""
+    a = np.sqrt(x * x + y * y + z * z)
+    if a < 1e-12:
+        return 1.0, 0.5 * x, 0.5 * y, 0.5 * z
+    s = np.sin(0.5 * a) / a
+    return np.cos(0.5 * a), s * x, s * y, s * z
+
+
+@njit(cache=True)
+def _rmat(q0, q1, q2, q3, r):
+    r[0, 0] = 1 - 2 * (q2 * q2 + q3 * q3)
+    r[0, 1] = 2 * (q1 * q2 - q0 * q3)
+    r[0, 2] = 2 * (q1 * q3 + q0 * q2)
+    r[1, 0] = 2 * (q1 * q2 + q0 * q3)
+    r[1, 1] = 1 - 2 * (q1 * q1 + q3 * q3)
+    r[1, 2] = 2 * (q2 * q3 - q0 * q1)
+    r[2, 0] = 2 * (q1 * q3 - q0 * q2)
+    r[2, 1] = 2 * (q2 * q3 + q0 * q1)
+    r[2, 2] = 1 - 2 * (q1 * q1 + q2 * q2)
+
+
+@njit(cache=True)
+def _propagate_cov(P, phi, T, qa, qb, F):
+    """P ← F P Fᵀ + Q with F = [[Φ, −T I], [0, I]], Q = diag(qa I, qb I). F is a 6×6 scratch (returned filled)."""
+    for i in range(6):
+        for j in range(6):
+            F[i, j] = 0.0
+    for i in range(3):
+        for j in range(3):
+            F[i, j] = phi[i, j]
+        F[i, 3 + i] = -T
+        F[3 + i, 3 + i] = 1.0
+    # FP (only the first three rows differ from P)
+    tmp = np.empty((6, 6))
+    for i in range(3):
+        for j in range(6):
+            s = 0.0
+            for k in range(3):
+                s += phi[i, k] * P[k, j]
+            tmp[i, j] = s - T * P[3 + i, j]
+    for i in range(3, 6):
+        for j in range(6):
+            tmp[i, j] = P[i, j]
+    # (FP)Fᵀ
+    for i in range(6):
+        for j in range(3):
+            s = 0.0
+            for k in range(3):
+                s += tmp[i, k] * phi[j, k]
+            P[i, j] = s - T * tmp[i, 3 + j]
+        for j in range(3, 6):
+            P[i, j] = tmp[i, j]
+    for i in range(3):
+        P[i, i] += qa
+        P[3 + i, 3 + i] += qb
+    for i in range(6):
+        for j in range(i + 1, 6):
+            m = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = m
+            P[j, i] = m
+
+
+@njit(cache=True)
+def _vec_update(P, h0, y, sig2, nis_gate, force, dx):
+    """Update with a unit-vector measurement: H = [[h0×], 0], R = sig2·I. Returns (accepted, NIS); dx filled."""
+    # H rows for δθ: [h0×] = [[0,-h2,h1],[h2,0,-h0],[-h1,h0,0]]
+    H = np.zeros((3, 3))
+    H[0, 1] = -h0[2]
+    H[0, 2] = h0[1]
+    H[1, 0] = h0[2]
+    H[1, 2] = -h0[0]
+    H[2, 0] = -h0[1]
+    H[2, 1] = h0[0]
+    M = np.zeros((6, 3))  # P Hᵀ
+    for i in range(6):
+        for j in range(3):
+            s = 0.0
+            for k in range(3):
+                s += P[i, k] * H[j, k]
+            M[i, j] = s
+    S = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            s = 0.0
+            for k in range(3):
+                s += H[i, k] * M[k, j]
+            S[i, j] = s
+        S[i, i] += sig2
+    # inverse of the symmetric 3×3
+    a, b, c = S[0, 0], S[0, 1], S[0, 2]
+    d, e, f = S[1, 1], S[1, 2], S[2, 2]
+    A = d * f - e * e
+    B = c * e - b * f
+    C = b * e - c * d
+    det = a * A + b * B + c * C
+    W = np.empty((3, 3))
+    W[0, 0] = A / det
+    W[0, 1] = B / det
+    W[0, 2] = C / det
+    W[1, 1] = (a * f - c * c) / det
+    W[1, 2] = (b * c - a * e) / det
+    W[2, 2] = (a * d - b * b) / det
+    W[1, 0] = W[0, 1]
+    W[2, 0] = W[0, 2]
+    W[2, 1] = W[1, 2]
+    wy0 = W[0, 0] * y[0] + W[0, 1] * y[1] + W[0, 2] * y[2]
+    wy1 = W[1, 0] * y[0] + W[1, 1] * y[1] + W[1, 2] * y[2]
+    wy2 = W[2, 0] * y[0] + W[2, 1] * y[1] + W[2, 2] * y[2]
+    nis = y[0] * wy0 + y[1] * wy1 + y[2] * wy2
+    if nis_gate > 0 and nis > nis_gate and not force:
+        return False, nis
+    for i in range(6):
+        dx[i] = M[i, 0] * wy0 + M[i, 1] * wy1 + M[i, 2] * wy2
+    # P ← P − M W Mᵀ
+    K = np.zeros((6, 3))
+    for i in range(6):
+        for j in range(3):
+            K[i, j] = M[i, 0] * W[0, j] + M[i, 1] * W[1, j] + M[i, 2] * W[2, j]
+    for i in range(6):
+        for j in range(i, 6):
+            s = K[i, 0] * M[j, 0] + K[i, 1] * M[j, 1] + K[i, 2] * M[j, 2]
+            v = P[i, j] - s
+            P[i, j] = v
+            P[j, i] = v
+    return True, nis
+
+
+@njit(cache=True)
+def _heading_update(P, r2, y, sig2, dx):
+    """Scalar heading update H = [r2, 0] with the correction projected on the world vertical (Joseph form)."""
+    M = np.zeros(6)
+    for i in range(6):
+        M[i] = P[i, 0] * r2[0] + P[i, 1] * r2[1] + P[i, 2] * r2[2]
+    S = M[0] * r2[0] + M[1] * r2[1] + M[2] * r2[2] + sig2
+    ka = (M[0] * r2[0] + M[1] * r2[1] + M[2] * r2[2]) / S  # world-vertical part of the attitude gain
+    kb = (M[3] * r2[0] + M[4] * r2[1] + M[5] * r2[2]) / S  # world-vertical part of the bias gain
+    K = np.empty(6)
+    for i in range(3):
+        K[i] = r2[i] * ka
+        K[3 + i] = r2[i] * kb
+    for i in range(6):
+        dx[i] = K[i] * y
+    # Joseph: P ← (I − K H) P (I − K H)ᵀ + K sig2 Kᵀ, H = [r2, 0]
+    #  = P − K Mᵀ − M Kᵀ + K (H P Hᵀ + sig2) Kᵀ = P − K Mᵀ − M Kᵀ + S K Kᵀ
+    for i in range(6):
+        for j in range(i, 6):
+            v = P[i, j] - K[i] * M[j] - M[i] * K[j] + S * K[i] * K[j]
+            P[i, j] = v
+            P[j, i] = v
+
+
+@njit(cache=True)
+def _apply_correction(st, dx):
+    qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
+    q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
+    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    st[0], st[1], st[2], st[3] = q0 / n, q1 / n, q2 / n, q3 / n
+    st[4] += dx[3]
+    st[5] += dx[4]
+    st[6] += dx[5]
+
+
+@njit(cache=True)
+def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
+               st, q_out, b_out, std_out, flags_out, p_store):
+    """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
+
+    t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
+    outputs: q_out (N,4), b_out (N,3), std_out (N,3) roll/pitch/heading σ rad, flags_out (N,) bit mask,
+    p_store (N,6,6) posterior P per sample when it has N rows (for the smoother), else unused.
+    """
+    n = t.shape[0]
+    P = st[S_P:S_P + 36].reshape((6, 6))
+    R = np.empty((3, 3))
+    phi = np.empty((3, 3))
+    F = np.empty((6, 6))
+    dx = np.zeros(6)
+    h0 = np.empty(3)
+    y = np.empty(3)
+    r2 = np.empty(3)
+    g = prm[P_GRAVITY]
+    store = p_store.shape[0] == n
+    for k in range(n):
+        flag = 0
+        gk0, gk1, gk2 = gyro[k, 0], gyro[k, 1], gyro[k, 2]
+        if not (np.isfinite(gk0) and np.isfinite(gk1) and np.isfinite(gk2)):
+            gk0, gk1, gk2 = st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2]
+            st[S_NGNAN] += 1
+        if st[S_INIT] == 0.0:
+            st[S_TPREV] = t[k]
+            st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2] = gk0, gk1, gk2
+        dt = t[k] - st[S_TPREV]
+        # ---------------- predict (eq. 2–6, 10) ----------------
+        w0 = 0.5 * (gk0 + st[S_GPREV]) - st[4]
+        w1 = 0.5 * (gk1 + st[S_GPREV + 1]) - st[5]
+        w2 = 0.5 * (gk2 + st[S_GPREV + 2]) - st[6]
+        if not (np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)):
+            w0, w1, w2 = 0.0, 0.0, 0.0
+        gap = dt > prm[P_GAP_DT]
+        dti = prm[P_GAP_DT] if gap else dt
+        if dt > 0:
+            e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
+            q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], e0, e1, e2, e3)
+            nq = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+            st[0], st[1], st[2], st[3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
+            a0, a1, a2, a3 = _qmul(st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], e0, e1, e2, e3)
+            st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = a0, a1, a2, a3
+            st[S_TACC] += dt
+        if gap:
+            st[S_NGAPS] += 1
+            inc = (prm[P_GAP_RATE] * dt) ** 2
+            for i in range(3):
+                P[i, i] = min(P[i, i] + inc, 10.0)
+        st[S_TPREV] = t[k]
+        st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2] = gk0, gk1, gk2
+        st[S_COUNT] += 1.0
+        is_upd = st[S_COUNT] >= update_every
+        if is_upd:
+            st[S_COUNT] = 0.0
+        if (is_upd or cov_every_sample) and st[S_TACC] > 0:
+            T = st[S_TACC]
+            _rmat(st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], R)
+            for i in range(3):
+                for j in range(3):
+                    phi[i, j] = R[j, i]  # Φ = ΔRᵀ
+            _propagate_cov(P, phi, T, prm[P_GYRO_NOISE] ** 2 * T, prm[P_BIAS_RW] ** 2 * T, F)
+            st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
+            st[S_TACC] = 0.0
+        st[S_INIT] = 1.0
+        _rmat(st[0], st[1], st[2], st[3], R)
+        ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
+        acc_ok = np.isfinite(ax) and np.isfinite(ay) and np.isfinite(az)
+        # ---------------- rest detection → zero-rate bias pseudo-measurement ----------------
+        if prm[P_REST_TIME] > 0 and acc_ok:
+            still = (abs(gk0 - st[4]) < prm[P_REST_GYRO] and abs(gk1 - st[5]) < prm[P_REST_GYRO]
+                     and abs(gk2 - st[6]) < prm[P_REST_GYRO]
+                     and abs(np.sqrt(ax * ax + ay * ay + az * az) - g) < prm[P_REST_ACC])
+            st[S_REST_T] = st[S_REST_T] + dt if still else 0.0
+            if st[S_REST_T] >= prm[P_REST_TIME]:
+                flag |= F_REST
+                st[S_NREST] += 1
+                if is_upd:
+                    r_rest = prm[P_REST_NOISE] ** 2
+                    gk = (gk0, gk1, gk2)
+                    for i in range(3):
+                        s_ = P[3 + i, 3 + i] + r_rest
+                        yy = gk[i] - st[4 + i]
+                        for j in range(6):
+                            dx[j] = P[j, 3 + i] / s_ * yy
+                        for a_ in range(6):
+                            for b_ in range(a_, 6):
+                                v = P[a_, b_] - P[a_, 3 + i] * P[b_, 3 + i] / s_
+                                P[a_, b_] = v
+                                P[b_, a_] = v
+                        _apply_correction(st, dx)
+                    _rmat(st[0], st[1], st[2], st[3], R)
+        if is_upd:
+            st[S_NUPD] += 1
+            # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
+            if acc_ok:
+                if use_gnss and np.isfinite(sog[k]) and np.isfinite(cog[k]):
+                    wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
+                    c, s = np.cos(cog[k]), np.sin(cog[k])
+                    sd = sogdot[k] if np.isfinite(sogdot[k]) else 0.0
+                    an0 = sd * c - sog[k] * wr * s
+                    an1 = sd * s + sog[k] * wr * c
+                    ax -= R[0, 0] * an0 + R[1, 0] * an1
+                    ay -= R[0, 1] * an0 + R[1, 1] * an1
+                    az -= R[0, 2] * an0 + R[1, 2] * an1
+                na = np.sqrt(ax * ax + ay * ay + az * az)
+                rej = prm[P_ACC_GATE] > 0 and abs(na - g) > prm[P_ACC_GATE]
+                force = st[S_AREJ_T] >= prm[P_REJ_TIMEOUT]
+                if na > 0 and (not rej or force):
+                    h0[0], h0[1], h0[2] = -R[2, 0], -R[2, 1], -R[2, 2]
+                    y[0], y[1], y[2] = ax / na - h0[0], ay / na - h0[1], az / na - h0[2]
+                    ok, nis = _vec_update(P, h0, y, prm[P_ACC_NOISE] ** 2, prm[P_ACC_NIS], force, dx)
+                    if ok:
+                        _apply_correction(st, dx)
+                        _rmat(st[0], st[1], st[2], st[3], R)
+                        st[S_AREJ_T] = 0.0
+                        flag |= F_ACC_USED
+                    else:
+                        rej = True
+                else:
+                    rej = True
+                if rej:
+                    flag |= F_ACC_REJ
+                    st[S_NAREJ] += 1
+                    st[S_AREJ_T] += dt * update_every
+            # ---------------- magnetometer update ----------------
+            mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
+            if mag_mode > 0 and np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz):
+                nm = np.sqrt(mx * mx + my * my + mz * mz)
+                mw0 = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz
+                mw1 = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz
+                mw2 = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz
+                rej = nm <= 0
+                if not rej and prm[P_MAG_NORM_GATE] > 0 and st[S_MNORM] > 0:
+                    rej = abs(nm / st[S_MNORM] - 1.0) > prm[P_MAG_NORM_GATE]
+                if not rej and prm[P_MAG_DIP_GATE] > 0:
+                    dip = np.arcsin(min(1.0, max(-1.0, mw2 / nm)))
+                    dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
+                    rej = abs(dip - dip_ref) > prm[P_MAG_DIP_GATE]
+                if rej:
+                    flag |= F_MAG_REJ
+                    st[S_NMREJ] += 1
+                elif mag_mode == 1:
+                    r2[0], r2[1], r2[2] = R[2, 0], R[2, 1], R[2, 2]
+                    yh = -np.arctan2(mw1, mw0)  # heading error: the horizontal field should point north
+                    _heading_update(P, r2, yh, prm[P_MAG_NOISE] ** 2, dx)
+                    _apply_correction(st, dx)
+                    flag |= F_MAG_USED
+                else:
+                    for i in range(3):
+                        h0[i] = R[0, i] * st[S_MREF] + R[1, i] * st[S_MREF + 1] + R[2, i] * st[S_MREF + 2]
+                    y[0], y[1], y[2] = mx / nm - h0[0], my / nm - h0[1], mz / nm - h0[2]
+                    ok, nis = _vec_update(P, h0, y, prm[P_MAG_NOISE] ** 2, 0.0, True, dx)
+                    _apply_correction(st, dx)
+                    flag |= F_MAG_USED
+        # ---------------- outputs ----------------
+        for i in range(4):
+            q_out[k, i] = st[i]
+        for i in range(3):
+            b_out[k, i] = st[4 + i]
+        # Euler-angle σ: δ(φ,θ,ψ) = E δθ, E the body-rate → Euler-rate matrix (ZYX)
+        q0, q1, q2, q3 = st[0], st[1], st[2], st[3]
+        roll = np.arctan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2))
+        sp = min(1.0, max(-1.0, 2 * (q0 * q2 - q3 * q1)))
+        cp = max(np.sqrt(1 - sp * sp), 1e-6)
+        sr, cr = np.sin(roll), np.cos(roll)
+        tp = sp / cp
+        e00, e01, e02 = 1.0, sr * tp, cr * tp
+        e11, e12 = cr, -sr
+        e21, e22 = sr / cp, cr / cp
+        v0 = (e00 * (e00 * P[0, 0] + e01 * P[1, 0] + e02 * P[2, 0]) + e01 * (e00 * P[0, 1] + e01 * P[1, 1]
+              + e02 * P[2, 1]) + e02 * (e00 * P[0, 2] + e01 * P[1, 2] + e02 * P[2, 2]))
+        v1 = e11 * e11 * P[1, 1] + 2 * e11 * e12 * P[1, 2] + e12 * e12 * P[2, 2]
+        v2 = e21 * e21 * P[1, 1] + 2 * e21 * e22 * P[1, 2] + e22 * e22 * P[2, 2]
+        std_out[k, 0] = np.sqrt(max(v0, 0.0))
+        std_out[k, 1] = np.sqrt(max(v1, 0.0))
+        std_out[k, 2] = np.sqrt(max(v2, 0.0))
+        flags_out[k] = flag
+        if store:
+            for i in range(6):
+                for j in range(6):
+                    p_store[k, i, j] = P[i, j]
+
+
+@njit(cache=True)
+def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, bias_rw, gap_dt, gap_rate, q_s, b_s, p_s):
+    """Error-state Rauch–Tung–Striebel backward pass over a full-rate-covariance EKF run.
+
+    With the filtered posterior (q_k, b_k, P_k) the prior at k+1 is recomputed (same prediction as the
+    filter); G_k = P_k Fᵀ (P⁻_{k+1})⁻¹; δ_k = G_k (x^s_{k+1} ⊖ x⁻_{k+1}) with ⊖ = [2·vec(q⁻* ⊗ q^s), b^s − b⁻];
+    x^s_k = x_k ⊕ δ_k; P^s_k = P_k + G_k (P^s_{k+1} − P⁻_{k+1}) G_kᵀ.
+    """
+    n = t.shape[0]
+    R = np.empty((3, 3))
+    phi = np.empty((3, 3))
+    F = np.empty((6, 6))
+    for i in range(4):
+        q_s[n - 1, i] = q_f[n - 1, i]
+    for i in range(3):
+        b_s[n - 1, i] = b_f[n - 1, i]
+    p_s[n - 1] = p_f[n - 1]
+    Pp = np.empty((6, 6))
+    d = np.empty(6)
+    for k in range(n - 2, -1, -1):
+        dt = t[k + 1] - t[k]
+        gap = dt > gap_dt
+        dti = gap_dt if gap else dt
+        g0, g1 = gyro[k], gyro[k + 1]
+        w0 = 0.5 * (g0[0] + g1[0]) - b_f[k, 0]
+        w1 = 0.5 * (g0[1] + g1[1]) - b_f[k, 1]
+        w2 = 0.5 * (g0[2] + g1[2]) - b_f[k, 2]
+        if not (np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)):
+            w0, w1, w2 = 0.0, 0.0, 0.0
+        e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
+        qp0, qp1, qp2, qp3 = _qmul(q_f[k, 0], q_f[k, 1], q_f[k, 2], q_f[k, 3], e0, e1, e2, e3)
+        _rmat(e0, e1, e2, e3, R)
+        for i in range(3):
+            for j in range(3):
+                phi[i, j] = R[j, i]
+        for i in range(6):
+            for j in range(6):
+                Pp[i, j] = p_f[k, i, j]
+        T = dt if dt > 0 else 0.0
+        _propagate_cov(Pp, phi, T, gyro_noise ** 2 * T, bias_rw ** 2 * T, F)
+        if gap:
+            inc = (gap_rate * dt) ** 2
+            for i in range(3):
+                Pp[i, i] = min(Pp[i, i] + inc, 10.0)
+        # G = P_k Fᵀ Pp⁻¹  (solve Pp Gᵀ = F P_k)
+        PF = np.empty((6, 6))  # P_k Fᵀ
+        for i in range(6):
+            for j in range(6):
+                s = 0.0
+                for m in range(6):
+                    s += p_f[k, i, m] * F[j, m]
+                PF[i, j] = s
+        G = np.linalg.solve(Pp, PF.T).T
+        # difference x^s_{k+1} ⊖ x⁻_{k+1}
+        c0, c1, c2, c3 = _qmul(qp0, -qp1, -qp2, -qp3, q_s[k + 1, 0], q_s[k + 1, 1], q_s[k + 1, 2], q_s[k + 1, 3])
+        if c0 < 0:
+            c0, c1, c2, c3 = -c0, -c1, -c2, -c3
+        d[0], d[1], d[2] = 2 * c1, 2 * c2, 2 * c3
+        for i in range(3):
+            d[3 + i] = b_s[k + 1, i] - b_f[k, i]
+        dx = G @ d
+        a0, a1, a2, a3 = _qmul(q_f[k, 0], q_f[k, 1], q_f[k, 2], q_f[k, 3], 1.0, 0.5 * dx[0], 0.5 * dx[1],
+                               0.5 * dx[2])
+        nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+        q_s[k, 0], q_s[k, 1], q_s[k, 2], q_s[k, 3] = a0 / nq, a1 / nq, a2 / nq, a3 / nq
+        for i in range(3):
+            b_s[k, i] = b_f[k, i] + dx[3 + i]
+        Ps = p_f[k] + G @ (p_s[k + 1] - Pp) @ G.T
+        p_s[k] = 0.5 * (Ps + Ps.T)
+
+
+# ================================================ Python API ================================================
+
+@dataclass
+class AttitudeResult:
+    """Per-sample EKF output (SI: q body→NED, bias rad/s, σ rad) and the run summary."""
+
+    time: np.ndarray
+    q: np.ndarray
+    bias: np.ndarray
+    std: np.ndarray  # (N,3) roll/pitch/heading σ, rad
+    flags: np.ndarray  # (N,) bit mask F_*
+    summary: dict = field(default_factory=dict)
+    cov: np.ndarray | None = None  # (N,6,6) posterior P when kept (smoother input)
+
+    def euler_deg(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r, p, h = quat_to_euler(self.q)
+        return np.degrees(r), np.degrees(p), np.degrees(h)
+
+
+def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) -> np.ndarray:
+    """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples."""
+    st = np.zeros(STATE_SIZE)
+    okA = np.flatnonzero(np.all(np.isfinite(accel), axis=1))
+    if okA.size == 0:
+        raise ImutoolError("no valid accelerometer sample to initialise the attitude")
+    a = accel[okA[0]]
+    roll = np.arctan2(-a[1], -a[2])
+    pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
+    heading = 0.0
+    mref = np.array([np.cos(np.radians(60)), 0.0, np.sin(np.radians(60))])
+    mnorm = 0.0
+    if mag is not None:
+        okM = np.flatnonzero(np.all(np.isfinite(mag), axis=1) & np.all(np.isfinite(accel), axis=1))
+        if okM.size:
+            i = okM[0]
+            a = accel[i]
+            roll = np.arctan2(-a[1], -a[2])
+            pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
+            from formats.frames import euler_to_quat, quat_rotate
+
+            m = mag[i]
+            mw = quat_rotate(euler_to_quat(roll, pitch, 0.0), m)
+            heading = np.arctan2(-mw[1], mw[0])
+            mnorm = float(np.linalg.norm(m))
+            hor = np.hypot(mw[0], mw[1])
+            mref = np.array([hor, 0.0, mw[2]]) / mnorm
+    from formats.frames import euler_to_quat
+
+    st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading)
+    st[S_B:S_B + 3] = params.init_bias
+    P = np.zeros((6, 6))
+    rp = np.radians(params.init_roll_pitch_sigma_deg) ** 2
+    P[0, 0] = P[1, 1] = rp
+    P[2, 2] = np.radians(params.init_heading_sigma_deg) ** 2
+    # express the NED-axis σ in body axes (heading σ is about the world vertical)
+    from formats.frames import quat_to_matrix
+
+    Rm = quat_to_matrix(st[S_Q:S_Q + 4])
+    P[:3, :3] = Rm.T @ P[:3, :3] @ Rm
+    P[3:, 3:] = np.eye(3) * params.init_bias_sigma ** 2
+    st[S_P:S_P + 36] = P.ravel()
+    st[S_MREF:S_MREF + 3] = mref
+    st[S_MNORM] = mnorm
+    st[S_DQ] = 1.0
+    return st
+
+
+def _gnss_arrays(time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray | None,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    if sog is None or cog_deg is None:
+        z = np.full(n, np.nan)
+        return z, z, z, False
+    sog = np.asarray(sog, float)
+    cog = np.radians(np.asarray(cog_deg, float))
+    # tangential acceleration: derivative of SOG across GNSS fixes (held values: use the change points)
+    ok = np.isfinite(sog)
+    sogdot = np.zeros(n)
+    if ok.sum() > 2:
+        ts, vs = time[ok], sog[ok]
+        chg = np.concatenate([[True], np.diff(vs) != 0])
+        if chg.sum() > 2:
+            tf, vf = ts[chg], vs[chg]
+            sogdot = np.interp(time, tf, np.gradient(vf, tf))
+    return sog, cog, sogdot, True
+
+
+def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None,
+            params: EkfParams | None = None, sog: np.ndarray | None = None, cog_deg: np.ndarray | None = None,
+            state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
+            cov_every_sample: bool | None = None) -> tuple[AttitudeResult, np.ndarray]:
+    """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
+
+    ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
+    :func:`rts_smooth`; 288 bytes/sample). GNSS compensation is used when ``sog`` (m/s) and ``cog_deg`` are given.
+    """
+    params = params or EkfParams()
+    t = np.ascontiguousarray(time, dtype=np.float64)
+    n = len(t)
+    g = np.ascontiguousarray(gyro, dtype=np.float64)
+    a = np.ascontiguousarray(accel, dtype=np.float64)
+    use_mag = mag is not None and params.mag_mode != "off"
+    m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
+    if dt_nominal is None:
+        d = np.diff(t)
+        d = d[d > 0]
+        dt_nominal = float(np.median(d)) if d.size else 0.01
+    if state is None:
+        state = initial_state(a, m if use_mag else None, params)
+    st = np.array(state, dtype=np.float64)
+    prm = params.vector(dt_nominal)
+    sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
+    q_out = np.empty((n, 4))
+    b_out = np.empty((n, 3))
+    std_out = np.empty((n, 3))
+    flags = np.zeros(n, dtype=np.uint8)
+    p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
+    every = max(1, int(params.update_every))
+    cov_each = keep_cov if cov_every_sample is None else cov_every_sample
+    ekf_kernel(t, g, a, m, sg, cg, sd, prm, every, params.mag_mode_code() if use_mag else 0,
+               bool(cov_each or every == 1), use_gnss, st, q_out, b_out, std_out, flags, p_store)
+    summary = {
+        "samples": n, "updates": int(st[S_NUPD]), "accel_rejected": int(st[S_NAREJ]),
+        "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
+        "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
+    }
+    return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None), st
+
+
+def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None = None,
+               dt_nominal: float | None = None) -> AttitudeResult:
+    """Backward RTS pass over a filter run made with ``keep_cov=True`` (zero-lag estimates)."""
+    params = params or EkfParams()
+    if res.cov is None:
+        raise ImutoolError("smoothing needs the filter covariances (run_ekf(..., keep_cov=True))")
+    t = res.time
+    if dt_nominal is None:
+        d = np.diff(t)
+        d = d[d > 0]
+        dt_nominal = float(np.median(d)) if d.size else 0.01
+    g = np.array(gyro, dtype=np.float64)
+    bad = ~np.all(np.isfinite(g), axis=1)
+    if bad.any():  # same hold-last-good rule as the filter
+        idx = np.where(~bad, np.arange(len(g)), 0)
+        np.maximum.accumulate(idx, out=idx)
+        g = g[idx]
+    n = len(t)
+    q_s = np.empty((n, 4))
+    b_s = np.empty((n, 3))
+    p_s = np.empty((n, 6, 6))
+    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.bias_rw, params.gap_factor * dt_nominal,
+               params.gap_rate_sigma, q_s, b_s, p_s)
+    std = euler_std(q_s, p_s)
+    out = AttitudeResult(t, q_s, b_s, std, res.flags.copy(), dict(res.summary), None)
+    out.summary["smoothed"] = True
+    return out
+
+
+def euler_std(q: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Roll/pitch/heading σ (N,3) rad from body-frame attitude covariances P[:, :3, :3] (δ(φ,θ,ψ) = E δθ)."""
+    roll, pitch, _ = quat_to_euler(q)
+    cp = np.maximum(np.cos(pitch), 1e-6)
+    sr, cr, tp = np.sin(roll), np.cos(roll), np.tan(pitch)
+    E = np.zeros((len(q), 3, 3))
+    E[:, 0, 0] = 1.0
+    E[:, 0, 1] = sr * tp
+    E[:, 0, 2] = cr * tp
+    E[:, 1, 1] = cr
+    E[:, 1, 2] = -sr
+    E[:, 2, 1] = sr / cp
+    E[:, 2, 2] = cr / cp
+    C = np.einsum("nij,njk,nlk->nil", E, P[:, :3, :3], E)
+    return np.sqrt(np.maximum(np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2]], axis=1), 0.0))
+
+
+def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool = False,
+                  use_gnss: bool = True) -> tuple[Recording, dict]:
+    """Run the EKF (and optionally the smoother) on a recording; returns (estimate recording, summary).
+
+    Needs ``gyro`` and ``accel``; uses ``mag`` when present, ``sog``/``cog`` when present and use_gnss.
+    Output channels: roll, pitch, heading (deg), q, gyro_bias (rad/s), roll_std/pitch_std/heading_std (deg),
+    accel_rejected, mag_rejected, rest (0/1); ``ref_*`` and label channels of the input are carried over.
+    """
+    params = params or EkfParams()
+    for ch in ("gyro", "accel"):
+        if ch not in rec.channels:
+            raise ImutoolError(f"the EKF needs channel {ch!r}; the recording has {', '.join(rec.channels)}")
+    gyro = rec.get("gyro", "rad/s") if "gyro" in rec.units else rec["gyro"]
+    accel = rec.get("accel", "m/s^2") if "accel" in rec.units else rec["accel"]
+    mag = rec["mag"] if "mag" in rec.channels else None
+    sog = cog = None
+    if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
+        sog = rec.get("sog", "m/s") if "sog" in rec.units else rec["sog"]
+        cog = rec.get("cog", "deg") if "cog" in rec.units else rec["cog"]
+    res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth)
+    summary = dict(res.summary)
+    if smooth:
+        res = rts_smooth(res, gyro, params)
+    out = result_recording(rec, res, params)
+    summary["method"] = "ekf" + ("+rts" if smooth else "")
+    return out, summary
+
+
+def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | None = None) -> Recording:
+    """Estimate channels (degrees at the surface) plus the input's ref_* and label channels."""
+    out = Recording(res.time.copy(), meta=dict(rec.meta))
+    r, p, h = res.euler_deg()
+    out.add("roll", r)
+    out.add("pitch", p)
+    out.add("heading", h)
+    out.add("q", res.q)
+    out.add("gyro_bias", res.bias)
+    sd = np.degrees(res.std)
+    out.add("roll_std", sd[:, 0], "deg")
+    out.add("pitch_std", sd[:, 1], "deg")
+    out.add("heading_std", sd[:, 2], "deg")
+    out.add("accel_rejected", (res.flags & F_ACC_REJ > 0).astype(float), "1")
+    out.add("mag_rejected", (res.flags & F_MAG_REJ > 0).astype(float), "1")
+    out.add("rest", (res.flags & F_REST > 0).astype(float), "1")
+    carry_labels(rec, out)
+    if params is not None:
+        out.meta["filter"] = {k: v for k, v in asdict(params).items()}
+    return out
+
+
+LABEL_CHANNELS = ("movement", "zvi")
+
+
+def carry_labels(src: Recording, dst: Recording) -> None:
+    """Copy truth (``ref_*``) and label channels (movement, sog, cog...) from the input to an estimate."""
+    for name, arr in src.channels.items():
+        if name.startswith("ref_") or name in LABEL_CHANNELS or name in ("sog", "cog"):
+            if name not in dst.channels:
+                dst.add(name, arr, src.units.get(name), src.columns.get(name))
+
+
+def quat_error_metrics(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """BROAD error angles (rad) per sample: d = q_est ⊗ q_ref* (world frame); total = 2·acos|d_w|,
+    heading = 2·atan|d_z/d_w|, inclination = 2·acos√(d_w² + d_z²)."""
+    from formats.frames import quat_conjugate
+
+    d = quat_multiply(q_est, quat_conjugate(q_ref))
+    dw, dz = np.abs(d[..., 0]), d[..., 3]
+    total = 2 * np.arccos(np.clip(dw, 0, 1))
+    heading = 2 * np.arctan(np.abs(dz) / np.maximum(dw, 1e-12))
+    incl = 2 * np.arccos(np.clip(np.sqrt(d[..., 0] ** 2 + dz ** 2), 0, 1))
+    return total, heading, incl

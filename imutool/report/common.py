@@ -1,0 +1,177 @@
+"""Pieces shared by the evidence reports: tolerances, item status, hashes, identification, editions, plateaus.
+
+Status vocabulary (never a pass without data that supports one):
+``pass`` / ``fail`` (criterion evaluated on enough data), ``insufficient data`` (some data, too little to decide),
+``not tested`` (no data for the item). Report-level ``overall``: ``fail`` if any item fails, ``pass`` only if every
+required item passed, otherwise ``incomplete``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PASS, FAIL, INSUFFICIENT, NOT_TESTED = "pass", "fail", "insufficient data", "not tested"
+STATUSES = (PASS, FAIL, INSUFFICIENT, NOT_TESTED)
+
+SCOPE = ("This report is test evidence produced by imutool from recorded data. It is NOT a type approval: type "
+         "approval (e.g. MED wheelmark, recognised-organisation or flag acceptance) is granted by the "
+         "Administration or a recognised organisation. Criteria whose source could not be confirmed are listed "
+         "with their confidence tag (standards.md legend: A verbatim, B secondary quote, C partial, R recalled "
+         "and not confirmed, I imutool's inference).")
+
+CONFIDENCE = {"A": "seen verbatim", "B": "secondary source quoting the text", "C": "partial (titles / TOC only)",
+              "R": "recalled, NOT confirmed", "I": "imutool inference, not a requirement"}
+
+
+def tol_angle(reading_deg: np.ndarray | float, floor_deg: float = 1.0, pct: float = 5.0) -> np.ndarray:
+    """MSC.363(92) angle tolerance max(floor, pct % of |reading|) (deg; standards.md P3, conf. B)."""
+    return np.maximum(floor_deg, pct / 100.0 * np.abs(np.asarray(reading_deg, float)))
+
+
+def tol_period(reading_s: np.ndarray | float, floor_s: float = 1.0, pct: float = 5.0) -> np.ndarray:
+    """MSC.363(92) roll-period tolerance max(floor, pct % of reading) (s; standards.md P4, conf. B)."""
+    return np.maximum(floor_s, pct / 100.0 * np.abs(np.asarray(reading_s, float)))
+
+
+def judge(err: np.ndarray, tol: np.ndarray | float, criterion: str = "max", n_min: int = 1) -> tuple[str, dict]:
+    """Status of an error series against a tolerance series.
+
+    criterion ``max``: every |error| ≤ tolerance. ``p95``: the 95th percentile of |error|/tolerance ≤ 1 (the
+    95 % bound of MSC.1/Circ.1575, standards.md P12). Fewer than n_min finite samples → insufficient data.
+    Returns (status, {worst_ratio, p95_ratio, n_exceed}).
+    """
+    e = np.asarray(err, float)
+    tl = np.broadcast_to(np.asarray(tol, float), e.shape)
+    ok = np.isfinite(e) & np.isfinite(tl)
+    n = int(ok.sum())
+    if n == 0:
+        return NOT_TESTED, {"worst_ratio": None, "p95_ratio": None, "n_exceed": 0}
+    r = np.abs(e[ok]) / tl[ok]
+    info = {"worst_ratio": float(r.max()), "p95_ratio": float(np.percentile(r, 95)),
+            "n_exceed": int(np.count_nonzero(r > 1.0))}
+    if n < n_min:
+        return INSUFFICIENT, info
+    value = info["worst_ratio"] if criterion == "max" else info["p95_ratio"]
+    return (PASS if value <= 1.0 else FAIL), info
+
+
+def stats(err: np.ndarray) -> dict[str, Any]:
+    """N, max |error|, RMS, 95th percentile |error|, mean (bias), std — JSON-safe (None for NaN)."""
+    from imutool.metrics import error_stats
+
+    s = error_stats(np.asarray(err, float))
+    return {k: clean(v) for k, v in s.items() if k in ("n", "max_abs", "rmse", "p95_abs", "mean", "std")}
+
+
+def clean(v: Any) -> Any:
+    """JSON-safe value: numpy → python, NaN/inf → None, recursively."""
+    if isinstance(v, dict):
+        return {str(k): clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [clean(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return clean(v.tolist())
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating, float)):
+        f = float(v)
+        return f if np.isfinite(f) else None
+    if isinstance(v, np.bool_):
+        return bool(v)
+    if isinstance(v, (str, int, bool)) or v is None:
+        return v
+    return str(v)
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def tool_identity() -> dict[str, Any]:
+    """imutool version and git commit (if the package sits in a git checkout)."""
+    from imutool import __version__
+
+    git = None
+    try:
+        root = Path(__file__).resolve().parents[2]
+        out = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                             timeout=5)
+        if out.returncode == 0:
+            git = out.stdout.strip()
+            dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                                   capture_output=True, text=True, timeout=5)
+            if dirty.returncode == 0 and dirty.stdout.strip():
+                git += " (modified)"
+    except (OSError, subprocess.SubprocessError):
+        git = None
+    return {"name": "imutool", "version": __version__, "git": git}
+
+
+def now_utc() -> str:
+    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> dict[str, Any]:
+    """Identification of one input: path, sha256, size, rows, rate, duration, channel used, metadata."""
+    if path is None:
+        return {"path": None, "sha256": None, "kind": kind, "rows": int(len(rec)) if rec is not None else 0}
+    meta = {} if rec is None else {k: v for k, v in rec.meta.items() if k not in ("validation",)}
+    return clean({
+        "path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind,
+        "rows": int(len(rec)), "rate_hz": float(rec.rate_hz) if len(rec) > 1 else None,
+        "duration_s": float(rec.duration), "channel": channel, "meta": meta,
+        "validation": rec.meta.get("validation"),
+    })
+
+
+def plateaus(t: np.ndarray, x: np.ndarray, band: float, min_s: float, settle_s: float = 2.0,
+             window_s: float = 2.0) -> list[tuple[float, float]]:
+    """Stationary stretches of x: runs where the range of x over ±window_s/2 stays ≤ band, lasting ≥ min_s.
+
+    Returns [(start, end)] in s, each trimmed by settle_s at the start (the table settling after a move).
+    """
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    t = np.asarray(t, float)
+    x = np.asarray(x, float)
+    if t.size < 3:
+        return []
+    dt = float(np.median(np.diff(t)))
+    w = max(3, int(round(window_s / dt)) | 1)
+    xf = np.where(np.isfinite(x), x, np.nan)
+    hi = maximum_filter1d(np.nan_to_num(xf, nan=np.inf), w, mode="nearest")
+    lo = minimum_filter1d(np.nan_to_num(xf, nan=-np.inf), w, mode="nearest")
+    still = (hi - lo) <= band
+    out: list[tuple[float, float]] = []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        t0, t1 = t[a] + settle_s, t[b - 1]
+        if t1 - t0 >= min_s:
+            out.append((float(t0), float(t1)))
+    return out
+
+
+def overall(items: list[dict[str, Any]], required: tuple[str, ...]) -> dict[str, Any]:
+    counts = {s: sum(1 for it in items if it["status"] == s) for s in STATUSES}
+    req = {it["id"]: it["status"] for it in items if it["id"] in required}
+    if counts[FAIL]:
+        status = FAIL
+    elif all(req.get(r) == PASS for r in required):
+        status = PASS
+    else:
+        status = "incomplete"
+    missing = [r for r in required if req.get(r) != PASS]
+    return {"status": status, "counts": counts, "required_items": list(required),
+            "required_not_passed": missing,
+            "rule": "fail if any item fails; pass only if every required item passed; otherwise incomplete"}

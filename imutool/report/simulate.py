@@ -1,0 +1,193 @@
+"""Simulated test programmes for the evidence reports: a device under test (DUT) against a reference.
+
+``inclinometer_test`` follows the ISO 19697-style sequence a tilt/motion table would run: static heel steps on both
+sides, sinusoidal roll at several period/amplitude combinations (one asymmetric), and a long static hold
+(drift). ``heading_test`` follows ISO 22090-2 / MSC.116(73): static headings on a turntable, turns at several
+rates of turn (follow-up) and a rolling segment at a constant heading (dynamic error).
+
+The DUT carries known injected errors so the report can be checked against them:
+``dut = (1 + scale) · truth(t − lag) + offset + drift·t + noise`` (deg; for heading also a semicircular deviation
+``a·sin h + b·cos h`` and a roll coupling ``c·roll``). Angles deg, roll + starboard down, heading clockwise from
+north; time s from the start of the programme. Deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from formats import Recording
+
+DEFAULT_STEPS = (0.0, 5.0, 10.0, 20.0, 30.0, -5.0, -10.0, -20.0, -30.0, 0.0)
+# (period s, starboard amplitude deg, port amplitude deg, cycles)
+DEFAULT_DYNAMIC = ((8.0, 10.0, 10.0, 6), (12.0, 20.0, 20.0, 5), (15.0, 25.0, 15.0, 4))
+
+
+def _ramp(a: float, b: float, n: int) -> np.ndarray:
+    """Smooth (raised-cosine) transition from a to b over n samples."""
+    s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n, endpoint=False))
+    return a + (b - a) * s
+
+
+def inclinometer_programme(rate_hz: float = 10.0, steps: tuple[float, ...] = DEFAULT_STEPS, hold_s: float = 20.0,
+                           transition_s: float = 4.0, dynamic: tuple = DEFAULT_DYNAMIC, long_deg: float = 5.0,
+                           long_s: float = 330.0) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """True table heel (t s, heel deg + stbd) and the list of segments [{kind, start, end, ...}]."""
+    dt = 1.0 / rate_hz
+    parts: list[np.ndarray] = []
+    segs: list[dict[str, Any]] = []
+    cur = 0.0
+    n_hold = int(round(hold_s * rate_hz))
+    n_tr = int(round(transition_s * rate_hz))
+
+    def t_now() -> float:
+        return sum(p.size for p in parts) * dt
+
+    for i, s in enumerate(steps):
+        if i > 0 or s != cur:
+            parts.append(_ramp(cur, s, n_tr))
+        t0 = t_now()
+        parts.append(np.full(n_hold, s))
+        segs.append({"kind": "static", "start": t0, "end": t_now(), "reference_deg": s})
+        cur = s
+    for period, a_s, a_p, cycles in dynamic:
+        parts.append(_ramp(cur, 0.0, n_tr))
+        cur = 0.0
+        n = int(round(cycles * period * rate_hz))
+        tt = np.arange(n) * dt
+        sn = np.sin(2 * np.pi * tt / period)
+        t0 = t_now()
+        parts.append(np.where(sn > 0, a_s * sn, a_p * sn))
+        segs.append({"kind": "dynamic", "start": t0, "end": t_now(), "period_s": period, "amp_stbd_deg": a_s,
+                     "amp_port_deg": a_p, "cycles": cycles})
+    if long_s > 0:
+        parts.append(_ramp(cur, long_deg, n_tr))
+        t0 = t_now()
+        parts.append(np.full(int(round(long_s * rate_hz)), long_deg))
+        segs.append({"kind": "long", "start": t0, "end": t_now(), "reference_deg": long_deg})
+    heel = np.concatenate(parts)
+    return np.arange(heel.size) * dt, heel, segs
+
+
+def _shift(t: np.ndarray, x: np.ndarray, lag_s: float) -> np.ndarray:
+    """x(t − lag) by linear interpolation (held at the ends)."""
+    return np.interp(t - lag_s, t, x)
+
+
+def inclinometer_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, scale: float = 0.0,
+                      lag_s: float = 0.0, noise_deg: float = 0.0, drift_deg_per_h: float = 0.0,
+                      ref_noise_deg: float = 0.0, long_s: float = 330.0, **programme: Any
+                      ) -> tuple[Recording, Recording, list[dict[str, Any]]]:
+    """(DUT recording, reference recording, segments) for an inclinometer test on a simulated tilt table.
+
+    Both recordings hold ``roll`` (deg, + starboard down) and ``pitch`` (0). Injected DUT errors are stored in
+    ``dut.meta['injected']``. Segments give the static steps (use them as a ``--static-steps`` file).
+    """
+    rng = np.random.default_rng(seed)
+    t, heel, segs = inclinometer_programme(rate_hz=rate_hz, long_s=long_s, **programme)
+    ref = heel + (rng.normal(0.0, ref_noise_deg, heel.size) if ref_noise_deg > 0 else 0.0)
+    dut = (1.0 + scale) * _shift(t, heel, lag_s) + offset_deg + drift_deg_per_h * t / 3600.0
+    if noise_deg > 0:
+        dut = dut + rng.normal(0.0, noise_deg, heel.size)
+    zeros = np.zeros_like(t)
+    common = {"frame": "vessel body FRD (x bow, y starboard, z down)",
+              "convention": "roll + starboard down (deg)", "rate_hz": rate_hz, "seed": seed}
+    inj = {"offset_deg": offset_deg, "scale": scale, "lag_s": lag_s, "noise_deg": noise_deg,
+           "drift_deg_per_h": drift_deg_per_h}
+    r_dut = Recording(t.copy(), {"roll": dut, "pitch": zeros.copy()}, {},
+                      {**common, "sensor": "simulated inclinometer (DUT)", "device": "SIM-INC-1 s/n 0001 fw 1.0",
+                       "injected": inj})
+    r_ref = Recording(t.copy(), {"roll": ref, "pitch": zeros.copy()}, {},
+                      {**common, "sensor": "simulated tilt table encoder (reference)",
+                       "reference_noise_deg": ref_noise_deg})
+    return r_dut, r_ref, segs
+
+
+def write_steps_csv(segs: list[dict[str, Any]], path: str) -> None:
+    """Write the static segments as a steps file: ``start,end,reference`` (s, s, deg), atomically."""
+    from formats.atomic import atomic_path
+
+    rows = [s for s in segs if s["kind"] in ("static", "long")]
+    with atomic_path(path) as tmp, open(tmp, "w") as f:
+        f.write("start,end,reference\n")
+        for s in rows:
+            f.write(f"{s['start']:.3f},{s['end']:.3f},{s['reference_deg']:.3f}\n")
+
+
+def heading_programme(rate_hz: float = 10.0, headings: int = 8, hold_s: float = 20.0, slew_dps: float = 5.0,
+                      turn_rates: tuple[float, ...] = (8.0, 15.0), turn_deg: float = 360.0,
+                      roll_amp_deg: float = 10.0, roll_period_s: float = 10.0, rolling_s: float = 60.0
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """True (t s, heading deg unwrapped, roll deg, segments) of a turntable heading test."""
+    dt = 1.0 / rate_hz
+    hs: list[np.ndarray] = []
+    segs: list[dict[str, Any]] = []
+    cur = 0.0
+    n_hold = int(round(hold_s * rate_hz))
+
+    def t_now() -> float:
+        return sum(p.size for p in hs) * dt
+
+    def slew(to: float, rate: float, kind: str | None = None) -> None:
+        nonlocal cur
+        n = max(2, int(round(abs(to - cur) / rate * rate_hz)))
+        t0 = t_now()
+        if kind is None:
+            hs.append(_ramp(cur, to, n))
+        else:  # constant rate with short smooth ends
+            n_acc = int(round(1.0 * rate_hz))
+            body = np.linspace(cur, to, n, endpoint=False)
+            hs.append(body)
+            segs.append({"kind": kind, "start": t0 + n_acc * dt, "end": t_now() - n_acc * dt,
+                         "rate_dps": float(np.sign(to - cur) * rate)})
+        cur = to
+
+    for k in range(headings):
+        h = 360.0 * k / headings
+        if k:
+            slew(h, slew_dps)
+        t0 = t_now()
+        hs.append(np.full(n_hold, h))
+        segs.append({"kind": "static", "start": t0, "end": t_now(), "heading_deg": h})
+    for r in turn_rates:
+        slew(cur + turn_deg, r, kind="turn")
+        hs.append(np.full(int(round(5 * rate_hz)), cur))
+    t0 = t_now()
+    n_roll = int(round(rolling_s * rate_hz))
+    hs.append(np.full(n_roll, cur))
+    segs.append({"kind": "rolling", "start": t0, "end": t_now(), "heading_deg": cur % 360.0,
+                 "roll_amp_deg": roll_amp_deg, "roll_period_s": roll_period_s})
+    heading = np.concatenate(hs)
+    t = np.arange(heading.size) * dt
+    roll = np.zeros_like(t)
+    m = (t >= t0)
+    roll[m] = roll_amp_deg * np.sin(2 * np.pi * (t[m] - t0) / roll_period_s)
+    return t, heading, roll, segs
+
+
+def heading_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, semicircular_deg: tuple[float, float]
+                 = (0.0, 0.0), lag_s: float = 0.0, noise_deg: float = 0.0, roll_coupling: float = 0.0,
+                 **programme: Any) -> tuple[Recording, Recording, list[dict[str, Any]]]:
+    """(DUT e.g. a digital magnetic compass, reference gyro, segments) for a heading-device test.
+
+    DUT heading = truth(t − lag) + offset + a·sin(h) + b·cos(h) + roll_coupling·roll + noise (deg, wrapped to
+    [0, 360)). Both recordings hold ``heading`` (deg) and ``roll`` (deg, truth).
+    """
+    rng = np.random.default_rng(seed)
+    t, h, roll, segs = heading_programme(rate_hz=rate_hz, **programme)
+    hl = _shift(t, h, lag_s)
+    a, b = semicircular_deg
+    hr = np.radians(hl)
+    dut = hl + offset_deg + a * np.sin(hr) + b * np.cos(hr) + roll_coupling * _shift(t, roll, lag_s)
+    if noise_deg > 0:
+        dut = dut + rng.normal(0.0, noise_deg, t.size)
+    common = {"frame": "NED; heading clockwise from north (deg)", "rate_hz": rate_hz, "seed": seed}
+    inj = {"offset_deg": offset_deg, "semicircular_deg": list(semicircular_deg), "lag_s": lag_s,
+           "noise_deg": noise_deg, "roll_coupling": roll_coupling}
+    r_dut = Recording(t.copy(), {"heading": dut % 360.0, "roll": roll.copy()}, {},
+                      {**common, "sensor": "simulated digital magnetic compass (DUT)",
+                       "device": "SIM-DMC-1 s/n 0002 fw 1.0", "injected": inj})
+    r_ref = Recording(t.copy(), {"heading": h % 360.0, "roll": roll.copy()}, {},
+                      {**common, "sensor": "simulated gyro compass / turntable encoder (reference)"})
+    return r_dut, r_ref, segs

@@ -1,0 +1,333 @@
+"""Roll statistics per IMO MSC.363(92) annex §3: actual heel, roll period, roll amplitudes, peak hold.
+
+Definitions (MSC.363(92) §3, standards.md P1): *actual heel angle* is the momentary roll angle of the ship
+relative to level (deg, **+ starboard down**, − port, as in IEC 61162-1 HRM); *roll period* is the time between
+two successive maxima of heel **on the same side**; *roll amplitude* is the maximum heel to port or to
+starboard. *Peak hold* (IEC 61162-1 HRM notes, standards.md P7) is the largest port and starboard heel since the
+last reset.
+
+Method (documented in docs/report.md):
+
+1. A Schmitt trigger with hysteresis ``h`` (deg) around a centre (0 = level ship, or a running mean for a ship
+   with a list) splits the heel into alternating *excursions*: a starboard excursion starts when heel − centre
+   rises above +h and ends when it falls below −h; a port excursion the other way round. Oscillations smaller
+   than ±h (noise, ripples on a crest) never switch the state, so a crest with two humps is one excursion.
+2. The extremum of each excursion is the largest |heel| sample in it, refined by a least-squares parabola
+   over ±``refine_frac`` × (excursion duration) around that sample (sub-sample time, noise-averaged value).
+3. Roll amplitude to a side = |refined extremum| of that excursion (port amplitude reported positive, as HRM).
+   Roll period of a side = time between the refined extrema of two consecutive excursions on that side
+   (port and starboard are tracked separately); periods longer than ``max_period_s`` are discarded.
+4. The first excursion is dropped when the recording starts inside it (its extremum may precede the start);
+   the last one, still open at the end, is not reported.
+5. Per-sample outputs are *causal*, as a device would display them: a cycle's values appear at the sample
+   where its excursion ends (the crossing of the opposite threshold). Peak hold is the running maximum of the
+   raw heel samples since the last reset (exact, no refinement).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta, timezone
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from formats import Recording
+from formats.errors import ImutoolError
+
+STBD = 1
+PORT = -1
+
+
+@njit(cache=True)
+def _excursions(v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Schmitt-trigger excursions of v (heel − centre, deg) with hysteresis h (deg).
+
+    Returns side (+1 stbd / −1 port), start index, end index (first sample past the opposite threshold),
+    index of the extreme sample, and a 0/1 flag "genuine start" (entered from inside the ±h band).
+    """
+    n = v.shape[0]
+    side = np.zeros(n, np.int64)
+    i0 = np.zeros(n, np.int64)
+    i1 = np.zeros(n, np.int64)
+    ie = np.zeros(n, np.int64)
+    genuine = np.zeros(n, np.int64)
+    k = 0
+    s = 0
+    start = 0
+    ext = 0
+    best = 0.0
+    prev_in_band = False
+    gen = 0
+    for i in range(n):
+        x = v[i]
+        if np.isnan(x):
+            continue
+        if s == 0:
+            if x > h:
+                s = 1
+            elif x < -h:
+                s = -1
+            else:
+                prev_in_band = True
+                continue
+            start = i
+            ext = i
+            best = x * s
+            gen = 1 if prev_in_band else 0
+            continue
+        if x * s > best:
+            best = x * s
+            ext = i
+        if x * s < -h:
+            side[k] = s
+            i0[k] = start
+            i1[k] = i
+            ie[k] = ext
+            genuine[k] = gen
+            k += 1
+            s = -s
+            start = i
+            ext = i
+            best = x * s
+            gen = 1
+    return side[:k], i0[:k], i1[:k], ie[:k], genuine[:k]
+
+
+@dataclass
+class RollCycles:
+    """One row per completed excursion (a half roll cycle), in time order.
+
+    side: +1 starboard, −1 port. t_peak (s), peak_deg (signed heel at the extremum, deg), amplitude_deg
+    (|peak|, deg), period_s (time since the previous extremum on the same side, NaN if none), t_start/t_end
+    (s, threshold crossings bounding the excursion), i_end (sample index where the cycle becomes known).
+    """
+
+    side: np.ndarray
+    t_peak: np.ndarray
+    peak_deg: np.ndarray
+    amplitude_deg: np.ndarray
+    period_s: np.ndarray
+    t_start: np.ndarray
+    t_end: np.ndarray
+    i_end: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.side.shape[0])
+
+    def of_side(self, side: int) -> RollCycles:
+        m = self.side == side
+        return RollCycles(*(getattr(self, f)[m] for f in self.__dataclass_fields__))
+
+    def as_recording(self) -> Recording:
+        """The per-cycle table as a Recording (time = t_peak) for writing with formats.write."""
+        rec = Recording(self.t_peak.copy(),
+                        {"side": self.side.astype(float), "peak_heel": self.peak_deg, "amplitude": self.amplitude_deg,
+                         "period": self.period_s, "t_start": self.t_start, "t_end": self.t_end},
+                        {"side": "1", "peak_heel": "deg", "amplitude": "deg", "period": "s", "t_start": "s",
+                         "t_end": "s"})
+        rec.meta["content"] = "roll cycles per MSC.363(92) §3: side +1 starboard / -1 port; time = time of the maximum"
+        return rec
+
+
+@dataclass
+class RollStats:
+    """Per-sample roll statistics (causal) plus the cycle table and the settings used."""
+
+    time: np.ndarray
+    heel: np.ndarray  # deg, + starboard
+    roll_period: np.ndarray  # s, latest same-side period (side of the latest completed excursion)
+    period_port: np.ndarray
+    period_stbd: np.ndarray
+    amp_port: np.ndarray  # deg, positive
+    amp_stbd: np.ndarray  # deg
+    peak_port: np.ndarray  # deg, positive, since last reset
+    peak_stbd: np.ndarray
+    reset_time: np.ndarray  # s, time of the last peak-hold reset
+    valid: np.ndarray  # 1 when a period is known and the latest excursion ended < max_period_s ago
+    cycles: RollCycles
+    settings: dict[str, Any] = field(default_factory=dict)
+    resets_utc: list[str | None] = field(default_factory=list)
+
+    def summary(self) -> dict[str, Any]:
+        """Mean/max of periods and amplitudes per side, counts, final peak hold."""
+        out: dict[str, Any] = {"samples": int(self.time.size), "cycles": len(self.cycles)}
+        for name, s in (("port", PORT), ("starboard", STBD)):
+            c = self.cycles.of_side(s)
+            per = c.period_s[np.isfinite(c.period_s)]
+            out[name] = {
+                "excursions": len(c),
+                "periods": int(per.size),
+                "period_mean_s": float(per.mean()) if per.size else None,
+                "amplitude_mean_deg": float(c.amplitude_deg.mean()) if len(c) else None,
+                "amplitude_max_deg": float(c.amplitude_deg.max()) if len(c) else None,
+            }
+        out["peak_hold_port_deg"] = _last_finite(self.peak_port)
+        out["peak_hold_stbd_deg"] = _last_finite(self.peak_stbd)
+        out["last_reset_utc"] = self.resets_utc[-1] if self.resets_utc else None
+        return out
+
+    def as_recording(self, meta: dict[str, Any] | None = None) -> Recording:
+        """Per-sample columns: heel, roll_period, period_port/stbd, amp_port/stbd, peak_port/stbd, ..."""
+        ch = {"heel": self.heel, "roll_period": self.roll_period, "period_port": self.period_port,
+              "period_stbd": self.period_stbd, "amp_port": self.amp_port, "amp_stbd": self.amp_stbd,
+              "peak_port": self.peak_port, "peak_stbd": self.peak_stbd, "peak_reset_time": self.reset_time,
+              "roll_valid": self.valid.astype(float)}
+        units = {"heel": "deg", "roll_period": "s", "period_port": "s", "period_stbd": "s", "amp_port": "deg",
+                 "amp_stbd": "deg", "peak_port": "deg", "peak_stbd": "deg", "peak_reset_time": "s", "roll_valid": "1"}
+        rec = Recording(self.time.copy(), ch, units, dict(meta or {}))
+        rec.meta["roll_stats"] = {**self.settings, "resets_utc": self.resets_utc,
+                                  "convention": "heel + starboard down; amp_port/peak_port positive (HRM)"}
+        return rec
+
+
+def _last_finite(a: np.ndarray) -> float | None:
+    ok = np.flatnonzero(np.isfinite(a))
+    return float(a[ok[-1]]) if ok.size else None
+
+
+def _refine(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, frac: float) -> tuple[float, float]:
+    """Least-squares parabola over ±frac·(t[i1]−t[i0]) around sample ie → (time, value) of the extremum."""
+    w = frac * (t[i1] - t[i0])
+    lo = int(np.searchsorted(t, t[ie] - w, side="left"))
+    hi = int(np.searchsorted(t, t[ie] + w, side="right"))
+    lo, hi = max(lo, i0), min(hi, i1)
+    tt = t[lo:hi] - t[ie]
+    xx = x[lo:hi]
+    ok = np.isfinite(xx)
+    tt, xx = tt[ok], xx[ok]
+    if tt.size >= 5 and w > 0:
+        s = tt / w
+        a2, a1, a0 = np.polyfit(s, xx, 2)
+        if a2 * side < 0:  # opens the right way
+            sv = -a1 / (2 * a2)
+            if abs(sv) <= 1.0:
+                return float(t[ie] + sv * w), float(a0 + a1 * sv + a2 * sv * sv)
+    return float(t[ie]), float(x[ie])
+
+
+def running_mean(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
+    """Centred moving average of x over window_s seconds (NaN ignored), for the centre of a listing ship."""
+    ok = np.isfinite(x)
+    cs = np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))])
+    cn = np.concatenate([[0], np.cumsum(ok)])
+    lo = np.searchsorted(t, t - window_s / 2, side="left")
+    hi = np.searchsorted(t, t + window_s / 2, side="right")
+    n = cn[hi] - cn[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, (cs[hi] - cs[lo]) / np.maximum(n, 1), np.nan)
+
+
+def roll_cycles(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5, centre: str = "zero",
+                centre_window_s: float = 120.0, refine_frac: float = 0.2, max_period_s: float = 60.0) -> RollCycles:
+    """Completed roll excursions of a heel series (t s, heel deg + stbd) per MSC.363(92) §3 (see module doc)."""
+    t = np.asarray(t, float)
+    x = np.asarray(heel_deg, float)
+    if t.shape != x.shape or t.ndim != 1:
+        raise ImutoolError(f"roll: time and heel must be 1-D of equal length (got {t.shape}, {x.shape})")
+    if hysteresis_deg < 0:
+        raise ImutoolError(f"roll: hysteresis must be ≥ 0 deg (got {hysteresis_deg})")
+    if centre == "zero":
+        c = np.zeros_like(x)
+    elif centre == "running":
+        c = running_mean(t, x, centre_window_s)
+    else:
+        raise ImutoolError(f"roll: centre must be 'zero' or 'running' (got {centre!r})")
+    side, i0, i1, ie, gen = _excursions(np.ascontiguousarray(x - c), float(hysteresis_deg))
+    keep = np.ones(side.size, bool)
+    if side.size and gen[0] == 0:
+        keep[0] = False
+    side, i0, i1, ie = side[keep], i0[keep], i1[keep], ie[keep]
+    n = side.size
+    tp = np.empty(n)
+    pk = np.empty(n)
+    for k in range(n):
+        tp[k], pk[k] = _refine(t, x, int(i0[k]), int(i1[k]), int(ie[k]), int(side[k]), refine_frac)
+    period = np.full(n, np.nan)
+    for s in (STBD, PORT):
+        idx = np.flatnonzero(side == s)
+        if idx.size > 1:
+            d = np.diff(tp[idx])
+            # consecutive same-side excursions must have exactly one opposite excursion between them
+            consecutive = np.diff(idx) == 2
+            period[idx[1:]] = np.where(consecutive & (d <= max_period_s), d, np.nan)
+    return RollCycles(side.astype(np.int64), tp, pk, np.abs(pk), period, t[i0], t[i1], i1.astype(np.int64))
+
+
+def _utc_of(t: float, utc_start: datetime | None) -> str | None:
+    if utc_start is not None:
+        return (utc_start + timedelta(seconds=float(t))).strftime("%Y-%m-%dT%H:%M:%S.%fZ")[:-4] + "Z"
+    if t > 1e9:  # looks like Unix time already
+        return datetime.fromtimestamp(float(t), tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")[:-4] + "Z"
+    return None
+
+
+def roll_stats(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5, centre: str = "zero",
+               centre_window_s: float = 120.0, refine_frac: float = 0.2, max_period_s: float = 60.0,
+               resets_s: list[float] | tuple[float, ...] = (), utc_start: datetime | None = None) -> RollStats:
+    """Per-sample MSC.363(92) roll statistics (causal) and the cycle table.
+
+    t: s; heel_deg: deg, + starboard down. resets_s: peak-hold reset times (s, same base as t); the
+    recording start is always a reset. utc_start: UTC of t = 0 (for the reset time/date; Unix-epoch times are
+    recognised without it).
+    """
+    t = np.asarray(t, float)
+    x = np.asarray(heel_deg, float)
+    cyc = roll_cycles(t, x, hysteresis_deg, centre, centre_window_s, refine_frac, max_period_s)
+    n = t.size
+    # causal step functions: value of the latest completed excursion at or before each sample
+    def step(idx_sel: np.ndarray, values: np.ndarray) -> np.ndarray:
+        out = np.full(n, np.nan)
+        if idx_sel.size == 0:
+            return out
+        pos = np.searchsorted(cyc.i_end[idx_sel], np.arange(n), side="right") - 1
+        has = pos >= 0
+        out[has] = values[pos[has]]
+        return out
+
+    all_idx = np.arange(len(cyc))
+    sp = np.flatnonzero(cyc.side == PORT)
+    ss = np.flatnonzero(cyc.side == STBD)
+    roll_period = step(all_idx, cyc.period_s[all_idx])
+    period_port = step(sp, cyc.period_s[sp])
+    period_stbd = step(ss, cyc.period_s[ss])
+    amp_port = step(sp, cyc.amplitude_deg[sp])
+    amp_stbd = step(ss, cyc.amplitude_deg[ss])
+    last_end_t = step(all_idx, t[cyc.i_end])
+    valid = np.isfinite(roll_period) & ((t - last_end_t) <= max_period_s)
+    # peak hold since the last reset: running max of raw samples (NaN ignored)
+    if n:
+        resets = sorted({float(t[0])} | {float(r) for r in resets_s if t[0] <= r <= t[-1]})
+    else:
+        resets = []
+    seg = np.searchsorted(np.asarray(resets), t, side="right") - 1 if n else np.zeros(0, int)
+    peak_port = np.full(n, np.nan)
+    peak_stbd = np.full(n, np.nan)
+    reset_time = np.asarray(resets)[seg] if n else np.zeros(0)
+    xs = np.where(np.isfinite(x), x, -np.inf)
+    xp = np.where(np.isfinite(x), -x, -np.inf)
+    for k in range(len(resets)):
+        m = np.flatnonzero(seg == k)
+        if m.size:
+            a = np.maximum.accumulate(xs[m])
+            b = np.maximum.accumulate(xp[m])
+            peak_stbd[m] = np.where(np.isfinite(a), a, np.nan)
+            peak_port[m] = np.where(np.isfinite(b), b, np.nan)
+    settings = {"hysteresis_deg": hysteresis_deg, "centre": centre, "centre_window_s": centre_window_s,
+                "refine_frac": refine_frac, "max_period_s": max_period_s,
+                "definitions": "MSC.363(92) annex §3: period between successive maxima on the same side"}
+    return RollStats(t, x, roll_period, period_port, period_stbd, amp_port, amp_stbd, peak_port, peak_stbd,
+                     reset_time, valid, cyc, settings, [_utc_of(r, utc_start) for r in resets])
+
+
+def heel_of(rec: Recording, path: str = "recording") -> np.ndarray:
+    """The heel series (deg, + starboard) of a recording: channel ``heel`` (HRM) or else ``roll``."""
+    for name in ("heel", "roll"):
+        if name in rec.channels:
+            a = rec.get(name, "deg") if rec.units.get(name) else rec[name]
+            if a.ndim != 1:
+                raise ImutoolError(f"channel {name!r} must be one column", path=path)
+            return np.asarray(a, float)
+    raise ImutoolError(f"needs a 'roll' or 'heel' channel (deg, + starboard down); has "
+                       f"{', '.join(rec.channels) or 'none'}", path=path)
