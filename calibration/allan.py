@@ -91,7 +91,8 @@ def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray) -> di
     n_, b0, k_ = np.sqrt(np.clip(coef, 0, None))
     i = int(np.argmin(adev))
     return {"N": float(n_), "B": float(adev[i] / BI_FACTOR), "K": float(k_), "tau_min_s": float(taus[i]),
-            "adev_min": float(adev[i]), "flat_B_fit": float(b0 / BI_FACTOR)}
+            "adev_min": float(adev[i]), "flat_B_fit": float(b0 / BI_FACTOR),
+            "B_upper_bound": bool(i >= len(taus) - 2)}
 
 
 @dataclass
@@ -109,7 +110,7 @@ class AllanResult:
         return float(np.mean([t[key] for t in self.terms]))
 
     def summary(self) -> dict[str, Any]:
-        return {k: [t[k] for t in self.terms] for k in ("N", "B", "K", "tau_min_s")}
+        return {k: [t[k] for t in self.terms] for k in ("N", "B", "K", "tau_min_s", "B_upper_bound")}
 
 
 def analyse(y: np.ndarray, rate_hz: float, name: str, unit: str, per_decade: int = 10) -> AllanResult:
@@ -129,7 +130,7 @@ def plot_allan(results: list[AllanResult], path: str, title: str = "Allan deviat
     from formats.atomic import atomic_path
 
     fig, axs = plt.subplots(len(results), 1, figsize=(8, 4.2 * len(results)), squeeze=False)
-    for ax, r in zip(axs[:, 0], results):
+    for ax, r in zip(axs[:, 0], results, strict=True):
         for j, lab in enumerate("xyz"[: r.adev.shape[1]]):
             t = r.terms[j]
             c = f"C{j}"

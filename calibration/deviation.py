@@ -60,7 +60,7 @@ class DeviationCard:
         """The card: (compass heading, deviation, magnetic heading) every ``step_deg`` degrees."""
         psi = np.arange(0.0, 360.0, step_deg)
         d = self.deviation_deg(psi)
-        return [(float(p), float(x), float((p + x) % 360.0)) for p, x in zip(psi, d)]
+        return [(float(p), float(x), float((p + x) % 360.0)) for p, x in zip(psi, d, strict=True)]
 
     def to_section(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -128,11 +128,11 @@ def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_spa
     return card
 
 
-def _covered_deg(c: np.ndarray, bin_deg: float = 5.0) -> float:
-    n = int(round(360.0 / bin_deg))
-    hit = np.zeros(n, dtype=bool)
-    hit[(np.floor(c / bin_deg).astype(int)) % n] = True
-    return float(hit.sum() * bin_deg)
+def _covered_deg(c: np.ndarray) -> float:
+    """Circle covered by the headings: 360° minus the largest gap between neighbouring headings (deg)."""
+    s = np.sort(np.asarray(c, dtype=float) % 360.0)
+    gaps = np.diff(np.concatenate([s, [s[0] + 360.0]]))
+    return float(360.0 - gaps.max())
 
 
 def plot_card(card: DeviationCard, path: str, compass_deg: np.ndarray | None = None,

@@ -66,7 +66,7 @@ def detect_rest(time: np.ndarray, gyro: np.ndarray | None, accel: np.ndarray | N
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     trim = int(round(trim_s * fs))
     out = []
-    for a, b in zip(starts, stops):
+    for a, b in zip(starts, stops, strict=True):
         a2, b2 = a + trim, b - trim
         if b2 > a2 and t[b2 - 1] - t[a2] >= min_rest_s:
             out.append((int(a2), int(b2)))
@@ -141,7 +141,7 @@ def calibrate_gyro(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray | None 
 def _gyro_scale(t: np.ndarray, w: np.ndarray, rests: list[tuple[int, int]], angle: float
                 ) -> tuple[np.ndarray, dict[str, Any]]:
     us, vs = [], []
-    for (a0, b0), (a1, _b1) in zip(rests[:-1], rests[1:]):
+    for (_a0, b0), (a1, _b1) in zip(rests[:-1], rests[1:], strict=True):
         seg = slice(b0 - 1, a1 + 1)
         ww = w[seg]
         dt = np.diff(t[seg])

@@ -144,10 +144,13 @@ def ellipsoid_fit_li(m: np.ndarray, k: float = 4.0) -> tuple[np.ndarray, np.ndar
         raise ImutoolError("ellipsoid fit: singular system (too few or degenerate magnetometer samples)") from None
     w = np.real(w)
     v = np.real(v)
-    pos = np.flatnonzero(w > 0)
+    # the solution satisfies the constraint v1ᵀ C1 v1 > 0 (then λ = v1ᵀ M v1 / v1ᵀ C1 v1 ≥ 0: the unique
+    # positive eigenvalue of Li & Griffiths; ≈ 0 for noise-free data)
+    q = np.einsum("ij,ik,kj->j", v, c1, v)
+    pos = np.flatnonzero(q > 0)
     if pos.size == 0:
         raise ImutoolError("ellipsoid fit: no ellipsoid solution (data too flat or too few orientations)")
-    v1 = v[:, pos[np.argmax(w[pos])]]
+    v1 = v[:, pos[np.argmin(np.abs(w[pos]))]]
     v2 = -s22i_s21 @ v1
     a, b_, c, f, g, h = v1
     p, q, r, dd = v2
@@ -429,7 +432,7 @@ def plot_before_after(m: np.ndarray, fit: MagFit, path: str, title: str = "Magne
     fig, axs = plt.subplots(2, 2, figsize=(10, 9))
     pairs = [(0, 1, "x", "y"), (0, 2, "x", "z"), (1, 2, "y", "z")]
     th = np.linspace(0, 2 * np.pi, 200)
-    for ax, (i, j, li, lj) in zip(axs.ravel()[:3], pairs):
+    for ax, (i, j, li, lj) in zip(axs.ravel()[:3], pairs, strict=True):
         ax.plot(raw[:, i], raw[:, j], ".", ms=1.5, color="C3", alpha=0.5, label="raw")
         ax.plot(cal[:, i], cal[:, j], ".", ms=1.5, color="C0", alpha=0.5, label="calibrated")
         ax.plot(fit.field_ut * np.cos(th), fit.field_ut * np.sin(th), "k--", lw=0.8, label=f"|m| = {fit.field_ut:.1f}")

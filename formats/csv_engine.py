@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 from numba import njit
+from numba import uint64 as _u64
 
 # -- tables -------------------------------------------------------------------------------------------------
 _Q_MIN = -342  # smallest power of ten with a table entry
@@ -93,9 +94,18 @@ _TWO53 = np.uint64(1 << 53)
 _MAXU = np.uint64(0xFFFFFFFFFFFFFFFF)
 _E16 = np.uint64(10**16)
 _E17 = np.uint64(10**17)
+_S2 = np.uint64(2)
+_S4 = np.uint64(4)
+_S8 = np.uint64(8)
+_S16 = np.uint64(16)
+_S32 = np.uint64(32)
+_S48 = np.uint64(48)
+_S56 = np.uint64(56)
+_S60 = np.uint64(60)
+_S62 = np.uint64(62)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     """Full 64×64 → 128-bit product (hi, lo)."""
     a0 = a & _M32
@@ -112,32 +122,32 @@ def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     return hi, lo
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _clz(w: np.uint64) -> int:
     n = 0
     if w == _U0:
         return 64
-    if (w >> np.uint64(32)) == _U0:
+    if (w >> _S32) == _U0:
         n += 32
-        w <<= np.uint64(32)
-    if (w >> np.uint64(48)) == _U0:
+        w <<= _S32
+    if (w >> _S48) == _U0:
         n += 16
-        w <<= np.uint64(16)
-    if (w >> np.uint64(56)) == _U0:
+        w <<= _S16
+    if (w >> _S56) == _U0:
         n += 8
-        w <<= np.uint64(8)
-    if (w >> np.uint64(60)) == _U0:
+        w <<= _S8
+    if (w >> _S60) == _U0:
         n += 4
-        w <<= np.uint64(4)
-    if (w >> np.uint64(62)) == _U0:
+        w <<= _S4
+    if (w >> _S62) == _U0:
         n += 2
-        w <<= np.uint64(2)
+        w <<= _S2
     if (w >> _U63) == _U0:
         n += 1
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) -> float:
     """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""
     if w == _U0:
@@ -150,12 +160,48 @@ def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) 
         return 0.0
     if q > _Q_MAX:
         return math.inf
-    lz = _clz(w)
-    w = w << np.uint64(lz)
+    # normalise w (count leading zeros by halving steps)
+    lz = 0
+    if (w >> _S32) == _U0:
+        lz += 32
+        w <<= _S32
+    if (w >> _S48) == _U0:
+        lz += 16
+        w <<= _S16
+    if (w >> _S56) == _U0:
+        lz += 8
+        w <<= _S8
+    if (w >> _S60) == _U0:
+        lz += 4
+        w <<= _S4
+    if (w >> _S62) == _U0:
+        lz += 2
+        w <<= _S2
+    if (w >> _U63) == _U0:
+        lz += 1
+        w <<= _U1
     i = q - _W_MIN
-    hi, lo = _mul128(w, t_hi[i])
+    # 64x64 -> 128-bit products, written out (numba calls in this hot path cost more than the work)
+    b = t_hi[i]
+    a0 = w & _M32
+    a1 = w >> _U32
+    b0 = b & _M32
+    b1 = b >> _U32
+    p00 = a0 * b0
+    p01 = a0 * b1
+    p10 = a1 * b0
+    mid = (p00 >> _U32) + (p01 & _M32) + (p10 & _M32)
+    lo = (mid << _U32) | (p00 & _M32)
+    hi = a1 * b1 + (p01 >> _U32) + (p10 >> _U32) + (mid >> _U32)
     if (hi & _M9) == _M9:
-        hi2, lo2 = _mul128(w, t_lo[i])
+        b = t_lo[i]
+        b0 = b & _M32
+        b1 = b >> _U32
+        p00 = a0 * b0
+        p01 = a0 * b1
+        p10 = a1 * b0
+        mid = (p00 >> _U32) + (p01 & _M32) + (p10 & _M32)
+        hi2 = a1 * b1 + (p01 >> _U32) + (p10 >> _U32) + (mid >> _U32)
         lo = lo + hi2
         if hi2 > lo:
             hi += _U1
@@ -166,7 +212,7 @@ def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) 
     if power2 <= 0:
         if -power2 + 1 >= 64:
             return 0.0
-        mant >>= np.uint64(-power2 + 1)
+        mant >>= _u64(-power2 + 1)
         mant += mant & _U1
         mant >>= _U1
         # mant < 2^52: subnormal; mant == 2^52: rounded up to the smallest normal (same formula)
@@ -191,7 +237,7 @@ _FALLBACK = 1
 _GARBAGE = 2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _lower(c: np.uint8) -> int:
     c = int(c)
     if 65 <= c <= 90:
@@ -276,7 +322,7 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
                 digits += 1
                 if w != _U0 or d != 0:
                     if nd < 19:
-                        w = w * _U10 + np.uint64(d)
+                        w = w * _U10 + _u64(d)
                         nd += 1
                     else:
                         many = True
@@ -291,7 +337,7 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
                     digits += 1
                     if w != _U0 or d != 0:
                         if nd < 19:
-                            w = w * _U10 + np.uint64(d)
+                            w = w * _U10 + _u64(d)
                             nd += 1
                             q -= 1
                         else:
@@ -401,16 +447,16 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
 
 
 # -- writer -------------------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     """round((hi·2^64 + lo) / 2^s) for 1 ≤ s ≤ 127 (result assumed < 2^64)."""
     s1 = s - 1
     if s1 >= 64:
-        r = hi >> np.uint64(s1 - 64)
+        r = hi >> _u64(s1 - 64)
     elif s1 == 0:
         r = lo
     else:
-        r = (hi << np.uint64(64 - s1)) | (lo >> np.uint64(s1))
+        r = (hi << _u64(64 - s1)) | (lo >> _u64(s1))
     return (r + _U1) >> _U1
 
 
@@ -418,7 +464,7 @@ def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
 def _digits17(ax: float, e10: int, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> np.uint64:
     """≈ round(ax · 10^(16 - e10)) (within ±1), ax > 0 finite."""
     f, e2 = math.frexp(ax)
-    m = np.uint64(f * 9007199254740992.0)  # 2^53; exact
+    m = _u64(f * 9007199254740992.0)  # 2^53; exact
     e2 -= 53
     k = 16 - e10
     i = k - _W_MIN
@@ -459,7 +505,7 @@ def shortest_digits(ax: float, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.nda
         if decimal_to_double(c, e - nd + 1, t_hi, t_lo) == ax:
             return c, nd, e
     for delta in (0, -1, 1):
-        c = d + np.uint64(delta) if delta >= 0 else d - _U1
+        c = d + _u64(delta) if delta >= 0 else d - _U1
         if decimal_to_double(c, e10 - 16, t_hi, t_lo) == ax:
             return c, 17, e10
     return _U0, 0, 0

@@ -7,8 +7,9 @@ Units and signs at this surface (DESIGN.md, standards.md §2):
 - HRM: heel + = starboard, port/starboard amplitudes and peak-hold values sent as positive numbers.
 
 Framing (``$``/``!`` + address + fields + ``*hh``) and checksums are done here; field decoding uses pynmea2's
-sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR, PASHR as ``ASHRATT``) and classes defined
-here, registered with pynmea2, where it lacks them (HRM, THS). One decoder per sentence type.
+sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR; PASHR's field layout is pynmea2's
+``ASHRATT``) and classes defined here, registered with pynmea2, where it lacks them (HRM, THS); SkyTraq
+``$PSTI,036`` is decoded here. One decoder per sentence type.
 """
 
 from __future__ import annotations
@@ -222,9 +223,13 @@ DEFAULT_XDR_MAP: dict[str, XdrMapping] = {
 
 
 def _normalise_xdr_map(xdr_map: dict[str, Any] | None) -> dict[str, XdrMapping]:
-    """Accept {id: XdrMapping | 'roll' | '-roll' | ('roll', -1)}; merged over the defaults unless empty dict."""
+    """Accept {id: XdrMapping | 'roll' | '-roll' | ('roll', -1)}. A map given replaces the defaults entirely
+    (the map used is exactly the map given, and is recorded in the Recording's meta)."""
     if xdr_map is None:
         return DEFAULT_XDR_MAP
+    if all(isinstance(v, XdrMapping) and k == k.strip().upper() and v.quantity in XDR_QUANTITIES
+           and v.sign in (1.0, -1.0) for k, v in xdr_map.items()):
+        return xdr_map  # already normalised (read_nmea normalises once per file)
     out: dict[str, XdrMapping] = {}
     for k, v in xdr_map.items():
         if isinstance(v, XdrMapping):
@@ -398,6 +403,22 @@ def _dec_pashr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]
     return out
 
 
+def _dec_psti(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """SkyTraq $PSTI,036 (dual-antenna attitude): time, date, true heading, pitch, roll (deg, as transmitted:
+    the antenna baseline's angles), mode (N = not valid drops the values). Other $PSTI variants: unsupported."""
+    f = list(s.fields) + [""] * 7
+    if f[0].strip() != "036":
+        raise NmeaUnsupportedError(f"PSTI,{f[0][:4]}: only PSTI,036 (attitude) is decoded", sentence_type="PSTI")
+    if f[6].strip().upper() == "N":
+        return {}
+    out: dict[str, float] = {}
+    for idx, key in ((3, "heading_true"), (4, "pitch"), (5, "roll")):
+        v = _num(f[idx], key, "PSTI")
+        if v is not None:
+            out[key] = v
+    return out
+
+
 def _dec_hrm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
     """HRM (standards.md §2.2): status V drops the heel/period/amplitude values (peak hold kept)."""
     m = _talker(s)
@@ -438,6 +459,7 @@ _DECODERS: dict[str, Callable[[NmeaSentence, dict[str, XdrMapping], list[str]], 
     "XDR": _dec_xdr,
     "PASHR": _dec_pashr,
     "HRM": _dec_hrm,
+    "PSTI": _dec_psti,
 }
 SUPPORTED_TYPES = tuple(_DECODERS)
 
@@ -687,7 +709,7 @@ def _date_epoch(day: int, month: int, year: int) -> float | None:
 
 
 def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
-    """(UTC time of day s, date epoch s at 00:00 UTC) carried by RMC, GGA, GLL, ZDA or PASHR."""
+    """(UTC time of day s, date epoch s at 00:00 UTC) carried by RMC, GGA, GLL, ZDA, PASHR or PSTI,036."""
     f = s.fields
     t = s.type
     try:
@@ -699,7 +721,10 @@ def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
         if t == "ZDA" and len(f) >= 4:
             de = None
             if f[1].strip().isdigit() and f[2].strip().isdigit() and f[3].strip().isdigit():
-                de = _date_epoch(int(f[1]), int(f[2]), int(f[3]))
+                year = int(f[3])
+                if year < 100:  # some devices (B&G GoFree) send a 2-digit year in ZDA
+                    year += 2000 if year < 80 else 1900
+                de = _date_epoch(int(f[1]), int(f[2]), year)
             return _tod(f[0]), de
         if t == "GGA" and f:
             return _tod(f[0]), None
@@ -707,6 +732,9 @@ def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
             return _tod(f[4]), None
         if t == "PASHR" and f:
             return _tod(f[0]), None
+        if t == "PSTI" and len(f) >= 3 and f[0] == "036" and re.fullmatch(r"\d{6}", f[2].strip()):
+            d = f[2].strip()
+            return _tod(f[1]), _date_epoch(int(d[:2]), int(d[2:4]), 2000 + int(d[4:6]))
     except ValueError:
         pass
     return None, None
@@ -747,7 +775,7 @@ def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map
     ``\\c:...\\`` tag block). Bad lines are counted per sentence type and never fatal.
 
     Time base (``time_source``; ``auto`` takes the first available): ``stamp`` = the per-line prefixes (s);
-    ``nmea`` = UTC from RMC/GGA/GLL/ZDA/PASHR: sentences between two time fixes are placed linearly by their
+    ``nmea`` = UTC from RMC/GGA/GLL/ZDA/PASHR/PSTI,036: sentences between two time fixes are placed linearly by their
     position in the log (so every sentence gets its own, increasing time), extrapolated at the ends with the
     mean spacing; Unix seconds when a date (RMC/ZDA) is known, else seconds of the UTC day;
     ``index`` = sentence position / ``nominal_rate_hz``. The choice is in ``meta['time_source']``.
@@ -922,17 +950,19 @@ def _nmea_times(pos: np.ndarray, anchors: list[tuple[int, float, float | None]],
     at: list[float] = []
     date = first_date
     prev = -math.inf
+    rejected = 0
     for p, tod, d in anchors:
         if d is not None:
             date = d
         base = date if date is not None else 0.0
         tt = base + tod
-        while tt < prev - 43200.0:  # midnight roll-over without a new date
+        if prev - 86400.0 < tt < prev - 43200.0:  # midnight roll-over before a new date arrives
             tt += 86400.0
         if ap and tt == at[-1]:
             continue  # several sentences of one burst carry the same time: the first one anchors it
         if tt < prev:
-            continue  # a time that goes backwards is not used as an anchor
+            rejected += 1  # a time that goes backwards is not used as an anchor
+            continue
         ap.append(float(p))
         at.append(tt)
         prev = tt
@@ -947,6 +977,7 @@ def _nmea_times(pos: np.ndarray, anchors: list[tuple[int, float, float | None]],
     t[hi] = ta[-1] + (pos[hi] - pa[-1]) * slope
     meta = {
         "anchors": len(pa),
+        "anchors_rejected_going_backwards": rejected,
         "origin": "unix seconds (UTC)" if first_date is not None else "seconds of the UTC day (no date in log)",
         "seconds_per_sentence_between_fixes": slope,
     }
@@ -983,10 +1014,11 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
     heading_mag / deviation / variation (HDG), rot (deg/min; derived from heading when absent), roll, pitch
     (deg), heave (m), HRM fields (roll, roll_period, amp_port, amp_stbd, peak_port, peak_stbd).
 
-    rate_hz: None writes every row; otherwise the rows nearest a uniform grid at that rate (decimation; no
-    interpolation, so values are the recorded ones). Rows whose needed channel is NaN emit nothing for that
-    sentence (THS/ROT/HRM emit an invalid-status sentence instead). Sentence order per row follows
-    ``sentences``. XDR ids/signs come from the first roll/pitch entries of ``xdr_map`` (default ROLL/PTCH, +).
+    rate_hz: None writes every row; otherwise, for each point of a uniform grid at that rate, the first row at
+    or after it (decimation; no interpolation, so values are the recorded ones). Rows whose needed channel is
+    NaN emit nothing for that sentence (THS/ROT/HRM emit an invalid-status sentence instead). Sentence order
+    per row follows ``sentences``. XDR ids/signs come from the first roll/pitch entries of ``xdr_map``
+    (default ROLL/PTCH, sign +).
     """
     sents = [s.upper() for s in sentences]
     for s in sents:
@@ -1001,8 +1033,8 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
     else:
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ImutoolError(f"rate must be a positive number of Hz, not {rate_hz!r}")
-        grid = np.arange(t[0], t[-1] + 0.5 / rate_hz, 1.0 / rate_hz)
-        rows = np.unique(np.clip(np.searchsorted(t, grid, side="left"), 0, n - 1))
+        grid = t[0] + np.arange(int(np.floor((t[-1] - t[0]) * rate_hz + 1e-9)) + 1) / rate_hz
+        rows = np.unique(np.clip(np.searchsorted(t, grid - 1e-9, side="left"), 0, n - 1))
     heading = _channel(rec, "heading", "deg")
     hsensor = _channel(rec, "heading_sensor", "deg")
     hmag = _channel(rec, "heading_mag", "deg")

@@ -181,6 +181,30 @@ def _gather(buf, starts, width):  # pragma: no cover - numba
     return out
 
 
+def _take(buf: np.ndarray, starts: np.ndarray, dtype: str, ncols: int) -> np.ndarray:
+    """(n, ncols) values of ``dtype`` read at each byte offset in ``starts`` (contiguous copy).
+
+    Runs of equally spaced starts (the usual case: equal-length messages back to back) are copied through
+    strided numpy views; heavily irregular spacing uses the numba byte gather.
+    """
+    n = starts.shape[0]
+    item = np.dtype(dtype).itemsize
+    if n == 0:
+        return np.empty((0, ncols), dtype)
+    if n > 2:
+        d = np.diff(starts)
+        cp = np.flatnonzero(d[1:] != d[:-1]) + 1
+        if cp.size < max(8, n // 256) and np.all(d > 0):
+            out = np.empty((n, ncols), dtype)
+            bounds = np.concatenate([[0], cp, [n - 1]])
+            for p, q in zip(bounds[:-1], bounds[1:], strict=True):
+                view = np.ndarray((q - p + 1, ncols), dtype, buffer=buf, offset=int(starts[p]),
+                                  strides=(int(d[p]), item))
+                out[p: q + 1] = view
+            return out
+    return _gather(buf, starts, item * ncols).view(dtype).reshape(n, ncols)
+
+
 def _fields(block: bytes | memoryview) -> dict[str, bytes]:
     """Parse a ROS1 header block: repeated (uint32 len, b'name=value')."""
     out: dict[str, bytes] = {}
@@ -474,7 +498,7 @@ def _decode(raw: _Raw, kind: str, msgtype: str) -> _Decoded:
     ok = lens >= 16
     hdr = np.zeros((n, 4), np.uint32)
     if ok.any():
-        hdr[ok] = _gather(buf, offs[ok], 16).view("<u4").reshape(-1, 4)
+        hdr[ok] = _take(buf, offs[ok], "<u4", 4)
     flen = hdr[:, 3].astype(np.int64)
     if raw.fmt == "ros1":
         sec = hdr[:, 1].astype(np.int64)
@@ -489,10 +513,13 @@ def _decode(raw: _Raw, kind: str, msgtype: str) -> _Decoded:
         ok &= (enc == 0x0100) & (flen >= 1) & (lens >= expected) & (lens <= expected + 7)
     nsec = hdr[:, 2].astype(np.int64)
     stamp = sec * 1_000_000_000 + nsec
-    floats = np.full((n, nf), np.nan)
     good = np.flatnonzero(ok)
-    if good.size:
-        floats[good] = _gather(buf, offs[good] + fstart[good], 8 * nf).view("<f8").reshape(-1, nf)
+    if good.size == n:
+        floats = _take(buf, offs + fstart, "<f8", nf)
+    else:
+        floats = np.full((n, nf), np.nan)
+        if good.size:
+            floats[good] = _take(buf, offs[good] + fstart[good], "<f8", nf)
     # frame ids: one check per distinct length
     frame_ids: set[str] = set()
     for L in np.unique(flen[good]):
@@ -501,7 +528,7 @@ def _decode(raw: _Raw, kind: str, msgtype: str) -> _Decoded:
         if width <= 0:
             frame_ids.add("")
             continue
-        rows = _gather(buf, offs[sel] + 16, width).reshape(-1, width)
+        rows = _take(buf, offs[sel] + 16, "u1", width)
         uniq = rows[:1] if (rows == rows[0]).all() else np.unique(rows, axis=0)
         for u in uniq[:20]:
             frame_ids.add(u.tobytes().decode("utf-8", "replace"))
@@ -582,16 +609,18 @@ def _seconds_to_sec_nsec(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _cov_channels(rec: Recording, cov: np.ndarray, absent: np.ndarray, name: str, scale: float) -> str | None:
     """Add the covariance of a quantity (FLU, ROS units) as *_std or *_cov channels; returns what was added."""
-    c = cov * _COV_SIGN * scale
-    c[absent] = np.nan
     present = ~absent
-    if not present.any() or not np.any(c[present] != 0):
+    anyabsent = bool(absent.any())
+    cp = cov[present] if anyabsent else cov
+    if cp.shape[0] == 0 or not np.any(cp != 0):
         return None
-    off = c[present][:, [1, 2, 3, 5, 6, 7]]
-    if np.any(off != 0):
+    if np.any(cp[:, [1, 2, 3, 5, 6, 7]] != 0):
+        c = cov * (_COV_SIGN * scale)
+        c[absent] = np.nan
         rec.add(f"{name}_cov", c, _COV_UNITS[name], columns=[f"{name}_cov_{a}" for a in _AXES])
         return f"{name}_cov"
-    var = c[:, [0, 4, 8]]
+    var = cov[:, [0, 4, 8]] * scale
+    var[absent] = np.nan
     with np.errstate(invalid="ignore"):
         std = np.sqrt(var)
     if name == "q":
@@ -639,9 +668,9 @@ def _to_recording(dec: _Decoded, kind: str, stamp: str, topic: str, path: str, m
             conv.append("linear_acceleration FLU → FRD (x,-y,-z)")
         for name, sl, absent in (("gyro", slice(16, 25), g_abs), ("accel", slice(28, 37), a_abs)):
             if name in rec:
-                _cov_channels(rec, f[:, sl].copy(), absent, name, 1.0)
+                _cov_channels(rec, f[:, sl], absent, name, 1.0)
         if "q" in rec:
-            _cov_channels(rec, f[:, 4:13].copy(), q_abs, "q", 1.0)
+            _cov_channels(rec, f[:, 4:13], q_abs, "q", 1.0)
         if len(rec.channels) == 0:
             raise ImutoolError(f"{topic}: every Imu field is marked absent (covariance[0] = -1)", path=path)
     else:
@@ -652,7 +681,7 @@ def _to_recording(dec: _Decoded, kind: str, stamp: str, topic: str, path: str, m
         conv.append(f"{'magnetic_field' if kind == 'mag' else 'vector'} FLU → FRD (x,-y,-z), "
                     f"×{mag_unit_scale:g} → µT")
         if kind == "mag":
-            _cov_channels(rec, f[:, 3:12].copy(), absent, "mag", mag_unit_scale**2)
+            _cov_channels(rec, f[:, 3:12], absent, "mag", mag_unit_scale**2)
     rec.meta["_conv"] = conv
     return rec
 
@@ -712,7 +741,7 @@ def read_bag(path: str | os.PathLike, topic: str | None = None, stamp: str = "he
 
     topic: None (auto: the only Imu topic and the only magnetometer topic; several → ImutoolError listing
     them) or 'IMU_TOPIC[,MAG_TOPIC]'. stamp: 'header' (message stamp) or 'record' (bag record time).
-    vector3_mag_unit: unit of a Vector3Stamped magnetometer (T, G, uT, nT...). fast=False forces rosbags
+    vector3_mag_unit: unit of a Vector3Stamped magnetometer (T, gauss, uT, nT...). fast=False forces rosbags
     per-message deserialisation (reference path). Output: FRD body / NED world, SI (mag µT), see module doc.
     With an IMU and a magnetometer topic the magnetometer is interpolated onto the IMU clock
     (formats.recording.merge; only the common time span is kept).
@@ -995,9 +1024,21 @@ def write_bag(rec: Recording, path: str | os.PathLike, topic: str = "/imu/data",
         "frame_id": fid,
         "channels_written": used,
         "channels_not_written": not_written,
-        "conversions": ["FRD → FLU (x,-y,-z) for gyro/accel/mag", "q: FRD→NED → FLU→ENU",
-                        "covariances R C Rᵀ, R = diag(1,-1,-1)"] + (["mag µT → T"] if has_mag else []),
+        "conversions": _out_conversions(used),
     }
+
+
+def _out_conversions(used: list[str]) -> list[str]:
+    conv = [f"{k} FRD → FLU (x,-y,-z)" for k in ("gyro", "accel", "mag") if k in used]
+    if "mag" in used:
+        conv.append("mag µT → T")
+    if "q" in used:
+        conv.append("q (FRD→NED) → orientation (FLU→ENU)")
+    elif "roll" in used:
+        conv.append("roll/pitch/heading → q (FRD→NED) → orientation (FLU→ENU)")
+    if any(k.endswith(("_std", "_cov")) or "_cov_" in k for k in used):
+        conv.append("covariances R C Rᵀ, R = diag(1,-1,-1) (std → variance on the diagonal)")
+    return conv
 
 
 def _rename_storage(folder: Path, name: str) -> None:

@@ -56,8 +56,8 @@ STATE_SIZE = 66
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
 P_ACC_GATE, P_ACC_NIS, P_MAG_NORM_GATE, P_MAG_DIP_GATE = 4, 5, 6, 7
 P_GRAVITY, P_REST_GYRO, P_REST_ACC, P_REST_TIME, P_REST_NOISE = 8, 9, 10, 11, 12
-P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT = 13, 14, 15
-N_PARAMS = 16
+P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT, P_GYRO_SCALE = 13, 14, 15, 16
+N_PARAMS = 17
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
@@ -67,11 +67,12 @@ F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
 class EkfParams:
     """Tuning of :func:`run_ekf`. Noise figures are one-sigma; every field is a CLI option of `imutool filter`."""
 
-    gyro_noise: float = 0.005  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
+    gyro_noise: float = 8e-4  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
+    gyro_scale_noise: float = 0.0  # fraction: rate-proportional process noise (scale/misalignment errors)
     bias_rw: float = 2e-5  # rad/s/√s   bias random walk (process noise of b)
-    accel_noise: float = 0.05  # σ of the normalised accel direction per update (≈ rad)
+    accel_noise: float = 0.08  # σ of the normalised accel direction per update (≈ rad)
     mag_noise_deg: float = 5.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
-    accel_gate: float = 1.5  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
+    accel_gate: float = 3.0  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
     accel_nis_gate: float = 25.0  # reject accel when its normalised innovation squared exceeds this (≤ 0: off)
     mag_norm_gate: float = 0.15  # reject mag when | ‖m‖/m_ref − 1 | exceeds this fraction (≤ 0: off)
     mag_dip_gate_deg: float = 10.0  # reject mag when its dip differs from the reference by more (≤ 0: off)
@@ -108,6 +109,7 @@ class EkfParams:
         p[P_GAP_DT] = self.gap_factor * dt_nominal
         p[P_GAP_RATE] = self.gap_rate_sigma
         p[P_REJ_TIMEOUT] = self.reject_timeout
+        p[P_GYRO_SCALE] = self.gyro_scale_noise
         return p
 
     def mag_mode_code(self) -> int:
@@ -354,7 +356,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             for i in range(3):
                 for j in range(3):
                     phi[i, j] = R[j, i]  # Φ = ΔRᵀ
-            _propagate_cov(P, phi, T, prm[P_GYRO_NOISE] ** 2 * T, prm[P_BIAS_RW] ** 2 * T, F)
+            # mean rate over T from the accumulated rotation angle (for the rate-proportional noise)
+            ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2), abs(st[S_DQ]))
+            qa = (prm[P_GYRO_NOISE] ** 2 + (prm[P_GYRO_SCALE] * ang / T) ** 2) * T
+            _propagate_cov(P, phi, T, qa, prm[P_BIAS_RW] ** 2 * T, F)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
         st[S_INIT] = 1.0
@@ -478,7 +483,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
 
 
 @njit(cache=True)
-def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, bias_rw, gap_dt, gap_rate, q_s, b_s, p_s):
+def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, gap_rate, q_s, b_s, p_s):
     """Error-state Rauch–Tung–Striebel backward pass over a full-rate-covariance EKF run.
 
     With the filtered posterior (q_k, b_k, P_k) the prior at k+1 is recomputed (same prediction as the
@@ -516,7 +521,8 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, bias_rw, gap_dt, gap_rate, q_
             for j in range(6):
                 Pp[i, j] = p_f[k, i, j]
         T = dt if dt > 0 else 0.0
-        _propagate_cov(Pp, phi, T, gyro_noise ** 2 * T, bias_rw ** 2 * T, F)
+        wn2 = w0 * w0 + w1 * w1 + w2 * w2 if not gap else 0.0
+        _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F)
         if gap:
             inc = (gap_rate * dt) ** 2
             for i in range(3):
@@ -697,7 +703,7 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     q_s = np.empty((n, 4))
     b_s = np.empty((n, 3))
     p_s = np.empty((n, 6, 6))
-    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.bias_rw, params.gap_factor * dt_nominal,
+    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise, params.bias_rw, params.gap_factor * dt_nominal,
                params.gap_rate_sigma, q_s, b_s, p_s)
     std = euler_std(q_s, p_s)
     out = AttitudeResult(t, q_s, b_s, std, res.flags.copy(), dict(res.summary), None)

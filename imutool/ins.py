@@ -13,8 +13,8 @@ paper) with the paper's A(t) (§3, eq. 32, 40, 42) extended by the bias states:
 δθ̇ = −[ω×] δθ − δb_g − n_g,  δṙ = δv,  δv̇ = −R [f×] δθ − R δb_a − R n_a,  δḃ = n_b.
 Discretised Φ = I + A T, Q = diag(σ_g² T, 0, σ_a² T, σ_ba² T, σ_bg² T) (σ = noise densities). At ZVI samples:
 velocity update z = 0 − v̂ (H_v, eq. 45) and optionally the height update z = 0 − r̂_d (H_r, flat floor);
-then the error is injected into the nominal state and reset. Alignment: roll/pitch from the mean specific force
-of the first rest interval, heading 0 (or given), gyro bias from the mean rate over that interval, gravity
+then the error is injected into the nominal state and reset. Alignment: roll/pitch from the median specific force
+of the first rest interval, heading 0 (or given), gyro bias from the median rate over that interval, gravity
 magnitude |f̄| from it too (absorbs the accelerometer's scale error). One compiled loop does everything.
 """
 
@@ -43,6 +43,8 @@ class InsConfig:
     accel_bias_rw: float = 1e-4  # accelerometer bias random walk, m/s²/√s
     zupt_sigma: float = 0.01  # m/s, std of the zero-velocity pseudo-measurement (v_v in eq. 45)
     height_sigma: float = 0.01  # m, std of the flat-floor height pseudo-measurement (v_r in eq. 45)
+    zaru: bool = False  # zero angular-rate update at ZVI samples (observes the gyro bias, incl. heading axis)
+    zaru_sigma: float = float(np.radians(1.0))  # rad/s, std of the zero angular-rate pseudo-measurement
     order: int = 3  # quaternion Taylor order: 2 (eq. 17) or 3 (eq. 18)
     zupt: bool = True  # velocity update at ZVI samples
     height_update: bool = False  # height update r_d = 0 at ZVI samples (flat floor)
@@ -52,6 +54,8 @@ class InsConfig:
     heading_deg: float = 0.0  # initial heading (deg, clockwise from north)
     gravity: float | None = None  # m/s²; None = |mean specific force| over the alignment interval
     align_min_s: float = 0.2  # the first rest interval at least this long (s) is used for alignment
+    align_window_s: float = 4.0  # s, alignment (attitude, gyro bias, gravity) over the last part of that interval
+    align_guard_s: float = 1.0  # s, ... ending this long before the interval's end
     init_tilt_sigma: float = float(np.radians(1.0))  # rad, initial roll/pitch std
     init_heading_sigma: float = float(np.radians(0.1))  # rad, initial heading std (heading is by definition)
     init_vel_sigma: float = 0.01  # m/s
@@ -162,7 +166,8 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
     n = t.shape[0]
     g, sg2, sa2, sbg2, sba2, rz, rh = prm[0], prm[1] ** 2, prm[2] ** 2, prm[3] ** 2, prm[4] ** 2, prm[5] ** 2, \
         prm[6] ** 2
-    order, use_zupt, use_h = opt[0], opt[1], opt[2]
+    order, use_zupt, use_h, use_zaru = opt[0], opt[1], opt[2], opt[3]
+    rw = prm[12] ** 2
     q = q0.copy()
     bg = bg0.copy()
     ba = ba0.copy()
@@ -189,7 +194,7 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
     f = np.zeros(3)
     fn = np.zeros(3)
     an = np.zeros(3)
-    idx = np.zeros(4, dtype=np.int64)
+    idx = np.zeros(7, dtype=np.int64)
     dx = np.zeros(NX)
     _rotmat(q, R)
     for i in range(3):
@@ -255,7 +260,7 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
                 wprev[i] = w[i]
             tprev = T
         # ---- zero-velocity (and height) update, eq. 44–45
-        if zvi[k] and (use_zupt or use_h):
+        if zvi[k] and (use_zupt or use_h or use_zaru):
             m = 0
             if use_zupt:
                 for i in range(3):
@@ -264,13 +269,25 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
             if use_h:
                 idx[m] = 5
                 m += 1
+            if use_zaru:
+                for i in range(3):
+                    idx[m] = 12 + i
+                    m += 1
             S = np.empty((m, m))
             z = np.empty(m)
             for a in range(m):
                 for b in range(m):
                     S[a, b] = P[idx[a], idx[b]]
-                S[a, a] += rh if idx[a] == 5 else rz
-                z[a] = -r[2] if idx[a] == 5 else -v[idx[a] - 6]
+                j = idx[a]
+                if j == 5:  # height: z = 0 − r̂_d
+                    S[a, a] += rh
+                    z[a] = -r[2]
+                elif j < 9:  # velocity: z = 0 − v̂
+                    S[a, a] += rz
+                    z[a] = -v[j - 6]
+                else:  # angular rate: z = y_g − b̂_g (ω = 0 at rest)
+                    S[a, a] += rw
+                    z[a] = gyro[k, j - 12] - bg[j - 12]
             Si = np.linalg.inv(S)
             K = np.zeros((NX, m))
             for i in range(NX):
@@ -362,6 +379,20 @@ def alignment_interval(time: np.ndarray, zvi: np.ndarray, min_s: float) -> tuple
                        f"(check the ZVI detector or its thresholds)")
 
 
+def alignment_window(time: np.ndarray, i0: int, i1: int, window_s: float, guard_s: float,
+                     min_s: float) -> tuple[int, int]:
+    """[start, stop) of the alignment window: the last ``window_s`` seconds of the rest interval [i0, i1) ending
+    ``guard_s`` before its end (the foot starts moving before a detector notices). The whole interval when it
+    is too short for that (window shorter than ``min_s``)."""
+    t_end = time[i1 - 1] - guard_s
+    t_start = max(time[i0], t_end - window_s)
+    if t_end - t_start < min_s:
+        return i0, i1
+    a = int(np.searchsorted(time, t_start, side="left"))
+    b = int(np.searchsorted(time, t_end, side="right"))
+    return max(a, i0), min(b, i1)
+
+
 def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarray,
             config: InsConfig | None = None) -> InsResult:
     """Run the INS. time (N,) s strictly increasing, gyro (N,3) rad/s, accel (N,3) m/s² (specific force, any
@@ -381,18 +412,20 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
         raise ImutoolError("INS: gyro/accel contain NaN or inf samples")
     if c.order not in (2, 3):
         raise ImutoolError(f"INS: quaternion integration order must be 2 or 3; got {c.order}")
-    a0, a1 = alignment_interval(t, z_, c.align_min_s)
-    fbar = a_[a0:a1].mean(axis=0)
+    i0, i1 = alignment_interval(t, z_, c.align_min_s)
+    a0, a1 = alignment_window(t, i0, i1, c.align_window_s, c.align_guard_s, c.align_min_s)
+    fbar = np.median(a_[a0:a1], axis=0)  # median: robust to a shuffle of the foot inside the window
     gravity = float(np.linalg.norm(fbar)) if c.gravity is None else float(c.gravity)
     q0 = align(fbar, c.heading_deg)
-    bg0 = g_[a0:a1].mean(axis=0) if c.init_gyro_bias else np.zeros(3)
+    bg0 = np.median(g_[a0:a1], axis=0) if c.init_gyro_bias else np.zeros(3)
     ba0 = np.zeros(3)
     bg_sigma = c.init_gyro_bias_sigma if c.gyro_bias_states else 0.0
     ba_sigma = c.init_accel_bias_sigma if c.accel_bias_states else 0.0
     prm = np.array([gravity, c.gyro_noise, c.accel_noise, c.gyro_bias_rw if c.gyro_bias_states else 0.0,
                     c.accel_bias_rw if c.accel_bias_states else 0.0, c.zupt_sigma, c.height_sigma,
-                    c.init_tilt_sigma, c.init_heading_sigma, c.init_vel_sigma, ba_sigma, bg_sigma], dtype=np.float64)
-    opt = np.array([c.order, int(c.zupt), int(c.height_update)], dtype=np.int64)
+                    c.init_tilt_sigma, c.init_heading_sigma, c.init_vel_sigma, ba_sigma, bg_sigma, c.zaru_sigma],
+                   dtype=np.float64)
+    opt = np.array([c.order, int(c.zupt), int(c.height_update), int(c.zaru and c.gyro_bias_states)], dtype=np.int64)
     pos = np.full((n, 3), np.nan)
     vel = np.full((n, 3), np.nan)
     q = np.full((n, 4), np.nan)
@@ -400,6 +433,14 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
     hvar = np.full(n, np.nan)
     bias = np.full((n, 6), np.nan)
     p_final = _ins_kernel(t, g_, a_, z_, a0, q0, bg0, ba0, prm, opt, pos, vel, q, pdiag, hvar, bias)
+    # samples of the rest interval before the alignment window: at rest at the origin with the aligned attitude
+    pos[i0:a0] = 0.0
+    vel[i0:a0] = 0.0
+    q[i0:a0] = q0
+    pdiag[i0:a0] = pdiag[a0]
+    hvar[i0:a0] = hvar[a0]
+    bias[i0:a0] = bias[a0]
+    a0 = i0
     info = {"alignment_start_s": float(t[a0]), "alignment_end_s": float(t[a1 - 1]), "gravity_m_s2": gravity,
             "initial_gyro_bias_deg_s": np.degrees(bg0).round(4).tolist()}
     return InsResult(t, pos, vel, q, pdiag, hvar, bias[:, :3], bias[:, 3:], z_ & (np.arange(n) >= a0), a0, gravity,
@@ -407,7 +448,8 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
 
 
 def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
-        detector_params: dict[str, float] | None = None, config: InsConfig | None = None) -> tuple[Recording, InsResult]:
+        detector_params: dict[str, float] | None = None,
+        config: InsConfig | None = None) -> tuple[Recording, InsResult]:
     """Run the INS over a recording (``gyro`` rad/s, ``accel`` m/s²). ZVI flags: given, or detected with
     ``detector``. Returns the output recording (pos, vel m/s, roll/pitch/heading deg, q, *_std, zvi, biases;
     ``ref_*`` columns of the input are carried over) and the raw :class:`InsResult`."""
@@ -449,15 +491,27 @@ def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
 # strides and evaluation
 
 
-def strides(time: np.ndarray, pos: np.ndarray, zvi: np.ndarray) -> dict[str, Any]:
+def strides(time: np.ndarray, pos: np.ndarray, zvi: np.ndarray, min_swing_s: float = 0.2,
+            max_stance_s: float = 2.0) -> dict[str, Any]:
     """Stride segmentation from ZVIs: one stride per swing between two stance intervals.
 
-    Length = horizontal distance (m) between the mean positions of consecutive stances; duration = time (s)
-    between the starts of consecutive stances. Returns count, mean/total length, mean duration, table.
+    Motion gaps shorter than ``min_swing_s`` (s) do not count as swings (a stance split by a foot roll).
+    Length = horizontal distance (m) between the mean positions of consecutive stances; swing_s = toe-off to
+    heel-strike; duration = time (s) between the starts of consecutive stances (NaN after a rest longer than
+    ``max_stance_s``, where the previous heel-strike is not a step).
+    Returns count, mean/total length, mean duration and the table.
     """
     from imutool.zvi import interval_indices
 
     iv = interval_indices(zvi)
+    if len(iv) > 1:
+        keep = [iv[0].copy()]
+        for a, b in iv[1:]:
+            if time[a] - time[keep[-1][1] - 1] < min_swing_s:
+                keep[-1][1] = b
+            else:
+                keep.append(np.array([a, b]))
+        iv = np.array(keep)
     rows = []
     ok = np.all(np.isfinite(pos), axis=1)
     for (a0, b0), (a1, b1) in zip(iv[:-1], iv[1:], strict=False):
@@ -469,12 +523,15 @@ def strides(time: np.ndarray, pos: np.ndarray, zvi: np.ndarray) -> dict[str, Any
         p1 = pos[a1:b1][m1].mean(axis=0)
         rows.append({"start_s": float(time[b0 - 1]), "end_s": float(time[a1]),
                      "length_m": float(np.hypot(*(p1 - p0)[:2])), "height_change_m": float(-(p1 - p0)[2]),
-                     "duration_s": float(time[a1] - time[a0])})
+                     "swing_s": float(time[a1] - time[b0 - 1]),
+                     "duration_s": float(time[a1] - time[a0]) if time[b0 - 1] - time[a0] <= max_stance_s
+                     else float("nan")})
     lengths = np.array([r["length_m"] for r in rows])
     durs = np.array([r["duration_s"] for r in rows])
+    durs = durs[np.isfinite(durs)]
     return {"count": len(rows), "total_length_m": float(lengths.sum()) if rows else 0.0,
             "mean_length_m": float(lengths.mean()) if rows else None,
-            "mean_duration_s": float(durs.mean()) if rows else None, "table": rows}
+            "mean_duration_s": float(durs.mean()) if len(durs) else None, "table": rows}
 
 
 def path_length(time: np.ndarray, pos: np.ndarray, step_s: float = 0.1) -> float:

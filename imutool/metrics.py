@@ -66,3 +66,95 @@ def best_lag(t: np.ndarray, x: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, m
         if den > 0:
             lag += 0.5 * step_s * (c0 - c2) / den
     return lag, float(costs[k])
+
+
+# ---- attitude evaluation (added by the attitude area; the functions above are unchanged) ------------------
+
+def snr_db(filtered: np.ndarray, raw: np.ndarray) -> float:
+    """Roll paper eq. 20: SNR_dB = 10·log10(Σ s² / Σ (s − ŝ)²), s = filtered signal, ŝ = raw measured signal."""
+    s = np.asarray(filtered, float)
+    r = np.asarray(raw, float)
+    ok = np.isfinite(s) & np.isfinite(r)
+    den = float(np.sum((s[ok] - r[ok]) ** 2))
+    return float(10 * np.log10(np.sum(s[ok] ** 2) / den)) if den > 0 else float("inf")
+
+
+def quat_errors(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """BROAD error angles (rad) per sample with d = q_est ⊗ q_ref* (world frame): total = 2·acos|d_w|,
+    heading = 2·atan(|d_z| / |d_w|) (rotation about the vertical), inclination = 2·acos√(d_w² + d_z²)
+    (angle between the two z axes)."""
+    from formats.frames import quat_conjugate, quat_multiply
+
+    d = quat_multiply(np.asarray(q_est, float), quat_conjugate(np.asarray(q_ref, float)))
+    dw, dz = np.abs(d[..., 0]), np.abs(d[..., 3])
+    total = 2 * np.arccos(np.clip(dw, 0.0, 1.0))
+    heading = 2 * np.arctan2(dz, dw)
+    incl = 2 * np.arccos(np.clip(np.sqrt(d[..., 0] ** 2 + d[..., 3] ** 2), 0.0, 1.0))
+    return total, heading, incl
+
+
+def evaluate_quaternion(q_est: np.ndarray, q_ref: np.ndarray, mask: np.ndarray | None = None) -> dict:
+    """BROAD metrics (deg): RMSE of total, heading and inclination error over ``mask`` rows with a valid ref."""
+    ok = np.all(np.isfinite(q_ref), axis=1) & np.all(np.isfinite(q_est), axis=1)
+    if mask is not None:
+        ok &= np.asarray(mask, bool)
+    out: dict = {"n": int(ok.sum())}
+    for name, e in zip(("total", "heading", "inclination"), quat_errors(q_est[ok], q_ref[ok]), strict=True):
+        st = error_stats(np.degrees(e))
+        out[name] = {"rmse": st["rmse"], "max_abs": st["max_abs"], "p95_abs": st["p95_abs"], "mae": st["mae"]}
+    return out
+
+
+def unwrap_deg(a: np.ndarray) -> np.ndarray:
+    """Unwrap an angle series in degrees (NaN kept)."""
+    a = np.asarray(a, float)
+    out = a.copy()
+    ok = np.isfinite(a)
+    out[ok] = np.degrees(np.unwrap(np.radians(a[ok])))
+    return out
+
+
+def evaluate_angle(t: np.ndarray, est: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, *, wrap: bool = False,
+                   max_lag_s: float = 0.0, raw: np.ndarray | None = None) -> dict:
+    """Error statistics (deg) of one angle against a reference interpolated onto the estimate's time.
+
+    wrap: heading (errors wrapped to ±180°, reference unwrapped before interpolation). max_lag_s > 0 adds the
+    response time (the lag L minimising RMS of est(t) − ref(t − L), positive = estimate lags) and the RMSE
+    once that lag is removed. raw: the unfiltered measured angle on ``t`` → SNR_dB (paper eq. 20) and, with
+    the reference, the SNR improvement 10·log10(Σ(raw−ref)² / Σ(est−ref)²).
+    """
+    r = interp_to(t, t_ref, unwrap_deg(ref) if wrap else ref)
+    e = np.asarray(est, float) - r
+    if wrap:
+        e = (e + 180.0) % 360.0 - 180.0
+    out = error_stats(e)
+    if max_lag_s > 0:
+        lag, rms = best_lag(t, np.asarray(est, float) if not wrap else unwrap_deg(est), t_ref,
+                            unwrap_deg(ref) if wrap else ref, max_lag_s, wrap_deg=wrap)
+        out["lag_s"] = lag
+        out["rmse_lag_removed"] = rms
+    if raw is not None:
+        raw = np.asarray(raw, float)
+        if wrap:
+            s = unwrap_deg(est)
+            rr = s + ((raw - s + 180.0) % 360.0 - 180.0)
+        else:
+            s, rr = np.asarray(est, float), raw
+        out["snr_db"] = snr_db(s, rr)
+        er = rr - (r if not wrap else s - e)
+        ok = np.isfinite(er) & np.isfinite(e)
+        if ok.any() and np.sum(e[ok] ** 2) > 0:
+            out["snr_gain_db"] = float(10 * np.log10(np.sum(er[ok] ** 2) / np.sum(e[ok] ** 2)))
+            out["raw_rmse"] = float(np.sqrt(np.mean(er[ok] ** 2)))
+    return out
+
+
+def attitude_rmse(est, ref) -> dict:
+    """Roll/pitch/heading RMSE (deg) of an estimate Recording against ref_* channels of ``ref`` (same clock or
+    interpolated)."""
+    out = {}
+    for name in ("roll", "pitch", "heading"):
+        if name in est.channels and f"ref_{name}" in ref.channels:
+            st = evaluate_angle(est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading")
+            out[name] = round(st["rmse"], 4)
+    return out

@@ -21,7 +21,7 @@ Method (documented in docs/report.md):
    the last one, still open at the end, is not reported.
 5. Per-sample outputs are *causal*, as a device would display them: a cycle's values appear at the sample
    where its excursion ends (the crossing of the opposite threshold). Peak hold is the running maximum of the
-   raw heel samples since the last reset (exact, no refinement).
+   raw heel samples since the last reset (exact, no refinement; 0 on a side the ship has not heeled to).
 """
 
 from __future__ import annotations
@@ -312,8 +312,9 @@ def roll_stats(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5,
         if m.size:
             a = np.maximum.accumulate(xs[m])
             b = np.maximum.accumulate(xp[m])
-            peak_stbd[m] = np.where(np.isfinite(a), a, np.nan)
-            peak_port[m] = np.where(np.isfinite(b), b, np.nan)
+            # no heel to a side yet → 0 on that side (a heel that never went to port has no port peak)
+            peak_stbd[m] = np.where(np.isfinite(a), np.maximum(a, 0.0), np.nan)
+            peak_port[m] = np.where(np.isfinite(b), np.maximum(b, 0.0), np.nan)
     settings = {"hysteresis_deg": hysteresis_deg, "centre": centre, "centre_window_s": centre_window_s,
                 "refine_frac": refine_frac, "max_period_s": max_period_s,
                 "definitions": "MSC.363(92) annex §3: period between successive maxima on the same side"}

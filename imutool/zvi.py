@@ -35,11 +35,11 @@ DETECTORS = ("paper", "shoe", "are", "mv", "mag")
 # x-io NGIMU foot walks; see docs/ins.md.
 DEFAULTS: dict[str, dict[str, float]] = {
     # B_g rad/s, B_a m/s² (per-sample accel difference), windows in s
-    "paper": {"b_g": 0.6, "b_a": 1.5, "window_g_s": 0.05, "window_a_s": 0.05, "min_duration_s": 0.05},
+    "paper": {"b_g": 0.6, "b_a": 2.0, "window_g_s": 0.05, "window_a_s": 0.05, "min_duration_s": 0.05},
     # sigma_a m/s², sigma_g rad/s (Skog's 0.01 m/s² and 0.1 deg/s), gamma dimensionless
-    "shoe": {"gamma": 1.5e4, "sigma_a": 0.01, "sigma_g": float(np.radians(0.1)), "window_s": 0.05,
+    "shoe": {"gamma": 1e5, "sigma_a": 0.01, "sigma_g": float(np.radians(0.1)), "window_s": 0.05,
              "min_duration_s": 0.05},
-    "are": {"gamma": 1.5e4, "sigma_g": float(np.radians(0.1)), "window_s": 0.05, "min_duration_s": 0.05},
+    "are": {"gamma": 1e5, "sigma_g": float(np.radians(0.1)), "window_s": 0.05, "min_duration_s": 0.05},
     "mv": {"gamma": 1.5e4, "sigma_a": 0.01, "window_s": 0.05, "min_duration_s": 0.05},
     "mag": {"gamma": 1.5e4, "sigma_a": 0.01, "window_s": 0.05, "min_duration_s": 0.05},
 }

@@ -84,10 +84,17 @@ class Scales:
 
 
 def xor_checksum(body: bytes) -> int:
-    c = 0
-    for b in body:
-        c ^= b
-    return c
+    """XOR of all bytes (the NMEA 0183 checksum), by folding the bytes as one big integer."""
+    n = len(body)
+    if n == 0:
+        return 0
+    x = int.from_bytes(body, "big")
+    width = n
+    while width > 1:
+        half = (width + 1) // 2
+        x = (x >> (8 * half)) ^ (x & ((1 << (8 * half)) - 1))
+        width = half
+    return x
 
 
 def _crc_table() -> list[int]:
@@ -186,19 +193,21 @@ class BridgeDecoder:
         return self._decode_binary() if self.binary else self._decode_text()
 
     def _decode_text(self) -> list[Frame]:
+        buf = self._buf
+        cut = buf.rfind(b"\n")
+        if cut < 0:
+            if len(buf) > 4096:  # no line end in a long run: garbage
+                self.stats.garbage_bytes += len(buf)
+                buf.clear()
+            return []
+        lines = bytes(buf[:cut]).split(b"\n")
+        del buf[: cut + 1]
         out = []
-        while True:
-            nl = self._buf.find(b"\n")
-            if nl < 0:
-                if len(self._buf) > 4096:  # no line end in a long run: garbage
-                    self.stats.garbage_bytes += len(self._buf)
-                    self._buf.clear()
-                return out
-            line = bytes(self._buf[:nl]).strip()
-            del self._buf[: nl + 1]
-            f = self.decode_line(line)
+        for line in lines:
+            f = self.decode_line(line.strip())
             if f is not None:
                 out.append(f)
+        return out
 
     def decode_line(self, line: bytes) -> Frame | None:
         if not line:
@@ -247,29 +256,34 @@ class BridgeDecoder:
     def _decode_binary(self) -> list[Frame]:
         out = []
         buf = self._buf
+        pos = 0
+        n = len(buf)
+        body_len = _BIN_BODY.size
         while True:
-            i = buf.find(SYNC)
+            i = buf.find(SYNC, pos)
             if i < 0:
                 keep = 1 if buf[-1:] == SYNC[:1] else 0
-                self.stats.garbage_bytes += len(buf) - keep
-                del buf[: len(buf) - keep]
-                return out
-            if i > 0:
-                self.stats.garbage_bytes += i
-                del buf[:i]
-            if len(buf) < BIN_FRAME_LEN:
-                return out
-            body = bytes(buf[2: 2 + _BIN_BODY.size])
-            (crc,) = struct.unpack_from("<H", buf, 2 + _BIN_BODY.size)
-            if body[0] != _BIN_BODY.size - 1 or crc16_ccitt(body) != crc:
+                self.stats.garbage_bytes += n - pos - keep
+                pos = n - keep
+                break
+            if i > pos:
+                self.stats.garbage_bytes += i - pos
+            if n - i < BIN_FRAME_LEN:
+                pos = i
+                break
+            body = bytes(buf[i + 2: i + 2 + body_len])
+            (crc,) = struct.unpack_from("<H", buf, i + 2 + body_len)
+            if body[0] != body_len - 1 or crc16_ccitt(body) != crc:
                 self.stats.bad_checksum += 1
-                del buf[:1]  # resynchronise on the next sync word
+                pos = i + 1  # resynchronise on the next sync word
                 continue
             vals = _BIN_BODY.unpack(body)
-            del buf[:BIN_FRAME_LEN]
+            pos = i + BIN_FRAME_LEN
             if self._track(vals[1]):
                 self.stats.frames += 1
-                out.append(Frame(vals[1], vals[2], tuple(vals[3:])))
+                out.append(Frame(vals[1], vals[2], vals[3:]))
+        del buf[:pos]
+        return out
 
 
 def frames_to_si(frames: list[Frame], scales: Scales) -> dict[str, np.ndarray]:

@@ -126,7 +126,9 @@ def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> 
     """Identification of one input: path, sha256, size, rows, rate, duration, channel used, metadata."""
     if path is None:
         return {"path": None, "sha256": None, "kind": kind, "rows": int(len(rec)) if rec is not None else 0}
-    meta = {} if rec is None else {k: v for k, v in rec.meta.items() if k not in ("validation",)}
+    if rec is None:
+        return clean({"path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind})
+    meta = {k: v for k, v in rec.meta.items() if k not in ("validation",)}
     return clean({
         "path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind,
         "rows": int(len(rec)), "rate_hz": float(rec.rate_hz) if len(rec) > 1 else None,

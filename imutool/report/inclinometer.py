@@ -83,7 +83,7 @@ NOT_TESTED_ALWAYS = [
     "Reference equipment traceability and uncertainty budget: to be attached by the test house.",
 ]
 
-REQUIRED = ("static_heel", "dynamic_heel", "amplitude_stbd", "amplitude_port", "roll_period")
+REQUIRED = ("static_heel", "dynamic_heel", "amplitude_stbd", "amplitude_port", "roll_period", "long_term")
 
 
 @dataclass
@@ -95,7 +95,7 @@ class InclinometerOptions:
     period_floor_s: float = 1.0  # ±1 s
     period_pct: float = 5.0
     criterion: str = "max"  # max | p95 (MSC.1/Circ.1575 95 %)
-    align: str = "xcorr"  # xcorr (remove the measured constant lag) | none (common clock; lag counts as error)
+    align: str = "none"  # none (common clock; latency counts as error) | xcorr (remove the measured constant lag)
     max_lag_s: float = 5.0
     hysteresis_deg: float = 0.5  # roll cycle detection (imutool.roll)
     min_cycles: int = 3  # per side, for amplitude and period items
@@ -154,8 +154,8 @@ def _dut_outputs(dut: Recording, heel: np.ndarray, o: InclinometerOptions) -> tu
 
 
 _HRM_FIELDS = [
-    ("heel", r"-?\d+(\.\d+)?"), ("period", r"\d+(\.\d+)?"), ("amp_port", r"\d+(\.\d+)?"),
-    ("amp_stbd", r"\d+(\.\d+)?"), ("status", r"[AV]"), ("peak_port", r"(\d+(\.\d+)?)?"),
+    ("heel", r"(-?\d+(\.\d+)?)?"), ("period", r"(\d+(\.\d+)?)?"), ("amp_port", r"(\d+(\.\d+)?)?"),
+    ("amp_stbd", r"(\d+(\.\d+)?)?"), ("status", r"[AV]"), ("peak_port", r"(\d+(\.\d+)?)?"),
     ("peak_stbd", r"(\d+(\.\d+)?)?"), ("reset_time", r"(\d{6}(\.\d+)?)?"), ("reset_day", r"(\d{2})?"),
     ("reset_month", r"(\d{2})?"),
 ]
@@ -298,7 +298,8 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         st, info = judge(ee, tl, o.criterion)
         errs_static.append(ee)
         step_rows.append({"start_s": a, "end_s": b, "reference_deg": rmean, "dut_mean_deg": float(np.mean(d[mm])),
-                          "error_mean_deg": float(np.mean(ee)), "max_abs_error_deg": float(np.max(np.abs(ee))),
+                          "error_mean_deg": float(np.mean(ee)), "error_std_deg": float(np.std(ee)),
+                          "max_abs_error_deg": float(np.max(np.abs(ee))),
                           "tolerance_deg": tl, "n": int(mm.sum()), "status": st})
     tested = [r for r in step_rows if r["status"] in (PASS, FAIL)]
     n_stbd = sum(1 for r in tested if r["reference_deg"] > o.level_band_deg)

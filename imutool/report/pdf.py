@@ -15,7 +15,7 @@ import numpy as np
 from formats.atomic import atomic_path
 
 A4 = (8.27, 11.69)
-LINES_PER_PAGE = 78
+LINES_PER_PAGE = 112
 WIDTH = 118
 
 
@@ -52,10 +52,11 @@ def _text_pages(pdf: Any, title: str, lines: list[str], footer: str) -> int:
     for k, chunk in enumerate(chunks):
         fig = plt.figure(figsize=A4)
         fig.text(0.06, 0.965, title + (f" (continued {k + 1}/{len(chunks)})" if k else ""), fontsize=12,
-                 weight="bold", va="top")
+                 weight="bold", va="top", parse_math=False)
         body = "\n".join(("\u25a0 " + ln[3:].upper()) if ln.startswith("## ") else ln for ln in chunk)
-        fig.text(0.06, 0.935, body, family="DejaVu Sans Mono", fontsize=6.4, va="top", linespacing=1.25)
-        fig.text(0.06, 0.02, footer, fontsize=6, color="0.4")
+        fig.text(0.06, 0.935, body, family="DejaVu Sans Mono", fontsize=7.0, va="top", linespacing=1.25,
+                 parse_math=False)
+        fig.text(0.06, 0.02, footer, fontsize=6, color="0.4", parse_math=False)
         pdf.savefig(fig)
         plt.close(fig)
         pages += 1
@@ -340,7 +341,7 @@ def render_pdf(ev: dict[str, Any], plots: dict[str, Any], path: str) -> int:
             pages += _text_pages(pdf, ev["title"], summary_lines(ev), footer)
             figs = _inclinometer_figures(ev, plots) if ev["report"] == "inclinometer" else _heading_figures(ev, plots)
             for fig in figs:
-                fig.text(0.06, 0.01, footer, fontsize=6, color="0.4")
+                fig.text(0.06, 0.01, footer, fontsize=6, color="0.4", parse_math=False)
                 pdf.savefig(fig)
                 plt.close(fig)
                 pages += 1

@@ -191,3 +191,41 @@ def heading_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, 
     r_ref = Recording(t.copy(), {"heading": h % 360.0, "roll": roll.copy()}, {},
                       {**common, "sensor": "simulated gyro compass / turntable encoder (reference)"})
     return r_dut, r_ref, segs
+
+
+SAMPLE_INCLINOMETER_ERRORS = {"offset_deg": 0.2, "scale": 0.01, "lag_s": 0.02, "noise_deg": 0.05,
+                              "drift_deg_per_h": 0.1}
+SAMPLE_HEADING_ERRORS = {"offset_deg": 0.2, "semicircular_deg": (0.3, -0.2), "lag_s": 0.05, "noise_deg": 0.05,
+                         "roll_coupling": 0.02}
+
+
+def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict[str, str]:
+    """Write the bundled report examples into ``folder`` and return {name: path}.
+
+    inclinometer_dut.csv / inclinometer_reference.csv / inclinometer_steps.csv (tilt-table programme, DUT with
+    SAMPLE_INCLINOMETER_ERRORS), inclinometer_dut.nmea (the DUT as a time-stamped HRM capture, from
+    ``imutool nmea``'s generator), heading_dut.csv / heading_reference.csv (SAMPLE_HEADING_ERRORS).
+    """
+    import os
+
+    import formats
+    from imutool.cli.nmea import nmea_lines
+    from formats.atomic import atomic_path
+
+    os.makedirs(folder, exist_ok=True)
+    out = {}
+    dut, ref, segs = inclinometer_test(rate_hz=rate_hz, seed=seed, ref_noise_deg=0.01, **SAMPLE_INCLINOMETER_ERRORS)
+    for name, rec in (("inclinometer_dut.csv", dut), ("inclinometer_reference.csv", ref)):
+        out[name] = os.path.join(folder, name)
+        formats.write(rec, out[name])
+    out["inclinometer_steps.csv"] = os.path.join(folder, "inclinometer_steps.csv")
+    write_steps_csv(segs, out["inclinometer_steps.csv"])
+    out["inclinometer_dut.nmea"] = os.path.join(folder, "inclinometer_dut.nmea")
+    with atomic_path(out["inclinometer_dut.nmea"]) as tmp, open(tmp, "w", newline="") as fh:
+        for ts, s in nmea_lines(dut, ["HRM"], None):
+            fh.write(f"{ts:.3f} {s}\r\n")
+    hd, hr, _ = heading_test(rate_hz=rate_hz, seed=seed, **SAMPLE_HEADING_ERRORS)
+    for name, rec in (("heading_dut.csv", hd), ("heading_reference.csv", hr)):
+        out[name] = os.path.join(folder, name)
+        formats.write(rec, out[name])
+    return out

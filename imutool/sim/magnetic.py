@@ -48,7 +48,7 @@ def _mag_errors(hard_iron, soft_iron, noise_density: float) -> tuple[SensorError
 def _sphere_attitude(t: np.ndarray, duration: float, f_hat: np.ndarray) -> np.ndarray:
     """Quaternions (N,4) body→NED whose body-frame field direction u(t) spirals uniformly over the sphere."""
     z = 2.0 / np.pi * np.arcsin(np.sin(2 * np.pi * t / duration - np.pi / 2))  # triangle −1 → 1 → −1
-    lon = 0.9 * t
+    lon = 2 * np.pi * 20.0 * t / duration  # 20 loops: spiral spacing in z < the coverage grid's bands
     rho = np.sqrt(np.clip(1 - z * z, 0, None))
     u = np.stack([rho * np.cos(lon), rho * np.sin(lon), z], axis=1)
     axis = np.cross(u, f_hat)
@@ -69,7 +69,7 @@ def mag_sphere(duration: float | None = None, rate_hz: float | None = None, seed
                field_ut: float = 50.0, inclination_deg: float = 60.0, noise_density_ut: float = 0.02,
                coverage: str = "full") -> object:
     """Sensor rotated by hand through every orientation: the field direction seen in body axes follows a spiral
-    that covers the sphere uniformly (z sweeps −1 → 1 → −1 linearly over the run, longitude turns at 0.9 rad/s),
+    that covers the sphere uniformly (z sweeps −1 → 1 → −1 linearly over the run, longitude makes 20 turns),
     while the sensor also turns about the field at 0.3 rad/s.
 
     Defaults: 120 s at 50 Hz; hard iron (12, −25, 8) µT; symmetric soft iron A_s (non-trivial off-diagonals);

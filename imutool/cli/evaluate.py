@@ -1,0 +1,173 @@
+"""`imutool evaluate EST --reference REF`: estimate vs truth — RMSE, max, p95, MAE, lag, SNR, BROAD metrics."""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+import click
+import numpy as np
+
+import formats
+from formats.errors import ImutoolError
+from imutool.cli.common import emit_summary
+
+
+def _load(path: str):
+    rec = formats.read(path)
+    rec, _ = rec.validated(duplicates="drop", backwards="sort", source=path)
+    return rec
+
+
+def _raw_angles(ref) -> dict[str, np.ndarray]:
+    """Unfiltered angles (deg) from the reference file's sensor channels (accel tilt, tilt-compensated mag)."""
+    if "accel" not in ref.channels:
+        return {}
+    from imutool.baseline import accel_tilt, tilt_compensated_heading
+
+    roll, pitch = accel_tilt(ref["accel"])
+    out = {"roll": np.degrees(roll), "pitch": np.degrees(pitch)}
+    if "mag" in ref.channels:
+        out["heading"] = np.degrees(tilt_compensated_heading(ref["mag"], roll, pitch))
+    return out
+
+
+def evaluate_angles(est, ref, max_lag_s: float) -> dict[str, Any]:
+    from imutool.metrics import evaluate_angle, interp_to
+
+    raw = _raw_angles(ref)
+    out: dict[str, Any] = {}
+    for name in ("roll", "pitch", "heading"):
+        if name not in est.channels or f"ref_{name}" not in ref.channels:
+            continue
+        r = raw.get(name)
+        if r is not None:
+            r = interp_to(est.time, ref.time, r) if name != "heading" else _interp_wrapped(est.time, ref.time, r)
+        st = evaluate_angle(est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading",
+                            max_lag_s=max_lag_s, raw=r)
+        out[name] = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in st.items()}
+    return out
+
+
+def _interp_wrapped(t, ts, a):
+    from imutool.metrics import interp_to, unwrap_deg
+
+    return interp_to(t, ts, unwrap_deg(a)) % 360.0
+
+
+def evaluate_quaternion_rec(est, ref) -> dict[str, Any]:
+    from imutool.metrics import evaluate_quaternion, interp_to
+
+    if "q" not in est.channels:
+        raise ImutoolError("the estimate has no quaternion (qw..qz)")
+    if "ref_q" not in ref.channels:
+        raise ImutoolError("the reference has no ref_qw..ref_qz columns")
+    qr = ref["ref_q"]
+    if ref is not est and (len(ref) != len(est) or not np.array_equal(ref.time, est.time)):
+        qr = interp_to(est.time, ref.time, qr)
+        qr = qr / np.linalg.norm(qr, axis=1, keepdims=True)
+    mask = None
+    for src in (est, ref):
+        if "movement" in src.channels:
+            mv = src["movement"] if src is est else np.round(interp_to(est.time, ref.time, ref["movement"]))
+            mask = np.nan_to_num(mv) > 0
+            break
+    out = evaluate_quaternion(est["q"], qr, mask)
+    out["rows"] = "movement rows" if mask is not None else "all rows"
+    return out
+
+
+def _external(module: str, func: str, what: str):
+    try:
+        mod = importlib.import_module(module)
+        return getattr(mod, func)
+    except (ImportError, AttributeError):
+        raise ImutoolError(f"{what} evaluation is not available in this build ({module}:{func} missing)") from None
+
+
+@click.command("evaluate", epilog="Example: imutool evaluate est.csv --reference roll.csv --max-lag 1 --plot err.png")
+@click.argument("est_path", metavar="EST", type=click.Path(exists=True))
+@click.option("--reference", "ref_path", type=click.Path(exists=True), default=None,
+              help="File with the ref_* truth columns (default: EST itself).")
+@click.option("--channel", type=click.Choice(["angles", "quaternion", "heave", "position"]), default=None,
+              help="What to compare (default: angles, plus quaternion when both files have one).")
+@click.option("--max-lag", type=float, default=0.0, show_default=True,
+              help="Search a constant lag up to ± this many seconds (response time / phase lag).")
+@click.option("--plot", "plot_path", type=click.Path(), default=None, help="Error plot (.png/.pdf).")
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option("--quiet", "-q", is_flag=True)
+def evaluate_cmd(est_path: str, ref_path: str | None, channel: str | None, max_lag: float, plot_path: str | None,
+                 as_json: bool, quiet: bool) -> None:
+    """Compare the estimate EST with a reference: per angle RMSE, max, p95, MAE, lag and SNR_dB (deg; heading
+    errors wrapped), quaternion errors with the BROAD metrics (total, heading, inclination), heave, position."""
+    est = _load(est_path)
+    ref = _load(ref_path) if ref_path else est
+    summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
+    if channel == "heave":
+        summary["heave"] = _external("imutool.heave", "evaluate_heave", "heave")(est, ref, max_lag)
+    elif channel == "position":
+        summary["position"] = _external("imutool.ins", "evaluate_position", "position")(est, ref)
+    else:
+        if channel in (None, "angles"):
+            ang = evaluate_angles(est, ref, max_lag)
+            if ang:
+                summary["angles"] = ang
+            elif channel == "angles":
+                raise ImutoolError("no angle to compare: need roll/pitch/heading in EST and ref_roll/ref_pitch/"
+                                   "ref_heading in the reference")
+        if channel == "quaternion" or (channel is None and "q" in est.channels and "ref_q" in ref.channels):
+            summary["quaternion"] = evaluate_quaternion_rec(est, ref)
+        if len(summary) == 2:
+            raise ImutoolError("nothing to compare: no matching estimate/ref_* channels", path=est_path)
+    if plot_path:
+        _plot(est, ref, plot_path)
+        summary["plot"] = plot_path
+    lines = None
+    if "angles" in summary:
+        lines = [f"{'angle':8s} {'RMSE':>7s} {'max':>7s} {'p95':>7s} {'MAE':>7s} {'lag s':>7s} {'SNR dB':>7s}"]
+        for k, v in summary["angles"].items():
+            lines.append(f"{k:8s} {v['rmse']:7.3f} {v['max_abs']:7.3f} {v['p95_abs']:7.3f} {v['mae']:7.3f} "
+                         f"{v.get('lag_s', float('nan')):7.3f} {v.get('snr_db', float('nan')):7.1f}")
+        if "quaternion" in summary:
+            qv = summary["quaternion"]
+            lines.append(f"BROAD ({qv['rows']}): total {qv['total']['rmse']:.3f}°, heading "
+                         f"{qv['heading']['rmse']:.3f}°, inclination {qv['inclination']['rmse']:.3f}° RMSE")
+    emit_summary(summary, as_json, quiet, lines)
+
+
+def _plot(est, ref, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from formats.atomic import atomic_path
+    from imutool.metrics import interp_to, unwrap_deg
+
+    names = [n for n in ("roll", "pitch", "heading") if n in est.channels and f"ref_{n}" in ref.channels]
+    if not names:
+        raise ImutoolError("nothing to plot: no roll/pitch/heading with ref_* columns")
+    fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.8 * len(names)), squeeze=False)
+    for i, n in enumerate(names):
+        wrap = n == "heading"
+        r = interp_to(est.time, ref.time, unwrap_deg(ref[f"ref_{n}"]) if wrap else ref[f"ref_{n}"])
+        e = est[n] - r
+        if wrap:
+            e = (e + 180) % 360 - 180
+            r = r % 360
+        axes[i, 0].plot(est.time, r, "k-", lw=1, label="reference")
+        axes[i, 0].plot(est.time, est[n], "C0-", lw=0.8, label="estimate")
+        axes[i, 0].set_ylabel(f"{n} (deg)")
+        axes[i, 0].legend(loc="upper right", fontsize=8)
+        axes[i, 1].plot(est.time, e, "C3-", lw=0.8)
+        if f"{n}_std" in est.channels:
+            s = est[f"{n}_std"]
+            axes[i, 1].fill_between(est.time, -2 * s, 2 * s, color="0.8", label="±2σ (filter)")
+            axes[i, 1].legend(loc="upper right", fontsize=8)
+        axes[i, 1].set_ylabel(f"{n} error (deg)")
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=path.rsplit(".", 1)[-1].lower() if "." in path else "png", dpi=100)
+    plt.close(fig)

@@ -1,0 +1,154 @@
+"""`imutool convert`: csv ↔ bag ↔ nmea through the CLI, streaming csv → csv, summaries and errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats import Recording
+from formats.csv import read_csv, write_csv
+from formats.frames import euler_to_quat
+from formats.rosbag import read_bag
+from imutool.cli import main
+
+RL = ("rosbags", "robot_localization")
+
+
+def run(args: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as e:
+        main([str(a) for a in args])
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err
+
+
+@pytest.fixture
+def csv_in(tmp_path) -> Path:
+    rng = np.random.default_rng(4)
+    n = 300
+    rec = Recording(np.arange(n) * 0.02)
+    rec.add("gyro", rng.normal(size=(n, 3)) * 0.1)
+    rec.add("accel", rng.normal(size=(n, 3)) * 0.2 + [0, 0, -9.81])
+    rec.add("mag", rng.normal(size=(n, 3)) + [20, 1, 44])
+    roll, pitch, hdg = rng.uniform(-10, 10, n), rng.uniform(-5, 5, n), rng.uniform(0, 359, n)
+    rec.add("q", euler_to_quat(np.radians(roll), np.radians(pitch), np.radians(hdg)))
+    rec.add("heading", hdg)
+    rec.add("roll", roll)
+    rec.add("pitch", pitch)
+    rec.add("ref_roll", roll + 0.1)
+    p = tmp_path / "in.csv"
+    write_csv(rec, p)
+    return p
+
+
+@pytest.mark.parametrize("ext", [".bag", ".db3", ".mcap", "_folder"])
+def test_csv_bag_csv_cli(tmp_path, csv_in, capsys, ext):
+    bag = tmp_path / f"out{ext}"
+    code, out, err = run(["convert", csv_in, bag, "--json"], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["rows_in"] == 300 and s["rows_out"] == 300
+    assert s["messages_out"] == {"/imu/data": 300, "/imu/mag": 300}
+    # never silent about what an Imu/MagneticField message cannot carry
+    assert set(s["channels_not_written"]) == {"roll", "pitch", "heading", "ref_roll"}
+    assert any("FRD → FLU" in c for c in s["conversions"])
+    back = tmp_path / "back.csv"
+    code, out, err = run(["convert", bag, "-o", back], capsys)
+    assert code == 0, err
+    assert "rows in 300, rows out 300" in out and "frame conversions: in:" in out
+    a, b = read_csv(csv_in), read_csv(back)
+    assert np.max(np.abs(a.time - b.time)) <= 1e-9
+    assert np.array_equal(a["gyro"], b["gyro"]) and np.array_equal(a["accel"], b["accel"])
+    assert np.allclose(a["mag"], b["mag"], rtol=4e-16, atol=0)
+    assert np.allclose(a["q"], b["q"], rtol=0, atol=5e-16)
+
+
+def test_real_bag_to_csv(shared, tmp_path, capsys):
+    src = shared(*RL, "test2.bag")
+    out_csv = tmp_path / "imu.csv"
+    code, out, err = run(["convert", src, out_csv, "--topic", "/imu/data", "--stamp", "record"], capsys)
+    assert code == 0, err
+    assert "frame_id ['base_link']" in out and "time = record stamp" in out
+    rec = read_csv(out_csv)
+    ref = read_bag(src, stamp="record")
+    assert len(rec) == 3061
+    for k in ref.channels:
+        assert np.array_equal(rec[k], ref[k]), k
+    assert rec.meta["bag"]["stamp"] == "record"
+
+
+def test_streaming_csv_to_csv_matches_whole_file(tmp_path, csv_in, capsys):
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    code, out, _ = run(["convert", csv_in, a, "--chunk-rows", "37"], capsys)
+    assert code == 0 and "(streamed)" in out
+    code, out, _ = run(["convert", csv_in, b, "--no-stream"], capsys)
+    assert code == 0 and "(streamed)" not in out
+    ra, rb = read_csv(a), read_csv(b)
+    assert np.array_equal(ra.time, rb.time)
+    for k in rb.channels:
+        assert np.array_equal(ra[k], rb[k]), k
+
+
+def test_streaming_handles_duplicates_across_chunks(tmp_path, capsys):
+    n = 50
+    t = np.arange(n) * 0.1
+    t[25] = t[24]  # a duplicate that falls on a chunk boundary with --chunk-rows 25
+    rec = Recording(t, {"gyro": np.zeros((n, 3))})
+    src = tmp_path / "dup.csv"
+    write_csv(rec, src)
+    code, out, _ = run(["convert", src, tmp_path / "o.csv", "--chunk-rows", "25", "--json"], capsys)
+    assert code == 0
+    s = json.loads(out)
+    assert s["rows_in"] == 50 and s["rows_out"] == 49
+    code, _, err = run(["convert", src, tmp_path / "o2.csv", "--chunk-rows", "25", "--duplicates", "error"], capsys)
+    assert code == 2 and "duplicate" in err and not (tmp_path / "o2.csv").exists()
+
+
+def test_csv_to_nmea(tmp_path, csv_in, capsys):
+    out_nmea = tmp_path / "o.nmea"
+    code, out, err = run(["convert", csv_in, out_nmea, "--sentences", "HDT", "--json"], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    lines = out_nmea.read_text().splitlines()
+    assert s["sentences_out"]["HDT"] == len(lines) > 0
+    assert all(line.startswith("$") and "HDT" in line for line in lines)
+
+
+def test_ambiguous_topics_error(tmp_path, csv_in, capsys):
+    """Two Imu topics and no --topic: one line listing topics with types and counts, exit status 2."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    one = tmp_path / "one.bag"
+    run(["convert", csv_in, one, "--quiet"], capsys)
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    from formats.rosbag import _Ros1Bag
+
+    bag = _Ros1Bag(str(one))
+    imu = next(t for t in bag.topics().values() if t.name == "/imu/data")
+    raw = bag.raw(imu)
+    two = tmp_path / "two.bag"
+    with Writer(two) as w:
+        for name in ("/imu/a", "/imu/b"):
+            c = w.add_connection(name, "sensor_msgs/msg/Imu", typestore=ts)
+            for o, n, t in zip(raw.offs, raw.lens, raw.rec_ns, strict=True):
+                w.write(c, int(t), raw.buf[o: o + n].tobytes())
+    code, _, err = run(["convert", two, tmp_path / "x.csv"], capsys)
+    assert code == 2
+    assert err.count("\n") == 1 and "/imu/a (sensor_msgs/msg/Imu, 300 msgs)" in err and "--topic" in err
+    code, out, err = run(["convert", two, tmp_path / "x.csv", "--topic", "/imu/b"], capsys)
+    assert code == 0, err
+
+
+def test_truncated_bag_reports_partial_read(shared, tmp_path, capsys):
+    data = Path(shared(*RL, "test1.bag")).read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    code, out, err = run(["convert", cut, tmp_path / "c.csv"], capsys)
+    assert code == 0, err
+    assert "WARNING: truncated bag:" in out and "messages recovered" in out
+    cut.write_bytes(data[:3000])
+    code, out, err = run(["convert", cut, tmp_path / "d.csv"], capsys)
+    assert code == 2 and "truncated" in err and "Traceback" not in err

@@ -1,0 +1,212 @@
+"""Inclinometer evidence report: injected errors recovered, pass/fail at the tolerance, honest 'not tested', PDF/JSON."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import jsonschema
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import formats
+from formats import Recording
+from imutool.cli import cli
+from imutool.report.inclinometer import InclinometerOptions, hrm_capture_check, inclinometer_evidence
+from imutool.report.pdf import load_schema
+from imutool.report.simulate import inclinometer_test, write_sample_data, write_steps_csv
+from imutool.roll import roll_stats
+
+SHORT = {"steps": (0.0, 5.0, 10.0, 30.0, -5.0, -10.0, -30.0, 0.0), "hold_s": 15.0,
+         "dynamic": ((8.0, 10.0, 10.0, 5), (12.0, 20.0, 14.0, 4)), "long_s": 0.0}
+
+
+def items(ev):
+    return {it["id"]: it for it in ev["items"]}
+
+
+@pytest.fixture(scope="module")
+def injected():
+    dut, ref, segs = inclinometer_test(offset_deg=0.3, scale=0.02, lag_s=0.4, noise_deg=0.05, ref_noise_deg=0.01,
+                                       seed=2, **SHORT)
+    ev, _ = inclinometer_evidence(dut, ref, options=InclinometerOptions(align="xcorr"))
+    return ev, segs
+
+
+def test_injected_errors_are_measured(injected):
+    ev, _ = injected
+    a = ev["alignment"]
+    assert abs(a["lag_s"] - 0.4) < 0.02
+    assert abs(a["linear_fit"]["offset_deg"] - 0.3) < 0.02
+    assert abs(a["linear_fit"]["scale_error"] - 0.02) < 0.002
+    it = items(ev)
+    # static: each step's mean error = offset + scale·reference; scatter = injected noise
+    for r in it["static_heel"]["rows"]:
+        assert abs(r["error_mean_deg"] - (0.3 + 0.02 * r["reference_deg"])) < 0.03
+    assert abs(np.median([r["error_std_deg"] for r in it["static_heel"]["rows"]]) - np.hypot(0.05, 0.01)) < 0.01
+    # amplitude errors per side follow the model: stbd +offset + scale·A, port −offset + scale·A
+    for r in it["amplitude_stbd"]["rows"]:
+        assert abs(r["error_deg"] - (0.3 + 0.02 * r["reference_deg"])) < 0.06
+    for r in it["amplitude_port"]["rows"]:
+        assert abs(r["error_deg"] - (-0.3 + 0.02 * r["reference_deg"])) < 0.06
+    assert it["roll_period"]["stats"]["max_abs"] < 0.1
+    assert ev["overall"]["status"] == "incomplete"  # everything passes, but the long-term item is not tested
+    assert it["long_term"]["status"] == "not tested"
+
+
+def test_lag_counts_as_error_without_alignment():
+    dut, ref, _ = inclinometer_test(lag_s=0.4, **SHORT)
+    ev, _ = inclinometer_evidence(dut, ref)  # default: common clock, no lag removed
+    assert abs(ev["alignment"]["lag_s"] - 0.4) < 0.02 and not ev["alignment"]["applied"]
+    # 0.4 s lag at 20° / 12 s: up to 2π·20/12·0.4 ≈ 4.2° error → the dynamic test must fail
+    assert items(ev)["dynamic_heel"]["status"] == "fail"
+
+
+@pytest.mark.parametrize("offset,expect", [(0.98, "pass"), (1.02, "fail"), (-0.98, "pass"), (-1.02, "fail")])
+def test_static_offset_flips_at_one_degree(tmp_path, offset, expect):
+    dut, ref, segs = inclinometer_test(offset_deg=offset, **SHORT)
+    steps = tmp_path / "steps.csv"
+    write_steps_csv(segs, str(steps))
+    ev, _ = inclinometer_evidence(dut, ref, steps_path=str(steps))
+    st = items(ev)["static_heel"]
+    assert st["status"] == expect
+    small = [r for r in st["rows"] if abs(r["reference_deg"]) <= 10]
+    assert all(r["status"] == expect for r in small)  # tolerance 1° up to 20°
+
+
+@pytest.mark.parametrize("scale,expect", [(0.049, "pass"), (0.051, "fail")])
+def test_static_scale_flips_at_five_percent(scale, expect):
+    dut, ref, _ = inclinometer_test(scale=scale, **SHORT)
+    ev, _ = inclinometer_evidence(dut, ref)
+    rows = items(ev)["static_heel"]["rows"]
+    at30 = [r for r in rows if abs(abs(r["reference_deg"]) - 30.0) < 0.01]
+    assert len(at30) == 2 and all(r["status"] == expect for r in at30)
+    assert all(abs(r["tolerance_deg"] - 1.5) < 1e-9 for r in at30)
+    assert items(ev)["static_heel"]["status"] == expect
+
+
+def _device_outputs(ref: Recording, d_amp=0.0, d_period=0.0) -> Recording:
+    """A DUT that reports HRM-like fields: the reference's own statistics plus injected errors."""
+    rs = roll_stats(ref.time, ref["roll"])
+    return Recording(ref.time.copy(), {"roll": ref["roll"].copy(), "roll_period": rs.roll_period + d_period,
+                                       "amp_port": rs.amp_port + d_amp, "amp_stbd": rs.amp_stbd + d_amp,
+                                       "peak_port": rs.peak_port, "peak_stbd": rs.peak_stbd},
+                     {"roll_period": "s", "amp_port": "deg", "amp_stbd": "deg", "peak_port": "deg",
+                      "peak_stbd": "deg"})
+
+
+@pytest.mark.parametrize("d,expect", [(0.97, "pass"), (1.03, "fail")])
+def test_amplitude_and_period_flip_at_tolerance(d, expect):
+    _, ref, _ = inclinometer_test(steps=(0.0,), dynamic=((10.0, 10.0, 10.0, 8),), long_s=0.0)
+    ev, _ = inclinometer_evidence(_device_outputs(ref, d_amp=d), ref)
+    it = items(ev)
+    assert it["amplitude_stbd"]["status"] == expect and it["amplitude_port"]["status"] == expect
+    assert it["amplitude_stbd"]["source"].startswith("device output")
+    assert abs(it["amplitude_stbd"]["stats"]["mean"] - d) < 0.01
+    ev, _ = inclinometer_evidence(_device_outputs(ref, d_period=d), ref)  # tolerance max(1 s, 5 % of 10 s) = 1 s
+    assert items(ev)["roll_period"]["status"] == expect
+    assert abs(items(ev)["roll_period"]["stats"]["mean"] - d) < 0.01
+
+
+def test_never_pass_without_data():
+    # static steps only: dynamic/amplitude/period are not tested, the report is incomplete, not a pass
+    dut, ref, _ = inclinometer_test(dynamic=(), long_s=0.0, hold_s=15.0)
+    ev, _ = inclinometer_evidence(dut, ref)
+    it = items(ev)
+    assert it["static_heel"]["status"] == "pass"
+    for k in ("dynamic_heel", "amplitude_stbd", "amplitude_port", "roll_period"):
+        assert it[k]["status"] in ("not tested", "insufficient data"), k
+    assert ev["overall"]["status"] == "incomplete"
+    assert any("Roll period" in s for s in ev["not_tested"])
+    # two roll cycles only: too few to judge, even though they are accurate
+    dut, ref, _ = inclinometer_test(steps=(0.0,), dynamic=((10.0, 10.0, 10.0, 2),), long_s=0.0)
+    ev, _ = inclinometer_evidence(dut, ref)
+    for k in ("amplitude_stbd", "amplitude_port", "roll_period"):
+        assert items(ev)[k]["status"] in ("insufficient data", "not tested"), k
+    dut, ref, _ = inclinometer_test(steps=(0.0,), dynamic=((10.0, 10.0, 10.0, 3),), long_s=20.0)
+    ev, _ = inclinometer_evidence(dut, ref)
+    assert items(ev)["amplitude_stbd"]["status"] == "insufficient data"
+    assert "at least 3" in items(ev)["amplitude_stbd"]["reason"]
+    # steps on one side only
+    dut, ref, _ = inclinometer_test(steps=(0.0, 5.0, 10.0, 20.0), dynamic=(), long_s=0.0, hold_s=15.0)
+    ev, _ = inclinometer_evidence(dut, ref)
+    assert items(ev)["static_heel"]["status"] == "insufficient data"
+    jsonschema.validate(ev, load_schema())
+
+
+def test_sign_mismatch_is_flagged():
+    dut, ref, _ = inclinometer_test(**SHORT)
+    dut.channels["roll"] = -dut["roll"]
+    ev, _ = inclinometer_evidence(dut, ref)
+    assert any("sign" in w for w in ev["warnings"])
+    assert ev["overall"]["status"] == "fail"
+
+
+def test_bad_steps_file(tmp_path):
+    dut, ref, _ = inclinometer_test(**SHORT)
+    p = tmp_path / "steps.csv"
+    p.write_text("start,end\n10,5\n")
+    with pytest.raises(formats.ImutoolError, match="not after start"):
+        inclinometer_evidence(dut, ref, steps_path=str(p))
+    p.write_text("a,b\n1,2\n")
+    with pytest.raises(formats.ImutoolError, match="header"):
+        inclinometer_evidence(dut, ref, steps_path=str(p))
+
+
+def test_hrm_capture_interface(tmp_path):
+    files = write_sample_data(str(tmp_path), rate_hz=5.0)
+    nm = files["inclinometer_dut.nmea"]
+    # corrupt one sentence's checksum: the interface item must fail and count it
+    lines = open(nm, newline="").read().split("\r\n")
+    lines[500] = lines[500][:-2] + ("00" if not lines[500].endswith("00") else "11")
+    bad = tmp_path / "bad.nmea"
+    bad.write_text("\r\n".join(lines), newline="")
+    cap = hrm_capture_check(str(bad))
+    assert cap["checksum_bad"] == 1 and cap["hrm_sentences"] == len([x for x in lines if "HRM" in x])
+    ref = formats.read(files["inclinometer_reference.csv"])
+    dut = formats.read(nm)
+    ev, _ = inclinometer_evidence(dut, ref, dut_path=nm)
+    it = items(ev)
+    assert it["interface"]["status"] == "pass", it["interface"]["reason"]
+    assert it["amplitude_stbd"]["source"].startswith("device output")
+    assert it["peak_hold"]["source"].startswith("device output")
+    assert abs(it["interface"]["capture"]["output_rate_hz"] - 5.0) < 0.01
+    jsonschema.validate(ev, load_schema())
+    ev, _ = inclinometer_evidence(formats.read(str(bad), checksum_policy="require"), ref, dut_path=str(bad))
+    assert items(ev)["interface"]["status"] == "fail"
+
+
+def test_cli_pdf_and_json(tmp_path):
+    files = write_sample_data(str(tmp_path / "sample"), rate_hz=5.0)
+    pdf = tmp_path / "out" / "evidence.pdf"
+    r = CliRunner().invoke(cli, ["report", "inclinometer", files["inclinometer_dut.csv"], "--reference",
+                                 files["inclinometer_reference.csv"], "--static-steps",
+                                 files["inclinometer_steps.csv"], "-o", str(pdf), "--device", "SIM-INC-1 s/n 1",
+                                 "--json"])
+    assert r.exit_code == 0, r.output
+    summary = json.loads(r.output)
+    ev = json.loads((tmp_path / "out" / "evidence.json").read_text())
+    jsonschema.validate(ev, load_schema())
+    assert summary["overall"] == ev["overall"]["status"] == "pass"
+    assert ev["inputs"]["dut"]["sha256"] and len(ev["inputs"]["static_steps"]["sha256"]) == 64
+    assert ev["identification"]["device_declared"] == "SIM-INC-1 s/n 1"
+    assert pdf.exists() and pdf.read_bytes()[:5] == b"%PDF-"
+    if shutil.which("pdftoppm") is None:
+        pytest.skip("pdftoppm (poppler-utils) not installed: PDF pages not rasterised")
+    subprocess.run(["pdftoppm", "-r", "40", "-png", str(pdf), str(tmp_path / "page")], check=True)
+    pages = sorted(tmp_path.glob("page-*.png"))
+    assert len(pages) == summary["pages"] >= 5
+    import matplotlib.image as mpimg
+
+    for k, png in enumerate(pages[1:4], start=2):  # plot pages follow the summary page
+        img = mpimg.imread(png)[..., :3]
+        h, w = img.shape[:2]
+        mid = img[int(0.1 * h):int(0.9 * h), int(0.1 * w):int(0.9 * w)]
+        ink = float(np.mean(mid.mean(axis=2) < 0.9))
+        assert ink > 0.02, f"page {k}: plot region nearly blank ({ink:.3f})"
+    # a bad output name is one clear error
+    r = CliRunner().invoke(cli, ["report", "inclinometer", files["inclinometer_dut.csv"], "--reference",
+                                 files["inclinometer_reference.csv"], "-o", str(tmp_path / "x.txt")])
+    assert r.exit_code != 0 and ".pdf" in str(r.exception)

@@ -1,0 +1,163 @@
+"""Roll statistics per MSC.363(92) §3 (imutool.roll) against analytic truth, real flume data and the CLI."""
+
+from __future__ import annotations
+
+import json
+from datetime import datetime, timezone
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import formats
+from formats import Recording
+from imutool.cli import cli
+from imutool.roll import PORT, STBD, roll_cycles, roll_stats
+
+
+def chirp_roll(duration=300.0, fs=20.0, t0_period=8.0, t1_period=12.0, a_stbd=12.0, a_port=7.0):
+    """Asymmetric roll with a linearly changing frequency; returns t, heel and the true peak times per side."""
+    t = np.arange(0.0, duration, 1.0 / fs)
+    f0, f1 = 1.0 / t0_period, 1.0 / t1_period
+    k = (f1 - f0) / duration
+    phi = 2 * np.pi * (f0 * t + 0.5 * k * t * t)
+    s = np.sin(phi)
+    heel = np.where(s > 0, a_stbd * s, a_port * s)
+
+    def peaks(offset):  # phi(t) = offset + 2πn  →  0.5 k t² + f0 t − (offset/2π + n) = 0
+        n = np.arange(0, 200)
+        target = offset / (2 * np.pi) + n
+        disc = f0 * f0 + 2 * k * target
+        tt = (-f0 + np.sqrt(np.where(disc > 0, disc, np.nan))) / k
+        return tt[np.isfinite(tt) & (tt > 0) & (tt < duration)]
+
+    return t, heel, {STBD: peaks(np.pi / 2), PORT: peaks(1.5 * np.pi)}
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.05])
+def test_period_and_amplitudes_match_truth(noise):
+    a_s, a_p = 12.0, 7.0
+    t, heel, true_peaks = chirp_roll(a_stbd=a_s, a_port=a_p)
+    x = heel + np.random.default_rng(3).normal(0.0, noise, heel.size)
+    rs = roll_stats(t, x)
+    for side, amp in ((STBD, a_s), (PORT, a_p)):
+        c = rs.cycles.of_side(side)
+        tp = true_peaks[side]
+        assert len(c) >= len(tp) - 2  # every maximum found but the first/last (edges)
+        j = np.array([np.argmin(np.abs(tp - x0)) for x0 in c.t_peak])
+        assert np.all(np.abs(tp[j] - c.t_peak) < 0.1)
+        assert np.max(np.abs(c.amplitude_deg - amp)) < 0.1
+        ok = np.isfinite(c.period_s)
+        true_period = tp[j[ok]] - tp[j[ok] - 1]
+        assert ok.sum() >= len(tp) - 3
+        assert np.max(np.abs(c.period_s[ok] - true_period)) < 0.1
+        # the period changes from 8 to 12 s over the run and is tracked
+        assert c.period_s[ok][0] < 9.0 and c.period_s[ok][-1] > 11.0
+
+
+def test_peak_hold_exact_with_resets():
+    t, heel, _ = chirp_roll(duration=120.0)
+    heel = heel + np.where(t > 60, 3.0, 0.0)  # bigger starboard peaks after 60 s
+    utc0 = datetime(2026, 3, 1, 12, 0, 0, tzinfo=timezone.utc)
+    rs = roll_stats(t, heel, resets_s=[50.0], utc_start=utc0)
+    before = t < 50.0
+    np.testing.assert_array_equal(rs.peak_stbd[before], np.maximum(np.maximum.accumulate(heel[before]), 0.0))
+    np.testing.assert_array_equal(rs.peak_port[before], np.maximum(np.maximum.accumulate(-heel[before]), 0.0))
+    after = ~before
+    np.testing.assert_array_equal(rs.peak_stbd[after], np.maximum(np.maximum.accumulate(heel[after]), 0.0))
+    assert rs.peak_stbd[-1] == heel[after].max()
+    assert rs.resets_utc == ["2026-03-01T12:00:00.000Z", "2026-03-01T12:00:50.000Z"]
+    assert np.all(rs.reset_time[after] == 50.0) and np.all(rs.reset_time[before] == 0.0)
+
+
+def test_hysteresis_ignores_small_oscillations_and_noise():
+    t = np.arange(0, 200, 0.05)
+    ripple = 0.3 * np.sin(2 * np.pi * t / 0.7)  # ±0.3° fast ripple, smaller than the 0.5° hysteresis
+    assert len(roll_cycles(t, ripple)) == 0
+    heel = 10 * np.sin(2 * np.pi * t / 10.0) + ripple  # crests with several humps each
+    c = roll_cycles(t, heel)
+    assert abs(len(c) - 40) <= 1  # one excursion per half cycle, no extra ones from the ripple
+    ok = np.isfinite(c.period_s)
+    assert np.max(np.abs(c.period_s[ok] - 10.0)) < 0.1
+
+
+def test_nan_samples_skipped_and_recording_start_inside_excursion_dropped():
+    t = np.arange(0, 100, 0.1)
+    heel = 8 * np.cos(2 * np.pi * t / 10.0)  # starts at a starboard maximum: that excursion is partial
+    heel[200:210] = np.nan
+    c = roll_cycles(t, heel)
+    assert c.t_peak[0] > 4.0  # the partial first excursion (peak at t=0) is not reported
+    assert np.all(np.isfinite(c.amplitude_deg))
+    assert np.max(np.abs(c.amplitude_deg - 8.0)) < 0.05
+
+
+def test_running_centre_for_a_listing_ship():
+    t = np.arange(0, 300, 0.1)
+    heel = 8.0 + 5.0 * np.sin(2 * np.pi * t / 12.0)  # listed 8° to starboard, never heels to port
+    assert len(roll_cycles(t, heel, centre="zero")) == 0
+    c = roll_cycles(t, heel, centre="running", centre_window_s=60.0)
+    st = c.of_side(STBD)
+    pt = c.of_side(PORT)
+    ok = np.isfinite(st.period_s)
+    assert np.max(np.abs(st.period_s[ok] - 12.0)) < 0.1
+    assert np.max(np.abs(st.peak_deg - 13.0)) < 0.1  # amplitudes stay absolute heel (relative to level)
+    assert np.max(np.abs(pt.peak_deg - 3.0)) < 0.1
+
+
+def test_per_sample_values_are_causal():
+    t = np.arange(0, 60, 0.1)
+    heel = np.where(t < 30, 5.0, 9.0) * np.sin(2 * np.pi * t / 6.0)
+    rs = roll_stats(t, heel)
+    c = rs.cycles
+    for k in range(len(c)):
+        i = c.i_end[k]
+        name = "amp_stbd" if c.side[k] == STBD else "amp_port"
+        arr = getattr(rs, name)
+        assert arr[i] == c.amplitude_deg[k]
+        if i > 0 and k >= 2:
+            assert arr[i - 1] == c.amplitude_deg[k - 2]  # the previous value until this cycle completes
+    assert not rs.valid[:50].any() and rs.valid[-1]
+
+
+def test_real_flume_roll_period(shared):
+    """NTNU flume (3012_1, camera roll): same-side periods agree with the roll spectrum peak and across sides."""
+    p = shared("ntnu_waves", "3012_1.csv")
+    d = np.loadtxt(p, delimiter=",", skiprows=1, usecols=(0, 9))
+    t, heel = d[:, 0], np.degrees(d[:, 1])
+    rs = roll_stats(t, heel, hysteresis_deg=1.0)
+    c = rs.cycles
+    win = (c.t_peak > 33) & (c.t_peak < 45) & np.isfinite(c.period_s)
+    ps = c.period_s[win & (c.side == STBD)]
+    pp = c.period_s[win & (c.side == PORT)]
+    assert ps.size >= 5 and pp.size >= 5
+    m = (t > 31) & (t < 46)
+    x = heel[m] - heel[m].mean()
+    spec = np.abs(np.fft.rfft(x * np.hanning(x.size), 16 * x.size))
+    f = np.fft.rfftfreq(16 * x.size, t[1] - t[0])
+    t_spec = 1.0 / f[1 + np.argmax(spec[1:])]
+    assert abs(np.mean(ps) - t_spec) / t_spec < 0.03
+    assert abs(np.mean(pp) - t_spec) / t_spec < 0.03
+    assert abs(np.mean(ps) - np.mean(pp)) < 0.05
+
+
+def test_roll_cli(tmp_path):
+    t, heel, _ = chirp_roll(duration=120.0, fs=10.0)
+    rec = Recording(t, {"roll": heel, "pitch": np.zeros_like(t)})
+    src = tmp_path / "est.csv"
+    formats.write(rec, src)
+    out, cyc = tmp_path / "roll_stats.csv", tmp_path / "cycles.csv"
+    r = CliRunner().invoke(cli, ["roll", str(src), "-o", str(out), "--cycles", str(cyc), "--json"])
+    assert r.exit_code == 0, r.output
+    s = json.loads(r.output)
+    assert s["starboard"]["excursions"] >= 10 and s["port"]["excursions"] >= 10
+    assert abs(s["starboard"]["amplitude_mean_deg"] - 12.0) < 0.1
+    back = formats.read(out)
+    for col in ("heel", "roll_period", "amp_port", "amp_stbd", "peak_port", "peak_stbd", "roll_valid"):
+        assert col in back.channels
+    np.testing.assert_allclose(back["heel"], heel, atol=1e-6)
+    cycles = formats.read(cyc)
+    assert set(np.unique(cycles["side"])) == {-1.0, 1.0}
+    bad = tmp_path / "nothing.csv"
+    formats.write(Recording(t, {"pitch": heel}), bad)
+    r = CliRunner().invoke(cli, ["roll", str(bad), "-o", str(tmp_path / "x.csv")])
+    assert r.exit_code != 0 and "roll" in str(r.exception or r.output)
