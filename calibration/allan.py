@@ -31,15 +31,33 @@ BI_FACTOR = 0.6643  # √(2 ln 2 / π)
 
 
 @njit(cache=True)
-def _avar_sum(theta: np.ndarray, m: int, stride: int) -> tuple:  # pragma: no cover - numba
-    n = theta.shape[0] - 2 * m
-    s = 0.0
-    cnt = 0
-    for k in range(0, n, stride):
-        d = theta[k + 2 * m] - 2.0 * theta[k + m] + theta[k]
-        s += d * d
-        cnt += 1
-    return s, cnt
+def _adev_axis(y: np.ndarray, dt: float, ms: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
+    """Overlapping Allan deviation of one axis y (N,) for cluster sizes ms into out (len ms).
+
+    θ_k = dt Σ_{i<k} (y_i − ȳ) (mean removed: σ unchanged, θ stays small); for each m the squared second
+    differences θ_{k+2m} − 2θ_{k+m} + θ_k are summed over k = 0, s, 2s, ... with s = max(1, m // 8)."""
+    n = y.shape[0]
+    mean = 0.0
+    for i in range(n):
+        mean += y[i]
+    mean /= n
+    theta = np.empty(n + 1)
+    theta[0] = 0.0
+    acc = 0.0
+    for i in range(n):
+        acc += (y[i] - mean) * dt
+        theta[i + 1] = acc
+    for j in range(ms.shape[0]):
+        m = ms[j]
+        stride = max(1, m // 8)
+        s = 0.0
+        cnt = 0
+        for k in range(0, n + 1 - 2 * m, stride):
+            d = theta[k + 2 * m] - 2.0 * theta[k + m] + theta[k]
+            s += d * d
+            cnt += 1
+        tau = m * dt
+        out[j] = np.sqrt(s / (2.0 * tau * tau * max(cnt, 1)))
 
 
 def tau_grid(n: int, dt: float, per_decade: int = 10) -> np.ndarray:
@@ -67,16 +85,12 @@ def allan_deviation(y: np.ndarray, rate_hz: float, per_decade: int = 10,
     dt = 1.0 / rate_hz
     ms = tau_grid(n, dt, per_decade) if m is None else np.asarray(m, dtype=np.int64)
     out = np.empty((len(ms), y2.shape[1]))
+    col = np.empty(n)
     for j in range(y2.shape[1]):
-        col = y2[:, j] - np.mean(y2[:, j])  # removing the mean leaves σ unchanged and keeps θ small
-        theta = np.empty(n + 1)
-        theta[0] = 0.0
-        np.cumsum(col * dt, out=theta[1:])
-        for i, mm in enumerate(ms):
-            stride = max(1, int(mm) // 8)
-            s, cnt = _avar_sum(theta, int(mm), stride)
-            tau = mm * dt
-            out[i, j] = np.sqrt(s / (2.0 * tau * tau * max(cnt, 1)))
+        col[:] = y2[:, j]
+        res = np.empty(len(ms))
+        _adev_axis(col, dt, ms, res)
+        out[:, j] = res
     taus = ms * dt
     n_eff = np.maximum((n - 2 * ms) / ms, 1.0)
     return taus, (out[:, 0] if one else out), n_eff

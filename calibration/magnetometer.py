@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 from scipy.optimize import least_squares
 
 from formats.errors import ImutoolError
@@ -202,38 +203,64 @@ def _pack(b: np.ndarray, a: np.ndarray, kind: str) -> np.ndarray:
     return np.concatenate([b, [a[r, c] for r, c in _IDX]])
 
 
+@njit(cache=True)
+def _res_jac_kernel(m: np.ndarray, b: np.ndarray, a: np.ndarray, field: float, jac: np.ndarray,
+                    want_jac: bool) -> np.ndarray:  # pragma: no cover - numba
+    """r_i = |A (m_i − b)| − field; jac (N,9): ∂r/∂b (3), ∂r/∂A diagonal (3), ∂r/∂A_01, A_02, A_12 (symmetric)."""
+    n = m.shape[0]
+    res = np.empty(n)
+    for i in range(n):
+        d0 = m[i, 0] - b[0]
+        d1 = m[i, 1] - b[1]
+        d2 = m[i, 2] - b[2]
+        y0 = a[0, 0] * d0 + a[0, 1] * d1 + a[0, 2] * d2
+        y1 = a[1, 0] * d0 + a[1, 1] * d1 + a[1, 2] * d2
+        y2 = a[2, 0] * d0 + a[2, 1] * d1 + a[2, 2] * d2
+        nn = np.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
+        res[i] = nn - field
+        if want_jac:
+            if nn <= 0.0:
+                nn = 1e-30
+            u0, u1, u2 = y0 / nn, y1 / nn, y2 / nn
+            jac[i, 0] = -(u0 * a[0, 0] + u1 * a[1, 0] + u2 * a[2, 0])
+            jac[i, 1] = -(u0 * a[0, 1] + u1 * a[1, 1] + u2 * a[2, 1])
+            jac[i, 2] = -(u0 * a[0, 2] + u1 * a[1, 2] + u2 * a[2, 2])
+            jac[i, 3] = u0 * d0
+            jac[i, 4] = u1 * d1
+            jac[i, 5] = u2 * d2
+            jac[i, 6] = u0 * d1 + u1 * d0
+            jac[i, 7] = u0 * d2 + u2 * d0
+            jac[i, 8] = u1 * d2 + u2 * d1
+    return res
+
+
+_NO_JAC = np.empty((0, 9))
+
+
 def _residual(p: np.ndarray, m: np.ndarray, kind: str, field: float) -> np.ndarray:
     b, a = _unpack(p, kind)
-    y = (m - b) @ a.T
-    return np.sqrt(np.einsum("ij,ij->i", y, y)) - field
+    return _res_jac_kernel(m, np.ascontiguousarray(b), np.ascontiguousarray(a), float(field), _NO_JAC, False)
 
 
 def _residual_jac(p: np.ndarray, m: np.ndarray, kind: str, field: float) -> tuple[np.ndarray, np.ndarray]:
     b, a = _unpack(p, kind)
-    d = m - b
-    y = d @ a.T
-    n = np.sqrt(np.einsum("ij,ij->i", y, y))
-    n = np.where(n > 0, n, 1e-30)
-    u = y / n[:, None]
-    res = n - field
-    npar = {"offset": 4, "diag": 6, "full": 9}[kind]
-    jac = np.empty((len(m), npar))
-    jac[:, :3] = -(u @ a)  # dr/db = −uᵀ A
-    if kind == "offset":
-        jac[:, 3] = np.einsum("ij,ij->i", u, d)
-    elif kind == "diag":
-        np.multiply(u, d, out=jac[:, 3:6])
-    else:
-        np.multiply(u, d, out=jac[:, 3:6])  # diagonal elements
-        for j, (r, c) in enumerate(_IDX[3:]):
-            jac[:, 6 + j] = u[:, r] * d[:, c] + u[:, c] * d[:, r]
-    return res, jac
+    full = np.empty((len(m), 9))
+    res = _res_jac_kernel(m, np.ascontiguousarray(b), np.ascontiguousarray(a), float(field), full, True)
+    if kind == "full":
+        return res, full
+    if kind == "diag":
+        return res, np.ascontiguousarray(full[:, :6])
+    out = np.empty((len(m), 4))
+    out[:, :3] = full[:, :3]
+    out[:, 3] = full[:, 3:6].sum(axis=1)  # A = s·I: ∂r/∂s = Σ_i u_i d_i
+    return res, out
 
 
 def refine(m: np.ndarray, b0: np.ndarray, a0: np.ndarray, kind: str, field: float = 1.0,
            max_nfev: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Levenberg–Marquardt refinement of b, A (kind) for residual |A(m−b)| − field. Returns (b, A, res, cov)."""
     p0 = _pack(b0, a0, kind)
+    m = np.ascontiguousarray(m, dtype=np.float64)
     sol = least_squares(lambda p: _residual(p, m, kind, field), p0,
                         jac=lambda p: _residual_jac(p, m, kind, field)[1], method="lm", max_nfev=max_nfev,
                         x_scale="jac")

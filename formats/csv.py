@@ -13,6 +13,7 @@ missing. A foreign CSV (any header) is read through a :class:`formats.columns.Ma
 
 from __future__ import annotations
 
+import csv as _csvmod
 import io
 import json
 import os
@@ -22,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from . import csv_engine as _eng
 from . import units as _units
 from .atomic import atomic_path
 from .columns import Mapping, infer_mapping, load_profile, mapping_from_profile, parse_mapping_option
@@ -41,6 +43,9 @@ class CsvHeader:
     data_line: int  # 1-based line number of the first data row
     mapping: Mapping | None = None
     skipped_comment_lines: int = 0
+    data_offset: int = 0  # byte offset of the first data row
+    sep: str = ","
+    decimal: str = "."
 
 
 @dataclass
@@ -59,10 +64,23 @@ def _parse_meta_value(v: str) -> Any:
     return v
 
 
-def read_header(path: str, columns: str | None = None, profile: str | None = None) -> CsvHeader:
-    """Read metadata and column names; infer or apply the column mapping for a foreign CSV."""
+def _split_header(line: str, sep: str) -> list[str]:
+    """Header names, honouring double quotes (``"Time (s)","Gyro X"``)."""
     try:
-        f = open(path, encoding="utf-8-sig", errors="replace", newline="")
+        row = next(_csvmod.reader([line], delimiter=sep, skipinitialspace=True))
+    except (_csvmod.Error, StopIteration):
+        row = line.split(sep)
+    return [h.strip().strip('"').strip() for h in row]
+
+
+def read_header(path: str, columns: str | None = None, profile: str | None = None) -> CsvHeader:
+    """Read metadata and column names; infer or apply the column mapping for a foreign CSV.
+
+    Handles a UTF-8 BOM, CRLF line ends, ``,``/``;``/tab separators (``;`` with decimal commas too) and
+    quoted header names. Records the byte offset of the first data row for the compiled reader.
+    """
+    try:
+        f = open(path, "rb")
     except OSError as e:
         raise ImutoolError(f"cannot open: {e.strerror}", path=path) from None
     with f:
@@ -71,9 +89,14 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
         lineno = 0
         comments = 0
         header_line = None
+        offset = 0
+        first_data = b""
         for raw in f:
             lineno += 1
-            line = raw.strip()
+            offset += len(raw)
+            if lineno == 1 and raw.startswith(b"\xef\xbb\xbf"):
+                raw = raw[3:]
+            line = raw.decode("utf-8", errors="replace").strip()
             if not line:
                 continue
             if line.startswith("#"):
@@ -87,11 +110,27 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
                     meta[k.strip()] = _parse_meta_value(v)
                 continue
             header_line = line
+            for nxt in f:
+                if nxt.strip() and not nxt.lstrip().startswith(b"#"):
+                    first_data = nxt
+                    break
             break
     if header_line is None:
         raise ImutoolError("no header row (the file is empty or has only comments)", path=path)
-    sep = "," if "," in header_line or ";" not in header_line else ";"
-    names = [h.strip().strip('"') for h in header_line.split(sep)]
+    if "\x00" in header_line or "\ufffd" in header_line:
+        raise ImutoolError("the header row is not text (binary file?)", path=path, line=lineno)
+    if "," in header_line:
+        sep = ","
+    elif ";" in header_line:
+        sep = ";"
+    elif "\t" in header_line:
+        sep = "\t"
+    else:
+        sep = ","
+    decimal = "."
+    if sep == ";" and b"," in first_data and b"." not in first_data:
+        decimal = ","
+    names = _split_header(header_line, sep)
     if any(not n for n in names):
         raise ImutoolError("the header row has an empty column name", path=path, line=lineno)
     if _looks_numeric(names):
@@ -107,7 +146,7 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
             mapping = infer_mapping(names)
     elif "time" not in names:
         raise ImutoolError("imutool CSV without a 'time' column", path=path, line=lineno)
-    hdr = CsvHeader(is_imutool, meta, names, lineno + 1, mapping, comments)
+    hdr = CsvHeader(is_imutool, meta, names, lineno + 1, mapping, comments, offset, sep, decimal)
     hdr.meta["_sep"] = sep
     return hdr
 
@@ -120,30 +159,72 @@ def _looks_numeric(names: list[str]) -> bool:
         return False
 
 
-def _parse_block(lines: list[str], ncol: int, sep: str, first_line: int, rep: ReadReport,
-                 strict: bool, path: str) -> np.ndarray:
-    """Parse data lines into an (n, ncol) float64 array; malformed rows counted and skipped (or raised)."""
-    out = np.empty((len(lines), ncol))
-    k = 0
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.split(sep)
-        try:
-            if len(parts) != ncol:
-                raise ValueError(f"{len(parts)} fields, expected {ncol}")
-            out[k] = [float(p) if p.strip() else np.nan for p in parts]
-        except ValueError as e:
-            msg = str(e) if "fields" in str(e) else f"not a number in {s[:60]!r}"
-            if strict:
-                raise ImutoolError(msg, path=path, line=first_line + i) from None
-            rep.bad_rows += 1
-            if len(rep.first_bad) < 5:
-                rep.first_bad.append(f"line {first_line + i}: {msg}")
-            continue
-        k += 1
-    return out[:k]
+_REASON = {1: "wrong number of fields", 2: "not a number"}
+
+
+class _BlockParser:
+    """Drives the compiled kernel over byte blocks: grows the output, resolves rare tokens with float(),
+    counts bad rows (first few with line numbers) or raises under ``strict``."""
+
+    def __init__(self, hdr: CsvHeader, path: str, strict: bool, rep: ReadReport):
+        self.ncol = len(hdr.names)
+        self.sep = ord(hdr.sep)
+        self.dec = ord(hdr.decimal)
+        self.path = path
+        self.strict = strict
+        self.rep = rep
+        self.line = hdr.data_line  # line number of the next unparsed line
+        self.fb = np.empty((4096, 4), np.int64)
+        self.bad = np.empty((8, 3), np.int64)
+
+    def parse(self, buf: np.ndarray, end: int, rows_hint: int) -> np.ndarray:
+        """Parse whole lines in buf[:end]; returns an (n, ncol) float64 array."""
+        out = np.empty((max(rows_hint, 16), self.ncol))
+        pos = 0
+        row = 0
+        while True:
+            res = _eng.parse_block(buf, pos, end, self.ncol, self.sep, self.dec, out, row, self.strict, self.fb,
+                                   self.bad, _eng.T_HI, _eng.T_LO)
+            new_pos, new_row, lines, nbad, nfb, stop = (int(v) for v in res)
+            for k in range(nfb):
+                r, c, s0, s1 = (int(v) for v in self.fb[k])
+                tok = bytes(buf[s0:s1])
+                if self.dec != 46:
+                    tok = tok.replace(b",", b".")
+                try:
+                    out[r, c] = float(tok)
+                except ValueError:  # cannot happen for tokens the kernel accepted; be safe anyway
+                    out[r, c] = np.nan
+            if nbad:
+                for k in range(min(nbad, self.bad.shape[0])):
+                    ln = self.line + int(self.bad[k, 0])
+                    reason = int(self.bad[k, 1])
+                    msg = _REASON.get(reason, "bad row")
+                    if reason == 1:
+                        msg += f" ({int(self.bad[k, 2])} fields, expected {self.ncol})"
+                    if self.strict:
+                        raise ImutoolError(msg, path=self.path, line=ln)
+                    if len(self.rep.first_bad) < 5:
+                        self.rep.first_bad.append(f"line {ln}: {msg}")
+                self.rep.bad_rows += nbad
+            self.line += lines
+            pos, row = new_pos, new_row
+            if stop == 1:
+                grown = np.empty((out.shape[0] * 2, self.ncol))
+                grown[:row] = out[:row]
+                out = grown
+            elif stop == 0 or pos >= end:
+                break
+        return out[:row]
+
+
+def _rows_hint(buf: np.ndarray, end: int) -> int:
+    """Expected number of rows from the mean length of the first lines (over-estimated a little)."""
+    head = buf[: min(end, 1 << 16)]
+    n = int(np.count_nonzero(head == 10))
+    if n == 0:
+        return 16
+    return int(end / (head.size / n) * 1.05) + 16
 
 
 def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) -> Recording:
@@ -216,40 +297,73 @@ def _expected_quantity_of(target: str) -> str | None:
 
 
 def iter_csv(path: str, chunk_rows: int = 500_000, columns: str | None = None, profile: str | None = None,
-             strict: bool = False) -> Iterator[Recording]:
-    """Stream a CSV as successive Recordings of at most ``chunk_rows`` rows (bounded memory)."""
+             strict: bool = False, block_bytes: int = 16 << 20) -> Iterator[Recording]:
+    """Stream a CSV as successive Recordings of at most ``chunk_rows`` rows (bounded memory).
+
+    The file is read in blocks of ``block_bytes`` cut at line ends; memory is O(block + chunk), not O(file).
+    Skipped-row counts in each chunk's meta are running totals.
+    """
     hdr = read_header(path, columns, profile)
     rep = ReadReport()
-    ncol = len(hdr.names)
-    sep = hdr.meta.get("_sep", ",")
-    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
-        for _ in range(hdr.data_line - 1):
-            f.readline()
-        line_no = hdr.data_line
+    parser = _BlockParser(hdr, path, strict, rep)
+    pending: list[np.ndarray] = []
+    npending = 0
+    carry = b""
+    with open(path, "rb") as f:
+        f.seek(hdr.data_offset)
         while True:
-            lines = []
-            for line in f:
-                lines.append(line)
-                if len(lines) >= chunk_rows:
-                    break
-            if not lines:
+            block = f.read(block_bytes)
+            eof = not block
+            data = carry + block
+            if eof:
+                end = len(data)
+                carry = b""
+            else:
+                cut = data.rfind(b"\n")
+                if cut < 0:
+                    carry = data
+                    continue
+                end = cut + 1
+                carry = data[end:]
+            if end:
+                buf = np.frombuffer(data, np.uint8)
+                arr = parser.parse(buf, end, _rows_hint(buf, end))
+                del buf
+                if arr.shape[0]:
+                    pending.append(arr)
+                    npending += arr.shape[0]
+            del data
+            while npending >= chunk_rows or (eof and npending):
+                allrows = pending[0] if len(pending) == 1 else np.concatenate(pending)
+                take = min(chunk_rows, allrows.shape[0])
+                yield _to_recording(hdr, allrows[:take], path, rep)
+                rest = allrows[take:]
+                pending = [rest] if rest.shape[0] else []
+                npending = rest.shape[0]
+            if eof:
                 break
-            data = _parse_block(lines, ncol, sep, line_no, rep, strict, path)
-            line_no += len(lines)
-            yield _to_recording(hdr, data, path, rep)
 
 
 def read_csv(path: str, columns: str | None = None, profile: str | None = None,
              strict: bool = False) -> Recording:
-    """Read a whole CSV (imutool or foreign) into a Recording (SI units for sensor channels)."""
+    """Read a whole CSV (imutool or foreign) into a Recording (SI units for sensor channels).
+
+    Malformed rows are counted and skipped (``meta['skipped_rows']``, first ones with line numbers in
+    ``meta['skipped_rows_first']``); ``strict=True`` raises ImutoolError at the first one instead.
+    """
     hdr = read_header(path, columns, profile)
     rep = ReadReport()
-    sep = hdr.meta.get("_sep", ",")
-    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
-        lines = f.readlines()[hdr.data_line - 1:]
-    data = _parse_block(lines, len(hdr.names), sep, hdr.data_line, rep, strict, path)
+    try:
+        buf = np.fromfile(path, dtype=np.uint8, offset=hdr.data_offset)
+    except OSError as e:
+        raise ImutoolError(f"cannot read: {e.strerror}", path=path) from None
+    data = _BlockParser(hdr, path, strict, rep).parse(buf, buf.size, _rows_hint(buf, buf.size))
+    del buf
     if data.shape[0] == 0:
-        raise ImutoolError("no data rows", path=path)
+        msg = "no data rows"
+        if rep.bad_rows:
+            msg += f" ({rep.bad_rows} malformed rows skipped; first: {rep.first_bad[0]})"
+        raise ImutoolError(msg, path=path)
     return _to_recording(hdr, data, path, rep)
 
 
@@ -289,14 +403,46 @@ def _canonicalised(rec: Recording) -> list[np.ndarray]:
     return blocks
 
 
+_WRITE_BLOCK_ROWS = 32768
+
+
+def format_array(data: np.ndarray, sep: str = ",") -> bytes:
+    """CSV text (bytes) of a 2-D float array: exact round-trip digits (shortest of 15/16/17), NaN empty."""
+    data = np.ascontiguousarray(data, dtype=np.float64)
+    if data.ndim == 1:
+        data = data[:, None]
+    parts = []
+    for r0 in range(0, data.shape[0], _WRITE_BLOCK_ROWS):
+        parts.append(_format_block(data, r0, min(r0 + _WRITE_BLOCK_ROWS, data.shape[0]), sep))
+    return b"".join(parts)
+
+
+def _format_block(data: np.ndarray, r0: int, r1: int, sep: str) -> bytes:
+    n = r1 - r0
+    out = np.empty(n * (data.shape[1] * _eng.MAX_FIELD_BYTES + 1), np.uint8)
+    fails = np.empty((1, 2), np.int64)
+    nbytes, nfail = _eng.format_block(data, r0, r1, ord(sep), out, fails, _eng.T_HI, _eng.T_LO, _eng.T_EXP)
+    if nfail:  # never seen; Python's repr is exact too
+        return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n"
+                       for row in data[r0:r1].tolist()).encode()
+    return out[:nbytes].tobytes()
+
+
+def _write_rows(f: Any, rec: Recording) -> None:
+    if not len(rec):
+        return
+    blocks = _canonicalised(rec)
+    for r0 in range(0, len(rec), _WRITE_BLOCK_ROWS):
+        r1 = min(r0 + _WRITE_BLOCK_ROWS, len(rec))
+        data = np.hstack([b[r0:r1] for b in blocks])
+        f.write(_format_block(data, 0, r1 - r0, ","))
+
+
 def format_rows(rec: Recording) -> str:
-    """Data rows as text: shortest round-trip representation, ``nan`` written as empty field."""
-    data = np.hstack(_canonicalised(rec)) if len(rec) else np.empty((0, 1))
-    buf = io.StringIO()
-    for row in data.tolist():
-        buf.write(",".join("" if v != v else repr(v) for v in row))
-        buf.write("\n")
-    return buf.getvalue()
+    """Data rows as text: exact round-trip representation, ``nan`` written as empty field."""
+    buf = io.BytesIO()
+    _write_rows(buf, rec)
+    return buf.getvalue().decode()
 
 
 def write_csv(rec: Recording, path: str) -> None:
@@ -306,9 +452,9 @@ def write_csv(rec: Recording, path: str) -> None:
         u = rec.units.get(name)
         if cu is not None and u is not None and u != cu:
             _units.convert(np.zeros(1), u, cu)  # raises a clear error on an incompatible unit
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
-        f.write(header_text(rec))
-        f.write(format_rows(rec))
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(header_text(rec).encode("utf-8"))
+        _write_rows(f, rec)
 
 
 class CsvWriter:
@@ -321,15 +467,15 @@ class CsvWriter:
         self.path = path
         self._ctx = atomic_path(path)
         self._tmp = self._ctx.__enter__()
-        self._f = open(self._tmp, "w", encoding="utf-8", newline="\n")
+        self._f = open(self._tmp, "wb")
         self._header_written = False
         self.rows = 0
 
     def write(self, rec: Recording) -> None:
         if not self._header_written:
-            self._f.write(header_text(rec))
+            self._f.write(header_text(rec).encode("utf-8"))
             self._header_written = True
-        self._f.write(format_rows(rec))
+        _write_rows(self._f, rec)
         self.rows += len(rec)
 
     def close(self) -> None:

@@ -274,9 +274,10 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
     stop = 0
     fb_cap = fb.shape[0]
     bad_cap = bad.shape[0]
+    ws2 = 9 if sep != 9 else 32  # a tab is blank space unless it is the separator
     while pos < end:
         p = pos
-        while p < end and (buf[p] == 32 or buf[p] == 9):
+        while p < end and (buf[p] == 32 or buf[p] == ws2):
             p += 1
         if p >= end:
             pos = end
@@ -299,7 +300,7 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
         nfb0 = nfb
         while True:
             # -- one field: spaces, optional quote, number, optional quote, spaces --
-            while p < end and (buf[p] == 32 or buf[p] == 9):
+            while p < end and (buf[p] == 32 or buf[p] == ws2):
                 p += 1
             quoted = False
             if p < end and buf[p] == 34:
@@ -392,7 +393,7 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
             stop_tok = p
             if quoted and p < end and buf[p] == 34:
                 p += 1
-            while p < end and (buf[p] == 32 or buf[p] == 9):
+            while p < end and (buf[p] == 32 or buf[p] == ws2):
                 p += 1
             if p < end and buf[p] != sep and buf[p] != 10 and buf[p] != 13:
                 fstat = _GARBAGE
@@ -548,14 +549,14 @@ def _emit(x: float, out: np.ndarray, p: int, tmp: np.ndarray, t_hi: np.ndarray, 
                     p += 1
                 out[p] = tmp[k]
                 p += 1
-            for k in range(nd, e + 1):
+            for _k in range(nd, e + 1):
                 out[p] = 48
                 p += 1
         else:
             out[p] = 48
             out[p + 1] = 46
             p += 2
-            for k in range(-e - 1):
+            for _k in range(-e - 1):
                 out[p] = 48
                 p += 1
             for k in range(nd):

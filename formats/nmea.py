@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 import os
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from datetime import datetime, timezone
+from functools import reduce
 from typing import Any
 
 import numpy as np
@@ -146,12 +148,10 @@ class NmeaSentence:
 
 def checksum(body: str) -> str:
     """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex."""
-    cs = 0
-    for ch in body:
-        cs ^= ord(ch)
-    return f"{cs & 0xFF:02X}"
+    return f"{reduce(operator.xor, body.encode('latin-1', 'replace'), 0) & 0xFF:02X}"
 
 
+_BAD_CHAR_RE = re.compile(r"[^\x20-\x7e]|[$!*]")
 _ADDR_RE = re.compile(r"^(?:P[A-Z0-9]{1,9}|[A-Z0-9]{2}[A-Z0-9]{3})$")
 
 
@@ -192,9 +192,9 @@ def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
         raise NmeaParseError(f"bad address field {addr[:12]!r}")
     if "," not in body:
         raise NmeaParseError("no data fields", sentence_type=stype)
-    bad = [c for c in body if not (" " <= c <= "~") or c in "$!*"]
+    bad = _BAD_CHAR_RE.search(body)
     if bad:
-        raise NmeaParseError(f"illegal character {bad[0]!r} inside the sentence (spliced line?)",
+        raise NmeaParseError(f"illegal character {bad.group()!r} inside the sentence (spliced line?)",
                              sentence_type=stype)
     fields = body.split(",")[1:]
     if addr[0] == "P":
@@ -485,11 +485,15 @@ def decode_checked(sentence: NmeaSentence | str,
     """Like :func:`decode`, but returns (values, problems) where problems lists what was skipped (XDR)."""
     if isinstance(sentence, str):
         sentence = parse_sentence(sentence)
+    return _decode_with(sentence, _normalise_xdr_map(xdr_map))
+
+
+def _decode_with(sentence: NmeaSentence, xmap: dict[str, XdrMapping]) -> tuple[dict[str, float], list[str]]:
     fn = _DECODERS.get(sentence.type)
     if fn is None:
         raise NmeaUnsupportedError(f"sentence type {sentence.type} is not decoded", sentence_type=sentence.type)
     problems: list[str] = []
-    values = fn(sentence, _normalise_xdr_map(xdr_map), problems)
+    values = fn(sentence, xmap, problems)
     return values, problems
 
 
@@ -850,7 +854,7 @@ def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map
             for k in range(len(s.fields) // 4 if len(s.fields) % 4 == 0 else 0):
                 xdr_ids[s.fields[4 * k + 3].strip()] += 1
         try:
-            vals, problems = decode_checked(s, xmap)
+            vals, problems = _decode_with(s, xmap)
             if problems and not vals:
                 raise NmeaFieldError(problems[0], sentence_type=stype)
         except NmeaUnsupportedError:
@@ -982,7 +986,10 @@ def _nmea_times(pos: np.ndarray, anchors: list[tuple[int, float, float | None]],
         "seconds_per_sentence_between_fixes": slope,
     }
     if first_date is not None:
-        meta["start_utc"] = datetime.fromtimestamp(float(t[0]), tz=timezone.utc).isoformat()
+        try:
+            meta["start_utc"] = datetime.fromtimestamp(float(t[0]), tz=timezone.utc).isoformat()
+        except (ValueError, OverflowError, OSError):
+            meta["start_utc"] = None  # a date outside what datetime can show (corrupted ZDA/RMC)
     return t, meta
 
 

@@ -344,43 +344,82 @@ class _Ros2Bag:
     """ROS2 bag: a folder with metadata.yaml, or a bare .db3 / .mcap file. sqlite3 rows are read directly."""
 
     def __init__(self, path: str):
-        from rosbags.rosbag2 import Reader
-
         self.path = path
         self.notes: list[str] = []
         self.truncated = False
+        self.reader: Any = None
+        self._direct_topics: dict[str, _Topic] | None = None
+        p = Path(path)
+        self.storage = "mcap"
+        self.db_files: list[Path] = []
+        counts: dict[str, int] | None = None
+        compressed = False
+        if p.is_dir():
+            try:
+                from ruamel.yaml import YAML
+
+                info = YAML(typ="safe").load((p / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+                self.storage = str(info.get("storage_identifier", "mcap"))
+                compressed = bool(info.get("compression_mode")) and str(info.get("compression_mode")).lower() != "none"
+                self.db_files = [p / Path(f).name for f in info.get("relative_file_paths", [])]
+                counts = {}
+                for t in info.get("topics_with_message_count") or []:
+                    name = t["topic_metadata"]["name"]
+                    counts[name] = counts.get(name, 0) + int(t["message_count"])
+            except Exception:
+                self.storage = "unknown"  # let rosbags report what is wrong
+        elif p.suffix == ".db3":
+            self.storage = "sqlite3"
+            self.db_files = [p]
+        self.direct = (self.storage == "sqlite3" and not compressed and bool(self.db_files)
+                       and all(f.is_file() for f in self.db_files))
+        if self.direct:
+            try:
+                self._direct_topics = self._db_topics(counts)
+                return
+            except sqlite3.DatabaseError:
+                self.direct = False  # fall through: rosbags gives its own diagnosis
+        from rosbags.rosbag2 import Reader
+
         try:
-            self.reader = Reader(Path(path))
+            self.reader = Reader(p)
             self.reader.open()
-        except ImutoolError:
-            raise
         except Exception as exc:
             raise ImutoolError(f"cannot open ROS2 bag: {exc}", path=path) from None
-        self.storage = "mcap"
-        p = Path(path)
-        if p.is_dir():
-            files = sorted(p.glob("*.db3"))
-            self.db_files = files
-            if files:
-                self.storage = "sqlite3"
-        elif p.suffix == ".db3":
-            self.db_files = [p]
-            self.storage = "sqlite3"
-        else:
-            self.db_files = []
-        try:
-            compressed = bool(self.reader.compression_mode)
-        except Exception:
-            compressed = False
-        self.direct = self.storage == "sqlite3" and not compressed
+
+    def _db_topics(self, counts: dict[str, int] | None) -> dict[str, _Topic]:
+        out: dict[str, _Topic] = {}
+        for db in self.db_files:
+            con = sqlite3.connect(f"file:{db}?immutable=1", uri=True)
+            try:
+                tops = con.execute("SELECT id, name, type, serialization_format FROM topics").fetchall()
+                n_by_id: dict[int, int] = {}
+                if counts is None:
+                    n_by_id = dict(con.execute("SELECT topic_id, count(*) FROM messages GROUP BY topic_id"))
+            finally:
+                con.close()
+            for tid, name, typ, ser in tops:
+                if ser != "cdr":
+                    raise sqlite3.DatabaseError(f"serialization {ser!r}")
+                t = out.setdefault(name, _Topic(name, typ, 0, "cdr"))
+                t.ids.append(tid)
+                if counts is None:
+                    t.count += int(n_by_id.get(tid, 0))
+        if counts is not None:
+            for name, t in out.items():
+                t.count = counts.get(name, 0)
+        return out
 
     def close(self) -> None:
         try:
-            self.reader.close()
+            if self.reader is not None:
+                self.reader.close()
         except Exception:
             pass
 
     def topics(self) -> dict[str, _Topic]:
+        if self._direct_topics is not None:
+            return self._direct_topics
         out: dict[str, _Topic] = {}
         for c in self.reader.connections:
             t = out.setdefault(c.topic, _Topic(c.topic, c.msgtype, 0, "cdr"))

@@ -470,6 +470,48 @@ class HeaveResult:
     summary: dict[str, Any]
 
 
+def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual):
+    """Φ, Q_d, H and the two output rows (heave, rate) of one set of oscillator frequencies."""
+    nmax = len(fr)
+    s = 2 * nmax + 1
+    om = np.where(good, 2 * np.pi * np.nan_to_num(fr, nan=1.0), 2 * np.pi)
+    fmat = oscillator_matrix(om)
+    qc = np.zeros((s, s))
+    ng = max(1, int(good.sum()))
+    for i in range(nmax):
+        if good[i]:
+            qc[2 * i + 1, 2 * i + 1] = 4 * bandwidth * om[i] ** 3 * sig**2 / ng
+    qc[-1, -1] = (residual_noise * sig) ** 2
+    phi, qd = discretise(fmat, qc, dt)
+    h = np.zeros(s)
+    h[0:2 * nmax:2] = good.astype(float)
+    h[-1] = 1.0
+    if per_harmonic:
+        g = integrator_response(sos, fs, np.where(good, fr, 1.0))
+        out_h = np.zeros(s)
+        out_v = np.zeros(s)
+        for i in range(nmax):
+            if not good[i]:
+                continue
+            lead_i = float(np.angle(g[i]))
+            rot = expm(oscillator_matrix(om[i:i + 1], residual=False) * (-lead_i / om[i])) / abs(g[i])
+            out_h[2 * i:2 * i + 2] = rot[0]
+            out_v[2 * i:2 * i + 2] = rot[1]
+        lead = float(np.angle(integrator_response(sos, fs, [fd if fd > 0 else fr[good][0]])[0]))
+        if output_residual:
+            out_h[-1] = 1.0
+    else:
+        # paper: a single step count from the lead at the dominant line, applied to the whole state
+        lead = float(np.angle(integrator_response(sos, fs, [fd])[0]))
+        m = -lead / (2 * np.pi * fd * dt)
+        fm = expm(fmat * (round(m) * dt))
+        out_h = h @ fm
+        out_v = np.zeros(s)
+        out_v[1:2 * nmax:2] = good.astype(float)
+        out_v = out_v @ fm
+    return phi, qd, h, out_h, out_v, lead
+
+
 def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarray, per_harmonic: bool,
                      bandwidth: float = 0.08, meas_noise: float = 0.002, residual_noise: float = 0.02,
                      output_residual: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
@@ -487,57 +529,26 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
     nmax = tracking.freqs.shape[1]
     s = 2 * nmax + 1
     first = int(tracking.start[0])
-    sig = float(np.std(d[first:])) if len(d) > first + 10 else float(np.std(d))
+    sig = float(np.std(d[:first])) if first > 10 else float(np.std(d))  # causal: the data before the 1st update
     sig = max(sig, 1e-4)
     phis = np.zeros((nseg, s, s))
     qds = np.zeros((nseg, s, s))
     hs = np.zeros((nseg, s))
     outs = np.zeros((nseg, 2, s))
     leads = []
+    cache: dict[tuple, tuple] = {}
     for k in range(nseg):
         fr = tracking.freqs[k]
         good = np.isfinite(fr)
-        om = np.where(good, 2 * np.pi * np.nan_to_num(fr, nan=1.0), 2 * np.pi)
-        fmat = oscillator_matrix(om)
-        qc = np.zeros((s, s))
-        ng = max(1, int(good.sum()))
-        for i in range(nmax):
-            if good[i]:
-                qc[2 * i + 1, 2 * i + 1] = 4 * bandwidth * om[i] ** 3 * sig**2 / ng
-        qc[-1, -1] = (residual_noise * sig) ** 2
-        phi, qd = discretise(fmat, qc, dt)
-        phis[k], qds[k] = phi, qd
-        h = np.zeros(s)
-        h[0:2 * nmax:2] = good.astype(float)
-        h[-1] = 1.0
-        hs[k] = h
-        g = integrator_response(sos, fs, np.where(good, fr, 1.0))
-        if per_harmonic:
-            out_h = np.zeros(s)
-            out_v = np.zeros(s)
-            for i in range(nmax):
-                if not good[i]:
-                    continue
-                lead = float(np.angle(g[i]))
-                rot = expm(oscillator_matrix(om[i:i + 1], residual=False) * (-lead / om[i])) / abs(g[i])
-                out_h[2 * i:2 * i + 2] = rot[0]
-                out_v[2 * i:2 * i + 2] = rot[1]
-            leads.append(float(np.angle(g[np.nanargmax(np.where(good, 1, -1))])))
-            if output_residual:
-                out_h[-1] = 1.0
-        else:
-            # paper: a single step count from the lead at the dominant line, applied to the whole state
-            fd = tracking.dominant[k]
-            gd = integrator_response(sos, fs, [fd])[0]
-            lead = float(np.angle(gd))
-            m = -lead / (2 * np.pi * fd * dt)
-            fm = expm(fmat * (round(m) * dt))
-            out_h = h @ fm
-            out_v = np.zeros(s)
-            out_v[1:2 * nmax:2] = good.astype(float)
-            out_v = out_v @ fm
-            leads.append(lead)
-        outs[k, 0], outs[k, 1] = out_h, out_v
+        # frequencies quantised to 0.25 % steps: identical models are discretised once (expm is the cost)
+        fq = np.where(good, np.exp(np.round(np.log(np.where(good, fr, 1.0)) / 0.0025) * 0.0025), np.nan)
+        fd = float(np.exp(np.round(np.log(tracking.dominant[k]) / 0.0025) * 0.0025))
+        key = (tuple(np.nan_to_num(fq, nan=-1.0)), fd if not per_harmonic else 0.0)
+        if key not in cache:
+            cache[key] = _segment_model(fq, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic,
+                                        output_residual)
+        phis[k], qds[k], hs[k], outs[k, 0], outs[k, 1], lead = cache[key]
+        leads.append(lead)
     seg = np.zeros(len(d), dtype=np.int64)
     seg[tracking.start] = 1
     seg = np.cumsum(seg) - 1

@@ -13,9 +13,11 @@ paper) with the paper's A(t) (§3, eq. 32, 40, 42) extended by the bias states:
 δθ̇ = −[ω×] δθ − δb_g − n_g,  δṙ = δv,  δv̇ = −R [f×] δθ − R δb_a − R n_a,  δḃ = n_b.
 Discretised Φ = I + A T, Q = diag(σ_g² T, 0, σ_a² T, σ_ba² T, σ_bg² T) (σ = noise densities). At ZVI samples:
 velocity update z = 0 − v̂ (H_v, eq. 45) and optionally the height update z = 0 − r̂_d (H_r, flat floor);
-then the error is injected into the nominal state and reset. Alignment: roll/pitch from the median specific force
-of the first rest interval, heading 0 (or given), gyro bias from the median rate over that interval, gravity
-magnitude |f̄| from it too (absorbs the accelerometer's scale error). One compiled loop does everything.
+optionally a zero angular-rate update z = y_g − b̂_g (ZARU); then the error is injected into the nominal state
+and reset. Alignment over a window of the first rest interval (its last ``align_window_s`` ending
+``align_guard_s`` before its end): roll/pitch from the interquartile-mean specific force f̄, heading 0 (or
+given), gyro bias from the interquartile-mean rate, gravity magnitude |f̄| (absorbs the accelerometer's scale
+error). One compiled loop does everything.
 """
 
 from __future__ import annotations
@@ -397,6 +399,8 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
             config: InsConfig | None = None) -> InsResult:
     """Run the INS. time (N,) s strictly increasing, gyro (N,3) rad/s, accel (N,3) m/s² (specific force, any
     right-handed body frame), zvi (N,) bool. Returns :class:`InsResult` (NaN before the alignment sample)."""
+    from scipy.stats import trim_mean
+
     c = config or InsConfig()
     t = np.ascontiguousarray(time, dtype=np.float64)
     g_ = np.ascontiguousarray(gyro, dtype=np.float64)
@@ -414,10 +418,11 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
         raise ImutoolError(f"INS: quaternion integration order must be 2 or 3; got {c.order}")
     i0, i1 = alignment_interval(t, z_, c.align_min_s)
     a0, a1 = alignment_window(t, i0, i1, c.align_window_s, c.align_guard_s, c.align_min_s)
-    fbar = np.median(a_[a0:a1], axis=0)  # median: robust to a shuffle of the foot inside the window
+    # interquartile means: robust to a brief shuffle of the foot, and not snapped to the quantum like a median
+    fbar = trim_mean(a_[a0:a1], 0.25, axis=0)
     gravity = float(np.linalg.norm(fbar)) if c.gravity is None else float(c.gravity)
     q0 = align(fbar, c.heading_deg)
-    bg0 = np.median(g_[a0:a1], axis=0) if c.init_gyro_bias else np.zeros(3)
+    bg0 = trim_mean(g_[a0:a1], 0.25, axis=0) if c.init_gyro_bias else np.zeros(3)
     ba0 = np.zeros(3)
     bg_sigma = c.init_gyro_bias_sigma if c.gyro_bias_states else 0.0
     ba_sigma = c.init_accel_bias_sigma if c.accel_bias_states else 0.0
@@ -492,7 +497,7 @@ def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
 
 
 def strides(time: np.ndarray, pos: np.ndarray, zvi: np.ndarray, min_swing_s: float = 0.2,
-            max_stance_s: float = 2.0) -> dict[str, Any]:
+            max_stance_s: float = 1.5) -> dict[str, Any]:
     """Stride segmentation from ZVIs: one stride per swing between two stance intervals.
 
     Motion gaps shorter than ``min_swing_s`` (s) do not count as swings (a stance split by a foot roll).

@@ -138,8 +138,9 @@ def test_real_hmc5883l_full_sphere(shared):
 
 
 def test_real_hmc5883l_ccw_turns_with_the_sphere_calibration(shared, tmp_path):
-    import formats
     from scipy.ndimage import median_filter
+
+    import formats
 
     m = formats.read(shared("mag_hmc5883l", "full-sphere", "hmc5883l_compass.csv")).get("mag", "uT")
     fit = calibrate_sphere(m, "auto")

@@ -156,6 +156,11 @@ def test_serial_nmea_capture_keeps_raw_log_and_counts_bad_lines(tmp_path):
     assert summary["errors"] == len(sent.corrupted)  # each corrupted sentence counted, none fatal
     rec = read_csv([f for f in summary["files"] if f.endswith(".csv")][0])
     assert "roll" in rec and np.nanmax(np.abs(rec["roll"])) < 16.0
+    from formats.nmea import read_nmea
+
+    log = read_nmea(raw)  # the raw evidence log is itself readable, on its arrival time stamps
+    assert log.meta["time_source"] == "stamp"
+    assert abs(log.time[0] - rec.time[0]) < 1.0
 
 
 def test_capture_cli_bad_port_is_one_line(tmp_path):

@@ -333,6 +333,15 @@ def test_nmea_time_base_dates_rollover_and_spliced_prefix(tmp_path):
     assert rec.meta["time"]["start_utc"].startswith("2014-04-16T23:59:59")
 
 
+@pytest.mark.parametrize("zda", ["GPZDA,235959,31,12,9999,,", "GPZDA,000000,01,01,0001,,", "GPZDA,99,99,99,99,,",
+                                 "GPRMC,000000,A,,,,,,,311299,,,A", "GPGGA,123456.789,,,,,0,,,,M,,M,,"])
+def test_extreme_dates_do_not_crash(tmp_path, zda):
+    p = tmp_path / "dates.log"
+    p.write_text("\n".join([_s("HEHDT,1.0,T"), _s(zda), _s("HEHDT,2.0,T"), _s(zda), _s("HEHDT,3.0,T")]))
+    rec = read_nmea(p)
+    assert len(rec) == 3 and np.all(np.diff(rec.time) > 0)
+
+
 def test_decode_psti036():
     d = decode("$PSTI,036,003832.000,290322,244.28,2.77,0.00,R*5D")
     assert d == {"heading_true": 244.28, "pitch": 2.77, "roll": 0.0}

@@ -1,4 +1,4 @@
-"""Inclinometer evidence report: injected errors recovered, pass/fail at the tolerance, honest 'not tested', PDF/JSON."""
+"""Inclinometer evidence: injected errors recovered, pass/fail at the tolerance, honest "not tested", PDF/JSON."""
 
 from __future__ import annotations
 

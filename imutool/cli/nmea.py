@@ -36,9 +36,10 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
     heading_ref says what the ``heading`` channel is: ``magnetic`` (HDG sensor = heading − deviation; THS true =
     heading + variation, needs the variation) or ``true`` (HDG sensor = heading − variation − deviation, needs the
     variation). Unknown deviation → null HDG fields and deviation 0 in the arithmetic.
+    HRM status is A whenever the heel is valid; period and amplitudes are null fields until a cycle completes
+    (and when the last one is older than max_period_s).
     """
     from formats.nmea import hdg_sentence, hrm_sentence, ths_sentence, xdr_roll_pitch
-
     from imutool.roll import roll_stats
 
     tk = {"HRM": "II", "XDR": "YX", "HDG": "HC", "THS": "HE", **(talkers or {})}
@@ -96,8 +97,11 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
             if s == "HRM":
                 h = _v(heel, i)
                 k = resets.index(float(rs.reset_time[i]))
-                yield float(t[i]), hrm_sentence(h, _v(rs.roll_period, i), _v(rs.amp_port, i), _v(rs.amp_stbd, i),
-                                                valid=bool(rs.valid[i]) and h is not None,
+                fresh = bool(rs.valid[i])
+                yield float(t[i]), hrm_sentence(h, _v(rs.roll_period, i) if fresh else None,
+                                                _v(rs.amp_port, i) if fresh else None,
+                                                _v(rs.amp_stbd, i) if fresh else None,
+                                                valid=h is not None,
                                                 peak_port_deg=_v(rs.peak_port, i), peak_stbd_deg=_v(rs.peak_stbd, i),
                                                 reset_utc=reset_dt[k], talker=tk["HRM"])
             elif s == "XDR":
@@ -122,7 +126,7 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
 @click.command("nmea", epilog="Example: imutool nmea est.csv -o out.nmea --sentences HRM,XDR,HDG,THS --rate 2 "
                "--variation -3.5")
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))
-@click.option("-o", "--output", default=None, type=click.Path(), help="Output NMEA log (.nmea); optional with --serial.")
+@click.option("-o", "--output", default=None, type=click.Path(), help="NMEA log (.nmea); optional with --serial.")
 @click.option("--sentences", default="HRM,XDR", show_default=True, help="Comma list of HRM, XDR, HDG, THS.")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Output rate (Hz); default: every input row.")
 @click.option("--serial", "serial_port", default=None, help="Also write to this serial port (e.g. /dev/ttyUSB0).")

@@ -242,7 +242,8 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     if not rows:
         st, why = NOT_TESTED, "no static heading (no plateau in the reference heading)"
     elif any(r["status"] == FAIL for r in rows):
-        st, why = FAIL, f"{sum(r['status'] == FAIL for r in rows)} of {len(rows)} headings outside ±{o.static_limit_deg}°"
+        nf = sum(r["status"] == FAIL for r in rows)
+        st, why = FAIL, f"{nf} of {len(rows)} headings outside ±{o.static_limit_deg}°"
     elif len(hd) < o.min_headings or gap > max_gap:
         st, why = INSUFFICIENT, (f"{len(hd)} distinct headings, largest gap {gap:.0f}°; ≥ {o.min_headings} "
                                  f"equidistant headings (gap ≤ {max_gap:.0f}°) needed")

@@ -15,8 +15,13 @@ import numpy as np
 from formats.atomic import atomic_path
 
 A4 = (8.27, 11.69)
-LINES_PER_PAGE = 112
+LINES_PER_PAGE = 100
 WIDTH = 118
+MAX_CHARS = 128  # hard limit per line at 7 pt on A4 (DejaVu Sans Mono)
+
+
+def _js(v: Any) -> str:
+    return json.dumps(v, ensure_ascii=False, default=str)
 
 
 def _fmt(v: Any, nd: int = 3) -> str:
@@ -53,7 +58,7 @@ def _text_pages(pdf: Any, title: str, lines: list[str], footer: str) -> int:
         fig = plt.figure(figsize=A4)
         fig.text(0.06, 0.965, title + (f" (continued {k + 1}/{len(chunks)})" if k else ""), fontsize=12,
                  weight="bold", va="top", parse_math=False)
-        body = "\n".join(("\u25a0 " + ln[3:].upper()) if ln.startswith("## ") else ln for ln in chunk)
+        body = "\n".join(("\u25a0 " + ln[3:].upper()) if ln.startswith("## ") else ln[:MAX_CHARS] for ln in chunk)
         fig.text(0.06, 0.935, body, family="DejaVu Sans Mono", fontsize=7.0, va="top", linespacing=1.25,
                  parse_math=False)
         fig.text(0.06, 0.02, footer, fontsize=6, color="0.4", parse_math=False)
@@ -76,7 +81,7 @@ def summary_lines(ev: dict[str, Any]) -> list[str]:
     L += [f"generated (UTC): {ev['generated_utc']}   tool: imutool {tool['version']}  git {tool['git'] or '-'}"]
     for k, v in ev["identification"].items():
         if v not in (None, {}, ""):
-            L += wrap(f"{k}: {json.dumps(v) if isinstance(v, (dict, list)) else v}")
+            L += wrap(f"{k}: {_js(v) if isinstance(v, (dict, list)) else v}")
     L += ["", "## Inputs (sha256 of the files as read)"]
     for name, inp in ev["inputs"].items():
         if not inp:
@@ -87,7 +92,7 @@ def summary_lines(ev: dict[str, Any]) -> list[str]:
         meta = inp.get("meta") or {}
         for key in ("sensor", "device", "frame", "convention", "mounting", "calibration", "filter", "injected"):
             if key in meta:
-                L += wrap(f"{key}: {json.dumps(meta[key]) if isinstance(meta[key], (dict, list)) else meta[key]}",
+                L += wrap(f"{key}: {_js(meta[key]) if isinstance(meta[key], (dict, list)) else meta[key]}",
                           "   ")
     c = ev["conventions"]
     L += ["", "## Units, frames and sign conventions"]
@@ -95,17 +100,17 @@ def summary_lines(ev: dict[str, Any]) -> list[str]:
         L += wrap(f"{k}: {v}")
     L += ["", "## Editions applied (confidence: A verbatim, B secondary quote, C partial, R recalled, I inference)"]
     L += table(["document", "edition", "role", "conf"],
-               [[e["document"], e["edition"][:52], e.get("role", "")[:40], e["confidence"]] for e in ev["editions"]])
+               [[e["document"], e["edition"][:44], e.get("role", "")[:38], e["confidence"]] for e in ev["editions"]])
     L += ["", "## Criteria"]
     L += table(["id", "criterion", "source", "conf"],
-               [[c["id"], c["text"][:62], c["source"][:38], c["confidence"]] for c in ev["criteria"]])
+               [[c["id"], c["text"][:66], c["source"][:40], c["confidence"]] for c in ev["criteria"]])
     a = ev["alignment"]
     L += ["", "## Time alignment"]
     L += wrap(f"{a['method']}: lag {_fmt(a.get('lag_s'), 3)} s ({a.get('lag_positive_means', '')}); "
               f"applied: {_fmt(a['applied'])}; {a.get('note', '')}")
     for k in ("correlation", "linear_fit", "rms_at_lag_deg"):
         if k in a:
-            L += wrap(f"{k}: {json.dumps(a[k]) if isinstance(a[k], dict) else _fmt(a[k], 4)}")
+            L += wrap(f"{k}: {_js(a[k]) if isinstance(a[k], dict) else _fmt(a[k], 4)}")
     L += ["", "## Items (N, max |error|, RMS, p95 |error| in the item's unit)"]
     L += table(["item", "clause", "status", "N", "max|e|", "RMS", "p95", "mean"],
                [[it["id"], it["clause"][:44], it["status"], it["stats"].get("n"), it["stats"].get("max_abs"),
@@ -136,7 +141,7 @@ def detail_lines(ev: dict[str, Any]) -> list[str]:
                 L += [f"... {len(rows) - 60} more rows in the JSON"]
         if it.get("capture"):
             for k, v in it["capture"].items():
-                L += wrap(f"{k}: {json.dumps(v) if isinstance(v, (dict, list)) else v}")
+                L += wrap(f"{k}: {_js(v) if isinstance(v, (dict, list)) else v}")
         L += [""]
     L += ["## Not tested / insufficient data"]
     for s in ev["not_tested"]:

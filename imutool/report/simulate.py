@@ -207,10 +207,11 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
     ``imutool nmea``'s generator), heading_dut.csv / heading_reference.csv (SAMPLE_HEADING_ERRORS).
     """
     import os
+    from datetime import datetime, timezone
 
     import formats
-    from imutool.cli.nmea import nmea_lines
     from formats.atomic import atomic_path
+    from imutool.cli.nmea import nmea_lines
 
     os.makedirs(folder, exist_ok=True)
     out = {}
@@ -222,7 +223,8 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
     write_steps_csv(segs, out["inclinometer_steps.csv"])
     out["inclinometer_dut.nmea"] = os.path.join(folder, "inclinometer_dut.nmea")
     with atomic_path(out["inclinometer_dut.nmea"]) as tmp, open(tmp, "w", newline="") as fh:
-        for ts, s in nmea_lines(dut, ["HRM"], None):
+        utc0 = datetime(2026, 1, 5, 8, 0, 0, tzinfo=timezone.utc)  # peak-hold reset = start of the test
+        for ts, s in nmea_lines(dut, ["HRM"], None, roll_kw={"utc_start": utc0}):
             fh.write(f"{ts:.3f} {s}\r\n")
     hd, hr, _ = heading_test(rate_hz=rate_hz, seed=seed, **SAMPLE_HEADING_ERRORS)
     for name, rec in (("heading_dut.csv", hd), ("heading_reference.csv", hr)):
