@@ -48,7 +48,8 @@ def bench_ellipsoid(n: int = 100_000) -> None:
             best, cpu = min(best, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
         err = np.linalg.norm(fit.A - np.linalg.inv(a_s)) / np.linalg.norm(np.linalg.inv(a_s))
         print(f"ellipsoid fit ({kind}: Li–Griffiths + least_squares refinement + coverage + covariance), "
-              f"{n:,} samples: {best:.3f} s wall, {cpu:.3f} s CPU, best of 3  (A error {100 * err:.3f} %; target < 1 s for 'full')")
+              f"{n:,} samples: {best:.3f} s wall, {cpu:.3f} s CPU, best of 3  (A error {100 * err:.3f} %; "
+              "target < 1 s for 'full')")
 
 
 if __name__ == "__main__":

@@ -53,7 +53,7 @@ def detect_rest(time: np.ndarray, gyro: np.ndarray | None, accel: np.ndarray | N
     t = np.asarray(time, dtype=float)
     if len(t) < 4:
         raise ImutoolError("too few samples to detect rest")
-    fs = 1.0 / float(np.median(np.diff(t)))
+    fs = (len(t) - 1) / float(t[-1] - t[0])  # mean rate: host timestamps of buffered sensors come in bursts
     w = max(3, int(round(window_s * fs)))
     still = np.ones(len(t), dtype=bool)
     if gyro is not None:

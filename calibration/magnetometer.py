@@ -78,8 +78,8 @@ class MagFit:
             "b": self.b.tolist(),
             "A": self.A.tolist(),
             "field_ut": float(self.field_ut),
-            "b_std": np.nan_to_num(self.b_std, nan=-1.0).tolist(),
-            "A_std": np.nan_to_num(self.A_std, nan=-1.0).tolist(),
+            "b_std": self.b_std.tolist(),  # nan = not estimated (e.g. vertical terms of a swing)
+            "A_std": self.A_std.tolist(),
         }
         out.update(self.extra.get("section", {}))
         return out

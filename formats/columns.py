@@ -75,10 +75,27 @@ def _unit_in(header: str) -> str | None:
     return None
 
 
+_ALL_QWORDS = {w for q, words in _QUANTITY_WORDS if q != "temp" for w in words}
+_SHORT_AXIS = {"a": "acc", "g": "gyro", "w": "gyro", "m": "mag"}  # ax, gy, wz, mx ...
+
+
+def _split_axis_tokens(tokens: list[str]) -> list[str]:
+    """``accz`` → ``acc, z``; ``gyrox`` → ``gyro, x``; a lone ``ax``/``gy``/``mz`` → quantity + axis."""
+    out: list[str] = []
+    for t in tokens:
+        if len(t) >= 2 and t[-1] in "xyz" and t[:-1] in _ALL_QWORDS:
+            out += [t[:-1], t[-1]]
+        elif len(tokens) == 1 and len(t) == 2 and t[0] in _SHORT_AXIS and t[1] in "xyz":
+            out += [_SHORT_AXIS[t[0]], t[1]]
+        else:
+            out.append(t)
+    return out
+
+
 def _infer_one(header: str) -> ColumnMap:
     explicit_unit = _unit_in(header)
     name = clean_name(header)
-    tokens = [t for t in name.split("_") if t]
+    tokens = _split_axis_tokens([t for t in name.split("_") if t])
     # time
     if name in _TIME_WORDS or (tokens and tokens[0] in ("time", "timestamp") and len(tokens) <= 2):
         unit = explicit_unit
@@ -137,12 +154,21 @@ def infer_mapping(headers: list[str]) -> Mapping:
         seen[c.target] = c.source
     for c in cols:
         q = _expected_quantity(c.target)
+        c.unit = resolve_unit(c.unit, q)
         if q and c.unit:
             try:
                 _units.factor_to_si(c.unit, q)
             except ImutoolError as e:
                 raise ImutoolError(f"column {c.source!r}: {e}") from None
     return Mapping(cols, "inferred")
+
+
+def resolve_unit(unit: str | None, quantity: str | None) -> str | None:
+    """Unit names that mean different things per quantity: on a magnetometer ``G``/``mG`` are gauss and
+    milligauss (not g and milli-g)."""
+    if unit and quantity == "magnetic" and unit.strip().lower() in ("g", "mg"):
+        return "gauss" if unit.strip().lower() == "g" else "mgauss"
+    return unit
 
 
 def _expected_quantity(target: str) -> str | None:
@@ -171,9 +197,10 @@ def parse_mapping_option(spec: str, headers: list[str]) -> Mapping:
         target, _, unit = rhs.partition(":")
         if src not in headers:
             raise ImutoolError(f"--columns: no column {src!r} in the file (has: {', '.join(headers)})")
+        unit = resolve_unit(unit.strip() or None, _expected_quantity(target.strip()))
         if unit:
             _units.lookup(unit)
-        given[src] = ColumnMap(src, target.strip(), unit.strip() or None, inferred=False, scale=scale)
+        given[src] = ColumnMap(src, target.strip(), unit, inferred=False, scale=scale)
     inferred = infer_mapping(headers)
     cols = [given.get(c.source, c) for c in inferred.columns]
     return Mapping(cols, "options")
@@ -212,6 +239,7 @@ def mapping_from_profile(profile: dict, headers: list[str], path: str = "profile
             q = _expected_quantity(spec["to"])
             unit = _DEFAULT_UNIT.get(spec["to"].split("_")[0]) if q else None
         elif unit:
+            unit = resolve_unit(unit, _expected_quantity(spec["to"]))
             _units.lookup(unit)
         if src not in headers:
             raise ImutoolError(f"column {src!r} named in the profile is not in the file", path=path)

@@ -122,31 +122,6 @@ def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     return hi, lo
 
 
-@njit(cache=True)
-def _clz(w: np.uint64) -> int:
-    n = 0
-    if w == _U0:
-        return 64
-    if (w >> _S32) == _U0:
-        n += 32
-        w <<= _S32
-    if (w >> _S48) == _U0:
-        n += 16
-        w <<= _S16
-    if (w >> _S56) == _U0:
-        n += 8
-        w <<= _S8
-    if (w >> _S60) == _U0:
-        n += 4
-        w <<= _S4
-    if (w >> _S62) == _U0:
-        n += 2
-        w <<= _S2
-    if (w >> _U63) == _U0:
-        n += 1
-    return n
-
-
 @njit(cache=True, inline="always")
 def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) -> float:
     """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""

@@ -238,10 +238,11 @@ class Recording:
         return out
 
     def select(self, rows: np.ndarray | slice) -> Recording:
-        """A new recording with the given rows (boolean mask, index array or slice)."""
+        """A new recording with the given rows (boolean mask, index array or slice); arrays are copies."""
+        take = (lambda a: a[rows].copy()) if isinstance(rows, slice) else (lambda a: a[rows])
         return Recording(
-            self.time[rows],
-            {k: v[rows] for k, v in self.channels.items()},
+            take(self.time),
+            {k: take(v) for k, v in self.channels.items()},
             dict(self.units),
             copy.deepcopy(self.meta),
             {k: list(v) for k, v in self.columns.items()},

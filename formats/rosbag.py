@@ -41,6 +41,7 @@ import sqlite3
 import struct
 import tempfile
 from dataclasses import dataclass, field
+from operator import itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -103,17 +104,23 @@ def _u32(b, p):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _scan_ros1(buf, out, conn_pos, fill):  # pragma: no cover - numba
+def _scan_ros1(buf, bounds, out, conn_pos, bad_chunks, fill):  # pragma: no cover - numba
     """Scan ROS1 records (uint32 header_len, header fields 'name=value', uint32 data_len, data) in ``buf``.
 
     Message-data records (op 0x02) go to ``out`` rows (conn, sec, nsec, data offset, data length);
-    connection records (op 0x07) to ``conn_pos``. Returns (n_messages, n_connections, end position).
-    With fill=False only counts.
+    connection records (op 0x07) to ``conn_pos``. ``bounds`` holds each decompressed chunk's (start, end) in
+    ``buf``; a chunk whose records do not parse to its end is flagged in ``bad_chunks`` (its readable records are
+    kept) and the scan goes on with the next chunk. Returns (n_messages, n_connections). fill=False only counts.
     """
-    n = buf.shape[0]
-    p = 0
     k = 0
     c = 0
+    for ci in range(bounds.shape[0]):
+        k, c = _scan_chunk(buf, bounds[ci, 0], bounds[ci, 1], out, conn_pos, bad_chunks, ci, k, c, fill)
+    return k, c
+
+
+@njit(cache=True)
+def _scan_chunk(buf, p, n, out, conn_pos, bad_chunks, ci, k, c, fill):  # pragma: no cover - numba
     while p + 4 <= n:
         hl = _u32(buf, p)
         h0 = p + 4
@@ -165,7 +172,9 @@ def _scan_ros1(buf, out, conn_pos, fill):  # pragma: no cover - numba
                 conn_pos[c] = p
             c += 1
         p = d0 + dl
-    return k, c, p
+    if p != n:
+        bad_chunks[ci] = 1
+    return k, c
 
 
 @njit(cache=True)
@@ -254,7 +263,10 @@ class _Ros1Bag:
                 if p + 8 + hl > size:
                     self.truncated = True
                     break
-                hdr = _fields(mv[p + 4: p + 4 + hl])
+                try:
+                    hdr = _fields(mv[p + 4: p + 4 + hl])
+                except (struct.error, ValueError):
+                    hdr = {}
                 (dl,) = struct.unpack_from("<I", mv, p + 4 + hl)
                 d0 = p + 8 + hl
                 if d0 + dl > size:
@@ -264,7 +276,8 @@ class _Ros1Bag:
                     break
                 op = hdr.get("op", b"")
                 if op == b"\x03":
-                    index_pos = struct.unpack("<Q", hdr["index_pos"])[0] if "index_pos" in hdr else 0
+                    ip = hdr.get("index_pos", b"")
+                    index_pos = struct.unpack("<Q", ip)[0] if len(ip) == 8 else 0
                 elif op == b"\x05":
                     comp = hdr.get("compression", b"none").decode()
                     if comp not in decompressors:
@@ -291,13 +304,17 @@ class _Ros1Bag:
                 raise ImutoolError("ROS1 bag is truncated: no complete chunk of messages to read", path=self.path)
             return
         buf = np.frombuffer(b"".join(chunks), dtype=np.uint8)
-        dummy = np.empty((0, 5), np.int64)
-        k, c, end = _scan_ros1(buf, dummy, np.empty(0, np.int64), False)
+        sizes = np.array([len(x) for x in chunks], np.int64)
+        ends = np.cumsum(sizes)
+        bounds = np.stack([ends - sizes, ends], axis=1)
+        bad = np.zeros(len(chunks), np.int64)
+        k, c = _scan_ros1(buf, bounds, np.empty((0, 5), np.int64), np.empty(0, np.int64), bad, False)
         out = np.empty((k, 5), np.int64)
         cpos = np.empty(c, np.int64)
-        _scan_ros1(buf, out, cpos, True)
-        if end != buf.shape[0]:
-            self.notes.append(f"chunk data ends in an unreadable record ({buf.shape[0] - end} bytes skipped)")
+        _scan_ros1(buf, bounds, out, cpos, bad, True)
+        if bad.any():
+            self.notes.append(f"{int(bad.sum())} chunk(s) end in an unreadable record (damaged); "
+                              "the records before the damage were kept")
         for cp in cpos:
             hl = int(buf[cp]) | int(buf[cp + 1]) << 8 | int(buf[cp + 2]) << 16 | int(buf[cp + 3]) << 24
             hdr = _fields(buf[cp + 4: cp + 4 + hl].tobytes())
@@ -308,7 +325,7 @@ class _Ros1Bag:
         self.recs = out
 
     def _add_conn(self, hdr: dict[str, bytes], data: bytes | memoryview) -> None:
-        if "conn" not in hdr:
+        if len(hdr.get("conn", b"")) != 4:
             return
         cid = struct.unpack("<I", hdr["conn"])[0]
         if cid in self.conns:
@@ -449,8 +466,8 @@ class _Ros2Bag:
             raise
         except Exception as exc:
             raise ImutoolError(f"cannot read messages of {topic.name}: {exc}", path=self.path) from None
-        rec_ns = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
-        datas = [r[1] for r in rows]
+        rec_ns = np.fromiter(map(itemgetter(0), rows), dtype=np.int64, count=len(rows))
+        datas = list(map(itemgetter(1), rows))
         lens = np.fromiter(map(len, datas), dtype=np.int64, count=len(datas))
         offs = np.zeros(len(datas), np.int64)
         if len(datas) > 1:

@@ -67,11 +67,11 @@ F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
 class EkfParams:
     """Tuning of :func:`run_ekf`. Noise figures are one-sigma; every field is a CLI option of `imutool filter`."""
 
-    gyro_noise: float = 8e-4  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
+    gyro_noise: float = 1e-3  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
     gyro_scale_noise: float = 0.0  # fraction: rate-proportional process noise (scale/misalignment errors)
     bias_rw: float = 2e-5  # rad/s/√s   bias random walk (process noise of b)
-    accel_noise: float = 0.08  # σ of the normalised accel direction per update (≈ rad)
-    mag_noise_deg: float = 5.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
+    accel_noise: float = 0.1  # σ of the normalised accel direction per update (≈ rad)
+    mag_noise_deg: float = 6.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
     accel_gate: float = 3.0  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
     accel_nis_gate: float = 25.0  # reject accel when its normalised innovation squared exceeds this (≤ 0: off)
     mag_norm_gate: float = 0.15  # reject mag when | ‖m‖/m_ref − 1 | exceeds this fraction (≤ 0: off)

@@ -184,9 +184,9 @@ def design_matrix(pos: np.ndarray, dirs: np.ndarray) -> np.ndarray:
 def _geometry_diagnosis(pos: np.ndarray, dirs: np.ndarray) -> list[str]:
     why = []
     pts = np.unique(np.round(pos, 9), axis=0)
-    if len(pts) < len(pos) and len(pts) < 4:
-        dup = len(pos) - len(pts)
-        why.append(f"only {len(pts)} distinct position(s) ({dup} measured axes share a position)")
+    if len(pts) < 4:
+        why.append(f"only {len(pts)} distinct sensor position(s): sensors at duplicated positions add no "
+                   "lever arm (at least 4 non-coplanar positions are needed for triads)")
     c = pts - pts.mean(axis=0)
     sv = np.linalg.svd(c, compute_uv=False) if len(pts) > 1 else np.zeros(3)
     scale = max(float(sv[0]) if len(sv) else 0.0, 1e-12)

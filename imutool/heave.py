@@ -513,7 +513,7 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
 
 
 def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarray, per_harmonic: bool,
-                     bandwidth: float = 0.08, meas_noise: float = 0.002, residual_noise: float = 0.02,
+                     bandwidth: float = 0.03, meas_noise: float = 0.002, residual_noise: float = 0.02,
                      output_residual: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Run the harmonic-oscillator KF on the band-passed displacement d (m) and apply the multi-step
     observation. Returns (heave, heave rate, info).
@@ -565,19 +565,24 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
 # ------------------------------------------------------------------------------------------------------------------
 # Driver
 # ------------------------------------------------------------------------------------------------------------------
-def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", harmonics: int = 3,
+def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", harmonics: int | None = None,
                    cutoff: float | None = None, order: int = 3, window_s: float = 120.0, hop_s: float = 5.0,
-                   min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0, bandwidth: float = 0.08,
+                   min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0, bandwidth: float = 0.03,
                    meas_noise: float = 0.002, residual_noise: float = 0.02, delayed_cutoff: float | None = None,
-                   lowpass: float | None = None, settle_periods: float = 4.0) -> HeaveResult:
+                   lowpass: float | None = None, settle_periods: float = 4.0,
+                   cutoff_ratio: float = 0.2) -> HeaveResult:
     """Heave (m, positive up) from vertical acceleration a_up (m/s², positive up) sampled at times t (s).
 
-    ``cutoff`` (Hz) of the causal band-pass: default 0.3 × the first tracked dominant frequency (the value known
+    ``harmonics``: oscillators in the model (default 3 for ``paper``, 5 for ``realtime``).
+    ``cutoff`` (Hz) of the causal band-pass: default ``cutoff_ratio`` (0.2) × the first tracked dominant
+    frequency (the value known
     after ``min_window_s``; the filter is fixed from then on). ``delayed_cutoff`` default 0.35 × the
     whole-record dominant frequency (the delayed output is offline anyway).
     """
     if method not in METHODS:
         raise ImutoolError(f"unknown heave method {method!r}; choose one of {', '.join(METHODS)}")
+    if harmonics is None:
+        harmonics = 3 if method == "paper" else 5
     if harmonics < 1 or harmonics > 8:
         raise ImutoolError(f"--harmonics must be 1..8, got {harmonics}")
     t = np.asarray(t, float)
@@ -595,7 +600,7 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     mode = "peaks" if method == "paper" else "centroids"
     tr = track_frequencies(t, a, harmonics, window_s, hop_s, min_window_s, fmin, fmax, mode)
     f_first = float(tr.dominant[0])
-    fc = float(cutoff) if cutoff else 0.3 * f_first
+    fc = float(cutoff) if cutoff else cutoff_ratio * f_first
     # delayed output: whole-record dominant frequency
     fw, sw = displacement_spectrum(a[:: max(1, int(fs // (5 * fmax)))], fs / max(1, int(fs // (5 * fmax))),
                                    fmin, fmax, pad=1)

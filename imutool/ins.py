@@ -163,6 +163,26 @@ def _apply_f(fth: np.ndarray, fvth: np.ndarray, fvba: np.ndarray, T: float, m: n
 
 
 @njit(cache=True)
+def _spd_inverse(s: np.ndarray, out: np.ndarray, m: int) -> None:
+    """out[:m,:m] = inverse of the symmetric positive-definite s[:m,:m] (Gauss-Jordan; s is overwritten)."""
+    for i in range(m):
+        for j in range(m):
+            out[i, j] = 1.0 if i == j else 0.0
+    for c in range(m):
+        piv = s[c, c]
+        for j in range(m):
+            s[c, j] /= piv
+            out[c, j] /= piv
+        for r in range(m):
+            if r != c:
+                fct = s[r, c]
+                if fct != 0.0:
+                    for j in range(m):
+                        s[r, j] -= fct * s[c, j]
+                        out[r, j] -= fct * out[c, j]
+
+
+@njit(cache=True)
 def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout, pdiag, hvar, bias):
     """The strapdown + error-state EKF loop from sample k0 (see module doc). prm/opt: see _pack()."""
     n = t.shape[0]
@@ -197,6 +217,11 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
     fn = np.zeros(3)
     an = np.zeros(3)
     idx = np.zeros(7, dtype=np.int64)
+    S = np.zeros((7, 7))
+    Si = np.zeros((7, 7))
+    z = np.zeros(7)
+    K = np.zeros((NX, 7))
+    HP = np.zeros((7, NX))
     dx = np.zeros(NX)
     _rotmat(q, R)
     for i in range(3):
@@ -275,8 +300,6 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
                 for i in range(3):
                     idx[m] = 12 + i
                     m += 1
-            S = np.empty((m, m))
-            z = np.empty(m)
             for a in range(m):
                 for b in range(m):
                     S[a, b] = P[idx[a], idx[b]]
@@ -290,8 +313,7 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
                 else:  # angular rate: z = y_g − b̂_g (ω = 0 at rest)
                     S[a, a] += rw
                     z[a] = gyro[k, j - 12] - bg[j - 12]
-            Si = np.linalg.inv(S)
-            K = np.zeros((NX, m))
+            _spd_inverse(S, Si, m)
             for i in range(NX):
                 for b in range(m):
                     acc = 0.0
@@ -304,7 +326,6 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
                     acc += K[i, a] * z[a]
                 dx[i] = acc
             # P ← P − K H P, symmetrised
-            HP = np.empty((m, NX))
             for a in range(m):
                 for j in range(NX):
                     HP[a, j] = P[idx[a], j]

@@ -322,9 +322,11 @@ def roll_stats(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5,
                      reset_time, valid, cyc, settings, [_utc_of(r, utc_start) for r in resets])
 
 
-def heel_of(rec: Recording, path: str = "recording") -> np.ndarray:
-    """The heel series (deg, + starboard) of a recording: channel ``heel`` (HRM) or else ``roll``."""
-    for name in ("heel", "roll"):
+def heel_of(rec: Recording, path: str = "recording", channel: str | None = None) -> np.ndarray:
+    """The heel series (deg, + starboard) of a recording: ``channel`` if given, else ``heel`` (HRM) or ``roll``."""
+    if channel and channel not in rec.channels:
+        raise ImutoolError(f"no channel {channel!r}; has {', '.join(rec.channels) or 'none'}", path=path)
+    for name in ((channel,) if channel else ("heel", "roll")):
         if name in rec.channels:
             a = rec.get(name, "deg") if rec.units.get(name) else rec[name]
             if a.ndim != 1:

@@ -107,3 +107,28 @@ def test_gyro_and_accel_append_sections(files, tmp_path, capsys):
     assert set(load_calibration(cal).sections) == {"gyro", "mag"}
     code, out, err = run(["calibrate", "gyro", tmp_path / "static.csv", "-o", tmp_path / "x.json"], capsys)
     assert code == 2 and ".toml" in err
+
+
+def test_deviation_against_an_nmea_gyrocompass_log(tmp_path, capsys):
+    rec = simulate("compass-swing", duration=120, rate_hz=10, seed=12)
+    formats.write(rec, tmp_path / "swing.csv")
+    ref = formats.Recording(rec.time.copy())
+    ref.add("heading", rec["ref_heading"], "deg")
+    formats.write(ref, tmp_path / "gyro.nmea")  # $HEHDT at 10 Hz (read back on the sentence-index clock)
+    code, out, err = run(["calibrate", "deviation", tmp_path / "swing.csv", "--heading-column",
+                          "ref_compass_heading", "--reference", tmp_path / "gyro.nmea", "-o", tmp_path / "c.toml",
+                          "--json"], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert "gyro.nmea:heading (true)" in s["reference"]
+    assert np.allclose([s["coefficients_deg"][n] for n in "ABCDE"], rec.meta["deviation_deg"], atol=0.1)
+
+
+def test_fitting_refuses_mounting_and_an_already_applied_section(files, tmp_path, capsys):
+    cal = tmp_path / "cal.toml"
+    code, _, err = run(["calibrate", "mag", files / "sphere.csv", "-o", cal, "--mounting", "x,-y,-z"], capsys)
+    assert code == 2 and "sensor axes" in err
+    assert run(["calibrate", "mag", files / "sphere.csv", "-o", cal], capsys)[0] == 0
+    code, _, err = run(["calibrate", "mag", files / "sphere.csv", "-o", tmp_path / "c2.toml", "--calibration", cal],
+                       capsys)
+    assert code == 2 and "already has a [mag] section" in err

@@ -152,3 +152,13 @@ def test_truncated_bag_reports_partial_read(shared, tmp_path, capsys):
     cut.write_bytes(data[:3000])
     code, out, err = run(["convert", cut, tmp_path / "d.csv"], capsys)
     assert code == 2 and "truncated" in err and "Traceback" not in err
+
+
+def test_bag_to_nmea_derives_heading_from_q(shared, tmp_path, capsys):
+    """test2.bag orientation: ENU yaw 20.7° (q_z 0.1796, q_w 0.9832) is heading 69.3° in NED."""
+    out_nmea = tmp_path / "t2.nmea"
+    code, out, err = run(["convert", shared(*RL, "test2.bag"), out_nmea, "--sentences", "HDT"], capsys)
+    assert code == 0, err
+    assert "derived from q" in out
+    first = out_nmea.read_text().splitlines()[0]
+    assert first.split(",")[1] == "69.3"

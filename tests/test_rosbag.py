@@ -364,3 +364,23 @@ def test_damaged_ros2_bag_is_a_clear_error(shared, tmp_path):
     f.write_bytes(f.read_bytes()[:100000])
     with pytest.raises(ImutoolError):
         read_bag(dst)
+
+
+def test_corrupted_bytes_never_crash(tmp_path, sim_rec):
+    """Random byte damage in an uncompressed and a bz2 ROS1 bag: a Recording (damage reported) or ImutoolError."""
+    rng = np.random.default_rng(0)
+    for comp in (None, "bz2"):
+        good = tmp_path / f"good_{comp}.bag"
+        write_bag(sim_rec, good, compression=comp)
+        data = good.read_bytes()
+        for trial in range(15):
+            buf = bytearray(data)
+            for pos in rng.integers(13, len(buf), size=int(rng.integers(1, 6))):
+                buf[pos] = int(rng.integers(0, 256))
+            p = tmp_path / f"bad_{comp}_{trial}.bag"
+            p.write_bytes(bytes(buf))
+            try:
+                rec = read_bag(p)
+            except ImutoolError:
+                continue
+            assert len(rec) <= len(sim_rec)

@@ -15,8 +15,20 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 _IN_KEYS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
-def _load(path: str, opts: dict[str, Any], extra: tuple[str, ...] = ()) -> Any:
-    """Read INPUT (and --with files merged onto its clock; each read with the same foreign-CSV options)."""
+def _load(path: str, opts: dict[str, Any], extra: tuple[str, ...] = (), fitting: str | None = None) -> Any:
+    """Read INPUT (and --with files merged onto its clock; each read with the same foreign-CSV options).
+
+    ``fitting``: the section being estimated. Its parameters are in sensor axes and relative to raw data, so
+    --mounting and a --calibration file that already holds that section are refused."""
+    if fitting and opts.get("mounting"):
+        raise ImutoolError(f"{fitting} calibration parameters are in sensor axes: calibrate without --mounting "
+                           "(store the mounting separately; it is applied after the calibration)")
+    if fitting and opts.get("calibration_file"):
+        from calibration.file import load_calibration
+
+        if fitting in load_calibration(opts["calibration_file"]):
+            raise ImutoolError(f"--calibration {opts['calibration_file']} already has a [{fitting}] section: "
+                               f"the {fitting} fit needs raw data", path=opts["calibration_file"])
     rec, _ = load_input(path, **{k: opts.get(k) for k in _IN_KEYS if opts.get(k) is not None})
     if extra:
         others = []
@@ -87,7 +99,7 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
     from calibration.file import provenance, update_calibration
 
     _check_toml_out(output)
-    rec = _load(input_path, io, with_files)
+    rec = _load(input_path, io, with_files, fitting="mag")
     require_channels(rec, ["mag"], input_path)
     m = rec.get("mag", "uT")
     if method == "sphere":
@@ -110,7 +122,8 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
         plot_before_after(m, fit, plot, title=f"{os.path.basename(input_path)} ({method})")
     summary = {"output": output, "method": method, "kind": fit.kind, "reason": fit.reason,
                "model": "m_true = A (m_meas - b)", "b_uT": np.round(fit.b, 4).tolist(),
-               "b_std_uT": np.round(fit.b_std, 4).tolist(), "A": np.round(fit.A, 5).tolist(),
+               "b_std_uT": [None if not np.isfinite(v) else round(float(v), 4) for v in fit.b_std],
+               "A": np.round(fit.A, 5).tolist(),
                "field_uT": round(fit.field_ut, 3), "residual_rms_uT": round(fit.residual_rms_ut, 4),
                "coverage": round(fit.coverage, 3), "raw_field_rel_std_pct": round(100 * fit.raw_rel_std, 3),
                "calibrated_field_rel_std_pct": round(100 * fit.cal_rel_std, 3), "samples": fit.n,
@@ -184,7 +197,7 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
     for o in outputs:
         if not o.lower().endswith((".pdf", ".png", ".svg", ".toml")):
             raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card) or .toml (calibration file)")
-    rec = _load(input_path, io, with_files)
+    rec = _load(input_path, io, with_files)  # mounting and a mag calibration are welcome here
     # compass heading
     if heading_column or "heading" in rec.channels:
         col = heading_column or "heading"
@@ -309,7 +322,7 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
     from calibration.inertial import calibrate_gyro
 
     _check_toml_out(output)
-    rec = _load(input_path, io, with_files)
+    rec = _load(input_path, io, with_files, fitting="gyro")
     require_channels(rec, ["gyro"], input_path)
     acc = rec.get("accel", "m/s^2") if "accel" in rec.channels else None
     temp = rec["temp"] if "temp" in rec.channels else None
@@ -364,7 +377,7 @@ def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, la
     from calibration.inertial import calibrate_accel, normal_gravity
 
     _check_toml_out(output)
-    rec = _load(input_path, io, with_files)
+    rec = _load(input_path, io, with_files, fitting="accel")
     require_channels(rec, ["accel"], input_path)
     if gravity is None:
         gravity = normal_gravity(latitude, height) if latitude is not None else 9.80665

@@ -150,6 +150,14 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
             if kout == "ros1" and compression != "none":
                 opts["compression"] = compression
         elif kout == "nmea":
+            if "q" in rec and not any(k in rec for k in ("roll", "pitch", "heading")):
+                from formats.frames import quat_to_euler
+
+                r, p, h = quat_to_euler(rec["q"])
+                rec = rec.copy()
+                for name, v in (("roll", r), ("pitch", p), ("heading", h)):
+                    rec.add(name, np.degrees(v), "deg")
+                conversions.append("roll/pitch/heading (deg, ZYX) derived from q (body FRD → NED) for NMEA")
             opts = {"sentences": tuple(s.strip().upper() for s in sentences.split(",") if s.strip()),
                     "rate_hz": nmea_rate, "talker": talker}
         res = formats.write(rec, out, **opts)

@@ -24,13 +24,13 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default="heading", show_default=True,
               help="EKF magnetometer use: heading only (never touches roll/pitch), full 3-D vector (paper), off.")
 @click.option("--smooth", is_flag=True, help="EKF: add the RTS backward pass (zero-lag offline estimates).")
-@click.option("--gyro-noise", type=float, default=8e-4, show_default=True, help="EKF: gyro noise density, rad/s/√Hz.")
+@click.option("--gyro-noise", type=float, default=1e-3, show_default=True, help="EKF: gyro noise density, rad/s/√Hz.")
 @click.option("--gyro-scale-noise", type=float, default=0.0, show_default=True,
               help="EKF: rate-proportional gyro noise (scale-factor uncertainty, fraction).")
 @click.option("--bias-rw", type=float, default=2e-5, show_default=True, help="EKF: gyro bias random walk, rad/s/√s.")
-@click.option("--accel-noise", type=float, default=0.08, show_default=True,
+@click.option("--accel-noise", type=float, default=0.1, show_default=True,
               help="EKF: σ of the normalised accelerometer direction per update (≈ rad).")
-@click.option("--mag-noise", type=float, default=5.0, show_default=True, help="EKF: σ of magnetic heading, deg.")
+@click.option("--mag-noise", type=float, default=6.0, show_default=True, help="EKF: σ of magnetic heading, deg.")
 @click.option("--accel-gate", type=float, default=3.0, show_default=True,
               help="EKF: skip accel update when | |a| − g | exceeds this (m/s², 0 = off).")
 @click.option("--accel-nis-gate", type=float, default=25.0, show_default=True,

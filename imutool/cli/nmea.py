@@ -84,7 +84,7 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
     else:
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise ImutoolError(f"--rate must be a positive number of Hz, not {rate_hz!r}")
-        grid = np.arange(t[0], t[-1] + 0.5 / rate_hz, 1.0 / rate_hz)
+        grid = np.arange(t[0], t[-1] + 1e-9, 1.0 / rate_hz)  # uniform grid within the recording
         rows = np.unique(np.clip(np.searchsorted(t, grid, side="left"), 0, n - 1))
     reset_dt: list[datetime | None] = []
     if rs is not None:
@@ -133,7 +133,8 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
 @click.option("--baud", type=int, default=4800, show_default=True, help="Serial baud rate (IEC 61162-1: 4800).")
 @click.option("--realtime/--no-realtime", default=True, show_default=True,
               help="Pace serial output by the recording's time stamps.")
-@click.option("--stamp", is_flag=True, help="Prefix each file line with its time (s), as `imutool capture` logs do.")
+@click.option("--time-prefix", "time_prefix", is_flag=True,
+              help="Prefix each file line with its time (s), as capture logs do (read back by imutool).")
 @click.option("--heading-ref", type=click.Choice(["magnetic", "true"]), default="magnetic", show_default=True,
               help="What the input `heading` channel is.")
 @click.option("--deviation", "deviation_deg", type=float, default=None, help="HDG deviation (deg, E +); null if unset.")
@@ -152,7 +153,7 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
 @input_options
 @output_options
 def nmea_cmd(input_path: str, output: str | None, sentences: str, rate_hz: float | None, serial_port: str | None,
-             baud: int, realtime: bool, stamp: bool, heading_ref: str, deviation_deg: float | None,
+             baud: int, realtime: bool, time_prefix: bool, heading_ref: str, deviation_deg: float | None,
              variation_deg: float | None, ths_mode: str, xdr_roll_id: str, xdr_pitch_id: str, xdr_roll_sign: str,
              xdr_pitch_sign: str, talker_opts: tuple[str, ...], hysteresis_deg: float, centre: str,
              centre_window_s: float, refine_frac: float, max_period_s: float, resets: str | None,
@@ -195,7 +196,7 @@ def nmea_cmd(input_path: str, output: str | None, sentences: str, rate_hz: float
         if output:
             with atomic_path(output) as tmp, open(tmp, "w", encoding="ascii", newline="") as fh:
                 for ts, s in gen:
-                    fh.write((f"{ts:.3f} " if stamp else "") + s + "\r\n")
+                    fh.write((f"{ts:.3f} " if time_prefix else "") + s + "\r\n")
                     counts[s[3:6]] += 1
                     if port is not None:
                         t_rec0 = ts if t_rec0 is None else t_rec0

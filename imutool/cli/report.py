@@ -35,6 +35,16 @@ def _identification(device: str | None, config: str | None) -> dict[str, Any]:
     return ident
 
 
+def _window(rec, t_start: float | None, t_end: float | None, path: str):
+    if t_start is None and t_end is None:
+        return rec
+    out = rec.slice_time(t_start, t_end)
+    if len(out) < 10:
+        raise ImutoolError(f"fewer than 10 samples between --start {t_start} and --end {t_end}", path=path)
+    out.meta["evaluated_window_s"] = [t_start, t_end]
+    return out
+
+
 def _finish(ev: dict, plots: dict, pdf: str, jpath: str, as_json: bool, quiet: bool) -> None:
     from imutool.report.pdf import render_pdf, write_json
 
@@ -72,6 +82,9 @@ def _common_options(f):
                      help="none: common clock, latency counts as error; xcorr: remove the measured lag."),
         click.option("--max-lag", "max_lag_s", type=float, default=5.0, show_default=True,
                      help="Lag search range ± s for the cross-correlation."),
+        click.option("--start", "t_start", type=float, default=None,
+                     help="Evaluate from this time (s, recording clock), e.g. after the filter has settled."),
+        click.option("--end", "t_end", type=float, default=None, help="Evaluate up to this time (s)."),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -99,13 +112,16 @@ def _common_options(f):
               help="Plateau detection: minimum duration (s).")
 @click.option("--drift-min", "drift_min_s", type=float, default=300.0, show_default=True,
               help="Minimum static hold (s) for the long-term test.")
+@click.option("--dut-channel", default=None, help="DUT heel channel (default: heel, else roll).")
+@click.option("--ref-channel", default=None, help="Reference heel channel (default: heel, else roll; e.g. ref_roll).")
 @input_options
 @output_options
 def inclinometer_cmd(dut_path: str, ref_path: str, output: str, json_path: str | None, device: str | None,
                      config_path: str | None, criterion: str, align: str, max_lag_s: float, steps_path: str | None,
                      angle_floor: float, angle_pct: float, period_floor: float, period_pct: float,
                      hysteresis_deg: float, min_cycles: int, min_steps_per_side: int, step_band_deg: float,
-                     step_min_s: float, drift_min_s: float, as_json: bool, quiet: bool, **io) -> None:
+                     step_min_s: float, drift_min_s: float, dut_channel: str | None, ref_channel: str | None,
+                     t_start: float | None, t_end: float | None, as_json: bool, quiet: bool, **io) -> None:
     """Electronic-inclinometer evidence (IMO MSC.363(92), ISO 19697 clauses) of DUT against --reference.
 
     DUT: a recording with `roll` (deg, + starboard down; e.g. `imutool filter` output) or an NMEA capture with
@@ -117,13 +133,15 @@ def inclinometer_cmd(dut_path: str, ref_path: str, output: str, json_path: str |
     ident = _identification(device, config_path)
     dut, _ = load_input(dut_path, **io)
     ref, _ = load_input(ref_path, **{**io, "mounting": None, "calibration_file": None})
+    dut, ref = _window(dut, t_start, t_end, dut_path), _window(ref, t_start, t_end, ref_path)
     o = InclinometerOptions(angle_floor_deg=angle_floor, angle_pct=angle_pct, period_floor_s=period_floor,
                             period_pct=period_pct, criterion=criterion, align=align, max_lag_s=max_lag_s,
                             hysteresis_deg=hysteresis_deg, min_cycles=min_cycles,
                             min_steps_per_side=min_steps_per_side, step_band_deg=step_band_deg,
                             step_min_s=step_min_s, drift_min_s=drift_min_s)
     ev, plots = inclinometer_evidence(dut, ref, dut_path=dut_path, ref_path=ref_path, steps_path=steps_path,
-                                      options=o, identification=ident)
+                                      options=o, identification=ident, dut_channel=dut_channel,
+                                      ref_channel=ref_channel)
     _finish(ev, plots, pdf, jpath, as_json, quiet)
 
 
@@ -143,7 +161,8 @@ def inclinometer_cmd(dut_path: str, ref_path: str, output: str, json_path: str |
 def heading_cmd(dut_path: str, ref_path: str, output: str, json_path: str | None, device: str | None,
                 config_path: str | None, criterion: str, align: str, max_lag_s: float, dut_channel: str | None,
                 ref_channel: str | None, correction_deg: float, static_limit: float, min_headings: int,
-                turn_min_dps: float, as_json: bool, quiet: bool, **io) -> None:
+                turn_min_dps: float, t_start: float | None, t_end: float | None, as_json: bool, quiet: bool,
+                **io) -> None:
     """Heading-device evidence (ISO 22090-2 / IMO MSC.116(73)): static, dynamic and follow-up error."""
     from imutool.report.heading import HeadingOptions, heading_evidence
 
@@ -151,6 +170,7 @@ def heading_cmd(dut_path: str, ref_path: str, output: str, json_path: str | None
     ident = _identification(device, config_path)
     dut, _ = load_input(dut_path, **io)
     ref, _ = load_input(ref_path, **{**io, "mounting": None, "calibration_file": None})
+    dut, ref = _window(dut, t_start, t_end, dut_path), _window(ref, t_start, t_end, ref_path)
     o = HeadingOptions(criterion=criterion, align=align, max_lag_s=max_lag_s, static_limit_deg=static_limit,
                        min_headings=min_headings, turn_min_dps=turn_min_dps)
     ev, plots = heading_evidence(dut, ref, dut_path=dut_path, ref_path=ref_path, dut_channel=dut_channel,

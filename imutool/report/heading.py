@@ -84,6 +84,7 @@ class HeadingOptions:
     band_max_dps: float = 20.0
     turn_min_dps: float = 1.0  # |rate of turn| above this = turning
     rot_window_s: float = 1.0  # smoothing of the reference rate of turn
+    follow_up_relative: bool = True  # follow-up error = error − static error at that heading (I)
     criterion: str = "max"  # max | p95
     align: str = "none"  # none (common clock: lag counts as follow-up error) | xcorr
     max_lag_s: float = 5.0
@@ -178,7 +179,12 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     overlap = min(dut.time[-1], t[-1]) - max(dut.time[0], t[0])
     if overlap <= 0:
         raise ImutoolError("the DUT and reference recordings do not overlap in time (check the clocks)")
-    lag, lag_rms = best_lag(dut.time[okd], h_dut[okd], t, h_ref, o.max_lag_s, wrap_deg=True)
+    # remove the mean (circular) error first so a constant offset does not bias the lag during one-way turns
+    d0 = np.interp(t, dut.time[okd], _unwrap_deg(h_dut[okd]), left=np.nan, right=np.nan)
+    e0 = wrap_deg180(d0 - h_ref)
+    e0 = e0[np.isfinite(e0)]
+    mean_err = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(e0)))))) if e0.size else 0.0
+    lag, lag_rms = best_lag(dut.time[okd], (h_dut[okd] - mean_err) % 360.0, t, h_ref, o.max_lag_s, wrap_deg=True)
     shift = lag if o.align == "xcorr" else 0.0
     u_dut = _unwrap_deg(h_dut[okd])
     d = np.interp(t, dut.time[okd] - shift, u_dut, left=np.nan, right=np.nan) % 360.0
@@ -195,6 +201,7 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     crit_txt = "every sample |error| ≤ limit" if o.criterion == "max" else "95th percentile |error| ≤ limit"
     alignment = {"method": "cross-correlation of wrapped heading (imutool.metrics.best_lag, wrap_deg)",
                  "lag_s": lag, "lag_positive_means": "DUT lags the reference", "rms_at_lag_deg": lag_rms,
+                 "mean_error_removed_for_lag_deg": mean_err,
                  "applied": o.align == "xcorr", "search_range_s": o.max_lag_s,
                  "note": ("lag removed (independent clocks): latency is NOT assessed by the follow-up test"
                           if o.align == "xcorr" else "no lag removed (common clock): latency counts as error"),
@@ -256,11 +263,34 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
 
     # ---- follow-up by rate-of-turn band --------------------------------------------------------------------
     turning = both & ~static_mask & (np.abs(rot) >= o.turn_min_dps)
+    # follow-up error isolates turning: the static error at the current heading (interpolated around the circle
+    # between the static test headings) is removed when follow_up_relative and static headings exist (I)
+    e_fu = e
+    fu_note = "raw heading error (no static headings to remove)"
+    if o.follow_up_relative and len(rows) >= 2:
+        order = np.argsort([r["heading_deg"] for r in rows])
+        xp = np.array([rows[i]["heading_deg"] for i in order])
+        fp = np.array([rows[i]["error_mean_deg"] for i in order])
+        e_fu = e - np.interp(h_ref, xp, fp, period=360.0)
+        fu_note = "heading error minus the static error at that heading (interpolated between static headings)"
+    elif not o.follow_up_relative:
+        fu_note = "raw heading error (static error included)"
+    # latency from the follow-up error: e_fu ≈ −rate·latency... sign: DUT(t) = ref(t − L) → error ≈ −rate·L
+    mt = turning & np.isfinite(e_fu) & np.isfinite(rot)
+    if mt.sum() > 10 and o.follow_up_relative and len(rows) >= 2:
+        alignment["latency_from_follow_up_s"] = float(-np.sum(e_fu[mt] * rot[mt]) / np.sum(rot[mt] ** 2))
+        alignment["latency_method"] = ("least squares of the follow-up error on the reference rate of turn: "
+                                       "error = −rate · latency (static error by heading removed)")
+    # band by the largest |rate| within ± rot_window_s: the start of an abrupt turn belongs to the faster band
+    from scipy.ndimage import maximum_filter1d
+
+    arot = maximum_filter1d(np.nan_to_num(np.abs(rot)), 2 * w + 1, mode="nearest")
+    arot[~np.isfinite(rot)] = np.nan
     for id_, lo, hi, lim in (("follow_up_10", o.turn_min_dps, o.band_split_dps, o.follow_low_deg),
                              ("follow_up_20", o.band_split_dps, o.band_max_dps, o.follow_high_deg)):
-        m = turning & (np.abs(rot) > lo) & (np.abs(rot) <= hi)
+        m = turning & (arot > lo) & (arot <= hi)
         secs = float(m.sum() * dt)
-        st, info = judge(e[m], lim, o.criterion)
+        st, info = judge(e_fu[m], lim, o.criterion)
         if not m.any():
             st, why = NOT_TESTED, f"no turn at {lo:g}-{hi:g} °/s in the reference"
         elif secs < o.min_band_s:
@@ -268,11 +298,12 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
             why = f"{secs:.1f} s of turning in the band; ≥ {o.min_band_s:g} s needed"
         else:
             why = (f"{secs:.1f} s of turning; {info['n_exceed']} of {int(m.sum())} samples beyond ±{lim}°; "
-                   f"max |rate| {float(np.nanmax(np.abs(rot[m]))):.1f} °/s")
+                   f"max |rate| {float(np.nanmax(arot[m])):.1f} °/s")
         items.append(_item(id_, "MSC.116(73) §4.3.2.4 (A); ISO 22090-2 follow-up test at 20 °/s (B)",
                            f"Follow-up error, rate of turn {lo:g}-{hi:g} °/s", st, why,
-                           f"|error| ≤ {lim}°; {crit_txt}", stats(e[m]), [], {"duration_s": secs}))
-    fast = turning & (np.abs(rot) > o.band_max_dps)
+                           f"|error| ≤ {lim}°; {crit_txt}", stats(e_fu[m]), [],
+                           {"duration_s": secs, "error_definition": fu_note, "raw_error_stats": stats(e[m])}))
+    fast = turning & (arot > o.band_max_dps)
     if fast.any():
         warnings.append(f"{fast.sum() * dt:.1f} s of turning faster than {o.band_max_dps:g} °/s: reported, not judged")
 
@@ -366,6 +397,8 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
              f"{o.dynamic_max_freq_hz} Hz", "source": "MSC.116(73) §4.3.2.3", "confidence": "A"},
             {"id": "follow_up", "text": f"±{o.follow_low_deg}° up to {o.band_split_dps:g} °/s, ±{o.follow_high_deg}° "
              f"{o.band_split_dps:g}-{o.band_max_dps:g} °/s", "source": "MSC.116(73) §4.3.2.4", "confidence": "A"},
+            {"id": "follow_up_error", "text": fu_note, "source": "imutool choice (MSC.116(73) names the follow-up "
+             "error without a measurement recipe here)", "confidence": "I"},
             {"id": "statistic", "text": crit_txt, "source": "imutool default (strictest)" if o.criterion == "max"
              else "ISO 22090-2 95 % figure", "confidence": "I" if o.criterion == "max" else "B"},
         ],
@@ -373,6 +406,7 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
         "overall": overall(items, REQUIRED), "not_tested": not_tested, "unconfirmed": UNCONFIRMED,
         "warnings": warnings,
     }
-    plots = {"t": t, "ref": h_ref, "dut": d, "err": e, "rot": rot, "static_mask": static_mask, "static_rows": rows,
+    plots = {"t": t, "ref": h_ref, "dut": d, "err": e, "err_fu": e_fu, "rot": rot, "static_mask": static_mask,
+             "static_rows": rows,
              "turn_mask": turning}
     return ev, plots

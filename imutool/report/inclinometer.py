@@ -218,15 +218,22 @@ def _item(id_: str, clause: str, title: str, status: str, reason: str, criterion
 def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = None,
                           ref_path: str | None = None, steps_path: str | None = None,
                           options: InclinometerOptions | None = None,
-                          identification: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Build the inclinometer evidence (JSON-safe dict) and the plot arrays. See module docstring."""
+                          identification: dict[str, Any] | None = None, dut_channel: str | None = None,
+                          ref_channel: str | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Build the inclinometer evidence (JSON-safe dict) and the plot arrays. See module docstring.
+
+    dut_channel / ref_channel choose the heel channels (default ``heel``, else ``roll``), e.g. ``ref_roll`` to use
+    the truth column of a simulated recording as the reference.
+    """
     o = options or InclinometerOptions()
     if o.criterion not in ("max", "p95"):
         raise ImutoolError(f"criterion must be 'max' or 'p95' (got {o.criterion!r})")
     if o.align not in ("xcorr", "none"):
         raise ImutoolError(f"align must be 'xcorr' or 'none' (got {o.align!r})")
-    h_dut = heel_of(dut, dut_path or "DUT")
-    h_ref = heel_of(ref, ref_path or "reference")
+    h_dut = heel_of(dut, dut_path or "DUT", dut_channel)
+    h_ref = heel_of(ref, ref_path or "reference", ref_channel)
+    dch = dut_channel or ("heel" if "heel" in dut.channels else "roll")
+    rch = ref_channel or ("heel" if "heel" in ref.channels else "roll")
     t = ref.time
     crit_txt = ("every sample/cycle |error| ≤ tolerance" if o.criterion == "max"
                 else "95th percentile of |error|/tolerance ≤ 1 (MSC.1/Circ.1575 95 % bound)")
@@ -498,10 +505,8 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
             "mounting": clean(dut.meta.get("mounting")), "calibration": clean(dut.meta.get("calibration")),
             "filter": clean(dut.meta.get("filter")),
         },
-        "inputs": {"dut": input_record(dut_path, dut, "heel" if "heel" in dut.channels else "roll",
-                                       "nmea" if is_nmea else "recording"),
-                   "reference": input_record(ref_path, ref, "heel" if "heel" in ref.channels else "roll",
-                                             "recording"),
+        "inputs": {"dut": input_record(dut_path, dut, dch, "nmea" if is_nmea else "recording"),
+                   "reference": input_record(ref_path, ref, rch, "recording"),
                    "static_steps": input_record(steps_path, None, None, "steps") if steps_path else None},
         "conventions": {"angle_unit": "deg", "time_unit": "s",
                         "sign": "heel + starboard down, − port (IEC 61162-1 HRM, P8); port amplitude positive",

@@ -241,7 +241,7 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[2].set_ylabel("period error (s)")
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.025, 1, 0.97))
     figs.append(fig)
 
     fig, axs = plt.subplots(2, 1, figsize=A4)
@@ -268,7 +268,7 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[1].set_ylabel("error (deg)")
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.025, 1, 0.97))
     figs.append(fig)
     return figs
 
@@ -315,17 +315,17 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[0].set_xlim(-20, 360)
     m = p["turn_mask"]
     if np.any(m):
-        axs[1].plot(np.abs(p["rot"][m]), p["err"][m], ".", ms=1.5, color="C0")
+        axs[1].plot(np.abs(p["rot"][m]), p.get("err_fu", p["err"])[m], ".", ms=1.5, color="C0")
         axs[1].plot([0, 10, 10, 20], [0.5, 0.5, 1.5, 1.5], "C3--", lw=1, label="limit (MSC.116(73))")
         axs[1].plot([0, 10, 10, 20], [-0.5, -0.5, -1.5, -1.5], "C3--", lw=1)
         axs[1].legend(fontsize=7)
     else:
         axs[1].text(0.5, 0.5, "no turns: follow-up not tested", ha="center", transform=axs[1].transAxes)
     axs[1].set_xlabel("|rate of turn| (°/s)")
-    axs[1].set_ylabel("error (deg)")
+    axs[1].set_ylabel("follow-up error (deg)")
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.025, 1, 0.97))
     figs.append(fig)
     return figs
 

@@ -195,7 +195,7 @@ def heading_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, 
 
 SAMPLE_INCLINOMETER_ERRORS = {"offset_deg": 0.2, "scale": 0.01, "lag_s": 0.02, "noise_deg": 0.05,
                               "drift_deg_per_h": 0.1}
-SAMPLE_HEADING_ERRORS = {"offset_deg": 0.2, "semicircular_deg": (0.3, -0.2), "lag_s": 0.05, "noise_deg": 0.05,
+SAMPLE_HEADING_ERRORS = {"offset_deg": 0.2, "semicircular_deg": (0.3, -0.2), "lag_s": 0.02, "noise_deg": 0.05,
                          "roll_coupling": 0.02}
 
 

@@ -1,0 +1,1 @@
+"""JSON schemas of the evidence reports (package so the schema files ship in wheels)."""

@@ -1,0 +1,405 @@
+"""CSV reader/writer: exact parsing and round trips, bad rows, streaming, foreign headers and units, real files."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from formats import Recording
+from formats import csv_engine as eng
+from formats.columns import infer_mapping, parse_mapping_option
+from formats.csv import CsvWriter, format_array, iter_csv, read_csv, read_header, write_csv
+from formats.errors import ImutoolError
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.uint64)
+
+
+def _parse_tokens(tokens: list[str]) -> np.ndarray:
+    """Parse one token per line through the compiled reader (fallback tokens resolved like read_csv)."""
+    data = ("\n".join(tokens) + "\n").encode()
+    buf = np.frombuffer(data, np.uint8)
+    out = np.empty((len(tokens) + 1, 1))
+    fb = np.empty((len(tokens) + 1, 4), np.int64)
+    bad = np.empty((8, 3), np.int64)
+    res = eng.parse_block(buf, 0, buf.size, 1, 44, 46, out, 0, False, fb, bad, eng.T_HI, eng.T_LO)
+    for k in range(int(res[4])):
+        r, c, s0, s1 = fb[k]
+        out[r, c] = float(data[s0:s1])
+    assert res[1] == len(tokens), (res, tokens[:3])
+    return out[: len(tokens), 0]
+
+
+def _write_text(path, text: str | bytes) -> str:
+    mode = "wb" if isinstance(text, bytes) else "w"
+    with open(path, mode) as f:
+        f.write(text)
+    return str(path)
+
+
+# -- exact number conversion ----------------------------------------------------------------------------------
+def test_parser_bit_identical_to_float_on_random_decimals():
+    rng = np.random.default_rng(3)
+    toks = []
+    for _ in range(20000):
+        nd = int(rng.integers(1, 24))
+        digs = "".join(rng.choice(list("0123456789"), nd))
+        pt = int(rng.integers(0, nd + 1))
+        s = ("-" if rng.random() < 0.3 else "") + digs[:pt] + "." + digs[pt:]
+        if rng.random() < 0.7:
+            s += f"e{int(rng.integers(-345, 330))}"
+        toks.append(s)
+    toks += ["2.2250738585072011e-308", "2.2250738585072012e-308", "4.9406564584124654e-324", "2.4703282292062328e-324",
+             "2.4703282292062327e-324", "1.7976931348623157e308", "1.7976931348623159e308", "9007199254740993",
+             "0.1", "1e23", "8.98846567431158e307", "7.2057594037927933e16", "1e-400", "1e400", "-0", "-0.0e5"]
+    got = _parse_tokens(toks)
+    ref = np.array([float(t) for t in toks])
+    assert np.array_equal(_bits(got), _bits(ref))
+
+
+def test_writer_round_trips_random_bit_patterns_and_is_short():
+    rng = np.random.default_rng(4)
+    x = rng.integers(0, 2**64 - 1, 50000, dtype=np.uint64, endpoint=True).view(np.float64)
+    x = x[np.isfinite(x)]
+    x = np.concatenate([x, rng.standard_normal(20000), np.round(rng.standard_normal(20000), 5),
+                        [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e308, 1.7976931348623157e308,
+                         0.1, 0.3, 1e16, 1e-5, 123.0, 9007199254740993.0, np.inf, -np.inf]])
+    text = format_array(x[:, None]).decode()
+    toks = text.split("\n")[:-1]
+    back = np.array([float(t) for t in toks])
+    assert np.array_equal(_bits(back), _bits(x))
+    # never longer than 17 significant digits; as short as repr for values with a short decimal form
+    short = np.round(rng.standard_normal(2000), 5)
+    for v, t in zip(short.tolist(), format_array(short[:, None]).decode().split("\n")):
+        assert len(t) <= len(repr(v)), (v, t)
+
+
+def test_nan_written_as_empty_field_and_read_back():
+    x = np.array([[1.0, np.nan, -0.0], [np.nan, np.nan, 2.5]])
+    assert format_array(x) == b"1,,-0\n,,2.5\n"
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True), min_size=1, max_size=40))
+def test_hypothesis_round_trip_bit_exact(values):
+    x = np.array(values, dtype=np.float64)
+    text = format_array(x[:, None]).decode().split("\n")[:-1]
+    got = _parse_tokens(["nan" if t == "" else t for t in text])
+    finite = ~np.isnan(x)
+    assert np.array_equal(_bits(got[finite]), _bits(x[finite]))
+    assert np.all(np.isnan(got[~finite]))
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.from_regex(r"-?[0-9]{1,25}(\.[0-9]{0,25})?([eE][-+]?[0-9]{1,3})?", fullmatch=True))
+def test_hypothesis_decimal_strings_match_python_float(tok):
+    got = _parse_tokens([tok])
+    assert struct.pack("<d", got[0]) == struct.pack("<d", float(tok))
+
+
+# -- the imutool CSV round trip --------------------------------------------------------------------------------
+def _sample_recording(n: int = 500) -> Recording:
+    rng = np.random.default_rng(0)
+    t = np.arange(n) / 100.0
+    rec = Recording(t, meta={"sensor": "test", "rate_hz": 100.0})
+    rec.add("gyro", rng.standard_normal((n, 3)))
+    rec.add("accel", rng.standard_normal((n, 3)) * 9.81)
+    rec.add("roll", rng.standard_normal(n) * 10.0)
+    q = rng.standard_normal((n, 4))
+    rec.add("ref_q", q / np.linalg.norm(q, axis=1, keepdims=True))
+    lab = (rng.random(n) > 0.5).astype(float)
+    lab[5] = np.nan
+    rec.add("movement", lab)
+    return rec
+
+
+def test_write_read_round_trip_exact(tmp_path):
+    rec = _sample_recording()
+    p = str(tmp_path / "r.csv")
+    write_csv(rec, p)
+    back = read_csv(p)
+    assert np.array_equal(_bits(back.time), _bits(rec.time))
+    for k in rec.channels:
+        a, b = rec[k], back[k]
+        assert a.shape == b.shape
+        assert np.array_equal(np.nan_to_num(a, nan=7.5), np.nan_to_num(b, nan=7.5)), k
+    assert back.meta["sensor"] == "test"
+    assert back.columns["ref_q"] == ["ref_qw", "ref_qx", "ref_qy", "ref_qz"]
+    assert "movement" in back.channels and np.isnan(back["movement"][5])
+    assert back.units["gyro"] == "rad/s" and back.units["roll"] == "deg"
+    assert not list(tmp_path.glob(".*tmp"))  # atomic write leaves no temporary file
+
+
+def test_units_converted_to_canonical_on_write(tmp_path):
+    rec = Recording(np.arange(3.0))
+    rec.add("gyro", np.ones((3, 3)) * 90.0, unit="deg/s")
+    rec.add("roll", np.ones(3) * math.pi / 2, unit="rad")
+    rec.add("pressure", np.ones(3) * 2.0, unit="m")
+    p = str(tmp_path / "u.csv")
+    write_csv(rec, p)
+    back = read_csv(p)
+    assert np.allclose(back["gyro"], math.pi / 2) and np.allclose(back["roll"], 90.0)
+    assert back.units["pressure"] == "m"
+
+
+def test_csvwriter_and_iter_csv_stream_equal_whole_file(tmp_path):
+    rec = _sample_recording(2300)
+    p = str(tmp_path / "big.csv")
+    write_csv(rec, p)
+    chunks = list(iter_csv(p, chunk_rows=700, block_bytes=4096))
+    assert [len(c) for c in chunks] == [700, 700, 700, 200]
+    q = str(tmp_path / "copy.csv")
+    with CsvWriter(q) as w:
+        for c in chunks:
+            w.write(c)
+    def rows(path):
+        return [ln for ln in open(path, "rb").read().split(b"\n") if not ln.startswith(b"#")]
+
+    assert rows(p) == rows(q)  # byte-identical data rows after a streamed copy
+    whole = read_csv(q)
+    assert np.array_equal(whole["gyro"], rec["gyro"])
+
+
+def test_csvwriter_aborted_leaves_nothing(tmp_path):
+    q = tmp_path / "out.csv"
+    with pytest.raises(RuntimeError):
+        with CsvWriter(str(q)) as w:
+            w.write(_sample_recording(10))
+            raise RuntimeError("boom")
+    assert not q.exists() and not list(tmp_path.iterdir())
+
+
+# -- bad input -------------------------------------------------------------------------------------------------
+def test_bad_rows_counted_with_line_numbers(tmp_path):
+    text = ("# imutool-csv: 1\ntime,gyro_x,gyro_y,gyro_z\n0,1,2,3\n0.1,1,2\n0.2,1,x,3\n\n# a comment\n"
+            "0.3,1,2,3,4\n0.4,1e5,-2,nan\n0.5,,inf,-inf\n0.6,1.2.3,0,0\n")
+    p = _write_text(tmp_path / "bad.csv", text)
+    rec = read_csv(p)
+    assert len(rec) == 3
+    assert rec.meta["skipped_rows"] == 4
+    first = rec.meta["skipped_rows_first"]
+    assert first[0].startswith("line 4:") and "fields" in first[0]
+    assert first[1].startswith("line 5:") and "not a number" in first[1]
+    assert first[2].startswith("line 8:")
+    assert first[3].startswith("line 11:")
+    assert np.isnan(rec["gyro"][1, 2]) and np.isnan(rec["gyro"][2, 0]) and rec["gyro"][2, 1] == np.inf
+    with pytest.raises(ImutoolError, match=r"bad.csv:4: wrong number of fields \(3 fields, expected 4\)"):
+        read_csv(p, strict=True)
+
+
+def test_crlf_bom_semicolon_decimal_comma_quotes(tmp_path):
+    text = '\ufeff"Time (s)";"Gyroscope X (deg/s)";"Accelerometer Z (g)"\r\n0,0;90,0;1,0\r\n0,01;-45;"0,5"\r\n'
+    p = _write_text(tmp_path / "eu.csv", text.encode("utf-8"))
+    rec = read_csv(p)
+    hdr = read_header(p)
+    assert hdr.sep == ";" and hdr.decimal == ","
+    assert [c.target for c in hdr.mapping.columns] == ["time", "gyro_x", "accel_z"]
+    assert np.allclose(rec.time, [0.0, 0.01])
+    assert np.allclose(rec["gyro_x"], np.radians([90.0, -45.0]))
+    assert np.allclose(rec["accel_z"], [9.80665, 4.903325])
+    text = '\ufeff"Time (s)","Gyroscope X (deg/s)","Accelerometer Z (g)"\r\n0,90,1\r\n0.01,-45,"0.5"\r\n'
+    p = _write_text(tmp_path / "q.csv", text.encode("utf-8"))
+    rec = read_csv(p)
+    assert np.allclose(rec.time, [0.0, 0.01])
+    assert np.allclose(rec["gyro_x"], np.radians([90.0, -45.0]))
+    assert np.allclose(rec["accel_z"], [9.80665, 4.903325])
+    assert "meta" not in rec.meta and rec.meta.get("skipped_rows") is None
+
+
+def test_tab_separated(tmp_path):
+    p = _write_text(tmp_path / "t.csv", "time\tgyro_x\tgyro_y\tgyro_z\n0\t1\t2\t3\n1\t 4\t5 \t6\n")
+    rec = read_csv(p)
+    assert np.array_equal(rec["gyro"], [[1, 2, 3], [4, 5, 6]])
+
+
+@pytest.mark.parametrize("content, match", [
+    (b"", "no header row"),
+    (b"# only a comment\n", "no header row"),
+    (b"1,2,3\n4,5,6\n", "numbers, not column names"),
+    (b"a,,c\n1,2,3\n", "empty column name"),
+    (b"x,y\n1,2\n", "no time column"),
+    (b"time,x\nfoo,bar\n", "no data rows"),
+    (b"\x00\x01\x02\xff\xfe", "not text"),
+])
+def test_bad_files_raise_one_clear_error(tmp_path, content, match):
+    p = _write_text(tmp_path / "bad.csv", content)
+    with pytest.raises(ImutoolError, match=match):
+        read_csv(p)
+
+
+def test_missing_file_error():
+    with pytest.raises(ImutoolError, match="cannot open"):
+        read_csv("/nonexistent/x.csv")
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=300))
+def test_fuzz_arbitrary_bytes_never_crash(tmp_path_factory, blob):
+    p = tmp_path_factory.mktemp("fz") / "f.csv"
+    p.write_bytes(b"time,a,b\n" + blob)
+    try:
+        rec = read_csv(str(p))
+    except ImutoolError:
+        return
+    assert rec["a"].shape == (len(rec),)
+
+
+_cell = st.one_of(st.floats(allow_nan=True).map(repr), st.text("0123456789.-+eE naif", max_size=6),
+                  st.just(""), st.integers().map(str))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.lists(_cell, min_size=0, max_size=5), max_size=12))
+def test_fuzz_garbled_rows_are_counted_or_parsed_like_float(tmp_path_factory, rows):
+    p = tmp_path_factory.mktemp("fz") / "g.csv"
+    p.write_text("time,a,b\n" + "\n".join(",".join(r) for r in rows) + "\n")
+    good = []
+    nonblank = 0
+    for r in rows:
+        line = ",".join(r)
+        if not line.strip() or line.strip().startswith("#"):
+            continue
+        nonblank += 1
+        if len(r) != 3:
+            continue
+        try:
+            vals = [float(c) if c.strip() else math.nan for c in r]
+        except ValueError:
+            continue
+        if any(("_" in c) for c in r):
+            continue
+        good.append(vals)
+    try:
+        rec = read_csv(str(p))
+    except ImutoolError as e:
+        assert "no data rows" in str(e) and not good
+        return
+    assert len(rec) == len(good)
+    assert rec.meta.get("skipped_rows", 0) == nonblank - len(good)
+    ref = np.array(good)
+    assert np.array_equal(np.nan_to_num(rec.time, nan=0.5), np.nan_to_num(ref[:, 0], nan=0.5))
+
+
+# -- foreign CSV inference ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("header, target, unit", [
+    ("Gyroscope X (deg/s)", "gyro_x", "deg/s"),
+    ("gyro_z_dps", "gyro_z", "dps"),
+    ("gyr_y", "gyro_y", "rad/s"),
+    ("acc_x_g", "accel_x", "g"),
+    ("Accelerometer Y (m/s^2)", "accel_y", "m/s^2"),
+    ("accel_z [m/s2]", "accel_z", "m/s2"),
+    ("AccZ (mg)", "accel_z", "mg"),
+    ("mag_x_gauss", "mag_x", "gauss"),
+    ("Magnetometer Z (uT)", "mag_z", "uT"),
+    ("mag_y (mG)", "mag_y", "mgauss"),  # milligauss on a magnetometer, not milli-g
+    ("mag_x_t", "mag_x", "T"),
+    ("MagY (nT)", "mag_y", "nT"),
+    ("Time [s]", "time", "s"),
+    ("time_s", "time", "s"),
+    ("timestamp (ms)", "time", "ms"),
+    ("temp_c", "temp", "degC"),
+    ("movement", "movement", None),
+])
+def test_infer_mapping_headers(header, target, unit):
+    cm = infer_mapping([header]).columns[0]
+    assert cm.target == target
+    assert (cm.unit or None) == unit
+
+
+@pytest.mark.parametrize("unit, value, si", [
+    ("deg/s", 180.0, math.pi), ("rad/s", 2.0, 2.0), ("g", 1.0, 9.80665), ("m/s^2", 3.0, 3.0),
+    ("gauss", 0.5, 50.0), ("mG", 500.0, 50.0), ("T", 5e-5, 50.0), ("uT", 50.0, 50.0), ("nT", 50000.0, 50.0),
+])
+def test_units_converted_to_si(tmp_path, unit, value, si):
+    q = {"deg/s": "gyro", "rad/s": "gyro", "g": "accel", "m/s^2": "accel"}.get(unit, "mag")
+    p = _write_text(tmp_path / "u.csv", f"t,{q}_x ({unit}),{q}_y ({unit}),{q}_z ({unit})\n0,{value},0,0\n")
+    rec = read_csv(p)
+    assert rec[q][0, 0] == pytest.approx(si, rel=1e-12)
+    assert rec.units[q] == {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT"}[q]
+    assert f"[{ {'mG': 'mgauss'}.get(unit, unit) }]" in rec.meta["column_mapping"]
+
+
+def test_counts_with_scale_by_option_and_profile(tmp_path):
+    p = _write_text(tmp_path / "raw.csv", "time,ax,ay,az,label\n0,1000,-2000,16384,3\n")
+    rec = read_csv(p, columns="ax=accel_x:counts*0.000598,ay=accel_y:counts*0.000598,az=accel_z:g*6.1035e-05")
+    assert rec["accel"][0, 0] == pytest.approx(0.598)
+    assert rec["accel"][0, 2] == pytest.approx(16384 * 6.1035e-05 * 9.80665)
+    assert rec.meta["column_mapping_origin"] == "options"
+    assert rec["label"][0] == 3.0  # unknown column kept
+    prof = _write_text(tmp_path / "p.toml", '[columns]\nax = { to = "accel_x", unit = "counts", scale = 0.5 }\n'
+                                            'ay = "accel_y"\naz = { to = "accel_z", unit = "g" }\n')
+    rec = read_csv(p, profile=prof)
+    assert rec["accel"][0].tolist() == pytest.approx([500.0, -2000.0, 16384 * 9.80665])
+    assert rec.meta["column_mapping_origin"].startswith("profile")
+
+
+def test_mapping_option_errors():
+    with pytest.raises(ImutoolError, match="no column 'nope'"):
+        parse_mapping_option("nope=gyro_x:deg/s", ["time", "gx"])
+    with pytest.raises(ImutoolError, match="unknown unit"):
+        parse_mapping_option("gx=gyro_x:furlongs", ["time", "gx"])
+    with pytest.raises(ImutoolError, match="expected SOURCE=TARGET"):
+        parse_mapping_option("gx", ["time", "gx"])
+
+
+def test_unknown_columns_written_back_unchanged(tmp_path):
+    p = _write_text(tmp_path / "f.csv", "Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),"
+                                        "movement,zvi\n0,1,2,3,1,0\n0.01,1,2,3,0,1\n")
+    rec = read_csv(p)
+    q = str(tmp_path / "o.csv")
+    write_csv(rec, q)
+    back = read_csv(q)
+    assert back["movement"].tolist() == [1.0, 0.0] and back["zvi"].tolist() == [0.0, 1.0]
+    assert read_header(q).names == ["time", "gyro_x", "gyro_y", "gyro_z", "movement", "zvi"]
+
+
+# -- real recordings -----------------------------------------------------------------------------------------
+def test_real_fusion_sensor_data(shared):
+    rec = read_csv(str(shared("fusion", "sensor_data.csv")))
+    assert len(rec) == 13514
+    assert rec.units["gyro"] == "rad/s" and rec.units["accel"] == "m/s^2" and rec.units["mag"] == "uT"
+    # at rest at the start: |accel| ≈ g (converted from g), field ≈ 40-50 µT, gyro small (converted from deg/s)
+    a = np.linalg.norm(rec["accel"][:50], axis=1)
+    assert np.all(np.abs(a - 9.81) < 0.3)
+    assert 30 < np.linalg.norm(rec["mag"][0]) < 60
+    assert np.abs(rec["gyro"][:50]).max() < math.radians(2.0)
+    assert "Gyroscope X (deg/s)->gyro_x[deg/s]" in rec.meta["column_mapping"]
+
+
+def test_real_broad_keeps_reference_and_labels(shared):
+    rec = read_csv(str(shared("broad", "05_undisturbed_slow_rotation_with_breaks_B.csv")))
+    assert rec["ref_q"].shape == (len(rec), 4)
+    assert "movement" in rec.channels and set(np.unique(rec["movement"])) <= {0.0, 1.0}
+    ok = ~np.isnan(rec["ref_q"]).any(axis=1)
+    assert 0 < ok.sum() < len(rec)
+    assert np.allclose(np.linalg.norm(rec["ref_q"][ok], axis=1), 1.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("name, channel, unit", [
+    ("hmc5883l_compass.csv", "mag", "gauss"),
+    ("mpu6050_accelerometer.csv", "accel", "g"),
+    ("mpu6050_gyroscope.csv", "gyro", "dps"),
+    ("mpu6050_temperature.csv", "temp", "degC"),
+])
+def test_real_hmc5883l_mpu6050(shared, name, channel, unit):
+    rec = read_csv(str(shared("mag_hmc5883l", "full-sphere", name)))
+    assert channel in rec.channels and len(rec) > 1000
+    assert f"[{unit}]" in rec.meta["column_mapping"]
+    if channel == "mag":
+        norm = np.linalg.norm(rec["mag"], axis=1)
+        assert 20 < np.median(norm) < 80  # Gauss → µT (Earth field ~50 µT, distorted sensor)
+    if channel == "accel":
+        assert 9.0 < np.median(np.linalg.norm(rec["accel"], axis=1)) < 10.8
+
+
+def test_real_duplicates_short_walk(shared):
+    rec = read_csv(str(shared("xio_gait_tracking", "short_walk.csv")))
+    clean, rep = rec.validated(duplicates="drop")
+    assert rep.duplicates > 0 and len(clean) == len(rec) - rep.duplicates
+    assert np.all(np.diff(clean.time) > 0)
