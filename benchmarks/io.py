@@ -1,18 +1,126 @@
-"""I/O speed: CSV read/write rows/s (CSV section) and ROS bag read messages/s (bag section).
+"""I/O speed and memory: CSV read/write rows/s and streamed-conversion peak RSS (CSV section), ROS bag read
+messages/s (bag section). Prints figures; no assertions. Sections are independent functions called from main().
 
-Run: ``python benchmarks/io.py [--bag-messages 200000] [--repeat 3]``. Prints figures; no assertions.
-Sections are independent functions called from :func:`main`.
+Usage::
+
+    python benchmarks/io.py                    # CSV 1 M rows x 10 columns + bag 200 k messages
+    python benchmarks/io.py --stream           # also: 10 M-row CSV -> CSV streamed conversion, peak RSS
+    python benchmarks/io.py --only csv --rows 200000
+    python benchmarks/io.py --only bag [--bag-messages 200000] [--repeat 3]
+
+CSV rates are CPU time of this process (``time.process_time``: the 2-core machine is shared, wall time is noisy);
+wall time is printed too. Compile time of the numba kernels is excluded (one warm-up call first).
 """
 
 from __future__ import annotations
 
 import argparse
+import io
+import itertools
 import os
+import resource
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
+from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from formats import Recording  # noqa: E402
+from formats.csv import CsvWriter, iter_csv, read_csv, write_csv  # noqa: E402
+
+
+# -- CSV ----------------------------------------------------------------------------------------------------
+def _timed(f: Callable[[], object]) -> tuple[float, float, object]:
+    w0, c0 = time.perf_counter(), time.process_time()
+    out = f()
+    return time.process_time() - c0, time.perf_counter() - w0, out
+
+
+def make_recording(rows: int, kind: str = "sensor", seed: int = 0) -> Recording:
+    """time + gyro + accel + mag (10 columns). ``sensor``: values at a sensor's resolution (short decimals, like
+    real logs); ``full``: arbitrary doubles (16–17 significant digits when written exactly)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(rows) / 100.0
+    g = rng.standard_normal((rows, 3)) * 0.2
+    a = rng.standard_normal((rows, 3)) + [0.0, 0.0, -9.81]
+    m = rng.standard_normal((rows, 3)) * 20 + [20.0, 0.0, 40.0]
+    if kind == "sensor":
+        g = np.round(g, 6)
+        a = np.round(a, 5)
+        m = np.round(m, 3)
+    rec = Recording(t, meta={"benchmark": kind})
+    rec.add("gyro", g)
+    rec.add("accel", a)
+    rec.add("mag", m)
+    return rec
+
+
+def bench_csv_write(rec: Recording, path: str) -> dict:
+    write_csv(rec.select(slice(0, 100)), path)  # warm-up (kernel compile/cache load)
+    cpu, wall, _ = _timed(lambda: write_csv(rec, path))
+    return {"rows": len(rec), "cpu_s": cpu, "wall_s": wall, "rows_per_s": len(rec) / cpu,
+            "mb": os.path.getsize(path) / 1e6}
+
+
+def bench_csv_read(path: str, rows: int) -> dict:
+    read_csv(path)  # warm-up, also brings the file into the page cache
+    cpu, wall, rec = _timed(lambda: read_csv(path))
+    assert len(rec) == rows
+    return {"rows": rows, "cpu_s": cpu, "wall_s": wall, "rows_per_s": rows / cpu}
+
+
+def bench_numpy_baselines(rec: Recording, path: str, rows: int) -> dict:
+    """numpy.loadtxt / savetxt on the same data (first ``rows`` rows; rates per row)."""
+    sub = rec.select(slice(0, rows))
+    data = np.column_stack([sub.time, sub["gyro"], sub["accel"], sub["mag"]])
+    cpu_s, _, _ = _timed(lambda: np.savetxt(io.BytesIO(), data, delimiter=","))
+    with open(path, "rb") as f:
+        lines = b"".join(line for line in itertools.islice(f, rows + 200) if not line.startswith(b"#"))
+    body = lines.split(b"\n", 1)[1]
+    cpu_l, _, arr = _timed(lambda: np.loadtxt(io.BytesIO(body), delimiter=","))
+    return {"rows": arr.shape[0], "savetxt_rows_per_s": rows / cpu_s, "loadtxt_rows_per_s": arr.shape[0] / cpu_l}
+
+
+def _write_big(path: str, rows: int, kind: str) -> None:
+    """A big CSV written in pieces (bounded memory)."""
+    step = 1_000_000
+    with CsvWriter(path) as w:
+        for r0 in range(0, rows, step):
+            n = min(step, rows - r0)
+            rec = make_recording(n, kind, seed=r0)
+            rec.time += r0 / 100.0
+            w.write(rec)
+
+
+def _convert_child(src: str, dst: str) -> None:
+    """Streamed CSV → CSV conversion (what `imutool convert` does for big files); runs in a child process."""
+    with CsvWriter(dst) as w:
+        for chunk in iter_csv(src):
+            w.write(chunk)
+
+
+def bench_stream_convert(rows: int, kind: str, tmpdir: str) -> dict:
+    src = os.path.join(tmpdir, "big.csv")
+    dst = os.path.join(tmpdir, "big_copy.csv")
+    _write_big(src, rows, kind)
+    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import resource, time; "
+            f"from benchmarks.io import _convert_child; c = time.process_time(); "
+            f"_convert_child({src!r}, {dst!r}); "
+            f"print(time.process_time() - c, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+    w0 = time.perf_counter()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    wall = time.perf_counter() - w0
+    cpu, rss_kb = float(out[0]), int(out[1])
+    return {"rows": rows, "file_gb": os.path.getsize(src) / 1e9, "cpu_s": cpu, "wall_s": wall,
+            "rows_per_s": rows / cpu, "peak_rss_mb": rss_kb / 1024.0}
 
 
 # -- ROS bags ---------------------------------------------------------------------------------------------------
@@ -96,17 +204,45 @@ def print_bag(results: dict[str, dict[str, float]]) -> None:
               f"{r['rosbags_deserialise_msgs_per_cpu_s']:,.0f} | {r['write_s']:.1f} |")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+def run_csv(rows: int, baseline_rows: int, stream: bool, stream_rows: int) -> None:
+    with tempfile.TemporaryDirectory(prefix="imutool-bench-") as tmp:
+        print(f"CSV, {rows} rows x 10 columns (rows/s of CPU time; wall time in brackets)")
+        print("| data | write rows/s | read rows/s | file MB | numpy.savetxt rows/s | numpy.loadtxt rows/s |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: |")
+        for kind in ("sensor", "full"):
+            rec = make_recording(rows, kind)
+            path = os.path.join(tmp, f"{kind}.csv")
+            w = bench_csv_write(rec, path)
+            r = bench_csv_read(path, rows)
+            b = bench_numpy_baselines(rec, path, min(baseline_rows, rows))
+            print(f"| {kind} | {w['rows_per_s']:,.0f} | {r['rows_per_s']:,.0f} | {w['mb']:.0f} | "
+                  f"{b['savetxt_rows_per_s']:,.0f} | {b['loadtxt_rows_per_s']:,.0f} |"
+                  f"   [wall write {w['wall_s']:.2f} s, read {r['wall_s']:.2f} s]")
+        if stream:
+            s = bench_stream_convert(stream_rows, "sensor", tmp)
+            print(f"streamed CSV->CSV conversion, {s['rows']:,} rows ({s['file_gb']:.2f} GB): "
+                  f"{s['rows_per_s']:,.0f} rows/s CPU, wall {s['wall_s']:.0f} s, peak RSS {s['peak_rss_mb']:.0f} MB")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--only", choices=["csv", "bag"], default=None, help="run one section only")
+    ap.add_argument("--rows", type=int, default=1_000_000, help="CSV: rows of the read/write benchmark")
+    ap.add_argument("--baseline-rows", type=int, default=200_000, help="CSV: rows for the numpy baselines")
+    ap.add_argument("--stream", action="store_true", help="CSV: also run the streamed conversion (slow)")
+    ap.add_argument("--stream-rows", type=int, default=10_000_000)
     ap.add_argument("--bag-messages", type=int, default=200_000)
     ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     try:
         print(f"load average: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     except OSError:
         pass
-    # CSV section: added by the CSV benchmark (bench_csv...) — keep the bag section below independent.
-    print_bag(bench_bag_read(args.bag_messages, args.repeat))
+    if args.only in (None, "csv"):
+        run_csv(args.rows, args.baseline_rows, args.stream, args.stream_rows)
+    if args.only in (None, "bag"):
+        print_bag(bench_bag_read(args.bag_messages, args.repeat))
+    print(f"(peak RSS of this process {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB)")
 
 
 if __name__ == "__main__":

@@ -348,13 +348,13 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
     if max_samples and len(m) > max_samples:
         m = m[np.linspace(0, len(m) - 1, max_samples).astype(int)]
     # coverage of directions from the centre of a first sphere fit (independent of the soft iron)
-    c0, _ = sphere_fit_linear(m)
     li = None
     try:
         c0, a0, _ = ellipsoid_fit_li(m)
         li = (c0, a0)
         dirs = (m - c0) @ a0.T
     except ImutoolError:
+        c0, _ = sphere_fit_linear(m)
         dirs = m - c0
     cov_frac = sphere_coverage(dirs, n_bands)
 

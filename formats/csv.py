@@ -421,7 +421,8 @@ def _format_block(data: np.ndarray, r0: int, r1: int, sep: str) -> bytes:
     n = r1 - r0
     out = np.empty(n * (data.shape[1] * _eng.MAX_FIELD_BYTES + 1), np.uint8)
     fails = np.empty((1, 2), np.int64)
-    nbytes, nfail = _eng.format_block(data, r0, r1, ord(sep), out, fails, _eng.T_HI, _eng.T_LO, _eng.T_EXP)
+    nbytes, nfail = _eng.format_block(data, data.view(np.uint64), r0, r1, ord(sep), out, fails, _eng.T_HI, _eng.T_LO,
+                                      _eng.T_EXP)
     if nfail:  # never seen; Python's repr is exact too
         return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n"
                        for row in data[r0:r1].tolist()).encode()
@@ -434,7 +435,7 @@ def _write_rows(f: Any, rec: Recording) -> None:
     blocks = _canonicalised(rec)
     for r0 in range(0, len(rec), _WRITE_BLOCK_ROWS):
         r1 = min(r0 + _WRITE_BLOCK_ROWS, len(rec))
-        data = np.hstack([b[r0:r1] for b in blocks])
+        data = np.ascontiguousarray(np.hstack([b[r0:r1] for b in blocks]), dtype=np.float64)
         f.write(_format_block(data, 0, r1 - r0, ","))
 
 

@@ -76,6 +76,7 @@ def _pow5_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 T_HI, T_LO, T_EXP = _pow5_table()
 POW10 = np.array([10.0**i for i in range(23)])
 POW2 = np.array([math.ldexp(1.0, k) for k in range(-1074, 972)])  # POW2[k + 1074] = 2^k, exact
+P10F = np.array([float(f'1e{k}') for k in range(-307, 310)])  # P10F[k + 307] ≈ 10^k
 POW10_INT = np.array([10**i for i in range(20)], dtype=np.uint64)
 
 _U0 = np.uint64(0)
@@ -94,6 +95,14 @@ _TWO53 = np.uint64(1 << 53)
 _MAXU = np.uint64(0xFFFFFFFFFFFFFFFF)
 _E16 = np.uint64(10**16)
 _E17 = np.uint64(10**17)
+_E15 = np.uint64(10**15)
+_U5 = np.uint64(5)
+_U50 = np.uint64(50)
+_U100 = np.uint64(100)
+_U52 = np.uint64(52)
+_M11 = np.uint64(0x7FF)
+_MANT = np.uint64((1 << 52) - 1)
+_ABS = np.uint64((1 << 63) - 1)
 _S2 = np.uint64(2)
 _S4 = np.uint64(4)
 _S8 = np.uint64(8)
@@ -105,7 +114,7 @@ _S60 = np.uint64(60)
 _S62 = np.uint64(62)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     """Full 64×64 → 128-bit product (hi, lo)."""
     a0 = a & _M32
@@ -212,7 +221,7 @@ _FALLBACK = 1
 _GARBAGE = 2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _lower(c: np.uint8) -> int:
     c = int(c)
     if 65 <= c <= 90:
@@ -423,7 +432,7 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
 
 
 # -- writer -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     """round((hi·2^64 + lo) / 2^s) for 1 ≤ s ≤ 127 (result assumed < 2^64)."""
     s1 = s - 1
@@ -436,12 +445,9 @@ def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     return (r + _U1) >> _U1
 
 
-@njit(cache=True)
-def _digits17(ax: float, e10: int, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> np.uint64:
-    """≈ round(ax · 10^(16 - e10)) (within ±1), ax > 0 finite."""
-    f, e2 = math.frexp(ax)
-    m = _u64(f * 9007199254740992.0)  # 2^53; exact
-    e2 -= 53
+@njit(cache=True, inline="always")
+def _digits17(m: np.uint64, e2: int, e10: int, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> np.uint64:
+    """≈ round(m·2^e2 · 10^(16 - e10)) (within ±1) for an integer m < 2^53."""
     k = 16 - e10
     i = k - _W_MIN
     h1, l1 = _mul128(m, t_hi[i])
@@ -458,45 +464,68 @@ def _digits17(ax: float, e10: int, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np
     return _round_shift(hi, lo, s)
 
 
-@njit(cache=True)
-def shortest_digits(ax: float, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[np.uint64, int, int]:
-    """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed."""
-    e10 = int(math.floor(math.log10(ax)))
-    d = _digits17(ax, e10, t_hi, t_lo, t_exp)
+@njit(cache=True, inline="always")
+def shortest_digits(ax: float, b: np.uint64, t_hi: np.ndarray, t_lo: np.ndarray,
+                    t_exp: np.ndarray) -> tuple[np.uint64, int, int]:
+    """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed.
+
+    ``b`` is the bit pattern of ax (> 0, finite). Tries 15, then 16, then 17 significant digits.
+    """
+    ex = int((b >> _U52) & _M11)
+    if ex == 0:  # subnormal: m·2^-1074 with m < 2^52
+        m = b & _MANT
+        e2 = -1074
+        e10 = int(math.floor(math.log10(ax)))
+    else:
+        m = (b & _MANT) | _TWO52
+        e2 = ex - 1075
+        e10 = ((e2 + 52) * 1262611) >> 22  # ⌊(e2+52)·log10 2⌋
+        if e10 + 1 <= 309 and ax >= P10F[e10 + 1 + 307]:
+            e10 += 1
+    d = _digits17(m, e2, e10, t_hi, t_lo, t_exp)
     if d >= _E17:
         e10 += 1
-        d = _digits17(ax, e10, t_hi, t_lo, t_exp)
+        d = _digits17(m, e2, e10, t_hi, t_lo, t_exp)
     elif d < _E16:
         e10 -= 1
-        d = _digits17(ax, e10, t_hi, t_lo, t_exp)
+        d = _digits17(m, e2, e10, t_hi, t_lo, t_exp)
     if d >= _E17 or d < _E16:
         return _U0, 0, 0
-    for nd in (15, 16):
-        div = POW10_INT[17 - nd]
-        c = (d + div // _U2) // div
-        e = e10
-        if c >= POW10_INT[nd]:
-            c = c // _U10
-            e += 1
-        if decimal_to_double(c, e - nd + 1, t_hi, t_lo) == ax:
-            return c, nd, e
-    for delta in (0, -1, 1):
-        c = d + _u64(delta) if delta >= 0 else d - _U1
+    # 15 digits
+    c = (d + _U50) // _U100
+    e = e10
+    if c >= _E15:
+        c = c // _U10
+        e += 1
+    if decimal_to_double(c, e - 14, t_hi, t_lo) == ax:
+        return c, 15, e
+    # 16 digits
+    c = (d + _U5) // _U10
+    e = e10
+    if c >= _E16:
+        c = c // _U10
+        e += 1
+    if decimal_to_double(c, e - 15, t_hi, t_lo) == ax:
+        return c, 16, e
+    # 17 digits: d, or its neighbour
+    for delta in range(3):
+        c = d if delta == 0 else (d - _U1 if delta == 1 else d + _U1)
         if decimal_to_double(c, e10 - 16, t_hi, t_lo) == ax:
             return c, 17, e10
     return _U0, 0, 0
 
 
-@njit(cache=True)
-def _emit(x: float, out: np.ndarray, p: int, tmp: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray,
+@njit(cache=True, inline="always")
+def _emit(x: float, b: np.uint64, out: np.ndarray, p: int, tmp: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray,
           t_exp: np.ndarray) -> int:
     """Write x at out[p:]; returns the new position (-1: could not format; Python does it)."""
     if x != x:
         return p
-    if x < 0.0 or (x == 0.0 and math.copysign(1.0, x) < 0.0):
+    if (b >> _U63) != _U0:
         out[p] = 45
         p += 1
         ax = -x
+        b = b & _ABS
     else:
         ax = x
     if ax == 0.0:
@@ -507,7 +536,7 @@ def _emit(x: float, out: np.ndarray, p: int, tmp: np.ndarray, t_hi: np.ndarray, 
         out[p + 1] = 110
         out[p + 2] = 102
         return p + 3
-    c, nd, e = shortest_digits(ax, t_hi, t_lo, t_exp)
+    c, nd, e = shortest_digits(ax, b, t_hi, t_lo, t_exp)
     if nd == 0:
         return -1
     while nd > 1 and c % _U10 == _U0:
@@ -567,9 +596,10 @@ MAX_FIELD_BYTES = 26  # sign, 17 digits, point, up to 4 leading zeros or 'e-308'
 
 
 @njit(cache=True)
-def format_block(data: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
+def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
                  t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[int, int]:
-    """Format rows data[r0:r1] as CSV lines into ``out`` (needs (r1-r0)·ncol·MAX_FIELD_BYTES bytes).
+    """Format rows data[r0:r1] (``bits`` = data.view(uint64)) as CSV lines into ``out`` (needs
+    (r1-r0)·(ncol·MAX_FIELD_BYTES + 1) bytes).
 
     Returns (bytes written, number of values that need Python's repr; their (row, col) go to ``fails``,
     their field is left empty — the caller re-formats those rows).
@@ -583,7 +613,7 @@ def format_block(data: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, 
             if j:
                 out[p] = sep
                 p += 1
-            q = _emit(data[r, j], out, p, tmp, t_hi, t_lo, t_exp)
+            q = _emit(data[r, j], bits[r, j], out, p, tmp, t_hi, t_lo, t_exp)
             if q < 0:
                 if nf < fails.shape[0]:
                     fails[nf, 0] = r

@@ -357,6 +357,160 @@ class _Ros1Bag:
         return _Raw(self.buf, r[:, 3].copy(), r[:, 4].copy(), rec_ns[order], "ros1")
 
 
+@njit(cache=True)
+def _scan_mcap(buf, bounds, out, other, bad, fill):  # pragma: no cover - numba
+    """Scan MCAP records (u8 opcode, u64 length, content) in each (start, end) segment of ``buf``.
+
+    Message records (0x05) go to ``out`` rows (channel id, log_time ns, data offset, data length, segment);
+    schema (0x03), channel (0x04) and chunk (0x06) records to ``other`` rows (opcode, content offset, length,
+    segment). A segment stops at Data End (0x0F); one that does not parse to its end is flagged in ``bad``.
+    Returns (n_messages, n_other).
+    """
+    k = 0
+    j = 0
+    for si in range(bounds.shape[0]):
+        p = bounds[si, 0]
+        n = bounds[si, 1]
+        while p < n:
+            if p + 9 > n:
+                bad[si] = 1
+                break
+            op = buf[p]
+            ln = _u32(buf, p + 1) | (_u32(buf, p + 5) << 32)
+            c = p + 9
+            if ln < 0 or c + ln > n:
+                bad[si] = 1
+                break
+            if op == 5 and ln >= 22:
+                if fill:
+                    out[k, 0] = np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)
+                    out[k, 1] = _u32(buf, c + 6) | (_u32(buf, c + 10) << 32)
+                    out[k, 2] = c + 22
+                    out[k, 3] = ln - 22
+                    out[k, 4] = si
+                k += 1
+            elif op == 3 or op == 4 or op == 6:
+                if fill:
+                    other[j, 0] = op
+                    other[j, 1] = c
+                    other[j, 2] = ln
+                    other[j, 3] = si
+                j += 1
+            elif op == 15:
+                break
+            p = c + ln
+    return k, j
+
+
+class _McapUnsupported(Exception):
+    pass
+
+
+def _mcap_str(b: bytes | memoryview, p: int) -> tuple[str, int]:
+    (n,) = struct.unpack_from("<I", b, p)
+    return bytes(b[p + 4: p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
+
+
+class _McapScan:
+    """Fast MCAP reader: chunks decompressed, records scanned by a numba kernel (ROS2 CDR messages)."""
+
+    MAGIC = b"\x89MCAP0\r\n"
+
+    def __init__(self, files: list[Path]):
+        from rosbags.rosbag2.storage_mcap import DECOMPRESSORS
+
+        self.notes: list[str] = []
+        self.truncated = False
+        chunks: list[bytes] = []
+        chunk_file: list[int] = []
+        self.schemas: dict[tuple[int, int], str] = {}
+        self.channels: dict[tuple[int, int], tuple[str, int, str]] = {}
+        for fi, f in enumerate(files):
+            data = np.fromfile(f, dtype=np.uint8)
+            if data[:8].tobytes() != self.MAGIC:
+                raise _McapUnsupported("no MCAP magic")
+            bounds = np.array([[8, data.shape[0]]], np.int64)
+            bad = np.zeros(1, np.int64)
+            k, j = _scan_mcap(data, bounds, np.empty((0, 5), np.int64), np.empty((0, 4), np.int64), bad, False)
+            if k:
+                raise _McapUnsupported("messages outside chunks")
+            other = np.empty((j, 4), np.int64)
+            _scan_mcap(data, bounds, np.empty((0, 5), np.int64), other, bad, True)
+            if bad[0]:
+                self.truncated = True
+            raw = memoryview(data)
+            for op, c, ln, _ in other.tolist():
+                rec = raw[c: c + ln]
+                if op == 6:
+                    usize = struct.unpack_from("<Q", rec, 16)[0]
+                    comp, q = _mcap_str(rec, 28)
+                    (clen,) = struct.unpack_from("<Q", rec, q)
+                    if comp not in DECOMPRESSORS:
+                        raise _McapUnsupported(f"chunk compression {comp!r}")
+                    try:
+                        body = DECOMPRESSORS[comp](rec[q + 8: q + 8 + clen], usize)
+                    except Exception as exc:
+                        self.notes.append(f"{f.name}: a chunk could not be decompressed ({exc}); skipped")
+                        continue
+                    chunks.append(body)
+                    chunk_file.append(fi)
+                else:
+                    self._meta_record(fi, op, rec)
+        if not chunks:
+            self.buf = np.empty(0, np.uint8)
+            self.recs = np.empty((0, 5), np.int64)
+            return
+        buf = np.frombuffer(b"".join(chunks), dtype=np.uint8)
+        sizes = np.array([len(x) for x in chunks], np.int64)
+        ends = np.cumsum(sizes)
+        bounds = np.stack([ends - sizes, ends], axis=1)
+        bad = np.zeros(len(chunks), np.int64)
+        k, j = _scan_mcap(buf, bounds, np.empty((0, 5), np.int64), np.empty((0, 4), np.int64), bad, False)
+        out = np.empty((k, 5), np.int64)
+        other = np.empty((j, 4), np.int64)
+        _scan_mcap(buf, bounds, out, other, bad, True)
+        if bad.any():
+            self.notes.append(f"{int(bad.sum())} MCAP chunk(s) damaged; records before the damage kept")
+        for op, c, ln, si in other.tolist():
+            if op in (3, 4):
+                self._meta_record(chunk_file[si], op, buf[c: c + ln].tobytes())
+        cf = np.array(chunk_file, np.int64)
+        out[:, 0] += cf[out[:, 4]] << 16  # channel key = file index << 16 | channel id
+        self.buf = buf
+        self.recs = out
+
+    def _meta_record(self, fi: int, op: int, rec: bytes | memoryview) -> None:
+        if op == 3:
+            (sid,) = struct.unpack_from("<H", rec, 0)
+            name, _ = _mcap_str(rec, 2)
+            self.schemas[(fi, sid)] = name
+        elif op == 4:
+            cid, sid = struct.unpack_from("<HH", rec, 0)
+            topic, q = _mcap_str(rec, 4)
+            enc, _ = _mcap_str(rec, q)
+            self.channels[(fi, cid)] = (topic, sid, enc)
+
+    def topics(self) -> dict[str, _Topic]:
+        keys = self.recs[:, 0]
+        counts = dict(zip(*np.unique(keys, return_counts=True), strict=True)) if keys.size else {}
+        out: dict[str, _Topic] = {}
+        for (fi, cid), (topic, sid, enc) in self.channels.items():
+            if enc != "cdr":
+                raise _McapUnsupported(f"message encoding {enc!r}")
+            typ = self.schemas.get((fi, sid), "")
+            t = out.setdefault(topic, _Topic(topic, typ, 0, "cdr"))
+            key = (fi << 16) | cid
+            t.ids.append(key)
+            t.count += int(counts.get(key, 0))
+        return out
+
+    def raw(self, topic: _Topic) -> _Raw:
+        r = self.recs[np.isin(self.recs[:, 0], np.array(topic.ids, dtype=np.int64))]
+        order = np.argsort(r[:, 1], kind="stable")
+        r = r[order]
+        return _Raw(self.buf, r[:, 2].copy(), r[:, 3].copy(), r[:, 1].copy(), "cdr")
+
+
 class _Ros2Bag:
     """ROS2 bag: a folder with metadata.yaml, or a bare .db3 / .mcap file. sqlite3 rows are read directly."""
 
@@ -371,6 +525,7 @@ class _Ros2Bag:
         self.db_files: list[Path] = []
         counts: dict[str, int] | None = None
         compressed = False
+        self._rel_files: list[str] | None = None
         if p.is_dir():
             try:
                 from ruamel.yaml import YAML
@@ -378,7 +533,8 @@ class _Ros2Bag:
                 info = YAML(typ="safe").load((p / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
                 self.storage = str(info.get("storage_identifier", "mcap"))
                 compressed = bool(info.get("compression_mode")) and str(info.get("compression_mode")).lower() != "none"
-                self.db_files = [p / Path(f).name for f in info.get("relative_file_paths", [])]
+                self._rel_files = list(info.get("relative_file_paths", []))
+                self.db_files = [p / Path(f).name for f in self._rel_files]
                 counts = {}
                 for t in info.get("topics_with_message_count") or []:
                     name = t["topic_metadata"]["name"]
@@ -388,6 +544,19 @@ class _Ros2Bag:
         elif p.suffix == ".db3":
             self.storage = "sqlite3"
             self.db_files = [p]
+        self.mcap: _McapScan | None = None
+        if self.storage == "mcap" and not compressed:
+            files = [p] if p.is_file() else [p / Path(f).name for f in (self._rel_files or [])]
+            if files and all(f.is_file() for f in files):
+                try:
+                    self.mcap = _McapScan(files)
+                    self._direct_topics = self.mcap.topics()
+                    self.notes += self.mcap.notes
+                    self.truncated = self.mcap.truncated
+                    return
+                except (_McapUnsupported, struct.error, ValueError, IndexError):
+                    self.mcap = None  # rosbags reads it (or explains what is wrong)
+                    self._direct_topics = None
         self.direct = (self.storage == "sqlite3" and not compressed and bool(self.db_files)
                        and all(f.is_file() for f in self.db_files))
         if self.direct:
@@ -445,6 +614,8 @@ class _Ros2Bag:
         return out
 
     def raw(self, topic: _Topic) -> _Raw:
+        if self.mcap is not None:
+            return self.mcap.raw(topic)
         rows: list[tuple[int, bytes]] = []
         try:
             if self.direct:
@@ -814,6 +985,8 @@ def read_bag(path: str | os.PathLike, topic: str | None = None, stamp: str = "he
     bag = _open(path)
     try:
         topics = bag.topics()
+        if getattr(bag, "truncated", False) and not any(t.count for t in topics.values()):
+            raise ImutoolError("bag is truncated: no complete chunk of messages to read", path=path)
         imu_t, mag_t, notes = _select(topics, topic, path)
         fmt_name = "ros1" if isinstance(bag, _Ros1Bag) else f"ros2-{bag.storage}"
         recs: list[Recording] = []

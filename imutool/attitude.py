@@ -703,7 +703,8 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     q_s = np.empty((n, 4))
     b_s = np.empty((n, 3))
     p_s = np.empty((n, 6, 6))
-    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise, params.bias_rw, params.gap_factor * dt_nominal,
+    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise, params.bias_rw,
+               params.gap_factor * dt_nominal,
                params.gap_rate_sigma, q_s, b_s, p_s)
     std = euler_std(q_s, p_s)
     out = AttitudeResult(t, q_s, b_s, std, res.flags.copy(), dict(res.summary), None)

@@ -369,8 +369,9 @@ def planar_roll(t: np.ndarray, a1: np.ndarray, a2: np.ndarray, p1: np.ndarray, p
     rolling section); the component along the x axis gives ω̇x. Rate and angle by band-pass integration:
     zero-phase (default) or causal, cut-off ``cutoff`` Hz (default 0.3 × the dominant frequency).
     Returns roll_accel (rad/s²), roll_rate (rad/s), roll (rad), cutoff_hz."""
-    from imutool.heave import bandpass_integrator, displacement_spectrum, heave_delayed  # noqa: PLC0415
     from scipy import signal  # noqa: PLC0415
+
+    from imutool.heave import bandpass_integrator, displacement_spectrum, heave_delayed  # noqa: PLC0415
 
     lever = np.cross(np.asarray(p2, float) - np.asarray(p1, float), np.asarray(d, float))
     if abs(lever[0]) < 1e-6:

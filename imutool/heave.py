@@ -100,7 +100,7 @@ def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.n
         if "ref_q" not in rec:
             raise ImutoolError("--attitude ref needs ref_qw..ref_qz columns")
         return rec["ref_q"], "ref_q (truth channel)"
-    if attitude in ("auto", "q") and "q" in rec:
+    if attitude in ("auto", "q") and "q" in rec and not (isinstance(rec["q"], np.ndarray) and rec["q"].ndim == 1):
         return rec["q"], "q channel of the input"
     if attitude == "q":
         raise ImutoolError("--attitude q needs qw..qz columns")
@@ -249,12 +249,14 @@ class Tracking:
 
 def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 120.0, hop_s: float = 5.0,
                       min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0,
-                      mode: str = "peaks", min_periods: float = 8.0) -> Tracking:
+                      mode: str = "peaks", min_periods: float = 8.0,
+                      min_concentration: float = 0.4) -> Tracking:
     """Causal sliding-window tracking of the n dominant heave frequencies.
 
     At t_k = min_window_s + k·hop_s the spectrum of a(t) over [t_k − window_s, t_k] (growing window at the start)
     gives the frequencies used from t_k on; estimates are accepted once the window holds ``min_periods``
-    periods of its own dominant frequency. ``mode`` 'peaks' (paper: the n strongest spectral lines) or
+    periods of its own dominant frequency and ``min_concentration`` of the velocity-spectrum energy lies within
+    0.6–1.6 × that frequency (a wave peak, not noise). ``mode`` 'peaks' (paper: the n strongest spectral lines) or
     'centroids' (energy centroids of n equal-energy bands: a better basis for a broad sea spectrum).
     """
     t = np.asarray(t, float)
@@ -273,10 +275,18 @@ def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 12
         seg = ad[lo:hi]
         if len(seg) >= 16:
             f, s = displacement_spectrum(seg, fsd, fmin, fmax)
-            if len(f):
+            if len(f) > 4:
+                # the wave peak is found in the acceleration spectrum (S_h·ω⁴): low-frequency accelerometer
+                # drift, hugely amplified by 1/ω⁴, must not win; the heave band is then [0.35, ∞) × that peak
+                sv = s * (2 * np.pi * f) ** 4
+                fv = float(f[int(np.argmax(sv))])
+                near = (f >= 0.6 * fv) & (f <= 1.6 * fv)
+                conc = float(sv[near].sum() / max(sv.sum(), 1e-300))
+                band = f >= 0.35 * fv
+                f, s = f[band], s[band]
                 fdom = float(f[int(np.argmax(s))])
-                if (hi - lo) / fsd * fdom < min_periods and tk + hop_s <= t[-1]:
-                    tk += hop_s  # not yet enough periods in the window for a trustworthy spectrum
+                if ((hi - lo) / fsd * fdom < min_periods or conc < min_concentration) and tk + hop_s <= t[-1]:
+                    tk += hop_s  # not yet a trustworthy spectrum: too few periods, or no clear wave peak
                     continue
                 res = 1.0 / max(1e-9, (hi - lo) / fsd)
                 fr = _peaks(f, s, n) if mode == "peaks" else _centroids(f, s, n, res)
@@ -361,6 +371,16 @@ def heave_delayed(a: np.ndarray, fs: float, cutoff: float, order: int = 4,
     c = c / c[-1]
     latency = float(np.searchsorted(c, 0.99) / fs)
     return h, v, latency
+
+
+def heave_zero_phase_bandpass(a: np.ndarray, fs: float, low: float, high: float, order: int = 2) -> np.ndarray:
+    """Reference baseline for the NTNU comparison: a zero-phase (forward–backward) 2nd-order Butterworth
+    band-pass [low, high] Hz applied to the acceleration, the velocity and the displacement of a trapezoidal
+    double integration. Offline."""
+    sos = signal.butter(order, [low, high], "bandpass", fs=fs, output="sos")
+    x = signal.sosfiltfilt(sos, np.asarray(a, float) - np.mean(a))
+    v = signal.sosfiltfilt(sos, np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]))]) / fs)
+    return signal.sosfiltfilt(sos, np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))]) / fs)
 
 
 def heave_envelope(a: np.ndarray, fs: float, period: float, lowpass: float | None = None) -> np.ndarray:
@@ -604,7 +624,12 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     # delayed output: whole-record dominant frequency
     fw, sw = displacement_spectrum(a[:: max(1, int(fs // (5 * fmax)))], fs / max(1, int(fs // (5 * fmax))),
                                    fmin, fmax, pad=1)
-    f_rec = float(fw[int(np.argmax(sw))]) if len(fw) else f_first
+    if len(fw) > 4:
+        fv = float(fw[int(np.argmax(sw * (2 * np.pi * fw) ** 4))])  # acceleration spectrum: drift must not win
+        inb = fw >= 0.35 * fv
+        f_rec = float(fw[inb][int(np.argmax(sw[inb]))])
+    else:
+        f_rec = f_first
     fcd = float(delayed_cutoff) if delayed_cutoff else 0.35 * f_rec
     hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lowpass)
     sos = bandpass_integrator(fs, fc, order)

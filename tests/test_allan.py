@@ -44,13 +44,13 @@ def test_overlapping_estimator_matches_direct_formula():
     rng = np.random.default_rng(3)
     y = rng.standard_normal(2000)
     fs = 10.0
-    m = np.array([1, 3, 7, 20])
+    m = np.array([1, 3, 7, 20, 40, 128])
     taus, adev, _ = allan_deviation(y, fs, m=m)
+    assert np.allclose(taus * fs, m)  # these sizes are multiples of their sub-sampling step already
     theta = np.concatenate([[0.0], np.cumsum(y - y.mean()) / fs])
-    for i, mm in enumerate(m):  # stride 1 for m < 16: the exact overlapping estimator
-        if mm >= 16:
-            continue
-        d = theta[2 * mm:] - 2 * theta[mm:-mm] + theta[:-2 * mm]
+    for i, mm in enumerate(m):  # every k for m < 16 (exact); every s-th k beyond (s = 2, 4, 16 here)
+        s = 1 if mm < 16 else 2 ** int(np.floor(np.log2(mm // 8)))
+        d = (theta[2 * mm:] - 2 * theta[mm:-mm] + theta[:-2 * mm])[::s]
         assert adev[i] == pytest.approx(np.sqrt(np.mean(d ** 2) / (2 * (mm / fs) ** 2)), rel=1e-10)
 
 

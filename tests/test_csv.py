@@ -76,7 +76,7 @@ def test_writer_round_trips_random_bit_patterns_and_is_short():
     assert np.array_equal(_bits(back), _bits(x))
     # never longer than 17 significant digits; as short as repr for values with a short decimal form
     short = np.round(rng.standard_normal(2000), 5)
-    for v, t in zip(short.tolist(), format_array(short[:, None]).decode().split("\n")):
+    for v, t in zip(short.tolist(), format_array(short[:, None]).decode().split("\n"), strict=False):
         assert len(t) <= len(repr(v)), (v, t)
 
 

@@ -30,7 +30,7 @@ def test_broad_metric_split():
 
     q_est = quat_multiply(yaw, q_ref)  # a pure heading error of 2° in the world frame
     tot, hd, inc = (np.degrees(x) for x in quat_errors(q_est[None], q_ref[None]))
-    assert abs(tot[0] - 2.0) < 1e-9 and abs(hd[0] - 2.0) < 1e-9 and inc[0] < 1e-6
+    assert abs(tot[0] - 2.0) < 1e-9 and abs(hd[0] - 2.0) < 1e-9 and inc[0] < 1e-4  # acos near 1: float precision
 
 
 def test_evaluate_missing_heave_module_is_one_line(tmp_path):

@@ -161,3 +161,18 @@ def test_roll_cli(tmp_path):
     formats.write(Recording(t, {"pitch": heel}), bad)
     r = CliRunner().invoke(cli, ["roll", str(bad), "-o", str(tmp_path / "x.csv")])
     assert r.exit_code != 0 and "roll" in str(r.exception or r.output)
+
+
+def test_real_nmea_heel_log(shared):
+    """A real sailing-boat log (gpsd bundg_zeus_9, XDR HEEL): cycles found, peak hold = raw extremes, reset UTC."""
+    p = shared("nmea_gpsd", "bundg_zeus_9.log")
+    rec = formats.read(p)
+    heel = rec["roll"]
+    rs = roll_stats(rec.time, heel)
+    assert len(rs.cycles) >= 10
+    ok = np.isfinite(heel)
+    assert rs.peak_stbd[-1] == max(np.nanmax(heel), 0.0) and rs.peak_port[-1] == max(np.nanmax(-heel), 0.0)
+    assert rs.resets_utc[0].startswith("2018-08-20T")  # Unix-epoch time base → UTC of the reset
+    per = rs.cycles.period_s[np.isfinite(rs.cycles.period_s)]
+    assert per.size >= 5 and np.all((per > 1.0) & (per < 60.0))
+    assert ok.sum() < len(heel)  # other sentences' rows carry NaN heel and are skipped

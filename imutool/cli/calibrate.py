@@ -136,7 +136,8 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
              "  A      = " + np.array2string(fit.A, precision=5).replace("\n", "\n           "),
              f"  field {fit.field_ut:.2f} µT, residual {fit.residual_rms_ut:.3g} µT RMS, coverage "
              f"{100 * fit.coverage:.0f}%",
-             f"  |m| relative std: raw {100 * fit.raw_rel_std:.2f}% → calibrated {100 * fit.cal_rel_std:.2f}%"]
+             f"  {'|m|' if method == 'sphere' else 'horizontal |m_h|'} relative std: raw {100 * fit.raw_rel_std:.2f}%"
+             f" → calibrated {100 * fit.cal_rel_std:.2f}%"]
     if method == "swing":
         lines.append(f"  not observable in a swing: {summary['unobservable']}")
     lines += [f"  warning: {w}" for w in fit.warnings]

@@ -12,6 +12,7 @@ import formats
 from formats.errors import ImutoolError
 from imutool.cli.common import emit_summary, input_options, load_input, output_options
 
+
 @click.command("filter", epilog="Example: imutool simulate ship-roll -o roll.csv && "
                                 "imutool filter roll.csv -o est.csv --smooth")
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))

@@ -123,7 +123,7 @@ def _lines(s: dict[str, Any]) -> list[str]:
     for name, c in s["channels"].items():
         cols = c["columns"]
         axes = " | ".join(f"{col} {_fmt(a)} / {_fmt(m)} / {_fmt(b)}"
-                          for col, a, m, b in zip(cols, c["min"], c["mean"], c["max"]))
+                          for col, a, m, b in zip(cols, c["min"], c["mean"], c["max"], strict=False))
         out.append(f"  {name:<12} [{c['unit'] or '-'}]  {axes}")
     if s["column_mapping"]:
         out.append(f"column mapping ({s['column_mapping']['origin']}):")

@@ -72,7 +72,7 @@ def _collect(path: str, wanted: tuple[str, ...], start: float | None, end: float
                 names = match_channels(list(chunk.channels), wanted, path)
                 t0 = float(chunk.time[0])
                 est_rows = max(len(chunk), int(size / max(1, _bytes_per_row(path, len(chunk)))))
-                bucket = max(1, est_rows // max_points)
+                bucket = max(1, -(-2 * est_rows // max_points))  # 2 points per bucket
             total += len(chunk)
             chunk = chunk.slice_time(None if start is None else t0 + start, None if end is None else t0 + end) \
                 if (start is not None or end is not None) else chunk
@@ -93,7 +93,7 @@ def _collect(path: str, wanted: tuple[str, ...], start: float | None, end: float
     t0 = float(rec.time[0])
     if start is not None or end is not None:
         rec = rec.slice_time(None if start is None else t0 + start, None if end is None else t0 + end)
-    bucket = max(1, len(rec) // max_points)
+    bucket = max(1, -(-2 * len(rec) // max_points))
     out = {n: envelope(rec.time - t0, rec[n].reshape(len(rec), -1), bucket) for n in names}
     return out, rec, len(rec)
 
@@ -144,7 +144,7 @@ def plot_cmd(path: str, channels: tuple[str, ...], output: str, start: float | N
     names = list(series)
     fig, axes = plt.subplots(len(names), 1, sharex=True, figsize=(10, 1.2 + 2.2 * len(names)), squeeze=False)
     drawn = 0
-    for ax, name in zip(axes[:, 0], names):
+    for ax, name in zip(axes[:, 0], names, strict=True):
         t, y = series[name]
         cols = rec.columns.get(name, [name])
         for j in range(y.shape[1]):

@@ -277,6 +277,8 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     warnings: list[str] = []
     if corr < 0:
         warnings.append("DUT and reference heel are anti-correlated: sign convention mismatch (HRM: + starboard)?")
+    if overlap < 0.9 * ref.duration:
+        warnings.append(f"the DUT covers only {overlap:.0f} s of the {ref.duration:.0f} s reference recording")
     if lag_at_edge:
         warnings.append(f"time lag at the search limit ±{o.max_lag_s} s: alignment unreliable (widen --max-lag)")
 
@@ -418,6 +420,9 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     if spans:
         a, b, rv = max(spans, key=lambda s: s[1] - s[0])
         m = (t >= a) & (t <= b) & both
+        if m.sum() < 10 or t[m][-1] - t[m][0] < o.drift_min_s:  # the DUT must cover the hold
+            spans = []
+    if spans:
         rr = h_ref[m] if rv is None else np.full(m.sum(), rv)
         ee = d[m] - rr
         slope = float(np.polyfit(t[m] - t[m][0], ee, 1)[0]) * 3600.0 if m.sum() > 2 else float("nan")
@@ -427,8 +432,8 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         extra = {"duration_s": b - a, "drift_deg_per_h": slope, "start_s": a, "end_s": b}
     else:
         longest = max((b - a for a, b, _ in steps), default=0.0)
-        st, why, ee, extra = NOT_TESTED, (f"no static hold ≥ {o.drift_min_s:g} s (longest {longest:.0f} s)"), \
-            np.array([]), {}
+        st, why, ee, extra = NOT_TESTED, (f"no static hold ≥ {o.drift_min_s:g} s covered by DUT and reference "
+                                          f"(longest reference hold {longest:.0f} s)"), np.array([]), {}
     items.append(_item("long_term", "ISO 19697 §6.4 (duration/limit not confirmed)", "Long-term heel (drift)", st, why,
                        angle_txt + " over the whole hold", stats(ee), [], extra))
 

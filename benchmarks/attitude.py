@@ -1,0 +1,67 @@
+"""Attitude benchmarks: EKF samples/s (full rate, multi-rate, with smoother) on 1 M samples; optionally the
+end-to-end `imutool filter` on a 24 h, 200 Hz CSV (17.28 M rows) with its peak RSS (``--24h``, slow: it first
+writes a ~3 GB file). Usage: python benchmarks/attitude.py [--24h] [--dir /tmp]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import subprocess
+import time
+
+import numpy as np
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--24h", dest="day", action="store_true", help="also run the 24 h end-to-end case")
+    ap.add_argument("--dir", default="/tmp")
+    a = ap.parse_args()
+    from imutool.attitude import EkfParams, rts_smooth, run_ekf
+    from imutool.sim import simulate
+
+    rec = simulate("ship-roll", duration=5000, seed=0)  # 1 000 001 samples at 200 Hz
+    t, g, acc, mag = rec.time, rec["gyro"], rec["accel"], rec["mag"]
+    run_ekf(t[:1000], g[:1000], acc[:1000], mag[:1000])  # compile / load the cache
+    for label, prm in [("full rate", EkfParams()), ("multi-rate (update every 40)", EkfParams(update_every=40))]:
+        t0 = time.perf_counter()
+        run_ekf(t, g, acc, mag, prm)
+        dt = time.perf_counter() - t0
+        print(f"EKF {label:30s}: {len(t) / dt / 1e6:6.2f} M samples/s ({dt:.2f} s for {len(t)} samples)")
+    t0 = time.perf_counter()
+    res, _ = run_ekf(t, g, acc, mag, keep_cov=True)
+    rts_smooth(res, g)
+    dt = time.perf_counter() - t0
+    print(f"EKF + RTS smoother              : {len(t) / dt / 1e6:6.2f} M samples/s")
+    if a.day:
+        day(a.dir)
+
+
+def day(folder: str) -> None:
+    import formats
+    from formats.csv import CsvWriter
+    from imutool.sim import simulate
+
+    path = os.path.join(folder, "att_bench_24h.csv")
+    if not os.path.exists(path):
+        print("writing the 24 h file ...", flush=True)
+        with CsvWriter(path) as w:
+            for i in range(24):
+                r = simulate("ship-roll", duration=3600 - 0.005, seed=i)
+                r.time = r.time + 3600.0 * i
+                keep = [c for c in ("gyro", "accel", "mag") if c in r.channels]
+                w.write(formats.Recording(r.time, {c: r[c] for c in keep}))
+    out = os.path.join(folder, "att_bench_24h_est.csv")
+    t0 = time.perf_counter()
+    subprocess.run([shutil.which("imutool") or "imutool", "filter", path, "-o", out, "-q"], check=True)
+    dt = time.perf_counter() - t0
+    rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    print(f"imutool filter, 24 h at 200 Hz (17.28 M rows): {dt:.1f} s, peak RSS {rss:.0f} MB")
+
+
+if __name__ == "__main__":
+    np.seterr(all="ignore")
+    main()

@@ -1,0 +1,88 @@
+"""`imutool heave IN -o OUT`: real-time and delayed heave (m, positive up) from acceleration."""
+
+from __future__ import annotations
+
+import click
+
+import formats
+from formats.errors import ImutoolError
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector
+
+
+@click.command("heave", epilog="Example: imutool simulate sea-state -o sea.csv && imutool heave sea.csv -o heave.csv")
+@click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))
+@click.option("-o", "--output", required=True, type=click.Path(), help="Output (.csv, ...): heave m positive UP.")
+@click.option("--method", type=click.Choice(["realtime", "paper", "bandpass", "envelope"]), default="realtime",
+              show_default=True, help="realtime: KF observer with per-harmonic phase cancellation; paper: the "
+              "heave paper's KF multi-step observer; bandpass: causal HPₙ/s² baseline; envelope: the "
+              "'traditional' envelope detrend (offline).")
+@click.option("--harmonics", type=int, default=None, help="Oscillators in the KF model [default 3 paper, 5 realtime].")
+@click.option("--vertical", default=None, metavar="COL[,COL]",
+              help="Single vertical accelerometer column(s), averaged (e.g. ACC_Heave_SB,ACC_HEAVE_PS). "
+              "Default: 3-axis accel rotated to NED with the attitude.")
+@click.option("--vertical-sign", type=click.Choice(["up", "down"]), default="up", show_default=True,
+              help="Where the --vertical accelerometers' positive axis points.")
+@click.option("--attitude", type=click.Choice(["auto", "q", "ekf", "tilt", "ref"]), default="auto",
+              show_default=True, help="Vertical from: q columns (auto if present), the attitude EKF, a "
+              "complementary tilt filter, or ref_q truth (testing only).")
+@click.option("--tilt-gain", type=float, default=0.05, show_default=True, help="Tilt filter gain (1/s).")
+@click.option("--lever-arm", default=None, metavar="X,Y,Z",
+              help="Monitoring point relative to the IMU, m body FRD (x bow, y starboard, z down).")
+@click.option("--cutoff", type=float, default=None, help="Causal band-pass cut-off Hz [default 0.2 × dominant].")
+@click.option("--cutoff-ratio", type=float, default=0.2, show_default=True,
+              help="Auto cut-off as a fraction of the first tracked dominant frequency.")
+@click.option("--order", type=int, default=3, show_default=True, help="High-pass order of the band-pass (≥ 3).")
+@click.option("--delayed-cutoff", type=float, default=None,
+              help="Zero-phase delayed heave cut-off Hz [default 0.35 × record dominant frequency].")
+@click.option("--window", "window_s", type=float, default=120.0, show_default=True,
+              help="Frequency-tracking window (s).")
+@click.option("--hop", "hop_s", type=float, default=5.0, show_default=True, help="Tracking update interval (s).")
+@click.option("--min-window", "min_window_s", type=float, default=10.0, show_default=True,
+              help="Data (s) before the first frequency estimate.")
+@click.option("--fmin", type=float, default=0.03, show_default=True, help="Lowest heave frequency considered (Hz).")
+@click.option("--fmax", type=float, default=2.0, show_default=True, help="Highest heave frequency considered (Hz).")
+@click.option("--bandwidth", type=float, default=0.03, show_default=True,
+              help="KF process noise as the oscillators' relative bandwidth.")
+@click.option("--meas-noise", type=float, default=0.002, show_default=True,
+              help="KF measurement noise as a fraction of the displacement std.")
+@click.option("--residual-noise", type=float, default=0.02, show_default=True,
+              help="Residual Δh random walk (fraction of std per √s).")
+@click.option("--nmea", "nmea_path", default=None, type=click.Path(), help="Also write $PASHR heave sentences here.")
+@click.option("--nmea-rate", type=float, default=10.0, show_default=True, help="NMEA output rate (Hz).")
+@input_options
+@output_options
+def heave_cmd(input_path: str, output: str, method: str, harmonics: int | None, vertical: str | None,
+              vertical_sign: str, attitude: str, tilt_gain: float, lever_arm: str | None, cutoff: float | None,
+              cutoff_ratio: float, order: int, delayed_cutoff: float | None, window_s: float, hop_s: float,
+              min_window_s: float, fmin: float, fmax: float, bandwidth: float, meas_noise: float,
+              residual_noise: float, nmea_path: str | None, nmea_rate: float, as_json: bool, quiet: bool,
+              **inopts) -> None:
+    """Heave (m, positive UP), heave rate, dominant period, settled flag and a delayed zero-phase heave."""
+    from imutool.heave import heave_recording
+
+    rec, _ = load_input(input_path, **inopts)
+    cols = None
+    if vertical:
+        cols = []
+        for c in vertical.split(","):
+            c = c.strip()
+            name = c if c in rec.channels else c.lower() if c.lower() in rec.channels else c
+            cols.append(name)
+    arm = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
+    att = "auto" if attitude == "auto" else attitude
+    if att == "tilt":
+        att = "tiltonly"
+    out, summary = heave_recording(
+        rec, method=method, vertical=cols, vertical_sign=vertical_sign, attitude=att, lever_arm=arm,
+        tilt_gain=tilt_gain, harmonics=harmonics, cutoff=cutoff, cutoff_ratio=cutoff_ratio, order=order,
+        delayed_cutoff=delayed_cutoff, window_s=window_s, hop_s=hop_s, min_window_s=min_window_s, fmin=fmin,
+        fmax=fmax, bandwidth=bandwidth, meas_noise=meas_noise, residual_noise=residual_noise)
+    formats.write(out, output)
+    summary = {"input": input_path, "output": output, "rows": len(out), **summary}
+    if nmea_path:
+        try:
+            from formats.nmea import write_nmea
+        except ImportError:
+            raise ImutoolError("NMEA output is not available in this build") from None
+        summary["nmea"] = write_nmea(out, nmea_path, sentences=("PASHR",), rate_hz=nmea_rate)
+    emit_summary(summary, as_json, quiet)
