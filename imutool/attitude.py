@@ -153,8 +153,9 @@ def _rmat(q0, q1, q2, q3, r):
 
 
 @njit(cache=True)
-def _propagate_cov(P, phi, T, qa, qb, F):
-    """P ← F P Fᵀ + Q with F = [[Φ, −T I], [0, I]], Q = diag(qa I, qb I). F is a 6×6 scratch (returned filled)."""
+def _propagate_cov(P, phi, T, qa, qb, F, tmp):
+    """P ← F P Fᵀ + Q with F = [[Φ, −T I], [0, I]], Q = diag(qa I, qb I). F (returned filled) and tmp: 6×6
+    scratch preallocated by the caller (no allocation per sample)."""
     for i in range(6):
         for j in range(6):
             F[i, j] = 0.0
@@ -164,7 +165,6 @@ def _propagate_cov(P, phi, T, qa, qb, F):
         F[i, 3 + i] = -T
         F[3 + i, 3 + i] = 1.0
     # FP (only the first three rows differ from P)
-    tmp = np.empty((6, 6))
     for i in range(3):
         for j in range(6):
             s = 0.0
@@ -194,61 +194,52 @@ def _propagate_cov(P, phi, T, qa, qb, F):
 
 
 @njit(cache=True)
-def _vec_update(P, h0, y, sig2, nis_gate, force, dx):
-    """Update with a unit-vector measurement: H = [[h0×], 0], R = sig2·I. Returns (accepted, NIS); dx filled."""
+def _vec_update(P, h0, y, sig2, nis_gate, force, dx, H, M, K):
+    """Update with a unit-vector measurement: H = [[h0×], 0], R = sig2·I. Returns (accepted, NIS); dx filled.
+    H (3,3), M (6,3), K (6,3): scratch preallocated by the caller."""
     # H rows for δθ: [h0×] = [[0,-h2,h1],[h2,0,-h0],[-h1,h0,0]]
-    H = np.zeros((3, 3))
+    H[0, 0] = 0.0
+    H[1, 1] = 0.0
+    H[2, 2] = 0.0
     H[0, 1] = -h0[2]
     H[0, 2] = h0[1]
     H[1, 0] = h0[2]
     H[1, 2] = -h0[0]
     H[2, 0] = -h0[1]
     H[2, 1] = h0[0]
-    M = np.zeros((6, 3))  # P Hᵀ
-    for i in range(6):
+    for i in range(6):  # M = P Hᵀ
         for j in range(3):
             s = 0.0
             for k in range(3):
                 s += P[i, k] * H[j, k]
             M[i, j] = s
-    S = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            s = 0.0
-            for k in range(3):
-                s += H[i, k] * M[k, j]
-            S[i, j] = s
-        S[i, i] += sig2
-    # inverse of the symmetric 3×3
-    a, b, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e, f = S[1, 1], S[1, 2], S[2, 2]
+    # S = H M + sig2 I (symmetric: upper triangle only)
+    a = H[0, 0] * M[0, 0] + H[0, 1] * M[1, 0] + H[0, 2] * M[2, 0] + sig2
+    b = H[0, 0] * M[0, 1] + H[0, 1] * M[1, 1] + H[0, 2] * M[2, 1]
+    c = H[0, 0] * M[0, 2] + H[0, 1] * M[1, 2] + H[0, 2] * M[2, 2]
+    d = H[1, 0] * M[0, 1] + H[1, 1] * M[1, 1] + H[1, 2] * M[2, 1] + sig2
+    e = H[1, 0] * M[0, 2] + H[1, 1] * M[1, 2] + H[1, 2] * M[2, 2]
+    f = H[2, 0] * M[0, 2] + H[2, 1] * M[1, 2] + H[2, 2] * M[2, 2] + sig2
+    # W = S⁻¹ (symmetric 3×3, cofactors)
     A = d * f - e * e
     B = c * e - b * f
     C = b * e - c * d
     det = a * A + b * B + c * C
-    W = np.empty((3, 3))
-    W[0, 0] = A / det
-    W[0, 1] = B / det
-    W[0, 2] = C / det
-    W[1, 1] = (a * f - c * c) / det
-    W[1, 2] = (b * c - a * e) / det
-    W[2, 2] = (a * d - b * b) / det
-    W[1, 0] = W[0, 1]
-    W[2, 0] = W[0, 2]
-    W[2, 1] = W[1, 2]
-    wy0 = W[0, 0] * y[0] + W[0, 1] * y[1] + W[0, 2] * y[2]
-    wy1 = W[1, 0] * y[0] + W[1, 1] * y[1] + W[1, 2] * y[2]
-    wy2 = W[2, 0] * y[0] + W[2, 1] * y[1] + W[2, 2] * y[2]
+    w00, w01, w02 = A / det, B / det, C / det
+    w11, w12, w22 = (a * f - c * c) / det, (b * c - a * e) / det, (a * d - b * b) / det
+    wy0 = w00 * y[0] + w01 * y[1] + w02 * y[2]
+    wy1 = w01 * y[0] + w11 * y[1] + w12 * y[2]
+    wy2 = w02 * y[0] + w12 * y[1] + w22 * y[2]
     nis = y[0] * wy0 + y[1] * wy1 + y[2] * wy2
     if nis_gate > 0 and nis > nis_gate and not force:
         return False, nis
     for i in range(6):
         dx[i] = M[i, 0] * wy0 + M[i, 1] * wy1 + M[i, 2] * wy2
     # P ← P − M W Mᵀ
-    K = np.zeros((6, 3))
     for i in range(6):
-        for j in range(3):
-            K[i, j] = M[i, 0] * W[0, j] + M[i, 1] * W[1, j] + M[i, 2] * W[2, j]
+        K[i, 0] = M[i, 0] * w00 + M[i, 1] * w01 + M[i, 2] * w02
+        K[i, 1] = M[i, 0] * w01 + M[i, 1] * w11 + M[i, 2] * w12
+        K[i, 2] = M[i, 0] * w02 + M[i, 1] * w12 + M[i, 2] * w22
     for i in range(6):
         for j in range(i, 6):
             s = K[i, 0] * M[j, 0] + K[i, 1] * M[j, 1] + K[i, 2] * M[j, 2]
@@ -259,15 +250,14 @@ def _vec_update(P, h0, y, sig2, nis_gate, force, dx):
 
 
 @njit(cache=True)
-def _heading_update(P, r2, y, sig2, dx):
-    """Scalar heading update H = [r2, 0] with the correction projected on the world vertical (Joseph form)."""
-    M = np.zeros(6)
+def _heading_update(P, r2, y, sig2, dx, M, K):
+    """Scalar heading update H = [r2, 0] with the correction projected on the world vertical (Joseph form).
+    M, K: (6,) scratch preallocated by the caller."""
     for i in range(6):
         M[i] = P[i, 0] * r2[0] + P[i, 1] * r2[1] + P[i, 2] * r2[2]
     S = M[0] * r2[0] + M[1] * r2[1] + M[2] * r2[2] + sig2
     ka = (M[0] * r2[0] + M[1] * r2[1] + M[2] * r2[2]) / S  # world-vertical part of the attitude gain
     kb = (M[3] * r2[0] + M[4] * r2[1] + M[5] * r2[2]) / S  # world-vertical part of the bias gain
-    K = np.empty(6)
     for i in range(3):
         K[i] = r2[i] * ka
         K[3 + i] = r2[i] * kb
@@ -311,6 +301,12 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     h0 = np.empty(3)
     y = np.empty(3)
     r2 = np.empty(3)
+    Hs = np.empty((3, 3))  # scratch for the updates / covariance propagation (allocated once per call)
+    Ms = np.empty((6, 3))
+    Ks = np.empty((6, 3))
+    tmp6 = np.empty((6, 6))
+    m6 = np.empty(6)
+    k6 = np.empty(6)
     g = prm[P_GRAVITY]
     store = p_store.shape[0] == n
     for k in range(n):
@@ -359,7 +355,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             # mean rate over T from the accumulated rotation angle (for the rate-proportional noise)
             ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2), abs(st[S_DQ]))
             qa = (prm[P_GYRO_NOISE] ** 2 + (prm[P_GYRO_SCALE] * ang / T) ** 2) * T
-            _propagate_cov(P, phi, T, qa, prm[P_BIAS_RW] ** 2 * T, F)
+            _propagate_cov(P, phi, T, qa, prm[P_BIAS_RW] ** 2 * T, F, tmp6)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
         st[S_INIT] = 1.0
@@ -377,10 +373,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 st[S_NREST] += 1
                 if is_upd:
                     r_rest = prm[P_REST_NOISE] ** 2
-                    gk = (gk0, gk1, gk2)
                     for i in range(3):
                         s_ = P[3 + i, 3 + i] + r_rest
-                        yy = gk[i] - st[4 + i]
+                        yy = (gk0 if i == 0 else (gk1 if i == 1 else gk2)) - st[4 + i]
                         for j in range(6):
                             dx[j] = P[j, 3 + i] / s_ * yy
                         for a_ in range(6):
@@ -409,7 +404,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 if na > 0 and (not rej or force):
                     h0[0], h0[1], h0[2] = -R[2, 0], -R[2, 1], -R[2, 2]
                     y[0], y[1], y[2] = ax / na - h0[0], ay / na - h0[1], az / na - h0[2]
-                    ok, nis = _vec_update(P, h0, y, prm[P_ACC_NOISE] ** 2, prm[P_ACC_NIS], force, dx)
+                    ok, nis = _vec_update(P, h0, y, prm[P_ACC_NOISE] ** 2, prm[P_ACC_NIS], force, dx, Hs, Ms, Ks)
                     if ok:
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)
@@ -443,14 +438,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 elif mag_mode == 1:
                     r2[0], r2[1], r2[2] = R[2, 0], R[2, 1], R[2, 2]
                     yh = -np.arctan2(mw1, mw0)  # heading error: the horizontal field should point north
-                    _heading_update(P, r2, yh, prm[P_MAG_NOISE] ** 2, dx)
+                    _heading_update(P, r2, yh, prm[P_MAG_NOISE] ** 2, dx, m6, k6)
                     _apply_correction(st, dx)
                     flag |= F_MAG_USED
                 else:
                     for i in range(3):
                         h0[i] = R[0, i] * st[S_MREF] + R[1, i] * st[S_MREF + 1] + R[2, i] * st[S_MREF + 2]
                     y[0], y[1], y[2] = mx / nm - h0[0], my / nm - h0[1], mz / nm - h0[2]
-                    ok, nis = _vec_update(P, h0, y, prm[P_MAG_NOISE] ** 2, 0.0, True, dx)
+                    ok, nis = _vec_update(P, h0, y, prm[P_MAG_NOISE] ** 2, 0.0, True, dx, Hs, Ms, Ks)
                     _apply_correction(st, dx)
                     flag |= F_MAG_USED
         # ---------------- outputs ----------------
@@ -501,6 +496,12 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, 
     p_s[n - 1] = p_f[n - 1]
     Pp = np.empty((6, 6))
     d = np.empty(6)
+    tmp6 = np.empty((6, 6))  # scratch, allocated once per call
+    FP = np.empty((6, 6))
+    L = np.zeros((6, 6))
+    GT = np.empty((6, 6))
+    GD = np.empty((6, 6))
+    dxs = np.empty(6)
     for k in range(n - 2, -1, -1):
         dt = t[k + 1] - t[k]
         gap = dt > gap_dt
@@ -522,20 +523,38 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, 
                 Pp[i, j] = p_f[k, i, j]
         T = dt if dt > 0 else 0.0
         wn2 = w0 * w0 + w1 * w1 + w2 * w2 if not gap else 0.0
-        _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F)
+        _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F, tmp6)
         if gap:
             inc = (gap_rate * dt) ** 2
             for i in range(3):
                 Pp[i, i] = min(Pp[i, i] + inc, 10.0)
-        # G = P_k Fᵀ Pp⁻¹  (solve Pp Gᵀ = F P_k)
-        PF = np.empty((6, 6))  # P_k Fᵀ
+        # G = P_k Fᵀ Pp⁻¹: Cholesky Pp = L Lᵀ, then Pp Gᵀ = F P_k column by column (no allocation)
         for i in range(6):
             for j in range(6):
                 s = 0.0
                 for m in range(6):
-                    s += p_f[k, i, m] * F[j, m]
-                PF[i, j] = s
-        G = np.linalg.solve(Pp, PF.T).T
+                    s += F[i, m] * p_f[k, m, j]
+                FP[i, j] = s
+        for j in range(6):
+            for i in range(j, 6):
+                s = Pp[i, j]
+                for m in range(j):
+                    s -= L[i, m] * L[j, m]
+                if i == j:
+                    L[j, j] = np.sqrt(max(s, 1e-300))
+                else:
+                    L[i, j] = s / L[j, j]
+        for c in range(6):  # column c of Gᵀ
+            for i in range(6):
+                s = FP[i, c]
+                for m in range(i):
+                    s -= L[i, m] * GT[m, c]
+                GT[i, c] = s / L[i, i]
+            for i in range(5, -1, -1):
+                s = GT[i, c]
+                for m in range(i + 1, 6):
+                    s -= L[m, i] * GT[m, c]
+                GT[i, c] = s / L[i, i]
         # difference x^s_{k+1} ⊖ x⁻_{k+1}
         c0, c1, c2, c3 = _qmul(qp0, -qp1, -qp2, -qp3, q_s[k + 1, 0], q_s[k + 1, 1], q_s[k + 1, 2], q_s[k + 1, 3])
         if c0 < 0:
@@ -543,15 +562,32 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, 
         d[0], d[1], d[2] = 2 * c1, 2 * c2, 2 * c3
         for i in range(3):
             d[3 + i] = b_s[k + 1, i] - b_f[k, i]
-        dx = G @ d
-        a0, a1, a2, a3 = _qmul(q_f[k, 0], q_f[k, 1], q_f[k, 2], q_f[k, 3], 1.0, 0.5 * dx[0], 0.5 * dx[1],
-                               0.5 * dx[2])
+        for i in range(6):  # dx = G d, G[i, m] = GT[m, i]
+            s = 0.0
+            for m in range(6):
+                s += GT[m, i] * d[m]
+            dxs[i] = s
+        a0, a1, a2, a3 = _qmul(q_f[k, 0], q_f[k, 1], q_f[k, 2], q_f[k, 3], 1.0, 0.5 * dxs[0], 0.5 * dxs[1],
+                               0.5 * dxs[2])
         nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
         q_s[k, 0], q_s[k, 1], q_s[k, 2], q_s[k, 3] = a0 / nq, a1 / nq, a2 / nq, a3 / nq
         for i in range(3):
-            b_s[k, i] = b_f[k, i] + dx[3 + i]
-        Ps = p_f[k] + G @ (p_s[k + 1] - Pp) @ G.T
-        p_s[k] = 0.5 * (Ps + Ps.T)
+            b_s[k, i] = b_f[k, i] + dxs[3 + i]
+        # P^s_k = P_k + G (P^s_{k+1} − Pp) Gᵀ
+        for i in range(6):
+            for j in range(6):
+                s = 0.0
+                for m in range(6):
+                    s += GT[m, i] * (p_s[k + 1, m, j] - Pp[m, j])
+                GD[i, j] = s
+        for i in range(6):
+            for j in range(i, 6):
+                s = 0.0
+                for m in range(6):
+                    s += GD[i, m] * GT[m, j]
+                v = 0.5 * (p_f[k, i, j] + p_f[k, j, i]) + s  # G D Gᵀ is symmetric: upper triangle mirrored
+                p_s[k, i, j] = v
+                p_s[k, j, i] = v
 
 
 # ================================================ Python API ================================================

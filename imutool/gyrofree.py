@@ -371,7 +371,7 @@ def planar_roll(t: np.ndarray, a1: np.ndarray, a2: np.ndarray, p1: np.ndarray, p
     Returns roll_accel (rad/s²), roll_rate (rad/s), roll (rad), cutoff_hz."""
     from scipy import signal  # noqa: PLC0415
 
-    from imutool.heave import bandpass_integrator, displacement_spectrum, heave_delayed  # noqa: PLC0415
+    from imutool.heave import bandpass_integrator, dominant_frequency, heave_delayed  # noqa: PLC0415
 
     lever = np.cross(np.asarray(p2, float) - np.asarray(p1, float), np.asarray(d, float))
     if abs(lever[0]) < 1e-6:
@@ -381,8 +381,10 @@ def planar_roll(t: np.ndarray, a1: np.ndarray, a2: np.ndarray, p1: np.ndarray, p
     fs = 1.0 / float(np.median(np.diff(t)))
     alpha = (np.asarray(a2, float) - np.asarray(a1, float)) / lever[0]
     if cutoff is None:
-        f, s = displacement_spectrum(alpha, fs, 0.03, min(5.0, 0.45 * fs))
-        cutoff = 0.3 * float(f[int(np.argmax(s))])
+        fd = dominant_frequency(alpha, fs, 0.03, min(5.0, 0.2 * fs))
+        if fd is None:
+            raise ImutoolError("planar mode: recording too short to find the dominant roll frequency")
+        cutoff = 0.3 * fd
     if causal:
         sos = bandpass_integrator(fs, cutoff, 3)
         roll = signal.sosfilt(sos, alpha - alpha[0])

@@ -189,6 +189,18 @@ def displacement_spectrum(a: np.ndarray, fs: float, fmin: float, fmax: float,
     return f[band], spec[band] / (2 * np.pi * f[band]) ** 4
 
 
+def dominant_frequency(a: np.ndarray, fs: float, fmin: float = 0.03, fmax: float = 2.0) -> float | None:
+    """Dominant heave frequency (Hz) of a whole record: the acceleration-spectrum peak locates the wave band
+    (low-frequency accelerometer drift must not win), then the displacement-spectrum peak above 0.35 × it."""
+    dec = max(1, int(fs // (5 * fmax)))
+    fw, sw = displacement_spectrum(np.asarray(a, float)[::dec], fs / dec, fmin, fmax, pad=1)
+    if len(fw) <= 4:
+        return None
+    fv = float(fw[int(np.argmax(sw * (2 * np.pi * fw) ** 4))])
+    inb = fw >= 0.35 * fv
+    return float(fw[inb][int(np.argmax(sw[inb]))])
+
+
 def _peaks(f: np.ndarray, s: np.ndarray, n: int, min_rel: float = 0.05) -> np.ndarray:
     """The n strongest local maxima (parabolic refinement), at least 5 % of the largest, ascending."""
     if len(s) < 3:
@@ -622,14 +634,7 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     f_first = float(tr.dominant[0])
     fc = float(cutoff) if cutoff else cutoff_ratio * f_first
     # delayed output: whole-record dominant frequency
-    fw, sw = displacement_spectrum(a[:: max(1, int(fs // (5 * fmax)))], fs / max(1, int(fs // (5 * fmax))),
-                                   fmin, fmax, pad=1)
-    if len(fw) > 4:
-        fv = float(fw[int(np.argmax(sw * (2 * np.pi * fw) ** 4))])  # acceleration spectrum: drift must not win
-        inb = fw >= 0.35 * fv
-        f_rec = float(fw[inb][int(np.argmax(sw[inb]))])
-    else:
-        f_rec = f_first
+    f_rec = dominant_frequency(a, fs, fmin, fmax) or f_first
     fcd = float(delayed_cutoff) if delayed_cutoff else 0.35 * f_rec
     hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lowpass)
     sos = bandpass_integrator(fs, fc, order)

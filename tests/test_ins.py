@@ -157,12 +157,14 @@ def test_cli_track_plot_and_summary(tmp_path):
     assert png.stat().st_size > 10_000
 
 
+@pytest.mark.parametrize("detector", ["shoe", "paper"])
 @pytest.mark.parametrize("name,limit", [("short_walk.csv", 0.082), ("long_walk.csv", 0.421)])
-def test_real_closed_loops(shared, name, limit):
-    """x-io Gait-Tracking loops: the foot returns to its start; x-io's own figures are 82 mm and 421 mm."""
+def test_real_closed_loops(shared, name, limit, detector):
+    """x-io Gait-Tracking loops: the foot returns to its start; x-io's own figures are 82 mm and 421 mm.
+    Default settings for both files and both detectors (no per-file tuning)."""
     rec, rep = formats.read(shared("xio_gait_tracking", name)).validated(duplicates="drop")
     assert rep.duplicates > 0  # the known logging quirk is handled, not ignored
-    out, _ = ins(rec, config=InsConfig(height_update=True))
+    out, _ = ins(rec, detector=detector, config=InsConfig(height_update=True))
     ev = evaluate_position(out)
     assert ev["final_error_m"] <= limit, ev
     assert ev["distance_m"] > (20.0 if name.startswith("short") else 50.0)

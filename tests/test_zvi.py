@@ -95,9 +95,9 @@ def test_bad_input():
         detect_zvi(t, bad, g, "shoe")
 
 
-def test_cli_writes_interval_table_and_plot(tmp_path, sim):
+def test_cli_writes_interval_table_and_plot(tmp_path):
     src = tmp_path / "walk.csv"
-    formats.write(sim, src)
+    formats.write(walk(seed=11, n_steps=4), src)
     out = tmp_path / "iv.csv"
     png = tmp_path / "zvi.png"
     r = CliRunner().invoke(cli, ["zvi", str(src), "-o", str(out), "--detector", "paper", "--plot", str(png),
@@ -115,7 +115,7 @@ def test_cli_writes_interval_table_and_plot(tmp_path, sim):
 
 def test_cli_rejects_option_of_other_detector(tmp_path, sim):
     src = tmp_path / "walk.csv"
-    formats.write(sim.select(slice(0, 2000)), src)
+    formats.write(sim.select(slice(0, 1000)), src)
     from imutool.cli import main
 
     with pytest.raises(SystemExit) as e:
