@@ -132,7 +132,7 @@ def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
 
 
 @njit(cache=True, inline="always")
-def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) -> float:
+def decimal_to_double(w: np.uint64, q: int) -> float:
     """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""
     if w == _U0:
         return 0.0
@@ -166,7 +166,7 @@ def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) 
         w <<= _U1
     i = q - _W_MIN
     # 64x64 -> 128-bit products, written out (numba calls in this hot path cost more than the work)
-    b = t_hi[i]
+    b = T_HI[i]
     a0 = w & _M32
     a1 = w >> _U32
     b0 = b & _M32
@@ -178,7 +178,7 @@ def decimal_to_double(w: np.uint64, q: int, t_hi: np.ndarray, t_lo: np.ndarray) 
     lo = (mid << _U32) | (p00 & _M32)
     hi = a1 * b1 + (p01 >> _U32) + (p10 >> _U32) + (mid >> _U32)
     if (hi & _M9) == _M9:
-        b = t_lo[i]
+        b = T_LO[i]
         b0 = b & _M32
         b1 = b >> _U32
         p00 = a0 * b0
@@ -358,7 +358,7 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
                     if many:
                         fstat = _FALLBACK
                     else:
-                        val = decimal_to_double(w, q, t_hi, t_lo)
+                        val = decimal_to_double(w, q)
                         if neg:
                             val = -val
             else:
@@ -446,17 +446,17 @@ def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
 
 
 @njit(cache=True, inline="always")
-def _digits17(m: np.uint64, e2: int, e10: int, t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> np.uint64:
+def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     """≈ round(m·2^e2 · 10^(16 - e10)) (within ±1) for an integer m < 2^53."""
     k = 16 - e10
     i = k - _W_MIN
-    h1, l1 = _mul128(m, t_hi[i])
-    h2, _l2 = _mul128(m, t_lo[i])
+    h1, l1 = _mul128(m, T_HI[i])
+    h2, _l2 = _mul128(m, T_LO[i])
     lo = l1 + h2
     hi = h1
     if lo < h2:
         hi += _U1
-    s = -(t_exp[i] + e2 + k + 64)
+    s = -(T_EXP[i] + e2 + k + 64)
     if s <= 0:
         return _MAXU
     if s > 127:
@@ -465,8 +465,7 @@ def _digits17(m: np.uint64, e2: int, e10: int, t_hi: np.ndarray, t_lo: np.ndarra
 
 
 @njit(cache=True, inline="always")
-def shortest_digits(ax: float, b: np.uint64, t_hi: np.ndarray, t_lo: np.ndarray,
-                    t_exp: np.ndarray) -> tuple[np.uint64, int, int]:
+def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
     """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed.
 
     ``b`` is the bit pattern of ax (> 0, finite). Tries 15, then 16, then 17 significant digits.
@@ -482,13 +481,13 @@ def shortest_digits(ax: float, b: np.uint64, t_hi: np.ndarray, t_lo: np.ndarray,
         e10 = ((e2 + 52) * 1262611) >> 22  # ⌊(e2+52)·log10 2⌋
         if e10 + 1 <= 309 and ax >= P10F[e10 + 1 + 307]:
             e10 += 1
-    d = _digits17(m, e2, e10, t_hi, t_lo, t_exp)
+    d = _digits17(m, e2, e10)
     if d >= _E17:
         e10 += 1
-        d = _digits17(m, e2, e10, t_hi, t_lo, t_exp)
+        d = _digits17(m, e2, e10)
     elif d < _E16:
         e10 -= 1
-        d = _digits17(m, e2, e10, t_hi, t_lo, t_exp)
+        d = _digits17(m, e2, e10)
     if d >= _E17 or d < _E16:
         return _U0, 0, 0
     # 15 digits
@@ -497,7 +496,7 @@ def shortest_digits(ax: float, b: np.uint64, t_hi: np.ndarray, t_lo: np.ndarray,
     if c >= _E15:
         c = c // _U10
         e += 1
-    if decimal_to_double(c, e - 14, t_hi, t_lo) == ax:
+    if decimal_to_double(c, e - 14) == ax:
         return c, 15, e
     # 16 digits
     c = (d + _U5) // _U10
@@ -505,91 +504,14 @@ def shortest_digits(ax: float, b: np.uint64, t_hi: np.ndarray, t_lo: np.ndarray,
     if c >= _E16:
         c = c // _U10
         e += 1
-    if decimal_to_double(c, e - 15, t_hi, t_lo) == ax:
+    if decimal_to_double(c, e - 15) == ax:
         return c, 16, e
     # 17 digits: d, or its neighbour
     for delta in range(3):
         c = d if delta == 0 else (d - _U1 if delta == 1 else d + _U1)
-        if decimal_to_double(c, e10 - 16, t_hi, t_lo) == ax:
+        if decimal_to_double(c, e10 - 16) == ax:
             return c, 17, e10
     return _U0, 0, 0
-
-
-@njit(cache=True, inline="always")
-def _emit(x: float, b: np.uint64, out: np.ndarray, p: int, tmp: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray,
-          t_exp: np.ndarray) -> int:
-    """Write x at out[p:]; returns the new position (-1: could not format; Python does it)."""
-    if x != x:
-        return p
-    if (b >> _U63) != _U0:
-        out[p] = 45
-        p += 1
-        ax = -x
-        b = b & _ABS
-    else:
-        ax = x
-    if ax == 0.0:
-        out[p] = 48
-        return p + 1
-    if ax == math.inf:
-        out[p] = 105
-        out[p + 1] = 110
-        out[p + 2] = 102
-        return p + 3
-    c, nd, e = shortest_digits(ax, b, t_hi, t_lo, t_exp)
-    if nd == 0:
-        return -1
-    while nd > 1 and c % _U10 == _U0:
-        c = c // _U10
-        nd -= 1
-    for k in range(nd - 1, -1, -1):
-        tmp[k] = np.uint8(48 + int(c % _U10))
-        c = c // _U10
-    if -4 <= e < 16:
-        if e >= 0:
-            for k in range(nd):
-                if k == e + 1:
-                    out[p] = 46
-                    p += 1
-                out[p] = tmp[k]
-                p += 1
-            for _k in range(nd, e + 1):
-                out[p] = 48
-                p += 1
-        else:
-            out[p] = 48
-            out[p + 1] = 46
-            p += 2
-            for _k in range(-e - 1):
-                out[p] = 48
-                p += 1
-            for k in range(nd):
-                out[p] = tmp[k]
-                p += 1
-    else:
-        out[p] = tmp[0]
-        p += 1
-        if nd > 1:
-            out[p] = 46
-            p += 1
-            for k in range(1, nd):
-                out[p] = tmp[k]
-                p += 1
-        out[p] = 101
-        p += 1
-        if e < 0:
-            out[p] = 45
-            e = -e
-        else:
-            out[p] = 43
-        p += 1
-        if e >= 100:
-            out[p] = 48 + e // 100
-            p += 1
-        out[p] = 48 + (e // 10) % 10
-        out[p + 1] = 48 + e % 10
-        p += 2
-    return p
 
 
 MAX_FIELD_BYTES = 26  # sign, 17 digits, point, up to 4 leading zeros or 'e-308', separator
@@ -599,10 +521,12 @@ MAX_FIELD_BYTES = 26  # sign, 17 digits, point, up to 4 leading zeros or 'e-308'
 def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
                  t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[int, int]:
     """Format rows data[r0:r1] (``bits`` = data.view(uint64)) as CSV lines into ``out`` (needs
-    (r1-r0)·(ncol·MAX_FIELD_BYTES + 1) bytes).
+    (r1-r0)·(ncol·MAX_FIELD_BYTES + 1) bytes). Layout as ``repr``: positional for 1e-4 ≤ |x| < 1e16, else
+    ``d.ddde±XX``; integers without a trailing ``.0``; NaN = empty field; ±inf as ``inf``/``-inf``.
 
-    Returns (bytes written, number of values that need Python's repr; their (row, col) go to ``fails``,
-    their field is left empty — the caller re-formats those rows).
+    Returns (bytes written, number of values that could not be formatted — never seen; their (row, col) go
+    to ``fails`` and the caller re-formats those rows with Python's repr). The tables are module constants;
+    the trailing table arguments are kept for a stable signature.
     """
     ncol = data.shape[1]
     tmp = np.empty(24, np.uint8)
@@ -613,14 +537,84 @@ def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int,
             if j:
                 out[p] = sep
                 p += 1
-            q = _emit(data[r, j], bits[r, j], out, p, tmp, t_hi, t_lo, t_exp)
-            if q < 0:
+            x = data[r, j]
+            if x != x:
+                continue
+            b = bits[r, j]
+            if (b >> _U63) != _U0:
+                out[p] = 45
+                p += 1
+                ax = -x
+                b = b & _ABS
+            else:
+                ax = x
+            if ax == 0.0:
+                out[p] = 48
+                p += 1
+                continue
+            if ax == math.inf:
+                out[p] = 105
+                out[p + 1] = 110
+                out[p + 2] = 102
+                p += 3
+                continue
+            c, nd, e = shortest_digits(ax, b)
+            if nd == 0:
                 if nf < fails.shape[0]:
                     fails[nf, 0] = r
                     fails[nf, 1] = j
                 nf += 1
+                continue
+            while nd > 1 and c % _U10 == _U0:
+                c = c // _U10
+                nd -= 1
+            for k in range(nd - 1, -1, -1):
+                tmp[k] = np.uint8(48 + int(c % _U10))
+                c = c // _U10
+            if -4 <= e < 16:
+                if e >= 0:
+                    for k in range(nd):
+                        if k == e + 1:
+                            out[p] = 46
+                            p += 1
+                        out[p] = tmp[k]
+                        p += 1
+                    for _k in range(nd, e + 1):
+                        out[p] = 48
+                        p += 1
+                else:
+                    out[p] = 48
+                    out[p + 1] = 46
+                    p += 2
+                    for _k in range(-e - 1):
+                        out[p] = 48
+                        p += 1
+                    for k in range(nd):
+                        out[p] = tmp[k]
+                        p += 1
             else:
-                p = q
+                out[p] = tmp[0]
+                p += 1
+                if nd > 1:
+                    out[p] = 46
+                    p += 1
+                    for k in range(1, nd):
+                        out[p] = tmp[k]
+                        p += 1
+                out[p] = 101
+                p += 1
+                if e < 0:
+                    out[p] = 45
+                    e = -e
+                else:
+                    out[p] = 43
+                p += 1
+                if e >= 100:
+                    out[p] = 48 + e // 100
+                    p += 1
+                out[p] = 48 + (e // 10) % 10
+                out[p + 1] = 48 + e % 10
+                p += 2
         out[p] = 10
         p += 1
     return p, nf

@@ -121,7 +121,7 @@ class EkfParams:
 
 # ================================================ numba kernels ================================================
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
             a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
@@ -129,7 +129,7 @@ def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
             a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rotvec_quat(x, y, z):
     """Unit quaternion of the rotation vector (x, y, z) rad (exact exponential)."""
     a = np.sqrt(x * x + y * y + z * z)
@@ -139,7 +139,7 @@ def _rotvec_quat(x, y, z):
     return np.cos(0.5 * a), s * x, s * y, s * z
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rmat(q0, q1, q2, q3, r):
     r[0, 0] = 1 - 2 * (q2 * q2 + q3 * q3)
     r[0, 1] = 2 * (q1 * q2 - q0 * q3)
@@ -152,7 +152,7 @@ def _rmat(q0, q1, q2, q3, r):
     r[2, 2] = 1 - 2 * (q1 * q1 + q2 * q2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _propagate_cov(P, phi, T, qa, qb, F, tmp):
     """P ← F P Fᵀ + Q with F = [[Φ, −T I], [0, I]], Q = diag(qa I, qb I). F (returned filled) and tmp: 6×6
     scratch preallocated by the caller (no allocation per sample)."""
@@ -193,7 +193,7 @@ def _propagate_cov(P, phi, T, qa, qb, F, tmp):
             P[j, i] = m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _vec_update(P, h0, y, sig2, nis_gate, force, dx, H, M, K):
     """Update with a unit-vector measurement: H = [[h0×], 0], R = sig2·I. Returns (accepted, NIS); dx filled.
     H (3,3), M (6,3), K (6,3): scratch preallocated by the caller."""
@@ -249,7 +249,7 @@ def _vec_update(P, h0, y, sig2, nis_gate, force, dx, H, M, K):
     return True, nis
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _heading_update(P, r2, y, sig2, dx, M, K):
     """Scalar heading update H = [r2, 0] with the correction projected on the world vertical (Joseph form).
     M, K: (6,) scratch preallocated by the caller."""
@@ -272,7 +272,7 @@ def _heading_update(P, r2, y, sig2, dx, M, K):
             P[j, i] = v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)

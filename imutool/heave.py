@@ -602,14 +602,15 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
                    min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0, bandwidth: float = 0.03,
                    meas_noise: float = 0.002, residual_noise: float = 0.02, delayed_cutoff: float | None = None,
                    lowpass: float | None = None, settle_periods: float = 4.0,
-                   cutoff_ratio: float = 0.2) -> HeaveResult:
+                   cutoff_ratio: float = 0.2, lowpass_ratio: float = 4.0) -> HeaveResult:
     """Heave (m, positive up) from vertical acceleration a_up (m/s², positive up) sampled at times t (s).
 
     ``harmonics``: oscillators in the model (default 3 for ``paper``, 5 for ``realtime``).
     ``cutoff`` (Hz) of the causal band-pass: default ``cutoff_ratio`` (0.2) × the first tracked dominant
     frequency (the value known
     after ``min_window_s``; the filter is fixed from then on). ``delayed_cutoff`` default 0.35 × the
-    whole-record dominant frequency (the delayed output is offline anyway).
+    whole-record dominant frequency (the delayed output is offline anyway); its zero-phase low-pass ``lowpass``
+    Hz defaults to ``lowpass_ratio`` (4) × that frequency.
     """
     if method not in METHODS:
         raise ImutoolError(f"unknown heave method {method!r}; choose one of {', '.join(METHODS)}")
@@ -636,7 +637,8 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     # delayed output: whole-record dominant frequency
     f_rec = dominant_frequency(a, fs, fmin, fmax) or f_first
     fcd = float(delayed_cutoff) if delayed_cutoff else 0.35 * f_rec
-    hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lowpass)
+    lp = lowpass if lowpass else min(lowpass_ratio * f_rec, 0.45 * fs)
+    hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lp)
     sos = bandpass_integrator(fs, fc, order)
     a0 = a - a[0]
     d = signal.sosfilt(sos, a0)
@@ -686,6 +688,7 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         "latency": latency,
         "delayed_cutoff_hz": round(fcd, 5),
         "delayed_latency_s": round(lat_d, 2),
+        "delayed_lowpass_hz": round(float(lp), 4),
         "settle_time_s": round(float(t_settle - t[0]), 2),
         "frequency_updates": int(len(tr.start)),
         "nan_samples_filled": nan_filled,
