@@ -295,39 +295,56 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
             if p < end and (buf[p] == 45 or buf[p] == 43):
                 neg = buf[p] == 45
                 p += 1
+            # fast scan: every digit into w (exact while the token has at most 19 digits in all)
             w = _U0
-            nd = 0
-            q = 0
-            digits = 0
-            many = False
+            p0 = p
             while p < end:
                 d = int(buf[p]) - 48
                 if d < 0 or d > 9:
                     break
-                digits += 1
-                if w != _U0 or d != 0:
-                    if nd < 19:
-                        w = w * _U10 + _u64(d)
-                        nd += 1
-                    else:
-                        many = True
-                        q += 1
+                w = w * _U10 + _u64(d)
                 p += 1
+            digits = p - p0
+            q = 0
             if p < end and buf[p] == dec:
                 p += 1
+                p1 = p
                 while p < end:
                     d = int(buf[p]) - 48
                     if d < 0 or d > 9:
                         break
-                    digits += 1
+                    w = w * _U10 + _u64(d)
+                    p += 1
+                q = p1 - p
+                digits += p - p1
+            many = False
+            if digits > 19:
+                # long token: keep the first 19 significant digits (leading zeros are not significant)
+                p = p0
+                w = _U0
+                nd = 0
+                q = 0
+                seen_dec = False
+                while p < end:
+                    ch = int(buf[p])
+                    if ch == dec and not seen_dec:
+                        seen_dec = True
+                        p += 1
+                        continue
+                    d = ch - 48
+                    if d < 0 or d > 9:
+                        break
                     if w != _U0 or d != 0:
                         if nd < 19:
                             w = w * _U10 + _u64(d)
                             nd += 1
-                            q -= 1
+                            if seen_dec:
+                                q -= 1
                         else:
                             many = True
-                    else:
+                            if not seen_dec:
+                                q += 1
+                    elif seen_dec:
                         q -= 1
                     p += 1
             fstat = _OK
@@ -569,7 +586,7 @@ def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int,
                 c = c // _U10
                 nd -= 1
             for k in range(nd - 1, -1, -1):
-                tmp[k] = np.uint8(48 + int(c % _U10))
+                tmp[k] = 48 + int(c % _U10)
                 c = c // _U10
             if -4 <= e < 16:
                 if e >= 0:

@@ -50,14 +50,16 @@ S_REST_T, S_AREJ_T, S_COUNT, S_INIT = 51, 52, 53, 54
 S_DQ = 55  # accumulated rotation since the last covariance propagation (4)
 S_TACC = 59  # accumulated time since the last covariance propagation
 S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
-STATE_SIZE = 66
+S_QI, S_LP1, S_LP2, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass stages in I (3+3)
+STATE_SIZE = 77
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
 P_ACC_GATE, P_ACC_NIS, P_MAG_NORM_GATE, P_MAG_DIP_GATE = 4, 5, 6, 7
 P_GRAVITY, P_REST_GYRO, P_REST_ACC, P_REST_TIME, P_REST_NOISE = 8, 9, 10, 11, 12
 P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT, P_GYRO_SCALE = 13, 14, 15, 16
-N_PARAMS = 17
+P_ACC_TAU, P_GYRO_PREV_W, P_ACC_ADAPT = 17, 18, 19
+N_PARAMS = 20
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
@@ -84,6 +86,9 @@ class EkfParams:
     gap_factor: float = 5.0  # a step longer than gap_factor × median dt is a gap
     gap_rate_sigma: float = 0.2  # rad/s  attitude variance growth over a gap: (σ·gap)²
     reject_timeout: float = 3.0  # s  accel forced back in after this long continuously rejected
+    accel_lp_tau: float = 3.0  # s  accel low-pass time constant in the quasi-inertial frame (≤ 0: raw accel)
+    accel_adapt: float = 0.0  # m/s²  accel σ scaled by (1 + (| ‖a‖ − g | / accel_adapt)²)^½ (≤ 0: fixed σ)
+    gyro_integration: str = "rectangular"  # rate over (t_{k-1}, t_k]: ω_k (rectangular) or ½(ω_{k-1}+ω_k)
     update_every: int = 1  # paper's multi-rate scheme: P propagation + update every N samples (1 = full rate)
     mag_mode: str = "heading"  # heading | full | off
     init_roll_pitch_sigma_deg: float = 5.0
@@ -110,7 +115,17 @@ class EkfParams:
         p[P_GAP_RATE] = self.gap_rate_sigma
         p[P_REJ_TIMEOUT] = self.reject_timeout
         p[P_GYRO_SCALE] = self.gyro_scale_noise
+        p[P_ACC_TAU] = self.accel_lp_tau
+        p[P_GYRO_PREV_W] = self.gyro_prev_weight()
+        p[P_ACC_ADAPT] = self.accel_adapt
         return p
+
+    def gyro_prev_weight(self) -> float:
+        try:
+            return {"trapezoid": 0.5, "rectangular": 0.0}[self.gyro_integration]
+        except KeyError:
+            raise ImutoolError(f"gyro integration {self.gyro_integration!r}: expected trapezoid or rectangular") \
+                from None
 
     def mag_mode_code(self) -> int:
         try:
@@ -132,9 +147,11 @@ def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
 @njit(cache=True, inline="always")
 def _rotvec_quat(x, y, z):
     """Unit quaternion of the rotation vector (x, y, z) rad (exact exponential)."""
-    a = np.sqrt(x * x + y * y + z * z)
-    if a < 1e-12:
-        return 1.0, 0.5 * x, 0.5 * y, 0.5 * z
+    a2 = x * x + y * y + z * z
+    if a2 < 4e-4:  # |a| < 0.02 rad: Taylor series, truncation < 1e-15 (no sin/cos per sample)
+        s = 0.5 - a2 * (1.0 / 48.0) + a2 * a2 * (1.0 / 3840.0)
+        return 1.0 - a2 * 0.125 + a2 * a2 * (1.0 / 384.0), s * x, s * y, s * z
+    a = np.sqrt(a2)
     s = np.sin(0.5 * a) / a
     return np.cos(0.5 * a), s * x, s * y, s * z
 
@@ -309,6 +326,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     k6 = np.empty(6)
     g = prm[P_GRAVITY]
     store = p_store.shape[0] == n
+    use_lp = prm[P_ACC_TAU] > 0
+    wp = prm[P_GYRO_PREV_W]  # weight of the previous gyro sample over the step (0.5: trapezoid, 0: rectangular)
+    wc = 1.0 - wp
+    RI = np.empty((3, 3))
+    dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
+    dip_lo = np.sin(max(dip_ref - prm[P_MAG_DIP_GATE], -0.5 * np.pi)) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi \
+        else -2.0
+    dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
     for k in range(n):
         flag = 0
         gk0, gk1, gk2 = gyro[k, 0], gyro[k, 1], gyro[k, 2]
@@ -320,9 +345,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2] = gk0, gk1, gk2
         dt = t[k] - st[S_TPREV]
         # ---------------- predict (eq. 2–6, 10) ----------------
-        w0 = 0.5 * (gk0 + st[S_GPREV]) - st[4]
-        w1 = 0.5 * (gk1 + st[S_GPREV + 1]) - st[5]
-        w2 = 0.5 * (gk2 + st[S_GPREV + 2]) - st[6]
+        w0 = wc * gk0 + wp * st[S_GPREV] - st[4]
+        w1 = wc * gk1 + wp * st[S_GPREV + 1] - st[5]
+        w2 = wc * gk2 + wp * st[S_GPREV + 2] - st[6]
         if not (np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)):
             w0, w1, w2 = 0.0, 0.0, 0.0
         gap = dt > prm[P_GAP_DT]
@@ -335,6 +360,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             a0, a1, a2, a3 = _qmul(st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], e0, e1, e2, e3)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = a0, a1, a2, a3
             st[S_TACC] += dt
+            if use_lp:
+                a0, a1, a2, a3 = _qmul(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], e0, e1, e2, e3)
+                nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+                st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3] = a0 / nq, a1 / nq, a2 / nq, a3 / nq
         if gap:
             st[S_NGAPS] += 1
             inc = (prm[P_GAP_RATE] * dt) ** 2
@@ -353,8 +382,11 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 for j in range(3):
                     phi[i, j] = R[j, i]  # Φ = ΔRᵀ
             # mean rate over T from the accumulated rotation angle (for the rate-proportional noise)
-            ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2), abs(st[S_DQ]))
-            qa = (prm[P_GYRO_NOISE] ** 2 + (prm[P_GYRO_SCALE] * ang / T) ** 2) * T
+            qa = prm[P_GYRO_NOISE] ** 2 * T
+            if prm[P_GYRO_SCALE] > 0:
+                ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2),
+                                     abs(st[S_DQ]))
+                qa += (prm[P_GYRO_SCALE] * ang / T) ** 2 * T
             _propagate_cov(P, phi, T, qa, prm[P_BIAS_RW] ** 2 * T, F, tmp6)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
@@ -385,26 +417,61 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                                 P[b_, a_] = v
                         _apply_correction(st, dx)
                     _rmat(st[0], st[1], st[2], st[3], R)
+        # ---------------- accelerometer: kinematic compensation, gate, quasi-inertial low-pass ----------------
+        rej = False
+        force = False
+        na = 0.0
+        dev_a = 0.0
+        if acc_ok:
+            if use_gnss and np.isfinite(sog[k]) and np.isfinite(cog[k]):
+                wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
+                c, s = np.cos(cog[k]), np.sin(cog[k])
+                sd = sogdot[k] if np.isfinite(sogdot[k]) else 0.0
+                an0 = sd * c - sog[k] * wr * s
+                an1 = sd * s + sog[k] * wr * c
+                ax -= R[0, 0] * an0 + R[1, 0] * an1
+                ay -= R[0, 1] * an0 + R[1, 1] * an1
+                az -= R[0, 2] * an0 + R[1, 2] * an1
+            na = np.sqrt(ax * ax + ay * ay + az * az)
+            dev_a = abs(na - g)
+            rej = (prm[P_ACC_GATE] > 0 and dev_a > prm[P_ACC_GATE]) or not na > 0
+            force = st[S_AREJ_T] >= prm[P_REJ_TIMEOUT]
+            if use_lp and (not rej or force):
+                # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
+                # (nearly) constant and translational acceleration averages out; two first-order stages τ/2.
+                _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                i0 = RI[0, 0] * ax + RI[0, 1] * ay + RI[0, 2] * az
+                i1 = RI[1, 0] * ax + RI[1, 1] * ay + RI[1, 2] * az
+                i2 = RI[2, 0] * ax + RI[2, 1] * ay + RI[2, 2] * az
+                if st[S_LPINIT] == 0.0:
+                    st[S_LP1], st[S_LP1 + 1], st[S_LP1 + 2] = i0, i1, i2
+                    st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2] = i0, i1, i2
+                    st[S_LPINIT] = 1.0
+                al = dt / (0.5 * prm[P_ACC_TAU] + dt) if dt > 0 else 0.0
+                st[S_LP1] += al * (i0 - st[S_LP1])
+                st[S_LP1 + 1] += al * (i1 - st[S_LP1 + 1])
+                st[S_LP1 + 2] += al * (i2 - st[S_LP1 + 2])
+                st[S_LP2] += al * (st[S_LP1] - st[S_LP2])
+                st[S_LP2 + 1] += al * (st[S_LP1 + 1] - st[S_LP2 + 1])
+                st[S_LP2 + 2] += al * (st[S_LP1 + 2] - st[S_LP2 + 2])
         if is_upd:
             st[S_NUPD] += 1
             # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
             if acc_ok:
-                if use_gnss and np.isfinite(sog[k]) and np.isfinite(cog[k]):
-                    wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
-                    c, s = np.cos(cog[k]), np.sin(cog[k])
-                    sd = sogdot[k] if np.isfinite(sogdot[k]) else 0.0
-                    an0 = sd * c - sog[k] * wr * s
-                    an1 = sd * s + sog[k] * wr * c
-                    ax -= R[0, 0] * an0 + R[1, 0] * an1
-                    ay -= R[0, 1] * an0 + R[1, 1] * an1
-                    az -= R[0, 2] * an0 + R[1, 2] * an1
-                na = np.sqrt(ax * ax + ay * ay + az * az)
-                rej = prm[P_ACC_GATE] > 0 and abs(na - g) > prm[P_ACC_GATE]
-                force = st[S_AREJ_T] >= prm[P_REJ_TIMEOUT]
-                if na > 0 and (not rej or force):
+                if not rej or force:
+                    if use_lp:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
+                        _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                        l0, l1, l2 = st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2]
+                        ax = RI[0, 0] * l0 + RI[1, 0] * l1 + RI[2, 0] * l2
+                        ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2
+                        az = RI[0, 2] * l0 + RI[1, 2] * l1 + RI[2, 2] * l2
+                        na = np.sqrt(ax * ax + ay * ay + az * az)
                     h0[0], h0[1], h0[2] = -R[2, 0], -R[2, 1], -R[2, 2]
                     y[0], y[1], y[2] = ax / na - h0[0], ay / na - h0[1], az / na - h0[2]
-                    ok, nis = _vec_update(P, h0, y, prm[P_ACC_NOISE] ** 2, prm[P_ACC_NIS], force, dx, Hs, Ms, Ks)
+                    sig2 = prm[P_ACC_NOISE] ** 2
+                    if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
+                        sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
+                    ok, nis = _vec_update(P, h0, y, sig2, prm[P_ACC_NIS], force, dx, Hs, Ms, Ks)
                     if ok:
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)
@@ -412,8 +479,6 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         flag |= F_ACC_USED
                     else:
                         rej = True
-                else:
-                    rej = True
                 if rej:
                     flag |= F_ACC_REJ
                     st[S_NAREJ] += 1
@@ -429,9 +494,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 if not rej and prm[P_MAG_NORM_GATE] > 0 and st[S_MNORM] > 0:
                     rej = abs(nm / st[S_MNORM] - 1.0) > prm[P_MAG_NORM_GATE]
                 if not rej and prm[P_MAG_DIP_GATE] > 0:
-                    dip = np.arcsin(min(1.0, max(-1.0, mw2 / nm)))
-                    dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
-                    rej = abs(dip - dip_ref) > prm[P_MAG_DIP_GATE]
+                    # |asin(m_z/|m|) − dip_ref| > gate ⇔ m_z/|m| outside [sin(dip_ref − gate), sin(dip_ref + gate)]
+                    sz = mw2 / nm
+                    rej = sz < dip_lo or sz > dip_hi
                 if rej:
                     flag |= F_MAG_REJ
                     st[S_NMREJ] += 1
@@ -454,11 +519,16 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         for i in range(3):
             b_out[k, i] = st[4 + i]
         # Euler-angle σ: δ(φ,θ,ψ) = E δθ, E the body-rate → Euler-rate matrix (ZYX)
+        # sin/cos of roll and pitch straight from R(q) (no transcendental per sample)
         q0, q1, q2, q3 = st[0], st[1], st[2], st[3]
-        roll = np.arctan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2))
+        r21, r22 = 2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2)
+        hr = np.sqrt(r21 * r21 + r22 * r22)
+        if hr > 1e-12:
+            sr, cr = r21 / hr, r22 / hr
+        else:
+            sr, cr = 0.0, 1.0
         sp = min(1.0, max(-1.0, 2 * (q0 * q2 - q3 * q1)))
         cp = max(np.sqrt(1 - sp * sp), 1e-6)
-        sr, cr = np.sin(roll), np.cos(roll)
         tp = sp / cp
         e00, e01, e02 = 1.0, sr * tp, cr * tp
         e11, e12 = cr, -sr
@@ -478,7 +548,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
 
 
 @njit(cache=True)
-def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, gap_rate, q_s, b_s, p_s):
+def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, gap_rate, gyro_prev_w, q_s, b_s, p_s):
     """Error-state Rauch–Tung–Striebel backward pass over a full-rate-covariance EKF run.
 
     With the filtered posterior (q_k, b_k, P_k) the prior at k+1 is recomputed (same prediction as the
@@ -507,9 +577,9 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, 
         gap = dt > gap_dt
         dti = gap_dt if gap else dt
         g0, g1 = gyro[k], gyro[k + 1]
-        w0 = 0.5 * (g0[0] + g1[0]) - b_f[k, 0]
-        w1 = 0.5 * (g0[1] + g1[1]) - b_f[k, 1]
-        w2 = 0.5 * (g0[2] + g1[2]) - b_f[k, 2]
+        w0 = gyro_prev_w * g0[0] + (1.0 - gyro_prev_w) * g1[0] - b_f[k, 0]
+        w1 = gyro_prev_w * g0[1] + (1.0 - gyro_prev_w) * g1[1] - b_f[k, 1]
+        w2 = gyro_prev_w * g0[2] + (1.0 - gyro_prev_w) * g1[2] - b_f[k, 2]
         if not (np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)):
             w0, w1, w2 = 0.0, 0.0, 0.0
         e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
@@ -654,6 +724,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) 
     st[S_MREF:S_MREF + 3] = mref
     st[S_MNORM] = mnorm
     st[S_DQ] = 1.0
+    st[S_QI] = 1.0
     return st
 
 
@@ -741,7 +812,7 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     p_s = np.empty((n, 6, 6))
     rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise, params.bias_rw,
                params.gap_factor * dt_nominal,
-               params.gap_rate_sigma, q_s, b_s, p_s)
+               params.gap_rate_sigma, params.gyro_prev_weight(), q_s, b_s, p_s)
     std = euler_std(q_s, p_s)
     out = AttitudeResult(t, q_s, b_s, std, res.flags.copy(), dict(res.summary), None)
     out.summary["smoothed"] = True

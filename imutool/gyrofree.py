@@ -475,3 +475,33 @@ def degenerate_examples() -> dict[str, Layout]:
 
 __all__ = [n for n in dir() if not n.startswith("_") and n not in ("itertools",)]
 del itertools
+
+
+def plot_rates(out: Recording, path: str, title: str = "gyro-free angular rate vs truth") -> None:
+    """PNG/PDF of ω estimate vs ``ref_gyro`` (rad/s) and the error per axis."""
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    from formats.atomic import atomic_path  # noqa: PLC0415
+
+    if "ref_gyro" not in out:
+        raise ImutoolError("plot needs ref_gyro (truth) in the output")
+    fig, ax = plt.subplots(3, 2, figsize=(11, 7), sharex=True)
+    for i, n in enumerate("xyz"):
+        ax[i, 0].plot(out.time, out["ref_gyro"][:, i], "k-", lw=2, label="truth")
+        ax[i, 0].plot(out.time, out["gyro"][:, i], "C0-", lw=0.8, label="EKF")
+        ax[i, 0].set_ylabel(f"ω{n} rad/s")
+        e = out["gyro"][:, i] - out["ref_gyro"][:, i]
+        ax[i, 1].plot(out.time, e, "C3-", lw=0.7)
+        ax[i, 1].fill_between(out.time, -out["gyro_std"][:, i], out["gyro_std"][:, i], color="C3", alpha=0.2)
+        ax[i, 1].set_ylabel(f"error rad/s (RMS {np.sqrt(np.mean(e**2)):.4f})")
+    ax[0, 0].legend()
+    ax[2, 0].set_xlabel("time s")
+    ax[2, 1].set_xlabel("time s (band: EKF 1σ)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=str(path).rsplit(".", 1)[-1], dpi=90)
+    plt.close(fig)

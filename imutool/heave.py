@@ -396,10 +396,13 @@ def heave_zero_phase_bandpass(a: np.ndarray, fs: float, low: float, high: float,
 
 
 def heave_envelope(a: np.ndarray, fs: float, period: float, lowpass: float | None = None) -> np.ndarray:
-    """The "traditional" method: (low-pass), double integration, subtract the envelope mid-line.
+    """The "traditional" method: (low-pass), bias (mean) removal, double integration, then the drift trend
+    = mid-line of the upper/lower envelopes is subtracted. Offline.
 
-    Upper/lower envelopes are cubic splines through the maxima/minima of the integrated displacement (peaks at
-    least 0.6 dominant periods apart). Offline."""
+    Envelopes are cubic splines through the maxima/minima of the integrated displacement (at least 0.6 dominant
+    periods apart). A bias random walk makes the double integral wander by metres, so that the oscillation has
+    no extrema at all; the wander is first reduced by a cubic spline through the means of consecutive
+    two-period blocks (a coarse trend the envelopes then refine)."""
     from scipy.interpolate import CubicSpline  # noqa: PLC0415
 
     x = np.asarray(a, float) - np.mean(a)
@@ -407,10 +410,16 @@ def heave_envelope(a: np.ndarray, fs: float, period: float, lowpass: float | Non
         x = signal.sosfiltfilt(signal.butter(4, lowpass, "lowpass", fs=fs, output="sos"), x)
     v = np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]))]) / fs
     d = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))]) / fs
+    idx = np.arange(len(d))
+    blk = max(4, int(round(2 * period * fs)))
+    nb = len(d) // blk
+    if nb >= 4:
+        centres = (np.arange(nb) + 0.5) * blk
+        means = d[: nb * blk].reshape(nb, blk).mean(1)
+        d = d - CubicSpline(centres, means)(idx)
     dist = max(1, int(0.6 * period * fs))
     up, _ = signal.find_peaks(d, distance=dist)
     lo, _ = signal.find_peaks(-d, distance=dist)
-    idx = np.arange(len(d))
     if len(up) < 2 or len(lo) < 2:
         return d - np.polyval(np.polyfit(idx, d, 2), idx)
     upper = CubicSpline(up, d[up])(idx)

@@ -98,17 +98,24 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _fmt_t(v: Any) -> str:
+    """Times: epoch stamps in full (ms resolution), short times as %g."""
+    if isinstance(v, float) and abs(v) >= 1e5:
+        return f"{v:.3f}"
+    return _fmt(v)
+
+
 def _lines(s: dict[str, Any]) -> list[str]:
     st = s["step_s"]
     out = [
         f"file:      {s['file']} ({s['format']})",
         f"rows:      {s['rows']}" + (f" ({s['rows_after_validation']} after validation)"
                                      if s["rows_after_validation"] != s["rows"] else ""),
-        f"time:      {_fmt(s['start_s'])} … {_fmt(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
+        f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
         f"rate:      {_fmt(s['rate_hz'])} Hz (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, "
         f"max {_fmt(st['max'])} s)",
         f"gaps:      {s['gaps']['count']}" + (f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
-                                              f"{_fmt(s['gaps']['first'][0]['start_s'])} s, "
+                                              f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
                                               f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
                                               if s["gaps"]["count"] else ""),
         f"duplicate timestamps: {s['duplicate_timestamps']} "

@@ -66,7 +66,7 @@ def _collect(path: str, wanted: tuple[str, ...], start: float | None, end: float
         t0 = None
         bucket = 1
         total = 0
-        for chunk in iter_csv(path, chunk_rows=1_000_000, columns=io.get("columns"), profile=io.get("profile")):
+        for chunk in iter_csv(path, chunk_rows=250_000, columns=io.get("columns"), profile=io.get("profile")):
             if template is None:
                 template = chunk
                 names = match_channels(list(chunk.channels), wanted, path)
