@@ -34,7 +34,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from formats import Recording  # noqa: E402
-from formats.csv import CsvWriter, iter_csv, read_csv, write_csv  # noqa: E402
+from formats.csv import CsvWriter, _threads, iter_csv, read_csv, write_csv  # noqa: E402
 
 
 # -- CSV ----------------------------------------------------------------------------------------------------
@@ -108,13 +108,16 @@ def _convert_child(src: str, dst: str) -> None:
 
 
 def bench_stream_convert(rows: int, kind: str, tmpdir: str) -> dict:
+    """Peak RSS of a child process converting a ``rows``-row CSV (VmHWM: ru_maxrss would include the parent's
+    size at fork, which Linux carries across exec)."""
     src = os.path.join(tmpdir, "big.csv")
     dst = os.path.join(tmpdir, "big_copy.csv")
     _write_big(src, rows, kind)
     code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import resource, time; "
             f"from benchmarks.io import _convert_child; c = time.process_time(); "
             f"_convert_child({src!r}, {dst!r}); "
-            f"print(time.process_time() - c, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+            f"hwm = [ln.split()[1] for ln in open('/proc/self/status') if ln.startswith('VmHWM')]; "
+            f"print(time.process_time() - c, hwm[0] if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
     w0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     wall = time.perf_counter() - w0
@@ -206,18 +209,20 @@ def print_bag(results: dict[str, dict[str, float]]) -> None:
 
 def run_csv(rows: int, baseline_rows: int, stream: bool, stream_rows: int) -> None:
     with tempfile.TemporaryDirectory(prefix="imutool-bench-") as tmp:
-        print(f"CSV, {rows} rows x 10 columns (rows/s of CPU time; wall time in brackets)")
-        print("| data | write rows/s | read rows/s | file MB | numpy.savetxt rows/s | numpy.loadtxt rows/s |")
-        print("| --- | ---: | ---: | ---: | ---: | ---: |")
+        print(f"CSV, {rows} rows x 10 columns; rows/s per wall-clock second and per CPU second (the kernels run in"
+              f" up to {_threads()} threads, so CPU time sums the threads)")
+        print("| data | write rows/s wall | write rows/s CPU | read rows/s wall | read rows/s CPU | file MB | "
+              "numpy.savetxt rows/s CPU | numpy.loadtxt rows/s CPU |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         for kind in ("sensor", "full"):
             rec = make_recording(rows, kind)
             path = os.path.join(tmp, f"{kind}.csv")
             w = bench_csv_write(rec, path)
             r = bench_csv_read(path, rows)
             b = bench_numpy_baselines(rec, path, min(baseline_rows, rows))
-            print(f"| {kind} | {w['rows_per_s']:,.0f} | {r['rows_per_s']:,.0f} | {w['mb']:.0f} | "
-                  f"{b['savetxt_rows_per_s']:,.0f} | {b['loadtxt_rows_per_s']:,.0f} |"
-                  f"   [wall write {w['wall_s']:.2f} s, read {r['wall_s']:.2f} s]")
+            print(f"| {kind} | {rows / w['wall_s']:,.0f} | {w['rows_per_s']:,.0f} | {rows / r['wall_s']:,.0f} | "
+                  f"{r['rows_per_s']:,.0f} | {w['mb']:.0f} | {b['savetxt_rows_per_s']:,.0f} | "
+                  f"{b['loadtxt_rows_per_s']:,.0f} |")
         if stream:
             s = bench_stream_convert(stream_rows, "sensor", tmp)
             print(f"streamed CSV->CSV conversion, {s['rows']:,} rows ({s['file_gb']:.2f} GB): "

@@ -18,6 +18,7 @@ import io
 import json
 import os
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -218,6 +219,40 @@ class _BlockParser:
         return out[:row]
 
 
+def _parse_parallel(hdr: CsvHeader, path: str, strict: bool, rep: ReadReport, buf: np.ndarray) -> np.ndarray:
+    """Parse a whole buffer; big buffers are cut at line ends into pieces parsed by threads (the kernel releases
+    the GIL). Bad-row line numbers are made absolute afterwards; ``strict`` parses in one piece."""
+    n = _threads()
+    if strict or n == 1 or buf.size < (8 << 20):
+        return _BlockParser(hdr, path, strict, rep).parse(buf, buf.size, _rows_hint(buf, buf.size))
+    cuts = [0]
+    for k in range(1, n):
+        c = int(buf.size * k // n)
+        nl = np.flatnonzero(buf[c: c + (1 << 20)] == 10)
+        if nl.size:
+            cuts.append(c + int(nl[0]) + 1)
+    cuts.append(buf.size)
+    cuts = sorted(set(cuts))
+    pieces = [buf[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    reps = [ReadReport() for _ in pieces]
+    parsers = [_BlockParser(hdr, path, False, r) for r in reps]
+    for p in parsers:
+        p.line = 0  # relative line numbers; made absolute below
+    with ThreadPoolExecutor(len(pieces)) as pool:
+        arrays = list(pool.map(lambda k: parsers[k].parse(pieces[k], pieces[k].size,
+                                                          _rows_hint(pieces[k], pieces[k].size)),
+                               range(len(pieces))))
+    base = hdr.data_line
+    for p, r in zip(parsers, reps, strict=True):
+        for msg in r.first_bad:
+            if len(rep.first_bad) < 5:
+                ln, _, rest = msg[5:].partition(":")
+                rep.first_bad.append(f"line {int(ln) + base}:{rest}")
+        rep.bad_rows += r.bad_rows
+        base += p.line
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+
 def _rows_hint(buf: np.ndarray, end: int) -> int:
     """Expected number of rows from the mean length of the first lines (over-estimated a little)."""
     head = buf[: min(end, 1 << 16)]
@@ -357,7 +392,7 @@ def read_csv(path: str, columns: str | None = None, profile: str | None = None,
         buf = np.fromfile(path, dtype=np.uint8, offset=hdr.data_offset)
     except OSError as e:
         raise ImutoolError(f"cannot read: {e.strerror}", path=path) from None
-    data = _BlockParser(hdr, path, strict, rep).parse(buf, buf.size, _rows_hint(buf, buf.size))
+    data = _parse_parallel(hdr, path, strict, rep, buf)
     del buf
     if data.shape[0] == 0:
         msg = "no data rows"
@@ -429,14 +464,34 @@ def _format_block(data: np.ndarray, r0: int, r1: int, sep: str) -> bytes:
     return out[:nbytes].tobytes()
 
 
+def _threads() -> int:
+    """Worker threads for the compiled kernels (they release the GIL): the usable cores, at most 4."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    return max(1, min(4, n))
+
+
 def _write_rows(f: Any, rec: Recording) -> None:
     if not len(rec):
         return
     blocks = _canonicalised(rec)
-    for r0 in range(0, len(rec), _WRITE_BLOCK_ROWS):
+
+    def one(r0: int) -> bytes:
         r1 = min(r0 + _WRITE_BLOCK_ROWS, len(rec))
         data = np.ascontiguousarray(np.hstack([b[r0:r1] for b in blocks]), dtype=np.float64)
-        f.write(_format_block(data, 0, r1 - r0, ","))
+        return _format_block(data, 0, r1 - r0, ",")
+
+    starts = range(0, len(rec), _WRITE_BLOCK_ROWS)
+    nthreads = _threads()
+    if nthreads == 1 or len(starts) < 2:
+        for r0 in starts:
+            f.write(one(r0))
+        return
+    with ThreadPoolExecutor(nthreads) as pool:  # blocks formatted in parallel, written in order
+        for text in pool.map(one, starts):
+            f.write(text)
 
 
 def format_rows(rec: Recording) -> str:

@@ -77,6 +77,7 @@ T_HI, T_LO, T_EXP = _pow5_table()
 POW10 = np.array([10.0**i for i in range(23)])
 POW2 = np.array([math.ldexp(1.0, k) for k in range(-1074, 972)])  # POW2[k + 1074] = 2^k, exact
 P10F = np.array([float(f'1e{k}') for k in range(-307, 310)])  # P10F[k + 307] ≈ 10^k
+DIGIT_PAIRS = np.frombuffer(''.join(f'{i:02d}' for i in range(100)).encode(), np.uint8).copy()
 POW10_INT = np.array([10**i for i in range(20)], dtype=np.uint64)
 
 _U0 = np.uint64(0)
@@ -96,6 +97,7 @@ _MAXU = np.uint64(0xFFFFFFFFFFFFFFFF)
 _E16 = np.uint64(10**16)
 _E17 = np.uint64(10**17)
 _E15 = np.uint64(10**15)
+_E8 = np.uint64(10**8)
 _U5 = np.uint64(5)
 _U50 = np.uint64(50)
 _U100 = np.uint64(100)
@@ -241,7 +243,7 @@ def _match_word(buf: np.ndarray, p: int, end: int, word: str) -> int:
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: int, out: np.ndarray, row: int,
                 strict: bool, fb: np.ndarray, bad: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray) -> np.ndarray:
     """Parse whole lines of ``buf[pos:end]`` into ``out[row:]`` (float64, ncol columns).
@@ -507,22 +509,29 @@ def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
         d = _digits17(m, e2, e10)
     if d >= _E17 or d < _E16:
         return _U0, 0, 0
+    # A shorter candidate can only round-trip if it lies within half an ulp of x; in units of d the ulp of x is
+    # d/m (1.1 … 22), so candidates farther away than that (+1 for d's own error) are not even tried.
+    reach = 0.5 * float(d) / float(m) + 1.0
     # 15 digits
-    c = (d + _U50) // _U100
-    e = e10
-    if c >= _E15:
-        c = c // _U10
-        e += 1
-    if decimal_to_double(c, e - 14) == ax:
-        return c, 15, e
+    r = int(d % _U100)
+    if min(r, 100 - r) <= reach:
+        c = (d + _U50) // _U100
+        e = e10
+        if c >= _E15:
+            c = c // _U10
+            e += 1
+        if decimal_to_double(c, e - 14) == ax:
+            return c, 15, e
     # 16 digits
-    c = (d + _U5) // _U10
-    e = e10
-    if c >= _E16:
-        c = c // _U10
-        e += 1
-    if decimal_to_double(c, e - 15) == ax:
-        return c, 16, e
+    r = int(d % _U10)
+    if min(r, 10 - r) <= reach:
+        c = (d + _U5) // _U10
+        e = e10
+        if c >= _E16:
+            c = c // _U10
+            e += 1
+        if decimal_to_double(c, e - 15) == ax:
+            return c, 16, e
     # 17 digits: d, or its neighbour
     for delta in range(3):
         c = d if delta == 0 else (d - _U1 if delta == 1 else d + _U1)
@@ -534,7 +543,7 @@ def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
 MAX_FIELD_BYTES = 26  # sign, 17 digits, point, up to 4 leading zeros or 'e-308', separator
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
                  t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[int, int]:
     """Format rows data[r0:r1] (``bits`` = data.view(uint64)) as CSV lines into ``out`` (needs
@@ -582,12 +591,24 @@ def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int,
                     fails[nf, 1] = j
                 nf += 1
                 continue
+            while nd > 8 and c % _E8 == _U0:
+                c = c // _E8
+                nd -= 8
+            while nd > 2 and c % _U100 == _U0:
+                c = c // _U100
+                nd -= 2
             while nd > 1 and c % _U10 == _U0:
                 c = c // _U10
                 nd -= 1
-            for k in range(nd - 1, -1, -1):
-                tmp[k] = 48 + int(c % _U10)
-                c = c // _U10
+            k = nd - 1
+            while k >= 1:  # two digits per division
+                two = int(c % _U100)
+                c = c // _U100
+                tmp[k] = DIGIT_PAIRS[2 * two + 1]
+                tmp[k - 1] = DIGIT_PAIRS[2 * two]
+                k -= 2
+            if k == 0:
+                tmp[0] = 48 + int(c)
             if -4 <= e < 16:
                 if e >= 0:
                     for k in range(nd):

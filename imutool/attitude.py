@@ -51,15 +51,16 @@ S_DQ = 55  # accumulated rotation since the last covariance propagation (4)
 S_TACC = 59  # accumulated time since the last covariance propagation
 S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
 S_QI, S_LP1, S_LP2, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass stages in I (3+3)
-STATE_SIZE = 77
+S_AVAR, S_APREV, S_NAVAR = 77, 78, 81  # accel white-noise variance estimate (m²/s⁴), previous raw accel, count
+STATE_SIZE = 82
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
 P_ACC_GATE, P_ACC_NIS, P_MAG_NORM_GATE, P_MAG_DIP_GATE = 4, 5, 6, 7
 P_GRAVITY, P_REST_GYRO, P_REST_ACC, P_REST_TIME, P_REST_NOISE = 8, 9, 10, 11, 12
 P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT, P_GYRO_SCALE = 13, 14, 15, 16
-P_ACC_TAU, P_GYRO_PREV_W, P_ACC_ADAPT = 17, 18, 19
-N_PARAMS = 20
+P_ACC_TAU, P_GYRO_PREV_W, P_ACC_ADAPT, P_ACC_SOFT, P_ACC_WN_GAIN = 17, 18, 19, 20, 21
+N_PARAMS = 22
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
@@ -72,10 +73,10 @@ class EkfParams:
     gyro_noise: float = 1e-3  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
     gyro_scale_noise: float = 0.0  # fraction: rate-proportional process noise (scale/misalignment errors)
     bias_rw: float = 2e-5  # rad/s/√s   bias random walk (process noise of b)
-    accel_noise: float = 0.1  # σ of the normalised accel direction per update (≈ rad)
-    mag_noise_deg: float = 6.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
-    accel_gate: float = 3.0  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
-    accel_nis_gate: float = 25.0  # reject accel when its normalised innovation squared exceeds this (≤ 0: off)
+    accel_noise: float = 0.03  # σ of the normalised accel direction per update (≈ rad)
+    mag_noise_deg: float = 45.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
+    accel_gate: float = 15.0  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
+    accel_nis_gate: float = 0.0  # reject accel when its normalised innovation squared exceeds this (≤ 0: off)
     mag_norm_gate: float = 0.15  # reject mag when | ‖m‖/m_ref − 1 | exceeds this fraction (≤ 0: off)
     mag_dip_gate_deg: float = 10.0  # reject mag when its dip differs from the reference by more (≤ 0: off)
     gravity: float = 9.80665  # m/s²
@@ -86,7 +87,9 @@ class EkfParams:
     gap_factor: float = 5.0  # a step longer than gap_factor × median dt is a gap
     gap_rate_sigma: float = 0.2  # rad/s  attitude variance growth over a gap: (σ·gap)²
     reject_timeout: float = 3.0  # s  accel forced back in after this long continuously rejected
-    accel_lp_tau: float = 3.0  # s  accel low-pass time constant in the quasi-inertial frame (≤ 0: raw accel)
+    accel_lp_tau: float = 1.0  # s  accel low-pass time constant in the quasi-inertial frame (≤ 0: raw accel)
+    accel_noise_gain: float = 3.0  # accel σ += gain × (white-noise σ of the accel direction, learned online)
+    accel_nis_soft: bool = False  # NIS above the gate: inflate R by NIS/gate instead of skipping the update
     accel_adapt: float = 0.0  # m/s²  accel σ scaled by (1 + (| ‖a‖ − g | / accel_adapt)²)^½ (≤ 0: fixed σ)
     gyro_integration: str = "rectangular"  # rate over (t_{k-1}, t_k]: ω_k (rectangular) or ½(ω_{k-1}+ω_k)
     update_every: int = 1  # paper's multi-rate scheme: P propagation + update every N samples (1 = full rate)
@@ -118,6 +121,8 @@ class EkfParams:
         p[P_ACC_TAU] = self.accel_lp_tau
         p[P_GYRO_PREV_W] = self.gyro_prev_weight()
         p[P_ACC_ADAPT] = self.accel_adapt
+        p[P_ACC_SOFT] = 1.0 if self.accel_nis_soft else 0.0
+        p[P_ACC_WN_GAIN] = self.accel_noise_gain
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -331,8 +336,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     wc = 1.0 - wp
     RI = np.empty((3, 3))
     dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
-    dip_lo = np.sin(max(dip_ref - prm[P_MAG_DIP_GATE], -0.5 * np.pi)) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi \
-        else -2.0
+    dip_lo = np.sin(dip_ref - prm[P_MAG_DIP_GATE]) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi else -2.0
     dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
     for k in range(n):
         flag = 0
@@ -394,6 +398,18 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         _rmat(st[0], st[1], st[2], st[3], R)
         ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
         acc_ok = np.isfinite(ax) and np.isfinite(ay) and np.isfinite(az)
+        if acc_ok and prm[P_ACC_WN_GAIN] > 0:
+            # white-noise level of the accelerometer from first differences (slow accelerations cancel):
+            # σ_w² ≈ ½·mean ‖a_k − a_{k−1}‖² / 3, averaged over ~10 s (running mean at start-up)
+            if st[S_NAVAR] > 0:
+                d0, d1, d2 = ax - st[S_APREV], ay - st[S_APREV + 1], az - st[S_APREV + 2]
+                dd = (d0 * d0 + d1 * d1 + d2 * d2) / 6.0
+                if dd < 100.0 * st[S_AVAR] or st[S_NAVAR] < 10:  # shocks do not inflate the noise estimate
+                    cnt = st[S_NAVAR]
+                    bw = max(1.0 / cnt, dt / 10.0) if dt > 0 else 1.0 / cnt
+                    st[S_AVAR] += bw * (dd - st[S_AVAR])
+            st[S_NAVAR] += 1.0
+            st[S_APREV], st[S_APREV + 1], st[S_APREV + 2] = ax, ay, az
         # ---------------- rest detection → zero-rate bias pseudo-measurement ----------------
         if prm[P_REST_TIME] > 0 and acc_ok:
             still = (abs(gk0 - st[4]) < prm[P_REST_GYRO] and abs(gk1 - st[5]) < prm[P_REST_GYRO]
@@ -446,8 +462,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 if st[S_LPINIT] == 0.0:
                     st[S_LP1], st[S_LP1 + 1], st[S_LP1 + 2] = i0, i1, i2
                     st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2] = i0, i1, i2
-                    st[S_LPINIT] = 1.0
+                st[S_LPINIT] += 1.0
                 al = dt / (0.5 * prm[P_ACC_TAU] + dt) if dt > 0 else 0.0
+                al = max(al, 1.0 / st[S_LPINIT])  # start-up: running mean until the time constant is reached
                 st[S_LP1] += al * (i0 - st[S_LP1])
                 st[S_LP1 + 1] += al * (i1 - st[S_LP1 + 1])
                 st[S_LP1 + 2] += al * (i2 - st[S_LP1 + 2])
@@ -468,10 +485,17 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         na = np.sqrt(ax * ax + ay * ay + az * az)
                     h0[0], h0[1], h0[2] = -R[2, 0], -R[2, 1], -R[2, 2]
                     y[0], y[1], y[2] = ax / na - h0[0], ay / na - h0[1], az / na - h0[2]
-                    sig2 = prm[P_ACC_NOISE] ** 2
+                    sig = prm[P_ACC_NOISE]
+                    if prm[P_ACC_WN_GAIN] > 0:
+                        sig += prm[P_ACC_WN_GAIN] * np.sqrt(st[S_AVAR]) / g
+                    sig2 = sig * sig
                     if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
                         sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
                     ok, nis = _vec_update(P, h0, y, sig2, prm[P_ACC_NIS], force, dx, Hs, Ms, Ks)
+                    if not ok and prm[P_ACC_SOFT] > 0:  # de-weight instead of skipping (flagged as rejected)
+                        _vec_update(P, h0, y, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, Hs, Ms, Ks)
+                        _apply_correction(st, dx)
+                        _rmat(st[0], st[1], st[2], st[3], R)
                     if ok:
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)

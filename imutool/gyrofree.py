@@ -232,6 +232,8 @@ def check_layout(layout: Layout, noise: float = 0.01, refuse: bool = True) -> di
             big = np.argsort(-np.abs(v))[:3]
             terms.append(" + ".join(f"{v[j]:+.2f}·{UNKNOWNS[j]}" for j in big if abs(v[j]) > 0.05))
         why = _geometry_diagnosis(pos, dirs) or ["the sensitive axes/positions do not separate all 12 unknowns"]
+        if len(dirs) <= 3:
+            why.append("for two parallel accelerometers across the roll axis use the planar mode (--planar)")
         out["observable"] = False
         out["reasons"] = why
         out["unobservable"] = terms

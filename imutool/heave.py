@@ -43,6 +43,7 @@ from imutool.metrics import best_lag, error_stats, interp_to
 
 GRAVITY = 9.80665
 METHODS = ("realtime", "paper", "bandpass", "envelope")
+AUTO_USES_EKF = False  # --attitude auto: q columns, else the tilt filter (the EKF on request: same heave, slower)
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -106,19 +107,17 @@ def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.n
         raise ImutoolError("--attitude q needs qw..qz columns")
     if "gyro" not in rec:
         raise ImutoolError("the vertical needs an attitude: give q columns, gyro_x..z, or --vertical COLUMN")
-    if attitude in ("auto", "ekf"):
+    if attitude == "ekf" or (attitude == "auto" and AUTO_USES_EKF):
         try:  # the attitude EKF (imutool.attitude), when present in this build
-            from imutool import attitude as att  # noqa: PLC0415
+            from imutool.attitude import ekf_recording  # noqa: PLC0415
 
-            fn = getattr(att, "estimate_attitude", None)
-            if fn is not None:
-                out = fn(rec)
-                q = out["q"] if isinstance(out, Recording) else np.asarray(out)
-                if q.shape == (len(rec), 4):
-                    return q, "imutool.attitude EKF"
-        except Exception as e:  # noqa: BLE001 - fall back to the tilt filter, and say so
+            out, _ = ekf_recording(rec)
+            q = np.asarray(out["q"], float)
+            if q.shape == (len(rec), 4):
+                return q, "imutool.attitude EKF"
+        except (ImportError, ImutoolError, KeyError) as e:
             if attitude == "ekf":
-                raise ImutoolError(f"attitude EKF failed: {e}") from None
+                raise ImutoolError(f"attitude EKF not usable here: {e}") from None
     return complementary_attitude(rec.time, rec["gyro"], rec["accel"], tilt_gain), \
         f"complementary tilt filter (gain {tilt_gain} 1/s)"
 
@@ -455,20 +454,41 @@ def discretise(f: np.ndarray, qc: np.ndarray, dt: float) -> tuple[np.ndarray, np
 
 
 @njit(cache=True)
-def _kf_kernel(z, seg, phis, qds, hs, r, outs, x0, p0):  # pragma: no cover - numba
-    """Linear KF with a scalar measurement; model k = seg[i] for sample i; output y[i] = outs[k] @ x̂(i)."""
+def _kf_kernel(z, seg, phis, qds, hs, r, outs, x0, p0, q):  # pragma: no cover - numba
+    """Linear KF with a scalar measurement, run every q-th sample with model k = seg[i]. The outputs of the q
+    samples up to the next update are model predictions (causal): y[i + j] = outs[k, j] @ x̂(i)."""
     n = z.shape[0]
     s = x0.shape[0]
-    nout = outs.shape[1]
+    nout = outs.shape[2]
     x = x0.copy()
     p = p0.copy()
     y = np.empty((n, nout))
     ph = np.empty(s)
-    for i in range(n):
+    xn = np.empty(s)
+    tmp = np.empty((s, s))
+    for i in range(0, n, q):
         k = seg[i]
         if i > 0:
-            x = phis[k] @ x
-            p = phis[k] @ p @ phis[k].T + qds[k]
+            f = phis[k]
+            for a in range(s):
+                acc = 0.0
+                for b in range(s):
+                    acc += f[a, b] * x[b]
+                xn[a] = acc
+            x[:] = xn
+            for a in range(s):
+                for b in range(s):
+                    acc = 0.0
+                    for c in range(s):
+                        acc += f[a, c] * p[c, b]
+                    tmp[a, b] = acc
+            for a in range(s):
+                for b in range(a, s):
+                    acc = qds[k, a, b]
+                    for c in range(s):
+                        acc += tmp[a, c] * f[b, c]
+                    p[a, b] = acc
+                    p[b, a] = acc
         h = hs[k]
         for a in range(s):
             ph[a] = 0.0
@@ -482,18 +502,18 @@ def _kf_kernel(z, seg, phis, qds, hs, r, outs, x0, p0):  # pragma: no cover - nu
         for a in range(s):
             x[a] += ph[a] * innov / sv
         for a in range(s):
-            for b in range(s):
-                p[a, b] -= ph[a] * ph[b] / sv
-        for a in range(s):
-            for b in range(a + 1, s):
-                v = 0.5 * (p[a, b] + p[b, a])
+            for b in range(a, s):
+                v = p[a, b] - ph[a] * ph[b] / sv
                 p[a, b] = v
                 p[b, a] = v
-        for j in range(nout):
-            acc = 0.0
-            for a in range(s):
-                acc += outs[k, j, a] * x[a]
-            y[i, j] = acc
+        for j in range(q):
+            if i + j >= n:
+                break
+            for o in range(nout):
+                acc = 0.0
+                for a in range(s):
+                    acc += outs[k, j, o, a] * x[a]
+                y[i + j, o] = acc
     return y
 
 
@@ -511,8 +531,10 @@ class HeaveResult:
     summary: dict[str, Any]
 
 
-def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual):
-    """Φ, Q_d, H and the two output rows (heave, rate) of one set of oscillator frequencies."""
+def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual,
+                   q=1):
+    """Φ, Q_d (update interval q·dt), H and the output rows (heave, rate) for each of the q samples up to the
+    next update (the rows composed with e^{F·j·dt}) of one set of oscillator frequencies."""
     nmax = len(fr)
     s = 2 * nmax + 1
     om = np.where(good, 2 * np.pi * np.nan_to_num(fr, nan=1.0), 2 * np.pi)
@@ -523,7 +545,7 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
         if good[i]:
             qc[2 * i + 1, 2 * i + 1] = 4 * bandwidth * om[i] ** 3 * sig**2 / ng
     qc[-1, -1] = (residual_noise * sig) ** 2
-    phi, qd = discretise(fmat, qc, dt)
+    phi, qd = discretise(fmat, qc, dt * q)
     h = np.zeros(s)
     h[0:2 * nmax:2] = good.astype(float)
     h[-1] = 1.0
@@ -550,7 +572,13 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
         out_v = np.zeros(s)
         out_v[1:2 * nmax:2] = good.astype(float)
         out_v = out_v @ fm
-    return phi, qd, h, out_h, out_v, lead
+    outs = np.empty((q, 2, s))
+    step = expm(fmat * dt)
+    acc = np.eye(s)
+    for j in range(q):
+        outs[j, 0], outs[j, 1] = out_h @ acc, out_v @ acc
+        acc = step @ acc
+    return phi, qd, h, outs, lead
 
 
 def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarray, per_harmonic: bool,
@@ -575,7 +603,11 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
     phis = np.zeros((nseg, s, s))
     qds = np.zeros((nseg, s, s))
     hs = np.zeros((nseg, s))
-    outs = np.zeros((nseg, 2, s))
+    # the KF runs at ≥ 20 × the highest tracked frequency (and ≥ 5 Hz); the samples in between are
+    # model predictions from the last update (causal, exact for the model)
+    fhi = float(np.nanmax(tracking.freqs))
+    q = max(1, int(fs / max(5.0, 20.0 * fhi)))
+    outs = np.zeros((nseg, q, 2, s))
     leads = []
     cache: dict[tuple, tuple] = {}
     for k in range(nseg):
@@ -587,8 +619,8 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
         key = (tuple(np.nan_to_num(fq, nan=-1.0)), fd if not per_harmonic else 0.0)
         if key not in cache:
             cache[key] = _segment_model(fq, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic,
-                                        output_residual)
-        phis[k], qds[k], hs[k], outs[k, 0], outs[k, 1], lead = cache[key]
+                                        output_residual, q)
+        phis[k], qds[k], hs[k], outs[k], lead = cache[key]
         leads.append(lead)
     seg = np.zeros(len(d), dtype=np.int64)
     seg[tracking.start] = 1
@@ -598,8 +630,9 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
     p0 = np.eye(s) * sig**2
     p0[1:2 * nmax:2, 1:2 * nmax:2] *= (2 * np.pi * np.nanmax(tracking.freqs[0])) ** 2
     r = (meas_noise * sig + 1e-3) ** 2
-    y = _kf_kernel(np.ascontiguousarray(d, float), seg, phis, qds, hs, float(r), outs, x0, p0)
-    info = {"phase_lead_deg_median": float(np.degrees(np.median(leads))) if leads else float("nan")}
+    y = _kf_kernel(np.ascontiguousarray(d, float), seg, phis, qds, hs, float(r), outs, x0, p0, q)
+    info = {"phase_lead_deg_median": float(np.degrees(np.median(leads))) if leads else float("nan"),
+            "kf_update_hz": round(fs / q, 3)}
     return y[:, 0], y[:, 1], info
 
 
@@ -647,7 +680,16 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     f_rec = dominant_frequency(a, fs, fmin, fmax) or f_first
     fcd = float(delayed_cutoff) if delayed_cutoff else 0.35 * f_rec
     lp = lowpass if lowpass else min(lowpass_ratio * f_rec, 0.45 * fs)
-    hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lp)
+    # the zero-phase path runs on block means at ≥ 10 × its low-pass (≥ 5 Hz), then back to every sample
+    qd = max(1, int(fs / max(5.0, 10.0 * lp)))
+    if qd > 1:
+        nb = len(a) // qd
+        ab = a[: nb * qd].reshape(nb, qd).mean(1)
+        tb = t[: nb * qd].reshape(nb, qd).mean(1)
+        hb, vb, lat_d = heave_delayed(ab, fs / qd, fcd, lowpass=lp)
+        hd, vd = np.interp(t, tb, hb), np.interp(t, tb, vb)
+    else:
+        hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lp)
     sos = bandpass_integrator(fs, fc, order)
     a0 = a - a[0]
     d = signal.sosfilt(sos, a0)

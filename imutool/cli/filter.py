@@ -29,12 +29,19 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--gyro-scale-noise", type=float, default=0.0, show_default=True,
               help="EKF: rate-proportional gyro noise (scale-factor uncertainty, fraction).")
 @click.option("--bias-rw", type=float, default=2e-5, show_default=True, help="EKF: gyro bias random walk, rad/s/√s.")
-@click.option("--accel-noise", type=float, default=0.1, show_default=True,
-              help="EKF: σ of the normalised accelerometer direction per update (≈ rad).")
-@click.option("--mag-noise", type=float, default=6.0, show_default=True, help="EKF: σ of magnetic heading, deg.")
-@click.option("--accel-gate", type=float, default=3.0, show_default=True,
-              help="EKF: skip accel update when | |a| − g | exceeds this (m/s², 0 = off).")
-@click.option("--accel-nis-gate", type=float, default=25.0, show_default=True,
+@click.option("--accel-noise", type=float, default=0.03, show_default=True,
+              help="EKF: σ floor of the normalised accelerometer direction per update (≈ rad).")
+@click.option("--accel-noise-gain", type=float, default=3.0, show_default=True,
+              help="EKF: accel σ += gain × the accelerometer's white-noise σ/g learned online (0 = fixed σ).")
+@click.option("--accel-lp-tau", type=float, default=1.0, show_default=True,
+              help="EKF: time constant (s) of the accel low-pass in the gyro-integrated quasi-inertial frame "
+                   "(0 = raw accel as in the paper).")
+@click.option("--gyro-integration", type=click.Choice(["rectangular", "trapezoid"]), default="rectangular",
+              show_default=True, help="EKF: rate over a step: ω_k (rectangular) or ½(ω_{k−1}+ω_k) (trapezoid).")
+@click.option("--mag-noise", type=float, default=45.0, show_default=True, help="EKF: σ of magnetic heading, deg.")
+@click.option("--accel-gate", type=float, default=15.0, show_default=True,
+              help="EKF: skip accel sample (shock) when | |a| − g | exceeds this (m/s², 0 = off).")
+@click.option("--accel-nis-gate", type=float, default=0.0, show_default=True,
               help="EKF: skip accel update when its NIS exceeds this (0 = off).")
 @click.option("--mag-norm-gate", type=float, default=0.15, show_default=True,
               help="EKF: skip mag update when |m|/m_ref departs from 1 by more (fraction, 0 = off).")
@@ -67,7 +74,8 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @input_options
 @output_options
 def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag_mode: str, smooth: bool,
-               gyro_noise: float, gyro_scale_noise: float, bias_rw: float, accel_noise: float, mag_noise: float,
+               gyro_noise: float, gyro_scale_noise: float, bias_rw: float, accel_noise: float,
+               accel_noise_gain: float, accel_lp_tau: float, gyro_integration: str, mag_noise: float,
                accel_gate: float, accel_nis_gate: float, mag_norm_gate: float, mag_dip_gate: float,
                rest_time: float, rest_gyro: float, rest_accel: float, gap_factor: float, gnss_path: str | None,
                no_gnss: bool, cutoff: float, order: int, compass_model: str, comp_q: float, comp_r: float,
@@ -84,7 +92,8 @@ def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag
     if update_every < 1:
         raise ImutoolError("--update-every must be ≥ 1")
     params = EkfParams(gyro_noise=gyro_noise, gyro_scale_noise=gyro_scale_noise, bias_rw=bias_rw,
-                       accel_noise=accel_noise, mag_noise_deg=mag_noise, accel_gate=accel_gate,
+                       accel_noise=accel_noise, accel_noise_gain=accel_noise_gain, accel_lp_tau=accel_lp_tau,
+                       gyro_integration=gyro_integration, mag_noise_deg=mag_noise, accel_gate=accel_gate,
                        accel_nis_gate=accel_nis_gate, mag_norm_gate=mag_norm_gate, mag_dip_gate_deg=mag_dip_gate,
                        rest_time=rest_time, rest_gyro=rest_gyro, rest_accel=rest_accel, gap_factor=gap_factor,
                        update_every=update_every, mag_mode=mag_mode)
