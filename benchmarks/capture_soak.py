@@ -35,7 +35,8 @@ def run_soak(duration: float = 60.0, rate: float = 500.0, replugs: int = 5, corr
     server = subprocess.Popen(
         _imutool("simulate", "--serve", link, "--protocol", protocol, "--rate", str(rate), "--duration", str(duration),
                  "--corrupt", str(corrupt), "--replug-every", str(duration / (replugs + 1)), "--serve-log",
-                 str(sent_log), "--start-delay", "3", "--quiet"),
+                 str(sent_log), "--start-delay", "0.5", "--start-when", str(out.with_suffix(".events.jsonl")),
+                 "--quiet"),
         stderr=subprocess.PIPE, text=True)
     for _ in range(200):
         if os.path.lexists(link):
@@ -52,7 +53,7 @@ def run_soak(duration: float = 60.0, rate: float = 500.0, replugs: int = 5, corr
         killed_at = time.time()
         capture = subprocess.Popen(_imutool(*cap_args, "--append"))
     server.wait()
-    time.sleep(2.0)
+    time.sleep(1.0)
     capture.send_signal(signal.SIGTERM)
     capture.wait(timeout=30)
     cpu1 = os.times()

@@ -97,7 +97,10 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
             offset += len(raw)
             if lineno == 1 and raw.startswith(b"\xef\xbb\xbf"):
                 raw = raw[3:]
-            line = raw.decode("utf-8", errors="replace").strip()
+            try:
+                line = raw.decode("utf-8").strip()
+            except UnicodeDecodeError:  # e.g. a Latin-1 "°/s" from a Windows logger
+                line = raw.decode("latin-1").strip()
             if not line:
                 continue
             if line.startswith("#"):
@@ -118,7 +121,8 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
             break
     if header_line is None:
         raise ImutoolError("no header row (the file is empty or has only comments)", path=path)
-    if "\x00" in header_line or "\ufffd" in header_line:
+    printable = sum(ch.isprintable() or ch == "\t" for ch in header_line)
+    if "\x00" in header_line or printable < 0.9 * len(header_line):
         raise ImutoolError("the header row is not text (binary file?)", path=path, line=lineno)
     if "," in header_line:
         sep = ","

@@ -450,6 +450,53 @@ def _dec_hrm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) 
     return out
 
 
+_KNOT = 1852.0 / 3600.0  # m/s per knot
+
+
+def _dec_rmc(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """RMC: speed over ground (knots → ``sog`` m/s) and course over ground (``cog``, deg true). Status V (void)
+    or FAA mode N (not valid) drops both; empty fields are unknown."""
+    d = list(s.fields) + [""] * (12 - len(s.fields))
+    status = d[1].strip().upper()
+    mode = d[11].strip().upper()[:1]
+    if status == "V" or mode == "N":
+        return {}
+    sog = _num(d[6], "speed over ground", "RMC")
+    cog = _num(d[7], "course over ground", "RMC")
+    out: dict[str, float] = {}
+    if sog is not None:
+        out["sog"] = sog * _KNOT
+    if cog is not None:
+        out["cog"] = cog % 360.0
+    return out
+
+
+def _dec_vtg(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
+    """VTG: course (deg true → ``cog``) and speed over ground (knots, else km/h → ``sog`` m/s). Handles the
+    NMEA 2.3+ layout (``cog,T,cogm,M,kn,N,kmh,K[,mode]``) and the old one without unit letters; mode N drops."""
+    f = [x.strip() for x in s.fields]
+    if len(f) >= 2 and f[1].upper() == "T":
+        d = f + [""] * (9 - len(f))
+        cog_s, kn_s, kmh_s, mode = d[0], d[4], d[6], d[8].upper()[:1]
+    else:  # pre-2.3: cog true, cog magnetic, knots, km/h
+        d = f + [""] * (4 - len(f))
+        cog_s, kn_s, kmh_s, mode = d[0], d[2], d[3], ""
+    if mode == "N":
+        return {}
+    out: dict[str, float] = {}
+    cog = _num(cog_s, "course over ground", "VTG")
+    kn = _num(kn_s, "speed (knots)", "VTG")
+    if kn is not None:
+        out["sog"] = kn * _KNOT
+    else:
+        kmh = _num(kmh_s, "speed (km/h)", "VTG")
+        if kmh is not None:
+            out["sog"] = kmh / 3.6
+    if cog is not None:
+        out["cog"] = cog % 360.0
+    return out
+
+
 _DECODERS: dict[str, Callable[[NmeaSentence, dict[str, XdrMapping], list[str]], dict[str, float]]] = {
     "HDT": _dec_hdt,
     "HDM": _dec_hdm,
@@ -460,6 +507,8 @@ _DECODERS: dict[str, Callable[[NmeaSentence, dict[str, XdrMapping], list[str]], 
     "PASHR": _dec_pashr,
     "HRM": _dec_hrm,
     "PSTI": _dec_psti,
+    "RMC": _dec_rmc,
+    "VTG": _dec_vtg,
 }
 SUPPORTED_TYPES = tuple(_DECODERS)
 
@@ -469,7 +518,8 @@ def decode(sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None) 
 
     Keys: heading_true, heading_mag, heading_sensor, deviation, variation (E +), rot, roll, pitch, heave, heel,
     roll_period, amp_port, amp_stbd, peak_port, peak_stbd, peak_reset_time (s of day), peak_reset_day,
-    peak_reset_month, ths_mode (code point of the letter). Only values present in the sentence are returned.
+    peak_reset_month, ths_mode (code point of the letter), sog (m/s, RMC/VTG), cog (deg true, RMC/VTG).
+    Only values present in the sentence are returned.
     Raises NmeaUnsupportedError for other types and NmeaFieldError for a non-numeric value field (XDR: only
     when no mapped group decoded; see :func:`decode_checked` for the partial case).
     """
@@ -762,6 +812,8 @@ _CHANNELS: dict[str, tuple[str, str]] = {
     "peak_port": ("peak_port", "deg"),
     "peak_stbd": ("peak_stbd", "deg"),
     "ths_mode": ("ths_mode", "1"),
+    "sog": ("sog", "m/s"),
+    "cog": ("cog", "deg"),
 }
 _MAX_BAD_LINES = 10
 

@@ -9,11 +9,13 @@ exactly the multiplicative correction of paper eq. 17. (The paper's 7×7 P over 
 is singular along the unit-norm constraint; the 3-parameter error state is the well-posed form of the same
 filter.)
 
-- Predict (eq. 2–6), every sample, with the real time step dt_k = t_k − t_{k−1} and the trapezoidal mean rate
-  ω = ½(ω_{k−1} + ω_k) − b: q ← q ⊗ exp(½ ω dt) (the exact exponential; paper eq. 5 is its first-order
-  truncation). Error-state transition F = [[Φ, −I dt], [0, I]], Φ = exp(−[ω×] dt); Q = diag(σ_g² dt I,
-  σ_b² dt I) (eq. 10). A step longer than ``gap_dt`` is a gap: the rotation is integrated over at most
-  ``gap_dt`` and the attitude variance grows by (gap_rate_sigma·dt)², so accel/mag re-converge after it.
+- Predict (eq. 2–6), every sample, with the real time step dt_k = t_k − t_{k−1} and the rate over the step
+  ω = ω_k − b (``gyro_integration="rectangular"``, default: the sample at t_k is the mean over the preceding
+  interval, as in VQF; "trapezoid" = ½(ω_{k−1} + ω_k) − b, half a sample later): q ← q ⊗ exp(½ ω dt) (the
+  exact exponential; paper eq. 5 is its first-order truncation). Error-state transition F = [[Φ, −I dt],
+  [0, I]], Φ = exp(−[ω×] dt); Q = diag(σ_g² dt I, σ_b² dt I) (eq. 10). A step longer than ``gap_dt`` is a gap: the
+  rotation is integrated over at most ``gap_dt`` and the attitude variance grows by (gap_rate_sigma·dt)², so accel/mag
+  re-converge after it.
 - Update (eq. 7–18) every ``update_every`` samples (paper: every 40th at 200 Hz; P is then propagated only at
   update steps with the accumulated rotation Φ = ΔRᵀ, as in the paper's multi-rate scheme):
   accelerometer z = a/‖a‖, ẑ = Rᵀ(q)·[0,0,−1], H = [[ẑ×], 0] (eq. 8–12), K = PHᵀS⁻¹ (eq. 14), δx = K y
@@ -22,8 +24,16 @@ filter.)
   the horizontal field direction only, a scalar heading innovation whose correction is projected onto the
   world vertical, so magnetic disturbance never reaches roll/pitch (Joseph-form covariance update for the
   projected gain); "off".
-- Robustness beyond the paper: accelerometer update skipped when | ‖a‖ − g | > accel_gate or its normalised
-  innovation squared exceeds accel_nis_gate (forced back in after reject_timeout s of continuous rejection);
+- Accelerometer measurement beyond the paper (VQF's key idea, Laidig & Seel 2023, inside the EKF): the specific
+  force is rotated into a quasi-inertial frame I given by the gyro-only integrated quaternion q_I, low-passed
+  there (two first-order stages of τ/2 each, ``accel_lp_tau``; running mean at start-up) — gravity is constant in
+  I while translational accelerations average out — and rotated back, z = R(q_I)ᵀ·LP(R(q_I)·a). Its σ is
+  ``accel_noise`` + ``accel_noise_gain`` × σ_w/g, with σ_w the accelerometer white noise learned online from first
+  differences (½·E‖a_k − a_{k−1}‖²/3, ~10 s average, shocks excluded), so noisy and quiet sensors both get a
+  consistent R without retuning. ``accel_lp_tau = 0`` gives the paper's raw-accelerometer update.
+- Robustness beyond the paper: accelerometer sample skipped (not fed to the low-pass) when | ‖a‖ − g | >
+  accel_gate (a shock); update skipped when its normalised innovation squared exceeds accel_nis_gate (off by
+  default; forced back in after reject_timeout s of continuous rejection);
   magnetometer skipped when its norm or dip departs from the reference; rest detection (low rate, ‖a‖ ≈ g
   for rest_time s) adds a zero-rate pseudo-measurement of the bias; optional GNSS compensation of the
   kinematic acceleration: a_ned = SȮG·[cos χ, sin χ, 0] + SOG·r·[−sin χ, cos χ, 0] (χ = COG, r = the world

@@ -232,12 +232,18 @@ def _centroids(f: np.ndarray, s: np.ndarray, n: int, resolution: float) -> np.nd
     f, s = f[keep], s[keep]
     c = np.cumsum(s)
     c /= c[-1]
+    edges = np.searchsorted(c, np.arange(1, n) / n, side="right")
+    fs_ = np.cumsum(f * s)
+    ss = np.cumsum(s)
+    bounds = np.concatenate([[0], edges, [len(s)]])
     out = []
-    for i in range(n):
-        m = (c > i / n) & (c <= (i + 1) / n + 1e-12)
-        if not np.any(m):
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        if hi <= lo:
             continue
-        out.append(float(np.sum(f[m] * s[m]) / np.sum(s[m])))
+        wsum = ss[hi - 1] - (ss[lo - 1] if lo > 0 else 0.0)
+        fsum = fs_[hi - 1] - (fs_[lo - 1] if lo > 0 else 0.0)
+        if wsum > 0:
+            out.append(float(fsum / wsum))
     out = sorted(out)
     merged: list[float] = []
     for v in out:
@@ -258,7 +264,7 @@ class Tracking:
     window_s: np.ndarray = field(default_factory=lambda: np.array([]))
 
 
-def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 120.0, hop_s: float = 5.0,
+def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 120.0, hop_s: float = 10.0,
                       min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0,
                       mode: str = "peaks", min_periods: float = 8.0,
                       min_concentration: float = 0.4) -> Tracking:
@@ -640,7 +646,7 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
 # Driver
 # ------------------------------------------------------------------------------------------------------------------
 def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", harmonics: int | None = None,
-                   cutoff: float | None = None, order: int = 3, window_s: float = 120.0, hop_s: float = 5.0,
+                   cutoff: float | None = None, order: int = 3, window_s: float = 120.0, hop_s: float = 10.0,
                    min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0, bandwidth: float = 0.03,
                    meas_noise: float = 0.002, residual_noise: float = 0.02, delayed_cutoff: float | None = None,
                    lowpass: float | None = None, settle_periods: float = 4.0,

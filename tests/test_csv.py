@@ -442,3 +442,10 @@ def test_parallel_read_of_big_file_matches_streamed_read(tmp_path):
     assert whole.meta["skipped_rows"] == 3
     assert whole.meta["skipped_rows_first"] == streamed[0].meta["skipped_rows_first"]
     assert whole.meta["skipped_rows_first"][1].startswith("line 70002:")
+
+
+def test_latin1_header_with_degree_sign(tmp_path):
+    text = "Time (s);Gyro X (°/s);Gyro Y (°/s);Gyro Z (°/s)\n0;180;0;0\n"
+    p = _write_text(tmp_path / "l1.csv", text.encode("latin-1"))
+    rec = read_csv(p)
+    assert rec["gyro"][0, 0] == pytest.approx(math.pi)

@@ -543,3 +543,25 @@ if __name__ == "__main__":  # print the agreement table against gpsd's decode
         print(f"{name}: {line}" + (f"; BAD {bad[:3]}" if bad else ""))
     print("TOTAL compared:", sum(v for k, v in grand.items() if k.startswith("compared")),
           "disagreements:", sum(v for k, v in grand.items() if k.startswith("DISAGREE")))
+
+
+def test_decode_rmc_vtg_sog_cog(tmp_path):
+    kn = 1852.0 / 3600.0
+    d = decode(_s("GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W"))
+    assert d["sog"] == pytest.approx(22.4 * kn) and d["cog"] == pytest.approx(84.4)
+    assert decode(_s("GPRMC,123519,V,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W")) == {}  # void fix
+    assert decode(_s("GNRMC,123519,A,4807.038,N,01131.000,E,1.0,360.0,230394,,,N")) == {}  # FAA mode N
+    assert decode(_s("GPRMC,000000,A,,,,,,,311299,,,A")) == {}  # no speed/course: time only
+    d = decode(_s("GPVTG,054.7,T,034.4,M,005.5,N,010.2,K,A"))
+    assert d["sog"] == pytest.approx(5.5 * kn) and d["cog"] == pytest.approx(54.7)
+    assert decode(_s("GPVTG,,T,,M,,N,036.0,K,A"))["sog"] == pytest.approx(10.0)  # km/h when knots are empty
+    d = decode(_s("GPVTG,054.7,034.4,005.5,010.2"))  # pre-2.3 layout without unit letters
+    assert d["sog"] == pytest.approx(5.5 * kn) and d["cog"] == pytest.approx(54.7)
+    assert decode(_s("GPVTG,054.7,T,034.4,M,005.5,N,010.2,K,N")) == {}
+    with pytest.raises(NmeaFieldError, match="speed"):
+        decode(_s("GPVTG,054.7,T,034.4,M,fast,N,010.2,K,A"))
+    p = tmp_path / "gnss.nmea"
+    p.write_text("\n".join(f"{t:.1f};A;" + _s(f"GPRMC,12000{t},A,,,,,{10 * t:.1f},{359.5 + t:.1f},230394,,,A")
+                           for t in range(3)) + "\n")
+    rec = read_nmea(p)
+    assert np.allclose(rec.get("sog", "m/s"), [0, 10 * kn, 20 * kn]) and np.allclose(rec["cog"], [359.5, 0.5, 1.5])

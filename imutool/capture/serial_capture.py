@@ -242,6 +242,8 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
     resume = last_complete_row(base) if append and not rotate_s else None
     csv = CaptureCsv(base, BRIDGE_COLUMNS, meta, rotate_s=rotate_s, append=append, overwrite=force)
     events = EventLog(base.with_suffix(".events.jsonl"), append=True)
+    src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log, events=events)
+    src.open_first()
     events.add("started", port=port, baud=baud, protocol="bridge-binary" if binary else "bridge", file=csv.file.current,
                truncated_partial_bytes=csv.file.truncated_bytes)
     if resume is not None:
@@ -250,8 +252,6 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
             events.add("resumed", after_seq=dec.last_seq)
         except (ValueError, IndexError):
             events.add("resume_failed", last_row=",".join(resume)[:200])
-    src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log, events=events)
-    src.open_first()
     status = StatusLine(status_s, quiet)
     stop = stop or StopFlag()
     stop.install()

@@ -89,14 +89,15 @@ class ServeLog:
 def serve(protocol: str = "bridge", rate_hz: float = 200.0, duration: float | None = None, seed: int = 0,
           corrupt_fraction: float = 0.0, link: str | None = None, replug_every: float | None = None,
           log_path: str | None = None, announce=print, stop_check=lambda: False,
-          start_delay: float = 0.0) -> ServeLog:
+          start_delay: float = 0.0, start_when: str | None = None) -> ServeLog:
     """Serve frames into a pty until ``duration`` (s) or ``stop_check()``; returns what was sent.
 
     protocol: ``nmea``, ``bridge`` (text) or ``bridge-binary``. ``link``: a path kept pointing at the current
     pty slave. ``replug_every``: close and reopen the pty every so many seconds (simulated unplug).
     Frame ids are the bridge sequence numbers' unwrapped count (or the NMEA sentence index).
     ``start_delay`` (s) waits after announcing the port so a reader can open it first (pyserial flushes the
-    input buffer when it opens a port, so bytes sent before that are never seen by any reader).
+    input buffer when it opens a port, so bytes sent before that are never seen by any reader);
+    ``start_when`` waits (up to 120 s) until that file exists, e.g. the capture's events log.
     """
     rng = np.random.default_rng(seed + 1)
     scales = Scales()
@@ -104,6 +105,10 @@ def serve(protocol: str = "bridge", rate_hz: float = 200.0, duration: float | No
     master, slave, name = open_pty()
     _point(link, name)
     announce(link or name)
+    if start_when:
+        deadline = time.monotonic() + 120.0
+        while not os.path.exists(start_when) and time.monotonic() < deadline:
+            time.sleep(0.05)
     time.sleep(start_delay)
     if protocol == "nmea":
         source = ((i, line) for i, line in nmea_lines(rate_hz, seed))
@@ -152,7 +157,7 @@ def serve(protocol: str = "bridge", rate_hz: float = 200.0, duration: float | No
                 if delay > 0:
                     time.sleep(delay)
     finally:
-        time.sleep(0.5)
+        time.sleep(2.0)  # let the reader drain the terminal buffer before the port goes away
         os.close(master)
         os.close(slave)
         if log_path:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.csv import MAGIC
+from formats.csv import MAGIC, format_array
 from formats.errors import ImutoolError
 
 
@@ -27,10 +27,6 @@ class DiskFull(ImutoolError):
 
 def utc_stamp(t: float | None = None) -> str:
     return datetime.fromtimestamp(time.time() if t is None else t, tz=timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-
-
-def _fmt(v: float) -> str:
-    return "" if v != v else repr(float(v))
 
 
 class RotatingFile:
@@ -157,6 +153,7 @@ class CaptureCsv:
     """imutool CSV written row by row (columns fixed at start), durable and rotating."""
 
     def __init__(self, path: str | os.PathLike, columns: list[str], meta: dict, **kw):
+        format_array(np.zeros((1, len(columns))))  # compile/load the formatter before any data is waiting
         self.columns = columns
         self.rows = 0
         self.file = RotatingFile(path, csv_header(columns, meta), **kw)
@@ -165,8 +162,7 @@ class CaptureCsv:
         """data: (n, len(columns)) floats; NaN written as an empty field."""
         if len(data) == 0:
             return
-        text = "".join(",".join(_fmt(v) for v in row) + "\n" for row in data.tolist())
-        self.file.write(text)
+        self.file.write(format_array(np.asarray(data, dtype=float)).decode("ascii"))
         self.rows += len(data)
 
     def close(self, summary: dict | None = None) -> None:

@@ -36,7 +36,8 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
               help="Zero-phase delayed heave cut-off Hz [default 0.35 × record dominant frequency].")
 @click.option("--window", "window_s", type=float, default=120.0, show_default=True,
               help="Frequency-tracking window (s).")
-@click.option("--hop", "hop_s", type=float, default=5.0, show_default=True, help="Tracking update interval (s).")
+@click.option("--hop", "hop_s", type=float, default=10.0, show_default=True,
+              help="Tracking update interval (s).")
 @click.option("--min-window", "min_window_s", type=float, default=10.0, show_default=True,
               help="Data (s) before the first frequency estimate.")
 @click.option("--fmin", type=float, default=0.03, show_default=True, help="Lowest heave frequency considered (Hz).")

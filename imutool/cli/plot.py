@@ -47,9 +47,15 @@ def envelope(t: np.ndarray, y: np.ndarray, bucket: int) -> tuple[np.ndarray, np.
     hi[~np.isfinite(hi)] = np.nan
     t2 = np.stack([tb[:, 0], tb[:, -1]], axis=1).reshape(-1)
     y2 = np.stack([lo, hi], axis=1).reshape(-1, y.shape[1])
-    if n < len(t):
-        t2 = np.concatenate([t2, t[n:]])
-        y2 = np.concatenate([y2, y[n:]])
+    if n < len(t):  # the partial last bucket: its min and max too
+        tail = y[n:]
+        with np.errstate(all="ignore"):
+            tl = np.nanmin(np.where(np.isnan(tail), np.inf, tail), axis=0)
+            th = np.nanmax(np.where(np.isnan(tail), -np.inf, tail), axis=0)
+        tl[~np.isfinite(tl)] = np.nan
+        th[~np.isfinite(th)] = np.nan
+        t2 = np.concatenate([t2, [t[n], t[-1]]])
+        y2 = np.concatenate([y2, tl[None, :], th[None, :]])
     return t2, y2
 
 

@@ -38,6 +38,8 @@ def _parse_set(items: tuple[str, ...]) -> dict:
 @click.option("--serve-log", default=None, help="With --serve: write what was sent (JSON) here at the end.")
 @click.option("--start-delay", type=float, default=1.0, show_default=True,
               help="With --serve: seconds between announcing the port and the first frame.")
+@click.option("--start-when", default=None, metavar="FILE",
+              help="With --serve: wait until FILE exists before streaming (e.g. a capture's events log).")
 @click.option("--duration", type=float, default=None, help="Length in s (scenario default if omitted).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Sample rate in Hz (scenario default).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (deterministic output).")
@@ -46,7 +48,7 @@ def _parse_set(items: tuple[str, ...]) -> dict:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, protocol: str, corrupt: float,
-                 replug_every: float | None, serve_log: str | None, start_delay: float, duration: float | None,
+                 replug_every: float | None, serve_log: str | None, start_delay: float, start_when: str | None, duration: float | None,
                  rate_hz: float | None, seed: int, settings: tuple[str, ...], as_json: bool, quiet: bool) -> None:
     """Simulate SCENARIO (ship-roll, sea-state, turn, compass-swing, mag-sphere, static, walk, ...)."""
     if serve:
@@ -54,7 +56,7 @@ def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, pr
 
         log = serve_pty(protocol, rate_hz or 200.0, duration, seed, corrupt, None if serve == "auto" else serve,
                         replug_every, serve_log, announce=lambda name: click.echo(f"serving on {name}", err=True),
-                        start_delay=start_delay)
+                        start_delay=start_delay, start_when=start_when)
         emit_summary({"protocol": protocol, **log.as_dict(), "corrupted": len(log.corrupted)}, as_json, quiet)
         return
     if not scenario or not output:
