@@ -448,6 +448,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         force = False
         na = 0.0
         dev_a = 0.0
+        ri_now = False  # RI = R(q_I) computed for this sample
         if acc_ok:
             if use_gnss and np.isfinite(sog[k]) and np.isfinite(cog[k]):
                 wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
@@ -466,6 +467,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
                 # (nearly) constant and translational acceleration averages out; two first-order stages τ/2.
                 _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                ri_now = True
                 i0 = RI[0, 0] * ax + RI[0, 1] * ay + RI[0, 2] * az
                 i1 = RI[1, 0] * ax + RI[1, 1] * ay + RI[1, 2] * az
                 i2 = RI[2, 0] * ax + RI[2, 1] * ay + RI[2, 2] * az
@@ -487,7 +489,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if acc_ok:
                 if not rej or force:
                     if use_lp:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
-                        _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                        if not ri_now:
+                            _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
                         l0, l1, l2 = st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2]
                         ax = RI[0, 0] * l0 + RI[1, 0] * l1 + RI[2, 0] * l2
                         ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2

@@ -48,8 +48,9 @@ def _parse_set(items: tuple[str, ...]) -> dict:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, protocol: str, corrupt: float,
-                 replug_every: float | None, serve_log: str | None, start_delay: float, start_when: str | None, duration: float | None,
-                 rate_hz: float | None, seed: int, settings: tuple[str, ...], as_json: bool, quiet: bool) -> None:
+                 replug_every: float | None, serve_log: str | None, start_delay: float, start_when: str | None,
+                 duration: float | None, rate_hz: float | None, seed: int, settings: tuple[str, ...], as_json: bool,
+                 quiet: bool) -> None:
     """Simulate SCENARIO (ship-roll, sea-state, turn, compass-swing, mag-sphere, static, walk, ...)."""
     if serve:
         from imutool.capture.serve import serve as serve_pty
