@@ -27,7 +27,6 @@ the static heel is not observable from differences of accelerations).
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -474,9 +473,6 @@ def degenerate_examples() -> dict[str, Layout]:
                   tri("D", (0, 0.1, 0), 4)], name="duplicated")
     return {"collinear": collinear, "duplicated": dup}
 
-
-__all__ = [n for n in dir() if not n.startswith("_") and n not in ("itertools",)]
-del itertools
 
 
 def plot_rates(out: Recording, path: str, title: str = "gyro-free angular rate vs truth") -> None:

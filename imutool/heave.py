@@ -150,7 +150,7 @@ def vertical_acceleration(rec: Recording, columns: list[str] | None = None, sign
         if lever_arm is not None and np.any(lever_arm != 0):
             raise ImutoolError("--lever-arm needs the 3-axis IMU (accel + gyro), not single vertical columns")
         info["vertical"] = f"mean of {', '.join(columns)} (positive {sign})"
-        return a - a[0] * 0.0, info
+        return a, info
     if "accel" not in rec:
         raise ImutoolError("needs accel_x..accel_z (or --vertical COLUMN for a single vertical accelerometer)")
     q, how = _attitude_for(rec, attitude, tilt_gain)

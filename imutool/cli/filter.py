@@ -43,6 +43,10 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
               help="EKF: skip accel sample (shock) when | |a| − g | exceeds this (m/s², 0 = off).")
 @click.option("--accel-nis-gate", type=float, default=0.0, show_default=True,
               help="EKF: skip accel update when its NIS exceeds this (0 = off).")
+@click.option("--accel-nis-soft", is_flag=True,
+              help="EKF: above --accel-nis-gate inflate R by NIS/gate instead of skipping the update.")
+@click.option("--accel-adapt", type=float, default=0.0, show_default=True,
+              help="EKF: scale accel σ by √(1 + (| |a| − g | / this)²) (m/s², 0 = off).")
 @click.option("--mag-norm-gate", type=float, default=0.15, show_default=True,
               help="EKF: skip mag update when |m|/m_ref departs from 1 by more (fraction, 0 = off).")
 @click.option("--mag-dip-gate", type=float, default=10.0, show_default=True,
@@ -76,7 +80,8 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag_mode: str, smooth: bool,
                gyro_noise: float, gyro_scale_noise: float, bias_rw: float, accel_noise: float,
                accel_noise_gain: float, accel_lp_tau: float, gyro_integration: str, mag_noise: float,
-               accel_gate: float, accel_nis_gate: float, mag_norm_gate: float, mag_dip_gate: float,
+               accel_gate: float, accel_nis_gate: float, accel_nis_soft: bool, accel_adapt: float,
+               mag_norm_gate: float, mag_dip_gate: float,
                rest_time: float, rest_gyro: float, rest_accel: float, gap_factor: float, gnss_path: str | None,
                no_gnss: bool, cutoff: float, order: int, compass_model: str, comp_q: float, comp_r: float,
                variation: float, paper_init: bool, chunk_rows: int, stream_mb: float, as_json: bool, quiet: bool,
@@ -94,7 +99,8 @@ def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag
     params = EkfParams(gyro_noise=gyro_noise, gyro_scale_noise=gyro_scale_noise, bias_rw=bias_rw,
                        accel_noise=accel_noise, accel_noise_gain=accel_noise_gain, accel_lp_tau=accel_lp_tau,
                        gyro_integration=gyro_integration, mag_noise_deg=mag_noise, accel_gate=accel_gate,
-                       accel_nis_gate=accel_nis_gate, mag_norm_gate=mag_norm_gate, mag_dip_gate_deg=mag_dip_gate,
+                       accel_nis_gate=accel_nis_gate, accel_nis_soft=accel_nis_soft, accel_adapt=accel_adapt,
+                       mag_norm_gate=mag_norm_gate, mag_dip_gate_deg=mag_dip_gate,
                        rest_time=rest_time, rest_gyro=rest_gyro, rest_accel=rest_accel, gap_factor=gap_factor,
                        update_every=update_every, mag_mode=mag_mode)
     if (method == "ekf" and not smooth and gnss_path is None and formats.kind_of(input_path) == "csv"
