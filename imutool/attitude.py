@@ -150,6 +150,9 @@ class EkfParams:
 
 
 # ================================================ numba kernels ================================================
+# LLVM fast-math flags that keep NaN/Inf semantics (the kernels test np.isfinite): contraction to FMA,
+# reassociation, reciprocal division, no signed zeros.
+_FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 
 @njit(cache=True, inline="always")
 def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
@@ -315,7 +318,7 @@ def _apply_correction(st, dx):
     st[6] += dx[5]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FASTMATH)
 def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
                st, q_out, b_out, std_out, flags_out, p_store):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
@@ -584,7 +587,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     p_store[k, i, j] = P[i, j]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=_FASTMATH)
 def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, gap_rate, gyro_prev_w, q_s, b_s, p_s):
     """Error-state Rauch–Tung–Striebel backward pass over a full-rate-covariance EKF run.
 

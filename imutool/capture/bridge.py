@@ -23,6 +23,7 @@ import struct
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from formats.errors import ImutoolError
 from formats.units import STANDARD_GRAVITY
@@ -108,6 +109,7 @@ def _crc_table() -> list[int]:
 
 
 _CRC_TABLE = _crc_table()
+_CRC_ARRAY = np.array(_CRC_TABLE, dtype=np.int64)
 
 
 def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
@@ -116,6 +118,118 @@ def crc16_ccitt(data: bytes, crc: int = 0xFFFF) -> int:
     for b in data:
         crc = ((crc << 8) & 0xFFFF) ^ t[(crc >> 8) ^ b]
     return crc
+
+
+# -- compiled scanners (the per-frame loops): one call per received chunk ------------------------------------
+@njit(cache=True)
+def _parse_text_line(buf: np.ndarray, s: int, e: int, row: np.ndarray) -> int:
+    """1 if buf[s:e] is exactly ``$IMB,<12 ints>*HH`` with a good checksum (values in row), else 0."""
+    if e - s < 9 or buf[s] != 36 or buf[s + 1] != 73 or buf[s + 2] != 77 or buf[s + 3] != 66 or buf[s + 4] != 44:
+        return 0
+    star = e - 3
+    if buf[star] != 42:
+        return 0
+    x = 0
+    for i in range(s + 1, star):
+        x ^= buf[i]
+    cs = 0
+    for i in range(star + 1, e):
+        c = buf[i]
+        if 48 <= c <= 57:
+            d = c - 48
+        elif 65 <= c <= 70:
+            d = c - 55
+        elif 97 <= c <= 102:
+            d = c - 87
+        else:
+            return 0
+        cs = cs * 16 + d
+    if cs != x:
+        return 0
+    p = s + 5
+    for k in range(12):
+        neg = False
+        if p < star and buf[p] == 45:
+            neg = True
+            p += 1
+        start = p
+        v = 0
+        while p < star and 48 <= buf[p] <= 57:
+            v = v * 10 + (buf[p] - 48)
+            p += 1
+        if p == start or p - start > 10:
+            return 0
+        row[k] = -v if neg else v
+        if k < 11:
+            if p >= star or buf[p] != 44:
+                return 0
+            p += 1
+    return 1 if p == star else 0
+
+
+@njit(cache=True)
+def _scan_text(buf: np.ndarray, vals: np.ndarray, status: np.ndarray, bounds: np.ndarray) -> int:
+    """Split buf (ending in a newline) into lines; status 1 = good frame (vals), 0 = empty, 2 = other."""
+    n = buf.size
+    k = 0
+    i = 0
+    while i < n:
+        j = i
+        while j < n and buf[j] != 10:
+            j += 1
+        s, e = i, j
+        while e > s and (buf[e - 1] == 13 or buf[e - 1] == 32):
+            e -= 1
+        while s < e and buf[s] == 32:
+            s += 1
+        bounds[k, 0] = s
+        bounds[k, 1] = e
+        if e == s:
+            status[k] = 0
+        else:
+            status[k] = 1 if _parse_text_line(buf, s, e, vals[k]) else 2
+        k += 1
+        i = j + 1
+    return k
+
+
+@njit(cache=True)
+def _crc16(buf: np.ndarray, s: int, n: int, table: np.ndarray) -> int:
+    crc = 0xFFFF
+    for i in range(s, s + n):
+        crc = ((crc << 8) & 0xFFFF) ^ table[(crc >> 8) ^ buf[i]]
+    return crc
+
+
+@njit(cache=True)
+def _scan_binary(buf: np.ndarray, vals: np.ndarray, table: np.ndarray, counts: np.ndarray) -> tuple[int, int]:
+    """Frames in buf: (frames found, bytes consumed). vals rows: seq, t_us, 10 samples.
+    counts: [garbage bytes, bad CRC]."""
+    n = buf.size
+    pos = 0
+    k = 0
+    while True:
+        i = pos
+        while i + 1 < n and not (buf[i] == 0xA5 and buf[i + 1] == 0x5A):
+            i += 1
+        if i + 1 >= n:  # no sync word: keep a trailing 0xA5 that may start one
+            keep = 1 if n > 0 and buf[n - 1] == 0xA5 else 0
+            counts[0] += max(0, n - pos - keep)
+            return k, max(pos, n - keep)
+        counts[0] += i - pos
+        if n - i < 31:
+            return k, i
+        if buf[i + 2] != 26 or _crc16(buf, i + 2, 27, table) != (buf[i + 29] | (buf[i + 30] << 8)):
+            counts[1] += 1
+            pos = i + 1
+            continue
+        vals[k, 0] = buf[i + 3] | (buf[i + 4] << 8)
+        vals[k, 1] = buf[i + 5] | (buf[i + 6] << 8) | (buf[i + 7] << 16) | (np.int64(buf[i + 8]) << 24)
+        for j in range(10):
+            v = buf[i + 9 + 2 * j] | (buf[i + 10 + 2 * j] << 8)
+            vals[k, 2 + j] = v - 65536 if v >= 32768 else v
+        k += 1
+        pos = i + 31
 
 
 @dataclass
@@ -167,19 +281,6 @@ class BridgeDecoder:
         self._buf = bytearray()
         self._last_seq: int | None = None
 
-    def _track(self, seq: int) -> bool:
-        """Update sequence bookkeeping; False for a repeated frame (to be dropped)."""
-        if self._last_seq is not None:
-            step = (seq - self._last_seq) & 0xFFFF
-            if step == 0:
-                self.stats.repeated += 1
-                return False
-            if step > 1:
-                self.stats.dropped += step - 1
-                self.stats.gaps.append((self._last_seq, step - 1))
-        self._last_seq = seq
-        return True
-
     @property
     def last_seq(self) -> int | None:
         return self._last_seq
@@ -189,27 +290,75 @@ class BridgeDecoder:
         self._last_seq = seq & 0xFFFF
 
     def feed(self, data: bytes) -> list[Frame]:
-        self._buf.extend(data)
-        return self._decode_binary() if self.binary else self._decode_text()
+        """Decode what has arrived; returns complete, valid, non-repeated frames in order."""
+        seq, t_us, counts = self.feed_arrays(data)
+        return [Frame(int(a), int(b), tuple(int(x) for x in c)) for a, b, c in zip(seq, t_us, counts, strict=True)]
 
-    def _decode_text(self) -> list[Frame]:
+    def feed_arrays(self, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`feed`, as arrays: seq (n,), t_us (n,), counts (n, 10) — the capture's fast path."""
+        self._buf.extend(data)
+        vals = self._scan_binary() if self.binary else self._scan_text()
+        if len(vals) == 0:
+            return vals[:, 0], vals[:, 1], vals[:, 2:]
+        keep = self._track_block(vals[:, 0] & 0xFFFF)
+        vals = vals[keep]
+        self.stats.frames += len(vals)
+        return vals[:, 0], vals[:, 1], vals[:, 2:]
+
+    def _track_block(self, seq: np.ndarray) -> np.ndarray:
+        """Vectorised sequence bookkeeping; returns the mask of frames to keep (repeats dropped)."""
+        prev = np.empty_like(seq)
+        prev[1:] = seq[:-1]
+        prev[0] = seq[0] - 1 if self._last_seq is None else self._last_seq
+        step = (seq - prev) & 0xFFFF
+        keep = step != 0
+        self.stats.repeated += int((~keep).sum())
+        for i in np.flatnonzero(step > 1):
+            self.stats.dropped += int(step[i] - 1)
+            self.stats.gaps.append((int(prev[i]), int(step[i] - 1)))
+        self._last_seq = int(seq[-1])
+        return keep
+
+    def _scan_text(self) -> np.ndarray:
         buf = self._buf
         cut = buf.rfind(b"\n")
         if cut < 0:
             if len(buf) > 4096:  # no line end in a long run: garbage
                 self.stats.garbage_bytes += len(buf)
                 buf.clear()
-            return []
-        lines = bytes(buf[:cut]).split(b"\n")
+            return np.empty((0, 12), np.int64)
+        arr = np.frombuffer(bytes(buf[: cut + 1]), dtype=np.uint8)
         del buf[: cut + 1]
-        out = []
-        for line in lines:
-            f = self.decode_line(line.strip())
-            if f is not None:
-                out.append(f)
-        return out
+        nl = int(np.count_nonzero(arr == 10))
+        vals = np.empty((nl, 12), np.int64)
+        status = np.empty(nl, np.int64)
+        bounds = np.empty((nl, 2), np.int64)
+        k = _scan_text(arr, vals, status, bounds)
+        other = np.flatnonzero(status[:k] == 2)
+        if len(other) == 0:
+            return vals[:k][status[:k] == 1]
+        rows = []  # rare lines (config, damaged, garbage before '$'): the exact Python path, in order
+        for i in range(k):
+            if status[i] == 1:
+                rows.append(vals[i])
+            elif status[i] == 2:
+                f = self._decode_line_raw(arr[bounds[i, 0]:bounds[i, 1]].tobytes())
+                if f is not None:
+                    rows.append(np.array([f.seq, f.t_us, *f.counts], dtype=np.int64))
+        return np.array(rows, dtype=np.int64).reshape(-1, 12)
 
-    def decode_line(self, line: bytes) -> Frame | None:
+    def _scan_binary(self) -> np.ndarray:
+        arr = np.frombuffer(bytes(self._buf), dtype=np.uint8)
+        vals = np.empty((arr.size // BIN_FRAME_LEN + 1, 12), np.int64)
+        counts = np.zeros(2, np.int64)
+        k, consumed = _scan_binary(arr, vals, _CRC_ARRAY, counts)
+        del self._buf[:consumed]
+        self.stats.garbage_bytes += int(counts[0])
+        self.stats.bad_checksum += int(counts[1])
+        return vals[:k]
+
+    def _decode_line_raw(self, line: bytes) -> Frame | None:
+        """Parse one line (no sequence bookkeeping); counts what is wrong with it."""
         if not line:
             return None
         start = line.rfind(b"$")
@@ -248,53 +397,23 @@ class BridgeDecoder:
         except ValueError:
             self.stats.malformed += 1
             return None
-        if not self._track(vals[0] & 0xFFFF):
-            return None
-        self.stats.frames += 1
         return Frame(vals[0], vals[1], tuple(vals[2:]))
-
-    def _decode_binary(self) -> list[Frame]:
-        out = []
-        buf = self._buf
-        pos = 0
-        n = len(buf)
-        body_len = _BIN_BODY.size
-        while True:
-            i = buf.find(SYNC, pos)
-            if i < 0:
-                keep = 1 if buf[-1:] == SYNC[:1] else 0
-                self.stats.garbage_bytes += n - pos - keep
-                pos = n - keep
-                break
-            if i > pos:
-                self.stats.garbage_bytes += i - pos
-            if n - i < BIN_FRAME_LEN:
-                pos = i
-                break
-            body = bytes(buf[i + 2: i + 2 + body_len])
-            (crc,) = struct.unpack_from("<H", buf, i + 2 + body_len)
-            if body[0] != body_len - 1 or crc16_ccitt(body) != crc:
-                self.stats.bad_checksum += 1
-                pos = i + 1  # resynchronise on the next sync word
-                continue
-            vals = _BIN_BODY.unpack(body)
-            pos = i + BIN_FRAME_LEN
-            if self._track(vals[1]):
-                self.stats.frames += 1
-                out.append(Frame(vals[1], vals[2], vals[3:]))
-        del buf[:pos]
-        return out
 
 
 def frames_to_si(frames: list[Frame], scales: Scales) -> dict[str, np.ndarray]:
-    """Channels in SI from frames: seq, t_mcu (s, unwrapped), accel (m/s²), gyro (rad/s), mag (µT), temp (°C)."""
+    """Channels in SI from frames: seq, t_mcu (s), accel (m/s²), gyro (rad/s), mag (µT), temp (°C)."""
     if not frames:
         return {}
-    c = np.array([f.counts for f in frames], dtype=float)
-    t_us = np.array([f.t_us for f in frames], dtype=np.int64)
+    return counts_to_si(np.array([f.seq for f in frames]), np.array([f.t_us for f in frames]),
+                        np.array([f.counts for f in frames]), scales)
+
+
+def counts_to_si(seq: np.ndarray, t_us: np.ndarray, counts: np.ndarray, scales: Scales) -> dict[str, np.ndarray]:
+    """As :func:`frames_to_si` for the arrays of :meth:`BridgeDecoder.feed_arrays`."""
+    c = np.asarray(counts, dtype=float)
     return {
-        "seq": np.array([f.seq for f in frames], dtype=float),
-        "t_mcu": t_us / 1e6,
+        "seq": np.asarray(seq, dtype=float),
+        "t_mcu": np.asarray(t_us, dtype=np.int64) / 1e6,
         "accel": c[:, 0:3] * scales.accel,
         "gyro": c[:, 3:6] * scales.gyro,
         "mag": c[:, 6:9] * scales.mag_ut,

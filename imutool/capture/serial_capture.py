@@ -17,7 +17,7 @@ import numpy as np
 
 from formats.errors import ImutoolError
 
-from .bridge import BridgeDecoder, Scales, frames_to_si
+from .bridge import BridgeDecoder, Scales, counts_to_si
 from .runtime import CaptureStats, StatusLine, StopFlag, iso_utc
 from .sink import CaptureCsv, EventLog, RotatingFile, last_complete_row
 
@@ -170,7 +170,7 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
     stop = stop or StopFlag()
     stop.install()
     buf = bytearray()
-    col_index = {c: i for i, c in enumerate(columns)}
+    col_index = {c: i for i, c in enumerate(columns) if i >= 2}
 
     def on_data(data: bytes, tw: float, tm: float) -> None:
         lines = _split_lines(buf, data)
@@ -198,18 +198,16 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
             except Exception as e:
                 stats.count_error(f"decode {type(e).__name__}")
                 continue
-            row = np.full(len(columns), np.nan)
-            row[0], row[1] = tw, tm
-            hit = False
-            for k, v in values.items():
-                j = col_index.get(k)
-                if j is not None and j >= 2 and isinstance(v, (int, float)):
-                    row[j] = v
-                    hit = True
-            if hit:
-                rows.append(row)
+            cells = [(col_index[k], v) for k, v in values.items() if k in col_index and isinstance(v, (int, float))]
+            if cells:
+                rows.append(cells)
         if rows:
-            csv.write_rows(np.array(rows))
+            block = np.full((len(rows), len(columns)), np.nan)
+            block[:, 0], block[:, 1] = tw, tm
+            for i, cells in enumerate(rows):
+                for j, v in cells:
+                    block[i, j] = v
+            csv.write_rows(block)
 
     try:
         run_loop(src, on_data, stats, duration, status, lambda: raw.bytes_written + csv.file.bytes_written, stop)
@@ -258,7 +256,7 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
 
     def on_data(data: bytes, tw: float, tm: float) -> None:
         n_gaps = len(dec.stats.gaps)
-        frames = dec.feed(data)
+        seq, t_us, counts = dec.feed_arrays(data)
         s = dec.stats
         for after, missing in s.gaps[n_gaps:]:
             events.add("sequence_gap", after_seq=after, missing=missing)
@@ -267,10 +265,10 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
         stats.errors = s.bad_checksum + s.malformed
         stats.error_kinds = {"bad_checksum": s.bad_checksum, "malformed": s.malformed,
                              "garbage_bytes": s.garbage_bytes, "repeated": s.repeated}
-        if not frames:
+        n = len(seq)
+        if not n:
             return
-        ch = frames_to_si(frames, dec.scales)
-        n = len(frames)
+        ch = counts_to_si(seq, t_us, counts, dec.scales)
         block = np.column_stack([np.full(n, tw), np.full(n, tm), ch["seq"], ch["t_mcu"], ch["accel"], ch["gyro"],
                                  ch["mag"], ch["temp"]])
         csv.write_rows(block)
