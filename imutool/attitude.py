@@ -175,6 +175,35 @@ def _rotvec_quat(x, y, z):
 
 
 @njit(cache=True, inline="always")
+def _atan_series(t):
+    """atan(t) for |t| ≤ 0.1: odd Taylor series to t¹⁷ (truncation < |t|¹⁹/19 ≈ 5e-21, below 1 ulp)."""
+    u = t * t
+    return t * (1.0 - u * (1.0 / 3.0 - u * (1.0 / 5.0 - u * (1.0 / 7.0 - u * (1.0 / 9.0 - u * (1.0 / 11.0 - u * (
+        1.0 / 13.0 - u * (1.0 / 15.0 - u * (1.0 / 17.0)))))))))
+
+
+@njit(cache=True, inline="always")
+def _atan2(y, x):
+    """atan2(y, x) in [−π, π] (≈ 1 ulp) with no library call: a libm call inside the EKF loop costs ~150 ns per
+    sample in register spills, the call itself ~40 ns. Hot path (small heading innovation): x > 0, |y| ≤ 0.1 x →
+    series of y/x. Otherwise t = min/max(|x|, |y|) ∈ [0, 1] is reduced by three angle halvings,
+    atan t = 2 atan(t / (1 + √(1 + t²))) (→ |t| ≤ tan(π/32) < 0.1), then octant/quadrant fixed."""
+    if x > 0 and abs(y) <= 0.1 * x:
+        return _atan_series(y / x)
+    ax, ay = abs(x), abs(y)
+    swap = ay > ax
+    t = (ax / ay if swap else ay / ax) if ax > 0 or ay > 0 else 0.0  # atan2(±0, ±0) = ±0 or ±π, as libm
+    for _ in range(3):
+        t = t / (1.0 + np.sqrt(1.0 + t * t))
+    a = 8.0 * _atan_series(t)
+    if swap:
+        a = 0.5 * np.pi - a
+    if np.signbit(x):
+        a = np.pi - a
+    return -a if np.signbit(y) else a
+
+
+@njit(cache=True, inline="always")
 def _rmat(q0, q1, q2, q3, r):
     r[0, 0] = 1 - 2 * (q2 * q2 + q3 * q3)
     r[0, 1] = 2 * (q1 * q2 - q0 * q3)
@@ -229,32 +258,128 @@ def _propagate_cov(P, phi, T, qa, qb, F, tmp):
 
 
 @njit(cache=True, inline="always")
-def _vec_update(P, h0, y, sig2, nis_gate, force, dx, H, M, K):
-    """Update with a unit-vector measurement: H = [[h0×], 0], R = sig2·I. Returns (accepted, NIS); dx filled.
-    H (3,3), M (6,3), K (6,3): scratch preallocated by the caller."""
-    # H rows for δθ: [h0×] = [[0,-h2,h1],[h2,0,-h0],[-h1,h0,0]]
-    H[0, 0] = 0.0
-    H[1, 1] = 0.0
-    H[2, 2] = 0.0
-    H[0, 1] = -h0[2]
-    H[0, 2] = h0[1]
-    H[1, 0] = h0[2]
-    H[1, 2] = -h0[0]
-    H[2, 0] = -h0[1]
-    H[2, 1] = h0[0]
-    for i in range(6):  # M = P Hᵀ
-        for j in range(3):
-            s = 0.0
-            for k in range(3):
-                s += P[i, k] * H[j, k]
-            M[i, j] = s
-    # S = H M + sig2 I (symmetric: upper triangle only)
-    a = H[0, 0] * M[0, 0] + H[0, 1] * M[1, 0] + H[0, 2] * M[2, 0] + sig2
-    b = H[0, 0] * M[0, 1] + H[0, 1] * M[1, 1] + H[0, 2] * M[2, 1]
-    c = H[0, 0] * M[0, 2] + H[0, 1] * M[1, 2] + H[0, 2] * M[2, 2]
-    d = H[1, 0] * M[0, 1] + H[1, 1] * M[1, 1] + H[1, 2] * M[2, 1] + sig2
-    e = H[1, 0] * M[0, 2] + H[1, 1] * M[1, 2] + H[1, 2] * M[2, 2]
-    f = H[2, 0] * M[0, 2] + H[2, 1] * M[1, 2] + H[2, 2] * M[2, 2] + sig2
+def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
+    """P ← F P Fᵀ + Q as block algebra (the bias block of F is I), F = [[Φ, −T I], [0, I]], Φ = ΔRᵀ with ΔR =
+    R(d) the rotation accumulated over T; Q = diag(qa I, qb I):
+    P_θθ ← Φ P_θθ Φᵀ − T(Φ P_θb + P_bθ Φᵀ) + T² P_bb + qa I, P_θb ← Φ P_θb − T P_bb, P_bb ← P_bb + qb I.
+    Straight-line scalar code; P stays exactly symmetric (upper triangle computed and mirrored)."""
+    f00, f11, f22 = 1 - 2 * (d2 * d2 + d3 * d3), 1 - 2 * (d1 * d1 + d3 * d3), 1 - 2 * (d1 * d1 + d2 * d2)
+    f01, f10 = 2 * (d1 * d2 + d0 * d3), 2 * (d1 * d2 - d0 * d3)
+    f02, f20 = 2 * (d1 * d3 - d0 * d2), 2 * (d1 * d3 + d0 * d2)
+    f12, f21 = 2 * (d2 * d3 + d0 * d1), 2 * (d2 * d3 - d0 * d1)
+    # blocks A = P_θθ, B = P_θb, C = P_bb; Φ = ΔRᵀ, f_ij = Φ[i, j] = R_ji
+    a00 = P[0, 0]
+    a01 = P[0, 1]
+    a02 = P[0, 2]
+    a11 = P[1, 1]
+    a12 = P[1, 2]
+    a22 = P[2, 2]
+    b00 = P[0, 3]
+    b01 = P[0, 4]
+    b02 = P[0, 5]
+    b10 = P[1, 3]
+    b11 = P[1, 4]
+    b12 = P[1, 5]
+    b20 = P[2, 3]
+    b21 = P[2, 4]
+    b22 = P[2, 5]
+    c00 = P[3, 3]
+    c01 = P[3, 4]
+    c02 = P[3, 5]
+    c11 = P[4, 4]
+    c12 = P[4, 5]
+    c22 = P[5, 5]
+    # X = Φ A − T Bᵀ, Y = Φ B − T C
+    x00 = f00 * a00 + f01 * a01 + f02 * a02 - T * b00
+    x01 = f00 * a01 + f01 * a11 + f02 * a12 - T * b10
+    x02 = f00 * a02 + f01 * a12 + f02 * a22 - T * b20
+    x10 = f10 * a00 + f11 * a01 + f12 * a02 - T * b01
+    x11 = f10 * a01 + f11 * a11 + f12 * a12 - T * b11
+    x12 = f10 * a02 + f11 * a12 + f12 * a22 - T * b21
+    x20 = f20 * a00 + f21 * a01 + f22 * a02 - T * b02
+    x21 = f20 * a01 + f21 * a11 + f22 * a12 - T * b12
+    x22 = f20 * a02 + f21 * a12 + f22 * a22 - T * b22
+    y00 = f00 * b00 + f01 * b10 + f02 * b20 - T * c00
+    y01 = f00 * b01 + f01 * b11 + f02 * b21 - T * c01
+    y02 = f00 * b02 + f01 * b12 + f02 * b22 - T * c02
+    y10 = f10 * b00 + f11 * b10 + f12 * b20 - T * c01
+    y11 = f10 * b01 + f11 * b11 + f12 * b21 - T * c11
+    y12 = f10 * b02 + f11 * b12 + f12 * b22 - T * c12
+    y20 = f20 * b00 + f21 * b10 + f22 * b20 - T * c02
+    y21 = f20 * b01 + f21 * b11 + f22 * b21 - T * c12
+    y22 = f20 * b02 + f21 * b12 + f22 * b22 - T * c22
+    # P_θθ ← X Φᵀ − T Y + qa I (upper triangle, mirrored), P_θb ← Y, P_bb ← C + qb I
+    P[0, 0] = x00 * f00 + x01 * f01 + x02 * f02 - T * y00 + qa
+    v = x00 * f10 + x01 * f11 + x02 * f12 - T * y01
+    P[0, 1] = v
+    P[1, 0] = v
+    v = x00 * f20 + x01 * f21 + x02 * f22 - T * y02
+    P[0, 2] = v
+    P[2, 0] = v
+    P[1, 1] = x10 * f10 + x11 * f11 + x12 * f12 - T * y11 + qa
+    v = x10 * f20 + x11 * f21 + x12 * f22 - T * y12
+    P[1, 2] = v
+    P[2, 1] = v
+    P[2, 2] = x20 * f20 + x21 * f21 + x22 * f22 - T * y22 + qa
+    P[0, 3] = y00
+    P[3, 0] = y00
+    P[0, 4] = y01
+    P[4, 0] = y01
+    P[0, 5] = y02
+    P[5, 0] = y02
+    P[1, 3] = y10
+    P[3, 1] = y10
+    P[1, 4] = y11
+    P[4, 1] = y11
+    P[1, 5] = y12
+    P[5, 1] = y12
+    P[2, 3] = y20
+    P[3, 2] = y20
+    P[2, 4] = y21
+    P[4, 2] = y21
+    P[2, 5] = y22
+    P[5, 2] = y22
+    P[3, 3] = c00 + qb
+    P[4, 4] = c11 + qb
+    P[5, 5] = c22 + qb
+
+
+@njit(cache=True, inline="always")
+def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx):
+    """Update with a unit-vector measurement: H = [[h×], 0], R = sig2·I (the zero block of H exploited;
+    3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code."""
+    p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
+    p11, p12, p13, p14, p15 = P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5]
+    p22, p23, p24, p25 = P[2, 2], P[2, 3], P[2, 4], P[2, 5]
+    p33, p34, p35 = P[3, 3], P[3, 4], P[3, 5]
+    p44, p45 = P[4, 4], P[4, 5]
+    p55 = P[5, 5]
+    # M = P Hᵀ, row i = h × P[i, :3]
+    m00 = h1 * p02 - h2 * p01
+    m01 = h2 * p00 - h0 * p02
+    m02 = h0 * p01 - h1 * p00
+    m10 = h1 * p12 - h2 * p11
+    m11 = h2 * p01 - h0 * p12
+    m12 = h0 * p11 - h1 * p01
+    m20 = h1 * p22 - h2 * p12
+    m21 = h2 * p02 - h0 * p22
+    m22 = h0 * p12 - h1 * p02
+    m30 = h1 * p23 - h2 * p13
+    m31 = h2 * p03 - h0 * p23
+    m32 = h0 * p13 - h1 * p03
+    m40 = h1 * p24 - h2 * p14
+    m41 = h2 * p04 - h0 * p24
+    m42 = h0 * p14 - h1 * p04
+    m50 = h1 * p25 - h2 * p15
+    m51 = h2 * p05 - h0 * p25
+    m52 = h0 * p15 - h1 * p05
+    # S = H M + sig2 I (symmetric: upper triangle only), H rows [h×] = [[0,-h2,h1],[h2,0,-h0],[-h1,h0,0]]
+    a = h1 * m20 - h2 * m10 + sig2
+    b = h1 * m21 - h2 * m11
+    c = h1 * m22 - h2 * m12
+    d = h2 * m01 - h0 * m21 + sig2
+    e = h2 * m02 - h0 * m22
+    f = h0 * m12 - h1 * m02 + sig2
     # W = S⁻¹ (symmetric 3×3, cofactors)
     A = d * f - e * e
     B = c * e - b * f
@@ -262,49 +387,165 @@ def _vec_update(P, h0, y, sig2, nis_gate, force, dx, H, M, K):
     det = a * A + b * B + c * C
     w00, w01, w02 = A / det, B / det, C / det
     w11, w12, w22 = (a * f - c * c) / det, (b * c - a * e) / det, (a * d - b * b) / det
-    wy0 = w00 * y[0] + w01 * y[1] + w02 * y[2]
-    wy1 = w01 * y[0] + w11 * y[1] + w12 * y[2]
-    wy2 = w02 * y[0] + w12 * y[1] + w22 * y[2]
-    nis = y[0] * wy0 + y[1] * wy1 + y[2] * wy2
+    wy0 = w00 * y0 + w01 * y1 + w02 * y2
+    wy1 = w01 * y0 + w11 * y1 + w12 * y2
+    wy2 = w02 * y0 + w12 * y1 + w22 * y2
+    nis = y0 * wy0 + y1 * wy1 + y2 * wy2
     if nis_gate > 0 and nis > nis_gate and not force:
         return False, nis
-    for i in range(6):
-        dx[i] = M[i, 0] * wy0 + M[i, 1] * wy1 + M[i, 2] * wy2
-    # P ← P − M W Mᵀ
-    for i in range(6):
-        K[i, 0] = M[i, 0] * w00 + M[i, 1] * w01 + M[i, 2] * w02
-        K[i, 1] = M[i, 0] * w01 + M[i, 1] * w11 + M[i, 2] * w12
-        K[i, 2] = M[i, 0] * w02 + M[i, 1] * w12 + M[i, 2] * w22
-    for i in range(6):
-        for j in range(i, 6):
-            s = K[i, 0] * M[j, 0] + K[i, 1] * M[j, 1] + K[i, 2] * M[j, 2]
-            v = P[i, j] - s
-            P[i, j] = v
-            P[j, i] = v
+    dx[0] = m00 * wy0 + m01 * wy1 + m02 * wy2
+    dx[1] = m10 * wy0 + m11 * wy1 + m12 * wy2
+    dx[2] = m20 * wy0 + m21 * wy1 + m22 * wy2
+    dx[3] = m30 * wy0 + m31 * wy1 + m32 * wy2
+    dx[4] = m40 * wy0 + m41 * wy1 + m42 * wy2
+    dx[5] = m50 * wy0 + m51 * wy1 + m52 * wy2
+    # P ← P − K Mᵀ, K = M W
+    k00 = m00 * w00 + m01 * w01 + m02 * w02
+    k01 = m00 * w01 + m01 * w11 + m02 * w12
+    k02 = m00 * w02 + m01 * w12 + m02 * w22
+    k10 = m10 * w00 + m11 * w01 + m12 * w02
+    k11 = m10 * w01 + m11 * w11 + m12 * w12
+    k12 = m10 * w02 + m11 * w12 + m12 * w22
+    k20 = m20 * w00 + m21 * w01 + m22 * w02
+    k21 = m20 * w01 + m21 * w11 + m22 * w12
+    k22 = m20 * w02 + m21 * w12 + m22 * w22
+    k30 = m30 * w00 + m31 * w01 + m32 * w02
+    k31 = m30 * w01 + m31 * w11 + m32 * w12
+    k32 = m30 * w02 + m31 * w12 + m32 * w22
+    k40 = m40 * w00 + m41 * w01 + m42 * w02
+    k41 = m40 * w01 + m41 * w11 + m42 * w12
+    k42 = m40 * w02 + m41 * w12 + m42 * w22
+    k50 = m50 * w00 + m51 * w01 + m52 * w02
+    k51 = m50 * w01 + m51 * w11 + m52 * w12
+    k52 = m50 * w02 + m51 * w12 + m52 * w22
+    P[0, 0] = p00 - (k00 * m00 + k01 * m01 + k02 * m02)
+    v = p01 - (k00 * m10 + k01 * m11 + k02 * m12)
+    P[0, 1] = v
+    P[1, 0] = v
+    v = p02 - (k00 * m20 + k01 * m21 + k02 * m22)
+    P[0, 2] = v
+    P[2, 0] = v
+    v = p03 - (k00 * m30 + k01 * m31 + k02 * m32)
+    P[0, 3] = v
+    P[3, 0] = v
+    v = p04 - (k00 * m40 + k01 * m41 + k02 * m42)
+    P[0, 4] = v
+    P[4, 0] = v
+    v = p05 - (k00 * m50 + k01 * m51 + k02 * m52)
+    P[0, 5] = v
+    P[5, 0] = v
+    P[1, 1] = p11 - (k10 * m10 + k11 * m11 + k12 * m12)
+    v = p12 - (k10 * m20 + k11 * m21 + k12 * m22)
+    P[1, 2] = v
+    P[2, 1] = v
+    v = p13 - (k10 * m30 + k11 * m31 + k12 * m32)
+    P[1, 3] = v
+    P[3, 1] = v
+    v = p14 - (k10 * m40 + k11 * m41 + k12 * m42)
+    P[1, 4] = v
+    P[4, 1] = v
+    v = p15 - (k10 * m50 + k11 * m51 + k12 * m52)
+    P[1, 5] = v
+    P[5, 1] = v
+    P[2, 2] = p22 - (k20 * m20 + k21 * m21 + k22 * m22)
+    v = p23 - (k20 * m30 + k21 * m31 + k22 * m32)
+    P[2, 3] = v
+    P[3, 2] = v
+    v = p24 - (k20 * m40 + k21 * m41 + k22 * m42)
+    P[2, 4] = v
+    P[4, 2] = v
+    v = p25 - (k20 * m50 + k21 * m51 + k22 * m52)
+    P[2, 5] = v
+    P[5, 2] = v
+    P[3, 3] = p33 - (k30 * m30 + k31 * m31 + k32 * m32)
+    v = p34 - (k30 * m40 + k31 * m41 + k32 * m42)
+    P[3, 4] = v
+    P[4, 3] = v
+    v = p35 - (k30 * m50 + k31 * m51 + k32 * m52)
+    P[3, 5] = v
+    P[5, 3] = v
+    P[4, 4] = p44 - (k40 * m40 + k41 * m41 + k42 * m42)
+    v = p45 - (k40 * m50 + k41 * m51 + k42 * m52)
+    P[4, 5] = v
+    P[5, 4] = v
+    P[5, 5] = p55 - (k50 * m50 + k51 * m51 + k52 * m52)
     return True, nis
 
 
 @njit(cache=True, inline="always")
-def _heading_update(P, r2, y, sig2, dx, M, K):
-    """Scalar heading update H = [r2, 0] with the correction projected on the world vertical (Joseph form).
-    M, K: (6,) scratch preallocated by the caller."""
-    for i in range(6):
-        M[i] = P[i, 0] * r2[0] + P[i, 1] * r2[1] + P[i, 2] * r2[2]
-    S = M[0] * r2[0] + M[1] * r2[1] + M[2] * r2[2] + sig2
-    ka = (M[0] * r2[0] + M[1] * r2[1] + M[2] * r2[2]) / S  # world-vertical part of the attitude gain
-    kb = (M[3] * r2[0] + M[4] * r2[1] + M[5] * r2[2]) / S  # world-vertical part of the bias gain
-    for i in range(3):
-        K[i] = r2[i] * ka
-        K[3 + i] = r2[i] * kb
-    for i in range(6):
-        dx[i] = K[i] * y
-    # Joseph: P ← (I − K H) P (I − K H)ᵀ + K sig2 Kᵀ, H = [r2, 0]
-    #  = P − K Mᵀ − M Kᵀ + K (H P Hᵀ + sig2) Kᵀ = P − K Mᵀ − M Kᵀ + S K Kᵀ
-    for i in range(6):
-        for j in range(i, 6):
-            v = P[i, j] - K[i] * M[j] - M[i] * K[j] + S * K[i] * K[j]
-            P[i, j] = v
-            P[j, i] = v
+def _heading_update(P, r0, r1, r2, y, sig2, dx):
+    """Scalar heading update H = [r, 0] (r = world vertical in body axes) with the correction projected on the world
+    vertical (Joseph form). Straight-line code."""
+    p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
+    p11, p12, p13, p14, p15 = P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5]
+    p22, p23, p24, p25 = P[2, 2], P[2, 3], P[2, 4], P[2, 5]
+    p33, p34, p35 = P[3, 3], P[3, 4], P[3, 5]
+    p44, p45 = P[4, 4], P[4, 5]
+    p55 = P[5, 5]
+    m0 = p00 * r0 + p01 * r1 + p02 * r2
+    m1 = p01 * r0 + p11 * r1 + p12 * r2
+    m2 = p02 * r0 + p12 * r1 + p22 * r2
+    m3 = p03 * r0 + p13 * r1 + p23 * r2
+    m4 = p04 * r0 + p14 * r1 + p24 * r2
+    m5 = p05 * r0 + p15 * r1 + p25 * r2
+    hm = m0 * r0 + m1 * r1 + m2 * r2
+    S = hm + sig2
+    ka = hm / S  # world-vertical part of the attitude gain
+    kb = (m3 * r0 + m4 * r1 + m5 * r2) / S  # world-vertical part of the bias gain
+    k0, k1, k2, k3, k4, k5 = r0 * ka, r1 * ka, r2 * ka, r0 * kb, r1 * kb, r2 * kb
+    dx[0], dx[1], dx[2], dx[3], dx[4], dx[5] = k0 * y, k1 * y, k2 * y, k3 * y, k4 * y, k5 * y
+    # Joseph: P ← (I − K H) P (I − K H)ᵀ + K sig2 Kᵀ = P − K Mᵀ − M Kᵀ + S K Kᵀ
+    P[0, 0] = p00 - k0 * m0 - m0 * k0 + S * k0 * k0
+    v = p01 - k0 * m1 - m0 * k1 + S * k0 * k1
+    P[0, 1] = v
+    P[1, 0] = v
+    v = p02 - k0 * m2 - m0 * k2 + S * k0 * k2
+    P[0, 2] = v
+    P[2, 0] = v
+    v = p03 - k0 * m3 - m0 * k3 + S * k0 * k3
+    P[0, 3] = v
+    P[3, 0] = v
+    v = p04 - k0 * m4 - m0 * k4 + S * k0 * k4
+    P[0, 4] = v
+    P[4, 0] = v
+    v = p05 - k0 * m5 - m0 * k5 + S * k0 * k5
+    P[0, 5] = v
+    P[5, 0] = v
+    P[1, 1] = p11 - k1 * m1 - m1 * k1 + S * k1 * k1
+    v = p12 - k1 * m2 - m1 * k2 + S * k1 * k2
+    P[1, 2] = v
+    P[2, 1] = v
+    v = p13 - k1 * m3 - m1 * k3 + S * k1 * k3
+    P[1, 3] = v
+    P[3, 1] = v
+    v = p14 - k1 * m4 - m1 * k4 + S * k1 * k4
+    P[1, 4] = v
+    P[4, 1] = v
+    v = p15 - k1 * m5 - m1 * k5 + S * k1 * k5
+    P[1, 5] = v
+    P[5, 1] = v
+    P[2, 2] = p22 - k2 * m2 - m2 * k2 + S * k2 * k2
+    v = p23 - k2 * m3 - m2 * k3 + S * k2 * k3
+    P[2, 3] = v
+    P[3, 2] = v
+    v = p24 - k2 * m4 - m2 * k4 + S * k2 * k4
+    P[2, 4] = v
+    P[4, 2] = v
+    v = p25 - k2 * m5 - m2 * k5 + S * k2 * k5
+    P[2, 5] = v
+    P[5, 2] = v
+    P[3, 3] = p33 - k3 * m3 - m3 * k3 + S * k3 * k3
+    v = p34 - k3 * m4 - m3 * k4 + S * k3 * k4
+    P[3, 4] = v
+    P[4, 3] = v
+    v = p35 - k3 * m5 - m3 * k5 + S * k3 * k5
+    P[3, 5] = v
+    P[5, 3] = v
+    P[4, 4] = p44 - k4 * m4 - m4 * k4 + S * k4 * k4
+    v = p45 - k4 * m5 - m4 * k5 + S * k4 * k5
+    P[4, 5] = v
+    P[5, 4] = v
+    P[5, 5] = p55 - k5 * m5 - m5 * k5 + S * k5 * k5
 
 
 @njit(cache=True, inline="always")
@@ -330,18 +571,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     n = t.shape[0]
     P = st[S_P:S_P + 36].reshape((6, 6))
     R = np.empty((3, 3))
-    phi = np.empty((3, 3))
-    F = np.empty((6, 6))
     dx = np.zeros(6)
-    h0 = np.empty(3)
-    y = np.empty(3)
-    r2 = np.empty(3)
-    Hs = np.empty((3, 3))  # scratch for the updates / covariance propagation (allocated once per call)
-    Ms = np.empty((6, 3))
-    Ks = np.empty((6, 3))
-    tmp6 = np.empty((6, 6))
-    m6 = np.empty(6)
-    k6 = np.empty(6)
     g = prm[P_GRAVITY]
     store = p_store.shape[0] == n
     use_lp = prm[P_ACC_TAU] > 0
@@ -394,17 +624,13 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             st[S_COUNT] = 0.0
         if (is_upd or cov_every_sample) and st[S_TACC] > 0:
             T = st[S_TACC]
-            _rmat(st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], R)
-            for i in range(3):
-                for j in range(3):
-                    phi[i, j] = R[j, i]  # Φ = ΔRᵀ
             # mean rate over T from the accumulated rotation angle (for the rate-proportional noise)
             qa = prm[P_GYRO_NOISE] ** 2 * T
             if prm[P_GYRO_SCALE] > 0:
                 ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2),
                                      abs(st[S_DQ]))
                 qa += (prm[P_GYRO_SCALE] * ang / T) ** 2 * T
-            _propagate_cov(P, phi, T, qa, prm[P_BIAS_RW] ** 2 * T, F, tmp6)
+            _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa, prm[P_BIAS_RW] ** 2 * T)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
         st[S_INIT] = 1.0
@@ -499,17 +725,17 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2
                         az = RI[0, 2] * l0 + RI[1, 2] * l1 + RI[2, 2] * l2
                         na = np.sqrt(ax * ax + ay * ay + az * az)
-                    h0[0], h0[1], h0[2] = -R[2, 0], -R[2, 1], -R[2, 2]
-                    y[0], y[1], y[2] = ax / na - h0[0], ay / na - h0[1], az / na - h0[2]
+                    h0, h1, h2 = -R[2, 0], -R[2, 1], -R[2, 2]
+                    y0, y1, y2 = ax / na - h0, ay / na - h1, az / na - h2
                     sig = prm[P_ACC_NOISE]
                     if prm[P_ACC_WN_GAIN] > 0:
                         sig += prm[P_ACC_WN_GAIN] * np.sqrt(st[S_AVAR]) / g
                     sig2 = sig * sig
                     if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
                         sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
-                    ok, nis = _vec_update(P, h0, y, sig2, prm[P_ACC_NIS], force, dx, Hs, Ms, Ks)
+                    ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx)
                     if not ok and prm[P_ACC_SOFT] > 0:  # de-weight instead of skipping (flagged as rejected)
-                        _vec_update(P, h0, y, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, Hs, Ms, Ks)
+                        _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx)
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)
                     if ok:
@@ -541,16 +767,16 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     flag |= F_MAG_REJ
                     st[S_NMREJ] += 1
                 elif mag_mode == 1:
-                    r2[0], r2[1], r2[2] = R[2, 0], R[2, 1], R[2, 2]
-                    yh = -np.arctan2(mw1, mw0)  # heading error: the horizontal field should point north
-                    _heading_update(P, r2, yh, prm[P_MAG_NOISE] ** 2, dx, m6, k6)
+                    yh = -_atan2(mw1, mw0)  # heading error: the horizontal field should point north
+                    _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, prm[P_MAG_NOISE] ** 2, dx)
                     _apply_correction(st, dx)
                     flag |= F_MAG_USED
                 else:
-                    for i in range(3):
-                        h0[i] = R[0, i] * st[S_MREF] + R[1, i] * st[S_MREF + 1] + R[2, i] * st[S_MREF + 2]
-                    y[0], y[1], y[2] = mx / nm - h0[0], my / nm - h0[1], mz / nm - h0[2]
-                    ok, nis = _vec_update(P, h0, y, prm[P_MAG_NOISE] ** 2, 0.0, True, dx, Hs, Ms, Ks)
+                    h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
+                    h1 = R[0, 1] * st[S_MREF] + R[1, 1] * st[S_MREF + 1] + R[2, 1] * st[S_MREF + 2]
+                    h2 = R[0, 2] * st[S_MREF] + R[1, 2] * st[S_MREF + 1] + R[2, 2] * st[S_MREF + 2]
+                    y0, y1, y2 = mx / nm - h0, my / nm - h1, mz / nm - h2
+                    ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2, 0.0, True, dx)
                     _apply_correction(st, dx)
                     flag |= F_MAG_USED
         # ---------------- outputs ----------------

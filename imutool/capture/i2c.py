@@ -15,7 +15,7 @@ import numpy as np
 from formats.errors import ImutoolError
 
 from .bridge import HMC5883L_LSB_PER_GAUSS, QMC5883L_LSB_PER_GAUSS, Scales
-from .runtime import CaptureStats, StatusLine, StopFlag, iso_utc, poll
+from .runtime import CaptureStats, StatusLine, StopFlag, finish_poll_capture, iso_utc, poll
 from .sink import CaptureCsv
 
 # MPU6050 registers
@@ -202,9 +202,4 @@ def capture_i2c(bus_id: str, out: str, imu: str | None = "mpu6050", mag: str | N
         if pending:
             csv.write_rows(np.array(pending))
         status.finish()
-    summary = {"started_utc": stats.started_utc, "stopped_utc": iso_utc(_time.time()),
-               "stop_reason": stop.reason or "duration reached", "samples": ps.samples, "rate_hz": rate_hz,
-               "achieved_hz": round(ps.achieved_hz, 3), "overruns": ps.overruns, "read_errors": ps.read_errors}
-    csv.close(summary)
-    summary["files"] = csv.file.files
-    return summary
+    return finish_poll_capture(csv, stats, stop, ps, rate_hz)

@@ -161,7 +161,7 @@ def capture_modbus(port: str, profile_path: str, out: str, unit: int | None = No
 
     import numpy as np
 
-    from .runtime import CaptureStats, StatusLine, StopFlag, iso_utc, poll
+    from .runtime import CaptureStats, StatusLine, StopFlag, finish_poll_capture, iso_utc, poll
     from .serial_capture import utc_name
     from .sink import CaptureCsv
 
@@ -193,9 +193,4 @@ def capture_modbus(port: str, profile_path: str, out: str, unit: int | None = No
         stop.restore()
         poller.close()
         status.finish()
-    summary = {"started_utc": stats.started_utc, "stopped_utc": iso_utc(time.time()),
-               "stop_reason": stop.reason or "duration reached", "samples": ps.samples, "rate_hz": rate,
-               "achieved_hz": round(ps.achieved_hz, 3), "overruns": ps.overruns, "read_errors": ps.read_errors}
-    csv.close(summary)
-    summary["files"] = csv.file.files
-    return summary
+    return finish_poll_capture(csv, stats, stop, ps, rate)

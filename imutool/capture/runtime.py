@@ -130,3 +130,13 @@ def poll(read_fn, rate_hz: float, on_sample, duration: float | None, stop_check=
     elapsed = clock() - t0
     st.achieved_hz = st.samples / elapsed if elapsed > 0 else 0.0
     return st
+
+
+def finish_poll_capture(csv, stats: CaptureStats, stop: StopFlag, ps: PollStats, rate_hz: float) -> dict:
+    """Close a polled capture's CSV with its summary trailer; returns the summary (with the file names)."""
+    summary = {"started_utc": stats.started_utc, "stopped_utc": iso_utc(time.time()),
+               "stop_reason": stop.reason or "duration reached", "samples": ps.samples, "rate_hz": rate_hz,
+               "achieved_hz": round(ps.achieved_hz, 3), "overruns": ps.overruns, "read_errors": ps.read_errors}
+    csv.close(summary)
+    summary["files"] = csv.file.files
+    return summary
