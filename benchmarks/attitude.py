@@ -29,6 +29,9 @@ def main() -> None:
     res, _ = run_ekf(t[:1000], g[:1000], acc[:1000], mag[:1000], keep_cov=True)
     rts_smooth(res, g[:1000])
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall = elapsed, cpu = process_time)")
+    import imutool.attitude  # the editable install may point at another checkout: say which code is measured
+
+    print(f"measuring {imutool.attitude.__file__} (run with PYTHONPATH=<tree> to measure a given working tree)")
     cases = [("full rate", EkfParams(), False), ("multi-rate (update every 40)", EkfParams(update_every=40), False),
              ("full rate, raw accel (paper)", EkfParams(accel_lp_tau=0.0, accel_noise_gain=0.0), False),
              ("full rate + RTS smoother", EkfParams(), True)]
