@@ -16,13 +16,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import operator
 import os
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from datetime import datetime, timezone
-from functools import reduce
 from typing import Any
 
 import numpy as np
@@ -147,12 +145,26 @@ class NmeaSentence:
 
 
 def checksum(body: str) -> str:
-    """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex."""
-    return f"{reduce(operator.xor, body.encode('latin-1', 'replace'), 0) & 0xFF:02X}"
+    """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex.
+
+    The bytes are XOR-folded as one big integer (halving its width each step): same result as a byte loop,
+    several times faster on the capture path.
+    """
+    b = body.encode("latin-1", "replace")
+    width = len(b)
+    if width == 0:
+        return "00"
+    x = int.from_bytes(b, "big")
+    while width > 1:
+        half = (width + 1) // 2
+        x = (x >> (8 * half)) ^ (x & ((1 << (8 * half)) - 1))
+        width = half
+    return f"{x:02X}"
 
 
 _BAD_CHAR_RE = re.compile(r"[^\x20-\x7e]|[$!*]")
 _ADDR_RE = re.compile(r"^(?:P[A-Z0-9]{1,9}|[A-Z0-9]{2}[A-Z0-9]{3})$")
+_HEX2_RE = re.compile(r"[0-9A-Fa-f]{2}")
 
 
 def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
@@ -172,7 +184,7 @@ def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
         raise NmeaParseError("does not start with '$' or '!' followed by an address")
     star = s.rfind("*")
     cs_ok: bool | None
-    if star >= 0 and len(s) - star == 3 and re.fullmatch(r"[0-9A-Fa-f]{2}", s[star + 1:]):
+    if star >= 0 and len(s) - star == 3 and _HEX2_RE.fullmatch(s, star + 1):
         body = s[1:star]
         cs_ok = checksum(body) == s[star + 1:].upper()
     else:
