@@ -363,9 +363,8 @@ def _dec_xdr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) 
     value of a mapped group (``-1.-3``) is noted in ``problems`` and skipped, other groups still decode.
     """
     f = s.fields
-    if len(f) % 4 == 0:
-        m = _talker(s)
-        groups = [tuple(m.get_transducer(i)) for i in range(m.num_transducers)]
+    if len(f) % 4 == 0:  # the layout of pynmea2's XDR.get_transducer(i), without building the object
+        groups = [tuple(f[i:i + 4]) for i in range(0, len(f), 4)]
     else:
         groups = [tuple(f[j - 3:j + 1]) for j in range(3, len(f)) if f[j].strip().upper() in xmap]
         problems.append(f"XDR: {len(f)} fields is not a multiple of 4; groups re-aligned on transducer ids")
