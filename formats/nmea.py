@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 import os
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from datetime import datetime, timezone
+from functools import reduce
 from typing import Any
 
 import numpy as np
@@ -145,21 +147,8 @@ class NmeaSentence:
 
 
 def checksum(body: str) -> str:
-    """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex.
-
-    The bytes are XOR-folded as one big integer (halving its width each step): same result as a byte loop,
-    several times faster on the capture path.
-    """
-    b = body.encode("latin-1", "replace")
-    width = len(b)
-    if width == 0:
-        return "00"
-    x = int.from_bytes(b, "big")
-    while width > 1:
-        half = (width + 1) // 2
-        x = (x >> (8 * half)) ^ (x & ((1 << (8 * half)) - 1))
-        width = half
-    return f"{x:02X}"
+    """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex."""
+    return f"{reduce(operator.xor, body.encode('latin-1', 'replace'), 0) & 0xFF:02X}"
 
 
 _BAD_CHAR_RE = re.compile(r"[^\x20-\x7e]|[$!*]")

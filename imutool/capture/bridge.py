@@ -19,8 +19,10 @@ start-up) or host options give the scale factors that turn counts into SI units.
 
 from __future__ import annotations
 
+import operator
 import struct
 from dataclasses import dataclass, field
+from functools import reduce
 
 import numpy as np
 from numba import njit
@@ -85,17 +87,8 @@ class Scales:
 
 
 def xor_checksum(body: bytes) -> int:
-    """XOR of all bytes (the NMEA 0183 checksum), by folding the bytes as one big integer."""
-    n = len(body)
-    if n == 0:
-        return 0
-    x = int.from_bytes(body, "big")
-    width = n
-    while width > 1:
-        half = (width + 1) // 2
-        x = (x >> (8 * half)) ^ (x & ((1 << (8 * half)) - 1))
-        width = half
-    return x
+    """XOR of all bytes (the NMEA 0183 checksum)."""
+    return reduce(operator.xor, body, 0)
 
 
 def _crc_table() -> list[int]:
