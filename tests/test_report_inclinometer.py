@@ -210,3 +210,12 @@ def test_cli_pdf_and_json(tmp_path):
     r = CliRunner().invoke(cli, ["report", "inclinometer", files["inclinometer_dut.csv"], "--reference",
                                  files["inclinometer_reference.csv"], "-o", str(tmp_path / "x.txt")])
     assert r.exit_code != 0 and ".pdf" in str(r.exception)
+
+
+def test_plot_tolerance_bands_follow_the_configured_tolerances():
+    dut, ref, _ = inclinometer_test(seed=3, **SHORT)
+    o = InclinometerOptions(angle_floor_deg=0.5, angle_pct=2.0, period_floor_s=0.7, period_pct=3.0)
+    _, plots = inclinometer_evidence(dut, ref, options=o)
+    np.testing.assert_allclose(plots["tol_angle"](np.array([0.0, 10.0, 40.0])), [0.5, 0.5, 0.8])
+    np.testing.assert_allclose(plots["tol_period"](np.array([10.0, 30.0])), [0.7, 0.9])
+    assert "0.5°" in plots["tol_angle_label"] and "2 %" in plots["tol_angle_label"]

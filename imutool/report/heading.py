@@ -408,5 +408,6 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     }
     plots = {"t": t, "ref": h_ref, "dut": d, "err": e, "err_fu": e_fu, "rot": rot, "static_mask": static_mask,
              "static_rows": rows,
-             "turn_mask": turning}
+             "turn_mask": turning, "static_limit_deg": o.static_limit_deg, "follow_low_deg": o.follow_low_deg,
+             "follow_high_deg": o.follow_high_deg, "band_split_dps": o.band_split_dps, "band_max_dps": o.band_max_dps}
     return ev, plots

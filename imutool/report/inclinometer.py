@@ -538,6 +538,9 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     }
     plots = {"t": t, "ref": h_ref, "dut": d, "err": e, "tol": tola(h_ref), "static_mask": static_mask,
              "steps": step_rows, "amp_rows": amp_rows[STBD] + amp_rows[PORT], "per_rows": per_rows,
+             "tol_angle": tola, "tol_period": lambda v: tol_period(v, o.period_floor_s, o.period_pct),
+             "tol_angle_label": f"tolerance max({o.angle_floor_deg:g}°, {o.angle_pct:g} %)",
+             "tol_period_label": f"tolerance max({o.period_floor_s:g} s, {o.period_pct:g} %)",
              "ref_peak_stbd": ref_ps, "ref_peak_port": ref_pp,
              "dut_peak_stbd": outs_al.get("peak_stbd"), "dut_peak_port": outs_al.get("peak_port")}
     return ev, plots

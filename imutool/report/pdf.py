@@ -167,6 +167,25 @@ def _shade_static(ax: Any, t: np.ndarray, mask: np.ndarray) -> None:
         ax.axvspan(t[a], t[b - 1], color="0.9", lw=0)
 
 
+def _side_error_panel(ax: Any, rows: list[dict[str, Any]], unit_sfx: str, what: str, tol_fn: Any, tol_label: str,
+                      empty: str, xlabel: str, ylabel: str) -> None:
+    """Port/starboard errors against the reference value with the configured tolerance band (± tol_fn)."""
+    for side, mk, col in (("stbd", "o", "C0"), ("port", "s", "C4")):
+        mine = [r for r in rows if r["side"] == side]
+        if mine:
+            ax.plot([r["reference" + unit_sfx] for r in mine], [r["error" + unit_sfx] for r in mine], mk, color=col,
+                    label=f"{side} {what}")
+    if rows:
+        xs = np.linspace(0, max(r["reference" + unit_sfx] for r in rows) * 1.1 + 1, 100)
+        tl = tol_fn(xs)
+        ax.fill_between(xs, -tl, tl, color="C2", alpha=0.25, lw=0, label=tol_label)
+        ax.legend(fontsize=7)
+    else:
+        ax.text(0.5, 0.5, empty, ha="center", transform=ax.transAxes)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+
+
 def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     import matplotlib.pyplot as plt
 
@@ -204,41 +223,17 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
         axs[0].plot(x, [np.sign(r["error_mean_deg"] or 1) * r["max_abs_error_deg"] for r in steps], "x", color="C3",
                     label="max |error| (signed)")
         xs = np.linspace(min(x.min(), -1), max(x.max(), 1), 200)
-        tl = np.maximum(1.0, 0.05 * np.abs(xs))
-        axs[0].fill_between(xs, -tl, tl, color="C2", alpha=0.25, lw=0, label="tolerance")
+        tl = p["tol_angle"](xs)
+        axs[0].fill_between(xs, -tl, tl, color="C2", alpha=0.25, lw=0, label=p["tol_angle_label"])
         axs[0].legend(fontsize=7)
     else:
         axs[0].text(0.5, 0.5, "no static steps: not tested", ha="center", transform=axs[0].transAxes)
     axs[0].set_xlabel("reference heel (deg)")
     axs[0].set_ylabel("error (deg)")
-    for side, mk, col in (("stbd", "o", "C0"), ("port", "s", "C4")):
-        rows = [r for r in p["amp_rows"] if r["side"] == side]
-        if rows:
-            axs[1].plot([r["reference_deg"] for r in rows], [r["error_deg"] for r in rows], mk, color=col,
-                        label=f"{side} amplitude")
-    if p["amp_rows"]:
-        xs = np.linspace(0, max(r["reference_deg"] for r in p["amp_rows"]) * 1.1 + 1, 100)
-        tl = np.maximum(1.0, 0.05 * xs)
-        axs[1].fill_between(xs, -tl, tl, color="C2", alpha=0.25, lw=0, label="tolerance")
-        axs[1].legend(fontsize=7)
-    else:
-        axs[1].text(0.5, 0.5, "no roll cycles: not tested", ha="center", transform=axs[1].transAxes)
-    axs[1].set_xlabel("reference amplitude (deg)")
-    axs[1].set_ylabel("amplitude error (deg)")
-    for side, mk, col in (("stbd", "o", "C0"), ("port", "s", "C4")):
-        rows = [r for r in p["per_rows"] if r["side"] == side]
-        if rows:
-            axs[2].plot([r["reference_s"] for r in rows], [r["error_s"] for r in rows], mk, color=col,
-                        label=f"{side} period")
-    if p["per_rows"]:
-        xs = np.linspace(0, max(r["reference_s"] for r in p["per_rows"]) * 1.1 + 1, 100)
-        tl = np.maximum(1.0, 0.05 * xs)
-        axs[2].fill_between(xs, -tl, tl, color="C2", alpha=0.25, lw=0, label="tolerance max(1 s, 5 %)")
-        axs[2].legend(fontsize=7)
-    else:
-        axs[2].text(0.5, 0.5, "no roll periods: not tested", ha="center", transform=axs[2].transAxes)
-    axs[2].set_xlabel("reference period (s)")
-    axs[2].set_ylabel("period error (s)")
+    _side_error_panel(axs[1], p["amp_rows"], "_deg", "amplitude", p["tol_angle"], p["tol_angle_label"],
+                      "no roll cycles: not tested", "reference amplitude (deg)", "amplitude error (deg)")
+    _side_error_panel(axs[2], p["per_rows"], "_s", "period", p["tol_period"], p["tol_period_label"],
+                      "no roll periods: not tested", "reference period (s)", "period error (s)")
     for ax in axs:
         ax.grid(alpha=0.3)
     fig.tight_layout(rect=(0, 0.025, 1, 0.97))
@@ -286,11 +281,12 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[0].legend(loc="upper right", fontsize=7)
     _shade_static(axs[1], t, p["static_mask"])
     axs[1].plot(t, p["err"], "C3-", lw=0.5)
-    axs[1].axhline(1.0, color="C2", ls="--", lw=0.8)
-    axs[1].axhline(-1.0, color="C2", ls="--", lw=0.8)
+    lim = p["static_limit_deg"]
+    axs[1].axhline(lim, color="C2", ls="--", lw=0.8)
+    axs[1].axhline(-lim, color="C2", ls="--", lw=0.8)
     axs[1].set_ylabel("error (deg, wrapped ±180)")
     axs[2].plot(t, p["rot"], "C0-", lw=0.6)
-    for v in (10, 20, -10, -20):
+    for v in (p["band_split_dps"], p["band_max_dps"], -p["band_split_dps"], -p["band_max_dps"]):
         axs[2].axhline(v, color="0.5", ls=":", lw=0.8)
     axs[2].set_ylabel("reference rate of turn (°/s)")
     axs[2].set_xlabel("time (s)")
@@ -305,8 +301,8 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
                    label="mean error")
         axs[0].plot([r["heading_deg"] for r in rows], [r["p95_abs_error_deg"] for r in rows], "kx",
                     label="p95 |error|")
-        axs[0].axhline(1.0, color="C3", ls="--", lw=0.8)
-        axs[0].axhline(-1.0, color="C3", ls="--", lw=0.8, label="±1.0°")
+        axs[0].axhline(lim, color="C3", ls="--", lw=0.8)
+        axs[0].axhline(-lim, color="C3", ls="--", lw=0.8, label=f"±{lim:g}°")
         axs[0].legend(fontsize=7)
     else:
         axs[0].text(0.5, 0.5, "no static headings: not tested", ha="center", transform=axs[0].transAxes)
@@ -316,8 +312,10 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     m = p["turn_mask"]
     if np.any(m):
         axs[1].plot(np.abs(p["rot"][m]), p.get("err_fu", p["err"])[m], ".", ms=1.5, color="C0")
-        axs[1].plot([0, 10, 10, 20], [0.5, 0.5, 1.5, 1.5], "C3--", lw=1, label="limit (MSC.116(73))")
-        axs[1].plot([0, 10, 10, 20], [-0.5, -0.5, -1.5, -1.5], "C3--", lw=1)
+        bx = [0, p["band_split_dps"], p["band_split_dps"], p["band_max_dps"]]
+        by = np.array([p["follow_low_deg"], p["follow_low_deg"], p["follow_high_deg"], p["follow_high_deg"]])
+        axs[1].plot(bx, by, "C3--", lw=1, label="limit (MSC.116(73) defaults unless changed)")
+        axs[1].plot(bx, -by, "C3--", lw=1)
         axs[1].legend(fontsize=7)
     else:
         axs[1].text(0.5, 0.5, "no turns: follow-up not tested", ha="center", transform=axs[1].transAxes)
