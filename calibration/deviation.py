@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ImutoolError
+from formats.frames import wrap_deg180
 
 NAMES = ("A", "B", "C", "D", "E")
 
@@ -24,10 +25,6 @@ NAMES = ("A", "B", "C", "D", "E")
 def _design(psi_deg: np.ndarray) -> np.ndarray:
     p = np.radians(np.asarray(psi_deg, dtype=float))
     return np.stack([np.ones_like(p), np.sin(p), np.cos(p), np.sin(2 * p), np.cos(2 * p)], axis=-1)
-
-
-def wrap180(a: np.ndarray) -> np.ndarray:
-    return (np.asarray(a, dtype=float) + 180.0) % 360.0 - 180.0
 
 
 @dataclass
@@ -103,7 +100,7 @@ def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_spa
         raise ImutoolError(
             f"compass headings cover only {covered:.0f}° of the circle (< {min_span_deg:.0f}° needed for the "
             "A–E harmonics); swing the vessel through a full turn")
-    d = wrap180(r - c)
+    d = wrap_deg180(r - c)
     x = _design(c)[:, :terms]
     coef, *_ = np.linalg.lstsq(x, d, rcond=None)
     res = d - x @ coef

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from formats.frames import wrap_deg180
+
 
 def error_stats(err: np.ndarray) -> dict[str, float]:
     """RMSE, max |e|, 95th percentile |e|, mean |e|, mean (bias), std and N of an error series (NaN ignored)."""
@@ -55,7 +57,7 @@ def best_lag(t: np.ndarray, x: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, m
         r = interp_to(t - lag, t_ref, ref)
         d = x - r
         if wrap_deg:
-            d = (d + 180.0) % 360.0 - 180.0
+            d = wrap_deg180(d)
         ok = np.isfinite(d)
         costs[i] = np.sqrt(np.mean(d[ok] ** 2)) if ok.sum() > 10 else np.inf
     k = int(np.argmin(costs))
@@ -126,7 +128,7 @@ def evaluate_angle(t: np.ndarray, est: np.ndarray, t_ref: np.ndarray, ref: np.nd
     r = interp_to(t, t_ref, unwrap_deg(ref) if wrap else ref)
     e = np.asarray(est, float) - r
     if wrap:
-        e = (e + 180.0) % 360.0 - 180.0
+        e = wrap_deg180(e)
     out = error_stats(e)
     if max_lag_s > 0:
         lag, rms = best_lag(t, np.asarray(est, float) if not wrap else unwrap_deg(est), t_ref,

@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from calibration import Calibration, calibrate_sphere, fit_deviation, load_calibration
-from calibration.deviation import DeviationCard, wrap180
+from calibration.deviation import DeviationCard
 from calibration.file import dumps_toml, loads_toml
 from calibration.magnetometer import crosswalk, ellipsoid_fit_li, sphere_coverage
 from calibration.swing import calibrate_swing, heading_from_mag, roll_pitch_from_accel
 from formats.errors import ImutoolError
+from formats.frames import wrap_deg180 as wrap180
 from imutool.sim import simulate
 
 

@@ -191,9 +191,10 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
                   min_speed: float, min_span: float, append: bool, sensor: str | None, with_files: tuple[str, ...],
                   as_json: bool, quiet: bool, **io: Any) -> None:
     """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ from compass vs reference headings."""
-    from calibration.deviation import fit_deviation, plot_card, wrap180
+    from calibration.deviation import fit_deviation, plot_card
     from calibration.file import provenance, update_calibration
     from calibration.swing import heading_from_mag, roll_pitch_from_accel
+    from formats.frames import wrap_deg180
 
     for o in outputs:
         if not o.lower().endswith((".pdf", ".png", ".svg", ".toml")):
@@ -264,7 +265,7 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
             update_calibration(o, "deviation", section, append)
         else:
             ok = np.isfinite(comp_at) & np.isfinite(ref_at)
-            plot_card(card, o, comp_at[ok], wrap180(ref_at[ok] - comp_at[ok]),
+            plot_card(card, o, comp_at[ok], wrap_deg180(ref_at[ok] - comp_at[ok]),
                       title=f"Deviation card — {os.path.basename(input_path)}")
     lines = [f"deviation card ({card.quality['n']} samples; compass from {src}; reference {rsrc}:{rname}, {kind})",
              "  δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ   (magnetic = compass + δ)",

@@ -10,6 +10,7 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
+from formats.frames import wrap_deg180
 from imutool.cli.common import emit_summary
 
 
@@ -153,7 +154,7 @@ def _plot(est, ref, path: str) -> None:
         r = interp_to(est.time, ref.time, unwrap_deg(ref[f"ref_{n}"]) if wrap else ref[f"ref_{n}"])
         e = est[n] - r
         if wrap:
-            e = (e + 180) % 360 - 180
+            e = wrap_deg180(e)
             r = r % 360
         axes[i, 0].plot(est.time, r, "k-", lw=1, label="reference")
         axes[i, 0].plot(est.time, est[n], "C0-", lw=0.8, label="estimate")
