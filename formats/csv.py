@@ -17,6 +17,8 @@ import csv as _csvmod
 import io
 import json
 import os
+import queue
+import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -172,6 +174,7 @@ class _BlockParser:
     counts bad rows (first few with line numbers) or raises under ``strict``."""
 
     def __init__(self, hdr: CsvHeader, path: str, strict: bool, rep: ReadReport):
+        self.hdr = hdr
         self.ncol = len(hdr.names)
         self.sep = ord(hdr.sep)
         self.dec = ord(hdr.decimal)
@@ -223,37 +226,37 @@ class _BlockParser:
         return out[:row]
 
 
-def _parse_parallel(hdr: CsvHeader, path: str, strict: bool, rep: ReadReport, buf: np.ndarray) -> np.ndarray:
-    """Parse a whole buffer; big buffers are cut at line ends into pieces parsed by threads (the kernel releases
-    the GIL). Bad-row line numbers are made absolute afterwards; ``strict`` parses in one piece."""
+def _parse_parallel(parser: _BlockParser, buf: np.ndarray, end: int) -> np.ndarray:
+    """Parse the whole lines of buf[:end] with ``parser`` (its running line number and report are updated); big
+    buffers are cut at line ends into pieces parsed by threads (the kernel releases the GIL), bad-row line numbers
+    made absolute afterwards. ``strict`` parses in one piece (it stops at the first bad row)."""
     n = _threads()
-    if strict or n == 1 or buf.size < (8 << 20):
-        return _BlockParser(hdr, path, strict, rep).parse(buf, buf.size, _rows_hint(buf, buf.size))
+    if parser.strict or n == 1 or end < (8 << 20):
+        return parser.parse(buf, end, _rows_hint(buf, end))
     cuts = [0]
     for k in range(1, n):
-        c = int(buf.size * k // n)
-        nl = np.flatnonzero(buf[c: c + (1 << 20)] == 10)
+        c = int(end * k // n)
+        nl = np.flatnonzero(buf[c: min(end, c + (1 << 20))] == 10)
         if nl.size:
             cuts.append(c + int(nl[0]) + 1)
-    cuts.append(buf.size)
+    cuts.append(end)
     cuts = sorted(set(cuts))
     pieces = [buf[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
     reps = [ReadReport() for _ in pieces]
-    parsers = [_BlockParser(hdr, path, False, r) for r in reps]
+    parsers = [_BlockParser(parser.hdr, parser.path, False, r) for r in reps]
     for p in parsers:
         p.line = 0  # relative line numbers; made absolute below
     with ThreadPoolExecutor(len(pieces)) as pool:
         arrays = list(pool.map(lambda k: parsers[k].parse(pieces[k], pieces[k].size,
                                                           _rows_hint(pieces[k], pieces[k].size)),
                                range(len(pieces))))
-    base = hdr.data_line
     for p, r in zip(parsers, reps, strict=True):
         for msg in r.first_bad:
-            if len(rep.first_bad) < 5:
+            if len(parser.rep.first_bad) < 5:
                 ln, _, rest = msg[5:].partition(":")
-                rep.first_bad.append(f"line {int(ln) + base}:{rest}")
-        rep.bad_rows += r.bad_rows
-        base += p.line
+                parser.rep.first_bad.append(f"line {int(ln) + parser.line}:{rest}")
+        parser.rep.bad_rows += r.bad_rows
+        parser.line += p.line
     return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
 
 
@@ -336,12 +339,57 @@ def _expected_quantity_of(target: str) -> str | None:
 
 
 def iter_csv(path: str, chunk_rows: int = 500_000, columns: str | None = None, profile: str | None = None,
-             strict: bool = False, block_bytes: int = 16 << 20) -> Iterator[Recording]:
+             strict: bool = False, block_bytes: int = 16 << 20, prefetch: bool = False) -> Iterator[Recording]:
     """Stream a CSV as successive Recordings of at most ``chunk_rows`` rows (bounded memory).
 
     The file is read in blocks of ``block_bytes`` cut at line ends; memory is O(block + chunk), not O(file).
-    Skipped-row counts in each chunk's meta are running totals.
+    Skipped-row counts in each chunk's meta are running totals. ``prefetch``: the next chunk is parsed in a
+    background thread while the caller works on the current one (one chunk more in memory); errors are raised
+    in the caller at the chunk where they occur.
     """
+    chunks = _iter_csv(path, chunk_rows, columns, profile, strict, block_bytes)
+    return in_background(chunks) if prefetch else chunks
+
+
+def in_background(items: Iterator[Any], depth: int = 1) -> Iterator[Any]:
+    """Run an iterator in a worker thread, ``depth`` items ahead of the consumer (useful when producing an item
+    runs GIL-free compiled code). Exceptions are re-raised in the consumer; abandoning the loop stops the worker."""
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    quit_ = threading.Event()
+
+    def put(item: tuple) -> bool:
+        while not quit_.is_set():
+            try:
+                q.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for it in items:
+                if not put(("item", it)):
+                    return
+            put(("end", None))
+        except BaseException as e:  # handed to the consumer
+            put(("error", e))
+
+    threading.Thread(target=work, name="imutool-prefetch", daemon=True).start()
+    try:
+        while True:
+            kind, value = q.get()
+            if kind == "end":
+                return
+            if kind == "error":
+                raise value
+            yield value
+    finally:
+        quit_.set()
+
+
+def _iter_csv(path: str, chunk_rows: int, columns: str | None, profile: str | None, strict: bool,
+              block_bytes: int) -> Iterator[Recording]:
     hdr = read_header(path, columns, profile)
     rep = ReadReport()
     parser = _BlockParser(hdr, path, strict, rep)
@@ -366,7 +414,7 @@ def iter_csv(path: str, chunk_rows: int = 500_000, columns: str | None = None, p
                 carry = data[end:]
             if end:
                 buf = np.frombuffer(data, np.uint8)
-                arr = parser.parse(buf, end, _rows_hint(buf, end))
+                arr = _parse_parallel(parser, buf, end)
                 del buf
                 if arr.shape[0]:
                     pending.append(arr)
@@ -396,7 +444,7 @@ def read_csv(path: str, columns: str | None = None, profile: str | None = None,
         buf = np.fromfile(path, dtype=np.uint8, offset=hdr.data_offset)
     except OSError as e:
         raise ImutoolError(f"cannot read: {e.strerror}", path=path) from None
-    data = _parse_parallel(hdr, path, strict, rep, buf)
+    data = _parse_parallel(_BlockParser(hdr, path, strict, rep), buf, buf.size)
     del buf
     if data.shape[0] == 0:
         msg = "no data rows"
@@ -445,27 +493,47 @@ def _canonicalised(rec: Recording) -> list[np.ndarray]:
 _WRITE_BLOCK_ROWS = 32768
 
 
-def format_array(data: np.ndarray, sep: str = ",") -> bytes:
-    """CSV text (bytes) of a 2-D float array: exact round-trip digits (shortest of 15/16/17), NaN empty."""
+def format_array(data: np.ndarray, sep: str = ",", decimals: np.ndarray | None = None) -> bytes:
+    """CSV text (bytes) of a 2-D float array: exact round-trip digits (shortest of 15/16/17), NaN empty.
+    ``decimals`` (per column, −1 = exact) rounds chosen columns to a fixed number of decimals."""
     data = np.ascontiguousarray(data, dtype=np.float64)
     if data.ndim == 1:
         data = data[:, None]
     parts = []
     for r0 in range(0, data.shape[0], _WRITE_BLOCK_ROWS):
-        parts.append(_format_block(data, r0, min(r0 + _WRITE_BLOCK_ROWS, data.shape[0]), sep))
+        parts.append(_format_block(data, r0, min(r0 + _WRITE_BLOCK_ROWS, data.shape[0]), sep, decimals))
     return b"".join(parts)
 
 
-def _format_block(data: np.ndarray, r0: int, r1: int, sep: str) -> bytes:
+def _format_block(data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.ndarray | None = None) -> bytes:
     n = r1 - r0
+    if decimals is None:
+        decimals = np.full(data.shape[1], -1, np.int64)
     out = np.empty(n * (data.shape[1] * _eng.MAX_FIELD_BYTES + 1), np.uint8)
     fails = np.empty((1, 2), np.int64)
-    nbytes, nfail = _eng.format_block(data, data.view(np.uint64), r0, r1, ord(sep), out, fails, _eng.T_HI, _eng.T_LO,
-                                      _eng.T_EXP)
+    nbytes, nfail = _eng.format_block(data, data.view(np.uint64), r0, r1, ord(sep), out, fails, decimals)
     if nfail:  # never seen; Python's repr is exact too
         return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n"
                        for row in data[r0:r1].tolist()).encode()
     return out[:nbytes].tobytes()
+
+
+DECIMALS_KEY = "csv_decimals"
+
+
+def column_decimals(rec: Recording) -> np.ndarray | None:
+    """Per-column decimals from ``rec.meta['csv_decimals']`` ({channel: n}, the printed resolution of estimator
+    outputs, written into the header); −1 (exact round trip) for the time and every other channel."""
+    spec = rec.meta.get(DECIMALS_KEY)
+    if not spec:
+        return None
+    if not isinstance(spec, dict) or not all(isinstance(v, int) and not isinstance(v, bool)
+                                             and 0 <= v <= _eng.MAX_DECIMALS for v in spec.values()):
+        raise ImutoolError(f"metadata {DECIMALS_KEY} must map channel names to 0…{_eng.MAX_DECIMALS} decimals, "
+                           f"got {spec!r}")
+    widths = [1] + [1 if a.ndim == 1 else a.shape[1] for a in rec.channels.values()]
+    per = [-1] + [spec.get(name, -1) for name in rec.channels]
+    return np.repeat(np.array(per, np.int64), widths)
 
 
 def _threads() -> int:
@@ -481,11 +549,12 @@ def _write_rows(f: Any, rec: Recording) -> None:
     if not len(rec):
         return
     blocks = _canonicalised(rec)
+    decimals = column_decimals(rec)
 
     def one(r0: int) -> bytes:
         r1 = min(r0 + _WRITE_BLOCK_ROWS, len(rec))
         data = np.ascontiguousarray(np.hstack([b[r0:r1] for b in blocks]), dtype=np.float64)
-        return _format_block(data, 0, r1 - r0, ",")
+        return _format_block(data, 0, r1 - r0, ",", decimals)
 
     starts = range(0, len(rec), _WRITE_BLOCK_ROWS)
     nthreads = _threads()
@@ -523,26 +592,48 @@ class CsvWriter:
     Usage: ``with CsvWriter(path) as w: w.write(chunk) ...`` — the header comes from the first chunk.
     """
 
-    def __init__(self, path: str):
+    def __init__(self, path: str, background: bool = False):
         self.path = path
         self._ctx = atomic_path(path)
         self._tmp = self._ctx.__enter__()
         self._f = open(self._tmp, "wb")
         self._header_written = False
         self.rows = 0
+        # background: formatting and writing of a chunk overlap the caller's next chunk (one chunk in flight)
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="imutool-writer") if background else None
+        self._pending: Any = None
 
     def write(self, rec: Recording) -> None:
         if not self._header_written:
             self._f.write(header_text(rec).encode("utf-8"))
             self._header_written = True
-        _write_rows(self._f, rec)
+        if self._pool is None:
+            _write_rows(self._f, rec)
+        else:
+            self._wait()
+            self._pending = self._pool.submit(_write_rows, self._f, rec)
         self.rows += len(rec)
 
+    def _wait(self) -> None:
+        """Finish the chunk in flight (its error, e.g. disk full, is raised here)."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            pending.result()
+
     def close(self) -> None:
+        try:
+            self._wait()
+        except BaseException as e:
+            self.abort(e)
+            raise
+        if self._pool is not None:
+            self._pool.shutdown()
         self._f.close()
         self._ctx.__exit__(None, None, None)
 
     def abort(self, exc: BaseException) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
         self._f.close()
         try:
             self._ctx.__exit__(type(exc), exc, exc.__traceback__)

@@ -543,16 +543,23 @@ def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
 MAX_FIELD_BYTES = 26  # sign, 17 digits, point, up to 4 leading zeros or 'e-308', separator
 
 
+P10U = np.array([10**k for k in range(20)], np.uint64)
+MAX_DECIMALS = 15
+
+
 @njit(cache=True, nogil=True)
 def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
-                 t_hi: np.ndarray, t_lo: np.ndarray, t_exp: np.ndarray) -> tuple[int, int]:
+                 decimals: np.ndarray) -> tuple[int, int]:
     """Format rows data[r0:r1] (``bits`` = data.view(uint64)) as CSV lines into ``out`` (needs
     (r1-r0)·(ncol·MAX_FIELD_BYTES + 1) bytes). Layout as ``repr``: positional for 1e-4 ≤ |x| < 1e16, else
     ``d.ddde±XX``; integers without a trailing ``.0``; NaN = empty field; ±inf as ``inf``/``-inf``.
 
+    ``decimals[j]`` ≥ 0 (≤ MAX_DECIMALS): column j is rounded to that many decimals instead (fixed point,
+    trailing zeros dropped, ``-0`` written ``0``) — for estimator outputs whose resolution is stated in the
+    file header; values too large for it (|x|·10^d ≥ 9e15) fall back to the exact form. −1: exact.
+
     Returns (bytes written, number of values that could not be formatted — never seen; their (row, col) go
-    to ``fails`` and the caller re-formats those rows with Python's repr). The tables are module constants;
-    the trailing table arguments are kept for a stable signature.
+    to ``fails`` and the caller re-formats those rows with Python's repr).
     """
     ncol = data.shape[1]
     tmp = np.empty(24, np.uint8)
@@ -584,6 +591,40 @@ def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int,
                 out[p + 2] = 102
                 p += 3
                 continue
+            dj = decimals[j]
+            if dj >= 0:
+                scaled = ax * P10F[dj + 307]
+                if scaled < 9e15:
+                    v = np.uint64(scaled + 0.5)
+                    if v == _U0:
+                        if x < 0:
+                            p -= 1  # rounds to zero: no sign
+                        out[p] = 48
+                        p += 1
+                        continue
+                    ip = v // P10U[dj]
+                    fp = v - ip * P10U[dj]
+                    k = 0
+                    while True:  # integer part, reversed
+                        tmp[k] = 48 + int(ip % _U10)
+                        ip = ip // _U10
+                        k += 1
+                        if ip == _U0:
+                            break
+                    for i in range(k - 1, -1, -1):
+                        out[p] = tmp[i]
+                        p += 1
+                    nd = dj
+                    while nd > 0 and fp % _U10 == _U0:
+                        fp = fp // _U10
+                        nd -= 1
+                    if nd > 0:
+                        out[p] = 46
+                        for i in range(nd, 0, -1):
+                            out[p + i] = 48 + int(fp % _U10)
+                            fp = fp // _U10
+                        p += nd + 1
+                    continue
             c, nd, e = shortest_digits(ax, b)
             if nd == 0:
                 if nf < fails.shape[0]:

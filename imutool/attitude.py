@@ -49,6 +49,7 @@ import numpy as np
 from numba import njit
 
 from formats import Recording
+from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler
 
@@ -559,7 +560,7 @@ def _apply_correction(st, dx):
     st[6] += dx[5]
 
 
-@njit(cache=True, fastmath=_FASTMATH)
+@njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
                st, q_out, b_out, std_out, flags_out, p_store):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
@@ -945,22 +946,45 @@ class AttitudeResult:
         return np.degrees(r), np.degrees(p), np.degrees(h)
 
 
+def _first_finite_row(*arrays: np.ndarray) -> int:
+    """Index of the first row finite in every array (−1: none), scanning in growing blocks (O(1) on good data)."""
+    n = min(len(a) for a in arrays)
+    i0, step = 0, 1024
+    while i0 < n:
+        i1 = min(n, i0 + step)
+        ok = np.ones(i1 - i0, bool)
+        for a in arrays:
+            ok &= np.isfinite(a[i0:i1]).reshape(i1 - i0, -1).all(axis=1)
+        hit = np.flatnonzero(ok)
+        if hit.size:
+            return i0 + int(hit[0])
+        i0, step = i1, step * 4
+    return -1
+
+
+def nominal_dt(t: np.ndarray) -> float:
+    """Median positive time step (s) — over at most ~200 000 evenly spread steps (exact for shorter series)."""
+    i = np.arange(0, len(t) - 1, max(1, (len(t) - 1) // 200_000))
+    d = t[i + 1] - t[i]
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else 0.01
+
+
 def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) -> np.ndarray:
     """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples."""
     st = np.zeros(STATE_SIZE)
-    okA = np.flatnonzero(np.all(np.isfinite(accel), axis=1))
-    if okA.size == 0:
+    i_acc = _first_finite_row(accel)
+    if i_acc < 0:
         raise ImutoolError("no valid accelerometer sample to initialise the attitude")
-    a = accel[okA[0]]
+    a = accel[i_acc]
     roll = np.arctan2(-a[1], -a[2])
     pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
     heading = 0.0
     mref = np.array([np.cos(np.radians(60)), 0.0, np.sin(np.radians(60))])
     mnorm = 0.0
     if mag is not None:
-        okM = np.flatnonzero(np.all(np.isfinite(mag), axis=1) & np.all(np.isfinite(accel), axis=1))
-        if okM.size:
-            i = okM[0]
+        i = _first_finite_row(mag, accel)
+        if i >= 0:
             a = accel[i]
             roll = np.arctan2(-a[1], -a[2])
             pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
@@ -1030,9 +1054,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     use_mag = mag is not None and params.mag_mode != "off"
     m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
     if dt_nominal is None:
-        d = np.diff(t)
-        d = d[d > 0]
-        dt_nominal = float(np.median(d)) if d.size else 0.01
+        dt_nominal = nominal_dt(t)
     if state is None:
         state = initial_state(a, m if use_mag else None, params)
     st = np.array(state, dtype=np.float64)
@@ -1063,9 +1085,7 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
         raise ImutoolError("smoothing needs the filter covariances (run_ekf(..., keep_cov=True))")
     t = res.time
     if dt_nominal is None:
-        d = np.diff(t)
-        d = d[d > 0]
-        dt_nominal = float(np.median(d)) if d.size else 0.01
+        dt_nominal = nominal_dt(t)
     g = np.array(gyro, dtype=np.float64)
     bad = ~np.all(np.isfinite(g), axis=1)
     if bad.any():  # same hold-last-good rule as the filter
@@ -1134,6 +1154,7 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     """Estimate channels (degrees at the surface) plus the input's ref_* and label channels."""
     out = Recording(res.time.copy(), meta=dict(rec.meta))
     r, p, h = res.euler_deg()
+    h[h >= 360.0 - 0.5 * 10.0 ** -OUTPUT_DECIMALS["heading"]] -= 360.0  # printed as 0, never as 360
     out.add("roll", r)
     out.add("pitch", p)
     out.add("heading", h)
@@ -1147,9 +1168,17 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     out.add("mag_rejected", (res.flags & F_MAG_REJ > 0).astype(float), "1")
     out.add("rest", (res.flags & F_REST > 0).astype(float), "1")
     carry_labels(rec, out)
+    out.meta[DECIMALS_KEY] = dict(OUTPUT_DECIMALS)
     if params is not None:
         out.meta["filter"] = {k: v for k, v in asdict(params).items()}
     return out
+
+
+# Printed resolution of the estimate columns in CSV outputs (stated in the file header): 1e-6° for angles and
+# their σ, 1e-9 for quaternion components (≈ 1e-7°) and bias (rad/s ≈ 2e-4 °/h) — far below any sensor's noise,
+# and ~40 % fewer bytes and much faster to write than 17 significant digits. Time stays exact.
+OUTPUT_DECIMALS = {"roll": 6, "pitch": 6, "heading": 6, "q": 9, "gyro_bias": 9, "roll_std": 6, "pitch_std": 6,
+                   "heading_std": 6, "accel_rejected": 0, "mag_rejected": 0, "rest": 0}
 
 
 LABEL_CHANNELS = ("movement", "zvi")

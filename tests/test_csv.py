@@ -442,6 +442,71 @@ def test_parallel_read_of_big_file_matches_streamed_read(tmp_path):
     assert whole.meta["skipped_rows"] == 3
     assert whole.meta["skipped_rows_first"] == streamed[0].meta["skipped_rows_first"]
     assert whole.meta["skipped_rows_first"][1].startswith("line 70002:")
+    # streamed in blocks big enough to be parsed by threads too, chunks crossing the blocks, in the background
+    chunks = list(iter_csv(str(p), chunk_rows=33_333, block_bytes=9 << 20, prefetch=True))
+    assert np.array_equal(_bits(np.concatenate([c["a"] for c in chunks])), _bits(whole["a"]))
+    assert chunks[-1].meta["skipped_rows_first"] == whole.meta["skipped_rows_first"]
+
+
+def test_in_background_passes_items_and_raises_the_worker_error_in_order():
+    from formats.csv import in_background
+
+    def items():
+        yield 1
+        yield 2
+        raise ImutoolError("bad row", path="x.csv", line=7)
+
+    got = []
+    with pytest.raises(ImutoolError, match="x.csv:7: bad row"):
+        for v in in_background(items()):
+            got.append(v)
+    assert got == [1, 2]
+    gen = in_background(iter(range(10**9)))  # abandoned early: the worker stops instead of running on
+    assert next(gen) == 0
+    gen.close()
+
+
+def test_background_writer_equals_foreground_and_reports_disk_errors(tmp_path):
+    rng = np.random.default_rng(3)
+    chunks = [Recording(np.arange(k, k + 5000) * 0.01, {"gyro": rng.standard_normal((5000, 3))})
+              for k in range(0, 20000, 5000)]
+    for bg in (False, True):
+        with CsvWriter(str(tmp_path / f"w{bg}.csv"), background=bg) as w:
+            for c in chunks:
+                w.write(c)
+    assert (tmp_path / "wTrue.csv").read_bytes() == (tmp_path / "wFalse.csv").read_bytes()
+    import os
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("/dev/full not available")
+    w = CsvWriter(str(tmp_path / "full.csv"), background=True)
+    w._f.close()
+    w._f = open("/dev/full", "wb")  # the disk fills up under the writer thread
+    with pytest.raises(OSError):
+        for c in chunks:
+            w.write(c)
+        w.close()
+    assert not (tmp_path / "full.csv").exists()
+
+
+def test_fixed_decimals_columns(tmp_path):
+    """``csv_decimals`` metadata: chosen channels rounded to n decimals (stated in the header), others exact."""
+    x = np.array([[1.23456789, -4e-7, 359.99999949, np.nan, -2.5e-3, 1e20]])
+    assert format_array(x, decimals=np.array([6, 6, 6, 6, 6, 6])) == b"1.234568,0,359.999999,,-0.0025,1e+20\n"
+    assert format_array(x[:, :2], decimals=np.array([0, -1])) == b"1,-4e-07\n"
+    t = np.array([0.005, 0.01])
+    rec = Recording(t, {"roll": np.array([1.0 / 3, -2.0 / 3]), "q": np.array([[1, 0, 0, 0], [0.5, 0.5, 0.5, 0.5]]) / 3},
+                    meta={"csv_decimals": {"roll": 3, "q": 2}})
+    p = str(tmp_path / "d.csv")
+    write_csv(rec, p)
+    lines = open(p).read().splitlines()
+    assert '# csv_decimals: {"roll":3,"q":2}' in lines
+    assert lines[-2:] == ["0.005,0.333,0.33,0,0,0", "0.01,-0.667,0.17,0.17,0.17,0.17"]
+    back = read_csv(p)
+    assert back.meta["csv_decimals"] == {"roll": 3, "q": 2}
+    rec.meta["csv_decimals"] = {"roll": 99}
+    with pytest.raises(ImutoolError, match="csv_decimals"):
+        write_csv(rec, p)
 
 
 def test_latin1_header_with_degree_sign(tmp_path):

@@ -71,7 +71,7 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--variation", type=float, default=0.0, show_default=True,
               help="compass: magnetic variation, deg east positive (true = magnetic + variation).")
 @click.option("--paper-init", is_flag=True, help="compass: x0 = 0, P0 = 0 as in the paper.")
-@click.option("--chunk-rows", type=int, default=2_000_000, show_default=True,
+@click.option("--chunk-rows", type=int, default=1_000_000, show_default=True,
               help="EKF on CSV: stream the file in chunks of this many rows when it is larger than --stream-mb.")
 @click.option("--stream-mb", type=float, default=300.0, show_default=True,
               help="EKF on CSV: stream (bounded memory) when the input is larger than this (MB).")
@@ -170,7 +170,7 @@ def _attach_gnss(rec, path: str):
 def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, io: dict) -> dict[str, Any]:
     """Bounded-memory EKF over a large CSV: chunks from iter_csv, state carried, rows appended to the output."""
     from formats.csv import CsvWriter, iter_csv
-    from imutool.attitude import result_recording, run_ekf
+    from imutool.attitude import nominal_dt, result_recording, run_ekf
 
     state = None
     dt_nom = None
@@ -178,8 +178,11 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
     summary: dict[str, Any] = {"input": path, "output": output, "rows": 0, "method": "ekf (streamed)",
                                "dropped_non_increasing_rows": 0}
     totals: dict[str, int] = {}
-    with CsvWriter(output) as w:
-        for chunk in iter_csv(path, chunk_rows=chunk_rows, columns=io.get("columns"), profile=io.get("profile")):
+    # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
+    # while the EKF runs on this one (the compiled kernels release the GIL)
+    with CsvWriter(output, background=True) as w:
+        for chunk in iter_csv(path, chunk_rows=chunk_rows, columns=io.get("columns"), profile=io.get("profile"),
+                              prefetch=True):
             keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
             if not keep.all():
                 summary["dropped_non_increasing_rows"] += int((~keep).sum())
@@ -197,8 +200,7 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
                 if ch not in chunk.channels:
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
             if dt_nom is None:
-                d = np.diff(chunk.time)
-                dt_nom = float(np.median(d[d > 0])) if (d > 0).any() else 0.01
+                dt_nom = nominal_dt(chunk.time)
             sog = cog = None
             if not no_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
                 sog, cog = chunk["sog"], chunk["cog"]
@@ -210,6 +212,9 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
             w.write(result_recording(chunk, res, params))
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
+            if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
+                summary["skipped_rows"] = chunk.meta["skipped_rows"]
+                summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
     summary.update(totals)
     summary["samples"] = summary["rows"]
     return summary
