@@ -27,10 +27,12 @@ filter.)
 - Accelerometer measurement beyond the paper (VQF's key idea, Laidig & Seel 2023, inside the EKF): the specific
   force is rotated into a quasi-inertial frame I given by the gyro-only integrated quaternion q_I, low-passed
   there (two first-order stages of τ/2 each, ``accel_lp_tau``; running mean at start-up) — gravity is constant in
-  I while translational accelerations average out — and rotated back, z = R(q_I)ᵀ·LP(R(q_I)·a). Its σ is
-  ``accel_noise`` + ``accel_noise_gain`` × σ_w/g, with σ_w the accelerometer white noise learned online from first
-  differences (½·E‖a_k − a_{k−1}‖²/3, ~10 s average, shocks excluded), so noisy and quiet sensors both get a
-  consistent R without retuning. ``accel_lp_tau = 0`` gives the paper's raw-accelerometer update.
+  I while translational accelerations average out — and rotated back, z = R(q_I)ᵀ·LP(R(q_I)·a). Its variance is
+  ``accel_noise``² + (``accel_noise_gain`` · σ_w/g)² (independent error sources add in variance), with σ_w the
+  accelerometer white noise learned online from second differences (E‖a_k − 2a_{k−1} + a_{k−2}‖²/18, ~10 s
+  average, shocks excluded; motion cancels to second order, so fast rotation does not pass for noise), so noisy
+  and quiet sensors both get a consistent R without retuning. ``accel_lp_tau = 0`` gives the paper's
+  raw-accelerometer update.
 - Robustness beyond the paper: accelerometer sample skipped (not fed to the low-pass) when | ‖a‖ − g | >
   accel_gate (a shock); update skipped when its normalised innovation squared exceeds accel_nis_gate (off by
   default; forced back in after reject_timeout s of continuous rejection);
@@ -63,7 +65,8 @@ S_TACC = 59  # accumulated time since the last covariance propagation
 S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
 S_QI, S_LP1, S_LP2, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass stages in I (3+3)
 S_AVAR, S_APREV, S_NAVAR = 77, 78, 81  # accel white-noise variance estimate (m²/s⁴), previous raw accel, count
-STATE_SIZE = 82
+S_APREV2 = 82  # raw accel two samples back (3)
+STATE_SIZE = 85
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -99,7 +102,7 @@ class EkfParams:
     gap_rate_sigma: float = 0.2  # rad/s  attitude variance growth over a gap: (σ·gap)²
     reject_timeout: float = 3.0  # s  accel forced back in after this long continuously rejected
     accel_lp_tau: float = 1.0  # s  accel low-pass time constant in the quasi-inertial frame (≤ 0: raw accel)
-    accel_noise_gain: float = 3.0  # accel σ += gain × (white-noise σ of the accel direction, learned online)
+    accel_noise_gain: float = 4.0  # accel σ² += (gain × white-noise σ of the accel direction, learned online)²
     accel_nis_soft: bool = False  # NIS above the gate: inflate R by NIS/gate instead of skipping the update
     accel_adapt: float = 0.0  # m/s²  accel σ scaled by (1 + (| ‖a‖ − g | / accel_adapt)²)^½ (≤ 0: fixed σ)
     gyro_integration: str = "rectangular"  # rate over (t_{k-1}, t_k]: ω_k (rectangular) or ½(ω_{k-1}+ω_k)
@@ -639,16 +642,21 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
         acc_ok = np.isfinite(ax) and np.isfinite(ay) and np.isfinite(az)
         if acc_ok and prm[P_ACC_WN_GAIN] > 0:
-            # white-noise level of the accelerometer from first differences (slow accelerations cancel):
-            # σ_w² ≈ ½·mean ‖a_k − a_{k−1}‖² / 3, averaged over ~10 s (running mean at start-up)
-            if st[S_NAVAR] > 0:
-                d0, d1, d2 = ax - st[S_APREV], ay - st[S_APREV + 1], az - st[S_APREV + 2]
-                dd = (d0 * d0 + d1 * d1 + d2 * d2) / 6.0
+            # white-noise level of the accelerometer from second differences (motion cancels to second order:
+            # a rotation at ω moves gravity by g·ω²·dt² per step, not g·ω·dt as with first differences):
+            # σ_w² ≈ mean ‖a_k − 2a_{k−1} + a_{k−2}‖² / 18 (3 axes × 6σ²), averaged over ~10 s (running mean at
+            # start-up)
+            if st[S_NAVAR] > 1:
+                d0 = ax - 2.0 * st[S_APREV] + st[S_APREV2]
+                d1 = ay - 2.0 * st[S_APREV + 1] + st[S_APREV2 + 1]
+                d2 = az - 2.0 * st[S_APREV + 2] + st[S_APREV2 + 2]
+                dd = (d0 * d0 + d1 * d1 + d2 * d2) * (1.0 / 18.0)
                 if dd < 100.0 * st[S_AVAR] or st[S_NAVAR] < 10:  # shocks do not inflate the noise estimate
-                    cnt = st[S_NAVAR]
+                    cnt = st[S_NAVAR] - 1.0
                     bw = max(1.0 / cnt, dt / 10.0) if dt > 0 else 1.0 / cnt
                     st[S_AVAR] += bw * (dd - st[S_AVAR])
             st[S_NAVAR] += 1.0
+            st[S_APREV2], st[S_APREV2 + 1], st[S_APREV2 + 2] = st[S_APREV], st[S_APREV + 1], st[S_APREV + 2]
             st[S_APREV], st[S_APREV + 1], st[S_APREV + 2] = ax, ay, az
         # ---------------- rest detection → zero-rate bias pseudo-measurement ----------------
         if prm[P_REST_TIME] > 0 and acc_ok:
@@ -728,10 +736,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         na = np.sqrt(ax * ax + ay * ay + az * az)
                     h0, h1, h2 = -R[2, 0], -R[2, 1], -R[2, 2]
                     y0, y1, y2 = ax / na - h0, ay / na - h1, az / na - h2
-                    sig = prm[P_ACC_NOISE]
+                    # independent error sources add in variance: model floor² + (gain·σ_w/g)²
+                    sig2 = prm[P_ACC_NOISE] * prm[P_ACC_NOISE]
                     if prm[P_ACC_WN_GAIN] > 0:
-                        sig += prm[P_ACC_WN_GAIN] * np.sqrt(st[S_AVAR]) / g
-                    sig2 = sig * sig
+                        sig2 += prm[P_ACC_WN_GAIN] * prm[P_ACC_WN_GAIN] * st[S_AVAR] / (g * g)
                     if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
                         sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
                     ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx)

@@ -159,19 +159,29 @@ def test_cli_filter_and_evaluate(tmp_path):
     assert bad.exit_code != 0 and "update-every" in str(bad.exception)
 
 
-BROAD = ["02_undisturbed_slow_rotation_B", "24_disturbed_tapping_A"]
+BROAD = ["02_undisturbed_slow_rotation_B", "05_undisturbed_slow_rotation_with_breaks_B",
+         "07_undisturbed_fast_rotation_B", "24_disturbed_tapping_A"]
 
 
-@pytest.mark.parametrize("trial", BROAD)
-def test_broad_real_data(shared, trial):
+def test_broad_real_data_meets_vqf(shared):
+    """The four BROAD trials, one default parameter set: the mean causal RMSE must reach VQF's (0.60° inclination,
+    1.45° total target); measured 0.593° / 1.23° (docs/attitude.md). The smoother must do better still."""
     from imutool.metrics import evaluate_quaternion
 
-    rec = formats.read(shared("broad", f"{trial}.csv"))
-    est, _ = ekf_recording(rec)
-    m = evaluate_quaternion(est["q"], rec["ref_q"], rec["movement"] > 0)
-    # fixed defaults; measured 0.41°/0.65° inclination and 1.36°/1.10° total (docs/attitude.md)
-    assert m["inclination"]["rmse"] < 0.8
-    assert m["total"]["rmse"] < 1.6
+    causal, smoothed = [], []
+    for trial in BROAD:
+        rec = formats.read(shared("broad", f"{trial}.csv"))
+        moving = rec["movement"] > 0
+        res, _ = run_ekf(rec.time, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), rec["mag"], keep_cov=True)
+        m = evaluate_quaternion(res.q, rec["ref_q"], moving)
+        causal.append((m["total"]["rmse"], m["inclination"]["rmse"]))
+        sm = rts_smooth(res, rec.get("gyro", "rad/s"))
+        m = evaluate_quaternion(sm.q, rec["ref_q"], moving)
+        smoothed.append((m["total"]["rmse"], m["inclination"]["rmse"]))
+    causal, smoothed = np.array(causal), np.array(smoothed)
+    assert np.all(causal[:, 1] < 1.1) and np.all(causal[:, 0] < 2.0), causal
+    assert causal[:, 1].mean() <= 0.60 and causal[:, 0].mean() <= 1.45, causal.mean(axis=0)
+    assert np.all(smoothed < causal), (smoothed, causal)
 
 
 def test_cli_gnss_from_nmea_file(tmp_path):

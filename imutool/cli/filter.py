@@ -31,8 +31,9 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--bias-rw", type=float, default=2e-5, show_default=True, help="EKF: gyro bias random walk, rad/s/√s.")
 @click.option("--accel-noise", type=float, default=0.03, show_default=True,
               help="EKF: σ floor of the normalised accelerometer direction per update (≈ rad).")
-@click.option("--accel-noise-gain", type=float, default=3.0, show_default=True,
-              help="EKF: accel σ += gain × the accelerometer's white-noise σ/g learned online (0 = fixed σ).")
+@click.option("--accel-noise-gain", type=float, default=4.0, show_default=True,
+              help="EKF: accel σ² = floor² + (gain × the accelerometer's white-noise σ/g learned online)² "
+                   "(0 = fixed σ).")
 @click.option("--accel-lp-tau", type=float, default=1.0, show_default=True,
               help="EKF: time constant (s) of the accel low-pass in the gyro-integrated quasi-inertial frame "
                    "(0 = raw accel as in the paper).")
