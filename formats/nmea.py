@@ -26,7 +26,6 @@ from functools import reduce
 from typing import Any
 
 import numpy as np
-import pynmea2
 from pynmea2 import TalkerSentence
 
 from .atomic import atomic_path
@@ -56,6 +55,7 @@ __all__ = [
     "parse_sentence",
     "decode",
     "decode_checked",
+    "decode_fast",
     "read_nmea",
     "write_nmea",
     "iter_sentences",
@@ -249,6 +249,7 @@ def _normalise_xdr_map(xdr_map: dict[str, Any] | None) -> dict[str, XdrMapping]:
 
 
 XDR_QUANTITIES = ("roll", "pitch", "heave")
+_HHMMSS_RE = re.compile(r"\d{6}(\.\d*)?")
 
 
 def _num(s: str | None, what: str, stype: str) -> float | None:
@@ -278,27 +279,19 @@ def _ew(value: float | None, letter: str | None, what: str, stype: str) -> float
     raise NmeaFieldError(f"{stype}: {what} direction {letter!r} is not E or W", sentence_type=stype)
 
 
-def _talker(s: NmeaSentence) -> Any:
-    cls = TalkerSentence.sentence_types.get(s.formatter)
-    return cls(s.talker, s.formatter, list(s.fields))
-
-
 def _dec_hdt(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
-    m = _talker(s)
-    h = _num(m.data[0] if m.data else None, "heading", "HDT")
+    h = _num(s.fields[0] if s.fields else None, "heading", "HDT")
     return {} if h is None else {"heading_true": h}
 
 
 def _dec_hdm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
-    m = _talker(s)
-    h = _num(m.data[0] if m.data else None, "heading", "HDM")
+    h = _num(s.fields[0] if s.fields else None, "heading", "HDM")
     return {} if h is None else {"heading_mag": h}
 
 
 def _dec_hdg(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
     """HDG: magnetic = sensor + deviation (E +); true = magnetic + variation (E +). Null fields = unknown."""
-    m = _talker(s)
-    d = list(m.data) + [""] * (5 - len(m.data))
+    d = s.fields + [""] * (5 - len(s.fields))
     h = _num(d[0], "heading", "HDG")
     dev = _ew(_num(d[1], "deviation", "HDG"), d[2], "deviation", "HDG")
     var = _ew(_num(d[3], "variation", "HDG"), d[4], "variation", "HDG")
@@ -318,9 +311,8 @@ def _dec_hdg(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) 
 
 def _dec_rot(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
     """ROT: deg/min, negative = bow turns to port; status V (invalid) drops the value."""
-    m = _talker(s)
-    r = _num(m.data[0] if m.data else None, "rate of turn", "ROT")
-    status = (m.data[1] if len(m.data) > 1 else "").strip().upper()
+    r = _num(s.fields[0] if s.fields else None, "rate of turn", "ROT")
+    status = (s.fields[1] if len(s.fields) > 1 else "").strip().upper()
     if r is None or status == "V":
         return {}
     return {"rot": r}
@@ -329,8 +321,7 @@ def _dec_rot(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) 
 def _dec_ths(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
     """THS: true heading + mode. ``ths_mode`` is the mode letter's code point (chr(int(v)) gives it back);
     mode V (not valid) drops the heading."""
-    m = _talker(s)
-    d = list(m.data) + [""] * (2 - len(m.data))
+    d = s.fields + [""] * (2 - len(s.fields))
     h = _num(d[0], "heading", "THS")
     mode = d[1].strip().upper()
     if mode and (len(mode) != 1 or mode not in THS_MODES):
@@ -387,16 +378,15 @@ def _dec_pashr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]
     Roll + starboard down, pitch + bow up, heave m + up (as the OxTS/Applanix manuals define it). Ashtech
     command replies ($PASHR,ACK / POS / SAT ...) are not attitude: unsupported.
     """
-    f = list(s.fields)
-    if len(f) < 6 or not re.fullmatch(r"\d{6}(\.\d*)?", f[0].strip()):
+    f = s.fields
+    if len(f) < 6 or not _HHMMSS_RE.fullmatch(f[0].strip()):
         raise NmeaUnsupportedError("PASHR: not an attitude sentence (Ashtech reply)", sentence_type="PASHR")
-    m = pynmea2.ProprietarySentence.sentence_types["ASH"]("ASH", ["R"] + f)
-    d = list(m.data) + [""] * 12
+    d = f + [""] * 12
     out: dict[str, float] = {}
-    h = _num(d[2], "heading", "PASHR")
-    if h is not None and d[3].strip().upper() == "T":
+    h = _num(d[1], "heading", "PASHR")
+    if h is not None and d[2].strip().upper() == "T":
         out["heading_true"] = h
-    for idx, key in ((4, "roll"), (5, "pitch"), (6, "heave")):
+    for idx, key in ((3, "roll"), (4, "pitch"), (5, "heave")):
         v = _num(d[idx], key, "PASHR")
         if v is not None:
             out[key] = v
@@ -421,8 +411,7 @@ def _dec_psti(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str])
 
 def _dec_hrm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
     """HRM (standards.md §2.2): status V drops the heel/period/amplitude values (peak hold kept)."""
-    m = _talker(s)
-    d = list(m.data) + [""] * (10 - len(m.data))
+    d = s.fields + [""] * (10 - len(s.fields))
     vals = {k: _num(d[i], k, "HRM") for i, k in ((0, "heel"), (1, "roll_period"), (2, "amp_port"),
                                                   (3, "amp_stbd"), (5, "peak_port"), (6, "peak_stbd"))}
     status = d[4].strip().upper()
@@ -545,6 +534,61 @@ def _decode_with(sentence: NmeaSentence, xmap: dict[str, XdrMapping]) -> tuple[d
     problems: list[str] = []
     values = fn(sentence, xmap, problems)
     return values, problems
+
+
+# -- fast path (live capture) -------------------------------------------------------------------------------------
+# decode_fast() gives the same values as decode(parse_sentence(line)) for the common case — a well-formed
+# sentence with a correct upper-case checksum that decodes cleanly — with plain str operations and no pynmea2
+# objects. For anything else it returns None and the caller takes the full path, which does the error reporting.
+_ADDR_TYPES: dict[str, str | None] = {}  # address field → sentence type (None: not a valid address)
+
+
+def _addr_type(addr: str) -> str | None:
+    t = _ADDR_TYPES.get(addr, "")
+    if t == "":
+        t = ("P" + addr[1:] if addr[0] == "P" else addr[2:]) if _ADDR_RE.match(addr) else None
+        if len(_ADDR_TYPES) < 4096:  # garbage addresses must not grow the cache without bound
+            _ADDR_TYPES[addr] = t
+    return t
+
+
+def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, float] | None:
+    """``decode(parse_sentence(line))`` for a clean sentence, fast; None when the full path must decide.
+
+    Returns the same dict as :func:`decode` when ``line`` is ``$`` + valid address + fields + ``*HH`` (correct,
+    upper-case checksum; no surrounding whitespace), every character printable ASCII, and the decoder finds
+    nothing to complain about — such a sentence is accepted under every checksum policy. Returns None for
+    anything else (bad or missing checksum, '!' sentences, unsupported types, bad fields, XDR problems...):
+    the caller then runs :func:`parse_sentence` and :func:`decode`, which raise the usual errors. The values
+    come from the very decoders :func:`decode` uses; only the general framing work is skipped.
+    """
+    n = len(line)
+    if n < 7 or line[0] != "$" or line[-3] != "*":
+        return None
+    body = line[1:-3]
+    if checksum(body) != line[-2:] or not (body.isascii() and body.isprintable()) \
+            or "$" in body or "!" in body or "*" in body:
+        return None
+    f = body.split(",")
+    if len(f) < 2:
+        return None
+    addr = f[0]
+    stype = _addr_type(addr)
+    if stype is None:
+        return None
+    fn = _DECODERS.get(stype)
+    if fn is None:
+        return None
+    xmap = DEFAULT_XDR_MAP if xdr_map is None else _normalise_xdr_map(xdr_map)
+    del f[0]
+    talker, formatter = ("P", addr[1:]) if addr[0] == "P" else (addr[:2], addr[2:])
+    s = NmeaSentence(talker, formatter, f, True, line)
+    problems: list[str] = []
+    try:
+        values = fn(s, xmap, problems)  # the same decoders as decode(): only the framing checks are skipped
+    except Exception:  # NmeaFieldError, NmeaUnsupportedError...: the full path reports it
+        return None
+    return None if problems and not values else values
 
 
 # -- writing single sentences -------------------------------------------------------------------------------------

@@ -12,14 +12,17 @@ import time
 from collections.abc import Callable
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from formats.errors import ImutoolError
 
-from .bridge import BridgeDecoder, Scales, counts_to_si
 from .runtime import CaptureStats, StatusLine, StopFlag, iso_utc
 from .sink import CaptureCsv, EventLog, RotatingFile, last_complete_row
+
+if TYPE_CHECKING:
+    from .bridge import Scales
 
 NMEA_COLUMNS = ["heading_true", "heading_mag", "heading_sensor", "deviation", "variation", "rot", "roll", "pitch",
                 "heel", "heave", "roll_period", "amp_port", "amp_stbd", "sog", "cog"]
@@ -115,18 +118,20 @@ class SerialSource:
             self._ser = None
 
 
-def _split_lines(buf: bytearray, data: bytes) -> list[bytes]:
+def _split_text(buf: bytearray, data: bytes) -> list[str]:
+    """Complete lines received so far, decoded once per chunk (ASCII, one U+FFFD per bad byte); the partial
+    last line stays in ``buf``. A line over 8 KiB without an end is garbage: it is passed on whole so the stream
+    can resynchronise."""
     buf.extend(data)
-    out = []
-    while True:
-        i = buf.find(b"\n")
-        if i < 0:
-            if len(buf) > 8192:  # a line this long is garbage; keep the tail for resync
-                out.append(bytes(buf))
-                buf.clear()
-            return out
-        out.append(bytes(buf[:i]))
-        del buf[: i + 1]
+    end = buf.rfind(b"\n")
+    lines = []
+    if end >= 0:
+        lines = buf[:end].decode("ascii", "replace").split("\n")
+        del buf[: end + 1]
+    if len(buf) > 8192:
+        lines.append(buf.decode("ascii", "replace"))
+        buf.clear()
+    return lines
 
 
 def run_loop(source: SerialSource, on_data: Callable[[bytes, float, float], None], stats: CaptureStats,
@@ -162,7 +167,7 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
     meta = {"source": f"serial {port} @ {baud} baud (NMEA 0183)", "time": "UTC epoch seconds at arrival",
             "units": ", ".join(f"{k}={v}" for k, v in NMEA_UNITS.items()), "captured_by": "imutool capture serial"}
     kw = {"rotate_s": rotate_s, "append": append, "overwrite": force}
-    csv = CaptureCsv(base, columns, meta, **kw)
+    csv = CaptureCsv(base, columns, meta, array_rows=False, **kw)  # rows come as text (see NmeaRows)
     raw = RotatingFile(base.with_suffix(".nmea"), "", **kw)
     src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log)
     src.open_first()
@@ -170,44 +175,54 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
     stop = stop or StopFlag()
     stop.install()
     buf = bytearray()
-    col_index = {c: i for i, c in enumerate(columns) if i >= 2}
+    to_row = NmeaRows(NMEA_COLUMNS)
+    # a clean sentence takes the fast path; anything else (and any unknown policy) the full one, which counts it
+    fast = nmea.decode_fast if checksum_policy in nmea.CHECKSUM_POLICIES else (lambda line: None)
+
+    def full(text: str) -> dict | None:
+        """parse_sentence + decode, with every failure counted by kind (never fatal); None when no values."""
+        try:
+            sentence = nmea.parse_sentence(text, checksum_policy=checksum_policy)
+        except Exception as e:
+            stats.count_error(type(e).__name__)
+            return None
+        if sentence is None:
+            stats.count_error("unparsed")
+            return None
+        stats.frames += 1
+        try:
+            return nmea.decode(sentence)
+        except Exception as e:
+            stats.count_error(f"decode {type(e).__name__}")
+            return None
 
     def on_data(data: bytes, tw: float, tm: float) -> None:
-        lines = _split_lines(buf, data)
+        lines = _split_text(buf, data)
         if not lines:
             return
-        stamp = _iso_us(tw)
-        raw.write("".join(f"{stamp} {ln.decode('ascii', 'replace').rstrip()}\n" for ln in lines))
+        prefix = _iso_us(tw) + " "
+        raw.write(prefix + ("\n" + prefix).join([ln.rstrip() for ln in lines]) + "\n")  # one write per chunk
+        stats.lines += len(lines)
         rows = []
+        n_fast = 0
         for ln in lines:
-            stats.lines += 1
-            text = ln.decode("ascii", "replace").strip()
+            text = ln.strip()
             if not text:
                 continue
-            try:
-                sentence = nmea.parse_sentence(text, checksum_policy=checksum_policy)
-            except Exception as e:  # every malformed line is counted by kind, never fatal
-                stats.count_error(type(e).__name__)
-                continue
-            if sentence is None:
-                stats.count_error("unparsed")
-                continue
-            stats.frames += 1
-            try:
-                values = nmea.decode(sentence)
-            except Exception as e:
-                stats.count_error(f"decode {type(e).__name__}")
-                continue
-            cells = [(col_index[k], v) for k, v in values.items() if k in col_index and isinstance(v, (int, float))]
-            if cells:
-                rows.append(cells)
+            values = fast(text)
+            if values is None:
+                values = full(text)
+                if not values:
+                    continue
+            else:
+                n_fast += 1
+            row = to_row(values)
+            if row:
+                rows.append(row)
+        stats.frames += n_fast
         if rows:
-            block = np.full((len(rows), len(columns)), np.nan)
-            block[:, 0], block[:, 1] = tw, tm
-            for i, cells in enumerate(rows):
-                for j, v in cells:
-                    block[i, j] = v
-            csv.write_rows(block)
+            lead = f"{tw!r},{tm!r},"
+            csv.write_lines(lead + ("\n" + lead).join(rows) + "\n", len(rows))
 
     try:
         run_loop(src, on_data, stats, duration, status, lambda: raw.bytes_written + csv.file.bytes_written, stop)
@@ -224,11 +239,32 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
     return summary
 
 
+class NmeaRows:
+    """Decoded values → the CSV cells after ``time,time_mono`` (shortest exact float text, empty = NaN);
+    '' when none of the values has a column (no row is written then)."""
+
+    def __init__(self, columns: list[str]):
+        self.index = {c: i for i, c in enumerate(columns)}
+        self.empty = [""] * len(columns)
+
+    def __call__(self, values: dict) -> str:
+        cells = None
+        for k, v in values.items():
+            j = self.index.get(k)
+            if j is not None and isinstance(v, (int, float)):
+                if cells is None:
+                    cells = self.empty.copy()
+                cells[j] = repr(float(v))
+        return "" if cells is None else ",".join(cells)
+
+
 def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales: Scales | None = None,
                    duration: float | None = None, rotate_s: float | None = None, status_s: float | None = 10.0,
                    quiet: bool = False, append: bool = False, force: bool = False, opener: Callable | None = None,
                    stop: StopFlag | None = None) -> dict:
     """Record bridge-protocol frames (text or binary) from a serial port into an imutool CSV in SI units."""
+    from .bridge import BridgeDecoder, counts_to_si  # numba kernels: only the bridge protocol needs them
+
     base = Path(out)
     if base.suffix.lower() != ".csv":
         base = base / f"bridge_{utc_name()}.csv"

@@ -152,11 +152,19 @@ def csv_header(columns: list[str], meta: dict) -> str:
 class CaptureCsv:
     """imutool CSV written row by row (columns fixed at start), durable and rotating."""
 
-    def __init__(self, path: str | os.PathLike, columns: list[str], meta: dict, **kw):
-        format_array(np.zeros((1, len(columns))))  # compile/load the formatter before any data is waiting
+    def __init__(self, path: str | os.PathLike, columns: list[str], meta: dict, array_rows: bool = True, **kw):
+        """``array_rows``: rows will come as float arrays (:meth:`write_rows`), so the compiled formatter is loaded
+        now, before any data is waiting; False when the caller writes ready text lines (:meth:`write_lines`)."""
+        if array_rows:
+            format_array(np.zeros((1, len(columns))))
         self.columns = columns
         self.rows = 0
         self.file = RotatingFile(path, csv_header(columns, meta), **kw)
+
+    def write_lines(self, text: str, n_rows: int) -> None:
+        """Append ``n_rows`` complete CSV lines already formatted (``text`` ends with a newline)."""
+        self.file.write(text)
+        self.rows += n_rows
 
     def write_rows(self, data: np.ndarray) -> None:
         """data: (n, len(columns)) floats; NaN written as an empty field."""
