@@ -1162,7 +1162,7 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     """Estimate channels (degrees at the surface) plus the input's ref_* and label channels."""
     out = Recording(res.time.copy(), meta=dict(rec.meta))
     r, p, h = res.euler_deg()
-    h[h >= 360.0 - 0.5 * 10.0 ** -OUTPUT_DECIMALS["heading"]] -= 360.0  # printed as 0, never as 360
+    h[h >= 360.0 - 0.5 * 10.0 ** -OUTPUT_DECIMALS["heading"]] = 0.0  # within the printed resolution of 360: 0
     out.add("roll", r)
     out.add("pitch", p)
     out.add("heading", h)

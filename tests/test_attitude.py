@@ -116,6 +116,24 @@ def test_streaming_chunks_equal_one_pass(roll_rec):
     assert np.allclose(np.vstack(parts), one.q, atol=1e-12)
 
 
+def test_initialisation_skips_leading_nan_rows_and_heading_stays_below_360():
+    rec = simulate("ship-roll", duration=20, seed=3)
+    acc, mag = rec["accel"].copy(), rec["mag"].copy()
+    acc[:1500] = np.nan  # more than the first scan block
+    mag[:2000, 1] = np.nan
+    st = initial_state(acc, mag, EkfParams())
+    ref = initial_state(rec["accel"][2000:], rec["mag"][2000:], EkfParams())
+    assert np.array_equal(st, ref)
+    with pytest.raises(Exception, match="no valid accelerometer"):
+        initial_state(np.full((5000, 3), np.nan), None, EkfParams())
+    from imutool.attitude import result_recording
+
+    res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"])
+    res.q[:] = np.array([np.cos(-1e-9), 0.0, 0.0, np.sin(-1e-9)])  # heading 359.9999999°
+    h = result_recording(rec, res)["heading"]
+    assert np.all((h >= 0) & (h < 360)) and np.all(h == 0.0)
+
+
 def test_cli_streamed_filter_equals_in_memory(tmp_path):
     """Large CSVs are filtered in chunks (parse, EKF and write overlapping in threads): the output must equal the
     in-memory run value for value, and a malformed row is counted, not fatal."""
