@@ -588,7 +588,7 @@ def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, f
         values = fn(s, xmap, problems)  # the same decoders as decode(): only the framing checks are skipped
     except Exception:  # NmeaFieldError, NmeaUnsupportedError...: the full path reports it
         return None
-    return None if problems and not values else values
+    return None if problems else values  # anything the decoder notes (XDR) is left to the full path
 
 
 # -- writing single sentences -------------------------------------------------------------------------------------
