@@ -136,7 +136,7 @@ def test_initialisation_skips_leading_nan_rows_and_heading_stays_below_360():
 
 def test_cli_streamed_filter_equals_in_memory(tmp_path):
     """Large CSVs are filtered in chunks (parse, EKF and write overlapping in threads): the output must equal the
-    in-memory run value for value, and a malformed row is counted, not fatal."""
+    in-memory run value for value (mounting applied in both), and a malformed row is counted, not fatal."""
     from imutool.cli import cli
 
     src = tmp_path / "roll.csv"
@@ -147,7 +147,8 @@ def test_cli_streamed_filter_equals_in_memory(tmp_path):
     outs = {}
     for name, extra in (("memory", []), ("stream", ["--stream-mb", "0", "--chunk-rows", "997"])):
         outs[name] = tmp_path / f"{name}.csv"
-        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(outs[name]), "--json", *extra])
+        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(outs[name]), "--json", "--mounting", "x,-y,-z",
+                                       *extra])
         assert run.exit_code == 0, run.output
         summary = json.loads(run.output)
     assert summary["method"] == "ekf (streamed)" and summary["skipped_rows"] == 1

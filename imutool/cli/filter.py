@@ -173,6 +173,13 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
     from formats.csv import CsvWriter, iter_csv
     from imutool.attitude import nominal_dt, result_recording, run_ekf
 
+    cal = mounting = None  # read once, applied to every chunk
+    if io.get("calibration_file"):
+        from calibration import load_calibration
+
+        cal = load_calibration(io["calibration_file"])
+    if io.get("mounting"):
+        mounting = formats.parse_mounting(io["mounting"])
     state = None
     dt_nom = None
     t_last = -np.inf
@@ -190,13 +197,10 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
                 chunk = chunk.select(keep)
             if len(chunk) == 0:
                 continue
-            if io.get("calibration_file"):
-                from calibration import load_calibration
-
-                chunk = load_calibration(io["calibration_file"]).apply(chunk)
-            if io.get("mounting"):
-                remap, mis = formats.parse_mounting(io["mounting"])
-                chunk = chunk.mounted(remap, mis)
+            if cal is not None:
+                chunk = cal.apply(chunk)
+            if mounting is not None:
+                chunk = chunk.mounted(*mounting)
             for ch in ("gyro", "accel"):
                 if ch not in chunk.channels:
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
