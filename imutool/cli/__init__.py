@@ -7,6 +7,7 @@ its own command module. Errors are one line on stderr (exit status 2) unless ``-
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 
 import click

@@ -7,6 +7,7 @@ in :data:`SCENARIOS` (module path, function) and imported on use. Every scenario
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from collections.abc import Callable
 
 from formats import Recording
