@@ -7,23 +7,28 @@ Knows nothing of filters or the CLI.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 from .errors import ImutoolError
 from .recording import Recording, TimeReport, merge, parse_mounting
 
-__all__ = ["ImutoolError", "Recording", "TimeReport", "merge", "parse_mounting", "read", "write", "kind_of"]
+__all__ = ["ImutoolError", "Recording", "TimeReport", "merge", "parse_mounting", "read", "write", "kind_of",
+           "iter_chunks"]
 
 BAG_EXT = {".bag": "ros1", ".db3": "ros2", ".mcap": "ros2"}
 NMEA_EXT = {".nmea", ".log", ".txt", ".nmea0183"}
+PARQUET_EXT = {".parquet", ".pq"}
 
 
 def kind_of(path: str | os.PathLike, for_output: bool = False) -> str:
-    """'csv', 'ros1', 'ros2' or 'nmea' from the path (a folder holding metadata.yaml is a ROS2 bag)."""
+    """'csv', 'parquet', 'ros1', 'ros2' or 'nmea' from the path (a folder holding metadata.yaml is a ROS2 bag)."""
     p = Path(path)
     ext = p.suffix.lower()
     if ext == ".csv":
         return "csv"
+    if ext in PARQUET_EXT:
+        return "parquet"
     if ext in BAG_EXT:
         return BAG_EXT[ext]
     if ext in NMEA_EXT:
@@ -31,7 +36,7 @@ def kind_of(path: str | os.PathLike, for_output: bool = False) -> str:
     if p.is_dir() or (for_output and ext == ""):
         return "ros2"
     raise ImutoolError(
-        f"cannot tell the format from the name {os.fspath(path)!r}; use .csv, .bag (ROS1), .db3/.mcap or a "
+        f"cannot tell the format from the name {os.fspath(path)!r}; use .csv, .parquet, .bag (ROS1), .db3/.mcap or a "
         "folder (ROS2), or .nmea/.log (NMEA 0183)"
     )
 
@@ -46,6 +51,10 @@ def read(path: str | os.PathLike, **options) -> Recording:
         from .csv import read_csv
 
         return read_csv(path, **options)
+    if kind == "parquet":
+        from .parquet import read_parquet
+
+        return read_parquet(path, **options)
     if kind in ("ros1", "ros2"):
         from .rosbag import read_bag
 
@@ -63,6 +72,10 @@ def write(rec: Recording, path: str | os.PathLike, **options) -> None:
         from .csv import write_csv
 
         return write_csv(rec, path, **options)
+    if kind == "parquet":
+        from .parquet import write_parquet
+
+        return write_parquet(rec, path, **options)
     if kind in ("ros1", "ros2"):
         from .rosbag import write_bag
 
@@ -70,3 +83,25 @@ def write(rec: Recording, path: str | os.PathLike, **options) -> None:
     from .nmea import write_nmea
 
     return write_nmea(rec, path, **options)
+
+
+def iter_chunks(path: str | os.PathLike, chunk_rows: int = 500_000, **options) -> Iterator[Recording]:
+    """Stream a CSV or Parquet file as Recordings of at most ``chunk_rows`` rows (bounded memory).
+
+    CSV options (``columns``, ``profile``, ``prefetch``...) go to :func:`formats.csv.iter_csv`; Parquet is read
+    row group by row group (:func:`formats.parquet.iter_parquet`). Other formats are read whole and sliced.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise ImutoolError("no such file", path=path)
+    kind = kind_of(path)
+    if kind == "csv":
+        from .csv import iter_csv
+
+        return iter_csv(path, chunk_rows=chunk_rows, **options)
+    if kind == "parquet":
+        from .parquet import iter_parquet
+
+        return iter_parquet(path, chunk_rows=chunk_rows)
+    rec = read(path, **options)
+    return (rec.select(slice(i, i + chunk_rows)) for i in range(0, len(rec), chunk_rows))

@@ -1,7 +1,7 @@
-"""`imutool convert IN OUT`: CSV ↔ ROS1/ROS2 bags ↔ NMEA 0183 (format from each name's extension).
+"""`imutool convert IN OUT`: CSV ↔ Parquet ↔ ROS1/ROS2 bags ↔ NMEA 0183 (format from each name's extension).
 
-Bags are converted REP-103 FLU/ENU ↔ FRD/NED at the boundary (formats.rosbag). CSV → CSV streams in chunks
-(bounded memory). The summary says rows in/out, channels, frame conversions applied and any channel the output
+Bags are converted REP-103 FLU/ENU ↔ FRD/NED at the boundary (formats.rosbag). CSV/Parquet → CSV/Parquet streams in
+chunks (bounded memory). The summary says rows in/out, channels, frame conversions applied and any channel the output
 format cannot carry.
 """
 
@@ -13,60 +13,18 @@ import click
 import numpy as np
 
 import formats
-from formats.errors import ImutoolError
 from imutool.cli.common import emit_summary, input_options, load_input, output_options, progress
 
 
 def _stream_csv(src: str, dst: str, chunk_rows: int, columns: str | None, profile: str | None, duplicates: str,
                 backwards: str, mounting: str | None, calibration_file: str | None,
                 quiet: bool) -> dict[str, Any]:
-    """CSV → CSV chunk by chunk: per-chunk validation plus a check across chunk boundaries."""
-    from formats.csv import CsvWriter, iter_csv
+    """CSV/Parquet → CSV/Parquet chunk by chunk (the library route: imutool.convert.stream_convert)."""
+    from imutool.convert import stream_convert
 
-    cal = None
-    if calibration_file:
-        from calibration import load_calibration
-
-        cal = load_calibration(calibration_file)
-    mount = formats.parse_mounting(mounting) if mounting else None
-    rows_in = 0
-    dropped_boundary = 0
-    actions: list[str] = []
-    channels: list[str] = []
-    last_t = -np.inf
-    with CsvWriter(dst) as w:
-        for chunk in progress(iter_csv(src, chunk_rows=chunk_rows, columns=columns, profile=profile), None,
-                              "converting", quiet):
-            rows_in += len(chunk)
-            if len(chunk) and chunk.time[0] <= last_t:
-                early = chunk.time <= last_t
-                back = chunk.time < last_t
-                if back.any() and backwards != "drop":
-                    raise ImutoolError(f"time goes backwards across a chunk boundary (row ≈ {rows_in - len(chunk) + 1}"
-                                       f"); streaming cannot sort: use --backwards drop or --no-stream", path=src)
-                if (early & ~back).any() and duplicates == "error":
-                    raise ImutoolError("duplicate timestamp across a chunk boundary", path=src)
-                dropped_boundary += int(early.sum())
-                chunk = chunk.select(~early)
-            if len(chunk) == 0:
-                continue
-            chunk, rep = chunk.validated(duplicates=duplicates, backwards="error" if backwards == "sort"
-                                         else backwards, source=src)
-            actions += rep.actions
-            if cal is not None:
-                chunk = cal.apply(chunk)
-            if mount is not None:
-                chunk = chunk.mounted(*mount)
-            last_t = float(chunk.time[-1])
-            channels = list(chunk.channels)
-            w.write(chunk)
-        rows_out = w.rows
-    if rows_in == 0:
-        raise ImutoolError("no data rows", path=src)
-    if dropped_boundary:
-        actions.append(f"dropped {dropped_boundary} rows at chunk boundaries (time not after the previous chunk)")
-    return {"rows_in": rows_in, "rows_out": rows_out, "channels": channels, "streamed": True,
-            "validation_actions": actions}
+    return stream_convert(src, dst, chunk_rows=chunk_rows, columns=columns, profile=profile, duplicates=duplicates,
+                          backwards=backwards, mounting=mounting, calibration_file=calibration_file,
+                          progress=lambda chunks: progress(chunks, None, "converting", quiet))
 
 
 @click.command("convert", epilog="Example: imutool convert roll.csv roll.bag   |   "
@@ -90,8 +48,9 @@ def _stream_csv(src: str, dst: str, chunk_rows: int, columns: str | None, profil
 @click.option("--vector3-mag-unit", default="T", show_default=True,
               help="Bag input: unit of a geometry_msgs/Vector3Stamped magnetometer topic.")
 @click.option("--chunk-rows", type=int, default=500_000, show_default=True,
-              help="CSV → CSV: rows per streamed chunk (bounds memory).")
-@click.option("--no-stream", is_flag=True, help="CSV → CSV: read the whole file (allows --backwards sort).")
+              help="CSV/Parquet → CSV/Parquet: rows per streamed chunk (bounds memory).")
+@click.option("--no-stream", is_flag=True,
+              help="CSV/Parquet → CSV/Parquet: read the whole file (allows --backwards sort).")
 @output_options
 def convert_cmd(input_path: str, output_arg: str | None, output: str | None, columns: str | None,
                 profile: str | None, topic: str | None, stamp: str, duplicates: str, backwards: str,
@@ -99,7 +58,7 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
                 talker: str | None, imu_topic: str, mag_topic: str, frame_id: str | None, storage: str | None,
                 compression: str, vector3_mag_unit: str, chunk_rows: int, no_stream: bool, as_json: bool,
                 quiet: bool) -> None:
-    """Convert IN to OUT: .csv, .bag (ROS1), .db3/.mcap or a folder (ROS2), .nmea/.log (NMEA 0183)."""
+    """Convert IN to OUT: .csv, .parquet, .bag (ROS1), .db3/.mcap or a folder (ROS2), .nmea/.log (NMEA 0183)."""
     out = output or output_arg
     if not out:
         raise click.UsageError("give the output as OUT or -o OUTPUT")
@@ -109,7 +68,8 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
     kout = formats.kind_of(out, for_output=True)
     summary: dict[str, Any] = {"input": input_path, "output": out, "from": kin, "to": kout}
     conversions: list[str] = []
-    if kin == "csv" and kout == "csv" and not no_stream and backwards != "sort" and duplicates != "mean":
+    if (kin in ("csv", "parquet") and kout in ("csv", "parquet") and not no_stream and backwards != "sort"
+            and duplicates != "mean"):
         summary.update(_stream_csv(input_path, out, chunk_rows, columns, profile, duplicates, backwards, mounting,
                                    calibration_file, quiet))
     else:
