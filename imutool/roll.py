@@ -13,7 +13,9 @@ Method (documented in docs/report.md):
    rises above +h and ends when it falls below −h; a port excursion the other way round. Oscillations smaller
    than ±h (noise, ripples on a crest) never switch the state, so a crest with two humps is one excursion.
 2. The extremum of each excursion is the largest |heel| sample in it, refined by a least-squares parabola
-   over ±``refine_frac`` × (excursion duration) around that sample (sub-sample time, noise-averaged value).
+   over ±``refine_frac`` × (excursion duration) around that sample, limited to the crest (contiguous samples
+   within 30 % of the excursion depth of the extremum); with fewer than 5 such samples (a low rate), the
+   parabola through the top 3 samples (sub-sample time, noise-averaged value).
 3. Roll amplitude to a side = |refined extremum| of that excursion (port amplitude reported positive, as HRM).
    Roll period of a side = time between the refined extrema of two consecutive excursions on that side
    (port and starboard are tracked separately); periods longer than ``max_period_s`` are discarded.
@@ -112,13 +114,15 @@ class RollCycles:
     t_start: np.ndarray
     t_end: np.ndarray
     i_end: np.ndarray
+    crest_s: np.ndarray | None = None  # s, crest width: time the heel stays within crest_band of the extremum
 
     def __len__(self) -> int:
         return int(self.side.shape[0])
 
     def of_side(self, side: int) -> RollCycles:
         m = self.side == side
-        return RollCycles(*(getattr(self, f)[m] for f in self.__dataclass_fields__))
+        return RollCycles(*(None if getattr(self, f) is None else getattr(self, f)[m]
+                            for f in self.__dataclass_fields__))
 
     def as_recording(self) -> Recording:
         """The per-cycle table as a Recording (time = t_peak) for writing with formats.write."""
@@ -193,6 +197,17 @@ def _refine(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, 
     lo = int(np.searchsorted(t, t[ie] - w, side="left"))
     hi = int(np.searchsorted(t, t[ie] + w, side="right"))
     lo, hi = max(lo, i0), min(hi, i1)
+    # ... and only the crest: contiguous samples within 30 % of the excursion depth of the extremum (a long
+    # excursion with a sharp peak would otherwise bend a wide parabola off the peak)
+    sx = side * x[i0:i1]
+    top = side * x[ie] - 0.3 * (side * x[ie] - np.nanmin(sx))
+    a = ie
+    while a > lo and np.isfinite(x[a - 1]) and side * x[a - 1] >= top:
+        a -= 1
+    b = ie + 1
+    while b < hi and np.isfinite(x[b]) and side * x[b] >= top:
+        b += 1
+    lo, hi = a, b
     tt = t[lo:hi] - t[ie]
     xx = x[lo:hi]
     ok = np.isfinite(xx)
@@ -204,6 +219,14 @@ def _refine(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, 
             sv = -a1 / (2 * a2)
             if abs(sv) <= 1.0:
                 return float(t[ie] + sv * w), float(a0 + a1 * sv + a2 * sv * sv)
+    elif i0 < ie < i1 - 1 and np.isfinite(x[ie - 1]) and np.isfinite(x[ie + 1]):
+        # too few samples for the least-squares window (low rate): parabola through the 3 samples at the top
+        tt = t[ie - 1:ie + 2] - t[ie]
+        a2, a1, a0 = np.polyfit(tt, x[ie - 1:ie + 2], 2)
+        if a2 * side < 0:
+            tv = -a1 / (2 * a2)
+            if tt[0] <= tv <= tt[2]:
+                return float(t[ie] + tv), float(a0 + a1 * tv + a2 * tv * tv)
     return float(t[ie]), float(x[ie])
 
 
@@ -219,9 +242,30 @@ def running_mean(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
         return np.where(n > 0, (cs[hi] - cs[lo]) / np.maximum(n, 1), np.nan)
 
 
+def _crest_width(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, band: float) -> float:
+    """Span (s) of the samples of the excursion [i0, i1) that come within ``band`` of its extremum x[ie].
+
+    Contiguous or not: a flat crest, or a crest with two humps of nearly equal height, makes the time of the
+    maximum ambiguous by about this much (noise, quantisation or a second unit may pick the other hump), so a
+    period measured between two such maxima is not resolved better than that. At least one sample interval.
+    """
+    top = side * x[ie] - band
+    seg = side * x[i0:i1]
+    idx = np.flatnonzero(np.isfinite(seg) & (seg >= top)) + i0
+    a, b = (int(idx[0]), int(idx[-1])) if idx.size else (ie, ie)
+    lo = t[a] - 0.5 * (t[a] - t[a - 1]) if a > 0 else t[a]
+    hi = t[b] + 0.5 * (t[b + 1] - t[b]) if b + 1 < t.size else t[b]
+    return float(hi - lo)
+
+
 def roll_cycles(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5, centre: str = "zero",
-                centre_window_s: float = 120.0, refine_frac: float = 0.2, max_period_s: float = 60.0) -> RollCycles:
-    """Completed roll excursions of a heel series (t s, heel deg + stbd) per MSC.363(92) §3 (see module doc)."""
+                centre_window_s: float = 120.0, refine_frac: float = 0.2, max_period_s: float = 60.0,
+                crest_band_deg: float = 0.1) -> RollCycles:
+    """Completed roll excursions of a heel series (t s, heel deg + stbd) per MSC.363(92) §3 (see module doc).
+
+    crest_band_deg (deg): band below the extremum that defines each cycle's crest width ``crest_s`` (the
+    ambiguity of the time of the maximum; used to refuse judging periods the data cannot resolve).
+    """
     t = np.asarray(t, float)
     x = np.asarray(heel_deg, float)
     if t.shape != x.shape or t.ndim != 1:
@@ -242,8 +286,10 @@ def roll_cycles(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5
     n = side.size
     tp = np.empty(n)
     pk = np.empty(n)
+    crest = np.empty(n)
     for k in range(n):
         tp[k], pk[k] = _refine(t, x, int(i0[k]), int(i1[k]), int(ie[k]), int(side[k]), refine_frac)
+        crest[k] = _crest_width(t, x, int(i0[k]), int(i1[k]), int(ie[k]), int(side[k]), crest_band_deg)
     period = np.full(n, np.nan)
     for s in (STBD, PORT):
         idx = np.flatnonzero(side == s)
@@ -252,7 +298,37 @@ def roll_cycles(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5
             # consecutive same-side excursions must have exactly one opposite excursion between them
             consecutive = np.diff(idx) == 2
             period[idx[1:]] = np.where(consecutive & (d <= max_period_s), d, np.nan)
-    return RollCycles(side.astype(np.int64), tp, pk, np.abs(pk), period, t[i0], t[i1], i1.astype(np.int64))
+    return RollCycles(side.astype(np.int64), tp, pk, np.abs(pk), period, t[i0], t[i1], i1.astype(np.int64), crest)
+
+
+def pair_cycles(ref: RollCycles, dut: RollCycles) -> np.ndarray:
+    """For each reference excursion, the index of the DUT excursion it pairs with, or −1.
+
+    Pairing by time overlap, one-to-one: reference excursion k and DUT excursion j pair when they are on the same
+    side, their spans [t_start, t_end] overlap, and each is the only same-side excursion of the other that
+    overlaps it. Irregular small roll makes one unit see a crossing the other does not (one long DUT excursion
+    covering two reference excursions): such excursions pair with nothing, instead of with the wrong cycle.
+    """
+    out = np.full(len(ref), -1, np.int64)
+    if len(ref) == 0 or len(dut) == 0:
+        return out
+
+    def overlaps(a: RollCycles, b: RollCycles) -> list[np.ndarray]:
+        # b excursions whose span overlaps each a excursion (same side)
+        lo = np.searchsorted(b.t_end, a.t_start, side="right")  # first b ending after a starts
+        hi = np.searchsorted(b.t_start, a.t_end, side="left")  # b starting before a ends
+        res = []
+        for k in range(len(a)):
+            idx = np.arange(lo[k], max(lo[k], hi[k]))
+            res.append(idx[b.side[idx] == a.side[k]])
+        return res
+
+    r2d = overlaps(ref, dut)
+    d2r = overlaps(dut, ref)
+    for k, js in enumerate(r2d):
+        if js.size == 1 and d2r[int(js[0])].size == 1 and int(d2r[int(js[0])][0]) == k:
+            out[k] = int(js[0])
+    return out
 
 
 def _utc_of(t: float, utc_start: datetime | None) -> str | None:
