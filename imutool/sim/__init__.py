@@ -24,6 +24,7 @@ SCENARIOS: dict[str, tuple[str, str]] = {
     "mag-sphere": ("imutool.sim.magnetic", "mag_sphere"),
     "walk": ("imutool.sim.walk", "walk"),
     "accel-array": ("imutool.sim.accel_array", "accel_array"),
+    "six-position": ("imutool.sim.calib_positions", "six_position"),
 }
 
 
@@ -46,6 +47,20 @@ def available() -> list[str]:
     return out
 
 
-def simulate(name: str, **options) -> Recording:
-    """Run a scenario by name (see :data:`SCENARIOS`)."""
-    return scenario(name)(**options)
+def options(name: str) -> list[str]:
+    """The option names a scenario accepts (besides duration, rate_hz and seed)."""
+    import inspect
+
+    params = inspect.signature(scenario(name)).parameters
+    return [p for p in params if p not in ("duration", "rate_hz", "seed")
+            and params[p].kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)]
+
+
+def simulate(name: str, **options_) -> Recording:
+    """Run a scenario by name (see :data:`SCENARIOS`); an unknown option is refused with the valid names."""
+    valid = options(name)
+    unknown = [k for k in options_ if k not in valid and k not in ("duration", "rate_hz", "seed")]
+    if unknown:
+        raise ImutoolError(f"scenario {name!r} has no option {', '.join(map(repr, unknown))}; "
+                           f"valid: {', '.join(valid)}")
+    return scenario(name)(**options_)
