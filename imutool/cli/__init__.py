@@ -85,13 +85,19 @@ def main(argv: list[str] | None = None) -> None:
     except click.exceptions.Abort:
         click.echo("imutool: aborted", err=True)
         sys.exit(130)
-    except click.ClickException as e:
-        e.show()
-        sys.exit(e.exit_code)
+    except click.exceptions.NoArgsIsHelpError as e:  # a bare `imutool` or `imutool calibrate`: the help
+        click.echo(e.ctx.get_help() if e.ctx is not None else e.format_message())
+        sys.exit(0)
+    except click.ClickException as e:  # usage errors (missing argument, bad choice/type, unknown option): one line
+        ctx = getattr(e, "ctx", None)
+        where = ctx.command_path if ctx is not None else _command_path(args)
+        click.echo(f"{where}: error: {_one_line(e.format_message())}"
+                   + (f" (see '{where} --help')" if isinstance(e, click.UsageError) else ""), err=True)
+        sys.exit(2)
     except ImutoolError as e:
         if debug:
             raise
-        click.echo(f"imutool: error: {e}", err=True)
+        click.echo(f"{_command_path(args)}: error: {_one_line(str(e))}", err=True)
         sys.exit(2)
     except KeyboardInterrupt:
         click.echo("imutool: interrupted", err=True)
@@ -104,3 +110,21 @@ def main(argv: list[str] | None = None) -> None:
         click.echo(f"imutool: internal error: {type(e).__name__}: {e} (run with --debug for details)", err=True)
         sys.exit(3)
     sys.exit(0)
+
+
+def _one_line(text: str) -> str:
+    """A message folded onto one line (click's messages may hold newlines)."""
+    return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
+
+
+def _command_path(args: list[str]) -> str:
+    """'imutool', 'imutool filter' or 'imutool calibrate mag' from the command-line arguments."""
+    words = ["imutool"]
+    rest = [a for a in args if not a.startswith("-")]
+    if rest and rest[0] in COMMANDS:
+        words.append(rest[0])
+        group = COMMANDS[rest[0]][1].endswith("_group")
+        if group and len(rest) > 1 and rest[1].isidentifier():
+            words.append(rest[1])
+    return " ".join(words)
+
