@@ -623,6 +623,9 @@ class CsvWriter:
     def close(self) -> None:
         try:
             self._wait()
+            if self._pool is not None:
+                self._pool.shutdown()
+            self._f.close()  # the last flush can fail too (disk full)
         except BaseException as e:
             self.abort(e)
             raise
@@ -632,11 +635,18 @@ class CsvWriter:
         self._ctx.__exit__(None, None, None)
 
     def abort(self, exc: BaseException) -> None:
+        """Drop the temporary file; a write failure (OSError) is raised as the one-line ImutoolError."""
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
-        self._f.close()
+        try:
+            self._f.close()
+        except OSError:
+            pass
         try:
             self._ctx.__exit__(type(exc), exc, exc.__traceback__)
+        except ImutoolError as e:
+            if isinstance(exc, OSError):
+                raise e from None
         except BaseException:
             pass
 

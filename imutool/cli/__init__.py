@@ -50,7 +50,9 @@ class LazyGroup(click.Group):
         if name not in COMMANDS or not _available(name):
             return None
         mod, attr, _ = COMMANDS[name]
-        return getattr(importlib.import_module(f"imutool.cli.{mod}"), attr)
+        from imutool.cli.ranges import apply_ranges  # every numeric option: declared range, no NaN/inf
+
+        return apply_ranges(getattr(importlib.import_module(f"imutool.cli.{mod}"), attr), name)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         rows = [(n, COMMANDS[n][2]) for n in self.list_commands(ctx)]

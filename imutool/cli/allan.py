@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
 
 _IN_KEYS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 _SI = {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT"}
@@ -40,6 +40,7 @@ def _rate(t: np.ndarray) -> tuple[float, str]:
 @click.option("--end", type=float, default=None, help="Use data before this time (s).")
 @input_options
 @output_options
+@safe_outputs("output", "plot", "kalibr")
 def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: str | None, topic_name: str,
               channels: str, per_decade: int, start: float | None, end: float | None, as_json: bool, quiet: bool,
               **io: Any) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels, safe_outputs
 
 _IN_KEYS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
@@ -42,9 +42,13 @@ def _load(path: str, opts: dict[str, Any], extra: tuple[str, ...] = (), fitting:
     return rec
 
 
-def _check_toml_out(output: str) -> None:
+def _check_toml_out(output: str, append: bool = False) -> None:
     if not output.lower().endswith(".toml"):
         raise ImutoolError(f"the calibration file must be .toml: {output!r}")
+    if append and os.path.exists(output):  # --append merges: the file must load cleanly before any work is done
+        from calibration.file import load_calibration
+
+        load_calibration(output)
 
 
 def _with_option(f):
@@ -91,6 +95,7 @@ def calibrate_group() -> None:
 @_with_option
 @input_options
 @output_options
+@safe_outputs("output", "plot", append="append")
 def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: float | None,
             min_coverage: float | None, grid_bands: int, horizontal_field: float | None, bz_prior: float,
             a33_prior: float | None, plot: str | None, append: bool, sensor: str | None,
@@ -98,7 +103,7 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
     """Hard/soft-iron calibration of the magnetometer in INPUT."""
     from calibration.file import provenance, update_calibration
 
-    _check_toml_out(output)
+    _check_toml_out(output, append)
     rec = _load(input_path, io, with_files, fitting="mag")
     require_channels(rec, ["mag"], input_path)
     m = rec.get("mag", "uT")
@@ -186,6 +191,7 @@ def _angle_interp(t: np.ndarray, ts: np.ndarray, a_deg: np.ndarray) -> np.ndarra
 @_with_option
 @input_options
 @output_options
+@safe_outputs("outputs", append="append")
 def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | None, reference_column: str | None,
                   reference_kind: str, variation: float, time_offset: float, heading_column: str | None,
                   min_speed: float, min_span: float, append: bool, sensor: str | None, with_files: tuple[str, ...],
@@ -199,6 +205,8 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
     for o in outputs:
         if not o.lower().endswith((".pdf", ".png", ".svg", ".toml")):
             raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card) or .toml (calibration file)")
+        if o.lower().endswith(".toml"):
+            _check_toml_out(o, append)
     rec = _load(input_path, io, with_files)  # mounting and a mag calibration are welcome here
     # compass heading
     if heading_column or "heading" in rec.channels:
@@ -316,6 +324,7 @@ def _rest_kw(window_s: float, gyro_std_deg: float, accel_std: float, min_rest_s:
 @_with_option
 @input_options
 @output_options
+@safe_outputs("output", append="append")
 def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_range: float, window_s: float,
              gyro_std_deg: float, accel_std: float, min_rest_s: float, append: bool, sensor: str | None,
              with_files: tuple[str, ...], as_json: bool, quiet: bool, **io: Any) -> None:
@@ -323,7 +332,7 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
     from calibration.file import provenance, update_calibration
     from calibration.inertial import calibrate_gyro
 
-    _check_toml_out(output)
+    _check_toml_out(output, append)
     rec = _load(input_path, io, with_files, fitting="gyro")
     require_channels(rec, ["gyro"], input_path)
     acc = rec.get("accel", "m/s^2") if "accel" in rec.channels else None
@@ -370,6 +379,7 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
 @_with_option
 @input_options
 @output_options
+@safe_outputs("output", append="append")
 def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, latitude: float | None, height: float,
               min_poses: int, window_s: float, gyro_std_deg: float, accel_std: float, min_rest_s: float,
               append: bool, sensor: str | None, with_files: tuple[str, ...], as_json: bool, quiet: bool,
@@ -378,7 +388,7 @@ def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, la
     from calibration.file import provenance, update_calibration
     from calibration.inertial import calibrate_accel, normal_gravity
 
-    _check_toml_out(output)
+    _check_toml_out(output, append)
     rec = _load(input_path, io, with_files, fitting="accel")
     require_channels(rec, ["accel"], input_path)
     if gravity is None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any, TypeVar
@@ -130,3 +131,63 @@ def parse_vector(text: str, n: int = 3, what: str = "value") -> np.ndarray:
         raise ImutoolError(f"{what} {text!r}: expected {n} comma-separated numbers")
     return v
 
+
+
+class FiniteFloat(click.FloatRange):
+    """A float option that refuses NaN and ±inf (click's FloatRange lets NaN through every bound check)."""
+
+    name = "float"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        rv = super().convert(value, param, ctx)
+        if isinstance(rv, float) and not np.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
+
+    def _describe_range(self) -> str:
+        if self.min is None and self.max is None:
+            return "finite"
+        return super()._describe_range()
+
+
+def safe_outputs(*names: str, append: str | None = None) -> Callable:
+    """Decorator for a command that writes files: adds ``--force`` and checks every output before any work.
+
+    ``names``: the command's parameters that name outputs (str, or a tuple for a repeatable option). Every other
+    parameter whose value names an existing path is an input: no output may be, or hold, an input (see
+    ``formats.atomic``). An existing output file is refused unless ``--force``; with the flag ``append`` set,
+    existing ``.toml`` outputs are merged into, not replaced (they must load cleanly; the command checks that).
+    Writers inside the command refuse anything the check did not approve.
+    """
+    import functools
+
+    from formats.atomic import check_outputs, output_guard
+
+    def deco(f: Callable) -> Callable:
+        @functools.wraps(f)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            force = bool(kwargs.pop("force", False))
+            outs: list[str] = []
+            for n in names:
+                v = kwargs.get(n)
+                if isinstance(v, (tuple, list)):
+                    outs += [str(x) for x in v if x]
+                elif v:
+                    outs.append(str(v))
+            merging = [o for o in outs if o.lower().endswith(".toml")] if append and kwargs.get(append) else []
+            ins: list[str] = []
+            for k, v in kwargs.items():
+                if k in names:
+                    continue
+                for x in v if isinstance(v, (tuple, list)) else (v,):
+                    if isinstance(x, str) and x and x not in merging and os.path.exists(x):
+                        ins.append(x)
+            with output_guard(force=force):
+                check_outputs(outs, ins, exists_ok=merging)
+                return f(*args, **kwargs)
+
+        return click.option("--force", is_flag=True,
+                            help="Replace existing output files (never an input, never a folder other than a ROS2 "
+                                 "bag folder imutool wrote).")(wrapper)
+
+    return deco

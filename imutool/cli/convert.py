@@ -13,7 +13,7 @@ import click
 import numpy as np
 
 import formats
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, progress
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, progress, safe_outputs
 
 
 def _stream_csv(src: str, dst: str, chunk_rows: int, columns: str | None, profile: str | None, duplicates: str,
@@ -52,6 +52,7 @@ def _stream_csv(src: str, dst: str, chunk_rows: int, columns: str | None, profil
 @click.option("--no-stream", is_flag=True,
               help="CSV/Parquet → CSV/Parquet: read the whole file (allows --backwards sort).")
 @output_options
+@safe_outputs("output_arg", "output")
 def convert_cmd(input_path: str, output_arg: str | None, output: str | None, columns: str | None,
                 profile: str | None, topic: str | None, stamp: str, duplicates: str, backwards: str,
                 mounting: str | None, calibration_file: str | None, sentences: str, nmea_rate: float | None,

@@ -11,7 +11,7 @@ import numpy as np
 import formats
 from formats.errors import ImutoolError
 from formats.frames import wrap_deg180
-from imutool.cli.common import emit_summary
+from imutool.cli.common import emit_summary, safe_outputs
 
 
 def _load(path: str):
@@ -97,6 +97,7 @@ def _external(module: str, func: str, what: str):
 @click.option("--plot", "plot_path", type=click.Path(), default=None, help="Error plot (.png/.pdf).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
+@safe_outputs("plot_path")
 def evaluate_cmd(est_path: str, ref_path: str | None, channel: str | None, max_lag: float, plot_path: str | None,
                  as_json: bool, quiet: bool) -> None:
     """Compare the estimate EST with a reference: per angle RMSE, max, p95, MAE, lag and SNR_dB (deg; heading

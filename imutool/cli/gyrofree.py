@@ -8,7 +8,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector, safe_outputs
 
 
 @click.command("gyrofree", epilog="Example: imutool simulate accel-array -o array.csv && "
@@ -32,6 +32,7 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--cutoff", type=float, default=None, help="Planar mode band-pass cut-off Hz [0.3 × dominant].")
 @input_options
 @output_options
+@safe_outputs("output")
 def gyrofree_cmd(input_path: str | None, output: str | None, layout_path: str, check_layout: bool,
                  noise: float | None, initial_rate: str | None, initial_sign: str, tilt_gain: float,
                  rate_rw: float, planar: str | None, causal: bool, cutoff: float | None, as_json: bool,

@@ -6,7 +6,7 @@ import click
 
 import formats
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector, safe_outputs
 
 
 @click.command("heave", epilog="Example: imutool simulate sea-state -o sea.csv && imutool heave sea.csv -o heave.csv")
@@ -52,6 +52,7 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--nmea-rate", type=float, default=10.0, show_default=True, help="NMEA output rate (Hz).")
 @input_options
 @output_options
+@safe_outputs("output", "nmea_path")
 def heave_cmd(input_path: str, output: str, method: str, harmonics: int | None, vertical: str | None,
               vertical_sign: str, attitude: str, tilt_gain: float, lever_arm: str | None, cutoff: float | None,
               cutoff_ratio: float, order: int, delayed_cutoff: float | None, window_s: float, hop_s: float,

@@ -6,7 +6,7 @@ import click
 import numpy as np
 
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels, safe_outputs
 
 
 @click.command("ins", epilog="Example: imutool ins walk.csv -o track.csv --zupt --height-update --plot track.png")
@@ -46,6 +46,7 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
               help="Write the stride table (start_s,end_s,length_m,height_change_m,swing_s,duration_s) as CSV.")
 @input_options
 @output_options
+@safe_outputs("output", "plot_path", "strides_path")
 def ins_cmd(input_path: str, output: str, zupt: bool, height_update: bool, zaru: bool, detector: str,
             gamma: float | None, zvi_column: str | None, order: str, gyro_noise: float, accel_noise: float,
             zupt_sigma: float, height_sigma: float, zaru_sigma: float, bias_states: bool, heading_deg: float,

@@ -13,7 +13,7 @@ import numpy as np
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
 from imutool.cli.roll import parse_resets, parse_utc, roll_options
 
 KNOWN = ("HRM", "XDR", "HDG", "THS")
@@ -152,6 +152,7 @@ def nmea_lines(rec: Recording, sentences: list[str], rate_hz: float | None = Non
 @roll_options
 @input_options
 @output_options
+@safe_outputs("output")
 def nmea_cmd(input_path: str, output: str | None, sentences: str, rate_hz: float | None, serial_port: str | None,
              baud: int, realtime: bool, time_prefix: bool, heading_ref: str, deviation_deg: float | None,
              variation_deg: float | None, ths_mode: str, xdr_roll_id: str, xdr_pitch_id: str, xdr_roll_sign: str,

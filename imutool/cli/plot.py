@@ -16,7 +16,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input
+from imutool.cli.common import emit_summary, input_options, load_input, safe_outputs
 
 _FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg"}
 
@@ -125,6 +125,7 @@ def _bytes_per_row(path: str, rows: int) -> float:
 @input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="No summary output.")
+@safe_outputs("output")
 def plot_cmd(path: str, channels: tuple[str, ...], output: str, start: float | None, end: float | None,
              max_points: int, title: str | None, dpi: int, columns: str | None, profile: str | None,
              topic: str | None, stamp: str, duplicates: str, backwards: str, mounting: str | None,

@@ -8,7 +8,7 @@ from typing import Any
 import click
 
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
 
 
 @click.group("report", epilog="Example: imutool report inclinometer dut.csv --reference table.csv -o evidence.pdf")
@@ -19,7 +19,12 @@ def report_group() -> None:
 def _paths(output: str, json_path: str | None) -> tuple[str, str]:
     if not output.lower().endswith(".pdf"):
         raise ImutoolError(f"output {output!r} must end in .pdf (the JSON is written beside it)")
-    return output, json_path or os.path.splitext(output)[0] + ".json"
+    if json_path is None:  # the JSON beside the PDF is an output too
+        from formats.atomic import check_outputs
+
+        json_path = os.path.splitext(output)[0] + ".json"
+        check_outputs([json_path])
+    return output, json_path
 
 
 def _identification(device: str | None, config: str | None) -> dict[str, Any]:
@@ -116,6 +121,7 @@ def _common_options(f):
 @click.option("--ref-channel", default=None, help="Reference heel channel (default: heel, else roll; e.g. ref_roll).")
 @input_options
 @output_options
+@safe_outputs("output", "json_path")
 def inclinometer_cmd(dut_path: str, ref_path: str, output: str, json_path: str | None, device: str | None,
                      config_path: str | None, criterion: str, align: str, max_lag_s: float, steps_path: str | None,
                      angle_floor: float, angle_pct: float, period_floor: float, period_pct: float,
@@ -158,6 +164,7 @@ def inclinometer_cmd(dut_path: str, ref_path: str, output: str, json_path: str |
               help="Rate of turn (°/s) above which the device is turning (follow-up test).")
 @input_options
 @output_options
+@safe_outputs("output", "json_path")
 def heading_cmd(dut_path: str, ref_path: str, output: str, json_path: str | None, device: str | None,
                 config_path: str | None, criterion: str, align: str, max_lag_s: float, dut_channel: str | None,
                 ref_channel: str | None, correction_deg: float, static_limit: float, min_headings: int,

@@ -8,7 +8,7 @@ import click
 
 import formats
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
 
 
 def parse_utc(text: str | None) -> datetime | None:
@@ -62,6 +62,7 @@ def roll_options(f):
 @roll_options
 @input_options
 @output_options
+@safe_outputs("output", "cycles_path")
 def roll_cmd(input_path: str, output: str, cycles_path: str | None, hysteresis_deg: float, centre: str,
              centre_window_s: float, refine_frac: float, max_period_s: float, resets: str | None,
              utc_start: str | None, as_json: bool, quiet: bool, **io) -> None:

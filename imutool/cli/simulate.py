@@ -6,7 +6,7 @@ import click
 
 import formats
 from imutool import sim
-from imutool.cli.common import emit_summary
+from imutool.cli.common import emit_summary, safe_outputs
 
 
 def _parse_set(items: tuple[str, ...]) -> dict:
@@ -47,6 +47,7 @@ def _parse_set(items: tuple[str, ...]) -> dict:
               help="Scenario option, repeatable (e.g. --set roll_amplitude_deg=20).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
+@safe_outputs("output", "serve_log")
 def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, protocol: str, corrupt: float,
                  replug_every: float | None, serve_log: str | None, start_delay: float, start_when: str | None,
                  duration: float | None, rate_hz: float | None, seed: int, settings: tuple[str, ...], as_json: bool,

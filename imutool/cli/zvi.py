@@ -6,7 +6,7 @@ import click
 import numpy as np
 
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels, safe_outputs
 
 
 def _rad(v: float | None) -> float | None:
@@ -41,6 +41,7 @@ def _rad(v: float | None) -> float | None:
               help="Grid-search the threshold (γ, or B_g for paper) maximising F1 against the labels; use it.")
 @input_options
 @output_options
+@safe_outputs("output", "flags_path", "plot_path")
 def zvi_cmd(input_path: str, output: str, detector: str, gamma: float | None, window_s: float | None,
             sigma_a: float | None, sigma_g: float | None, b_g: float | None, b_a: float | None,
             window_g_s: float | None, window_a_s: float | None, min_duration_s: float | None,

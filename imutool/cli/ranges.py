@@ -1,0 +1,107 @@
+"""The declared range of every numeric option of every command, applied when a command is loaded.
+
+One table instead of ranges scattered over the command modules: each entry is ``(min, max, min_open, max_open)``
+(``None`` = unbounded) for a parameter name, optionally qualified by the command path (``"calibrate mag
+field_ut"`` wins over ``"field_ut"``). Every float option refuses NaN and ±inf (:class:`FiniteFloat`); an int
+option gets :class:`click.IntRange`. ``tests/test_hostile.py`` checks that every numeric option has an entry, so
+a new option without a declared range fails the tests. Cross-option rules (start before end) stay in the commands.
+"""
+
+from __future__ import annotations
+
+import click
+
+from imutool.cli.common import FiniteFloat
+
+Bound = tuple[float | None, float | None, bool, bool]
+
+POS: Bound = (0, None, True, False)  # > 0: rates, durations, noises, cut-offs, sizes
+NONNEG: Bound = (0, None, False, False)  # ≥ 0: gates and thresholds where 0 means "off"
+ANY: Bound = (None, None, False, False)  # any finite value: times, offsets, priors
+FRACTION: Bound = (0, 1, False, False)
+ANGLE180: Bound = (-180, 180, False, False)
+COUNT1: Bound = (1, None, False, False)
+
+RANGES: dict[str, Bound] = {
+    # times and windows (seconds on the recording clock; any finite value, start < end checked by the command)
+    "start": ANY, "end": ANY, "t_start": ANY, "t_end": ANY, "time_offset": ANY,
+    # sizes and counts
+    "chunk_rows": COUNT1, "update_every": COUNT1, "per_decade": (1, 1000, False, False),
+    "grid_bands": (2, 90, False, False), "max_points": (2, None, False, False), "dpi": (10, 2400, False, False),
+    "min_cycles": COUNT1, "min_steps_per_side": COUNT1, "min_headings": (2, None, False, False),
+    "min_poses": COUNT1, "harmonics": (1, 20, False, False), "seed": (0, 2**32 - 1, False, False),
+    "baud": (50, 10_000_000, False, False), "unit": (0, 247, False, False), "mag_gain": (0, 8, False, False),
+    # rates, durations, cut-offs (zero is meaningless)
+    "rate_hz": (0, 100_000, True, False), "nmea_rate": (0, 100_000, True, False),
+    "cutoff": POS, "delayed_cutoff": POS, "cutoff_ratio": (0, 1, True, True), "fmin": POS, "fmax": POS,
+    "bandwidth": POS, "window_s": POS, "hop_s": POS, "min_window_s": POS, "window_g_s": POS, "window_a_s": POS,
+    "centre_window_s": POS, "max_period_s": POS, "duration": POS, "replug_every": POS, "start_delay": NONNEG,
+    "align_window": POS, "align_guard": NONNEG, "min_rest_s": NONNEG, "min_duration_s": NONNEG,
+    "step_min_s": POS, "drift_min_s": POS, "max_lag_s": NONNEG, "max_lag": NONNEG, "stream_mb": NONNEG,
+    # noises and sigmas (a zero noise makes a filter singular)
+    "gyro_noise": POS, "accel_noise": POS, "mag_noise": POS, "meas_noise": POS, "residual_noise": POS,
+    "zupt_sigma": POS, "height_sigma": POS, "zaru_sigma": POS, "sigma_a": POS, "sigma_g": POS, "noise": POS,
+    "rate_rw": NONNEG, "bias_rw": NONNEG, "gyro_scale_noise": NONNEG, "comp_q": NONNEG, "comp_r": POS,
+    # gates, thresholds, gains (0 = off where the help says so)
+    "accel_noise_gain": NONNEG, "accel_lp_tau": NONNEG, "accel_gate": NONNEG, "accel_nis_gate": NONNEG,
+    "accel_adapt": NONNEG, "mag_norm_gate": NONNEG, "mag_dip_gate": (0, 90, False, False), "rest_time": NONNEG,
+    "rest_gyro": NONNEG, "rest_accel": NONNEG, "gap_factor": (1, None, True, False), "gamma": POS,
+    "b_g": POS, "b_a": POS, "gyro_std_deg": POS, "accel_std": POS, "tilt_gain": NONNEG,
+    "hysteresis_deg": NONNEG, "refine_frac": FRACTION, "step_band_deg": POS, "turn_min_dps": POS,
+    "min_temp_range": NONNEG, "min_speed": NONNEG, "min_coverage": FRACTION, "corrupt": FRACTION,
+    # tolerances of the reports (a negative tolerance cannot be met)
+    "angle_floor": NONNEG, "angle_pct": (0, 100, False, False), "period_floor": NONNEG,
+    "period_pct": (0, 100, False, False), "static_limit": NONNEG,
+    # angles
+    "variation": ANGLE180, "variation_deg": ANGLE180, "deviation_deg": ANGLE180, "correction_deg": ANGLE180,
+    "heading_deg": (-360, 360, False, False), "min_span": (0, 360, True, False), "turns_deg": POS,
+    "latitude": (-90, 90, False, False),
+    # physical quantities
+    "field_ut": (0, 10_000, True, False), "horizontal_field": (0, 10_000, True, False), "bz_prior": ANY,
+    "a33_prior": POS, "gravity": (9.7, 9.9, False, False), "height": (-11_000, 100_000, False, False),
+    # order of a Butterworth filter (higher orders are numerically useless at sensor rates)
+    "order": (1, 8, False, False),
+    "heave order": (3, 8, False, False),
+}
+
+
+def _range_type(param: click.Parameter, bound: Bound) -> click.ParamType:
+    lo, hi, lo_open, hi_open = bound
+    if isinstance(param.type, click.types.IntParamType):
+        return click.IntRange(None if lo is None else int(lo), None if hi is None else int(hi),
+                              min_open=lo_open, max_open=hi_open)
+    return FiniteFloat(lo, hi, min_open=lo_open, max_open=hi_open)
+
+
+def is_numeric(param: click.Parameter) -> bool:
+    return isinstance(param.type, (click.types.IntParamType, click.types.FloatParamType))
+
+
+def bound_for(path: str, name: str) -> Bound | None:
+    """The declared range of option ``name`` of command ``path`` (e.g. 'heave', 'calibrate mag')."""
+    words = path.split()
+    for i in range(len(words)):
+        key = " ".join(words[i:] + [name])
+        if key in RANGES:
+            return RANGES[key]
+    return RANGES.get(name)
+
+
+def apply_ranges(cmd: click.Command, path: str | None = None) -> click.Command:
+    """Give every numeric option of ``cmd`` (and its sub-commands) its declared range; floats refuse NaN/inf."""
+    path = path or cmd.name or ""
+    if getattr(cmd, "_imutool_ranges", False):
+        return cmd
+    for p in cmd.params:
+        if not is_numeric(p) or isinstance(p.type, (FiniteFloat, click.IntRange)):
+            continue
+        bound = bound_for(path, p.name or "")
+        if bound is not None:
+            p.type = _range_type(p, bound)
+        elif isinstance(p.type, click.types.FloatParamType):
+            p.type = FiniteFloat()
+    if isinstance(cmd, click.Group):
+        for name, sub in cmd.commands.items():
+            apply_ranges(sub, f"{path} {name}")
+    cmd._imutool_ranges = True  # type: ignore[attr-defined]
+    return cmd
