@@ -52,6 +52,9 @@ __all__ = [
     "ths_sentence",
     "rot_sentence",
     "pashr_sentence",
+    "tss1_frame",
+    "parse_tss1",
+    "utc_offset_s",
     "parse_sentence",
     "decode",
     "decode_checked",
@@ -729,9 +732,12 @@ def rot_sentence(rate_deg_per_min: float | None, valid: bool = True, talker: str
 def pashr_sentence(time_utc_s: float | None, heading_deg: float | None, roll_deg: float | None,
                    pitch_deg: float | None, heave_m: float | None, roll_std_deg: float | None = None,
                    pitch_std_deg: float | None = None, heading_std_deg: float | None = None,
-                   aiding: int = 1, imu_status: int = 0) -> str:
-    """$PASHR attitude (OxTS/Applanix layout): UTC time of day (s) as hhmmss.sss, true heading, 'T', roll
-    (+ starboard down), pitch (+ bow up), heave (m, + up), 1-σ accuracies (deg), aiding and IMU status."""
+                   aiding: int | None = 0, imu_status: int | None = 1) -> str:
+    """$PASHR attitude (Applanix POS MV / OxTS layout): UTC time of day (s) as hhmmss.sss (empty when the time
+    is not known — never invent one), true heading and 'T' (both empty without a heading), roll (+ starboard
+    down), pitch (+ bow up), heave (m, sign as the caller chose; + up is the Applanix convention), 1-σ
+    accuracies (deg), aiding flag (Applanix: 0 no aiding, 1 GNSS, 2 GNSS + GAMS) and IMU status (0 IMU out /
+    not valid, 1 satisfactory). Empty fields for unknown values."""
     if time_utc_s is not None and math.isfinite(time_utc_s):
         tod = time_utc_s % 86400.0
         ms = int(round(tod * 1000.0)) % 86_400_000
@@ -740,9 +746,90 @@ def pashr_sentence(time_utc_s: float | None, heading_deg: float | None, roll_deg
         ts = f"{hh:02d}{mm:02d}{rem / 1000.0:06.3f}"
     else:
         ts = None
-    fields = [ts, _wrap360(heading_deg), "T", roll_deg, pitch_deg, heave_m, roll_std_deg, pitch_std_deg,
+    h = _wrap360(heading_deg)
+    fields = [ts, h, "T" if h is not None else None, roll_deg, pitch_deg, heave_m, roll_std_deg, pitch_std_deg,
               heading_std_deg, aiding, imu_status]
     return format_sentence("P", "ASHR", fields, [None, 2, None, 2, 2, 2, 3, 3, 3, None, None])
+
+
+# -- TSS1 (not NMEA: fixed-length ASCII heave/roll/pitch frame) ------------------------------------------------------
+TSS1_LENGTH = 27  # characters including CR/LF
+TSS1_STATUS = "UuGgHhFf"  # Unaided, GNSS(speed) aided, Heading aided, Full aided; lower case = settling
+_TSS1_RE = re.compile(r"^:([0-9A-F]{2})([0-9A-F]{4}) ([ -])(\d{4})([A-Za-z])([ -])(\d{4}) ([ -])(\d{4})$")
+
+
+def _tss1_signed(v: float, scale: float, what: str) -> str:
+    n = int(round(v * scale))
+    if abs(n) > 9999:
+        raise ImutoolError(f"TSS1: {what} {v:g} is outside the frame's range (±{9999 / scale:g})")
+    return ("-" if n < 0 else " ") + f"{abs(n):04d}"
+
+
+def tss1_frame(heave_m: float, roll_deg: float, pitch_deg: float, status: str = "U",
+               horizontal_accel_m_s2: float = 0.0, vertical_accel_m_s2: float = 0.0) -> str:
+    """TSS1 frame ``:XXAAAA MHHHHQMRRRR MPPPP`` (no CR/LF; 25 characters, 27 with CR/LF).
+
+    Layout (NovAtel OEM7 "TSS1" log; Norwegian Subsea and Kongsberg EK80 TSS1 pages): XX horizontal acceleration,
+    unsigned hex, 3.83 cm/s² per bit (0–9.81 m/s²); AAAA vertical acceleration, 16-bit two's-complement hex,
+    0.0625 cm/s² per bit (±20.48 m/s²); space; heave sign (space or '-') and 4 digits in cm; status Q
+    (:data:`TSS1_STATUS`); roll sign and 4 digits in 0.01° (+ = port up, i.e. starboard down); space; pitch sign
+    and 4 digits in 0.01° (+ bow up). The caller chooses the heave sign (TSS1 itself defines + = up)."""
+    if status not in TSS1_STATUS or len(status) != 1:
+        raise ImutoolError(f"TSS1 status {status!r} must be one of {TSS1_STATUS}")
+    for v, what in ((heave_m, "heave"), (roll_deg, "roll"), (pitch_deg, "pitch")):
+        if v is None or not math.isfinite(v):
+            raise ImutoolError(f"TSS1: {what} is missing (the frame has no empty field)")
+    xx = min(255, max(0, int(round(abs(horizontal_accel_m_s2 or 0.0) / 0.0383))))
+    va = int(round((vertical_accel_m_s2 or 0.0) / 0.000625))
+    va = min(32767, max(-32768, va)) & 0xFFFF
+    return (f":{xx:02X}{va:04X} " + _tss1_signed(heave_m, 100.0, "heave") + status
+            + _tss1_signed(roll_deg, 100.0, "roll") + " " + _tss1_signed(pitch_deg, 100.0, "pitch"))
+
+
+def parse_tss1(line: str) -> dict[str, float | str]:
+    """Decode one TSS1 frame (CR/LF optional): horizontal_accel, vertical_accel (m/s²), heave (m, as sent),
+    status (letter), settled (1.0/0.0 from the letter's case), roll, pitch (deg). Raises NmeaParseError."""
+    s = line.rstrip("\r\n")
+    m = _TSS1_RE.match(s)
+    if not m:
+        raise NmeaParseError(f"not a TSS1 frame: {s[:30]!r}", sentence_type="TSS1")
+    xx, aaaa, hs, hv, q, rs, rv, ps, pv = m.groups()
+    if q not in TSS1_STATUS:
+        raise NmeaFieldError(f"TSS1: status {q!r} is not one of {TSS1_STATUS}", sentence_type="TSS1")
+    va = int(aaaa, 16)
+    va = va - 0x10000 if va >= 0x8000 else va
+
+    def sg(sign: str, digits: str, scale: float) -> float:
+        return (-1.0 if sign == "-" else 1.0) * int(digits) / scale
+
+    return {"horizontal_accel": int(xx, 16) * 0.0383, "vertical_accel": va * 0.000625,
+            "heave": sg(hs, hv, 100.0), "status": q, "settled": 1.0 if q.isupper() else 0.0,
+            "roll": sg(rs, rv, 100.0), "pitch": sg(ps, pv, 100.0)}
+
+
+def utc_offset_s(rec: Recording) -> float | None:
+    """Seconds to add to ``rec.time`` for Unix UTC, or None when the recording carries no real time.
+
+    Real time comes from metadata (``start_utc`` / ``utc_start`` / ``start_time_utc``, ISO 8601; the time of the
+    first row) or from a time axis that is already Unix seconds (after 2000-01-01, as NMEA logs read here are)."""
+    if len(rec) == 0:
+        return None
+    for key in ("start_utc", "utc_start", "start_time_utc"):
+        v = rec.meta.get(key)
+        if not v:
+            continue
+        if isinstance(v, datetime):
+            d = v
+        else:
+            try:
+                d = datetime.fromisoformat(str(v).strip().replace("Z", "+00:00"))
+            except ValueError:
+                raise ImutoolError(f"metadata {key}: {str(v)[:40]!r} is not an ISO 8601 time") from None
+        d = d if d.tzinfo else d.replace(tzinfo=timezone.utc)
+        return d.timestamp() - float(rec.time[0])
+    if float(rec.time[0]) > 946_684_800.0:
+        return 0.0
+    return None
 
 
 # -- reading whole logs -------------------------------------------------------------------------------------------
@@ -1121,7 +1208,7 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
     or after it (decimation; no interpolation, so values are the recorded ones). Rows whose needed channel is
     NaN emit nothing for that sentence (THS/ROT/HRM emit an invalid-status sentence instead). Sentence order
     per row follows ``sentences``. XDR ids/signs come from the first roll/pitch entries of ``xdr_map``
-    (default ROLL/PTCH, sign +).
+    (default ROLL/PTCH, sign +). PASHR's UTC is the recording's real time (:func:`utc_offset_s`), else empty.
     """
     sents = [s.upper() for s in sentences]
     for s in sents:
@@ -1161,6 +1248,7 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
     rsign = int(xm[rid].sign) if rid in xm else 1
     psign = int(xm[pid].sign) if pid in xm else 1
     tk = talker
+    utc0 = utc_offset_s(rec) if "PASHR" in sents else None
 
     for i in rows:
         i = int(i)
@@ -1203,7 +1291,7 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
             elif s == "PASHR":
                 h, r, p, hv = _f(heading, i), _f(roll, i), _f(pitch, i), _f(heave, i)
                 if any(x is not None for x in (h, r, p, hv)):
-                    out = pashr_sentence(ti, h, r, p, hv)
+                    out = pashr_sentence(None if utc0 is None else ti + utc0, h, r, p, hv)
             if out is not None:
                 yield ti, out
 

@@ -82,7 +82,8 @@ def test_deviation_from_a_separate_bearings_csv(files, tmp_path, capsys):
     ref.add("bearing", rec["ref_heading"][::50], "deg")
     formats.write(ref, tmp_path / "bearings.csv")
     code, out, err = run(["calibrate", "deviation", files / "swing.csv", "--heading-column", "ref_compass_heading",
-                          "--reference", tmp_path / "bearings.csv", "-o", tmp_path / "card.png", "--json"], capsys)
+                          "--reference", tmp_path / "bearings.csv", "-o", tmp_path / "card.png", "--json",
+                          "--variation", "0"], capsys)  # a true reference needs the variation (simulated: 0)
     assert code == 0, err
     s = json.loads(out)
     assert "bearing" in s["reference"]
@@ -117,7 +118,7 @@ def test_deviation_against_an_nmea_gyrocompass_log(tmp_path, capsys):
     formats.write(ref, tmp_path / "gyro.nmea")  # $HEHDT at 10 Hz (read back on the sentence-index clock)
     code, out, err = run(["calibrate", "deviation", tmp_path / "swing.csv", "--heading-column",
                           "ref_compass_heading", "--reference", tmp_path / "gyro.nmea", "-o", tmp_path / "c.toml",
-                          "--json"], capsys)
+                          "--json", "--variation", "0"], capsys)  # true reference: variation required
     assert code == 0, err
     s = json.loads(out)
     assert "gyro.nmea:heading (true)" in s["reference"]

@@ -239,6 +239,7 @@ def test_format_sentence_limits():
 def _sim_recording(n: int = 200, rate: float = 10.0) -> Recording:
     t = 1000.0 + np.arange(n) / rate
     rec = Recording(t)
+    rec.meta["start_utc"] = "1970-01-01T00:16:40Z"  # real time of the first row (PASHR never invents a UTC)
     rec.add("heading", (30.0 + 5.0 * t) % 360.0)
     rec.add("roll", 15.0 * np.sin(2 * np.pi * t / 8.0))
     rec.add("pitch", 3.0 * np.sin(2 * np.pi * t / 5.0))

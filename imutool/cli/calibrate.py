@@ -150,7 +150,7 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
 
 
 # -- deviation -------------------------------------------------------------------------------------------------
-_REF_NAMES = ("heading_mag", "heading", "ref_heading", "cog", "course", "bearing", "true_heading", "heading_true")
+_REF_NAMES = ("heading_mag", "ref_heading_mag", "heading", "ref_heading", "cog", "course", "bearing", "true_heading", "heading_true")
 
 
 def _angle_interp(t: np.ndarray, ts: np.ndarray, a_deg: np.ndarray) -> np.ndarray:
@@ -161,11 +161,55 @@ def _angle_interp(t: np.ndarray, ts: np.ndarray, a_deg: np.ndarray) -> np.ndarra
     return out
 
 
+_CARD_KEYS = ("vessel", "compass", "place", "date", "latitude", "longitude", "conditions", "adjuster")
+
+
+def _card_info(path: str | None) -> dict[str, Any]:
+    """Header fields of the card from a TOML file (keys: vessel, compass, place, date, latitude, longitude,
+    conditions, adjuster)."""
+    if not path:
+        return {}
+    import tomllib
+
+    try:
+        with open(path, "rb") as fh:
+            d = tomllib.load(fh)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise ImutoolError(f"--card-info: {e}", path=path) from None
+    d = d.get("card", d)
+    unknown = sorted(set(d) - set(_CARD_KEYS))
+    if unknown:
+        raise ImutoolError(f"--card-info: unknown keys {', '.join(unknown)} (known: {', '.join(_CARD_KEYS)})",
+                           path=path)
+    return {k: (v.isoformat() if hasattr(v, "isoformat") else v) for k, v in d.items()}
+
+
+def _swing_date(date_opt: str | None, *recs: Any) -> Any:
+    """Date of the swing: --date, else the real time of a recording (metadata start time / Unix time axis)."""
+    from datetime import date, datetime, timezone
+
+    from formats.nmea import utc_offset_s
+
+    if date_opt:
+        try:
+            return date.fromisoformat(date_opt.strip()[:10])
+        except ValueError:
+            raise ImutoolError(f"--date {date_opt!r}: expected YYYY-MM-DD") from None
+    for r in recs:
+        if r is None or len(r) == 0:
+            continue
+        off = utc_offset_s(r)
+        if off is not None:
+            return datetime.fromtimestamp(float(r.time[0]) + off, tz=timezone.utc)
+    return None
+
+
 @calibrate_group.command("deviation", epilog="Example: imutool calibrate deviation swing.csv --reference gnss.nmea "
-                                             "-o card.pdf -o cal.toml --append")
+                                             "-o card.pdf -o card.txt -o cal.toml --vessel 'MV Aurora'")
 @click.argument("input_path", metavar="INPUT")
 @click.option("-o", "--output", "outputs", multiple=True, required=True,
-              help="Card plot (.pdf/.png) and/or calibration file (.toml, section [deviation]). Repeatable.")
+              help="Card (.pdf/.png/.svg plot + text; .txt text card) and/or calibration file (.toml, section "
+                   "[deviation]). Repeatable.")
 @click.option("--reference", default=None, type=click.Path(exists=True),
               help="Reference headings: NMEA log (HDT/THS/HDM...), CSV (heading, cog or bearing column). "
                    "Default: a reference column of INPUT (ref_heading).")
@@ -173,9 +217,27 @@ def _angle_interp(t: np.ndarray, ts: np.ndarray, a_deg: np.ndarray) -> np.ndarra
               help=f"Column with the reference heading (deg); default the first of {', '.join(_REF_NAMES)}.")
 @click.option("--reference-kind", type=click.Choice(["auto", "true", "magnetic"]), default="auto",
               show_default=True, help="Whether the reference is true or magnetic heading (auto: magnetic for "
-                                      "heading_mag, else true).")
-@click.option("--variation", type=float, default=0.0, show_default=True,
-              help="Magnetic variation (declination), deg, east positive: magnetic = true − variation.")
+                                      "heading_mag / ref_heading_mag, else true).")
+@click.option("--variation", type=float, default=None,
+              help="Magnetic variation (declination), deg, east positive: magnetic = true − variation. A true "
+                   "reference without it is refused unless --position (or a position in the reference log) and "
+                   "a date give it from the World Magnetic Model (needs imutool[wmm]).")
+@click.option("--position", default=None, metavar="LAT,LON",
+              help="Where the swing was done (decimal deg, N/E +): latitude for the card, and the WMM variation "
+                   "when --variation is not given. Default: first RMC/GGA fix of the reference log.")
+@click.option("--date", "date_opt", default=None, metavar="YYYY-MM-DD",
+              help="Date of the swing (card header, WMM). Default: the recording's real start time.")
+@click.option("--vessel", default=None, help="Card header: vessel name.")
+@click.option("--compass", "compass_name", default=None, help="Card header: compass (make, model, serial).")
+@click.option("--place", default=None, help="Card header: place of the swing.")
+@click.option("--conditions", default=None, help="Card header: swing conditions (loading, trim, heel, weather...).")
+@click.option("--adjuster", default=None, help="Card header: compass adjuster's name (the card keeps a signature "
+                                                "line).")
+@click.option("--card-info", default=None, type=click.Path(exists=True, dir_okay=False),
+              help="TOML with the header fields (vessel, compass, place, date, latitude, longitude, conditions, "
+                   "adjuster); options override it.")
+@click.option("--max-deviation", type=float, default=5.0, show_default=True,
+              help="Warn above this |deviation| (deg): compass to be adjusted (ISO 25862 as quoted: 5° in service).")
 @click.option("--time-offset", type=float, default=0.0, show_default=True,
               help="Seconds added to the reference times to align them with INPUT.")
 @click.option("--heading-column", default=None,
@@ -184,29 +246,38 @@ def _angle_interp(t: np.ndarray, ts: np.ndarray, a_deg: np.ndarray) -> np.ndarra
 @click.option("--min-speed", type=float, default=2.0, show_default=True,
               help="With a GNSS course-over-ground reference and a 'sog' column (kn): use rows at or above this.")
 @click.option("--min-span", type=float, default=270.0, show_default=True,
-              help="Refuse if the compass headings cover less of the circle (deg).")
+              help="Refuse if the compass headings cover less of the circle (deg). Whatever it says, headings "
+                   "that cannot separate the A–E harmonics are refused.")
 @click.option("--append/--new", default=True, show_default=True,
               help="Merge [deviation] into an existing .toml (or write a new one).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
 @_with_option
 @input_options
 @output_options
-@safe_outputs("outputs", append="append")
 def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | None, reference_column: str | None,
-                  reference_kind: str, variation: float, time_offset: float, heading_column: str | None,
-                  min_speed: float, min_span: float, append: bool, sensor: str | None, with_files: tuple[str, ...],
-                  as_json: bool, quiet: bool, **io: Any) -> None:
-    """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ from compass vs reference headings."""
-    from calibration.deviation import fit_deviation, plot_card
+                  reference_kind: str, variation: float | None, position: str | None, date_opt: str | None,
+                  vessel: str | None, compass_name: str | None, place: str | None, conditions: str | None,
+                  adjuster: str | None, card_info: str | None, max_deviation: float, time_offset: float,
+                  heading_column: str | None, min_speed: float, min_span: float, append: bool, sensor: str | None,
+                  with_files: tuple[str, ...], as_json: bool, quiet: bool, **io: Any) -> None:
+    """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ from compass vs reference headings.
+
+    The card: header (vessel, compass, place, date, latitude, variation, reference, conditions), coefficients
+    and both tables at 15° (compass → magnetic; magnetic → compass, the course to steer) in E/W notation,
+    residuals per heading, warnings, adjuster's signature line.
+    """
+    from calibration.deviation import card_text, card_warnings, ew, fit_deviation, plot_card
     from calibration.file import provenance, update_calibration
     from calibration.swing import heading_from_mag, roll_pitch_from_accel
+    from calibration.wmm import parse_position, position_from_nmea, wmm_variation
+    from formats.atomic import atomic_path
     from formats.frames import wrap_deg180
 
     for o in outputs:
-        if not o.lower().endswith((".pdf", ".png", ".svg", ".toml")):
-            raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card) or .toml (calibration file)")
-        if o.lower().endswith(".toml"):
-            _check_toml_out(o, append)
+        if not o.lower().endswith((".pdf", ".png", ".svg", ".toml", ".txt")):
+            raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card plot), .txt (text card) or .toml "
+                               "(calibration file)")
+    info = _card_info(card_info)
     rec = _load(input_path, io, with_files)  # mounting and a mag calibration are welcome here
     # compass heading
     if heading_column or "heading" in rec.channels:
@@ -243,7 +314,42 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
     rt = ref_rec.time + time_offset
     if "sog" in ref_rec.channels and rname in ("cog", "course"):
         rvals = np.where(np.asarray(ref_rec["sog"]) >= min_speed, rvals, np.nan)
-    kind = reference_kind if reference_kind != "auto" else ("magnetic" if rname == "heading_mag" else "true")
+    kind = reference_kind if reference_kind != "auto" else ("magnetic" if rname in ("heading_mag", "ref_heading_mag") else "true")
+    # position and date (header; WMM variation for a true reference)
+    lat = lon = None
+    pos_src = None
+    if position:
+        lat, lon = parse_position(position)
+        pos_src = "--position"
+    elif info.get("latitude") is not None and info.get("longitude") is not None:
+        lat, lon = float(info["latitude"]), float(info["longitude"])
+        pos_src = "--card-info"
+    log_day = None
+    for cand in ([reference] if reference else []) + [input_path]:
+        if cand and not cand.lower().endswith((".csv", ".parquet", ".bag", ".db3", ".mcap", ".toml")):
+            plat, plon, log_day = position_from_nmea(cand)
+            if lat is None and plat is not None:
+                lat, lon, pos_src = plat, plon, f"first fix in {os.path.basename(cand)}"
+            break
+    when = _swing_date(date_opt or info.get("date"), rec, ref_rec if reference else None) or log_day
+    var_src = "given (--variation)" if variation is not None else None
+    notes: list[str] = []
+    if kind == "true" and variation is None:
+        if lat is None or when is None:
+            miss = " and ".join(x for x, v in (("a position (--position LAT,LON or RMC/GGA in the reference "
+                                                "log)", lat), ("a date (--date)", when)) if v is None)
+            raise ImutoolError(f"the reference {os.path.basename(rsrc)}:{rname} is TRUE heading: give --variation "
+                               f"(deg, E +), or {miss} for the World Magnetic Model — without it the card would "
+                               "carry the variation as deviation")
+        v = wmm_variation(lat, lon, when)
+        variation = v.deg
+        var_src = v.source()
+        if v.warning:
+            notes.append(v.warning)
+    if kind == "true":
+        comp_ref = "true − variation"
+    else:
+        comp_ref = "magnetic"
     if ref_rec is rec:
         ref_at = rvals
         comp_at = compass
@@ -255,36 +361,61 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
         ref_at = _angle_interp(rec.time, rt, rvals)
     if kind == "true":
         ref_at = ref_at - variation
-    card = fit_deviation(comp_at, ref_at, min_span_deg=min_span)
+    card = fit_deviation(comp_at, ref_at, min_span_deg=min_span, limit_deg=max_deviation)
+    card.warnings = notes + card_warnings(card, max_deviation)
+    header = {**info, "vessel": vessel or info.get("vessel"), "compass": compass_name or info.get("compass"),
+              "place": place or info.get("place"), "conditions": conditions or info.get("conditions"),
+              "adjuster": adjuster or info.get("adjuster"),
+              "date": (when.isoformat()[:10] if hasattr(when, "isoformat") else None),
+              "latitude": lat, "longitude": lon, "position_source": pos_src,
+              "variation": variation, "variation_source": var_src,
+              "reference": f"{os.path.basename(rsrc)}:{rname} ({kind}; magnetic = {comp_ref}); compass from {src}"}
+    card.header = {k: v for k, v in header.items() if v not in (None, "")}
     summary: dict[str, Any] = {"compass_heading": src, "reference": f"{rsrc}:{rname} ({kind})",
-                               "variation_deg": variation,
+                               "variation_deg": variation, "variation_source": var_src,
                                "coefficients_deg": {n: round(float(getattr(card, n)), 4) for n in "ABCDE"},
                                "std_deg": {k: round(v, 4) for k, v in card.std.items()},
                                "residual_rms_deg": round(card.quality["residual_rms_deg"], 4),
-                               "samples": card.quality["n"], "outputs": list(outputs),
+                               "max_abs_deviation_deg": round(card.max_abs_deg(), 3),
+                               "samples": card.quality["n"], "outputs": list(outputs), "header": card.header,
+                               "warnings": card.warnings,
                                "card_15deg": [[p, round(d, 2)] for p, d, _ in card.table(15.0)]}
+    if card.invertible():
+        summary["magnetic_to_compass_15deg"] = [[m, round(p, 2)] for m, _, p in card.table_magnetic(15.0)]
     for o in outputs:
         if o.lower().endswith(".toml"):
             section = card.to_section()
             section["provenance"] = provenance(input_path, "deviation least squares", sensor or
                                                str(rec.meta.get("sensor", "")), card.quality,
                                                reference=f"{rsrc}:{rname} ({kind})", variation_deg=variation,
-                                               compass_heading=src)
+                                               variation_source=var_src, compass_heading=src)
             update_calibration(o, "deviation", section, append)
+        elif o.lower().endswith(".txt"):
+            with atomic_path(o) as tmp:
+                tmp.write_text(card_text(card), encoding="utf-8")
         else:
             ok = np.isfinite(comp_at) & np.isfinite(ref_at)
             plot_card(card, o, comp_at[ok], wrap_deg180(ref_at[ok] - comp_at[ok]),
-                      title=f"Deviation card — {os.path.basename(input_path)}")
+                      title=f"Deviation card — {card.header.get('vessel') or os.path.basename(input_path)}")
     lines = [f"deviation card ({card.quality['n']} samples; compass from {src}; reference {rsrc}:{rname}, {kind})",
-             "  δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ   (magnetic = compass + δ)",
-             "  " + "  ".join(f"{n} = {getattr(card, n):+.3f}° ± {card.std.get(n, float('nan')):.3f}"
-                              for n in "ABCDE"),
-             f"  residual {card.quality['residual_rms_deg']:.3f}° RMS, max {card.quality['residual_max_deg']:.2f}°",
-             "  card (compass → deviation):"]
+             "  δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ   (magnetic = compass + δ; E add, W subtract)",
+             "  " + "  ".join(f"{n} = {ew(getattr(card, n), 2)} ± {card.std.get(n, float('nan')):.2f}°"
+                              for n in "ABCDE")]
+    if kind == "true":
+        lines.append(f"  variation {ew(variation, 2)} ({var_src})")
+    lines += [f"  residual {card.quality['residual_rms_deg']:.3f}° RMS, max {card.quality['residual_max_deg']:.2f}°; "
+              f"largest deviation {card.max_abs_deg():.1f}°", "  compass → deviation:"]
     tab = card.table(15.0)
     for i in range(0, len(tab), 6):
-        lines.append("   " + "  ".join(f"{p:03.0f}° {d:+5.1f}" for p, d, _ in tab[i:i + 6]))
+        lines.append("   " + "  ".join(f"{p:03.0f}° {ew(d):>7s}" for p, d, _ in tab[i:i + 6]))
+    if card.invertible():
+        lines.append("  magnetic → compass (course to steer):")
+        tm = card.table_magnetic(15.0)
+        for i in range(0, len(tm), 6):
+            lines.append("   " + "  ".join(f"{m:03.0f}°→{p:05.1f}°" for m, _, p in tm[i:i + 6]))
     lines.append(f"  written: {', '.join(outputs)}")
+    for w in card.warnings:
+        click.echo(f"warning: {w}", err=True)
     emit_summary(summary, as_json, quiet, lines)
 
 

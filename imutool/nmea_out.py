@@ -1,0 +1,408 @@
+"""IEC 61162-1 (NMEA 0183) sentences and TSS1 frames out of a recording, with honest flags and a line budget.
+
+Sentences: HRM (heel, roll period, amplitudes, peak hold), XDR (pitch/roll), HDG (compass sensor heading,
+deviation, variation, E/W), HDT and THS (true heading; THS with a mode indicator), ROT (deg/min), $PASHR
+(attitude + heave, Applanix POS MV layout) and TSS1 (heave/roll/pitch survey frame). Writers live in
+``formats.nmea``; this module decides what each field says.
+
+Units and signs: degrees; roll (heel) + starboard down; pitch + bow up; heading clockwise from north in
+[0, 360); rate of turn deg/min, + bow to starboard; heave m, **+ up** inside imutool, sent + up or + down as
+chosen (``heave_positive``).
+
+Honesty rules:
+- heading reference: ``compass`` (what the sensor reads: deviation not applied), ``magnetic`` (deviation
+  applied) or ``true``. HDG carries the sensor heading and the deviation of the card (the magnetic→compass
+  inverse of the card is solved, not approximated by −δ) — or null deviation when none is known;
+- talkers: HDG ``HC`` (magnetic compass); HDT/THS/ROT from the heading's source: ``HE`` only for a
+  north-seeking gyro, ``GN`` GNSS compass, ``IN`` integrated navigation, ``II`` a magnetic heading corrected by
+  variation (or a source not stated). THS mode: ``V`` where the heading is missing, ``S`` for a simulated
+  recording, else ``A``;
+- heave while the estimator settles (``settled`` = 0): $PASHR heave field empty and IMU status 0 (Applanix:
+  0 = IMU out / not valid, 1 = satisfactory); TSS1 status letter in lower case (settling). No GNSS channel
+  (sog, cog, lat, lon) → PASHR aiding flag 0 (no aiding) and TSS1 ``U``/``u`` (unaided);
+- UTC only from the recording's real time (:func:`formats.nmea.utc_offset_s`, or ``utc_start`` given by the
+  caller); otherwise PASHR's time field is empty;
+- the output rate must fit the serial line: bytes per second of the chosen set (8N1: 10 bits a character)
+  against ``baud / 10``; a rate that does not fit is refused, no rate given → the highest standard rate that
+  fits (:func:`plan_rate`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+
+from formats import Recording
+from formats.errors import ImutoolError
+from formats.nmea import (
+    hdg_sentence,
+    hdt_sentence,
+    hrm_sentence,
+    pashr_sentence,
+    rot_sentence,
+    ths_sentence,
+    tss1_frame,
+    utc_offset_s,
+    xdr_roll_pitch,
+)
+
+SENTENCES = ("HRM", "XDR", "HDG", "HDT", "THS", "ROT", "PASHR", "TSS1")
+HEADING_REFS = ("compass", "magnetic", "true")
+HEADING_SOURCES = ("auto", "magnetic", "gyro", "gnss", "ins")
+TRUE_TALKER = {"gyro": "HE", "gnss": "GN", "ins": "IN", "magnetic": "II", "auto": "II"}
+STANDARD_RATES = (100.0, 50.0, 25.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1)
+BITS_PER_CHAR = 10  # 8N1: start + 8 data + stop
+GNSS_CHANNELS = ("sog", "cog", "lat", "lon")
+
+
+def _ch(rec: Recording, names: tuple[str, ...], unit: str) -> tuple[np.ndarray | None, str | None]:
+    for name in names:
+        if name in rec.channels and rec[name].ndim == 1:
+            a = rec.get(name, unit) if rec.units.get(name) and rec.units.get(name) != unit else rec[name]
+            return np.asarray(a, dtype=float), name
+    return None, None
+
+
+def _v(a: np.ndarray | None, i: int) -> float | None:
+    if a is None:
+        return None
+    x = float(a[i])
+    return x if math.isfinite(x) else None
+
+
+def is_simulated(rec: Recording) -> bool:
+    """True when the recording says it came from imutool's simulator (THS mode S)."""
+    m = rec.meta
+    return bool(m.get("scenario")) or "simulat" in str(m.get("sensor", "")).lower() or bool(m.get("simulated"))
+
+
+def heave_sign(rec: Recording, heave_positive: str) -> float:
+    """Factor from the recording's heave (meta ``heave_positive``, default up) to the requested convention."""
+    if heave_positive not in ("up", "down"):
+        raise ImutoolError(f"heave_positive must be 'up' or 'down', not {heave_positive!r}")
+    have = str(rec.meta.get("heave_positive", "up")).lower()
+    return 1.0 if have == heave_positive else -1.0
+
+
+@dataclass
+class Headings:
+    """Per-row headings (deg, NaN where unknown): compass sensor, deviation, magnetic, true; and what is known."""
+
+    sensor: np.ndarray | None = None
+    deviation: np.ndarray | None = None
+    magnetic: np.ndarray | None = None
+    true: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def resolve_headings(h: np.ndarray, heading_ref: str, card: Any = None, deviation_deg: float | None = None,
+                     variation_deg: float | None = None) -> Headings:
+    """Sensor / deviation / magnetic / true heading arrays from one heading channel (deg).
+
+    ``card``: a deviation card (``deviation_deg(compass)``, ``compass_from_magnetic(magnetic)``); ``deviation_deg``
+    a fixed deviation (E +) instead. magnetic = compass + δ(compass); true = magnetic + variation (E +)."""
+    if heading_ref not in HEADING_REFS:
+        raise ImutoolError(f"heading reference {heading_ref!r}: use one of {', '.join(HEADING_REFS)}")
+    if card is not None and deviation_deg is not None:
+        raise ImutoolError("give the deviation either as a card (--calibration) or as --deviation, not both")
+    h = np.asarray(h, dtype=float) % 360.0
+    out = Headings()
+    var = variation_deg
+    if heading_ref == "compass":
+        out.sensor = h
+        if card is not None:
+            out.deviation = card.deviation_deg(h)
+            out.notes.append("deviation from the card at each compass heading")
+        elif deviation_deg is not None:
+            out.deviation = np.full_like(h, float(deviation_deg))
+        if out.deviation is not None:
+            out.magnetic = (h + out.deviation) % 360.0
+    else:
+        out.magnetic = h if heading_ref == "magnetic" else (None if var is None else (h - var) % 360.0)
+        if heading_ref == "true":
+            out.true = h
+        if out.magnetic is not None:
+            if card is not None:
+                out.sensor = card.compass_from_magnetic(out.magnetic)
+                out.deviation = card.deviation_deg(out.sensor)
+                out.notes.append("compass heading solved from the card's magnetic→compass inverse")
+            elif deviation_deg is not None:
+                out.sensor = (out.magnetic - deviation_deg) % 360.0
+                out.deviation = np.full_like(h, float(deviation_deg))
+            else:
+                out.sensor = out.magnetic
+                out.notes.append("no deviation known: HDG sensor field = magnetic heading, deviation field null")
+    if out.true is None and out.magnetic is not None and var is not None:
+        out.true = (out.magnetic + var) % 360.0
+    return out
+
+
+@dataclass
+class RatePlan:
+    """Output rate against the serial line: rate (Hz), bytes per output instant, bytes/s, line capacity."""
+
+    rate_hz: float
+    bytes_per_row: int
+    bytes_per_s: float
+    capacity_bytes_per_s: float
+    baud: int
+    chosen: bool  # True: picked here; False: given by the caller
+
+    def describe(self) -> str:
+        how = "picked to fit" if self.chosen else "as asked"
+        return (f"{self.rate_hz:g} Hz ({how}): ≈{self.bytes_per_s:.0f} bytes/s of {self.capacity_bytes_per_s:.0f} "
+                f"at {self.baud} Bd 8N1 ({100 * self.bytes_per_s / self.capacity_bytes_per_s:.0f} %)")
+
+
+def input_rate(rec: Recording) -> float:
+    """Median sample rate (Hz) of the recording."""
+    if len(rec) < 2:
+        return 1.0
+    dt = float(np.median(np.diff(rec.time)))
+    return 1.0 / dt if dt > 0 else 1.0
+
+
+def plan_rate(row_bytes: int, baud: int, rate_hz: float | None, input_hz: float,
+              fill: float = 0.9) -> RatePlan:
+    """Check (``rate_hz`` given) or choose (None) the output rate for ``row_bytes`` bytes per output instant.
+
+    Capacity = baud / 10 bytes/s (8N1); at most ``fill`` of it is used. A given rate that needs more is refused
+    (ImutoolError naming the rate that fits); None → the highest of :data:`STANDARD_RATES` (or the input rate)
+    that fits. Raises when not even 0.1 Hz fits."""
+    if not (isinstance(baud, int) and baud > 0):
+        raise ImutoolError(f"--baud must be a positive integer, not {baud!r}")
+    cap = baud / BITS_PER_CHAR
+    usable = cap * fill
+    max_rate = usable / max(row_bytes, 1)
+    if rate_hz is not None:
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise ImutoolError(f"--rate must be a positive number of Hz, not {rate_hz!r}")
+        need = row_bytes * rate_hz
+        if need > usable:
+            fit = [r for r in STANDARD_RATES if r <= max_rate]
+            need_baud = next((b for b in (4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800)
+                              if b * fill / BITS_PER_CHAR >= need), None)
+            raise ImutoolError(
+                f"--rate {rate_hz:g} Hz does not fit the line: {row_bytes} bytes per output × {rate_hz:g} Hz = "
+                f"{need:.0f} bytes/s, but {baud} Bd (8N1) carries {cap:.0f} bytes/s ({100 * fill:.0f} % usable = "
+                f"{usable:.0f}); use " + (f"--rate {fit[0]:g} or less, " if fit else "") + "fewer sentences"
+                + (f", or --baud {need_baud}" if need_baud else ""))
+        return RatePlan(float(rate_hz), row_bytes, need, cap, baud, False)
+    cands = [r for r in STANDARD_RATES if r <= max_rate and r <= input_hz * 1.0001]
+    if input_hz <= max_rate and (not cands or input_hz < cands[0]):
+        cands.insert(0, input_hz)
+    if not cands:
+        raise ImutoolError(f"the sentences need {row_bytes} bytes per output: even 0.1 Hz does not fit "
+                           f"{baud} Bd; choose fewer sentences or a higher --baud")
+    r = cands[0]
+    return RatePlan(float(r), row_bytes, row_bytes * r, cap, baud, True)
+
+
+def output_rows(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
+    """Row indices for a uniform output grid at ``rate_hz`` (first row at or after each grid point)."""
+    n = len(t)
+    if rate_hz is None:
+        return np.arange(n)
+    grid = t[0] + np.arange(int(np.floor((t[-1] - t[0]) * rate_hz + 1e-9)) + 1) / rate_hz
+    return np.unique(np.clip(np.searchsorted(t, grid - 1e-9, side="left"), 0, n - 1))
+
+
+def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: float | None = None, *,
+               heading_ref: str = "magnetic", heading_source: str = "auto", deviation_deg: float | None = None,
+               card: Any = None, variation_deg: float | None = None, ths_mode: str = "auto",
+               heave_positive: str = "up", xdr_roll_id: str = "ROLL", xdr_pitch_id: str = "PTCH",
+               xdr_roll_sign: int = 1, xdr_pitch_sign: int = 1, talkers: dict[str, str] | None = None,
+               roll_kw: dict | None = None, utc_start: datetime | None = None) -> Iterator[tuple[float, str]]:
+    """(time s, sentence or TSS1 frame without CR/LF) for each output row; see the module docstring.
+
+    Channels: ``roll``/``heel`` and ``pitch`` (deg), a heading (``heading`` as ``heading_ref``;
+    ``heading_mag`` = magnetic, ``heading_true`` = true, ``heading_sensor`` = compass), ``rot`` (deg/min) or
+    ``gyro`` (z ≈ rate of turn), ``heave`` (m, + up unless meta ``heave_positive`` = down), ``heave_rate``,
+    ``accel`` (for TSS1's horizontal acceleration), ``settled`` (heave validity), GNSS channels. ``utc_start``:
+    UTC of the first row (else from the recording's metadata/time, else no UTC).
+    """
+    sents = [s.strip().upper() for s in sentences if s.strip()]
+    for s in sents:
+        if s not in SENTENCES:
+            raise ImutoolError(f"unknown sentence {s!r}; known: {', '.join(SENTENCES)}")
+    if not sents:
+        raise ImutoolError("no sentence chosen")
+    if heading_source not in HEADING_SOURCES:
+        raise ImutoolError(f"heading source {heading_source!r}: use one of {', '.join(HEADING_SOURCES)}")
+    if ths_mode != "auto" and (len(ths_mode) != 1 or ths_mode not in "AEMSV"):
+        raise ImutoolError(f"THS mode {ths_mode!r}: use auto or one of A, E, M, S, V")
+    n = len(rec)
+    if n == 0:
+        return
+    t = rec.time
+    tk = {"HRM": "II", "XDR": "YX", "HDG": "HC", "HDT": TRUE_TALKER[heading_source],
+          "THS": TRUE_TALKER[heading_source], "ROT": TRUE_TALKER[heading_source], **(talkers or {})}
+    heel, _ = _ch(rec, ("heel", "roll"), "deg")
+    pitch, _ = _ch(rec, ("pitch",), "deg")
+    hdg, hname = _ch(rec, ("heading", "heading_true", "heading_mag", "heading_sensor"), "deg")
+    ref = {"heading_true": "true", "heading_mag": "magnetic", "heading_sensor": "compass"}.get(hname or "",
+                                                                                           heading_ref)
+    need_heading = [s for s in sents if s in ("HDG", "HDT", "THS")]
+    if ("HRM" in sents or "XDR" in sents) and heel is None:
+        raise ImutoolError(f"HRM/XDR need a 'roll' or 'heel' channel (deg); has {', '.join(rec.channels)}")
+    if "TSS1" in sents and (heel is None or pitch is None):
+        raise ImutoolError("TSS1 needs roll and pitch (deg) as well as heave: the recording has "
+                           f"{', '.join(rec.channels)} (run imutool filter and pass its roll/pitch along)")
+    hs = None
+    if need_heading:
+        if hdg is None:
+            raise ImutoolError(f"{'/'.join(need_heading)} need a heading channel (deg); has {', '.join(rec.channels)}")
+        hs = resolve_headings(hdg, ref, card, deviation_deg, variation_deg)
+        if ("THS" in sents or "HDT" in sents) and hs.true is None:
+            what = ("the deviation (--calibration with a [deviation] card, or --deviation) and " if ref == "compass"
+                    and hs.magnetic is None else "")
+            raise ImutoolError(f"THS/HDT carry TRUE heading: the {ref} heading needs {what}the variation "
+                               "(--variation, deg, E +)")
+        if "HDG" in sents and hs.sensor is None:
+            raise ImutoolError("HDG from a true heading needs --variation (deg, E +) to recover the magnetic heading")
+    heave, _ = _ch(rec, ("heave",), "m")
+    if ("PASHR" in sents or "TSS1" in sents) and heave is not None:
+        heave = heave * heave_sign(rec, heave_positive)
+    if "TSS1" in sents and heave is None:
+        raise ImutoolError(f"TSS1 needs a 'heave' channel (m); has {', '.join(rec.channels)}")
+    if "PASHR" in sents and all(x is None for x in (hdg, heel, pitch, heave)):
+        raise ImutoolError(f"PASHR needs heading, roll, pitch or heave; has {', '.join(rec.channels)}")
+    settled, _ = _ch(rec, ("settled",), "1")
+    gnss = np.zeros(n, dtype=bool)
+    for name in GNSS_CHANNELS:
+        a, _ = _ch(rec, (name,), rec.units.get(name) or "1")
+        if a is not None:
+            gnss |= np.isfinite(a)
+    # PASHR heading is true heading: only when it is known
+    true_arr = hs.true if hs is not None else None
+    if "PASHR" in sents and true_arr is None and hdg is not None:
+        true_arr = resolve_headings(hdg, ref, card, deviation_deg, variation_deg).true
+    # rate of turn (deg/min): rot channel, else gyro z (body z down: + = bow to starboard), else d(heading)/dt
+    rot = None
+    if "ROT" in sents:
+        rot, _ = _ch(rec, ("rot",), "deg/min")
+        if rot is None and "gyro" in rec.channels and rec["gyro"].ndim == 2:
+            g = rec.get("gyro", "rad/s") if rec.units.get("gyro") else rec["gyro"]
+            rot = np.degrees(np.asarray(g, float)[:, 2]) * 60.0
+        if rot is None and hdg is not None and n >= 2:
+            unwrapped = np.degrees(np.unwrap(np.radians(np.nan_to_num(hdg, nan=0.0))))
+            rot = np.gradient(unwrapped, t) * 60.0
+            rot[~np.isfinite(hdg)] = np.nan
+        if rot is None:
+            raise ImutoolError("ROT needs 'rot' (deg/min), 'gyro' or a heading channel")
+    # TSS1 accelerations: vertical from d(heave rate)/dt (same sign as heave), horizontal from accel x/y
+    vacc = hacc = None
+    if "TSS1" in sents:
+        hr, _ = _ch(rec, ("heave_rate",), "m/s")
+        if n >= 3:
+            vacc = (np.gradient(hr * heave_sign(rec, heave_positive), t) if hr is not None
+                    else np.gradient(np.gradient(heave, t), t))
+        if "accel" in rec.channels and rec["accel"].ndim == 2:
+            a = np.asarray(rec.get("accel", "m/s^2") if rec.units.get("accel") else rec["accel"], float)
+            hacc = np.hypot(a[:, 0], a[:, 1])
+    off = utc_start.timestamp() - float(t[0]) if utc_start is not None else utc_offset_s(rec)
+    rs = None
+    if "HRM" in sents:
+        from imutool.roll import roll_stats
+
+        kw = dict(roll_kw or {})
+        if kw.get("utc_start") is None and off not in (None, 0.0):
+            kw["utc_start"] = datetime.fromtimestamp(off, tz=timezone.utc)
+        rs = roll_stats(t, heel, **kw)
+        reset_dt = [datetime.fromisoformat(u.replace("Z", "+00:00")) if u else None for u in rs.resets_utc]
+        resets = sorted(set(rs.reset_time.tolist()))
+    sim = is_simulated(rec)
+    for i in output_rows(t, rate_hz):
+        i = int(i)
+        ti = float(t[i])
+        ok_heave = settled is None or (_v(settled, i) or 0.0) >= 0.5
+        for s in sents:
+            if s == "HRM":
+                h = _v(heel, i)
+                k = resets.index(float(rs.reset_time[i]))
+                fresh = bool(rs.valid[i])
+                yield ti, hrm_sentence(h, _v(rs.roll_period, i) if fresh else None,
+                                       _v(rs.amp_port, i) if fresh else None, _v(rs.amp_stbd, i) if fresh else None,
+                                       valid=h is not None, peak_port_deg=_v(rs.peak_port, i),
+                                       peak_stbd_deg=_v(rs.peak_stbd, i), reset_utc=reset_dt[k], talker=tk["HRM"])
+            elif s == "XDR":
+                r, p = _v(heel, i), _v(pitch, i)
+                if r is not None or p is not None:
+                    yield ti, xdr_roll_pitch(r, p, roll_id=xdr_roll_id, pitch_id=xdr_pitch_id,
+                                             roll_sign=xdr_roll_sign, pitch_sign=xdr_pitch_sign, talker=tk["XDR"])
+            elif s == "HDG":
+                sh = _v(hs.sensor, i)
+                if sh is not None:
+                    yield ti, hdg_sentence(sh, _v(hs.deviation, i), variation_deg, talker=tk["HDG"])
+            elif s == "HDT":
+                tr = _v(hs.true, i)
+                if tr is not None:
+                    yield ti, hdt_sentence(tr, talker=tk["HDT"])
+            elif s == "THS":
+                tr = _v(hs.true, i)
+                mode = ths_mode if ths_mode != "auto" else ("S" if sim else "A")
+                yield ti, ths_sentence(tr, mode=mode if tr is not None else "V", talker=tk["THS"])
+            elif s == "ROT":
+                r = _v(rot, i)
+                yield ti, rot_sentence(r, valid=r is not None, talker=tk["ROT"])
+            elif s == "PASHR":
+                hv = _v(heave, i) if ok_heave else None
+                yield ti, pashr_sentence(None if off is None else ti + off, _v(true_arr, i), _v(heel, i),
+                                         _v(pitch, i), hv, aiding=1 if gnss[i] else 0,
+                                         imu_status=1 if ok_heave else 0)
+            elif s == "TSS1":
+                hv, r, p = _v(heave, i), _v(heel, i), _v(pitch, i)
+                if hv is None or r is None or p is None:
+                    continue  # a fixed-length frame has no empty field: no frame rather than a made-up value
+                q = "G" if gnss[i] else "U"
+                yield ti, tss1_frame(hv, r, p, q if ok_heave else q.lower(), _v(hacc, i) or 0.0,
+                                     _v(vacc, i) or 0.0)
+
+
+def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_rows: int = 200,
+              **kw: Any) -> int:
+    """Largest number of bytes (with CR/LF) one output instant takes, over the first ``sample_rows`` rows
+    (+ 2 bytes a sentence of margin for wider numbers later on)."""
+    sub = rec.slice_time(None, float(rec.time[min(len(rec), sample_rows) - 1])) if len(rec) > sample_rows else rec
+    per: dict[float, int] = {}
+    count: dict[float, int] = {}
+    for ti, s in nmea_lines(sub, sentences, None, **kw):
+        per[ti] = per.get(ti, 0) + len(s) + 2
+        count[ti] = count.get(ti, 0) + 1
+    if not per:
+        return 0
+    k = max(per, key=lambda x: per[x])
+    return int(per[k] + 2 * count[k])
+
+
+def header_lines(*, source: str, sentences: list[str], plan: RatePlan | None, heading_ref: str,
+                 heading_source: str, heave_positive: str, card_from: str | None, deviation_deg: float | None,
+                 variation_deg: float | None, utc: str | None, talkers: dict[str, str]) -> list[str]:
+    """The ``#`` header block of an NMEA log written by imutool (conventions, flags, rate; read back as
+    comments by imutool's reader)."""
+    def ew(v: float | None) -> str:
+        return "null (unknown)" if v is None else f"{abs(v):.1f}° {'E' if v >= 0 else 'W'}"
+
+    lines = [f"imutool nmea from {source}",
+             f"sentences: {','.join(sentences)}" + (f" at {plan.describe()}" if plan else ""),
+             "angles deg; roll + starboard down; pitch + bow up; heading clockwise from north; ROT deg/min "
+             "+ to starboard",
+             f"heave: m, positive {heave_positive.upper()} (--heave-positive {heave_positive}; TSS1 defines + up)"]
+    if any(s in sentences for s in ("HDG", "HDT", "THS", "PASHR")):
+        dev = f"card {card_from}" if card_from else ew(deviation_deg)
+        lines.append(f"heading input: {heading_ref}; deviation {dev}; variation {ew(variation_deg)}; "
+                     f"source {heading_source} (HDT/THS/ROT talker {talkers.get('THS', '?')}, HDG talker "
+                     f"{talkers.get('HDG', '?')})")
+    lines.append("UTC: " + (utc or "not known (no start time in the recording): PASHR time fields empty"))
+    if "PASHR" in sentences:
+        lines.append("PASHR: heave empty and IMU status 0 while the heave settles (settled = 0); aiding flag "
+                     "1 only with GNSS in the recording")
+    if "TSS1" in sentences:
+        lines.append("TSS1: status U/G unaided/GNSS-aided, lower case while settling; vertical acceleration from "
+                     "the heave rate, horizontal from accel x/y (00 without it)")
+    return ["# " + x for x in lines]
