@@ -23,11 +23,41 @@ STATUSES = (PASS, FAIL, INSUFFICIENT, NOT_TESTED)
 SCOPE = ("This report is test evidence produced by imutool from recorded data. It is NOT a type approval: type "
          "approval (e.g. MED wheelmark, recognised-organisation or flag acceptance) is granted by the "
          "Administration or a recognised organisation. Criteria whose source could not be confirmed are listed "
-         "with their confidence tag (standards.md legend: A verbatim, B secondary quote, C partial, R recalled "
-         "and not confirmed, I imutool's inference).")
+         "with their confidence tag (legend of the standards excerpts shipped with imutool, "
+         "imutool/report/standards.md: A verbatim, B secondary quote, C partial, R recalled and not confirmed, "
+         "I imutool's inference).")
+STANDARDS_FILE = "imutool/report/standards.md (shipped with imutool)"
 
 CONFIDENCE = {"A": "seen verbatim", "B": "secondary source quoting the text", "C": "partial (titles / TOC only)",
               "R": "recalled, NOT confirmed", "I": "imutool inference, not a requirement"}
+
+
+def check_tolerance(name: str, floor: float, pct: float, unit: str) -> None:
+    """Refuse a tolerance that cannot be met or means nothing: floor > 0 and 0 < pct < 100."""
+    from formats.errors import ImutoolError
+
+    if not (np.isfinite(floor) and floor > 0):
+        raise ImutoolError(f"{name} tolerance floor must be > 0 {unit} (got {floor:g}): a zero or negative "
+                           "tolerance cannot be met by any instrument")
+    if not (np.isfinite(pct) and 0 < pct < 100):
+        raise ImutoolError(f"{name} tolerance must be between 0 and 100 % of reading (got {pct:g} %)")
+
+
+def standards_cited(ids: list[str]) -> list[dict[str, str]]:
+    """The rows of the shipped standards excerpts (imutool/report/standards.md) with these ids: id, requirement,
+    value, source, confidence — so a report quotes what it applies, with its confidence tag."""
+    from importlib import resources
+
+    text = resources.files("imutool.report").joinpath("standards.md").read_text(encoding="utf-8")
+    rows: dict[str, dict[str, str]] = {}
+    for line in text.splitlines():
+        if not line.startswith("| P"):
+            continue
+        c = [x.strip() for x in line.strip().strip("|").split("|")]
+        if len(c) >= 5:
+            rows[c[0]] = {"id": c[0], "requirement": c[1].replace("**", "").replace("*", ""), "value": c[2],
+                          "source": c[3], "confidence": c[4]}
+    return [rows[i] for i in ids if i in rows]
 
 
 def tol_angle(reading_deg: np.ndarray | float, floor_deg: float = 1.0, pct: float = 5.0) -> np.ndarray:
@@ -165,6 +195,8 @@ def plateaus(t: np.ndarray, x: np.ndarray, band: float, min_s: float, settle_s: 
 
 
 def overall(items: list[dict[str, Any]], required: tuple[str, ...]) -> dict[str, Any]:
+    """Report verdict: ``fail`` if any item fails; ``pass`` only if every required item was tested and passed;
+    otherwise ``incomplete`` with the lists of passed and not-passed (not tested / insufficient) items."""
     counts = {s: sum(1 for it in items if it["status"] == s) for s in STATUSES}
     req = {it["id"]: it["status"] for it in items if it["id"] in required}
     if counts[FAIL]:
@@ -174,6 +206,17 @@ def overall(items: list[dict[str, Any]], required: tuple[str, ...]) -> dict[str,
     else:
         status = "incomplete"
     missing = [r for r in required if req.get(r) != PASS]
-    return {"status": status, "counts": counts, "required_items": list(required),
-            "required_not_passed": missing,
-            "rule": "fail if any item fails; pass only if every required item passed; otherwise incomplete"}
+    passed = [it["id"] for it in items if it["status"] == PASS]
+    failed = [it["id"] for it in items if it["status"] == FAIL]
+    untested = [r for r in required if req.get(r) in (NOT_TESTED, INSUFFICIENT, None)]
+    if status == PASS:
+        headline = f"PASS: all {len(required)} required items tested and passed"
+    elif status == FAIL:
+        headline = f"FAIL: {', '.join(failed)}"
+    else:
+        headline = f"INCOMPLETE: passed: {', '.join(passed) or 'none'}; not tested: {', '.join(untested)}"
+    return {"status": status, "headline": headline, "counts": counts, "required_items": list(required),
+            "required_not_passed": missing, "passed": passed, "failed": failed, "not_tested": untested,
+            "exit_status": 0 if status == PASS else 1,
+            "rule": "fail if any item fails; pass only if every required item was tested and passed; otherwise "
+                    "incomplete. Exit status 0 pass, 1 fail or incomplete, 2 usage error"}

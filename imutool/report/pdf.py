@@ -7,7 +7,7 @@ degree sign and ± render. A4 portrait, 8.27 × 11.69 in.
 from __future__ import annotations
 
 import json
-import textwrap
+import os
 from typing import Any
 
 import numpy as np
@@ -15,156 +15,461 @@ import numpy as np
 from formats.atomic import atomic_path
 
 A4 = (8.27, 11.69)
-LINES_PER_PAGE = 100
-WIDTH = 118
-MAX_CHARS = 128  # hard limit per line at 7 pt on A4 (DejaVu Sans Mono)
-
-
-def _js(v: Any) -> str:
-    return json.dumps(v, ensure_ascii=False, default=str)
+PW, PH = 595.0, 842.0  # page size (pt)
+ML, MR, MT, MB = 48.0, 48.0, 56.0, 54.0  # margins (pt); the footer sits inside the bottom margin
+TW = PW - ML - MR
+FONT = "DejaVu Sans"  # proportional, bundled with matplotlib (° and ± render)
+BLANK = "_" * 34  # a field to fill in by hand
 
 
 def _fmt(v: Any, nd: int = 3) -> str:
+    """A table cell: rounded numbers (never raw 17-digit floats), '-' for missing, yes/no for booleans."""
     if v is None:
         return "-"
-    if isinstance(v, bool):
+    if isinstance(v, (bool, np.bool_)):
         return "yes" if v else "no"
     if isinstance(v, (int, np.integer)):
         return str(int(v))
     if isinstance(v, (float, np.floating)):
-        return "-" if not np.isfinite(v) else f"{float(v):.{nd}f}"
+        if not np.isfinite(v):
+            return "-"
+        return f"{float(v):.{nd}f}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {_fmt(x, nd)}" for k, x in v.items())
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_fmt(x, nd) for x in v)
     return str(v)
 
 
-def table(headers: list[str], rows: list[list[Any]], nd: int = 3) -> list[str]:
-    """Fixed-width text table lines."""
-    cells = [[_fmt(c, nd) for c in r] for r in rows]
-    w = [max([len(h)] + [len(r[i]) for r in cells]) for i, h in enumerate(headers)]
-    out = ["  ".join(h.ljust(w[i]) for i, h in enumerate(headers)), "  ".join("-" * x for x in w)]
-    out += ["  ".join(c.ljust(w[i]) for i, c in enumerate(r)) for r in cells]
-    return out
+def key_label(key: str) -> tuple[str, str]:
+    """Column label and unit of a row key: 'reference_deg' → ('reference', 'deg'), 't_peak_s' → ('t peak', 's')."""
+    for suffix, unit in (("_deg", "deg"), ("_s", "s"), ("_ms2", "m/s²"), ("_hz", "Hz")):
+        if key.endswith(suffix):
+            return key[: -len(suffix)].replace("_", " "), unit
+    return key.replace("_", " "), ""
 
 
-def wrap(text: str, indent: str = "") -> list[str]:
-    return textwrap.wrap(text, WIDTH, initial_indent=indent, subsequent_indent=indent + "  ") or [""]
+def key_decimals(key: str) -> int:
+    """Decimals of a row column: times of day 1, other seconds 2, angles 3."""
+    if key in ("start_s", "end_s", "t_peak_s"):
+        return 1
+    if key.endswith("_s"):
+        return 2
+    return 3
 
 
-def _text_pages(pdf: Any, title: str, lines: list[str], footer: str) -> int:
-    import matplotlib.pyplot as plt
-
-    pages = 0
-    chunks = [lines[i:i + LINES_PER_PAGE] for i in range(0, max(len(lines), 1), LINES_PER_PAGE)]
-    for k, chunk in enumerate(chunks):
-        fig = plt.figure(figsize=A4)
-        fig.text(0.06, 0.965, title + (f" (continued {k + 1}/{len(chunks)})" if k else ""), fontsize=12,
-                 weight="bold", va="top", parse_math=False)
-        body = "\n".join(("\u25a0 " + ln[3:].upper()) if ln.startswith("## ") else ln[:MAX_CHARS] for ln in chunk)
-        fig.text(0.06, 0.935, body, family="DejaVu Sans Mono", fontsize=7.0, va="top", linespacing=1.25,
-                 parse_math=False)
-        fig.text(0.06, 0.02, footer, fontsize=6, color="0.4", parse_math=False)
-        pdf.savefig(fig)
-        plt.close(fig)
-        pages += 1
-    return pages
+def row_cells(keys: list[str], row: dict[str, Any]) -> list[str]:
+    """The formatted cells of one detail row (the same text the PDF prints; tests compare it with the JSON)."""
+    return [_fmt(row.get(k), key_decimals(k)) for k in keys]
 
 
-def summary_lines(ev: dict[str, Any]) -> list[str]:
-    """Identification, inputs, editions, criteria, overall result and the item table as text lines."""
-    L: list[str] = []
+def row_keys(rows: list[dict[str, Any]]) -> list[str]:
+    keys: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in keys:
+                keys.append(k)
+    if "side" in keys:
+        keys.remove("side")
+        keys.insert(0, "side")
+    return keys
+
+
+# ---- text layout: blocks → pages of drawing operations ----------------------------------------------------------
+class _Measure:
+    def __init__(self) -> None:
+        from matplotlib.font_manager import FontProperties
+        from matplotlib.textpath import TextToPath
+
+        self.tp = TextToPath()
+        self.props: dict[tuple[float, str], Any] = {}
+        self.FontProperties = FontProperties
+        self.cache: dict[tuple[str, float, str], float] = {}
+
+    def width(self, text: str, size: float, weight: str = "normal") -> float:
+        key = (text, size, weight)
+        w = self.cache.get(key)
+        if w is None:
+            pk = (size, weight)
+            if pk not in self.props:
+                self.props[pk] = self.FontProperties(family=FONT, size=size, weight=weight)
+            w = self.tp.get_text_width_height_descent(text, self.props[pk], ismath=False)[0] if text else 0.0
+            self.cache[key] = w
+        return w
+
+    def wrap(self, text: str, width: float, size: float, weight: str = "normal") -> list[str]:
+        """Greedy word wrap to a width in points (words longer than the width are cut by characters)."""
+        out: list[str] = []
+        for para in str(text).split("\n"):
+            line = ""
+            for word in para.split(" "):
+                cand = word if not line else line + " " + word
+                if self.width(cand, size, weight) <= width:
+                    line = cand
+                    continue
+                if line:
+                    out.append(line)
+                while self.width(word, size, weight) > width and len(word) > 1:
+                    k = len(word)
+                    while k > 1 and self.width(word[:k], size, weight) > width:
+                        k -= 1
+                    out.append(word[:k])
+                    word = word[k:]
+                line = word
+            out.append(line)
+        return out
+
+
+class Layout:
+    """Flows headings, paragraphs, key/value lists, tables (paginated, header repeated) and signature blocks onto
+    A4 pages. Each page is a list of drawing operations in points (origin bottom left)."""
+
+    def __init__(self, title: str) -> None:
+        self.m = _Measure()
+        self.title = title
+        self.pages: list[list[tuple]] = []
+        self._new_page()
+
+    def _new_page(self) -> None:
+        self.page: list[tuple] = []
+        self.pages.append(self.page)
+        self.y = PH - MT
+
+    def _need(self, h: float) -> None:
+        if self.y - h < MB:
+            self._new_page()
+
+    def text(self, x: float, y: float, s: str, size: float, weight: str = "normal", color: str = "black",
+             ha: str = "left") -> None:
+        self.page.append(("text", x, y, s, size, weight, color, ha))
+
+    def space(self, h: float) -> None:
+        self.y -= h
+
+    def page_break(self) -> None:
+        if self.page:
+            self._new_page()
+
+    def heading(self, s: str, size: float = 12.0) -> None:
+        self._need(size * 1.6 + 30)  # keep a heading with at least two lines of what follows
+        self.y -= size * 0.6
+        for ln in self.m.wrap(s, TW, size, "bold"):
+            self.y -= size * 1.25
+            self.text(ML, self.y, ln, size, "bold")
+        self.y -= 3
+
+    def para(self, s: str, size: float = 8.5, indent: float = 0.0, weight: str = "normal",
+             color: str = "black") -> None:
+        lh = size * 1.3
+        for ln in self.m.wrap(s, TW - indent, size, weight):
+            self._need(lh)
+            self.y -= lh
+            self.text(ML + indent, self.y, ln, size, weight, color)
+        self.y -= 2
+
+    def banner(self, s: str, colour: str) -> None:
+        size = 13.0
+        lines = self.m.wrap(s, TW - 16, size, "bold")
+        h = len(lines) * size * 1.3 + 12
+        self._need(h)
+        self.page.append(("rect", ML, self.y - h, TW, h, colour))
+        yy = self.y - 6
+        for ln in lines:
+            yy -= size * 1.3
+            self.text(ML + 8, yy + 3, ln, size, "bold", "white")
+        self.y -= h + 6
+
+    def kv(self, pairs: list[tuple[str, str]], size: float = 8.5, key_w: float = 170.0) -> None:
+        lh = size * 1.3
+        for k, v in pairs:
+            kl = self.m.wrap(k, key_w - 8, size, "bold")
+            vl = self.m.wrap(v, TW - key_w, size)
+            n = max(len(kl), len(vl))
+            self._need(n * lh + 2)
+            for i in range(n):
+                self.y -= lh
+                if i < len(kl):
+                    self.text(ML, self.y, kl[i], size, "bold")
+                if i < len(vl):
+                    self.text(ML + key_w, self.y, vl[i], size)
+            self.y -= 2
+
+    def table(self, headers: list[str], rows: list[list[str]], units: list[str] | None = None, size: float = 7.5,
+              caption: str | None = None, weights: list[float] | None = None, numeric: list[bool] | None = None
+              ) -> None:
+        """A table that paginates: rows never cut, the header (and units) repeated on every page."""
+        m = self.m
+        pad = 4.0
+        ncol = len(headers)
+        units = units or [""] * ncol
+        numeric = numeric or [False] * ncol
+        nat = []
+        for j in range(ncol):
+            w = max([m.width(w_, size, "bold") for w_ in (headers[j].split(" ") + [units[j]])]
+                    + [m.width(r[j], size) for r in rows] + [8.0])
+            nat.append(w + 2 * pad + 1.0)  # + 1 pt: rounding in the measured widths never forces a wrap
+        tot = sum(nat)
+        if tot > TW:  # shrink the wide columns first (they wrap), never below their longest header word
+            # numbers never wrap; text columns shrink down to their longest header word
+            minw = [nat[j] if numeric[j] else max(m.width(w_, size, "bold") for w_ in headers[j].split(" ")) + 2 * pad
+                    for j in range(ncol)]
+            wts = weights or [1.0] * ncol
+            widths = list(nat)
+            excess = tot - TW
+            for _ in range(50):
+                if excess <= 0.5:
+                    break
+                flex = [j for j in range(ncol) if widths[j] > minw[j] + 0.5]
+                if not flex:
+                    break
+                share = sum(widths[j] * wts[j] for j in flex)
+                for j in flex:
+                    cut = min(widths[j] - minw[j], excess * widths[j] * wts[j] / share)
+                    widths[j] -= cut
+                excess = sum(widths) - TW
+        else:
+            widths = nat
+        lh = size * 1.25
+
+        def cell_lines(txt: str, j: int, weight: str = "normal") -> list[str]:
+            return m.wrap(txt, widths[j] - 2 * pad, size, weight)
+
+        head = [cell_lines(h, j, "bold") for j, h in enumerate(headers)]
+        nh = max(len(h) for h in head) + (1 if any(units) else 0)
+        head_h = nh * lh + 4
+
+        def draw_header(cont: bool) -> None:
+            if caption:
+                self.y -= size * 1.5
+                self.text(ML, self.y, caption + (" (continued)" if cont else ""), size + 0.5, "bold")
+                self.y -= 3
+            top = self.y
+            self.page.append(("rect", ML, top - head_h, sum(widths), head_h, "#e6e9ef"))
+            x = ML
+            for j in range(ncol):
+                yy = top
+                for ln in head[j]:
+                    yy -= lh
+                    self.text(x + pad, yy, ln, size, "bold")
+                if units[j]:
+                    self.text(x + pad, top - nh * lh, f"({units[j]})", size, "normal", "#333333")
+                x += widths[j]
+            self.y = top - head_h
+            self.page.append(("line", ML, self.y, ML + sum(widths), self.y, 0.6))
+
+        self._need(head_h + lh * 2 + (size * 2 if caption else 0))
+        draw_header(False)
+        for r in rows:
+            cl = [cell_lines(c, j) for j, c in enumerate(r)]
+            h = max(len(c) for c in cl) * lh + 3
+            if self.y - h < MB:
+                self._new_page()
+                draw_header(True)
+            x = ML
+            for j in range(ncol):
+                yy = self.y
+                for ln in cl[j]:
+                    yy -= lh
+                    if numeric[j]:
+                        self.text(x + widths[j] - pad, yy, ln, size, ha="right")
+                    else:
+                        self.text(x + pad, yy, ln, size)
+                x += widths[j]
+            self.y -= h
+            self.page.append(("line", ML, self.y, ML + sum(widths), self.y, 0.2))
+        self.y -= 6
+
+    def signatures(self, roles: list[str]) -> None:
+        size = 8.5
+        h = 62.0
+        for role in roles:
+            self._need(h)
+            self.y -= 14
+            self.text(ML, self.y, role, size, "bold")
+            self.y -= 30
+            cols = (("Name", 0.0), ("Signature", 190.0), ("Date", 370.0))
+            for label, dx in cols:
+                self.page.append(("line", ML + dx, self.y, ML + dx + 160, self.y, 0.6))
+                self.text(ML + dx, self.y - 10, label, 7.0, color="#444444")
+            self.y -= 18
+
+
+def _draw_page(fig: Any, ops: list[tuple]) -> None:
+    from matplotlib.patches import Rectangle
+
+    for op in ops:
+        if op[0] == "text":
+            _, x, y, s, size, weight, color, ha = op
+            fig.text(x / PW, y / PH, s, fontsize=size, weight=weight, color=color, ha=ha, va="baseline",
+                     family=FONT, parse_math=False)
+        elif op[0] == "line":
+            _, x0, y0, x1, y1, lw = op
+            fig.add_artist(_line(x0, y0, x1, y1, lw))
+        elif op[0] == "rect":
+            _, x, y, w, h, col = op
+            fig.add_artist(Rectangle((x / PW, y / PH), w / PW, h / PH, transform=fig.transFigure, color=col, lw=0,
+                                     zorder=-1))
+
+
+def _line(x0: float, y0: float, x1: float, y1: float, lw: float) -> Any:
+    from matplotlib.lines import Line2D
+
+    return Line2D([x0 / PW, x1 / PW], [y0 / PH, y1 / PH], lw=lw, color="#555555")
+
+
+def _footer(fig: Any, ev: dict[str, Any], k: int, n: int) -> None:
+    num = (ev.get("test_record") or {}).get("report", {}).get("number") or "________"
+    fig.add_artist(_line(ML, MB - 22, PW - MR, MB - 22, 0.4))
+    fig.text(ML / PW, (MB - 34) / PH,
+             f"Report No. {num}   ·   {ev['title']}   ·   result {ev['overall']['status'].upper()}",
+             fontsize=6.5, color="#444444", family=FONT, parse_math=False)
+    fig.text(ML / PW, (MB - 43) / PH, f"imutool {ev['tool']['version']} · generated {ev['generated_utc']} · test "
+             "evidence only, not a type approval", fontsize=6.0, color="#666666", family=FONT, parse_math=False)
+    fig.text((PW - MR) / PW, (MB - 34) / PH, f"page {k} of {n}", fontsize=7.5, weight="bold", ha="right",
+             family=FONT, parse_math=False)
+
+
+_STATUS_COLOUR = {"pass": "#1b7a3a", "fail": "#b0201e", "incomplete": "#b36b00"}
+
+
+def _test_record_blocks(L: Layout, ev: dict[str, Any]) -> None:
+    from .testinfo import FIELDS
+
+    tr = ev.get("test_record") or {}
+    L.heading("Test record")
+    src = tr.get("source")
+    L.para(("From " + os.path.basename(src) + ". ") if src else "No test record was given (--test-info). "
+           "Blank lines are fields the test record does not state: fill them in by hand; imutool never invents "
+           "them.", size=8)
+    pairs = []
+    for sec, key, label, _ in FIELDS:
+        v = (tr.get(sec) or {}).get(key)
+        pairs.append((label, BLANK if v in (None, "", []) else _fmt(v, 3)))
+    L.kv(pairs)
+
+
+def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
+    """Page 1 onwards: result, scope, test record, identification, inputs, conventions, editions, criteria, items."""
     ov = ev["overall"]
-    L += [f"## RESULT: {ov['status'].upper()}   ({ov['rule']})", ""]
-    if ov["required_not_passed"]:
-        L += wrap("Required items not passed: " + ", ".join(ov["required_not_passed"]))
-    L += [""] + wrap("Scope: " + ev["scope"]) + [""]
-    L += ["## Identification"]
+    L.banner("RESULT: " + ov.get("headline", ov["status"].upper()), _STATUS_COLOUR.get(ov["status"], "#444444"))
+    L.para(ov["rule"], size=7.5, color="#333333")
+    L.para("Scope: " + ev["scope"], size=7.5)
+    L.heading("Items (one row per requirement; source says whether the device reported the values)", 11)
+    L.table(["item", "clause", "status", "source", "unit", "N", "max |error|", "RMS", "p95 |error|", "mean"],
+            [[it["id"], it["clause"], it["status"], it.get("source") or "-", it.get("unit", ""),
+              _fmt(it["stats"].get("n")), _fmt(it["stats"].get("max_abs")), _fmt(it["stats"].get("rmse")),
+              _fmt(it["stats"].get("p95_abs")), _fmt(it["stats"].get("mean"))] for it in ev["items"]],
+            size=7.0, caption=None, weights=[0.3, 1.5, 0.3, 1.5, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1],
+            numeric=[False] * 5 + [True] * 5)
+    for it in ev["items"]:
+        L.para(f"{it['id']} — {it['status']}: {it['reason']}", size=7.5, indent=0)
+    _test_record_blocks(L, ev)
+    L.heading("Identification")
     tool = ev["tool"]
-    L += [f"generated (UTC): {ev['generated_utc']}   tool: imutool {tool['version']}  git {tool['git'] or '-'}"]
+    pairs = [("Generated (UTC)", ev["generated_utc"]), ("Tool", f"imutool {tool['version']}, git {tool['git'] or '-'}")]
     for k, v in ev["identification"].items():
-        if v not in (None, {}, ""):
-            L += wrap(f"{k}: {_js(v) if isinstance(v, (dict, list)) else v}")
-    L += ["", "## Inputs (sha256 of the files as read)"]
+        if v not in (None, {}, "", []):
+            pairs.append((k.replace("_", " "), _fmt(v)))
+    L.kv(pairs)
+    L.heading("Inputs (sha256 of the files as read)")
     for name, inp in ev["inputs"].items():
         if not inp:
             continue
-        L += [f"{name}: {inp.get('path')}", f"   sha256 {inp.get('sha256')}",
-              f"   kind {inp.get('kind')}  rows {_fmt(inp.get('rows'))}  rate {_fmt(inp.get('rate_hz'), 2)} Hz  "
-              f"duration {_fmt(inp.get('duration_s'), 1)} s  channel {inp.get('channel', '-')}"]
-        meta = inp.get("meta") or {}
-        for key in ("sensor", "device", "frame", "convention", "mounting", "calibration", "filter", "injected"):
-            if key in meta:
-                L += wrap(f"{key}: {_js(meta[key]) if isinstance(meta[key], (dict, list)) else meta[key]}",
-                          "   ")
-    c = ev["conventions"]
-    L += ["", "## Units, frames and sign conventions"]
-    for k, v in c.items():
-        L += wrap(f"{k}: {v}")
-    L += ["", "## Editions applied (confidence: A verbatim, B secondary quote, C partial, R recalled, I inference)"]
-    L += table(["document", "edition", "role", "conf"],
-               [[e["document"], e["edition"][:44], e.get("role", "")[:38], e["confidence"]] for e in ev["editions"]])
-    L += ["", "## Criteria"]
-    L += table(["id", "criterion", "source", "conf"],
-               [[c["id"], c["text"][:66], c["source"][:40], c["confidence"]] for c in ev["criteria"]])
+        L.kv([(name.replace("_", " "), f"{inp.get('path')}"), ("sha256", str(inp.get("sha256"))),
+              ("content", f"{inp.get('kind')}, {_fmt(inp.get('rows'))} rows, {_fmt(inp.get('rate_hz'), 2)} Hz, "
+                          f"{_fmt(inp.get('duration_s'), 1)} s, channel {inp.get('channel', '-')}")])
+    L.heading("Units, frames and sign conventions")
+    L.kv([(k.replace("_", " "), str(v)) for k, v in ev["conventions"].items()])
+    L.heading("Editions applied (confidence: A verbatim, B secondary quote, C partial, R recalled, I inference)")
+    L.table(["document", "edition", "role", "conf."],
+            [[e["document"], e["edition"], e.get("role", ""), e["confidence"]] for e in ev["editions"]],
+            weights=[0.5, 1.0, 1.0, 0.1])
+    L.heading("Criteria applied")
+    L.table(["id", "criterion", "source", "conf."],
+            [[c["id"], c["text"], c["source"], c["confidence"]] for c in ev["criteria"]], weights=[0.2, 1.5, 1, 0.1])
     a = ev["alignment"]
-    L += ["", "## Time alignment"]
-    L += wrap(f"{a['method']}: lag {_fmt(a.get('lag_s'), 3)} s ({a.get('lag_positive_means', '')}); "
-              f"applied: {_fmt(a['applied'])}; {a.get('note', '')}")
-    for k in ("correlation", "linear_fit", "rms_at_lag_deg"):
-        if k in a:
-            L += wrap(f"{k}: {_js(a[k]) if isinstance(a[k], dict) else _fmt(a[k], 4)}")
-    L += ["", "## Items (N, max |error|, RMS, p95 |error| in the item's unit)"]
-    L += table(["item", "clause", "status", "N", "max|e|", "RMS", "p95", "mean"],
-               [[it["id"], it["clause"][:44], it["status"], it["stats"].get("n"), it["stats"].get("max_abs"),
-                 it["stats"].get("rmse"), it["stats"].get("p95_abs"), it["stats"].get("mean")]
-                for it in ev["items"]])
-    L += [""]
-    for it in ev["items"]:
-        L += wrap(f"{it['id']}: {it['status']} - {it['reason']}")
-    return L
+    L.heading("Time alignment")
+    pairs = [("method", a["method"]), ("lag (s)", f"{_fmt(a.get('lag_s'), 3)} ({a.get('lag_positive_means', '')})"),
+             ("applied", f"{_fmt(a['applied'])}: {a.get('note', '')}")]
+    if "correlation" in a:
+        pairs.append(("correlation", _fmt(a["correlation"], 4)))
+    lf = a.get("linear_fit")
+    if lf:
+        pairs.append(("linear fit", f"offset {_fmt(lf.get('offset_deg'), 3)} deg, scale error "
+                                    f"{_fmt(100 * lf['scale_error'] if lf.get('scale_error') is not None else None, 2)}"
+                                    f" %  ({lf.get('model', '')})"))
+    if "rms_at_lag_deg" in a:
+        pairs.append(("RMS at the lag (deg)", _fmt(a["rms_at_lag_deg"], 3)))
+    if "latency_from_follow_up_s" in a:
+        pairs.append(("latency from follow-up (s)", _fmt(a["latency_from_follow_up_s"], 3)))
+    L.kv(pairs)
 
 
-def detail_lines(ev: dict[str, Any]) -> list[str]:
-    """Per-item row tables, then not tested, unconfirmed figures, warnings and settings."""
-    L: list[str] = []
+def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
+    """Per-item row tables (every row of the JSON), not tested, standards cited, unconfirmed, warnings, settings,
+    signatures."""
+    L.page_break()
     for it in ev["items"]:
-        L += [f"## {it['title']} - {it['clause']}", f"status: {it['status']}"]
-        L += wrap(f"criterion: {it['criterion'] or '-'}")
-        L += wrap(f"result: {it['reason']}")
+        L.heading(f"{it['title']} — {it['clause']}", 11)
+        pairs = [("status", it["status"]), ("criterion", it["criterion"] or "-"), ("result", it["reason"])]
         if it.get("source"):
-            L += wrap(f"source of DUT values: {it['source']}")
+            pairs.append(("values", it["source"]))
+        for k in ("judging", "error_definition"):
+            if it.get(k):
+                pairs.append((k.replace("_", " "), str(it[k])))
+        cyc = it.get("cycles")
+        if cyc:
+            nj = "; ".join(f"{v} {k}" for k, v in cyc["not_judged"].items()) or "none"
+            pairs.append(("cycles", f"{cyc['judged']} of {cyc['reference_maxima']} reference maxima judged; not "
+                                    f"judged: {nj}"))
+        if it.get("raw_error_stats"):
+            r = it["raw_error_stats"]
+            pairs.append(("raw error (static error included)", f"N {_fmt(r.get('n'))}, max |error| "
+                          f"{_fmt(r.get('max_abs'))} deg, RMS {_fmt(r.get('rmse'))} deg, p95 {_fmt(r.get('p95_abs'))}"
+                          f" deg; status on the raw error: {it.get('raw_status', '-')}"))
+        if it.get("drift_deg_per_h") is not None:
+            pairs.append(("drift", f"{_fmt(it['drift_deg_per_h'], 3)} ± {_fmt(it.get('drift_u95_deg_per_h'), 3)} "
+                                   f"°/h (95 %) over {_fmt(it.get('duration_s'), 0)} s"))
+        L.kv(pairs, size=8)
         rows = it.get("rows") or []
         if rows:
-            keys = [k for k in rows[0] if k not in ("side",)]
-            if "side" in rows[0]:
-                keys = ["side"] + keys
-            L += table(keys, [[r.get(k) for k in keys] for r in rows[:60]])
-            if len(rows) > 60:
-                L += [f"... {len(rows) - 60} more rows in the JSON"]
+            keys = row_keys(rows)
+            labels = [key_label(k) for k in keys]
+            L.table([lb for lb, _ in labels], [row_cells(keys, r) for r in rows], units=[u for _, u in labels],
+                    caption=f"{it['id']}: {len(rows)} rows", numeric=[k not in ("side", "status") for k in keys])
         if it.get("capture"):
-            for k, v in it["capture"].items():
-                L += wrap(f"{k}: {_js(v) if isinstance(v, (dict, list)) else v}")
-        L += [""]
-    L += ["## Not tested / insufficient data"]
+            L.kv([(k.replace("_", " "), _fmt(v)) for k, v in it["capture"].items()], size=7.5)
+    L.heading("Not tested / insufficient data")
     for s in ev["not_tested"]:
-        L += wrap("- " + s)
-    L += ["", "## Figures from the standards that are NOT confirmed (standards.md)"]
+        L.para("• " + s, size=8)
+    sc = ev.get("standards_cited")
+    if sc:
+        L.heading(f"Standards excerpts applied ({sc['file']})")
+        L.table(["id", "requirement", "value", "conf."],
+                [[r["id"], r["requirement"], r["value"], r["confidence"]] for r in sc["rows"]],
+                weights=[0.1, 2.0, 1.0, 0.1], size=7.0)
+    L.heading("Figures from the standards that are NOT confirmed")
     for u in ev["unconfirmed"]:
-        L += wrap(f"- {u['id']} [{u['confidence']}]: {u['text']}")
+        L.para(f"• {u['id']} [{u['confidence']}]: {u['text']}", size=8)
     if ev["warnings"]:
-        L += ["", "## Warnings"]
+        L.heading("Warnings")
         for w in ev["warnings"]:
-            L += wrap("! " + w)
-    L += ["", "## Settings"]
-    for k, v in ev["settings"].items():
-        L += [f"{k} = {v}"]
-    return L
+            L.para("! " + w, size=8)
+    L.heading("Settings")
+    L.kv([(k.replace("_", " "), _fmt(v, 3)) for k, v in ev["settings"].items()], size=7.5, key_w=190)
+    L.heading("Sign-off")
+    L.para("The undersigned confirm that the test was carried out as recorded above and that this evidence "
+           "belongs to the device identified in the test record.", size=8)
+    L.signatures(["Operator (test house)", "Witness (surveyor / recognised organisation)",
+                  "Approved for the test house"])
 
 
-def _shade_static(ax: Any, t: np.ndarray, mask: np.ndarray) -> None:
+def _shade_static(ax: Any, t: np.ndarray, mask: np.ndarray | None, color: str = "0.9") -> None:
     if mask is None or not np.any(mask):
         return
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
     for a, b in zip(edges[::2], edges[1::2], strict=True):
-        ax.axvspan(t[a], t[b - 1], color="0.9", lw=0)
+        ax.axvspan(t[a], t[b - 1], color=color, lw=0)
 
 
 def _side_error_panel(ax: Any, rows: list[dict[str, Any]], unit_sfx: str, what: str, tol_fn: Any, tol_label: str,
@@ -192,8 +497,9 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     figs = []
     t = p["t"]
     fig, axs = plt.subplots(3, 1, figsize=A4, sharex=True)
-    fig.suptitle("Heel: DUT vs reference (grey = static steps)", fontsize=11)
+    fig.suptitle("Heel: DUT vs reference (grey = static steps, blue = lateral acceleration)", fontsize=11)
     _shade_static(axs[0], t, p["static_mask"])
+    _shade_static(axs[0], t, p.get("acc_mask"), "#cfe0f5")
     axs[0].plot(t, p["ref"], "k-", lw=0.8, label="reference")
     axs[0].plot(t, p["dut"], "C1-", lw=0.6, label="DUT (aligned)")
     axs[0].set_ylabel("heel (deg, + stbd)")
@@ -236,7 +542,7 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
                       "no roll periods: not tested", "reference period (s)", "period error (s)")
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0.025, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
     figs.append(fig)
 
     fig, axs = plt.subplots(2, 1, figsize=A4)
@@ -263,7 +569,7 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[1].set_ylabel("error (deg)")
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0.025, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
     figs.append(fig)
     return figs
 
@@ -275,8 +581,18 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     fig, axs = plt.subplots(3, 1, figsize=A4, sharex=True)
     fig.suptitle("Heading: DUT vs reference (grey = static headings)", fontsize=11)
     _shade_static(axs[0], t, p["static_mask"])
-    axs[0].plot(t, p["ref"], "k.", ms=0.8, label="reference")
-    axs[0].plot(t, p["dut"], "C1.", ms=0.5, label="DUT (aligned)")
+    # the DUT drawn as reference + wrapped error and both broken where the reference wraps: a DUT at 359.9°
+    # against a reference at 0.1° is drawn at −0.1°, next to it, not a full circle away
+    ref_w = np.asarray(p["ref"], float).copy()
+    dut_w = ref_w + np.asarray(p["err"], float)
+    brk = np.flatnonzero(np.abs(np.diff(ref_w)) > 180.0) + 1
+    ref_w = np.insert(ref_w, brk, np.nan)
+    dut_w = np.insert(dut_w, brk, np.nan)
+    tw = np.insert(np.asarray(t, float), brk, np.nan)
+    axs[0].plot(tw, ref_w, "k-", lw=0.8, label="reference")
+    axs[0].plot(tw, dut_w, "C1-", lw=0.6, label="DUT (aligned; drawn as reference + wrapped error)")
+    axs[0].set_ylim(-15, 375)
+    axs[0].set_yticks([0, 90, 180, 270, 360])
     axs[0].set_ylabel("heading (deg)")
     axs[0].legend(loc="upper right", fontsize=7)
     _shade_static(axs[1], t, p["static_mask"])
@@ -311,7 +627,10 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[0].set_xlim(-20, 360)
     m = p["turn_mask"]
     if np.any(m):
-        axs[1].plot(np.abs(p["rot"][m]), p.get("err_fu", p["err"])[m], ".", ms=1.5, color="C0")
+        axs[1].plot(np.abs(p["rot"][m]), p.get("err_raw", p["err"])[m], ".", ms=1.2, color="0.6",
+                    label="raw error (static error included)")
+        axs[1].plot(np.abs(p["rot"][m]), p.get("err_fu", p["err"])[m], ".", ms=1.5, color="C0",
+                    label="static error removed (judged)")
         bx = [0, p["band_split_dps"], p["band_split_dps"], p["band_max_dps"]]
         by = np.array([p["follow_low_deg"], p["follow_low_deg"], p["follow_high_deg"], p["follow_high_deg"]])
         axs[1].plot(bx, by, "C3--", lw=1, label="limit (MSC.116(73) defaults unless changed)")
@@ -323,36 +642,57 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[1].set_ylabel("follow-up error (deg)")
     for ax in axs:
         ax.grid(alpha=0.3)
-    fig.tight_layout(rect=(0, 0.025, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
     figs.append(fig)
     return figs
 
 
 def render_pdf(ev: dict[str, Any], plots: dict[str, Any], path: str) -> int:
-    """Write the evidence PDF (text pages, then plot pages). Returns the page count."""
+    """Write the evidence PDF: summary pages, plot pages, detail pages; footer with the report number and
+    "page x of y" on every page. Returns the page count."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_pdf import PdfPages
 
-    footer = (f"imutool {ev['tool']['version']} - {ev['report']} evidence - generated {ev['generated_utc']} - "
-              f"result {ev['overall']['status']} - test evidence only, not a type approval")
-    pages = 0
+    head = Layout(ev["title"])
+    head.heading(ev["title"], 14)
+    summary_blocks(head, ev)
+    tail = Layout("Details per item")
+    tail.pages.clear()
+    tail._new_page()
+    tail.heading("Details per item (every row of the JSON)", 13)
+    detail_blocks(tail, ev)
+    tail.pages = [p for p in tail.pages if p]
+    figs = _inclinometer_figures(ev, plots) if ev["report"] == "inclinometer" else _heading_figures(ev, plots)
+    total = len(head.pages) + len(figs) + len(tail.pages)
+    k = 0
     with atomic_path(path) as tmp:
         with PdfPages(tmp) as pdf:
-            pages += _text_pages(pdf, ev["title"], summary_lines(ev), footer)
-            figs = _inclinometer_figures(ev, plots) if ev["report"] == "inclinometer" else _heading_figures(ev, plots)
-            for fig in figs:
-                fig.text(0.06, 0.01, footer, fontsize=6, color="0.4", parse_math=False)
+            for ops in head.pages:
+                fig = plt.figure(figsize=A4)
+                _draw_page(fig, ops)
+                k += 1
+                _footer(fig, ev, k, total)
                 pdf.savefig(fig)
                 plt.close(fig)
-                pages += 1
-            pages += _text_pages(pdf, "Details per item", detail_lines(ev), footer)
+            for fig in figs:
+                k += 1
+                _footer(fig, ev, k, total)
+                pdf.savefig(fig)
+                plt.close(fig)
+            for ops in tail.pages:
+                fig = plt.figure(figsize=A4)
+                _draw_page(fig, ops)
+                k += 1
+                _footer(fig, ev, k, total)
+                pdf.savefig(fig)
+                plt.close(fig)
             d = pdf.infodict()
             d["Title"] = ev["title"]
             d["Creator"] = f"imutool {ev['tool']['version']}"
-    return pages
+    return total
 
 
 def write_json(ev: dict[str, Any], path: str) -> None:

@@ -19,9 +19,11 @@ import numpy as np
 
 from formats import Recording
 
-DEFAULT_STEPS = (0.0, 5.0, 10.0, 20.0, 30.0, -5.0, -10.0, -20.0, -30.0, 0.0)
-# (period s, starboard amplitude deg, port amplitude deg, cycles)
-DEFAULT_DYNAMIC = ((8.0, 10.0, 10.0, 6), (12.0, 20.0, 20.0, 5), (15.0, 25.0, 15.0, 4))
+DEFAULT_STEPS = (0.0, 5.0, 10.0, 20.0, 30.0, 45.0, -5.0, -10.0, -20.0, -30.0, -45.0, 0.0)
+# (period s, starboard amplitude deg, port amplitude deg, cycles): periods 4-30 s (standards.md P10, I)
+DEFAULT_DYNAMIC = ((4.0, 5.0, 5.0, 8), (8.0, 10.0, 10.0, 6), (12.0, 20.0, 20.0, 5), (15.0, 25.0, 15.0, 4),
+                   (30.0, 15.0, 15.0, 3))
+G = 9.80665  # m/s²
 
 
 def _ramp(a: float, b: float, n: int) -> np.ndarray:
@@ -32,42 +34,65 @@ def _ramp(a: float, b: float, n: int) -> np.ndarray:
 
 def inclinometer_programme(rate_hz: float = 10.0, steps: tuple[float, ...] = DEFAULT_STEPS, hold_s: float = 20.0,
                            transition_s: float = 4.0, dynamic: tuple = DEFAULT_DYNAMIC, long_deg: float = 5.0,
-                           long_s: float = 330.0) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
-    """True table heel (t s, heel deg + stbd) and the list of segments [{kind, start, end, ...}]."""
+                           long_s: float = 3700.0, long_rate_hz: float = 1.0, lat_accel_ms2: float = 0.0,
+                           lat_accel_s: float = 60.0, lat_accel_period_s: float = 20.0
+                           ) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]], np.ndarray]:
+    """True table heel and the programme: (t s, heel deg + stbd, segments [{kind, start, end, ...}], lateral
+    acceleration m/s² + starboard).
+
+    Static steps (to the declared range), sinusoidal roll (periods 4-30 s by default), an optional
+    lateral-acceleration segment (table level, a sled/centrifuge applies ``lat_accel_ms2`` as a sine of
+    ``lat_accel_period_s``: the heel must stay 0 while the specific force tilts) and a long static hold at
+    ``long_deg``, sampled at ``long_rate_hz`` (an hours-long hold at a low rate keeps files small; the time
+    base is then not uniform, which every reader accepts).
+    """
     dt = 1.0 / rate_hz
-    parts: list[np.ndarray] = []
+    ts: list[np.ndarray] = []
+    hs: list[np.ndarray] = []
+    acc: list[np.ndarray] = []
     segs: list[dict[str, Any]] = []
     cur = 0.0
     n_hold = int(round(hold_s * rate_hz))
     n_tr = int(round(transition_s * rate_hz))
 
     def t_now() -> float:
-        return sum(p.size for p in parts) * dt
+        return float(ts[-1][-1] + dt) if ts else 0.0
+
+    def add(x: np.ndarray, a: np.ndarray | None = None, step: float = dt) -> tuple[float, float]:
+        t0 = t_now()
+        ts.append(t0 + np.arange(x.size) * step)
+        hs.append(x)
+        acc.append(np.zeros(x.size) if a is None else a)
+        return t0, float(ts[-1][-1] + step) if x.size else t0
 
     for i, s in enumerate(steps):
         if i > 0 or s != cur:
-            parts.append(_ramp(cur, s, n_tr))
-        t0 = t_now()
-        parts.append(np.full(n_hold, s))
-        segs.append({"kind": "static", "start": t0, "end": t_now(), "reference_deg": s})
+            add(_ramp(cur, s, n_tr))
+        t0, t1 = add(np.full(n_hold, s))
+        segs.append({"kind": "static", "start": t0, "end": t1, "reference_deg": s})
         cur = s
     for period, a_s, a_p, cycles in dynamic:
-        parts.append(_ramp(cur, 0.0, n_tr))
+        add(_ramp(cur, 0.0, n_tr))
         cur = 0.0
         n = int(round(cycles * period * rate_hz))
-        tt = np.arange(n) * dt
-        sn = np.sin(2 * np.pi * tt / period)
-        t0 = t_now()
-        parts.append(np.where(sn > 0, a_s * sn, a_p * sn))
-        segs.append({"kind": "dynamic", "start": t0, "end": t_now(), "period_s": period, "amp_stbd_deg": a_s,
+        sn = np.sin(2 * np.pi * np.arange(n) * dt / period)
+        t0, t1 = add(np.where(sn > 0, a_s * sn, a_p * sn))
+        segs.append({"kind": "dynamic", "start": t0, "end": t1, "period_s": period, "amp_stbd_deg": a_s,
                      "amp_port_deg": a_p, "cycles": cycles})
+    if lat_accel_ms2 > 0 and lat_accel_s > 0:
+        add(_ramp(cur, 0.0, n_tr))
+        cur = 0.0
+        n = int(round(lat_accel_s * rate_hz))
+        a = lat_accel_ms2 * np.sin(2 * np.pi * np.arange(n) * dt / lat_accel_period_s)
+        t0, t1 = add(np.zeros(n), a)
+        segs.append({"kind": "lateral_acceleration", "start": t0, "end": t1, "reference_deg": 0.0,
+                     "lat_accel_ms2": lat_accel_ms2, "period_s": lat_accel_period_s})
     if long_s > 0:
-        parts.append(_ramp(cur, long_deg, n_tr))
-        t0 = t_now()
-        parts.append(np.full(int(round(long_s * rate_hz)), long_deg))
-        segs.append({"kind": "long", "start": t0, "end": t_now(), "reference_deg": long_deg})
-    heel = np.concatenate(parts)
-    return np.arange(heel.size) * dt, heel, segs
+        add(_ramp(cur, long_deg, n_tr))
+        step = 1.0 / long_rate_hz
+        t0, t1 = add(np.full(int(round(long_s * long_rate_hz)), long_deg), step=step)
+        segs.append({"kind": "long", "start": t0, "end": t1 - step, "reference_deg": long_deg})
+    return np.concatenate(ts), np.concatenate(hs), segs, np.concatenate(acc)
 
 
 def _shift(t: np.ndarray, x: np.ndarray, lag_s: float) -> np.ndarray:
@@ -77,31 +102,78 @@ def _shift(t: np.ndarray, x: np.ndarray, lag_s: float) -> np.ndarray:
 
 def inclinometer_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, scale: float = 0.0,
                       lag_s: float = 0.0, noise_deg: float = 0.0, drift_deg_per_h: float = 0.0,
-                      ref_noise_deg: float = 0.0, long_s: float = 330.0, **programme: Any
-                      ) -> tuple[Recording, Recording, list[dict[str, Any]]]:
+                      ref_noise_deg: float = 0.0, long_s: float = 3700.0, accel_coupling: float = 0.0,
+                      **programme: Any) -> tuple[Recording, Recording, list[dict[str, Any]]]:
     """(DUT recording, reference recording, segments) for an inclinometer test on a simulated tilt table.
 
-    Both recordings hold ``roll`` (deg, + starboard down) and ``pitch`` (0). Injected DUT errors are stored in
+    Both recordings hold ``roll`` (deg, + starboard down) and ``pitch`` (0); the reference also holds
+    ``lat_accel`` (m/s², + starboard: the kinematic lateral acceleration applied, gravity excluded).
+    ``accel_coupling`` is the fraction of the apparent tilt atan(a/g) that leaks into the DUT heel (1 for an
+    accelerometer-only inclinometer, ~0 for a gyro-aided one). Injected DUT errors are stored in
     ``dut.meta['injected']``. Segments give the static steps (use them as a ``--static-steps`` file).
     """
     rng = np.random.default_rng(seed)
-    t, heel, segs = inclinometer_programme(rate_hz=rate_hz, long_s=long_s, **programme)
+    t, heel, segs, lat = inclinometer_programme(rate_hz=rate_hz, long_s=long_s, **programme)
     ref = heel + (rng.normal(0.0, ref_noise_deg, heel.size) if ref_noise_deg > 0 else 0.0)
     dut = (1.0 + scale) * _shift(t, heel, lag_s) + offset_deg + drift_deg_per_h * t / 3600.0
+    dut = dut + accel_coupling * np.degrees(np.arctan2(_shift(t, lat, lag_s), G))
     if noise_deg > 0:
         dut = dut + rng.normal(0.0, noise_deg, heel.size)
     zeros = np.zeros_like(t)
     common = {"frame": "vessel body FRD (x bow, y starboard, z down)",
               "convention": "roll + starboard down (deg)", "rate_hz": rate_hz, "seed": seed}
     inj = {"offset_deg": offset_deg, "scale": scale, "lag_s": lag_s, "noise_deg": noise_deg,
-           "drift_deg_per_h": drift_deg_per_h}
-    r_dut = Recording(t.copy(), {"roll": dut, "pitch": zeros.copy()}, {},
+           "drift_deg_per_h": drift_deg_per_h, "accel_coupling": accel_coupling}
+    r_dut = Recording(t.copy(), {"roll": dut, "pitch": zeros.copy()}, {"roll": "deg", "pitch": "deg"},
                       {**common, "sensor": "simulated inclinometer (DUT)", "device": "SIM-INC-1 s/n 0001 fw 1.0",
                        "injected": inj})
-    r_ref = Recording(t.copy(), {"roll": ref, "pitch": zeros.copy()}, {},
-                      {**common, "sensor": "simulated tilt table encoder (reference)",
-                       "reference_noise_deg": ref_noise_deg})
+    ch = {"roll": ref, "pitch": zeros.copy()}
+    units = {"roll": "deg", "pitch": "deg"}
+    if np.any(lat != 0):
+        ch["lat_accel"] = lat
+        units["lat_accel"] = "m/s^2"
+    r_ref = Recording(t.copy(), ch, units, {**common, "sensor": "simulated tilt table encoder (reference)",
+                                            "reference_noise_deg": ref_noise_deg})
     return r_dut, r_ref, segs
+
+
+def irregular_roll(duration_s: float, rate_hz: float = 1.0, tp_s: float = 10.0, std_deg: float = 0.5,
+                   gamma: float = 3.3, seed: int = 0, n_comp: int = 400) -> tuple[np.ndarray, np.ndarray]:
+    """Irregular ship roll (t s, heel deg) from a JONSWAP-shaped spectrum (peak period tp_s, peak enhancement
+    gamma) as a sum of n_comp sines with random phases, scaled to a standard deviation of std_deg.
+
+    A ship's roll response is narrow-banded around its natural period; the JONSWAP shape with gamma 3.3 is
+    a stand-in for that (imutool's test model, not a seakeeping computation).
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    wp = 2 * np.pi / tp_s
+    w = np.linspace(0.4 * wp, 3.0 * wp, n_comp)
+    sig = np.where(w <= wp, 0.07, 0.09)
+    spec = w ** -5 * np.exp(-1.25 * (wp / w) ** 4) * gamma ** np.exp(-((w - wp) ** 2) / (2 * sig ** 2 * wp ** 2))
+    amp = np.sqrt(2 * spec * (w[1] - w[0]))
+    ph = rng.uniform(0, 2 * np.pi, n_comp)
+    x = (amp[None, :] * np.cos(w[None, :] * t[:, None] + ph[None, :])).sum(axis=1)
+    return t, x * std_deg / x.std()
+
+
+def sea_pair(duration_s: float = 1800.0, rate_hz: float = 1.0, tp_s: float = 10.0, std_deg: float = 0.5,
+             seed: int = 0, noise_ref_deg: float = 0.02, noise_dut_deg: float = 0.03, quant_deg: float = 0.01,
+             offset_deg: float = 0.0, scale: float = 0.0) -> tuple[Recording, Recording]:
+    """Two motion sensors on one ship at sea: (DUT, reference), each heel = truth + its own white noise,
+    quantised to quant_deg (a 0.01° output resolution), sampled at rate_hz; the DUT optionally with an offset
+    (deg) and a scale error (fraction)."""
+    t, x = irregular_roll(duration_s, rate_hz, tp_s, std_deg, seed=seed)
+    rng = np.random.default_rng(seed + 1000)
+    ref = x + rng.normal(0.0, noise_ref_deg, x.size)
+    dut = (1 + scale) * x + offset_deg + rng.normal(0.0, noise_dut_deg, x.size)
+    q = (lambda v: np.round(v / quant_deg) * quant_deg) if quant_deg > 0 else (lambda v: v)
+    meta = {"frame": "vessel body FRD", "convention": "roll + starboard down (deg)", "rate_hz": rate_hz}
+    r_dut = Recording(t.copy(), {"roll": q(dut)}, {"roll": "deg"},
+                      {**meta, "sensor": "simulated motion sensor B (DUT)",
+                       "injected": {"offset_deg": offset_deg, "scale": scale, "noise_deg": noise_dut_deg}})
+    r_ref = Recording(t.copy(), {"roll": q(ref)}, {"roll": "deg"}, {**meta, "sensor": "simulated motion sensor A"})
+    return r_dut, r_ref
 
 
 def write_steps_csv(segs: list[dict[str, Any]], path: str) -> None:
@@ -116,7 +188,7 @@ def write_steps_csv(segs: list[dict[str, Any]], path: str) -> None:
 
 
 def heading_programme(rate_hz: float = 10.0, headings: int = 8, hold_s: float = 20.0, slew_dps: float = 5.0,
-                      turn_rates: tuple[float, ...] = (8.0, 15.0), turn_deg: float = 360.0,
+                      turn_rates: tuple[float, ...] = (8.0, 20.0), turn_deg: float = 360.0,
                       roll_amp_deg: float = 10.0, roll_period_s: float = 10.0, rolling_s: float = 60.0
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
     """True (t s, heading deg unwrapped, roll deg, segments) of a turntable heading test."""
