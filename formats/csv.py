@@ -320,6 +320,10 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) 
     if hdr.mapping is not None:
         meta["column_mapping"] = hdr.mapping.as_meta()
         meta["column_mapping_origin"] = hdr.mapping.origin
+        assumed = sorted({cm.target.split("_")[0] for cm in hdr.mapping.columns
+                          if cm.unit_assumed and cm.target.split("_")[0] in ("gyro", "accel", "mag")})
+        if assumed:  # no unit in the header: formats.plausibility checks these against their values
+            meta["units_assumed"] = ",".join(assumed)
     if rep.bad_rows:
         meta["skipped_rows"] = rep.bad_rows
         meta["skipped_rows_first"] = rep.first_bad

@@ -36,6 +36,9 @@ def input_options(f: Callable) -> Callable:
                      help="Sensor→body axes, e.g. 'x,-y,-z' or 'y,x,-z;0.5,0,1.2' (misalignment deg)."),
         click.option("--calibration", "calibration_file", default=None,
                      type=click.Path(exists=True, dir_okay=False), help="Calibration TOML to apply."),
+        click.option("--strict", is_flag=True, expose_value=False, callback=_remember_strict,
+                     help="Input warnings (implausible units or axes, absurd samples, >1 % of rows dropped by "
+                          "validation) are errors (exit 2)."),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -48,11 +51,26 @@ def output_options(f: Callable) -> Callable:
     return f
 
 
+def _remember_strict(ctx: click.Context, param: click.Parameter, value: bool) -> bool:
+    if value:
+        ctx.meta["imutool.strict"] = True
+    return value
+
+
 def load_input(path: str, *, columns: str | None = None, profile: str | None = None, topic: str | None = None,
                stamp: str = "header", duplicates: str = "drop", backwards: str = "error",
                mounting: str | None = None, calibration_file: str | None = None,
-               validate: bool = True) -> tuple[Recording, dict[str, Any]]:
-    """Read, validate, apply calibration and mounting. Returns (recording, validation report dict)."""
+               validate: bool = True, strict: bool | None = None) -> tuple[Recording, dict[str, Any]]:
+    """Read, validate, bridge absurd samples, apply calibration and mounting, check plausibility.
+
+    Returns (recording, validation report dict). What validation did (rows read/kept/dropped and why, samples
+    bridged) and every plausibility warning (formats.plausibility) go to stderr, into ``rec.meta`` (written
+    into the output's header by estimators that carry the input's metadata) and, through the click context,
+    into the command's summary (:func:`emit_summary`). ``strict`` (default: the ``--strict`` option) turns the
+    warnings into an ImutoolError.
+    """
+    from formats import plausibility
+
     kind = formats.kind_of(path)
     opts: dict[str, Any] = {}
     if kind == "csv":
@@ -61,9 +79,15 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
         opts = {"topic": topic, "stamp": stamp}
     rec = formats.read(path, **opts)
     report: dict[str, Any] = {}
+    checks = plausibility.PlausibilityReport()
     if validate:
+        n_in = len(rec)
         rec, rep = rec.validated(duplicates=duplicates, backwards=backwards, source=path)
         report = rep.as_dict()
+        drops, warns = plausibility.dropped_rows(n_in, len(rec), report, rec.meta, duplicates)
+        report.update(drops)
+        checks.warnings += warns
+        rec, checks = plausibility.bridge_absurd(rec, rep=checks)
     if calibration_file:
         from calibration import load_calibration
 
@@ -71,11 +95,53 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
     if mounting:
         remap, mis = formats.parse_mounting(mounting)
         rec = rec.mounted(remap, mis)
+    if len(rec):  # also for commands that read without validating (info, plot): they show the warnings
+        ok = np.all(np.diff(rec.time) > 0) if len(rec) > 1 else True
+        found = plausibility.check_recording(rec if ok else rec.select(np.argsort(rec.time, kind="stable")), mounting)
+        checks.warnings += found.warnings
+        checks.figures.update(found.figures)
+        report.update({k: v for k, v in checks.as_dict().items() if k != "figures"})
+        report["plausibility_figures"] = checks.figures
+        if validate:
+            rec.meta["validation"] = {k: v for k, v in report.items()
+                                      if k not in ("plausibility_figures", "warnings")}
+        else:
+            report.update(rows_read=len(rec), rows_kept=len(rec), validated=False)
+        if checks.warnings:
+            rec.meta["warnings"] = list(rec.meta.get("warnings") or []) + checks.warnings
+        _note_input(path, report, checks.warnings, strict)
     return rec, report
 
 
+def _note_input(path: str, report: dict[str, Any], warnings: list[str], strict: bool | None) -> None:
+    """Warnings to stderr (or an error under --strict); the report kept for the command's summary."""
+    ctx = click.get_current_context(silent=True)
+    if strict is None:
+        strict = bool(ctx is not None and ctx.meta.get("imutool.strict"))
+    if warnings and strict:
+        raise ImutoolError("; ".join(warnings) + " (an error because of --strict)", path=path)
+    for w in warnings:
+        click.echo(f"warning: {path}: {w}", err=True)
+    if ctx is not None:
+        ctx.meta.setdefault("imutool.inputs", []).append({"input": path, **report})
+
+
 def emit_summary(summary: dict[str, Any], as_json: bool, quiet: bool, lines: Iterable[str] | None = None) -> None:
-    """Print the one-screen summary (or JSON) to stdout."""
+    """Print the one-screen summary (or JSON) to stdout (with what input validation did, see load_input)."""
+    ctx = click.get_current_context(silent=True)
+    inputs = ctx.meta.get("imutool.inputs") if ctx is not None else None
+    if inputs:
+        if lines is None and not as_json:
+            lines = list(_default_lines(summary))
+        summary = dict(summary)
+        summary.setdefault("validation", [{k: v for k, v in r.items() if k != "plausibility_figures"}
+                                          for r in inputs])
+        warns = [w for r in inputs for w in r.get("warnings", [])]
+        if warns:
+            have = summary.get("warnings")
+            summary["warnings"] = (list(have) if isinstance(have, (list, tuple)) else [have] if have else []) + warns
+        if lines is not None and not as_json:
+            lines = [*lines, *_validation_lines(inputs)]
     if as_json:
         click.echo(json.dumps(summary, indent=2, default=_json_default))
         return
@@ -83,6 +149,16 @@ def emit_summary(summary: dict[str, Any], as_json: bool, quiet: bool, lines: Ite
         return
     for line in lines if lines is not None else _default_lines(summary):
         click.echo(line)
+
+
+def _validation_lines(inputs: list[dict[str, Any]]) -> Iterator[str]:
+    for r in inputs:
+        why = "; ".join(f"{n} {k}" for k, n in r.get("dropped", {}).items())
+        bridged = sum(r.get("absurd_samples_interpolated", {}).values()) + sum(
+            r.get("absurd_samples_set_nan", {}).values())
+        yield (f"validation: {r['input']}: {r.get('rows_read', r.get('rows'))} rows read, {r.get('rows_kept')} kept"
+               + (f" (dropped: {why})" if why else "") + (f"; {bridged} absurd samples bridged" if bridged else "")
+               + (f"; {len(r['warnings'])} warning(s) on stderr" if r.get("warnings") else ""))
 
 
 def _default_lines(summary: dict[str, Any], indent: str = "") -> Iterator[str]:

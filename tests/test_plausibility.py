@@ -1,0 +1,180 @@
+"""Plausibility checks on every input (units, axes, absurd samples) and what validation did, in every summary."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import shared_data
+
+import formats
+from formats.plausibility import bridge_absurd, check_recording, gyro_tilt_ratio
+from imutool.cli import main
+from imutool.sim import simulate
+
+
+def run(args, capsys):
+    with pytest.raises(SystemExit) as e:
+        main([str(a) for a in args])
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def roll():
+    return simulate("ship-roll", duration=60, seed=1)
+
+
+def _foreign(rec, path, gyro_factor=1.0, accel_factor=1.0, mag_factor=1.0, names=("gx", "gy", "gz", "ax", "ay",
+                                                                                  "az", "mx", "my", "mz")):
+    """A foreign CSV without units in the header, values scaled into another unit."""
+    data = np.column_stack([rec.time, rec["gyro"] * gyro_factor, rec["accel"] * accel_factor,
+                            rec["mag"] * mag_factor])
+    np.savetxt(path, data, delimiter=",", header="time," + ",".join(names), comments="", fmt="%.9g")
+    return path
+
+
+def test_clean_simulation_gives_no_warning_and_reports_validation(roll, tmp_path, capsys):
+    p = tmp_path / "roll.csv"
+    formats.write(roll, p)
+    code, out, err = run(["filter", p, "-o", tmp_path / "est.csv", "--json"], capsys)
+    assert code == 0, err
+    assert "warning" not in err
+    s = json.loads(out)
+    v = s["validation"][0]
+    assert v["rows_read"] == v["rows_kept"] == len(roll) and v["rows_dropped"] == 0
+    assert "warnings" not in s or not s["warnings"]
+    r = gyro_tilt_ratio(roll)
+    assert 0.8 < r["k"] < 1.3 and r["correlation"] > 0.8
+
+
+def test_deg_per_s_gyro_without_units_warns_and_strict_refuses(roll, tmp_path, capsys):
+    p = _foreign(roll, tmp_path / "dps.csv", gyro_factor=180 / np.pi)
+    out_csv = tmp_path / "est.csv"
+    code, out, err = run(["filter", p, "-o", out_csv, "--json"], capsys)
+    assert code == 0
+    assert "UNITS: gyro" in err and "deg/s" in err and "--columns 'gx=gyro_x:deg/s" in err
+    s = json.loads(out)
+    assert any("UNITS: gyro" in w for w in s["warnings"])
+    header = [ln for ln in out_csv.read_text().splitlines() if ln.startswith("#")]
+    assert any(ln.startswith("# warnings:") and "UNITS" in ln for ln in header)
+    code, out, err = run(["filter", p, "-o", tmp_path / "est2.csv", "--strict"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "UNITS: gyro" in err
+    assert not (tmp_path / "est2.csv").exists()
+    # the fix named in the message works: no warning, rates now right
+    code, out, err = run(["info", p, "--columns", "gx=gyro_x:deg/s,gy=gyro_y:deg/s,gz=gyro_z:deg/s"], capsys)
+    assert code == 0 and "UNITS: gyro" not in err
+
+
+def test_rad_per_s_values_under_a_deg_per_s_header_contradiction_warns(roll, tmp_path, capsys):
+    p = _foreign(roll, tmp_path / "contra.csv",
+                 names=("gyro_x_dps", "gyro_y_dps", "gyro_z_dps", "ax", "ay", "az", "mx", "my", "mz"))
+    code, out, err = run(["info", p], capsys)
+    assert code == 0
+    assert "header declares gyro in dps" in err and "look like rad/s" in err
+
+
+def test_accel_in_g_and_mag_in_gauss_without_units(roll, tmp_path, capsys):
+    p = _foreign(roll, tmp_path / "g.csv", accel_factor=1 / 9.80665, mag_factor=0.01)
+    code, out, err = run(["info", p], capsys)
+    assert code == 0
+    assert "UNITS: accelerometer" in err and "look like g" in err and "ax=accel_x:g" in err
+    assert "UNITS: magnetometer" in err and "look like gauss" in err
+    # no gyro warning: the gyro is fine (the direction of the accelerometer does not depend on its unit)
+    assert "UNITS: gyro" not in err
+    p2 = _foreign(roll, tmp_path / "mg.csv", accel_factor=1000 / 9.80665)
+    code, out, err = run(["info", p2], capsys)
+    assert "look like mg" in err
+
+
+def test_z_up_sensor_warns_naming_mounting(roll, tmp_path, capsys):
+    flu = roll.mounted("x,-y,-z")  # FRD → FLU: z up
+    p = tmp_path / "flu.csv"
+    formats.write(flu, p)
+    code, out, err = run(["info", p], capsys)
+    assert code == 0 and "AXES" in err and "--mounting x,-y,-z" in err
+    code, out, err = run(["info", p, "--mounting", "x,-y,-z"], capsys)
+    assert code == 0 and "AXES" not in err
+    side = roll.mounted("z,y,-x")  # a sensor on its side: its −x axis points up
+    rep = check_recording(side)
+    assert any("AXES" in w and "along -x" in w for w in rep.warnings)
+    fix = next(w for w in rep.warnings if "AXES" in w).split("--mounting ")[1].split(" ")[0]
+    assert not any("AXES" in w for w in check_recording(side.mounted(fix)).warnings)
+
+
+def test_xio_csv_without_mounting_gives_z_up_warning(capsys):
+    p = shared_data("fusion", "sensor_data.csv")
+    code, out, err = run(["info", p], capsys)
+    assert code == 0
+    assert "AXES" in err and "+z" in err and "--mounting x,-y,-z" in err
+    assert "UNITS" not in err  # its header states deg/s and g, and the values agree
+    code, out, err = run(["info", p, "--mounting", "x,-y,-z"], capsys)
+    assert "AXES" not in err
+
+
+def test_xio_csv_with_the_units_stripped_gives_units_warnings(tmp_path, capsys):
+    src = shared_data("fusion", "sensor_data.csv").read_text().splitlines()
+    hdr = src[0].replace(" (deg/s)", "").replace(" (g)", "")
+    p = tmp_path / "xio.csv"
+    p.write_text("\n".join([hdr, *src[1:]]) + "\n")
+    code, out, err = run(["info", p, "--mounting", "x,-y,-z"], capsys)
+    assert "UNITS: gyro" in err and "deg/s" in err
+    assert "UNITS: accelerometer" in err and "look like g" in err
+
+
+def test_repeated_timestamps_dropped_are_counted_and_warned(roll, tmp_path, capsys):
+    r = roll.select(slice(0, 3000))
+    r.time = np.floor(r.time / 0.015) * 0.015  # a logger stamping on arrival: ~3 rows per stamp
+    p = tmp_path / "dup.csv"
+    formats.write(r, p)
+    code, out, err = run(["filter", p, "-o", tmp_path / "o.csv", "--json"], capsys)
+    assert code == 0
+    assert "DROPPED" in err and "repeated timestamp" in err and "--duplicates mean" in err
+    v = json.loads(out)["validation"][0]
+    assert v["rows_read"] == 3000 and v["rows_kept"] == len(np.unique(r.time))
+    assert v["rows_dropped"] == 3000 - v["rows_kept"] and sum(v["dropped"].values()) == v["rows_dropped"]
+    code, out, err = run(["filter", p, "-o", tmp_path / "o1.csv"], capsys)
+    assert f"3000 rows read, {v['rows_kept']} kept (dropped: {v['rows_dropped']} repeated" in out  # plain summary
+    code, out, err = run(["filter", p, "-o", tmp_path / "o2.csv", "--strict"], capsys)
+    assert code == 2 and "DROPPED" in err
+
+
+@pytest.mark.parametrize("cmd", ["filter", "heave"])
+def test_one_absurd_sample_does_not_poison_the_estimate(cmd, roll, tmp_path, capsys):
+    clean = tmp_path / "clean.csv"
+    formats.write(roll, clean)
+    bad = roll.copy()
+    bad["gyro"][3000, 0] = 1e200
+    bad["accel"][4000, 2] = 1e200
+    bad["accel"][5000:5040, 1] = np.inf  # a 0.2 s run
+    p = tmp_path / "bad.csv"
+    formats.write(bad, p)
+    code, out, err = run([cmd, clean, "-o", tmp_path / "a.csv", "-q"], capsys)
+    assert code == 0, err
+    code, out, err = run([cmd, p, "-o", tmp_path / "b.csv", "--json"], capsys)
+    assert code == 0, err
+    assert "absurd gyro" in err and "absurd accel" in err
+    v = json.loads(out)["validation"][0]
+    assert v["absurd_samples_interpolated"] == {"gyro": 1, "accel": 41}
+    a, b = formats.read(tmp_path / "a.csv"), formats.read(tmp_path / "b.csv")
+    col = "roll" if cmd == "filter" else "heave"
+    assert np.all(np.isfinite(b[col]))
+    tol = 0.5 if cmd == "filter" else 0.05  # deg, m
+    assert np.max(np.abs(a[col] - b[col])) < tol
+
+
+def test_bridge_absurd_library_rules(roll):
+    r = roll.copy()
+    r["gyro"][10, 2] = -1e300
+    r["gyro"][2000:2300, 0] = 1e9  # 1.5 s run: too long to interpolate → NaN
+    out, rep = bridge_absurd(r)
+    assert np.isfinite(out["gyro"][10]).all() and np.allclose(out["gyro"][10], (r["gyro"][9] + r["gyro"][11]) / 2,
+                                                              atol=1e-12)
+    assert np.isnan(out["gyro"][2000:2300, 0]).all() and rep.set_nan == {"gyro": 300} and rep.bridged == {"gyro": 1}
+    assert r["gyro"][10, 2] == -1e300  # input untouched
+    # most samples beyond range: a units problem, left alone and said
+    r2 = roll.copy()
+    r2["gyro"][:] = 1e3
+    out2, rep2 = bridge_absurd(r2)
+    assert out2 is r2 and any("unit or scale error" in w for w in rep2.warnings)
