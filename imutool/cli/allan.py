@@ -29,7 +29,9 @@ def _rate(t: np.ndarray) -> tuple[float, str]:
 
 @click.command("allan", epilog="Example: imutool allan static.csv -o noise.yaml --plot allan.png --kalibr imu.yaml")
 @click.argument("inputs", nargs=-1, required=True, metavar="INPUT...")
-@click.option("-o", "--output", required=True, help="Noise file (.yaml) read by 'imutool filter --noise'.")
+@click.option("-o", "--output", required=True,
+              help="Noise file (.yaml, SI: rad/s/√Hz, m/s²/√Hz, µT/√Hz): white noise, bias instability and random "
+                   "walk per sensor, to fill in the noise options of filter/ins or a kalibr config.")
 @click.option("--plot", default=None, help="Log-log Allan deviation plot with the fitted lines (.png/.pdf).")
 @click.option("--kalibr", default=None, help="Also write a kalibr-style imu.yaml here.")
 @click.option("--topic-name", default="/imu0", show_default=True, help="rostopic written into the kalibr file.")
@@ -47,7 +49,8 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
     """Allan deviation of a static recording (several INPUT files: one per sensor, each on its own clock).
 
     For each axis: N (ARW/VRW) read at τ = 1 s on the slope −½ line, bias instability B = min σ / 0.664,
-    K (rate/acceleration random walk) read at τ = 3 s on the slope +½ line. SI units throughout.
+    K (rate/acceleration random walk) read at τ = 3 s on the slope +½ line. The summary gives the gyro in
+    degrees (ARW °/√h, B °/h, K °/h/√h), accelerometer and magnetometer in SI; the noise file is SI throughout.
     """
     from calibration.allan import analyse, plot_allan
     from calibration.noise import write_kalibr, write_noise
@@ -62,7 +65,11 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
     values: dict[str, Any] = {}
     info: dict[str, Any] = {}
     rates = []
+    from imutool.progress import stages
+
+    steps = stages("allan", [*inputs, *wanted, "writing"], quiet)
     for path in inputs:
+        steps.stage(f"reading {os.path.basename(path)}")
         rec, rep = load_input(path, **{k: io.get(k) for k in _IN_KEYS if io.get(k) is not None})
         if start is not None or end is not None:
             rec = rec.slice_time(start, end)
@@ -75,6 +82,7 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
                 y = y[ok]
             fs, timing = _rate(rec.time)
             rates.append(fs)
+            steps.stage(f"Allan deviation of {name}")
             res = analyse(y, fs, name, _SI[name], per_decade)
             results.append(res)
             n_, b_, k_ = (res.summary()[k] for k in ("N", "B", "K"))
@@ -89,11 +97,17 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
                           "timing": timing,
                           "gaps": len(rep.get("gaps", [])),
                           "N": n_, "B": b_, "K": k_, "tau_min_s": res.summary()["tau_min_s"],
-                          "B_upper_bound": res.summary()["B_upper_bound"]}
+                          "B_upper_bound": res.summary()["B_upper_bound"],
+                          "units": {"N": f"{_SI[name]}/√Hz", "B": _SI[name], "K": f"{_SI[name]}/√s"}}
+            if name == "gyro":  # degrees at the user surface
+                info[name]["deg"] = {"ARW_deg_per_rt_h": [float(np.degrees(v) * 60) for v in n_],
+                                     "B_deg_per_h": [float(np.degrees(v) * 3600) for v in b_],
+                                     "K_deg_per_h_per_rt_h": [float(np.degrees(v) * 3600 * 60) for v in k_]}
     if not results:
         raise ImutoolError(f"none of the channels {', '.join(wanted)} found in {', '.join(inputs)}")
     values["rate_hz"] = float(max(rates))
     values["source"] = ", ".join(inputs)
+    steps.stage("writing")
     write_noise(output, values)
     if kalibr:
         write_kalibr(kalibr, values, topic_name)
@@ -106,14 +120,19 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
         lines.append(f"  {r.name} ({info[r.name]['rate_hz']} Hz, {info[r.name]['duration_s']} s):")
         if info[r.name]["timing"] != "regular":
             lines.append(f"    note: {info[r.name]['timing']}")
-        lines.append(f"    {lab} N  ({unit:>11s}) = " + "  ".join(f"{v:.4g}" for v in s["N"]))
-        lines.append(f"    bias inst. B ({_SI[r.name]:>9s}) = " + "  ".join(f"{v:.4g}" for v in s["B"])
-                     + "   at τ = " + ", ".join(f"{v:.3g}" for v in s["tau_min_s"]) + " s")
-        lines.append(f"    random walk K ({_SI[r.name]}/√s) = " + "  ".join(f"{v:.4g}" for v in s["K"]))
+        taus = "   at τ = " + ", ".join(f"{v:.3g}" for v in s["tau_min_s"]) + " s"
+        if r.name == "gyro":  # degrees at the user surface (the noise file stays SI)
+            lines.append("    ARW N          (°/√h) = " + "  ".join(f"{np.degrees(v) * 60:.4g}" for v in s["N"]))
+            lines.append("    bias inst. B    (°/h) = " + "  ".join(f"{np.degrees(v) * 3600:.4g}" for v in s["B"])
+                         + taus)
+            lines.append("    rate RW K    (°/h/√h) = "
+                         + "  ".join(f"{np.degrees(v) * 216000:.4g}" for v in s["K"]))
+        else:
+            lines.append(f"    {lab} N  ({unit:>11s}) = " + "  ".join(f"{v:.4g}" for v in s["N"]))
+            lines.append(f"    bias inst. B ({_SI[r.name]:>9s}) = " + "  ".join(f"{v:.4g}" for v in s["B"]) + taus)
+            lines.append(f"    random walk K ({_SI[r.name]}/√s) = " + "  ".join(f"{v:.4g}" for v in s["K"]))
         if any(s["B_upper_bound"]):
             lines.append("    note: σ(τ) still falls at the longest τ on some axes: B there is an upper bound and K is "
                          "not resolved (record longer)")
-        if r.name == "gyro":
-            lines.append("    in deg: ARW " + "  ".join(f"{np.degrees(v) * 60:.3g}" for v in s["N"]) + " °/√h;  B "
-                         + "  ".join(f"{np.degrees(v) * 3600:.3g}" for v in s["B"]) + " °/h")
+    steps.close()
     emit_summary({"output": output, "kalibr": kalibr, "plot": plot, "channels": info}, as_json, quiet, lines)

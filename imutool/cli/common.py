@@ -182,13 +182,13 @@ def show_progress(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
 
-def progress(items: Iterable[T], total: int | None, label: str, quiet: bool) -> Iterator[T]:
-    """Progress bar on stderr when interactive (quiet or not a TTY: no output)."""
-    if not show_progress(quiet):
-        yield from items
-        return
-    with click.progressbar(items, length=total, label=label, file=sys.stderr) as bar:
-        yield from bar
+def progress(items: Iterable[T], total: int | None, label: str, quiet: bool, unit: str = "it",
+             weight: Callable[[T], int] | None = None) -> Iterator[T]:
+    """Progress bar on stderr when interactive (quiet or not a TTY: no output); see imutool.progress."""
+    from imutool.progress import bar
+
+    with bar(label, total=total, unit=unit, quiet=quiet) as b:
+        yield from b.iterate(items, weight)
 
 
 def require_channels(rec: Recording, names: Iterable[str], path: str) -> None:

@@ -24,7 +24,15 @@ def _stream_csv(src: str, dst: str, chunk_rows: int, columns: str | None, profil
 
     return stream_convert(src, dst, chunk_rows=chunk_rows, columns=columns, profile=profile, duplicates=duplicates,
                           backwards=backwards, mounting=mounting, calibration_file=calibration_file,
-                          progress=lambda chunks: progress(chunks, None, "converting", quiet))
+                          progress=lambda chunks: progress(chunks, _rows_hint(src), "converting", quiet, unit="rows",
+                                                           weight=len))
+
+
+def _rows_hint(src: str) -> int | None:
+    """Rows expected from a CSV (estimated from its size) for the progress total; None for other formats."""
+    from imutool.progress import estimate_rows
+
+    return estimate_rows(src) if formats.kind_of(src) == "csv" else None
 
 
 @click.command("convert", epilog="Example: imutool convert roll.csv roll.bag   |   "
@@ -74,6 +82,10 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
         summary.update(_stream_csv(input_path, out, chunk_rows, columns, profile, duplicates, backwards, mounting,
                                    calibration_file, quiet))
     else:
+        from imutool.progress import stages
+
+        steps = stages("convert", ["reading", "writing"], quiet)
+        steps.stage("reading")
         if kin in ("ros1", "ros2"):
             rec = formats.read(input_path, topic=topic, stamp=stamp, vector3_mag_unit=vector3_mag_unit)
             rows_in = len(rec)
@@ -121,7 +133,9 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
                 conversions.append("roll/pitch/heading (deg, ZYX) derived from q (body FRD → NED) for NMEA")
             opts = {"sentences": tuple(s.strip().upper() for s in sentences.split(",") if s.strip()),
                     "rate_hz": nmea_rate, "talker": talker}
+        steps.stage("writing")
         res = formats.write(rec, out, **opts)
+        steps.close()
         summary["rows_in"] = rows_in
         summary["channels"] = list(rec.channels)
         if kout in ("ros1", "ros2") and isinstance(res, dict):

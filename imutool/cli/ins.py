@@ -55,7 +55,10 @@ def ins_cmd(input_path: str, output: str, zupt: bool, height_update: bool, zaru:
     """Dead-reckon INPUT (gyro + accel, e.g. a foot-mounted IMU) into a position track with sigmas."""
     import formats
     from imutool.ins import InsConfig, evaluate_position, ins, plot_track, strides
+    from imutool.progress import stages
 
+    steps = stages("ins", ["reading", "INS", "writing"], quiet)
+    steps.stage("reading")
     rec, report = load_input(input_path, **input_kw)
     require_channels(rec, ["gyro", "accel"], input_path)
     for name, v in (("--gyro-noise", gyro_noise), ("--accel-noise", accel_noise), ("--zupt-sigma", zupt_sigma),
@@ -75,6 +78,7 @@ def ins_cmd(input_path: str, output: str, zupt: bool, height_update: bool, zaru:
     params = {"gamma": gamma} if gamma is not None and detector != "paper" else {}
     if gamma is not None and detector == "paper":
         raise ImutoolError("--gamma does not apply to the paper detector (use `imutool zvi` to tune B_g, B_a)")
+    steps.stage("INS + zero-velocity updates")
     try:
         out, res = ins(rec, zvi=flags, detector=detector, detector_params=params, config=cfg)
     except ImutoolError as e:
@@ -83,6 +87,7 @@ def ins_cmd(input_path: str, output: str, zupt: bool, height_update: bool, zaru:
     out.meta["ins_config"] = (f"zupt={zupt} height_update={height_update} zaru={zaru} detector="
                               f"{zvi_column or detector} order={order} gyro_noise={gyro_noise}deg/s/rtHz "
                               f"accel_noise={accel_noise}m/s2/rtHz zupt_sigma={zupt_sigma}m/s")
+    steps.stage("writing")
     formats.write(out, output)
     loop = evaluate_position(out)
     st = strides(out.time, out["pos"], out["zvi"])
@@ -124,4 +129,5 @@ def ins_cmd(input_path: str, output: str, zupt: bool, height_update: bool, zaru:
         summary["plot"] = plot_path
     if report.get("actions"):
         summary["input_fixes"] = report["actions"]
+    steps.close()
     emit_summary(summary, as_json, quiet)

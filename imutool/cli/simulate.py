@@ -52,7 +52,10 @@ def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, pr
                  replug_every: float | None, serve_log: str | None, start_delay: float, start_when: str | None,
                  duration: float | None, rate_hz: float | None, seed: int, settings: tuple[str, ...], as_json: bool,
                  quiet: bool) -> None:
-    """Simulate SCENARIO (ship-roll, sea-state, turn, compass-swing, mag-sphere, static, walk, ...)."""
+    """Simulate SCENARIO (ship-roll, sea-state, turn, compass-swing, mag-sphere, static, six-position, walk, ...).
+
+    Scenario options (--set NAME=VALUE) are the keyword arguments of the scenario functions in imutool.sim; an
+    unknown name is refused with the list of valid ones."""
     if serve:
         from imutool.capture.serve import serve as serve_pty
 
@@ -68,10 +71,16 @@ def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, pr
         opts["duration"] = duration
     if rate_hz is not None:
         opts["rate_hz"] = rate_hz
+    from imutool.progress import stages
+
+    steps = stages("simulate", ["simulating", "writing"], quiet)
+    steps.stage(f"simulating {scenario}")
     rec = sim.simulate(scenario, seed=seed, **opts)
     rec.meta["scenario"] = scenario
     rec.meta["seed"] = seed
+    steps.stage(f"writing {output}")
     formats.write(rec, output)
+    steps.close()
     summary = {"scenario": scenario, "output": output, "rows": len(rec), "duration_s": round(rec.duration, 3),
                "rate_hz": round(rec.rate_hz, 3), "channels": list(rec.channels)}
     emit_summary(summary, as_json, quiet)

@@ -49,7 +49,10 @@ def zvi_cmd(input_path: str, output: str, detector: str, gamma: float | None, wi
             as_json: bool, quiet: bool, **input_kw) -> None:
     """Detect zero-velocity intervals in INPUT (needs gyro and accel) and write the interval table."""
     from imutool import zvi
+    from imutool.progress import stages
 
+    steps = stages("zvi", ["reading", "detecting", "writing"], quiet)
+    steps.stage("reading")
     rec, report = load_input(input_path, **input_kw)
     require_channels(rec, ["gyro", "accel"], input_path)
     given = {"gamma": gamma, "window_s": window_s, "sigma_a": sigma_a, "sigma_g": _rad(sigma_g), "b_g": _rad(b_g),
@@ -73,7 +76,9 @@ def zvi_cmd(input_path: str, output: str, detector: str, gamma: float | None, wi
         best = zvi.pick_threshold(rec.time, gyro, accel, truth, detector, **params)
         params[best["param"]] = best["value"]
         summary["picked"] = {"param": best["param"], "value": best["value"], "f1": round(best["f1"], 4)}
+    steps.stage(f"detecting ({detector})")
     res = zvi.detect_zvi(rec.time, gyro, accel, detector, **params)
+    steps.stage("writing")
     zvi.write_intervals(res, output)
     summary.update(res.summary())
     summary["output"] = output
@@ -93,4 +98,5 @@ def zvi_cmd(input_path: str, output: str, detector: str, gamma: float | None, wi
         summary["plot"] = plot_path
     if report.get("actions"):
         summary["input_fixes"] = report["actions"]
+    steps.close()
     emit_summary(summary, as_json, quiet)
