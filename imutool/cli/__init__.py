@@ -83,7 +83,10 @@ def main(argv: list[str] | None = None) -> None:
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     try:
-        cli.main(args=args, prog_name="imutool", standalone_mode=False)
+        try:
+            cli.main(args=args, prog_name="imutool", standalone_mode=False)
+        finally:
+            _close_progress()
     except click.exceptions.Abort:
         click.echo("imutool: aborted", err=True)
         sys.exit(130)
@@ -130,3 +133,9 @@ def _command_path(args: list[str]) -> str:
             words.append(rest[1])
     return " ".join(words)
 
+
+def _close_progress() -> None:
+    """Close any progress bar left open (an error line must start on a clean line)."""
+    mod = sys.modules.get("imutool.progress")
+    if mod is not None:
+        mod.close_all()
