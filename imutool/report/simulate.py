@@ -283,7 +283,7 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
 
     import formats
     from formats.atomic import atomic_path
-    from imutool.cli.nmea import nmea_lines
+    from imutool.nmea_out import nmea_lines
 
     os.makedirs(folder, exist_ok=True)
     out = {}
