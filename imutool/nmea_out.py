@@ -371,7 +371,7 @@ def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_row
     sub = rec.slice_time(None, float(rec.time[min(len(rec), sample_rows) - 1])) if len(rec) > sample_rows else rec
     per: dict[float, int] = {}
     count: dict[float, int] = {}
-    for ti, s in nmea_lines(sub, sentences, None, **kw):
+    for ti, s in nmea_lines(sub, sentences, None, **{k: v for k, v in kw.items() if k != "card_from"}):
         per[ti] = per.get(ti, 0) + len(s) + 2
         count[ti] = count.get(ti, 0) + 1
     if not per:
@@ -405,4 +405,53 @@ def header_lines(*, source: str, sentences: list[str], plan: RatePlan | None, he
     if "TSS1" in sentences:
         lines.append("TSS1: status U/G unaided/GNSS-aided, lower case while settling; vertical acceleration from "
                      "the heave rate, horizontal from accel x/y (00 without it)")
-    return ["# " + x for x in lines]
+    table = str.maketrans({"°": " deg", "≈": "~", "−": "-", "×": "x", "→": "->"})
+    return [("# " + x).translate(table).encode("ascii", "replace").decode("ascii") for x in lines]
+
+
+def write_log(rec: Recording, path: str, sentences: list[str] | tuple[str, ...], *, rate_hz: float | None = None,
+              baud: int = 4800, source: str = "", header: bool = True, time_prefix: bool = False,
+              **kw: Any) -> dict[str, Any]:
+    """Plan the rate against ``baud`` (:func:`plan_rate`), then write the '#' header block and the sentences
+    (CR/LF, atomic) to ``path``. ``kw`` as :func:`nmea_lines`. Returns counts, rate and line use."""
+    from formats.atomic import atomic_path
+
+    sents = [s.strip().upper() for s in sentences if s.strip()]
+    if len(rec) == 0:
+        raise ImutoolError("the recording has no rows", path=path)
+    nb = row_bytes(rec, sents, **kw)
+    if nb == 0:
+        raise ImutoolError(f"no sentence could be written: the recording lacks the channels for {','.join(sents)} "
+                           f"(has {', '.join(rec.channels)})", path=path)
+    plan = plan_rate(nb, baud, rate_hz, input_rate(rec))
+    us = kw.get("utc_start")
+    off = us.timestamp() - float(rec.time[0]) if us is not None else utc_offset_s(rec)
+    utc = (None if off is None else "recording time + offset, first row " + datetime.fromtimestamp(
+        float(rec.time[0]) + off, tz=timezone.utc).isoformat().replace("+00:00", "Z"))
+    src = kw.get("heading_source", "auto")
+    talkers = {"HDG": "HC", "THS": TRUE_TALKER[src], **(kw.get("talkers") or {})}
+    counts: dict[str, int] = {}
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="") as fh:
+        if header:
+            for h in header_lines(source=source, sentences=sents, plan=plan,
+                                  heading_ref=kw.get("heading_ref", "magnetic"), heading_source=src,
+                                  heave_positive=kw.get("heave_positive", "up"), card_from=kw.get("card_from"),
+                                  deviation_deg=kw.get("deviation_deg"), variation_deg=kw.get("variation_deg"),
+                                  utc=utc, talkers=talkers):
+                fh.write(h + "\r\n")
+        for ts, s in nmea_lines(rec, sents, plan.rate_hz, **{k: v for k, v in kw.items() if k != "card_from"}):
+            fh.write((f"{ts:.3f} " if time_prefix else "") + s + "\r\n")
+            k = sentence_kind(s)
+            counts[k] = counts.get(k, 0) + 1
+    return {"path": path, "sentences": counts, "total": int(sum(counts.values())), "rate_hz": plan.rate_hz,
+            "rate_chosen": plan.chosen, "bytes_per_s": round(plan.bytes_per_s, 1),
+            "line_bytes_per_s": plan.capacity_bytes_per_s, "baud": baud,
+            "heave_positive": kw.get("heave_positive", "up"), "utc": utc}
+
+
+def sentence_kind(s: str) -> str:
+    """Type of an output line: 'HRM', 'PASHR', 'TSS1'."""
+    if s.startswith(":"):
+        return "TSS1"
+    addr = s[1:].split(",", 1)[0]
+    return "P" + addr[1:] if addr.startswith("P") else addr[2:]

@@ -104,7 +104,10 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
     from calibration.file import provenance, update_calibration
 
     _check_toml_out(output, append)
+    steps = _steps(quiet)
+    steps.stage("reading")
     rec = _load(input_path, io, with_files, fitting="mag")
+    steps.stage("fitting")
     require_channels(rec, ["mag"], input_path)
     m = rec.get("mag", "uT")
     if method == "sphere":
@@ -146,11 +149,14 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
     if method == "swing":
         lines.append(f"  not observable in a swing: {summary['unobservable']}")
     lines += [f"  warning: {w}" for w in fit.warnings]
+    steps.close()
     emit_summary(summary, as_json, quiet, lines)
 
 
 # -- deviation -------------------------------------------------------------------------------------------------
-_REF_NAMES = ("heading_mag", "ref_heading_mag", "heading", "ref_heading", "cog", "course", "bearing", "true_heading", "heading_true")
+_REF_NAMES = ("heading_mag", "ref_heading_mag", "heading", "ref_heading", "cog", "course", "bearing", "true_heading",
+              "heading_true")
+_MAG_REFS = ("heading_mag", "ref_heading_mag")
 
 
 def _angle_interp(t: np.ndarray, ts: np.ndarray, a_deg: np.ndarray) -> np.ndarray:
@@ -254,6 +260,7 @@ def _swing_date(date_opt: str | None, *recs: Any) -> Any:
 @_with_option
 @input_options
 @output_options
+@safe_outputs("outputs", append="append")
 def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | None, reference_column: str | None,
                   reference_kind: str, variation: float | None, position: str | None, date_opt: str | None,
                   vessel: str | None, compass_name: str | None, place: str | None, conditions: str | None,
@@ -278,7 +285,10 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
             raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card plot), .txt (text card) or .toml "
                                "(calibration file)")
     info = _card_info(card_info)
+    steps = _steps(quiet)
+    steps.stage("reading")
     rec = _load(input_path, io, with_files)  # mounting and a mag calibration are welcome here
+    steps.stage("fitting")
     # compass heading
     if heading_column or "heading" in rec.channels:
         col = heading_column or "heading"
@@ -314,7 +324,7 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
     rt = ref_rec.time + time_offset
     if "sog" in ref_rec.channels and rname in ("cog", "course"):
         rvals = np.where(np.asarray(ref_rec["sog"]) >= min_speed, rvals, np.nan)
-    kind = reference_kind if reference_kind != "auto" else ("magnetic" if rname in ("heading_mag", "ref_heading_mag") else "true")
+    kind = reference_kind if reference_kind != "auto" else ("magnetic" if rname in _MAG_REFS else "true")
     # position and date (header; WMM variation for a true reference)
     lat = lon = None
     pos_src = None
@@ -416,7 +426,15 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
     lines.append(f"  written: {', '.join(outputs)}")
     for w in card.warnings:
         click.echo(f"warning: {w}", err=True)
+    steps.close()
     emit_summary(summary, as_json, quiet, lines)
+
+
+def _steps(quiet: bool):
+    """Progress on stderr (interactive only): reading, fitting (+ writing)."""
+    from imutool.progress import stages
+
+    return stages("calibrate", ["reading", "fitting"], quiet)
 
 
 # -- gyro ------------------------------------------------------------------------------------------------------
@@ -464,7 +482,10 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
     from calibration.inertial import calibrate_gyro
 
     _check_toml_out(output, append)
+    steps = _steps(quiet)
+    steps.stage("reading")
     rec = _load(input_path, io, with_files, fitting="gyro")
+    steps.stage("fitting")
     require_channels(rec, ["gyro"], input_path)
     acc = rec.get("accel", "m/s^2") if "accel" in rec.channels else None
     temp = rec["temp"] if "temp" in rec.channels else None
@@ -489,6 +510,7 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
         lines.append(f"  {cal.quality['temp_note']}")
     if cal.scale is not None:
         lines.append("  S = " + np.array2string(cal.scale, precision=5).replace("\n", "\n      "))
+    steps.close()
     emit_summary(summary, as_json, quiet, lines)
 
 
@@ -520,7 +542,10 @@ def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, la
     from calibration.inertial import calibrate_accel, normal_gravity
 
     _check_toml_out(output, append)
+    steps = _steps(quiet)
+    steps.stage("reading")
     rec = _load(input_path, io, with_files, fitting="accel")
+    steps.stage("fitting")
     require_channels(rec, ["accel"], input_path)
     if gravity is None:
         gravity = normal_gravity(latitude, height) if latitude is not None else 9.80665
@@ -541,6 +566,7 @@ def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, la
              f"  residual {cal.residual_rms:.4g} m/s² RMS over the poses"]
     if "note" in cal.quality:
         lines.append(f"  note: {cal.quality['note']}")
+    steps.close()
     emit_summary(summary, as_json, quiet, lines)
 
 

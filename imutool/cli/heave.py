@@ -48,8 +48,18 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
               help="KF measurement noise as a fraction of the displacement std.")
 @click.option("--residual-noise", type=float, default=0.02, show_default=True,
               help="Residual Δh random walk (fraction of std per √s).")
-@click.option("--nmea", "nmea_path", default=None, type=click.Path(), help="Also write $PASHR heave sentences here.")
-@click.option("--nmea-rate", type=float, default=10.0, show_default=True, help="NMEA output rate (Hz).")
+@click.option("--nmea", "nmea_path", default=None, type=click.Path(),
+              help="Also write heave sentences here ($PASHR and/or TSS1, see --nmea-sentences); settling rows are "
+                   "flagged (PASHR IMU status 0, empty heave; TSS1 lower-case status).")
+@click.option("--nmea-sentences", default="PASHR", show_default=True,
+              help="PASHR and/or TSS1 (TSS1 needs roll/pitch columns in INPUT, e.g. an imutool filter output).")
+@click.option("--nmea-rate", type=float, default=None,
+              help="NMEA output rate (Hz); default: the highest standard rate that fits --nmea-baud.")
+@click.option("--nmea-baud", type=int, default=4800, show_default=True,
+              help="Line speed the NMEA output must fit (8N1).")
+@click.option("--heave-positive", type=click.Choice(["up", "down"]), default="up", show_default=True,
+              help="Sign of heave in every output (CSV columns and NMEA): up (imutool, TSS1, Applanix) or down "
+                   "(SBG, Kongsberg native). Written into each output's header.")
 @input_options
 @output_options
 @safe_outputs("output", "nmea_path")
@@ -57,11 +67,14 @@ def heave_cmd(input_path: str, output: str, method: str, harmonics: int | None, 
               vertical_sign: str, attitude: str, tilt_gain: float, lever_arm: str | None, cutoff: float | None,
               cutoff_ratio: float, order: int, delayed_cutoff: float | None, window_s: float, hop_s: float,
               min_window_s: float, fmin: float, fmax: float, bandwidth: float, meas_noise: float,
-              residual_noise: float, nmea_path: str | None, nmea_rate: float, as_json: bool, quiet: bool,
-              **inopts) -> None:
+              residual_noise: float, nmea_path: str | None, nmea_sentences: str, nmea_rate: float | None,
+              nmea_baud: int, heave_positive: str, as_json: bool, quiet: bool, **inopts) -> None:
     """Heave (m, positive UP), heave rate, dominant period, settled flag and a delayed zero-phase heave."""
     from imutool.heave import heave_recording
+    from imutool.progress import stages
 
+    steps = stages("heave", ["reading", "heave", "writing"], quiet)
+    steps.stage("reading")
     rec, _ = load_input(input_path, **inopts)
     cols = None
     if vertical:
@@ -74,17 +87,42 @@ def heave_cmd(input_path: str, output: str, method: str, harmonics: int | None, 
     att = "auto" if attitude == "auto" else attitude
     if att == "tilt":
         att = "tiltonly"
+    steps.stage(f"heave ({method})")
     out, summary = heave_recording(
         rec, method=method, vertical=cols, vertical_sign=vertical_sign, attitude=att, lever_arm=arm,
         tilt_gain=tilt_gain, harmonics=harmonics, cutoff=cutoff, cutoff_ratio=cutoff_ratio, order=order,
         delayed_cutoff=delayed_cutoff, window_s=window_s, hop_s=hop_s, min_window_s=min_window_s, fmin=fmin,
         fmax=fmax, bandwidth=bandwidth, meas_noise=meas_noise, residual_noise=residual_noise)
-    formats.write(out, output)
-    summary = {"input": input_path, "output": output, "rows": len(out), **summary}
+    nmea_info = None
     if nmea_path:
-        try:
-            from formats.nmea import write_nmea
-        except ImportError:
-            raise ImutoolError("NMEA output is not available in this build") from None
-        summary["nmea"] = write_nmea(out, nmea_path, sentences=("PASHR",), rate_hz=nmea_rate)
+        from imutool.nmea_out import write_log
+
+        sents = [x.strip().upper() for x in nmea_sentences.split(",") if x.strip()]
+        bad = [x for x in sents if x not in ("PASHR", "TSS1")]
+        if bad:
+            raise ImutoolError(f"--nmea-sentences: {', '.join(bad)} not heave sentences (PASHR, TSS1)")
+        nrec = out.copy()
+        for name in ("roll", "pitch", "heading", "heading_true", "sog", "cog", "lat", "lon"):
+            if name in rec.channels and name not in nrec.channels:
+                nrec.add(name, rec[name], rec.units.get(name))
+        for key in ("start_utc", "utc_start", "start_time_utc", "scenario", "sensor"):
+            if rec.meta.get(key) and key not in nrec.meta:
+                nrec.meta[key] = rec.meta[key]
+        nmea_info = write_log(nrec, nmea_path, sents, rate_hz=nmea_rate, baud=nmea_baud, source=input_path,
+                              heave_positive=heave_positive, heading_ref="true")
+    if heave_positive == "down":  # every heave column flips; the header says so
+        for name in ("heave", "heave_delayed", "heave_rate", "heave_rate_delayed", "ref_heave", "ref_heave_rate"):
+            if name in out.channels:
+                out.add(name, -out[name], out.units.get(name))
+        out.meta["heave_positive"] = "down"
+        out.meta["heave"] = str(out.meta.get("heave", "m")).replace("positive UP", "positive DOWN")
+    else:
+        out.meta["heave_positive"] = "up"
+    steps.stage("writing")
+    formats.write(out, output)
+    steps.close()
+    summary = {"input": input_path, "output": output, "rows": len(out), "heave_positive": heave_positive,
+               **summary}
+    if nmea_info is not None:
+        summary["nmea"] = nmea_info
     emit_summary(summary, as_json, quiet)
