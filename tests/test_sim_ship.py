@@ -44,3 +44,128 @@ def test_static_long_is_cheap_and_still():
     assert np.allclose(r["ref_gyro"], 0.0)
     g = r["gyro"] - r["ref_gyro_bias"]
     assert abs(np.std(g[:, 0]) - np.radians(0.005) * 10) < 1e-4  # white noise σ = N·√fs
+
+
+# --- ship-at-sea: a bridge sensor on a vessel in irregular seas, with a 360° turn (imutool.sim.voyage) ---
+
+G_NED = np.array([0.0, 0.0, 9.80665])
+
+
+def _body(q, v_ned):
+    """Rᵀ v for each sample: a NED vector in body axes."""
+    from formats.frames import quat_to_matrix
+
+    return np.einsum("nji,nj->ni", quat_to_matrix(q), v_ned)
+
+
+def test_ship_at_sea_gyro_integrates_to_truth():
+    """Body rates come from the Euler-angle derivatives: the error-free gyro, integrated, stays on ref_q."""
+    from formats.frames import quat_conjugate, quat_multiply
+
+    r = simulate("ship-at-sea", duration=60, seed=4, noise=0, turn_start=5)
+    assert np.array_equal(r["gyro"], r["ref_gyro"])  # noise=0: no noise, bias or quantisation
+    t, w, q_ref = r.time, r["gyro"], r["ref_q"]
+    q = q_ref[0].copy()
+    worst = 0.0
+    for k in range(len(t) - 1):
+        h = t[k + 1] - t[k]
+        rot = 0.5 * (w[k] + w[k + 1]) * h + np.cross(w[k], w[k + 1]) * h * h / 12  # with coning correction
+        a = np.linalg.norm(rot)
+        q = quat_multiply(q, np.r_[np.cos(a / 2), np.sinc(a / (2 * np.pi)) * rot / 2])
+        e = quat_multiply(quat_conjugate(q_ref[k + 1]), q)
+        worst = max(worst, 2 * np.degrees(np.arcsin(min(1.0, np.linalg.norm(e[1:])))))
+    assert worst < 0.05
+    # the motion is not trivial: the turn and the roll both happen in these 60 s
+    assert np.ptp(np.unwrap(np.radians(r["ref_heading"]))) > np.radians(100)
+    assert np.abs(r["ref_roll"]).max() > 15
+
+
+def test_ship_at_sea_specific_force_from_position_track():
+    """f = Rᵀ(a − g): the simulator's accelerometer (noise off) against finite differences of ref_pos."""
+    for lever in ("0,0,0", (-30, 0, -20)):
+        r = simulate("ship-at-sea", duration=40, seed=7, noise=0, turn_start=5, lever_arm=lever)
+        p, h = r["ref_pos"], 1.0 / r.meta["rate_hz"]
+        a = (p[2:] - 2 * p[1:-1] + p[:-2]) / h**2
+        f = _body(r["ref_q"][1:-1], a - G_NED)
+        assert np.abs(f - r["accel"][1:-1]).max() < 2e-3
+        # ref_vel is the derivative of ref_pos
+        assert np.abs((p[2:] - p[:-2]) / (2 * h) - r["ref_vel"][1:-1]).max() < 2e-3
+    # the hull point's acceleration really is there: heave, turn centripetal (≈ 0.42 m/s²) and sway
+    assert np.abs(a[:, 2]).max() > 0.8
+    # at rest (calm water, no turn, no speed) the accelerometer reads −g on z
+    calm = simulate("ship-at-sea", duration=5, seed=1, noise=0, severity=0, turn_rate_dps=0, speed_mps=0)
+    assert np.allclose(calm["accel"], [0.0, 0.0, -9.80665], atol=1e-12)
+
+
+def test_ship_at_sea_lever_arm_term():
+    """f(r) − f(0) = ω̇ × r + ω × (ω × r), with ω̇ from finite differences of the truth rate."""
+    lever = np.array([-30.0, 0.0, -20.0])
+    r0 = simulate("ship-at-sea", duration=40, seed=5, noise=0, turn_start=5, lever_arm=(0, 0, 0))
+    rb = simulate("ship-at-sea", duration=40, seed=5, noise=0, turn_start=5, lever_arm=lever)
+    assert rb.meta["lever_arm_m"] == lever.tolist() and r0.meta["lever_arm_m"] == [0.0, 0.0, 0.0]
+    assert np.array_equal(r0["ref_q"], rb["ref_q"])  # the lever arm does not change the sea
+    h = 1.0 / r0.meta["rate_hz"]
+    w = r0["ref_gyro"]
+    wd = (w[2:] - w[:-2]) / (2 * h)
+    w = w[1:-1]
+    expect = np.cross(wd, lever) + np.cross(w, np.cross(w, lever))
+    diff = (rb["accel"] - r0["accel"])[1:-1]
+    assert np.abs(diff - expect).max() < 2e-3
+    assert np.linalg.norm(expect, axis=1).max() > 1.0  # 20 m above the roll centre: metres per second squared
+    assert np.abs(rb["ref_lever_accel"][1:-1] - expect).max() < 2e-3
+
+
+def test_ship_at_sea_stresses_accelerometer_tilt():
+    """Accelerometer-only roll at the bridge is off by more than 2° RMS during the turn (noise on)."""
+    r = simulate("ship-at-sea", duration=200, seed=2, turn_start=30)
+    f = r["accel"]
+    err = np.degrees(np.arctan2(-f[:, 1], -f[:, 2])) - r["ref_roll"]
+    turn = (r.time > 30) & (r.time < 160)
+    assert np.sqrt(np.mean(err[turn] ** 2)) > 2.0
+    # a drifting gyro bias (random walk on top of the constant one) and an accelerometer bias are present
+    gb = r["ref_gyro_bias"]
+    assert np.abs(gb[-1] - gb[0]).max() > 0 and np.abs(gb[0]).max() > 0
+    assert np.abs(np.asarray(r.meta["accel_bias_m_s2"])).max() > 0
+
+
+def test_ship_at_sea_turn_heel_gnss_and_sea():
+    r = simulate("ship-at-sea", duration=200, seed=3, severity=0, turn_start=20)  # calm water: the turn alone
+    v, rate = 8.0, np.radians(3.0)
+    heel = -np.degrees(np.arctan(v * rate * 3.0 / (9.80665 * 2.0)))  # outward: port-down in a starboard turn
+    steady = (r.time > 40) & (r.time < 130)
+    assert abs(np.mean(r["ref_roll"][steady]) - heel) < 0.01 and -5 < heel < -2
+    assert np.allclose(r["ref_rate_of_turn"][steady], 3.0, atol=1e-9)
+    hd = np.unwrap(np.radians(r["ref_heading"]))
+    assert abs(np.degrees(hd[-1] - hd[0]) - 360.0) < 1e-6
+    # GNSS: 1 Hz fixes held between them, close to the truth
+    sog, cog = r["sog"], r["cog"]
+    changes = r.time[1:][np.diff(sog) != 0]
+    assert np.allclose(changes, np.round(changes), atol=1e-9)
+    assert np.abs(sog - r["ref_sog"]).max() < 0.3 and abs(np.median(sog) - v) < 0.05
+    dcog = (cog - r["ref_cog"] + 180) % 360 - 180
+    assert np.abs(dcog[steady]).max() < 5.0  # ≤ 1 s hold at 3 °/s plus noise
+    # the sea: roll peak = roll_deg with no turn, heave ±2 m, deterministic per seed
+    s = simulate("ship-at-sea", duration=120, seed=3, turn_rate_dps=0, noise=0)
+    assert abs(np.abs(s["ref_roll"]).max() - 19.0) < 1e-9
+    assert abs(np.abs(s["ref_heave"]).max() - 2.0) < 1e-9
+    a, b = simulate("ship-at-sea", duration=20, seed=9), simulate("ship-at-sea", duration=20, seed=9)
+    assert all(np.array_equal(a[k], b[k]) for k in a.channels)
+    assert not np.array_equal(a["ref_roll"], simulate("ship-at-sea", duration=20, seed=10)["ref_roll"])
+
+
+def test_ship_at_sea_cli_lever_arm(tmp_path):
+    from click.testing import CliRunner
+
+    import formats
+    from imutool.cli import cli
+
+    out = tmp_path / "voyage.csv"
+    run = CliRunner().invoke(cli, ["simulate", "ship-at-sea", "-o", str(out), "--duration", "5",
+                                   "--set", "lever_arm=-10,2,-15", "--set", "turn_rate_dps=0"])
+    assert run.exit_code == 0, run.output
+    rec = formats.read(str(out))
+    assert list(rec.meta["lever_arm_m"]) == [-10.0, 2.0, -15.0]
+    assert {"sog", "cog", "ref_sog", "ref_cog", "ref_q", "ref_roll", "ref_pos"} <= set(rec.channels)
+    bad = CliRunner().invoke(cli, ["simulate", "ship-at-sea", "-o", str(tmp_path / "x.csv"), "--duration", "5",
+                                   "--set", "lever_arm=1,2"])
+    assert bad.exit_code != 0 and "lever_arm" in str(bad.exception) and not (tmp_path / "x.csv").exists()

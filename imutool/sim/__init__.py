@@ -17,6 +17,7 @@ from formats.errors import ImutoolError
 SCENARIOS: dict[str, tuple[str, str]] = {
     "ship-roll": ("imutool.sim.ship", "ship_roll"),
     "turn": ("imutool.sim.ship", "turning_ship"),
+    "ship-at-sea": ("imutool.sim.voyage", "ship_at_sea"),
     "static": ("imutool.sim.ship", "static"),
     "sea-state": ("imutool.sim.sea", "sea_state"),
     "heave-platform": ("imutool.sim.sea", "heave_platform"),
