@@ -571,34 +571,37 @@ def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, la
 
 
 # -- show ------------------------------------------------------------------------------------------------------
-@calibrate_group.command("show", epilog="Example: imutool calibrate show cal.toml --as fusion")
+@calibrate_group.command("show", epilog="Example: imutool calibrate show cal.toml --as c > cal.h")
 @click.argument("path", metavar="CAL.toml", type=click.Path(exists=True, dir_okay=False))
-@click.option("--as", "form", type=click.Choice(["text", "matlab", "fusion", "magneto", "json"]), default="text",
-              show_default=True, help="Print the magnetometer parameters in another tool's convention.")
+@click.option("--as", "form", type=click.Choice(["text", "c", "fusion", "matlab", "python", "json", "magneto"]),
+              default="text", show_default=True,
+              help="text: the file and the deviation card; c (= fusion): x-io Fusion C; matlab: magcal A, b, "
+                   "expmfs; python: numpy; json: every section; magneto: Magneto's printout. Code forms paste and "
+                   "compile/run as printed.")
 def show_cmd(path: str, form: str) -> None:
-    """Print a calibration file, or its magnetometer parameters as MATLAB / x-io Fusion / Magneto / JSON."""
-    import json
-
+    """Print a calibration file, or paste-ready code: C (x-io Fusion), MATLAB, Python/numpy, JSON, Magneto."""
+    from calibration.crosswalk import render
+    from calibration.deviation import card_text
     from calibration.file import load_calibration
-    from calibration.magnetometer import crosswalk
 
     cal = load_calibration(path)
-    if form == "json":
-        click.echo(json.dumps(cal.sections, indent=2, default=str))
-        return
-    if form != "text":
+    if form == "magneto":
+        from calibration.magnetometer import crosswalk
+
         mg = cal.mag()
         if mg is None:
             raise ImutoolError("no [mag] section to convert", path=path)
-        click.echo("# imutool: m_true = A (m_meas - b)")
-        click.echo(crosswalk(mg[0], mg[1], form))
+        click.echo(crosswalk(mg[0], mg[1], form), nl=False)
+        return
+    if form != "text":
+        click.echo(render(cal, form), nl=False)
         return
     click.echo(f"calibration file {path}: sections {', '.join(cal.sections)}")
     for name, sec in cal.sections.items():
         prov = sec.get("provenance", {})
         click.echo(f"[{name}] {sec.get('model', '')}")
         for k, v in sec.items():
-            if k in ("provenance", "model", "card_15deg"):
+            if k in ("provenance", "model", "card_15deg", "magnetic_to_compass_15deg", "header", "warnings"):
                 continue
             click.echo(f"  {k} = {v}")
         if prov:
@@ -607,7 +610,5 @@ def show_cmd(path: str, form: str) -> None:
                        f"sensor {prov.get('sensor', '') or '?'}")
     dev = cal.deviation
     if dev is not None:
-        click.echo("  deviation card (compass → deviation, deg):")
-        tab = dev.table(15.0)
-        for i in range(0, len(tab), 6):
-            click.echo("   " + "  ".join(f"{p:03.0f}° {d:+5.1f}" for p, d, _ in tab[i:i + 6]))
+        click.echo("")
+        click.echo(card_text(dev))
