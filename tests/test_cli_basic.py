@@ -53,7 +53,7 @@ def test_info_text_and_json(messy_csv):
     assert "duplicate timestamps: 2 (1 with different data)" in r.output
     assert "rows with NaN: 3 (gyro 3)" in r.output
     assert "malformed rows skipped: 1" in r.output
-    assert "[rad/s]" in r.output and "movement" in r.output
+    assert "[deg/s]" in r.output and "movement" in r.output  # rates in degrees at the user surface
     r = _run("info", messy_csv, "--json")
     s = json.loads(r.output)
     assert s["rows"] == 352 and s["rows_after_validation"] == 350
@@ -62,7 +62,7 @@ def test_info_text_and_json(messy_csv):
     assert s["rate_hz"] == pytest.approx(100.0, rel=1e-6)
     assert s["step_s"]["min"] == pytest.approx(0.01) and s["step_s"]["max"] == pytest.approx(0.51)
     g = s["channels"]["gyro"]
-    assert g["unit"] == "rad/s" and g["columns"] == ["gyro_x", "gyro_y", "gyro_z"] and len(g["mean"]) == 3
+    assert g["unit"] == "deg/s" and g["unit_in_file"] == "rad/s" and g["columns"] == ["gyro_x", "gyro_y", "gyro_z"] and len(g["mean"]) == 3
     assert s["metadata"]["sensor"] == "unit-test"
     assert s["skipped_rows"] == 1 and "line" in s["skipped_rows_first"][0]
     assert any("dropped 2 rows" in a for a in s["validation_actions"])
@@ -85,16 +85,16 @@ def test_info_foreign_csv_prints_mapping(tmp_path):
     assert "column mapping (inferred):" in r.output
     assert "Gyroscope X (deg/s)->gyro_x[deg/s]" in r.output and "acc_z_g->accel_z[g]" in r.output
     s = json.loads(_run("info", str(p), "--json").output)
-    assert s["channels"]["gyro"]["max"][0] == pytest.approx(np.pi)
+    assert s["channels"]["gyro"]["max"][0] == pytest.approx(180.0)  # read as rad/s, shown in deg/s
     assert s["channels"]["accel"]["mean"][2] == pytest.approx(9.80665)
     r = _run("info", str(p), "--columns", "acc_z_g=accel_z:m/s^2", "--json")
     assert json.loads(r.output)["channels"]["accel"]["mean"][2] == pytest.approx(1.0)
 
 
 def test_info_real_fusion(shared):
-    s = json.loads(_run("info", str(shared("fusion", "sensor_data.csv")), "--json").output)
+    s = json.loads(_run("info", str(shared("fusion", "sensor_data.csv")), "--json").stdout)  # stderr: z-up warning
     assert s["rows"] == 13514
-    assert s["channels"]["gyro"]["unit"] == "rad/s" and s["channels"]["mag"]["unit"] == "uT"
+    assert s["channels"]["gyro"]["unit"] == "deg/s" and s["channels"]["mag"]["unit"] == "uT"
     assert s["column_mapping"]["origin"] == "inferred"
     assert 95 < s["rate_hz"] < 105
 

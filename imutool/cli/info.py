@@ -14,6 +14,9 @@ from formats import Recording
 from formats.errors import ImutoolError
 from imutool.cli.common import emit_summary, input_options, load_input
 
+# units shown in degrees (DESIGN: degrees at every user-facing surface); the file keeps what its header says
+_DEG_UNITS = {"rad/s": "deg/s", "rad": "deg", "rad/s^2": "deg/s^2"}
+
 _HIDDEN_META = {"validation", "column_mapping", "column_mapping_origin", "skipped_rows", "skipped_rows_first"}
 
 
@@ -26,6 +29,9 @@ def _channel_stats(rec: Recording) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for name, a in rec.channels.items():
         a2 = a.reshape(len(a), -1).astype(float)
+        unit = rec.units.get(name)
+        if unit in _DEG_UNITS:
+            a2 = np.degrees(a2)
         with np.errstate(all="ignore"):
             ok = ~np.isnan(a2)
             any_ok = ok.any(axis=0)
@@ -33,12 +39,14 @@ def _channel_stats(rec: Recording) -> dict[str, Any]:
             mx = np.where(any_ok, np.nanmax(np.where(ok, a2, -np.inf), axis=0), np.nan) if len(a2) else []
             mean = np.where(any_ok, np.nansum(a2, axis=0) / np.maximum(ok.sum(axis=0), 1), np.nan) if len(a2) else []
         out[name] = {
-            "unit": rec.units.get(name),
+            "unit": _DEG_UNITS.get(unit, unit),
             "columns": list(rec.columns.get(name, [name])),
             "min": [_num(v) for v in mn],
             "max": [_num(v) for v in mx],
             "mean": [_num(v) for v in mean],
         }
+        if unit in _DEG_UNITS:
+            out[name]["unit_in_file"] = unit
     return out
 
 
@@ -126,7 +134,7 @@ def _lines(s: dict[str, Any]) -> list[str]:
     ]
     if s["skipped_rows"]:
         out.append(f"malformed rows skipped: {s['skipped_rows']} (" + "; ".join(s["skipped_rows_first"]) + ")")
-    out.append("channels (unit; min / mean / max per axis):")
+    out.append("channels (unit; min / mean / max per axis; angles and rates in degrees):")
     for name, c in s["channels"].items():
         cols = c["columns"]
         axes = " | ".join(f"{col} {_fmt(a)} / {_fmt(m)} / {_fmt(b)}"
@@ -154,7 +162,8 @@ def info_cmd(path: str, columns: str | None, profile: str | None, topic: str | N
              backwards: str, mounting: str | None, calibration_file: str | None, as_json: bool) -> None:
     """Summarise FILE (CSV, ROS1/ROS2 bag, NMEA log): duration, rows, rate (median, min/max step), gaps,
     duplicate timestamps, NaN rows, channels with units and min/mean/max per axis, metadata, the foreign-CSV
-    column mapping used, and what the time-base validation would do. Units are those held inside (SI)."""
+    column mapping used, and what the time-base validation would do. Units are SI except angles and angular
+    rates, shown in degrees (deg, deg/s) whatever the file holds (the JSON names the unit in the file)."""
     rec, _ = load_input(path, columns=columns, profile=profile, topic=topic, stamp=stamp, duplicates=duplicates,
                         backwards=backwards, mounting=mounting, calibration_file=calibration_file, validate=False)
     if len(rec) == 0:

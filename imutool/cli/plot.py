@@ -131,7 +131,7 @@ def plot_cmd(path: str, channels: tuple[str, ...], output: str, start: float | N
              topic: str | None, stamp: str, duplicates: str, backwards: str, mounting: str | None,
              calibration_file: str | None, as_json: bool, quiet: bool) -> None:
     """Plot CHANNEL... of FILE (names or prefixes: `gyro accel`, `ref`) to a PNG/PDF, one subplot each,
-    units in the axis labels, time in seconds from the first sample."""
+    units in the axis labels (angular rates in deg/s, angles in deg), time in seconds from the first sample."""
     ext = Path(output).suffix.lower()
     if ext not in _FORMATS:
         raise ImutoolError(f"plot output must end in {', '.join(_FORMATS)} (got {output!r})")
@@ -153,11 +153,13 @@ def plot_cmd(path: str, channels: tuple[str, ...], output: str, start: float | N
     drawn = 0
     for ax, name in zip(axes[:, 0], names, strict=True):
         t, y = series[name]
+        unit = rec.units.get(name)
+        if unit in ("rad/s", "rad"):  # degrees at every user-facing surface
+            y, unit = np.degrees(y), {"rad/s": "deg/s", "rad": "deg"}[unit]
         cols = rec.columns.get(name, [name])
         for j in range(y.shape[1]):
             ax.plot(t, y[:, j], lw=0.7, label=cols[j] if j < len(cols) else f"{name}[{j}]")
         drawn = max(drawn, len(t))
-        unit = rec.units.get(name)
         ax.set_ylabel(f"{name} [{unit}]" if unit else name)
         ax.grid(True, alpha=0.3)
         if y.shape[1] > 1:

@@ -81,6 +81,12 @@ def zvi_cmd(input_path: str, output: str, detector: str, gamma: float | None, wi
     steps.stage("writing")
     zvi.write_intervals(res, output)
     summary.update(res.summary())
+    for k in ("b_g", "sigma_g"):  # degrees at the user surface, as the options
+        if k in summary["params"]:
+            summary["params"][f"{k}_deg_s"] = round(float(np.degrees(summary["params"].pop(k))), 6)
+    if summary.get("picked", {}).get("param") == "b_g":
+        summary["picked"] = {"param": "b_g_deg_s", "value": round(float(np.degrees(summary["picked"]["value"])), 6),
+                             "f1": summary["picked"]["f1"]}
     summary["output"] = output
     if truth is not None:
         summary["score_vs_" + label_col] = {k: round(v, 4) for k, v in zvi.flag_scores(res.flags, truth).items()}
