@@ -153,6 +153,8 @@ def _plain(v: Any) -> Any:
 
 # -- the calibration object ----------------------------------------------------------------------------------
 def _mat(v: Any, name: str, path: str | None, shape: tuple[int, ...]) -> np.ndarray:
+    if isinstance(v, str):
+        raise ImutoolError(f"calibration {name}: not numeric ({v!r})", path=path)
     try:
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
@@ -279,15 +281,141 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
     sections = {k: v for k, v in data.items() if k in SECTIONS and isinstance(v, dict)}
     if not sections:
         raise ImutoolError(f"no calibration sections ({', '.join(SECTIONS)}) in the file", path=p)
-    cal = Calibration(sections, p)
-    if "mag" in sections:
-        cal.mag()
-    return cal
+    validate_calibration(data, p)
+    return Calibration(sections, p)
+
+
+FILE_VERSION = 1
+# what a calibration term may be: beyond these the file describes no real sensor (SI units)
+GYRO_BIAS_MAX = 1.0  # rad/s (57 °/s; MEMS biases are ≤ a few °/s)
+ACCEL_BIAS_MAX = 0.5 * 9.80665  # m/s²
+SCALE_RANGE = (0.5, 2.0)  # singular values of a gyro scale / accel T matrix
+MAG_A_RANGE = (1e-3, 1e3)  # singular values of the soft-iron matrix
+MISALIGNMENT_MAX_DEG = 45.0
+DEVIATION_COEFF_MAX_DEG = 90.0
+
+
+def _key(section: str, key: str) -> str:
+    return f"[{section}] {key}"
+
+
+def _matrix_checks(a: np.ndarray, where: str, path: str, sv_range: tuple[float, float],
+                   max_condition: float) -> None:
+    sv = np.linalg.svd(a, compute_uv=False)
+    rank = int(np.count_nonzero(sv > 1e-9 * max(float(sv[0]), 1e-300)))
+    if rank < 3:
+        raise ImutoolError(f"{where} is singular (rank {rank}): it would collapse the data; recalibrate", path=path)
+    if np.linalg.det(a) <= 0:
+        raise ImutoolError(f"{where} has a negative determinant (a mirror image); recalibrate", path=path)
+    cond = float(sv[0] / sv[-1])
+    if cond > max_condition:
+        raise ImutoolError(f"{where} is badly conditioned (singular value ratio {cond:.3g} > {max_condition:g}); "
+                           "recalibrate with more orientations", path=path)
+    if sv[-1] < sv_range[0] or sv[0] > sv_range[1]:
+        raise ImutoolError(f"{where} scales by {sv[-1]:.3g}…{sv[0]:.3g}, outside {sv_range[0]:g}…{sv_range[1]:g}",
+                           path=path)
+
+
+def validate_calibration(data: dict[str, Any], path: str) -> None:
+    """Refuse (ImutoolError naming the file and key) a calibration that no real sensor has.
+
+    Version: ``imutool_calibration`` (or ``version``) must be 1 when present. Unknown top-level tables are
+    refused (a misspelt section would silently not apply). [mag]: b finite (3,), A finite 3×3, full rank,
+    positive determinant, singular-value ratio ≤ ``MAX_CONDITION``, field_ut > 0 when present. [gyro]/[accel]:
+    biases finite and below ``GYRO_BIAS_MAX`` / ``ACCEL_BIAS_MAX``, scale/T matrices as A with singular values
+    in ``SCALE_RANGE``. [deviation]: A–E finite numbers (deg) below ``DEVIATION_COEFF_MAX_DEG``. [mounting]:
+    a valid remap and three finite misalignment angles below ``MISALIGNMENT_MAX_DEG``.
+    """
+    from .magnetometer import MAX_CONDITION
+
+    for vk in ("imutool_calibration", "version"):
+        if vk in data and data[vk] != FILE_VERSION:
+            raise ImutoolError(f"{vk} = {data[vk]!r}: unknown calibration file version (this imutool reads "
+                               f"{FILE_VERSION})", path=path)
+    unknown = [k for k, v in data.items() if isinstance(v, dict) and k not in SECTIONS]
+    if unknown:
+        raise ImutoolError(f"unknown section [{unknown[0]}] (known: {', '.join(SECTIONS)})", path=path)
+    for name in SECTIONS:
+        if name in data and not isinstance(data[name], dict):
+            raise ImutoolError(f"{name} must be a table [{name}]", path=path)
+    if "mag" in data:
+        s = data["mag"]
+        for k in ("b", "A"):
+            if k not in s:
+                raise ImutoolError(f"{_key('mag', k)} is missing", path=path)
+        b = _mat(s["b"], "mag.b", path, (3,))
+        a = _mat(s["A"], "mag.A", path, (3, 3))
+        del b
+        _matrix_checks(a, f"{_key('mag', 'A')} (soft iron)", path, MAG_A_RANGE, MAX_CONDITION)
+        if "field_ut" in s:
+            f = _number(s["field_ut"], _key("mag", "field_ut"), path)
+            if not f > 0:
+                raise ImutoolError(f"{_key('mag', 'field_ut')} = {f}: a field strength must be > 0 µT", path=path)
+    if "gyro" in data:
+        s = data["gyro"]
+        bias = _mat(s.get("bias", [0, 0, 0]), "gyro.bias", path, (3,))
+        if np.max(np.abs(bias)) > GYRO_BIAS_MAX:
+            raise ImutoolError(f"{_key('gyro', 'bias')} {bias.tolist()} rad/s exceeds {GYRO_BIAS_MAX} rad/s "
+                               "(deg/s written as rad/s?)", path=path)
+        if "scale" in s:
+            _matrix_checks(_mat(s["scale"], "gyro.scale", path, (3, 3)), _key("gyro", "scale"), path, SCALE_RANGE,
+                           MAX_CONDITION)
+        if "temp_slope" in s:
+            _mat(s["temp_slope"], "gyro.temp_slope", path, (3,))
+        if "temp_ref" in s:
+            _number(s["temp_ref"], _key("gyro", "temp_ref"), path)
+    if "accel" in data:
+        s = data["accel"]
+        bias = _mat(s.get("bias", [0, 0, 0]), "accel.bias", path, (3,))
+        if np.max(np.abs(bias)) > ACCEL_BIAS_MAX:
+            raise ImutoolError(f"{_key('accel', 'bias')} {bias.tolist()} m/s² exceeds {ACCEL_BIAS_MAX:.3g} m/s² "
+                               "(g written as m/s²?)", path=path)
+        if "T" in s:
+            _matrix_checks(_mat(s["T"], "accel.T", path, (3, 3)), _key("accel", "T"), path, SCALE_RANGE,
+                           MAX_CONDITION)
+    if "deviation" in data:
+        s = data["deviation"]
+        for k in ("A", "B", "C", "D", "E"):
+            if k in s:
+                v = _number(s[k], _key("deviation", k), path)
+                if abs(v) > DEVIATION_COEFF_MAX_DEG:
+                    raise ImutoolError(f"{_key('deviation', k)} = {v}° is beyond {DEVIATION_COEFF_MAX_DEG:g}°: not "
+                                       "a deviation card", path=path)
+        for k in ("std", "header"):
+            if k in s and not isinstance(s[k], dict):
+                raise ImutoolError(f"{_key('deviation', k)} must be a table", path=path)
+        for k, v in (s.get("std") or {}).items():
+            _number(v, _key("deviation", f"std.{k}"), path)
+    if "mounting" in data:
+        s = data["mounting"]
+        from formats.frames import parse_axis_remap
+
+        try:
+            parse_axis_remap(str(s.get("remap", "x,y,z")))
+        except ImutoolError as e:
+            raise ImutoolError(f"{_key('mounting', 'remap')}: {e}", path=path) from None
+        mis = _mat(s.get("misalignment_deg", [0, 0, 0]), "mounting.misalignment_deg", path, (3,))
+        if np.max(np.abs(mis)) > MISALIGNMENT_MAX_DEG:
+            raise ImutoolError(f"{_key('mounting', 'misalignment_deg')} {mis.tolist()}: a misalignment is a small "
+                               f"angle (≤ {MISALIGNMENT_MAX_DEG:g}°); put the rotation in remap", path=path)
+
+
+def _number(v: Any, where: str, path: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ImutoolError(f"{where} must be a number, got {v!r}", path=path)
+    f = float(v)
+    if not math.isfinite(f):
+        raise ImutoolError(f"{where} is not finite ({f})", path=path)
+    return f
 
 
 def update_calibration(path: str | os.PathLike, name: str, table: dict[str, Any], append: bool) -> Calibration:
     """Write section ``name`` into ``path``: merged into the existing file with ``append``, else a new file."""
     cal = load_calibration(path) if append and os.path.exists(path) else Calibration()
     cal.set_section(name, table)
+    try:  # the same checks as on loading: a file imutool writes, imutool reads
+        validate_calibration(cal.sections, os.fspath(path))
+    except ImutoolError as e:
+        raise ImutoolError(f"the {name} calibration is not usable, nothing written: {e}") from None
     cal.save(path)
     return cal

@@ -21,8 +21,15 @@ Method:
    (A preserves volume; F is then the geometric-mean radius), like MATLAB magcal.
 4. Parameter covariance σ² (JᵀJ)⁻¹ with σ² = RSS / (N − p). Consecutive samples are correlated, so these
    one-sigma values are lower bounds.
-5. Coverage: fraction of an equal-area grid on the unit sphere (Lambert cylindrical: ``n_bands`` bands equal
-   in z, ``2·n_bands`` longitude sectors) that holds at least ``min_per_cell`` corrected directions.
+5. Coverage of *field directions*: fraction of an equal-area grid on the unit sphere (Lambert cylindrical:
+   ``n_bands`` bands equal in z, ``2·n_bands`` longitude sectors) that holds at least ``min_per_cell``
+   corrected directions. Only directions of the field count, not of the noise: the samples are first averaged
+   over ``COVERAGE_WINDOW`` consecutive samples (noise down 5×, a rotation barely blurred) and a mean counts only
+   when its corrected magnitude is within ±30 % of the fitted field. A motionless recording (a noise cloud that
+   a sphere fit happily blows up to "100 % coverage, field 3 µT") collapses to its centre or to one direction
+   and covers ≈ 0 %: refused.
+6. Every fitted A is checked: finite, symmetric positive-definite, condition number ≤ ``MAX_CONDITION``
+   (real soft iron is a few tens of percent; a large ratio means the data did not determine A); b finite.
 """
 
 from __future__ import annotations
@@ -40,6 +47,8 @@ KINDS = ("offset", "diag", "full", "auto")
 # coverage needed for each kind (fraction of the equal-area sphere grid); below: refused
 MIN_COVERAGE = {"offset": 0.25, "diag": 0.45, "full": 0.60}
 WARN_COVERAGE = 0.75
+COVERAGE_WINDOW = 25  # samples averaged before a direction counts (noise ÷ 5)
+MAX_CONDITION = 4.0  # largest/smallest eigenvalue of a fitted soft-iron matrix
 _IDX = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 
@@ -116,6 +125,54 @@ def sphere_coverage(directions: np.ndarray, n_bands: int = 8, min_per_cell: int 
     if min_per_cell is None:
         min_per_cell = max(3, int(0.05 * len(u) / (nz * nl)))
     return float(np.count_nonzero(counts >= min_per_cell)) / (nz * nl)
+
+
+def field_direction_coverage(m: np.ndarray, b: np.ndarray, a: np.ndarray, field: float, n_bands: int = 8,
+                             window: int = COVERAGE_WINDOW, tolerance: float = 0.3) -> float:
+    """Coverage of the calibrated field's directions (see module docstring, item 5).
+
+    m: (N,3) samples in time order; b, A, field: a calibration with |A (m − b)| ≈ field. Moving means over
+    ``window`` samples (fewer for short records: at most N/20) are corrected; those whose magnitude is within
+    ``tolerance`` of the field give the directions counted by :func:`sphere_coverage` (cells need ≥ 3 of them).
+    """
+    m = np.asarray(m, dtype=float)
+    m = m[np.all(np.isfinite(m), axis=1)]
+    w = int(max(1, min(window, len(m) // 20)))
+    if len(m) < w or not np.isfinite(field) or field <= 0:
+        return 0.0
+    c = np.cumsum(np.vstack([np.zeros((1, 3)), m]), axis=0)
+    sm = (c[w:] - c[:-w]) / w
+    y = (sm - b) @ np.asarray(a, dtype=float).T
+    n = np.linalg.norm(y, axis=1)
+    ok = np.abs(n - field) <= tolerance * field
+    if np.count_nonzero(ok) < 3:
+        return 0.0
+    nz, nl = n_bands, 2 * n_bands
+    cov = sphere_coverage(y[ok], n_bands, min_per_cell=max(3, int(0.05 * len(y) / (nz * nl))))
+    return cov
+
+
+def check_soft_iron(b: np.ndarray, a: np.ndarray, what: str = "fitted", max_condition: float = MAX_CONDITION
+                    ) -> str | None:
+    """Why (b, A) is not a usable hard/soft-iron correction, or None: finite, A symmetric positive-definite,
+    condition number ≤ max_condition."""
+    b = np.asarray(b, dtype=float)
+    a = np.asarray(a, dtype=float)
+    if b.shape != (3,) or a.shape != (3, 3):
+        return f"{what} b must be 3 numbers and A 3×3"
+    if not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
+        return f"{what} b or A is not finite"
+    if not np.allclose(a, a.T, rtol=1e-6, atol=1e-9 * max(1.0, float(np.max(np.abs(a))))):
+        return f"{what} A is not symmetric"
+    ev = np.linalg.eigvalsh(0.5 * (a + a.T))
+    if ev[0] <= 0:
+        rank = int(np.count_nonzero(np.abs(ev) > 1e-9 * max(1e-300, float(np.max(np.abs(ev))))))
+        return f"{what} A is not positive-definite (eigenvalues {np.array2string(ev, precision=3)}, rank {rank})"
+    cond = float(ev[-1] / ev[0])
+    if cond > max_condition:
+        return (f"{what} A is badly conditioned (eigenvalue ratio {cond:.3g} > {max_condition:g}; real soft iron "
+                "is a few tens of percent)")
+    return None
 
 
 # -- algebraic fit -------------------------------------------------------------------------------------------
@@ -347,16 +404,17 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
         raise ImutoolError(f"magnetometer calibration needs at least 20 valid samples; got {len(m)}")
     if max_samples and len(m) > max_samples:
         m = m[np.linspace(0, len(m) - 1, max_samples).astype(int)]
-    # coverage of directions from the centre of a first sphere fit (independent of the soft iron)
+    # coverage of field directions from a first fit (noise averaged out, see field_direction_coverage)
     li = None
+    c0, r0 = sphere_fit_linear(m)
+    cov_frac = field_direction_coverage(m, c0, np.eye(3) / r0, 1.0, n_bands)
     try:
-        c0, a0, _ = ellipsoid_fit_li(m)
-        li = (c0, a0)
-        dirs = (m - c0) @ a0.T
+        c1, a1, _ = ellipsoid_fit_li(m)
+        if check_soft_iron(c1, a1 * r0) is None:
+            li = (c1, a1)
+            cov_frac = max(cov_frac, field_direction_coverage(m, c1, a1, 1.0, n_bands))
     except ImutoolError:
-        c0, _ = sphere_fit_linear(m)
-        dirs = m - c0
-    cov_frac = sphere_coverage(dirs, n_bands)
+        pass
 
     def need(k: str) -> float:
         return MIN_COVERAGE[k] if min_coverage is None else float(min_coverage)
@@ -366,12 +424,23 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
     if not allowed:
         k = kinds[0] if kind != "auto" else "offset"
         raise ImutoolError(
-            f"coverage {100 * cov_frac:.0f}% of the sphere (equal-area grid {n_bands}×{2 * n_bands}) is below the "
-            f"{100 * need(k):.0f}% needed for a '{k}' fit; rotate the sensor through more orientations, use "
-            "--method swing for a sensor that only turns in heading, or lower --min-coverage at your own risk")
+            f"field-direction coverage {100 * cov_frac:.0f}% of the sphere (equal-area grid {n_bands}×"
+            f"{2 * n_bands}, noise averaged out), below the {100 * need(k):.0f}% needed for a '{k}' fit; rotate "
+            "the sensor through many orientations (tumble it through every side up, or turn it about several axes), "
+            "use --method swing for a sensor that only turns in heading, or lower --min-coverage at your own risk")
     results = {}
+    refused = {}
     for k in allowed:
-        results[k] = fit_one(m, k, field_ut, li)
+        r = fit_one(m, k, field_ut, li)
+        why = check_soft_iron(r[0], r[1], f"'{k}' fit:")
+        if why is None:
+            results[k] = r
+        else:
+            refused[k] = why
+    if not results:
+        raise ImutoolError(f"magnetometer calibration not determined by the data: {'; '.join(refused.values())}; "
+                           "rotate the sensor through more orientations")
+    allowed = [k for k in allowed if k in results]
     raw_n = np.linalg.norm(m, axis=1)
     raw_rel = float(np.std(raw_n) / np.mean(raw_n))
     cands = {k: {"residual_rms_ut": float(np.sqrt(np.mean(r[3] ** 2))),
@@ -398,7 +467,20 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
     b, a, s, res, b_std, a_std = results[chosen]
     corr = (m - b) @ a.T
     cn = np.linalg.norm(corr, axis=1)
+    # the coverage the chosen calibration itself sees (field directions, noise averaged out)
+    cov_fit = field_direction_coverage(m, b, a, float(np.mean(cn)), n_bands)
+    if cov_fit < need(chosen):
+        raise ImutoolError(
+            f"calibrated field-direction coverage {100 * cov_fit:.0f}% of the sphere, below the "
+            f"{100 * need(chosen):.0f}% needed for a '{chosen}' fit; rotate the sensor through many orientations "
+            "(every side up), or use --method swing for a sensor that only turns in heading")
+    cov_frac = cov_fit
     warns = []
+    if refused:
+        warns.append("not determined by the data: " + "; ".join(refused.values()))
+    f_est = float(np.mean(cn)) if field_ut is None else float(field_ut)
+    if field_ut is None and not 10.0 <= f_est <= 150.0:
+        warns.append(f"fitted field {f_est:.3g} µT is not the Earth's (20–70 µT): check the magnetometer unit")
     if cov_frac < WARN_COVERAGE:
         warns.append(f"coverage only {100 * cov_frac:.0f}% of the sphere: soft-iron terms are weakly determined")
     fit = MagFit(b=b, A=a, field_ut=float(np.mean(cn)) if field_ut is None else float(field_ut), kind=chosen,
