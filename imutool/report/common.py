@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import subprocess
 from datetime import datetime, timezone
 from pathlib import Path
@@ -53,10 +54,10 @@ def standards_cited(ids: list[str]) -> list[dict[str, str]]:
     for line in text.splitlines():
         if not line.startswith("| P"):
             continue
-        c = [x.strip() for x in line.strip().strip("|").split("|")]
+        c = [x.strip().replace("\\|", "|").replace("**", "") for x in re.split(r"(?<!\\)\|", line.strip()[1:-1])]
         if len(c) >= 5:
-            rows[c[0]] = {"id": c[0], "requirement": c[1].replace("**", "").replace("*", ""), "value": c[2],
-                          "source": c[3], "confidence": c[4]}
+            rows[c[0]] = {"id": c[0], "requirement": c[1].replace("*", ""), "value": c[2], "source": c[3],
+                          "confidence": c[4]}
     return [rows[i] for i in ids if i in rows]
 
 

@@ -717,8 +717,12 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
                                                                                   ".nmea0183")
     if is_nmea:
         cap = hrm_capture_check(dut_path)
-        rate = float(dut.rate_hz) if len(dut) > 1 else None
+        dtt = np.round(np.diff(dut.time), 3)
+        rate = float(1.0 / np.median(dtt)) if dtt.size and np.median(dtt) > 0 else None
         cap["output_rate_hz"] = rate
+        vals, cnt = np.unique(dtt, return_counts=True)
+        top = np.argsort(cnt)[::-1][:3]
+        cap["output_intervals_s"] = {f"{vals[i]:g}": int(cnt[i]) for i in top}
         if cap["hrm_sentences"] == 0:
             st, why = FAIL, "no HRM sentence in the capture"
         elif cap["checksum_bad"] or cap["checksum_missing"] or cap["field_format_errors"] or cap["over_82_chars"]:

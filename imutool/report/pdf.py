@@ -344,6 +344,10 @@ def _test_record_blocks(L: Layout, ev: dict[str, Any]) -> None:
     pairs = []
     for sec, key, label, _ in FIELDS:
         v = (tr.get(sec) or {}).get(key)
+        if isinstance(v, float):
+            v = f"{v:g}"
+        elif isinstance(v, list) and all(isinstance(x, float) for x in v):
+            v = " to ".join(f"{x:g}" for x in v)
         pairs.append((label, BLANK if v in (None, "", []) else _fmt(v, 3)))
     L.kv(pairs)
 
@@ -375,9 +379,12 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
     for name, inp in ev["inputs"].items():
         if not inp:
             continue
-        L.kv([(name.replace("_", " "), f"{inp.get('path')}"), ("sha256", str(inp.get("sha256"))),
-              ("content", f"{inp.get('kind')}, {_fmt(inp.get('rows'))} rows, {_fmt(inp.get('rate_hz'), 2)} Hz, "
-                          f"{_fmt(inp.get('duration_s'), 1)} s, channel {inp.get('channel', '-')}")])
+        pairs = [(name.replace("_", " "), f"{inp.get('path')}"), ("sha256", str(inp.get("sha256")))]
+        if inp.get("rows") is not None:
+            pairs.append(("content", f"{inp.get('kind')}, {_fmt(inp.get('rows'))} rows, {_fmt(inp.get('rate_hz'), 2)}"
+                                     f" Hz (median), {_fmt(inp.get('duration_s'), 1)} s, channel "
+                                     f"{inp.get('channel', '-')}"))
+        L.kv(pairs)
     L.heading("Units, frames and sign conventions")
     L.kv([(k.replace("_", " "), str(v)) for k, v in ev["conventions"].items()])
     L.heading("Editions applied (confidence: A verbatim, B secondary quote, C partial, R recalled, I inference)")
@@ -408,7 +415,6 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
 def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
     """Per-item row tables (every row of the JSON), not tested, standards cited, unconfirmed, warnings, settings,
     signatures."""
-    L.page_break()
     for it in ev["items"]:
         L.heading(f"{it['title']} — {it['clause']}", 11)
         pairs = [("status", it["status"]), ("criterion", it["criterion"] or "-"), ("result", it["reason"])]
@@ -516,6 +522,12 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[2].set_ylabel("|error| / tolerance")
     axs[2].set_xlabel("time (s, reference clock)")
     axs[2].legend(loc="upper right", fontsize=7)
+    lt = next((it for it in ev["items"] if it["id"] == "long_term"), None)
+    if lt and lt.get("start_s") is not None and t.size and lt["end_s"] - lt["start_s"] > 0.5 * (t[-1] - t[0]):
+        # the long hold has its own plot: show the programme before it at a readable scale
+        axs[2].set_xlim(t[0], lt["start_s"] + 30.0)
+        axs[0].set_title(f"programme before the long-term hold (from {lt['start_s']:.0f} s: see the long-term plot)",
+                         fontsize=8)
     for ax in axs:
         ax.grid(alpha=0.3)
     figs.append(fig)

@@ -266,7 +266,8 @@ def heading_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, 
 
 
 SAMPLE_INCLINOMETER_ERRORS = {"offset_deg": 0.2, "scale": 0.01, "lag_s": 0.02, "noise_deg": 0.05,
-                              "drift_deg_per_h": 0.1}
+                              "drift_deg_per_h": 0.1, "accel_coupling": 0.05}
+SAMPLE_LATERAL_ACCEL_MS2 = 1.0  # the sample programme's lateral-acceleration segment (peak, m/s²)
 SAMPLE_HEADING_ERRORS = {"offset_deg": 0.2, "semicircular_deg": (0.3, -0.2), "lag_s": 0.02, "noise_deg": 0.05,
                          "roll_coupling": 0.02}
 
@@ -274,9 +275,11 @@ SAMPLE_HEADING_ERRORS = {"offset_deg": 0.2, "semicircular_deg": (0.3, -0.2), "la
 def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict[str, str]:
     """Write the bundled report examples into ``folder`` and return {name: path}.
 
-    inclinometer_dut.csv / inclinometer_reference.csv / inclinometer_steps.csv (tilt-table programme, DUT with
+    inclinometer_dut.csv / inclinometer_reference.csv / inclinometer_steps.csv (tilt-table programme: steps to
+    ±45°, roll periods 4-30 s, a lateral-acceleration segment, a 1 h hold at 1 Hz; DUT with
     SAMPLE_INCLINOMETER_ERRORS), inclinometer_dut.nmea (the DUT as a time-stamped HRM capture, from
-    ``imutool nmea``'s generator), heading_dut.csv / heading_reference.csv (SAMPLE_HEADING_ERRORS).
+    ``imutool nmea``'s generator), heading_dut.csv / heading_reference.csv (SAMPLE_HEADING_ERRORS; turns at 8
+    and 20 °/s). The test record example ``test_info.toml`` is a hand-written file, not generated.
     """
     import os
     from datetime import datetime, timezone
@@ -287,7 +290,8 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
 
     os.makedirs(folder, exist_ok=True)
     out = {}
-    dut, ref, segs = inclinometer_test(rate_hz=rate_hz, seed=seed, ref_noise_deg=0.01, **SAMPLE_INCLINOMETER_ERRORS)
+    dut, ref, segs = inclinometer_test(rate_hz=rate_hz, seed=seed, ref_noise_deg=0.01,
+                                       lat_accel_ms2=SAMPLE_LATERAL_ACCEL_MS2, **SAMPLE_INCLINOMETER_ERRORS)
     for name, rec in (("inclinometer_dut.csv", dut), ("inclinometer_reference.csv", ref)):
         out[name] = os.path.join(folder, name)
         formats.write(rec, out[name])
