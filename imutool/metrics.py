@@ -160,3 +160,48 @@ def attitude_rmse(est, ref) -> dict:
             st = evaluate_angle(est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading")
             out[name] = round(st["rmse"], 4)
     return out
+
+
+def heave_accuracy(t_est: np.ndarray, heave_est: np.ndarray, t_ref: np.ndarray, heave_ref: np.ndarray, *,
+                   lag_s: float = 0.0, mask: np.ndarray | None = None, floor_m: float = 0.05, pct: float = 5.0,
+                   sample_fraction: float = 0.95) -> dict:
+    """A heave error under the three readings of "5 cm or 5 %" (heave m, any one sign convention for both).
+
+    The estimate at t is compared with the reference at t − lag_s (``mask``: samples to use, e.g. settled).
+    Hs = 4 σ of the reference over the compared samples (significant heave), significant amplitude Hs/2.
+
+    - ``significant``: RMS error ≤ max(floor, pct % of Hs) — the reading imutool's README used;
+    - ``amplitude``: RMS error ≤ max(floor, pct % of the significant amplitude Hs/2);
+    - ``per_sample``: |error| ≤ max(floor, pct % of |reference heave| at that sample) for at least
+      ``sample_fraction`` of the samples (95 %: IMO treats accuracy figures as 95 % bounds, MSC.1/Circ.1575).
+
+    Vendors state "5 cm or 5 %" without saying 5 % of what (standards.md §4): report all three.
+    """
+    te = np.asarray(t_est, dtype=float)
+    he = np.asarray(heave_est, dtype=float)
+    m = np.ones(len(te), bool) if mask is None else np.asarray(mask, bool)
+    r = interp_to(te - lag_s, np.asarray(t_ref, float), np.asarray(heave_ref, float))
+    ok = m & np.isfinite(he) & np.isfinite(r)
+    n = int(ok.sum())
+    if n < 10:
+        nan = float("nan")
+        return {"n": n, "hs_ref_m": nan, "rmse_m": nan, "significant": None, "amplitude": None, "per_sample": None}
+    e = he[ok] - r[ok]
+    rmse = float(np.sqrt(np.mean(e * e)))
+    hs = float(4.0 * np.std(r[ok]))
+    f = pct / 100.0
+    tol_s = max(floor_m, f * hs)
+    tol_a = max(floor_m, f * hs / 2.0)
+    within = np.abs(e) <= np.maximum(floor_m, f * np.abs(r[ok]))
+    frac = float(np.mean(within))
+    return {
+        "n": n, "hs_ref_m": hs, "rmse_m": rmse, "floor_m": floor_m, "pct": pct,
+        "significant": {"definition": f"RMS error <= max({floor_m:g} m, {pct:g} % of Hs = 4 sigma of the reference)",
+                        "tolerance_m": tol_s, "pass": bool(rmse <= tol_s)},
+        "amplitude": {"definition": f"RMS error <= max({floor_m:g} m, {pct:g} % of the significant amplitude Hs/2)",
+                      "tolerance_m": tol_a, "pass": bool(rmse <= tol_a)},
+        "per_sample": {"definition": f"|error| <= max({floor_m:g} m, {pct:g} % of |reference|) at >= "
+                                     f"{100 * sample_fraction:g} % of samples",
+                       "fraction_within": frac, "p95_abs_m": float(np.percentile(np.abs(e), 95)),
+                       "pass": bool(frac >= sample_fraction)},
+    }

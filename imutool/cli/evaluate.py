@@ -107,6 +107,7 @@ def evaluate_cmd(est_path: str, ref_path: str | None, channel: str | None, max_l
     summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
     if channel == "heave":
         summary["heave"] = _external("imutool.heave", "evaluate_heave", "heave")(est, ref, max_lag)
+        _heave_readings(est, ref, summary["heave"])
     elif channel == "position":
         summary["position"] = _external("imutool.ins", "evaluate_position", "position")(est, ref)
     else:
@@ -135,6 +136,23 @@ def evaluate_cmd(est_path: str, ref_path: str | None, channel: str | None, max_l
             lines.append(f"BROAD ({qv['rows']}): total {qv['total']['rmse']:.3f}°, heading "
                          f"{qv['heading']['rmse']:.3f}°, inclination {qv['inclination']['rmse']:.3f}° RMSE")
     emit_summary(summary, as_json, quiet, lines)
+
+
+def _heave_readings(est, ref, out: dict[str, Any]) -> None:
+    """Add the three "5 cm or 5 %" readings (imutool.metrics.heave_accuracy) to each evaluated heave channel."""
+    import numpy as np
+
+    from imutool.metrics import heave_accuracy
+
+    rname = next((n for n in ("ref_heave", "heave") if n in ref.channels and (ref is not est or n == "ref_heave")),
+                 None)
+    if rname is None:
+        return
+    for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
+        if isinstance(out.get(ch), dict) and ch in est.channels:
+            mask = np.asarray(est[flag]) > 0.5 if flag in est.channels else None
+            out[ch]["readings"] = heave_accuracy(est.time, est[ch], ref.time, ref[rname],
+                                                 lag_s=float(out[ch].get("lag_s", 0.0)), mask=mask)
 
 
 def _plot(est, ref, path: str) -> None:
