@@ -17,7 +17,7 @@ from imutool import __version__
 # command name -> (module under imutool.cli, attribute, one-line help shown in `imutool --help`)
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "info": ("info", "info_cmd", "Summarise a recording: duration, rate, gaps, channels, units, ranges."),
-    "convert": ("convert", "convert_cmd", "Convert between CSV, ROS1/ROS2 bags and NMEA 0183."),
+    "convert": ("convert", "convert_cmd", "Convert between CSV, Parquet, ROS1/ROS2 bags and NMEA 0183."),
     "plot": ("plot", "plot_cmd", "Plot channels of a recording to PNG/PDF."),
     "simulate": ("simulate", "simulate_cmd", "Simulate a recording with truth columns (ref_*)."),
     "filter": ("filter", "filter_cmd", "Estimate roll/pitch/heading: quaternion EKF, compass KF, baselines."),
@@ -32,6 +32,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "report": ("report", "report_group", "Certification evidence reports (inclinometer, heading device)."),
     "nmea": ("nmea", "nmea_cmd", "Write NMEA 0183 sentences (HRM, XDR, HDG, THS) to a file or port."),
     "capture": ("capture", "capture_group", "Record serial NMEA, bridge frames, I2C or Modbus sensors."),
+    "events": ("events", "events_group", "Heavy-roll events, hourly roll statistics, parametric roll; fleet table."),
+    "batch": ("batch", "batch_cmd", "Run any command over many files on local cores or a Dask cluster."),
 }
 
 
