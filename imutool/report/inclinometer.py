@@ -464,6 +464,9 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         if lat.ndim != 1:
             raise ImutoolError(f"channel {o.lat_accel_channel!r} must be one column (m/s²)", path=ref_path)
     acc_mask = (np.abs(np.nan_to_num(lat)) >= o.lat_accel_min_ms2) if lat is not None else np.zeros(t.size, bool)
+    # samples under any noticeable applied acceleration (≥ 10 % of the threshold) are kept out of the static and
+    # dynamic heel items: they belong to the acceleration item (judged from the threshold up)
+    acc_any = (np.abs(np.nan_to_num(lat)) >= 0.1 * o.lat_accel_min_ms2) if lat is not None else acc_mask
 
     items: list[dict[str, Any]] = []
     # ---- static steps (ISO 19697 §6.2) ----------------------------------------------------------------------
@@ -474,7 +477,7 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         steps = [(a, b, None) for a, b in plateaus(t, h_ref, o.step_band_deg, o.step_min_s, o.step_settle_s)]
         step_src = (f"plateaus detected in the reference (range ≤ {o.step_band_deg}° over 2 s, ≥ {o.step_min_s} s, "
                     f"first {o.step_settle_s} s ignored)")
-    steps = [(a, b, rv) for a, b, rv in steps if not acc_mask[(t >= a) & (t <= b)].any()]
+    steps = [(a, b, rv) for a, b, rv in steps if not acc_any[(t >= a) & (t <= b)].any()]
     static_mask = np.zeros(t.size, bool)
     step_rows = []
     errs_static = []
@@ -532,7 +535,7 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     outs_al = {k: interp_to(t, dut.time - shift, v) for k, v in outs.items()}
 
     # ---- dynamic heel (§6.3) ---------------------------------------------------------------------------------
-    dyn = ~static_mask & ~acc_mask & both
+    dyn = ~static_mask & ~acc_any & both
     dyn_s = float(dts[dyn].sum())
     n_cyc = int(np.isfinite(cr.period_s).sum())
     e_dyn = e[dyn]
@@ -554,7 +557,7 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     # only excursions clear of the static steps (and of the acceleration segment) are roll cycles
     i_a = np.searchsorted(t, cr.t_start)
     i_b = np.searchsorted(t, cr.t_end, side="right")
-    cs = np.concatenate([[0], np.cumsum(static_mask | acc_mask)])
+    cs = np.concatenate([[0], np.cumsum(static_mask | acc_any)])
     moving = (cs[np.minimum(i_b, t.size)] - cs[i_a]) == 0
     amp_rows, per_rows, cyc_counts = _judged_cycles(t, cr, cd, pair, moving, outs_al, out_src == SRC_DEVICE, o,
                                                     tola, tolp)
