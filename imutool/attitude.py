@@ -54,6 +54,7 @@ from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler
+from imutool.progress import Progress, chunk_ranges
 
 # ---- state vector layout (float64, carried between chunks) -------------------------------------------------
 S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)
@@ -66,7 +67,12 @@ S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
 S_QI, S_LP1, S_LP2, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass stages in I (3+3)
 S_AVAR, S_APREV, S_NAVAR = 77, 78, 81  # accel white-noise variance estimate (m²/s⁴), previous raw accel, count
 S_APREV2 = 82  # raw accel two samples back (3)
-STATE_SIZE = 85
+S_BHOLD = 85  # time left (s) during which accel updates may not move the bias
+S_BIASMAX = 86  # |b_i| bound (rad/s, copied from the parameters; ≤ 0: none)
+S_NIS_A, S_NIS_M, S_NINC = 87, 88, 89  # windowed mean NIS per degree of freedom (accel, mag heading); flagged count
+S_WLP, S_WDOT, S_WINIT = 90, 93, 96  # lever arm: low-passed body rate (3), its derivative (3), started flag
+S_SHOCK_T = 97  # continuous time (s) the accelerometer has been beyond the shock gate
+STATE_SIZE = 98
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -74,44 +80,195 @@ P_ACC_GATE, P_ACC_NIS, P_MAG_NORM_GATE, P_MAG_DIP_GATE = 4, 5, 6, 7
 P_GRAVITY, P_REST_GYRO, P_REST_ACC, P_REST_TIME, P_REST_NOISE = 8, 9, 10, 11, 12
 P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT, P_GYRO_SCALE = 13, 14, 15, 16
 P_ACC_TAU, P_GYRO_PREV_W, P_ACC_ADAPT, P_ACC_SOFT, P_ACC_WN_GAIN = 17, 18, 19, 20, 21
-N_PARAMS = 22
+P_MAG_BIAS, P_ACC_BIAS_DEV, P_BIAS_MAX, P_BIAS_HOLD = 22, 23, 24, 25
+P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
+P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
+N_PARAMS = 32
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
-F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED = 1, 2, 4, 8, 16
+F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 8, 16, 32
+
+
+# Every tuning constant of the EKF, with its unit, in one place (VQF's PyVQFParams is the model). Each entry:
+# name -> (unit, (lowest, highest) allowed, one-line meaning). The defaults are the dataclass defaults below;
+# they were chosen on all 16 shared BROAD trials and the simulator, never on one file (docs/attitude.md).
+PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
+    "gyro_noise": ("rad/s/√Hz", (1e-7, 1.0), "gyro white-noise density: process noise of the attitude"),
+    "gyro_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise (scale-factor/misalignment errors)"),
+    "bias_rw": ("rad/s/√s", (0.0, 1.0), "gyro bias random walk: process noise of the bias"),
+    "accel_noise": ("rad", (1e-5, 3.0), "σ floor of the normalised accelerometer direction per update"),
+    "accel_noise_gain": ("1", (0.0, 100.0), "σ² += (gain × learned accelerometer white-noise σ / g)²"),
+    "accel_lp_tau": ("s", (0.0, 100.0), "low-pass time constant of the specific force in the quasi-inertial "
+                                         "frame (0: raw accelerometer, as in the paper)"),
+    "accel_gate": ("m/s^2", (0.0, 1e3), "shock gate: accelerometer samples with | |a| − g | above this are "
+                                         "skipped for at most shock_max s (0: off)"),
+    "accel_nis_gate": ("1", (0.0, 1e6), "skip accelerometer updates whose NIS exceeds this (0: off)"),
+    "accel_nis_soft": ("bool", (0, 1), "above accel_nis_gate inflate R by NIS/gate instead of skipping"),
+    "accel_adapt": ("m/s^2", (0.0, 1e3), "accelerometer σ × √(1 + (| |a| − g | / this)²) (0: off)"),
+    "shock_max": ("s", (0.0, 1e3), "a shock is at most this long: beyond accel_gate for longer, the acceleration "
+                                   "is sustained and the accelerometer is used again (low-passed), never coasted "
+                                   "on; the gyro bias does not learn from it either way (bias_hold)"),
+    "reject_timeout": ("s", (0.01, 1e4), "a rejected accelerometer is forced back in after this long"),
+    "accel_bias_dev": ("m/s^2", (0.0, 1e3), "no gyro-bias learning from the accelerometer while | |a| − g | "
+                                            "exceeds this, and for bias_hold s after (0: always learn)"),
+    "bias_hold": ("s", (0.0, 1e3), "hold-off after a large | |a| − g | before the bias learns again"),
+    "bias_max": ("rad/s", (0.0, 10.0), "bound on each gyro-bias component (0: none)"),
+    "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading per update ('full' mode: of m̂, rad)"),
+    "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
+    "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
+    "mag_norm_soft": ("1", (0.0, 10.0), "mag σ² × (1 + (norm deviation / this)²): de-weighting (0: off)"),
+    "mag_dip_soft_deg": ("deg", (0.0, 90.0), "mag σ² × (1 + (dip deviation / this)²): de-weighting (0: off)"),
+    "mag_bias": ("bool", (0, 1), "magnetic heading updates may correct the gyro bias"),
+    "gravity": ("m/s^2", (9.7, 9.9), "local gravity"),
+    "rest_gyro": ("rad/s", (0.0, 10.0), "rest: |ω − b| below this on every axis ..."),
+    "rest_accel": ("m/s^2", (0.0, 100.0), "... and | |a| − g | below this ..."),
+    "rest_time": ("s", (0.0, 1e4), "... for this long (0: no rest detection)"),
+    "rest_noise": ("rad/s", (1e-6, 10.0), "σ of the zero-rate pseudo-measurement at rest, per sample"),
+    "gap_factor": ("1", (1.0, 1e6), "a time step longer than this × the median step is a gap"),
+    "gap_rate_sigma": ("rad/s", (0.0, 100.0), "attitude variance growth over a gap: (σ · gap)²"),
+    "gyro_integration": ("rectangular|trapezoid", (0, 0), "rate over a step: ω_k or ½(ω_{k−1} + ω_k)"),
+    "update_every": ("samples", (1, 1e6), "covariance propagation + updates every N samples (paper: 40)"),
+    "mag_mode": ("heading|full|off", (0, 0), "magnetometer use: heading only (never touches roll/pitch), "
+                                             "the paper's full 3-D vector, or none"),
+    "nis_window": ("s", (0.0, 1e4), "self-check window: mean normalised innovation squared per degree of "
+                                     "freedom over about this long (0: off)"),
+    "nis_limit": ("1", (0.0, 1e6), "self-check: samples whose windowed NIS exceeds this are flagged "
+                                   "inconsistent (0: off)"),
+    "lever_arm_lp_tau": ("s", (0.0, 10.0), "low-pass of the body rate before differentiating it (lever arm)"),
+    "init_roll_pitch_sigma_deg": ("deg", (0.0, 180.0), "initial σ of roll and pitch"),
+    "init_heading_sigma_deg": ("deg", (0.0, 180.0), "initial σ of heading"),
+    "init_bias_sigma": ("rad/s", (0.0, 10.0), "initial σ of each gyro-bias component"),
+    "init_bias": ("rad/s", (-10.0, 10.0), "initial gyro bias [x, y, z]"),
+}
 
 
 @dataclass
 class EkfParams:
-    """Tuning of :func:`run_ekf`. Noise figures are one-sigma; every field is a CLI option of `imutool filter`."""
+    """Every tuning constant of :func:`run_ekf` (units and meaning: :data:`PARAM_DOC`). One-sigma noise figures.
 
-    gyro_noise: float = 1e-3  # rad/s/√Hz  gyro white noise density (process noise of the attitude)
-    gyro_scale_noise: float = 0.0  # fraction: rate-proportional process noise (scale/misalignment errors)
-    bias_rw: float = 2e-5  # rad/s/√s   bias random walk (process noise of b)
-    accel_noise: float = 0.03  # σ of the normalised accel direction per update (≈ rad)
-    mag_noise_deg: float = 45.0  # σ of the magnetic heading per update (deg); "full" mode: σ of m̂ (≈ rad)
-    accel_gate: float = 15.0  # m/s²   reject accel when | ‖a‖ − g | exceeds this (≤ 0: off)
-    accel_nis_gate: float = 0.0  # reject accel when its normalised innovation squared exceeds this (≤ 0: off)
-    mag_norm_gate: float = 0.15  # reject mag when | ‖m‖/m_ref − 1 | exceeds this fraction (≤ 0: off)
-    mag_dip_gate_deg: float = 10.0  # reject mag when its dip differs from the reference by more (≤ 0: off)
-    gravity: float = 9.80665  # m/s²
-    rest_gyro: float = 0.05  # rad/s   rest when |ω − b| stays below this ...
-    rest_accel: float = 0.3  # m/s²    ... and | ‖a‖ − g | below this ...
-    rest_time: float = 1.0  # s       ... for this long (≤ 0: rest detection off)
-    rest_noise: float = 0.05  # rad/s   σ of the zero-rate pseudo-measurement at rest (per sample)
-    gap_factor: float = 5.0  # a step longer than gap_factor × median dt is a gap
-    gap_rate_sigma: float = 0.2  # rad/s  attitude variance growth over a gap: (σ·gap)²
-    reject_timeout: float = 3.0  # s  accel forced back in after this long continuously rejected
-    accel_lp_tau: float = 1.0  # s  accel low-pass time constant in the quasi-inertial frame (≤ 0: raw accel)
-    accel_noise_gain: float = 4.0  # accel σ² += (gain × white-noise σ of the accel direction, learned online)²
-    accel_nis_soft: bool = False  # NIS above the gate: inflate R by NIS/gate instead of skipping the update
-    accel_adapt: float = 0.0  # m/s²  accel σ scaled by (1 + (| ‖a‖ − g | / accel_adapt)²)^½ (≤ 0: fixed σ)
-    gyro_integration: str = "rectangular"  # rate over (t_{k-1}, t_k]: ω_k (rectangular) or ½(ω_{k-1}+ω_k)
-    update_every: int = 1  # paper's multi-rate scheme: P propagation + update every N samples (1 = full rate)
-    mag_mode: str = "heading"  # heading | full | off
+    Load and save as TOML (:meth:`from_toml`, :meth:`to_toml`) so a configuration can be kept, shared and cited;
+    ``imutool filter --params FILE`` reads one and writes the parameters it used into the output's metadata.
+    """
+
+    gyro_noise: float = 1e-3
+    gyro_scale_noise: float = 0.0
+    bias_rw: float = 2e-5
+    accel_noise: float = 0.03
+    accel_noise_gain: float = 4.0
+    accel_lp_tau: float = 1.0
+    accel_gate: float = 0.0
+    accel_nis_gate: float = 0.0
+    accel_nis_soft: bool = False
+    accel_adapt: float = 0.0
+    shock_max: float = 0.2
+    reject_timeout: float = 3.0
+    accel_bias_dev: float = 0.0
+    bias_hold: float = 1.0
+    bias_max: float = 0.0
+    mag_noise_deg: float = 20.0
+    mag_norm_gate: float = 0.15
+    mag_dip_gate_deg: float = 10.0
+    mag_norm_soft: float = 0.05
+    mag_dip_soft_deg: float = 5.0
+    mag_bias: bool = True
+    gravity: float = 9.80665
+    rest_gyro: float = 0.05
+    rest_accel: float = 0.3
+    rest_time: float = 1.0
+    rest_noise: float = 0.05
+    gap_factor: float = 5.0
+    gap_rate_sigma: float = 0.2
+    gyro_integration: str = "rectangular"
+    update_every: int = 1
+    mag_mode: str = "heading"
+    nis_window: float = 10.0
+    nis_limit: float = 3.0
+    lever_arm_lp_tau: float = 0.1
     init_roll_pitch_sigma_deg: float = 5.0
     init_heading_sigma_deg: float = 20.0
-    init_bias_sigma: float = 0.01  # rad/s
-    init_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad/s
+    init_bias_sigma: float = 0.01
+    init_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Refuse (ImutoolError) any value outside its declared range, NaN or inf, or an unknown choice."""
+        for name, (unit, (lo, hi), _) in PARAM_DOC.items():
+            v = getattr(self, name)
+            if name == "gyro_integration":
+                self.gyro_prev_weight()
+                continue
+            if name == "mag_mode":
+                self.mag_mode_code()
+                continue
+            vals = v if name == "init_bias" else (v,)
+            try:
+                arr = np.asarray(vals, dtype=float)
+            except (TypeError, ValueError):
+                raise ImutoolError(f"EKF parameter {name} = {v!r}: expected a number ({unit})") from None
+            if arr.shape != ((3,) if name == "init_bias" else (1,)):
+                want = "3 numbers" if name == "init_bias" else "one number"
+                raise ImutoolError(f"EKF parameter {name} = {v!r}: expected {want}")
+            if not (np.all(np.isfinite(arr)) and np.all(arr >= lo) and np.all(arr <= hi)):
+                raise ImutoolError(f"EKF parameter {name} = {v!r} is outside [{lo:g}, {hi:g}] {unit}")
+
+    @classmethod
+    def from_dict(cls, values: dict, source: str = "parameters") -> EkfParams:
+        """Parameters from a mapping (TOML table); unknown names are refused with the list of known ones."""
+        unknown = sorted(set(values) - set(PARAM_DOC))
+        if unknown:
+            raise ImutoolError(f"{source}: unknown EKF parameter(s) {', '.join(unknown)}; known: "
+                               f"{', '.join(PARAM_DOC)}")
+        kw = dict(values)
+        if "init_bias" in kw and isinstance(kw["init_bias"], list):
+            kw["init_bias"] = tuple(kw["init_bias"])
+        for k, v in kw.items():
+            default = getattr(cls, k, None)
+            if isinstance(default, bool) and not isinstance(v, bool):
+                raise ImutoolError(f"{source}: {k} must be true or false, not {v!r}")
+            if isinstance(default, str) and not isinstance(v, str):
+                raise ImutoolError(f"{source}: {k} must be a string, not {v!r}")
+            if isinstance(default, int) and not isinstance(default, bool) and isinstance(v, float):
+                if v != int(v):
+                    raise ImutoolError(f"{source}: {k} must be a whole number, not {v!r}")
+                kw[k] = int(v)
+        return cls(**kw)
+
+    @classmethod
+    def from_toml(cls, path: str) -> EkfParams:
+        """Read a parameters file: keys at the top level or under ``[ekf]`` (as :meth:`to_toml` writes)."""
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib
+        try:
+            with open(path, "rb") as f:
+                data = tomllib.load(f)
+        except OSError as e:
+            raise ImutoolError(f"cannot read parameters: {e.strerror}", path=path) from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+            raise ImutoolError(f"not a valid TOML parameters file: {e}", path=path) from None
+        table = data.get("ekf", data)
+        if not isinstance(table, dict):
+            raise ImutoolError("[ekf] must be a table", path=path)
+        return cls.from_dict({k: v for k, v in table.items() if k != "imutool_params"}, source=str(path))
+
+    def to_toml(self) -> str:
+        """The parameters as a commented TOML ``[ekf]`` table (units and meaning on every line)."""
+        lines = ["# imutool EKF parameters (imutool filter --params FILE); units and meaning per line", "[ekf]"]
+        for name, (unit, _, meaning) in PARAM_DOC.items():
+            v = getattr(self, name)
+            if isinstance(v, bool):
+                txt = "true" if v else "false"
+            elif isinstance(v, str):
+                txt = f'"{v}"'
+            elif isinstance(v, tuple):
+                txt = "[" + ", ".join(repr(float(x)) for x in v) + "]"
+            else:
+                txt = repr(v)
+            lines.append(f"{name} = {txt}  # {unit}: {meaning}")
+        return "\n".join(lines) + "\n"
 
     def vector(self, dt_nominal: float) -> np.ndarray:
         p = np.zeros(N_PARAMS)
@@ -137,6 +294,16 @@ class EkfParams:
         p[P_ACC_ADAPT] = self.accel_adapt
         p[P_ACC_SOFT] = 1.0 if self.accel_nis_soft else 0.0
         p[P_ACC_WN_GAIN] = self.accel_noise_gain
+        p[P_MAG_BIAS] = 1.0 if self.mag_bias else 0.0
+        p[P_ACC_BIAS_DEV] = self.accel_bias_dev
+        p[P_BIAS_MAX] = self.bias_max
+        p[P_BIAS_HOLD] = self.bias_hold
+        p[P_MAG_NORM_SOFT] = self.mag_norm_soft
+        p[P_MAG_DIP_SOFT] = np.radians(self.mag_dip_soft_deg)
+        p[P_NIS_TAU] = self.nis_window
+        p[P_NIS_LIMIT] = self.nis_limit
+        p[P_LEVER_TAU] = self.lever_arm_lp_tau
+        p[P_SHOCK_MAX] = self.shock_max
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -349,7 +516,7 @@ def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
 
 
 @njit(cache=True, inline="always")
-def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx):
+def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_bias=False):
     """Update with a unit-vector measurement: H = [[h×], 0], R = sig2·I (the zero block of H exploited;
     3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code."""
     p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
@@ -473,11 +640,15 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx):
     P[4, 5] = v
     P[5, 4] = v
     P[5, 5] = p55 - (k50 * m50 + k51 * m51 + k52 * m52)
+    if consider_bias:  # Schmidt (consider) update: the bias is neither corrected nor its variance reduced
+        dx[3], dx[4], dx[5] = 0.0, 0.0, 0.0
+        P[3, 3], P[4, 4], P[5, 5] = p33, p44, p55
+        P[3, 4], P[4, 3], P[3, 5], P[5, 3], P[4, 5], P[5, 4] = p34, p34, p35, p35, p45, p45
     return True, nis
 
 
 @njit(cache=True, inline="always")
-def _heading_update(P, r0, r1, r2, y, sig2, dx):
+def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False):
     """Scalar heading update H = [r, 0] (r = world vertical in body axes) with the correction projected on the world
     vertical (Joseph form). Straight-line code."""
     p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
@@ -496,6 +667,8 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx):
     S = hm + sig2
     ka = hm / S  # world-vertical part of the attitude gain
     kb = (m3 * r0 + m4 * r1 + m5 * r2) / S  # world-vertical part of the bias gain
+    if consider_bias:  # Schmidt: Joseph form with a zero bias gain is exact for that suboptimal gain
+        kb = 0.0
     k0, k1, k2, k3, k4, k5 = r0 * ka, r1 * ka, r2 * ka, r0 * kb, r1 * kb, r2 * kb
     dx[0], dx[1], dx[2], dx[3], dx[4], dx[5] = k0 * y, k1 * y, k2 * y, k3 * y, k4 * y, k5 * y
     # Joseph: P ← (I − K H) P (I − K H)ᵀ + K sig2 Kᵀ = P − K Mᵀ − M Kᵀ + S K Kᵀ
@@ -550,6 +723,7 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx):
     P[4, 5] = v
     P[5, 4] = v
     P[5, 5] = p55 - k5 * m5 - m5 * k5 + S * k5 * k5
+    return y * y / S
 
 
 @njit(cache=True, inline="always")
@@ -561,11 +735,15 @@ def _apply_correction(st, dx):
     st[4] += dx[3]
     st[5] += dx[4]
     st[6] += dx[5]
+    bm = st[S_BIASMAX]
+    if bm > 0:
+        for i in range(4, 7):
+            st[i] = min(bm, max(-bm, st[i]))
 
 
 @njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
-               st, q_out, b_out, std_out, flags_out, p_store):
+               lever, st, q_out, b_out, std_out, flags_out, p_store):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
 
     t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
@@ -687,6 +865,27 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         na = 0.0
         dev_a = 0.0
         ri_now = False  # RI = R(q_I) computed for this sample
+        use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
+        if use_lever and dt > 0:
+            # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
+            # differentiated (bias-free rate; the bias cancels in ω̇ and is negligible in ω × (ω × r))
+            al = dt / (prm[P_LEVER_TAU] + dt) if prm[P_LEVER_TAU] > 0 else 1.0
+            if st[S_WINIT] == 0.0:
+                st[S_WLP], st[S_WLP + 1], st[S_WLP + 2] = gk0 - st[4], gk1 - st[5], gk2 - st[6]
+                st[S_WINIT] = 1.0
+            for i in range(3):
+                wi = (gk0 if i == 0 else (gk1 if i == 1 else gk2)) - st[4 + i]
+                new = st[S_WLP + i] + al * (wi - st[S_WLP + i])
+                st[S_WDOT + i] = (new - st[S_WLP + i]) / dt
+                st[S_WLP + i] = new
+        if acc_ok and use_lever:
+            wx, wy, wz = st[S_WLP], st[S_WLP + 1], st[S_WLP + 2]
+            ex, ey, ez = st[S_WDOT], st[S_WDOT + 1], st[S_WDOT + 2]
+            rx, ry, rz = lever[0], lever[1], lever[2]
+            cx, cy, cz = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx  # ω × r
+            ax -= (ey * rz - ez * ry) + (wy * cz - wz * cy)
+            ay -= (ez * rx - ex * rz) + (wz * cx - wx * cz)
+            az -= (ex * ry - ey * rx) + (wx * cy - wy * cx)
         if acc_ok:
             if use_gnss and np.isfinite(sog[k]) and np.isfinite(cog[k]):
                 wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
@@ -699,7 +898,17 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 az -= R[0, 2] * an0 + R[1, 2] * an1
             na = np.sqrt(ax * ax + ay * ay + az * az)
             dev_a = abs(na - g)
-            rej = (prm[P_ACC_GATE] > 0 and dev_a > prm[P_ACC_GATE]) or not na > 0
+            if prm[P_ACC_BIAS_DEV] > 0 and dev_a > prm[P_ACC_BIAS_DEV]:
+                st[S_BHOLD] = prm[P_BIAS_HOLD]
+            elif dt > 0:
+                st[S_BHOLD] = max(0.0, st[S_BHOLD] - dt)
+            above = prm[P_ACC_GATE] > 0 and dev_a > prm[P_ACC_GATE]
+            if above:  # a shock, or sustained acceleration once it lasts longer than shock_max
+                st[S_SHOCK_T] += dt
+                st[S_BHOLD] = prm[P_BIAS_HOLD]
+            else:
+                st[S_SHOCK_T] = 0.0
+            rej = (above and st[S_SHOCK_T] <= prm[P_SHOCK_MAX]) or not na > 0
             force = st[S_AREJ_T] >= prm[P_REJ_TIMEOUT]
             if use_lp and (not rej or force):
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
@@ -742,11 +951,15 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         sig2 += prm[P_ACC_WN_GAIN] * prm[P_ACC_WN_GAIN] * st[S_AVAR] / (g * g)
                     if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
                         sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
-                    ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx)
+                    cons = st[S_BHOLD] > 0
+                    ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons)
                     if not ok and prm[P_ACC_SOFT] > 0:  # de-weight instead of skipping (flagged as rejected)
-                        _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx)
+                        _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)
+                    if prm[P_NIS_TAU] > 0 and dt > 0:  # self-check: windowed NIS per degree of freedom
+                        aw = min(1.0, dt * update_every / prm[P_NIS_TAU])
+                        st[S_NIS_A] += aw * (min(nis, 1e6) / 3.0 - st[S_NIS_A])
                     if ok:
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)
@@ -777,7 +990,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     st[S_NMREJ] += 1
                 elif mag_mode == 1:
                     yh = -_atan2(mw1, mw0)  # heading error: the horizontal field should point north
-                    _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, prm[P_MAG_NOISE] ** 2, dx)
+                    sm2 = prm[P_MAG_NOISE] ** 2
+                    if prm[P_MAG_NORM_SOFT] > 0 and st[S_MNORM] > 0:
+                        sm2 *= 1.0 + ((nm / st[S_MNORM] - 1.0) / prm[P_MAG_NORM_SOFT]) ** 2
+                    if prm[P_MAG_DIP_SOFT] > 0:
+                        sm2 *= 1.0 + ((np.arcsin(min(1.0, max(-1.0, mw2 / nm))) - dip_ref) / prm[P_MAG_DIP_SOFT]) ** 2
+                    nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2, dx, prm[P_MAG_BIAS] == 0.0)
+                    if prm[P_NIS_TAU] > 0 and dt > 0:
+                        st[S_NIS_M] += min(1.0, dt * update_every / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
                     _apply_correction(st, dx)
                     flag |= F_MAG_USED
                 else:
@@ -815,6 +1035,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         std_out[k, 0] = np.sqrt(max(v0, 0.0))
         std_out[k, 1] = np.sqrt(max(v1, 0.0))
         std_out[k, 2] = np.sqrt(max(v2, 0.0))
+        if prm[P_NIS_LIMIT] > 0 and (st[S_NIS_A] > prm[P_NIS_LIMIT] or st[S_NIS_M] > prm[P_NIS_LIMIT]):
+            flag |= F_INCONSISTENT
+            st[S_NINC] += 1
         flags_out[k] = flag
         if store:
             for i in range(6):
@@ -1048,7 +1271,8 @@ def _gnss_arrays(time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray |
 def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None,
             params: EkfParams | None = None, sog: np.ndarray | None = None, cog_deg: np.ndarray | None = None,
             state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
-            cov_every_sample: bool | None = None) -> tuple[AttitudeResult, np.ndarray]:
+            cov_every_sample: bool | None = None, lever_arm: np.ndarray | None = None,
+            progress: Progress | None = None) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
@@ -1067,7 +1291,11 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         state = initial_state(a, m if use_mag else None, params)
     st = np.array(state, dtype=np.float64)
     prm = params.vector(dt_nominal)
+    st[S_BIASMAX] = params.bias_max
     sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
+    lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(lever)):
+        raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")
     q_out = np.empty((n, 4))
     b_out = np.empty((n, 3))
     std_out = np.empty((n, 3))
@@ -1075,12 +1303,17 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
     every = max(1, int(params.update_every))
     cov_each = keep_cov if cov_every_sample is None else cov_every_sample
-    ekf_kernel(t, g, a, m, sg, cg, sd, prm, every, params.mag_mode_code() if use_mag else 0,
-               bool(cov_each or every == 1), use_gnss, st, q_out, b_out, std_out, flags, p_store)
+    mode, cov_flag = params.mag_mode_code() if use_mag else 0, bool(cov_each or every == 1)
+    # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
+    for i0, i1 in ([(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress)):
+        ekf_kernel(t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1], prm, every, mode,
+                   cov_flag, use_gnss, lever, st, q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1],
+                   p_store[i0:i1] if keep_cov else p_store)
     summary = {
         "samples": n, "updates": int(st[S_NUPD]), "accel_rejected": int(st[S_NAREJ]),
         "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
+        "inconsistent_samples": int(st[S_NINC]),
     }
     return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None), st
 
@@ -1130,8 +1363,31 @@ def euler_std(q: np.ndarray, P: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2]], axis=1), 0.0))
 
 
+def self_check(time: np.ndarray, flags: np.ndarray, max_spans: int = 20,
+               n_total: int | None = None) -> tuple[dict, list[str]]:
+    """Summary of the innovation-consistency monitor: flagged share, time spans (s) and warnings to show.
+
+    ``n_total``: number of samples the share refers to (default: len(flags)); a flag-0 row separates spans."""
+    bad = (np.asarray(flags) & F_INCONSISTENT) > 0
+    share = float(bad.sum()) / max(1, len(bad) if n_total is None else n_total)
+    info: dict = {"inconsistent_samples": int(bad.sum()), "inconsistent_share": round(share, 6)}
+    if not bad.any():
+        return info, []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
+    spans = [(float(time[a]), float(time[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    info["inconsistent_spans_s"] = [[round(a, 3), round(b, 3)] for a, b in spans[:max_spans]]
+    shown = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in spans[:5]) + (f" and {len(spans) - 5} more"
+                                                                        if len(spans) > 5 else "")
+    warn = (f"the attitude filter's self-check failed on {100 * share:.1f} % of samples ({shown}): its "
+            "accelerometer/magnetometer innovations are far larger than its covariance allows, so the estimate "
+            "is not trustworthy there (column 'inconsistent' = 1); sustained acceleration, a wrong mounting or "
+            "units, or a diverging filter")
+    return info, [warn]
+
+
 def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool = False,
-                  use_gnss: bool = True) -> tuple[Recording, dict]:
+                  use_gnss: bool = True, lever_arm: np.ndarray | None = None,
+                  progress: Progress | None = None) -> tuple[Recording, dict]:
     """Run the EKF (and optionally the smoother) on a recording; returns (estimate recording, summary).
 
     Needs ``gyro`` and ``accel``; uses ``mag`` when present, ``sog``/``cog`` when present and use_gnss.
@@ -1149,11 +1405,20 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
         sog = rec.get("sog", "m/s") if "sog" in rec.units else rec["sog"]
         cog = rec.get("cog", "deg") if "cog" in rec.units else rec["cog"]
-    res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth)
+    res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth, lever_arm=lever_arm,
+                     progress=progress)
     summary = dict(res.summary)
+    check, warnings = self_check(res.time, res.flags)
+    summary.update(check)
     if smooth:
         res = rts_smooth(res, gyro, params)
     out = result_recording(rec, res, params)
+    if lever_arm is not None:
+        out.meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
+        out.meta["lever_arm_frame"] = "body FRD, sensor relative to the centre of rotation"
+    if warnings:
+        out.meta["warnings"] = list(out.meta.get("warnings") or []) + warnings
+        summary["warnings"] = list(summary.get("warnings") or []) + warnings
     summary["method"] = "ekf" + ("+rts" if smooth else "")
     return out, summary
 
@@ -1175,10 +1440,11 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     out.add("accel_rejected", (res.flags & F_ACC_REJ > 0).astype(float), "1")
     out.add("mag_rejected", (res.flags & F_MAG_REJ > 0).astype(float), "1")
     out.add("rest", (res.flags & F_REST > 0).astype(float), "1")
+    out.add("inconsistent", (res.flags & F_INCONSISTENT > 0).astype(float), "1")
     carry_labels(rec, out)
     out.meta[DECIMALS_KEY] = dict(OUTPUT_DECIMALS)
     if params is not None:
-        out.meta["filter"] = {k: v for k, v in asdict(params).items()}
+        out.meta["filter"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(params).items()}
     return out
 
 
@@ -1186,7 +1452,7 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
 # their σ, 1e-9 for quaternion components (≈ 1e-7°) and bias (rad/s ≈ 2e-4 °/h) — far below any sensor's noise,
 # and ~40 % fewer bytes and much faster to write than 17 significant digits. Time stays exact.
 OUTPUT_DECIMALS = {"roll": 6, "pitch": 6, "heading": 6, "q": 9, "gyro_bias": 9, "roll_std": 6, "pitch_std": 6,
-                   "heading_std": 6, "accel_rejected": 0, "mag_rejected": 0, "rest": 0}
+                   "heading_std": 6, "accel_rejected": 0, "mag_rejected": 0, "rest": 0, "inconsistent": 0}
 
 
 LABEL_CHANNELS = ("movement", "zvi")

@@ -77,13 +77,18 @@ def test_nan_rows_gaps_and_shocks():
     g[100:110] = np.nan
     a[500:520] = np.nan
     m[700:800, 1] = np.nan
-    a[5000:5010] += 30.0  # shocks
+    a[5000:5005, 0] += 30.0  # a knock: ±30 m/s² for 25 ms each way (the velocity returns to zero, as a real one)
+    a[5005:5010, 0] -= 30.0
     res, st = run_ekf(rec.time, g, a, m)
     assert np.all(np.isfinite(res.q)) and np.all(np.isfinite(res.std))
     assert res.summary["gaps"] == 1 and res.summary["gyro_nan_samples"] == 10
-    assert np.all(res.flags[5000:5010] & 1)  # shocks rejected
     r = np.degrees(quat_to_euler(res.q)[0])
+    # no shock gate by default: the quasi-inertial low-pass averages a physical shock out (a gate that drops
+    # samples biases that average: on BROAD 16 it makes the filter diverge, docs/attitude.md)
+    assert np.abs(r[5000:5600] - rec["ref_roll"][5000:5600]).max() < 1.0
     assert _rmse(r[4000:], rec["ref_roll"][4000:]) < 0.5
+    gated, _ = run_ekf(rec.time, g, a, m, EkfParams(accel_gate=15.0))  # the optional gate still flags them
+    assert np.all(gated.flags[5000:5010] & 1)
 
 
 def test_heading_only_mag_keeps_disturbance_out_of_roll():
@@ -150,7 +155,7 @@ def test_cli_streamed_filter_equals_in_memory(tmp_path):
         run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(outs[name]), "--json", "--mounting", "x,-y,-z",
                                        *extra])
         assert run.exit_code == 0, run.output
-        summary = json.loads(run.output)
+        summary = json.loads(run.stdout)
     assert summary["method"] == "ekf (streamed)" and summary["skipped_rows"] == 1
     a, b = formats.read(outs["memory"]), formats.read(outs["stream"])
     assert len(a) == len(b) == 8000
@@ -172,10 +177,10 @@ def test_cli_filter_and_evaluate(tmp_path):
         assert c in est.channels
     ev = CliRunner().invoke(cli, ["evaluate", str(out), "--reference", str(src), "--json", "--max-lag", "0.5"])
     assert ev.exit_code == 0, ev.output
-    s = json.loads(ev.output)
+    s = json.loads(ev.stdout)
     assert s["angles"]["roll"]["rmse"] < 1.0 and "snr_db" in s["angles"]["roll"]
     bad = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / "x.csv"), "--update-every", "0"])
-    assert bad.exit_code != 0 and "update-every" in str(bad.exception)
+    assert bad.exit_code == 2 and "update-every" in bad.output
 
 
 BROAD = ["02_undisturbed_slow_rotation_B", "05_undisturbed_slow_rotation_with_breaks_B",
@@ -226,7 +231,7 @@ def test_cli_gnss_from_nmea_file(tmp_path):
         out = tmp_path / f"{name}.csv"
         run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "--json", *extra])
         assert run.exit_code == 0, run.output
-        assert json.loads(run.output)["gnss_compensation"] is (name == "gnss")
+        assert json.loads(run.stdout)["gnss_compensation"] is (name == "gnss")
         est = formats.read(out)
         errs[name] = np.abs(est["roll"][late] - rec["ref_roll"][late]).max()
     assert errs["gnss"] < 1.0 < errs["none"], errs
@@ -242,8 +247,8 @@ def test_learned_accel_noise_and_raw_mode():
     a[3000:3005] += 40.0
     res, st = run_ekf(rec.time, rec["gyro"], a, rec["mag"])
     assert np.sqrt(st[S_AVAR]) == pytest.approx(9.80665 * np.radians(1.5), rel=0.05)
-    assert np.all(res.flags[3000:3005] & 1)
     raw, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], EkfParams(accel_lp_tau=0, accel_noise_gain=0))
+    clean, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"])
     s = rec.time > 10
-    r_def, r_raw = (np.degrees(quat_to_euler(x.q)[0]) for x in (res, raw))
+    r_def, r_raw = (np.degrees(quat_to_euler(x.q)[0]) for x in (clean, raw))
     assert _rmse(r_def[s], rec["ref_roll"][s]) < _rmse(r_raw[s], rec["ref_roll"][s])

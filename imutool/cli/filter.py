@@ -10,7 +10,8 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options
+from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector, safe_outputs
+from imutool.progress import bar
 
 
 @click.command("filter", epilog="Example: imutool simulate ship-roll -o roll.csv && "
@@ -20,45 +21,23 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--method", type=click.Choice(["ekf", "lpf", "accel", "compass"]), default="ekf", show_default=True,
               help="ekf: quaternion EKF with gyro bias; lpf: Butterworth low-passed accel tilt + magnetic heading "
                    "(paper baseline); accel: unfiltered accelerometer tilt; compass: heading Kalman filter.")
-@click.option("--update-every", type=int, default=1, show_default=True,
-              help="EKF: covariance propagation + accel/mag update every N samples (paper: 40 at 200 Hz).")
-@click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default="heading", show_default=True,
-              help="EKF magnetometer use: heading only (never touches roll/pitch), full 3-D vector (paper), off.")
+@click.option("--params", "params_file", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="EKF: TOML file with tuning parameters (every constant, its unit and default: "
+                   "`--save-params FILE` writes the full set).")
+@click.option("--param", "param_items", multiple=True, metavar="NAME=VALUE",
+              help="EKF: override one tuning parameter (repeatable), e.g. --param mag_noise_deg=10.")
+@click.option("--save-params", type=click.Path(dir_okay=False), default=None,
+              help="EKF: write the parameters used (TOML, with units) to this file.")
+@click.option("--update-every", type=int, default=None,
+              help="EKF: covariance propagation + accel/mag update every N samples (paper: 40 at 200 Hz; default 1).")
+@click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default=None,
+              help="EKF magnetometer use: heading only (default; never touches roll/pitch), full 3-D vector "
+                   "(paper), off.")
 @click.option("--smooth", is_flag=True, help="EKF: add the RTS backward pass (zero-lag offline estimates).")
-@click.option("--gyro-noise", type=float, default=1e-3, show_default=True, help="EKF: gyro noise density, rad/s/√Hz.")
-@click.option("--gyro-scale-noise", type=float, default=0.0, show_default=True,
-              help="EKF: rate-proportional gyro noise (scale-factor uncertainty, fraction).")
-@click.option("--bias-rw", type=float, default=2e-5, show_default=True, help="EKF: gyro bias random walk, rad/s/√s.")
-@click.option("--accel-noise", type=float, default=0.03, show_default=True,
-              help="EKF: σ floor of the normalised accelerometer direction per update (≈ rad).")
-@click.option("--accel-noise-gain", type=float, default=4.0, show_default=True,
-              help="EKF: accel σ² = floor² + (gain × the accelerometer's white-noise σ/g learned online)² "
-                   "(0 = fixed σ).")
-@click.option("--accel-lp-tau", type=float, default=1.0, show_default=True,
-              help="EKF: time constant (s) of the accel low-pass in the gyro-integrated quasi-inertial frame "
-                   "(0 = raw accel as in the paper).")
-@click.option("--gyro-integration", type=click.Choice(["rectangular", "trapezoid"]), default="rectangular",
-              show_default=True, help="EKF: rate over a step: ω_k (rectangular) or ½(ω_{k−1}+ω_k) (trapezoid).")
-@click.option("--mag-noise", type=float, default=45.0, show_default=True, help="EKF: σ of magnetic heading, deg.")
-@click.option("--accel-gate", type=float, default=15.0, show_default=True,
-              help="EKF: skip accel sample (shock) when | |a| − g | exceeds this (m/s², 0 = off).")
-@click.option("--accel-nis-gate", type=float, default=0.0, show_default=True,
-              help="EKF: skip accel update when its NIS exceeds this (0 = off).")
-@click.option("--accel-nis-soft", is_flag=True,
-              help="EKF: above --accel-nis-gate inflate R by NIS/gate instead of skipping the update.")
-@click.option("--accel-adapt", type=float, default=0.0, show_default=True,
-              help="EKF: scale accel σ by √(1 + (| |a| − g | / this)²) (m/s², 0 = off).")
-@click.option("--mag-norm-gate", type=float, default=0.15, show_default=True,
-              help="EKF: skip mag update when |m|/m_ref departs from 1 by more (fraction, 0 = off).")
-@click.option("--mag-dip-gate", type=float, default=10.0, show_default=True,
-              help="EKF: skip mag update when the dip departs by more (deg, 0 = off).")
-@click.option("--rest-time", type=float, default=1.0, show_default=True,
-              help="EKF: rest after this long below --rest-gyro/--rest-accel (s, 0 = no rest detection).")
-@click.option("--rest-gyro", type=float, default=0.05, show_default=True, help="EKF: rest rate threshold, rad/s.")
-@click.option("--rest-accel", type=float, default=0.3, show_default=True,
-              help="EKF: rest | |a| − g | threshold, m/s².")
-@click.option("--gap-factor", type=float, default=5.0, show_default=True,
-              help="EKF: a time step longer than this × median dt is a gap.")
+@click.option("--lever-arm", default=None, metavar="X,Y,Z",
+              help="EKF: sensor position relative to the vessel's centre of rotation, m, body FRD (x bow, "
+                   "y starboard, z down; a bridge 20 m above the roll centre is z = -20): the tangential and "
+                   "centripetal accelerations ω̇×r + ω×(ω×r) are removed before the accelerometer update.")
 @click.option("--gnss", "gnss_path", type=click.Path(exists=True, dir_okay=False), default=None,
               help="EKF: NMEA or CSV file with sog (m/s) and cog (deg) for centripetal compensation "
                    "(sog/cog columns of INPUT are used automatically).")
@@ -73,40 +52,37 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
               help="compass: magnetic variation, deg east positive (true = magnetic + variation).")
 @click.option("--paper-init", is_flag=True, help="compass: x0 = 0, P0 = 0 as in the paper.")
 @click.option("--chunk-rows", type=int, default=1_000_000, show_default=True,
-              help="EKF on CSV: stream the file in chunks of this many rows when it is larger than --stream-mb.")
+              help="EKF on CSV/Parquet: stream the file in chunks of this many rows when larger than --stream-mb.")
 @click.option("--stream-mb", type=float, default=300.0, show_default=True,
-              help="EKF on CSV: stream (bounded memory) when the input is larger than this (MB).")
+              help="EKF on CSV/Parquet: stream (bounded memory) when the input is larger than this (MB).")
 @input_options
 @output_options
-def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag_mode: str, smooth: bool,
-               gyro_noise: float, gyro_scale_noise: float, bias_rw: float, accel_noise: float,
-               accel_noise_gain: float, accel_lp_tau: float, gyro_integration: str, mag_noise: float,
-               accel_gate: float, accel_nis_gate: float, accel_nis_soft: bool, accel_adapt: float,
-               mag_norm_gate: float, mag_dip_gate: float,
-               rest_time: float, rest_gyro: float, rest_accel: float, gap_factor: float, gnss_path: str | None,
-               no_gnss: bool, cutoff: float, order: int, compass_model: str, comp_q: float, comp_r: float,
-               variation: float, paper_init: bool, chunk_rows: int, stream_mb: float, as_json: bool, quiet: bool,
-               **io: Any) -> None:
+@safe_outputs("output", "save_params")
+def filter_cmd(input_path: str, output: str, method: str, params_file: str | None, param_items: tuple[str, ...],
+               save_params: str | None, update_every: int | None, mag_mode: str | None, smooth: bool,
+               lever_arm: str | None, gnss_path: str | None, no_gnss: bool, cutoff: float, order: int,
+               compass_model: str, comp_q: float, comp_r: float, variation: float, paper_init: bool,
+               chunk_rows: int, stream_mb: float, as_json: bool, quiet: bool, **io: Any) -> None:
     """Estimate roll, pitch and heading (deg) from INPUT (gyro/accel/mag, or an NMEA heading for compass).
 
     Output columns: roll, pitch, heading (deg), qw..qz (body→NED), gyro_bias_x..z (rad/s), roll_std,
-    pitch_std, heading_std (deg, one sigma), accel_rejected, mag_rejected, rest (0/1); ref_* and label
-    columns of the input are carried over so `imutool evaluate OUTPUT` works directly.
+    pitch_std, heading_std (deg, one sigma), accel_rejected, mag_rejected, rest, inconsistent (0/1: the
+    filter's self-check); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
+    works directly. EKF tuning: --params FILE / --param NAME=VALUE (list and units: --save-params).
     """
-    from imutool.attitude import EkfParams
+    params = ekf_params(params_file, param_items, update_every, mag_mode)
+    lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
+    if lever is not None and not np.all(np.isfinite(lever)):
+        raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
+    if save_params:
+        from formats.atomic import atomic_path
 
-    if update_every < 1:
-        raise ImutoolError("--update-every must be ≥ 1")
-    params = EkfParams(gyro_noise=gyro_noise, gyro_scale_noise=gyro_scale_noise, bias_rw=bias_rw,
-                       accel_noise=accel_noise, accel_noise_gain=accel_noise_gain, accel_lp_tau=accel_lp_tau,
-                       gyro_integration=gyro_integration, mag_noise_deg=mag_noise, accel_gate=accel_gate,
-                       accel_nis_gate=accel_nis_gate, accel_nis_soft=accel_nis_soft, accel_adapt=accel_adapt,
-                       mag_norm_gate=mag_norm_gate, mag_dip_gate_deg=mag_dip_gate,
-                       rest_time=rest_time, rest_gyro=rest_gyro, rest_accel=rest_accel, gap_factor=gap_factor,
-                       update_every=update_every, mag_mode=mag_mode)
-    if (method == "ekf" and not smooth and gnss_path is None and formats.kind_of(input_path) == "csv"
+        with atomic_path(save_params) as tmp:
+            tmp.write_text(params.to_toml(), encoding="utf-8")
+    if (method == "ekf" and not smooth and gnss_path is None and formats.kind_of(input_path) in ("csv", "parquet")
             and os.path.getsize(input_path) > stream_mb * 1e6):
-        summary = _stream_ekf(input_path, output, params, chunk_rows, no_gnss, io)
+        summary = _stream_ekf(input_path, output, params, chunk_rows, no_gnss, io, lever, quiet)
+        _warn(summary)
         emit_summary(summary, as_json, quiet)
         return
     rec, validation = load_input(input_path, **io)
@@ -116,9 +92,16 @@ def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag
 
         if gnss_path and not no_gnss:
             rec = _attach_gnss(rec, gnss_path)
-        out, s = ekf_recording(rec, params, smooth=smooth, use_gnss=not no_gnss)
-        if smooth:
-            s["smoother_gain"] = _smoother_gain(rec, params)
+        with bar("filter", total=len(rec), unit="samples", quiet=quiet) as b:
+            out, s = ekf_recording(rec, params, smooth=smooth, use_gnss=not no_gnss, lever_arm=lever, progress=b)
+        if smooth and ("ref_q" in rec.channels or "ref_roll" in rec.channels):
+            from imutool.metrics import attitude_rmse
+
+            causal, _ = ekf_recording(rec, params, use_gnss=not no_gnss, lever_arm=lever)
+            s["smoother_gain"] = {"causal_rmse_deg": attitude_rmse(causal, rec),
+                                  "smoothed_rmse_deg": attitude_rmse(out, rec)}
+        if params_file:
+            out.meta["filter_params_file"] = params_file
     elif method in ("lpf", "accel"):
         from imutool.baseline import lpf_attitude
 
@@ -136,20 +119,52 @@ def filter_cmd(input_path: str, output: str, method: str, update_every: int, mag
     summary.update(s)
     if validation.get("rows_with_nan"):
         summary["input_rows_with_nan"] = validation["rows_with_nan"]
+    _warn(summary)
     formats.write(out, output)
     emit_summary(summary, as_json, quiet)
 
 
-def _smoother_gain(rec, params) -> dict[str, Any] | None:
-    """When the input carries truth (ref_roll...), RMSE of the causal filter vs the smoother."""
-    if "ref_q" not in rec.channels and "ref_roll" not in rec.channels:
-        return None
-    from imutool.attitude import ekf_recording
-    from imutool.metrics import attitude_rmse
+def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None,
+               mag_mode: str | None) -> Any:
+    """EkfParams from the defaults, then --params FILE, then --param NAME=VALUE, then the everyday flags."""
+    from imutool.attitude import PARAM_DOC, EkfParams
 
-    causal, _ = ekf_recording(rec, params, smooth=False)
-    smooth, _ = ekf_recording(rec, params, smooth=True)
-    return {"causal_rmse_deg": attitude_rmse(causal, rec), "smoothed_rmse_deg": attitude_rmse(smooth, rec)}
+    values: dict[str, Any] = {}
+    if params_file:
+        values.update(vars(EkfParams.from_toml(params_file)))
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or name not in PARAM_DOC:
+            raise ImutoolError(f"--param {item!r}: expected NAME=VALUE with NAME one of {', '.join(PARAM_DOC)}")
+        values[name] = _param_value(name, text.strip(), getattr(EkfParams(), name))
+    if update_every is not None:
+        values["update_every"] = update_every
+    if mag_mode is not None:
+        values["mag_mode"] = mag_mode
+    return EkfParams.from_dict(values, source="--params/--param")
+
+
+def _param_value(name: str, text: str, default: Any) -> Any:
+    try:
+        if isinstance(default, bool):
+            if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError
+            return text.lower() in ("true", "1", "yes")
+        if isinstance(default, tuple):
+            return tuple(float(x) for x in text.split(","))
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            return float(text)
+        return text
+    except ValueError:
+        raise ImutoolError(f"--param {name}={text!r}: expected a value like {default!r}") from None
+
+
+def _warn(summary: dict[str, Any]) -> None:
+    for w in summary.get("warnings") or []:
+        click.echo(f"warning: {w}", err=True)
 
 
 def _attach_gnss(rec, path: str):
@@ -168,10 +183,12 @@ def _attach_gnss(rec, path: str):
     return out
 
 
-def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, io: dict) -> dict[str, Any]:
-    """Bounded-memory EKF over a large CSV: chunks from iter_csv, state carried, rows appended to the output."""
-    from formats.csv import CsvWriter, iter_csv
-    from imutool.attitude import nominal_dt, result_recording, run_ekf
+def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, io: dict, lever=None,
+                quiet: bool = True) -> dict[str, Any]:
+    """Bounded-memory EKF over a large CSV/Parquet: chunks streamed, state carried, rows appended to the output."""
+    from formats.csv import CsvWriter
+    from imutool.attitude import F_INCONSISTENT, nominal_dt, result_recording, run_ekf, self_check
+    from imutool.progress import estimate_rows
 
     cal = mounting = None  # read once, applied to every chunk
     if io.get("calibration_file"):
@@ -188,9 +205,12 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
     totals: dict[str, int] = {}
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
-    with CsvWriter(output, background=True) as w:
-        for chunk in iter_csv(path, chunk_rows=chunk_rows, columns=io.get("columns"), profile=io.get("profile"),
-                              prefetch=True):
+    opts = ({"columns": io.get("columns"), "profile": io.get("profile"), "prefetch": True}
+            if formats.kind_of(path) == "csv" else {})
+    flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
+    total = estimate_rows(path) if formats.kind_of(path) == "csv" else None
+    with CsvWriter(output, background=True) as w, bar("filter", total=total, unit="rows", quiet=quiet) as b:
+        for chunk in formats.iter_chunks(path, chunk_rows=chunk_rows, **opts):
             keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
             if not keep.all():
                 summary["dropped_non_increasing_rows"] += int((~keep).sum())
@@ -210,16 +230,34 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
             if not no_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
                 sog, cog = chunk["sog"], chunk["cog"]
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
-                                 sog, cog, state=state, dt_nominal=dt_nom)
+                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever)
+            bad = (res.flags & F_INCONSISTENT) > 0
+            if bad.any():
+                flagged_t.append(res.time[bad])
             for k, v in res.summary.items():
                 if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
                     totals[k] = int(v)  # the state carries cumulative counters
-            w.write(result_recording(chunk, res, params))
+            est = result_recording(chunk, res, params)
+            if lever is not None:
+                est.meta["lever_arm_m"] = [float(x) for x in lever]
+            w.write(est)
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
+            b(summary["rows"], total)
             if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
                 summary["skipped_rows"] = chunk.meta["skipped_rows"]
                 summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
     summary.update(totals)
     summary["samples"] = summary["rows"]
+    if flagged_t:  # spans from the flagged times: a gap longer than 1 s between flagged samples splits a span
+        tf = np.concatenate(flagged_t)
+        flags = np.full(len(tf), F_INCONSISTENT, np.uint8)
+        split = np.flatnonzero(np.diff(tf) > 1.0)
+        times = np.insert(tf, split + 1, np.nan)
+        flags = np.insert(flags, split + 1, 0)
+        check, warnings = self_check(times, flags, n_total=summary["rows"])
+        summary.update(check)
+        summary["warnings"] = warnings
+    if lever is not None:
+        summary["lever_arm_m"] = [float(x) for x in lever]
     return summary

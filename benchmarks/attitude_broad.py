@@ -1,0 +1,168 @@
+"""Attitude accuracy on every shared BROAD trial, beside VQF and offline VQF computed in the same run, and the
+generalisation table: parameters chosen on one kind of motion, scored on the others.
+
+Usage::
+
+    pip install vqf                       # benchmark-only: never a dependency of the filter
+    python benchmarks/attitude_broad.py   # per-trial table (defaults) + generalisation table
+    python benchmarks/attitude_broad.py --quick   # per-trial table only
+
+Metric (BROAD paper, Laidig et al., Data 6(7) 2021): over ``movement`` rows with a valid optical reference,
+d = q_est ⊗ q_ref* (world frame), total = 2·acos|d_w|, inclination = 2·acos√(d_w² + d_z²); RMS in degrees.
+VQF works in ENU; its quaternion is left-multiplied by the fixed ENU→NED rotation before scoring.
+
+The candidate grid is small and stated below. The shock gate is off in every candidate: that is a design
+decision (a gate that cuts the accelerometer makes the filter coast and lets the gyro bias run; issue 13),
+not a tuned value.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from formats import read  # noqa: E402
+from formats.frames import quat_multiply  # noqa: E402
+from imutool.attitude import EkfParams, rts_smooth, run_ekf  # noqa: E402
+from imutool.metrics import evaluate_quaternion  # noqa: E402
+
+BROAD = Path(os.environ.get("IMUTOOL_SHARED_DATA", ROOT.parent / "shared" / "data")) / "broad"
+ENU2NED = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])  # x_ned = y_enu, y_ned = x_enu, z_ned = −z_enu
+ROTATION = ("01", "02", "04", "05", "06", "07")  # "undisturbed rotation" trials of BROAD
+OTHER = ("10", "11", "16", "21", "24", "26", "28", "29", "33", "35")  # translation and disturbance trials
+
+# the candidate grid of the generalisation table (every other parameter at its default)
+GRID = {"mag_noise_deg": (10.0, 20.0, 45.0), "accel_lp_tau": (1.0, 3.0), "mag_soft": (False, True)}
+
+
+def load_trials() -> dict[str, dict[str, np.ndarray]]:
+    trials = {}
+    for f in sorted(BROAD.glob("*.csv")):
+        rec = read(f)
+        trials[f.stem] = {"t": rec.time, "g": rec.get("gyro", "rad/s"), "a": rec.get("accel", "m/s^2"),
+                          "m": rec["mag"], "q": rec["ref_q"], "mv": rec["movement"] > 0}
+    return trials
+
+
+def score(q: np.ndarray, d: dict) -> tuple[float, float]:
+    m = evaluate_quaternion(q, d["q"], d["mv"])
+    return m["total"]["rmse"], m["inclination"]["rmse"]
+
+
+def run_ours(d: dict, prm: EkfParams, smooth: bool) -> tuple[tuple[float, float], tuple[float, float], dict]:
+    res, _ = run_ekf(d["t"], d["g"], d["a"], d["m"], prm, keep_cov=smooth)
+    c = score(res.q, d)
+    s = score(rts_smooth(res, d["g"], prm).q, d) if smooth else (np.nan, np.nan)
+    return c, s, res.summary
+
+
+def run_vqf(d: dict) -> tuple[tuple[float, float], tuple[float, float]]:
+    from vqf import VQF, offlineVQF
+
+    ts = float(np.median(np.diff(d["t"])))
+    g, a, m = (np.ascontiguousarray(d[k]) for k in "gam")
+    def to_ned(q: np.ndarray) -> np.ndarray:
+        return quat_multiply(np.broadcast_to(ENU2NED, q.shape), q)
+
+    causal = VQF(ts).updateBatch(g, a, m)["quat9D"]
+    offline = offlineVQF(g, a, m, ts)["quat9D"]
+    return score(to_ned(causal), d), score(to_ned(offline), d)
+
+
+def candidate(kw: dict) -> EkfParams:
+    soft = kw.get("mag_soft", False)
+    base = {k: v for k, v in kw.items() if k != "mag_soft"}
+    return replace(EkfParams(), **base, mag_norm_soft=0.05 if soft else 0.0, mag_dip_soft_deg=5.0 if soft else 0.0)
+
+
+def limit(v: float) -> float:
+    """Issue 13's per-trial ceiling: max(2 × VQF, VQF + 2°)."""
+    return max(2 * v, v + 2)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="defaults only (no generalisation table)")
+    args = ap.parse_args()
+    if not BROAD.is_dir():
+        sys.exit(f"BROAD trials not found at {BROAD} (set IMUTOOL_SHARED_DATA)")
+    t0 = time.perf_counter()
+    trials = load_trials()
+    print(f"{len(trials)} BROAD trials from {BROAD}; load average {os.getloadavg()[0]:.1f}")
+    vqf = {name: run_vqf(d) for name, d in trials.items()}
+    prm = EkfParams()
+    print("\nDefaults (one parameter set for every trial), RMSE total / inclination, deg:")
+    print(f"| trial | imutool causal | imutool smoother | VQF | offline VQF | within limit |\n|{'---|' * 6}")
+    rows = []
+    for name, d in trials.items():
+        c, s, summ = run_ours(d, prm, smooth=True)
+        (v, vo) = vqf[name]
+        ok = c[0] <= limit(v[0]) and c[1] <= limit(v[1])
+        rows.append([*c, *s, *v, *vo])
+        print(f"| {name} | {c[0]:.2f} / {c[1]:.2f} | {s[0]:.2f} / {s[1]:.2f} | {v[0]:.2f} / {v[1]:.2f} | "
+              f"{vo[0]:.2f} / {vo[1]:.2f} | {'yes' if ok else 'NO'} |")
+    r = np.array(rows)
+    mean, worst = r.mean(axis=0), r.max(axis=0)
+    print(f"| **mean** | {mean[0]:.2f} / {mean[1]:.2f} | {mean[2]:.2f} / {mean[3]:.2f} | {mean[4]:.2f} / "
+          f"{mean[5]:.2f} | {mean[6]:.2f} / {mean[7]:.2f} | |")
+    print(f"| worst | {worst[0]:.2f} / {worst[1]:.2f} | {worst[2]:.2f} / {worst[3]:.2f} | {worst[4]:.2f} / "
+          f"{worst[5]:.2f} | {worst[6]:.2f} / {worst[7]:.2f} | |")
+    if not args.quick:
+        generalisation(trials, vqf)
+    print(f"\n({time.perf_counter() - t0:.0f} s)")
+
+
+def generalisation(trials: dict, vqf: dict) -> None:
+    """Choose the candidate with the lowest mean VQF-relative error on one group; score it on the other."""
+    names = list(trials)
+    cands = [dict(zip(GRID, vals, strict=True)) for vals in itertools.product(*GRID.values())]
+    rel = np.zeros((len(cands), len(names)))  # mean of total/VQF and inclination/VQF per trial
+    raw = np.zeros((len(cands), len(names), 2))
+    for i, kw in enumerate(cands):
+        for j, name in enumerate(names):
+            c, _, _ = run_ours(trials[name], candidate(kw), smooth=False)
+            v = vqf[name][0]
+            raw[i, j] = c
+            rel[i, j] = 0.5 * (c[0] / v[0] + c[1] / v[1])
+    vq = np.array([vqf[n][0] for n in names])
+    lim = np.stack([[limit(v) for v in vq[:, 0]], [limit(v) for v in vq[:, 1]]], axis=1)
+    print("\nEvery candidate on all 16 (worst/limit = the largest ratio of a trial's RMSE to its ceiling "
+          "max(2 × VQF, VQF + 2°); ≤ 1 means no trial above it):")
+    print("| candidate | mean total / incl | worst/limit |\n|---|---|---|")
+    for i, kw in enumerate(cands):
+        m = raw[i].mean(axis=0)
+        print(f"| {kw} | {m[0]:.2f} / {m[1]:.3f} | {(raw[i] / lim).max():.2f} |")
+    groups = {"rotation": [j for j, n in enumerate(names) if n[:2] in ROTATION],
+              "translation+disturbance": [j for j, n in enumerate(names) if n[:2] in OTHER],
+              "all 16": list(range(len(names)))}
+    print(f"\nGeneralisation: candidates {GRID} (accel gate off in all); chosen = lowest mean of "
+          "(total/VQF + inclination/VQF)/2 on the tuning group")
+    print("| tuned on | chosen | scored on | mean total / incl | worst total / incl | VQF mean |\n|" + "---|" * 6)
+    for tune, score_on in (("rotation", "translation+disturbance"), ("translation+disturbance", "rotation"),
+                           ("all 16", "all 16")):
+        i = int(np.argmin(rel[:, groups[tune]].mean(axis=1)))
+        js = groups[score_on]
+        m, w = raw[i, js].mean(axis=0), raw[i, js].max(axis=0)
+        print(f"| {tune} | {cands[i]} | {score_on} | {m[0]:.2f} / {m[1]:.2f} | {w[0]:.2f} / {w[1]:.2f} | "
+              f"{vq[js, 0].mean():.2f} / {vq[js, 1].mean():.2f} |")
+    dp = EkfParams()
+    d = int(np.argmin([abs(c["mag_noise_deg"] - dp.mag_noise_deg) + abs(c["accel_lp_tau"] - dp.accel_lp_tau)
+                       + (c["mag_soft"] != (dp.mag_norm_soft > 0)) for c in cands]))
+    for g, js in groups.items():
+        m = raw[d, js].mean(axis=0)
+        print(f"| (defaults) | {cands[d]} | {g} | {m[0]:.2f} / {m[1]:.2f} | {raw[d, js, 0].max():.2f} / "
+              f"{raw[d, js, 1].max():.2f} | {vq[js, 0].mean():.2f} / {vq[js, 1].mean():.2f} |")
+
+
+if __name__ == "__main__":
+    main()
