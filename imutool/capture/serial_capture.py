@@ -1,6 +1,8 @@
 """Serial capture (pyserial): NMEA 0183 instruments and the bridge protocol, for hours, losing nothing.
 
-Every received line/frame is timestamped on arrival with the UTC wall clock and the monotonic clock. A port
+Every frame gets its own time (:mod:`imutool.capture.clock`): bridge frames the MCU clock mapped to UTC by an
+offset and drift fitted to the arrival times; NMEA lines their arrival time, the lines of one read spread back
+by the bytes that followed them at the baud rate. ``time_mono`` is the host's monotonic clock at the read. A port
 that disappears (USB unplugged) is reopened with exponential backoff and the outage is recorded as a gap.
 Corrupted input is counted, never fatal. SIGINT/SIGTERM stop cleanly with the files finalised.
 """
@@ -18,6 +20,7 @@ import numpy as np
 
 from formats.errors import ImutoolError
 
+from .clock import FrameClock, spread_by_baud
 from .runtime import CaptureStats, StatusLine, StopFlag, iso_utc
 from .sink import CaptureCsv, EventLog, RotatingFile, last_complete_row
 
@@ -164,7 +167,8 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
         base = base / f"nmea_{utc_name()}.csv"
     stats = CaptureStats(started_utc=iso_utc(time.time()))
     columns = ["time", "time_mono"] + NMEA_COLUMNS
-    meta = {"source": f"serial {port} @ {baud} baud (NMEA 0183)", "time": "UTC epoch seconds at arrival",
+    meta = {"source": f"serial {port} @ {baud} baud (NMEA 0183)",
+            "time": "UTC epoch seconds at arrival (lines of one read spread back by the baud rate, 10 bits/byte)",
             "units": ", ".join(f"{k}={v}" for k, v in NMEA_UNITS.items()), "captured_by": "imutool capture serial"}
     kw = {"rotate_s": rotate_s, "append": append, "overwrite": force}
     csv = CaptureCsv(base, columns, meta, array_rows=False, **kw)  # rows come as text (see NmeaRows)
@@ -196,16 +200,20 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
             stats.count_error(f"decode {type(e).__name__}")
             return None
 
+    last = [-np.inf]
+
     def on_data(data: bytes, tw: float, tm: float) -> None:
         lines = _split_text(buf, data)
         if not lines:
             return
-        prefix = _iso_us(tw) + " "
-        raw.write(prefix + ("\n" + prefix).join([ln.rstrip() for ln in lines]) + "\n")  # one write per chunk
+        stamps = spread_by_baud(tw, [len(ln) for ln in lines], len(buf), baud, last[0])
+        last[0] = float(stamps[-1])
+        mono = tm + (stamps - tw)
+        raw.write("".join(f"{_iso_us(t)} {ln.rstrip()}\n" for t, ln in zip(stamps, lines, strict=True)))
         stats.lines += len(lines)
         rows = []
         n_fast = 0
-        for ln in lines:
+        for i, ln in enumerate(lines):
             text = ln.strip()
             if not text:
                 continue
@@ -218,11 +226,10 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
                 n_fast += 1
             row = to_row(values)
             if row:
-                rows.append(row)
+                rows.append(f"{float(stamps[i])!r},{float(mono[i])!r},{row}")
         stats.frames += n_fast
         if rows:
-            lead = f"{tw!r},{tm!r},"
-            csv.write_lines(lead + ("\n" + lead).join(rows) + "\n", len(rows))
+            csv.write_lines("\n".join(rows) + "\n", len(rows))
 
     try:
         run_loop(src, on_data, stats, duration, status, lambda: raw.bytes_written + csv.file.bytes_written, stop)
@@ -271,7 +278,10 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
     stats = CaptureStats(started_utc=iso_utc(time.time()))
     dec = BridgeDecoder(binary=binary, scales=scales)
     meta = {"source": f"serial {port} @ {baud} baud (imutool bridge, {'binary' if binary else 'text'})",
-            "time": "UTC epoch seconds at arrival", "scales": dec.scales.as_meta(),
+            "time": "UTC epoch seconds per frame: MCU clock (t_mcu) mapped to UTC by an offset and drift fitted to "
+                    "the arrival times (lower envelope; docs/capture.md)",
+            "time_mono": "host monotonic clock at the read that carried the frame",
+            "scales": dec.scales.as_meta(),
             "units": "seq=1, t_mcu=s, time_mono=s", "captured_by": "imutool capture serial --protocol bridge"}
     resume = last_complete_row(base) if append and not rotate_s else None
     csv = CaptureCsv(base, BRIDGE_COLUMNS, meta, rotate_s=rotate_s, append=append, overwrite=force)
@@ -289,6 +299,12 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
     status = StatusLine(status_s, quiet)
     stop = stop or StopFlag()
     stop.install()
+    clock = FrameClock()
+    if resume is not None:  # continue after the last stamp on disk
+        try:
+            clock.resume_after(float(resume[0]))
+        except (ValueError, IndexError):
+            pass
 
     def on_data(data: bytes, tw: float, tm: float) -> None:
         n_gaps = len(dec.stats.gaps)
@@ -305,8 +321,8 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
         if not n:
             return
         ch = counts_to_si(seq, t_us, counts, dec.scales)
-        block = np.column_stack([np.full(n, tw), np.full(n, tm), ch["seq"], ch["t_mcu"], ch["accel"], ch["gyro"],
-                                 ch["mag"], ch["temp"]])
+        block = np.column_stack([clock.map(t_us, seq, tw), np.full(n, tm), ch["seq"], ch["t_mcu"], ch["accel"],
+                                 ch["gyro"], ch["mag"], ch["temp"]])
         csv.write_rows(block)
 
     try:
@@ -318,6 +334,7 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
         status.finish()
         summary = _summary(stats, stop.reason)
         summary["decoder"] = dec.stats.as_dict()
+        summary["clock"] = clock.as_meta()
         summary["sequence_gaps"] = [{"after_seq": a, "missing": m} for a, m in dec.stats.gaps[:100]]
         csv.close({k: v for k, v in summary.items() if not isinstance(v, (list, dict))})
         events.add("stopped", reason=summary["stop_reason"], frames=stats.frames, dropped=stats.dropped)
