@@ -11,8 +11,11 @@ estimate barely changes, while 24 h of 200 Hz data take a few seconds.
 
 Noise terms (σ²(τ) = N²/τ + (0.664 B)² + K² τ/3 near the flat part):
   - N: angle (velocity) random walk, read on the slope −½ line at τ = 1 s (unit/√Hz = unit·√s … per √s);
-  - B: bias instability = min σ(τ) / 0.664 (= √(2 ln 2 / π));
-  - K: rate (acceleration) random walk, read on the slope +½ line at τ = 3 s (unit/√s).
+  - B: bias instability = min σ(τ) / 0.664 (= √(2 ln 2 / π)) — only when a flicker floor is there: without one
+    the minimum is the white/random-walk crossover (σ² = 2NK/√3 at τ = √3 N/K) and is labelled so
+    (``B_kind``; see :func:`fit_noise_terms`);
+  - K: rate (acceleration) random walk, read on the slope +½ line at τ = 3 s (unit/√s); when the +½ slope is
+    not seen (recording too short) K is not resolved and only the bound K ≤ min σ(τ) √(3/τ) is known.
 The lines are placed by a weighted non-negative least-squares fit of the three-term model to σ²(τ) (weights
 from the number of independent clusters), which is steadier than reading one point where the slope is ±½.
 """
@@ -154,17 +157,35 @@ def allan_deviation(y: np.ndarray, rate_hz: float, per_decade: int = 10,
     return taus, (out[:, 0] if one else out), n_eff
 
 
-def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray) -> dict[str, float]:
-    """N (τ=1 line), B (min/0.664), K (τ=3 line) for one axis; plus tau of the minimum."""
+def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray,
+                    flicker_share: float = 0.25) -> dict[str, float | bool | str]:
+    """N (τ=1 line), B (min/0.664), K (τ=3 line) for one axis; plus what the minimum is and whether K is seen.
+
+    ``B_kind``: ``"bias instability"`` when the fitted flat (flicker) term carries at least ``flicker_share`` of
+    σ² at the minimum; else ``"crossover"`` when N and K alone explain the minimum — the white/random-walk
+    crossover, σ_min² = 2NK/√3 at τ = √3 N/K, which is *not* a bias instability (B is then only an upper bound) —
+    or ``"upper bound"`` when σ still falls at the longest τ. ``K_resolved``: the +½ slope is seen (K > 0, the
+    minimum is not at the end, and the K term carries ≥ ``flicker_share`` of σ² at the longest τ); ``K_upper``:
+    the bound K ≤ min over τ of σ(τ) √(3/τ), valid whatever the noise is.
+    """
     a2 = adev ** 2
     w = np.sqrt(n_eff) / a2  # relative weighting: each point's σ² has relative std ≈ 1/√(n_eff/2)
     x = np.column_stack([1.0 / taus, np.ones_like(taus), taus / 3.0]) * w[:, None]
     coef, _ = nnls(x, a2 * w)
     n_, b0, k_ = np.sqrt(np.clip(coef, 0, None))
     i = int(np.argmin(adev))
+    at_end = bool(i >= len(taus) - 2)
+    if b0 ** 2 >= flicker_share * a2[i]:
+        kind = "bias instability"  # the flat (flicker) term is there, whether or not σ has turned up yet
+    elif at_end:
+        kind = "upper bound"
+    else:
+        kind = "crossover"
+    k_resolved = bool(k_ > 0 and not at_end and k_ ** 2 * taus[-1] / 3.0 >= flicker_share * a2[-1])
     return {"N": float(n_), "B": float(adev[i] / BI_FACTOR), "K": float(k_), "tau_min_s": float(taus[i]),
             "adev_min": float(adev[i]), "flat_B_fit": float(b0 / BI_FACTOR),
-            "B_upper_bound": bool(i >= len(taus) - 2)}
+            "B_upper_bound": kind != "bias instability", "B_kind": kind,
+            "K_resolved": k_resolved, "K_upper": float(np.min(adev * np.sqrt(3.0 / taus)))}
 
 
 @dataclass
@@ -182,7 +203,8 @@ class AllanResult:
         return float(np.mean([t[key] for t in self.terms]))
 
     def summary(self) -> dict[str, Any]:
-        return {k: [t[k] for t in self.terms] for k in ("N", "B", "K", "tau_min_s", "B_upper_bound")}
+        return {k: [t[k] for t in self.terms] for k in ("N", "B", "K", "tau_min_s", "B_upper_bound", "B_kind",
+                                                          "K_resolved", "K_upper")}
 
 
 def analyse(y: np.ndarray, rate_hz: float, name: str, unit: str, per_decade: int = 10) -> AllanResult:
@@ -206,8 +228,10 @@ def plot_allan(results: list[AllanResult], path: str, title: str = "Allan deviat
         for j, lab in enumerate("xyz"[: r.adev.shape[1]]):
             t = r.terms[j]
             c = f"C{j}"
+            bl = "B" if t.get("B_kind", "bias instability") == "bias instability" else f"min/0.664 ({t['B_kind']})"
+            kl = f"K={t['K']:.3g}" if t.get("K_resolved", True) else f"K≤{t['K_upper']:.3g} (not resolved)"
             ax.loglog(r.taus, r.adev[:, j], "-", color=c, lw=1.5,
-                      label=f"{lab}: N={t['N']:.3g}, B={t['B']:.3g}, K={t['K']:.3g}")
+                      label=f"{lab}: N={t['N']:.3g}, {bl}={t['B']:.3g}, {kl}")
             tt = r.taus
             ax.loglog(tt, t["N"] / np.sqrt(tt), ":", color=c, lw=0.8)
             ax.loglog(tt, t["K"] * np.sqrt(tt / 3.0), "--", color=c, lw=0.8)

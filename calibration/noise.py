@@ -29,6 +29,12 @@ KEY_UNITS = {
     "mag_noise_density": "uT/sqrt(Hz)",
     "mag_bias_instability": "uT",
     "mag_random_walk": "uT/sqrt(s)",
+    "gyro_bias_instability_upper_bound": "rad/s (no flicker floor seen: the Allan minimum is a crossover)",
+    "accel_bias_instability_upper_bound": "m/s^2 (no flicker floor seen)",
+    "mag_bias_instability_upper_bound": "uT (no flicker floor seen)",
+    "gyro_random_walk_upper_bound": "rad/s/sqrt(s) (not resolved: upper bound)",
+    "accel_random_walk_upper_bound": "m/s^2/sqrt(s) (not resolved: upper bound)",
+    "mag_random_walk_upper_bound": "uT/sqrt(s) (not resolved: upper bound)",
 }
 
 
@@ -67,24 +73,58 @@ def write_noise(path: str | os.PathLike, values: dict[str, Any]) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
-def write_kalibr(path: str | os.PathLike, values: dict[str, Any], topic: str = "/imu0") -> None:
-    """kalibr-style ``imu.yaml`` (accelerometer/gyroscope noise density and random walk, update_rate)."""
-    d = {
-        "rostopic": topic,
-        "update_rate": float(values.get("rate_hz", 0.0)),
-        "accelerometer_noise_density": values.get("accel_noise_density"),
-        "accelerometer_random_walk": values.get("accel_random_walk"),
-        "gyroscope_noise_density": values.get("gyro_noise_density"),
-        "gyroscope_random_walk": values.get("gyro_random_walk"),
-    }
-    text = dumps_flat_yaml(d, {"accelerometer_noise_density": "m/s^2/sqrt(Hz)",
-                               "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
-                               "gyroscope_noise_density": "rad/s/sqrt(Hz)",
-                               "gyroscope_random_walk": "rad/s^2/sqrt(Hz)"},
+KALIBR_FALLBACKS = ("refuse", "upper-bound")
+
+
+def write_kalibr(path: str | os.PathLike, values: dict[str, Any], topic: str = "/imu0",
+                 fallback: str = "refuse") -> list[str]:
+    """kalibr-style ``imu.yaml`` (accelerometer/gyroscope noise density and random walk, update_rate).
+
+    A term the recording did not resolve (missing, None, NaN or 0 — a zero random walk makes kalibr treat the
+    bias as constant) is refused (``fallback='refuse'``, ImutoolError naming the terms), or written from the
+    labelled upper bound ``<sensor>_random_walk_upper_bound`` (``fallback='upper-bound'``: the value carries an
+    ``UPPER BOUND`` comment and a warning is returned). Noise densities have no fallback. Returns warnings."""
+    if fallback not in KALIBR_FALLBACKS:
+        raise ImutoolError(f"kalibr fallback {fallback!r}: use one of {', '.join(KALIBR_FALLBACKS)}")
+
+    def known(v: Any) -> bool:
+        return isinstance(v, (int, float)) and math.isfinite(v) and v > 0
+
+    keys = {"accelerometer_noise_density": "accel_noise_density", "accelerometer_random_walk": "accel_random_walk",
+            "gyroscope_noise_density": "gyro_noise_density", "gyroscope_random_walk": "gyro_random_walk"}
+    units = {"accelerometer_noise_density": "m/s^2/sqrt(Hz)", "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
+             "gyroscope_noise_density": "rad/s/sqrt(Hz)", "gyroscope_random_walk": "rad/s^2/sqrt(Hz)"}
+    d: dict[str, Any] = {"rostopic": topic, "update_rate": float(values.get("rate_hz", 0.0))}
+    comments = dict(units)
+    missing: list[str] = []
+    warnings: list[str] = []
+    for kk, ik in keys.items():
+        v = values.get(ik)
+        if known(v):
+            d[kk] = float(v)
+            continue
+        bound = values.get(ik + "_upper_bound")
+        if kk.endswith("random_walk") and fallback == "upper-bound" and known(bound):
+            d[kk] = float(bound)
+            comments[kk] = units[kk] + "  UPPER BOUND, not resolved by the recording (record longer)"
+            warnings.append(f"kalibr {kk}: not resolved, written as the upper bound {float(bound):.3g} "
+                            f"{units[kk]} (labelled in the file)")
+        else:
+            missing.append(kk)
+    if missing:
+        why = "; a random walk needs the +1/2 slope of the Allan deviation (record longer)" if any(
+            m.endswith("random_walk") for m in missing) else ""
+        hint = (" or write the labelled upper bound with the 'upper-bound' fallback (--kalibr-fallback upper-bound)"
+                if fallback == "refuse" and any(m.endswith("random_walk") for m in missing) else "")
+        raise ImutoolError(f"kalibr file not written: {', '.join(missing)} not resolved by this recording{why}"
+                           f"{hint}", path=os.fspath(path))
+    text = dumps_flat_yaml(d, comments,
                            header="kalibr IMU noise model (continuous-time), from imutool allan; inflate for "
-                                  "real-world use as kalibr recommends")
+                                  "real-world use as kalibr recommends"
+                                  + ("\nWARNING: " + "\nWARNING: ".join(warnings) if warnings else ""))
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+    return warnings
 
 
 def _parse_scalar(s: str) -> Any:

@@ -68,14 +68,90 @@ def test_noise_yaml_and_kalibr_round_trip(tmp_path):
     write_noise(tmp_path / "noise.yaml", vals)
     back = load_noise(tmp_path / "noise.yaml")
     assert back == vals
-    write_kalibr(tmp_path / "imu.yaml", vals)
+    # the accelerometer random walk is not resolved: refused, never written as 0.0
+    with pytest.raises(ImutoolError, match="accelerometer_random_walk not resolved"):
+        write_kalibr(tmp_path / "imu.yaml", vals)
+    assert not (tmp_path / "imu.yaml").exists()
+    with pytest.raises(ImutoolError, match="accelerometer_random_walk"):
+        write_kalibr(tmp_path / "imu.yaml", {**vals, "accel_random_walk": 0.0})
+    write_kalibr(tmp_path / "imu.yaml", {**vals, "accel_random_walk": 3e-4})
     text = (tmp_path / "imu.yaml").read_text()
     for key in ("gyroscope_noise_density: 0.00015", "gyroscope_random_walk: 2e-06", "update_rate: 100.0",
-                "accelerometer_noise_density: 0.002", 'rostopic: "/imu0"'):
+                "accelerometer_noise_density: 0.002", "accelerometer_random_walk: 0.0003", 'rostopic: "/imu0"'):
         assert key in text
+    assert "UPPER BOUND" not in text
+    # the explicit fallback writes the labelled upper bound and says so
+    w = write_kalibr(tmp_path / "imu2.yaml", {**vals, "accel_random_walk_upper_bound": 4e-4},
+                     fallback="upper-bound")
+    text = (tmp_path / "imu2.yaml").read_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith("accelerometer_random_walk:"))
+    assert "0.0004" in line and "UPPER BOUND" in line and "WARNING" in text
+    assert len(w) == 1 and "upper bound" in w[0]
+    with pytest.raises(ImutoolError, match="gyroscope_noise_density"):  # no fallback for a noise density
+        write_kalibr(tmp_path / "imu3.yaml", {"accel_noise_density": 1e-3, "accel_random_walk": 1e-4},
+                     fallback="upper-bound")
     (tmp_path / "bad.yaml").write_text("foo: 1\n")
     with pytest.raises(ImutoolError, match="none of the keys"):
         load_noise(tmp_path / "bad.yaml")
+
+
+def test_white_plus_random_walk_minimum_is_labelled_a_crossover():
+    # no flicker: σ² = N²/τ + K² τ/3, minimum 2NK/√3 at τ = √3 N/K (≈ 17 s) — not a bias instability
+    n_d, k_rw, fs = 0.01, 0.001, 20.0
+    res = analyse(_white_plus_rw(n_d, k_rw, fs, 1.0, seed=5), fs, "gyro", "rad/s")
+    for t in res.terms:
+        assert t["B_kind"] == "crossover" and t["B_upper_bound"] and t["K_resolved"]
+        assert t["adev_min"] == pytest.approx(np.sqrt(2 * n_d * k_rw / np.sqrt(3)), rel=0.15)
+        assert t["tau_min_s"] == pytest.approx(np.sqrt(3) * n_d / k_rw, rel=0.6)
+        assert t["flat_B_fit"] < 0.3 * t["B"]
+
+
+def _flicker(n, fs, level, rng):
+    """1/f noise scaled to a flat Allan deviation ≈ level (σ = 0.664 B)."""
+    f = np.fft.rfftfreq(n, 1 / fs)
+    x = np.fft.rfft(rng.standard_normal(n))
+    x[1:] /= np.sqrt(f[1:])
+    x[0] = 0
+    y = np.fft.irfft(x, n)
+    taus, adev, _ = allan_deviation(y, fs, m=np.array([int(20 * fs)]))
+    return y * level / adev[0]
+
+
+def test_flicker_floor_is_labelled_bias_instability():
+    rng = np.random.default_rng(9)
+    fs, n = 20.0, int(3600 * 20)
+    y = rng.standard_normal(n) * 0.01 * np.sqrt(fs) + _flicker(n, fs, 0.003, rng)
+    t = analyse(y, fs, "gyro", "rad/s").terms[0]
+    assert t["B_kind"] == "bias instability" and not t["B_upper_bound"]
+    assert t["B"] * 0.6643 == pytest.approx(0.003, rel=0.25)
+
+
+def test_allan_cli_labels_and_refuses_unresolved_kalibr(tmp_path):
+    from click.testing import CliRunner
+
+    import formats
+    from imutool.cli import cli
+
+    rng = np.random.default_rng(4)
+    fs, n = 50.0, 3000  # 60 s: no +1/2 slope can be seen
+    t = np.arange(n) / fs
+    rec = formats.Recording(t)
+    rec.add("gyro", rng.standard_normal((n, 3)) * 1e-3 * np.sqrt(fs), "rad/s")
+    rec.add("accel", rng.standard_normal((n, 3)) * 2e-3 * np.sqrt(fs) + [0, 0, -9.81], "m/s^2")
+    formats.write(rec, tmp_path / "static.csv")
+    r = CliRunner().invoke(cli, ["allan", str(tmp_path / "static.csv"), "-o", str(tmp_path / "noise.yaml"),
+                                 "--kalibr", str(tmp_path / "imu.yaml")])
+    assert r.exit_code != 0 and "random_walk not resolved" in str(r.exception)
+    assert not (tmp_path / "imu.yaml").exists()
+    r = CliRunner().invoke(cli, ["allan", str(tmp_path / "static.csv"), "-o", str(tmp_path / "noise2.yaml"),
+                                 "--kalibr", str(tmp_path / "imu.yaml"), "--kalibr-fallback", "upper-bound"])
+    assert r.exit_code == 0, r.output
+    assert "not resolved (<=" in r.stdout and "bias inst. B" not in r.stdout and "warning: kalibr" in r.stderr
+    text = (tmp_path / "imu.yaml").read_text()
+    assert text.count("UPPER BOUND") == 2 and "random_walk: 0.0\n" not in text
+    noise = load_noise(tmp_path / "noise2.yaml")
+    assert "gyro_random_walk" not in noise and noise["gyro_random_walk_upper_bound"] > 0
+    assert "gyro_bias_instability" not in noise and noise["gyro_bias_instability_upper_bound"] > 0
 
 
 def test_allan_cli_on_the_real_static_recording(shared, tmp_path, capsys):
@@ -85,11 +161,20 @@ def test_allan_cli_on_the_real_static_recording(shared, tmp_path, capsys):
     out = tmp_path / "noise.yaml"
     with pytest.raises(SystemExit) as e:
         main(["allan", str(d / "mpu6050_gyroscope.csv"), str(d / "hmc5883l_compass.csv"), "-o", str(out),
-              "--kalibr", str(tmp_path / "imu.yaml"), "--plot", str(tmp_path / "allan.png"), "--json"])
+              "--plot", str(tmp_path / "allan.png"), "--json"])
     assert e.value.code == 0
     noise = load_noise(out)
+    kinds = noise["gyro_allan_minimum_xyz"]
+    assert set(kinds) <= {"bias instability", "crossover", "upper bound"} and len(kinds) == 3
+    assert ("gyro_bias_instability" in noise) == all(k == "bias instability" for k in kinds)
     # MPU6050 gyro white noise ~0.005–0.05 deg/s/√Hz; HMC5883L ~0.005–0.05 µT/√Hz at 77 Hz
     assert np.radians(0.005) < noise["gyro_noise_density"] < np.radians(0.05)
     assert 0.005 < noise["mag_noise_density"] < 0.05
     assert (tmp_path / "allan.png").stat().st_size > 10_000
     assert "irregular timestamps" in capsys.readouterr().out
+    # no accelerometer in these files: a kalibr file would need made-up accelerometer terms — refused
+    with pytest.raises(SystemExit) as e:
+        main(["allan", str(d / "mpu6050_gyroscope.csv"), "-o", str(tmp_path / "n2.yaml"), "--kalibr",
+              str(tmp_path / "imu.yaml"), "--kalibr-fallback", "upper-bound"])
+    assert e.value.code == 2 and "accelerometer_noise_density" in capsys.readouterr().err
+    assert not (tmp_path / "imu.yaml").exists()
