@@ -33,7 +33,8 @@ def _fmt(v: Any, nd: int = 3) -> str:
     if isinstance(v, (float, np.floating)):
         if not np.isfinite(v):
             return "-"
-        return f"{float(v):.{nd}f}"
+        txt = f"{float(v):.{nd}f}"
+        return txt[1:] if txt.startswith("-") and float(txt) == 0.0 else txt  # no "-0.00"
     if isinstance(v, dict):
         return ", ".join(f"{k} {_fmt(x, nd)}" for k, x in v.items())
     if isinstance(v, (list, tuple)):
