@@ -167,11 +167,11 @@ def test_one_absurd_sample_does_not_poison_the_estimate(cmd, roll, tmp_path, cap
 def test_bridge_absurd_library_rules(roll):
     r = roll.copy()
     r["gyro"][10, 2] = -1e300
-    r["gyro"][2000:2300, 0] = 1e9  # 1.5 s run: too long to interpolate → NaN
+    r["gyro"][2000:2110, 0] = 1e9  # a 0.55 s run: too long to interpolate → NaN
     out, rep = bridge_absurd(r)
     assert np.isfinite(out["gyro"][10]).all() and np.allclose(out["gyro"][10], (r["gyro"][9] + r["gyro"][11]) / 2,
                                                               atol=1e-12)
-    assert np.isnan(out["gyro"][2000:2300, 0]).all() and rep.set_nan == {"gyro": 300} and rep.bridged == {"gyro": 1}
+    assert np.isnan(out["gyro"][2000:2110, 0]).all() and rep.set_nan == {"gyro": 110} and rep.bridged == {"gyro": 1}
     assert r["gyro"][10, 2] == -1e300  # input untouched
     # most samples beyond range: a units problem, left alone and said
     r2 = roll.copy()
