@@ -176,3 +176,51 @@ def test_real_nmea_heel_log(shared):
     per = rs.cycles.period_s[np.isfinite(rs.cycles.period_s)]
     assert per.size >= 5 and np.all((per > 1.0) & (per < 60.0))
     assert ok.sum() < len(heel)  # other sentences' rows carry NaN heel and are skipped
+
+
+def _cycles(side, t_start, t_end):
+    from imutool.roll import RollCycles
+
+    n = len(side)
+    z = np.zeros(n)
+    return RollCycles(np.asarray(side), z.copy(), z.copy(), z.copy(), np.full(n, np.nan), np.asarray(t_start, float),
+                      np.asarray(t_end, float), np.zeros(n, np.int64), z.copy())
+
+
+def test_pair_cycles_by_time_overlap_one_to_one():
+    from imutool.roll import pair_cycles
+
+    # reference: S P S P S; the DUT missed the second port crossing, so its 2nd starboard excursion spans
+    # reference excursions 2-4: those must pair with nothing (not with the wrong cycle); the rest pair
+    ref = _cycles([1, -1, 1, -1, 1, -1], [0, 5, 10, 15, 20, 25], [5, 10, 15, 20, 25, 30])
+    dut = _cycles([1, -1, 1, -1], [0.3, 5.2, 10.1, 25.2], [5.2, 10.1, 25.2, 30.1])
+    p = pair_cycles(ref, dut)
+    assert list(p) == [0, 1, -1, -1, -1, 3]
+    # identical cycle lists pair index by index
+    assert list(pair_cycles(ref, ref)) == list(range(len(ref)))
+
+
+def test_crest_width_measures_the_ambiguity_of_the_maximum():
+    t = np.arange(0.0, 60.0, 0.1)
+    sharp = 10 * np.sin(2 * np.pi * t / 10)
+    c = roll_cycles(t, sharp, crest_band_deg=0.05)
+    # a 10° / 10 s crest stays within 0.05° of its top for 2·sqrt(2·0.05/(10·(2π/10)²)) ≈ 0.20 s
+    assert np.all(np.abs(c.crest_s - 0.2) <= 0.11)
+    # two humps of nearly equal height (0.02° apart) 3 s apart: the maximum could be either → crest ≥ 3 s
+    hump = np.where((t % 10) < 5, 2.0 * np.sin(2 * np.pi * t / 10), -2.0)
+    k = (t % 10 > 1.0) & (t % 10 < 4.0)
+    hump[k] = 2.0 - 0.3 * np.sin(np.pi * (t[k] % 10 - 1.0) / 3.0) ** 2
+    hump[(t % 10 > 3.9) & (t % 10 < 4.1)] -= 0.02
+    c = roll_cycles(t, hump, crest_band_deg=0.05).of_side(STBD)
+    assert len(c) >= 4 and np.all(c.crest_s > 2.5)
+
+
+def test_low_rate_peak_time_is_interpolated():
+    # 1 Hz: the 3-point parabola puts the maximum between the samples (not on the sample grid)
+    t = np.arange(0.0, 300.0, 1.0)
+    heel = 3.0 * np.sin(2 * np.pi * (t - 0.37) / 11.0)
+    c = roll_cycles(t, heel).of_side(STBD)
+    true = 0.37 + 11.0 / 4 + 11.0 * np.round((c.t_peak - 0.37 - 11.0 / 4) / 11.0)
+    assert np.max(np.abs(c.t_peak - true)) < 0.1
+    ok = np.isfinite(c.period_s)
+    assert np.max(np.abs(c.period_s[ok] - 11.0)) < 0.15
