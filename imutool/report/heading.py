@@ -265,7 +265,8 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
                          + ("" if len(hd) >= 8 else "; 8 headings are preferable"))
     items.append(_item("static", "MSC.116(73) §4.3.2.2 (A); ISO 22090-2 §6.4/§5.3 (B)", "Static heading error", st,
                        why, f"|error| ≤ {o.static_limit_deg}° at each heading; {crit_txt}", stats(ee_all), rows,
-                       {"distinct_headings": len(hd), "largest_gap_deg": gap}))
+                       {"distinct_headings": len(hd), "largest_gap_deg": gap, "unit": "deg",
+                        "source": "device heading"}))
 
     # ---- follow-up by rate-of-turn band --------------------------------------------------------------------
     turning = both & ~static_mask & (np.abs(rot) >= o.turn_min_dps)
@@ -293,8 +294,9 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     arot = maximum_filter1d(np.nan_to_num(np.abs(rot)), 2 * w + 1, mode="nearest")
     arot[~np.isfinite(rot)] = np.nan
     top = o.band_max_dps * (1 + o.band_margin)
-    for id_, lo, hi, lim in (("follow_up_10", o.turn_min_dps, o.band_split_dps, o.follow_low_deg),
-                             ("follow_up_20", o.band_split_dps, top, o.follow_high_deg)):
+    for id_, lo, hi, lim, nominal in (("follow_up_10", o.turn_min_dps, o.band_split_dps, o.follow_low_deg,
+                                       o.band_split_dps),
+                                      ("follow_up_20", o.band_split_dps, top, o.follow_high_deg, o.band_max_dps)):
         m = turning & (arot > lo) & (arot <= hi)
         secs = float(m.sum() * dt)
         st, jinfo = judge(e_fu[m], lim, o.criterion)
@@ -314,10 +316,11 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
                 why += (f"; the ISO 22090-2 follow-up test turns at {o.follow_up_test_dps:g} °/s: ≥ {o.min_band_s:g} s "
                         f"at ≥ {o.follow_up_test_frac * o.follow_up_test_dps:g} °/s needed ({fast_s:.1f} s)")
         items.append(_item(id_, "MSC.116(73) §4.3.2.4 (A); ISO 22090-2 follow-up test at 20 °/s (B)",
-                           f"Follow-up error, rate of turn {lo:g}-{hi:g} °/s", st, why,
+                           f"Follow-up error, rate of turn {lo:g}-{nominal:g} °/s", st, why,
                            f"|error| ≤ {lim}°; {crit_txt}", stats(e_fu[m]), [],
                            {"unit": "deg", "duration_s": secs, "error_definition": fu_note,
                             "raw_error_stats": stats(e[m]), "raw_status": st_raw if m.any() else NOT_TESTED,
+                            "source": "device heading",
                             "seconds_at_test_rate": fast_s}))
     fast = turning & (arot > top)
     if fast.any():
@@ -326,7 +329,7 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     # ---- dynamic error (rolling/pitching at a constant heading) --------------------------------------------
     quiet = both & ~static_mask & (np.abs(rot) < o.turn_min_dps)
     secs = float(quiet.sum() * dt)
-    extra: dict[str, Any] = {"duration_s": secs}
+    extra: dict[str, Any] = {"duration_s": secs, "unit": "deg", "source": "device heading"}
     if roll is None:
         st, why, ed = NOT_TESTED, "no roll channel: motion at constant heading cannot be verified", np.array([])
     else:
