@@ -252,3 +252,169 @@ def test_learned_accel_noise_and_raw_mode():
     s = rec.time > 10
     r_def, r_raw = (np.degrees(quat_to_euler(x.q)[0]) for x in (clean, raw))
     assert _rmse(r_def[s], rec["ref_roll"][s]) < _rmse(r_raw[s], rec["ref_roll"][s])
+
+
+# ------------------------------------------------------------ issue 13: robustness on motion never tuned on
+
+
+def _roll_pitch_err(res, rec, after_s: float) -> tuple[np.ndarray, np.ndarray]:
+    r, p, _ = (np.degrees(x) for x in quat_to_euler(res.q))
+    late = rec.time > rec.time[0] + after_s
+    return r[late] - rec["ref_roll"][late], p[late] - rec["ref_pitch"][late]
+
+
+def test_ship_at_sea_bridge_sensor_meets_msc363_with_lever_arm_and_gnss():
+    """Bridge sensor 20 m above and 30 m aft of the roll centre, irregular roll to 19°, heave ±2 m, a 360° turn at
+    3 °/s and 8 m/s: with --lever-arm and SOG/COG, roll and pitch RMSE ≤ 0.5° and |error| ≤ 1.0° after the first
+    minute (MSC.363(92)); without the lever arm the same filter misses that by far (what the lever arm buys)."""
+    rec = simulate("ship-at-sea", duration=300, seed=3, turn_start=100)
+    r = np.array(rec.meta["lever_arm_m"])
+    res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"], lever_arm=r)
+    er, ep = _roll_pitch_err(res, rec, 60)
+    assert _rmse(er, 0) <= 0.5 and np.abs(er).max() <= 1.0, (_rmse(er, 0), np.abs(er).max())
+    assert _rmse(ep, 0) <= 0.5 and np.abs(ep).max() <= 1.0, (_rmse(ep, 0), np.abs(ep).max())
+    no_lever, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"])
+    er0, _ = _roll_pitch_err(no_lever, rec, 60)
+    assert _rmse(er0, 0) > 2 * _rmse(er, 0) and np.abs(er0).max() > 1.5
+
+
+def test_lever_arm_cli_metadata_and_sign(tmp_path):
+    """`filter --lever-arm` is recorded in the output; the wrong sign of the lever arm is worse than none."""
+    from imutool.cli import cli
+
+    rec = simulate("ship-at-sea", duration=150, seed=4, turn_rate_dps=0)
+    src = tmp_path / "bridge.csv"
+    formats.write(rec, src)
+    x, y, z = rec.meta["lever_arm_m"]
+    errs = {}
+    for name, arm in (("right", f"{x},{y},{z}"), ("none", None), ("flipped", f"{-x},{-y},{-z}")):
+        out = tmp_path / f"{name}.csv"
+        extra = ["--lever-arm", arm] if arm else []
+        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "-q", *extra])
+        assert run.exit_code == 0, run.output
+        est = formats.read(out)
+        late = est.time > 60
+        errs[name] = _rmse(est["roll"][late], rec["ref_roll"][late])
+        if arm:
+            assert est.meta["lever_arm_m"] == pytest.approx([float(v) for v in arm.split(",")])
+    assert errs["right"] < 0.5 < errs["none"] < errs["flipped"], errs
+
+
+@pytest.mark.parametrize("fault", ["flip_x", "scale_3"])
+def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
+    """A recording built to break the filter (a gyro axis reversed, a gyro in the wrong unit
+    scale): the self-check flags it — warning on stderr, spans in the JSON summary, a warning in the output's
+    metadata and an `inconsistent` column. The same recording intact: no flag, no warning."""
+    from imutool.cli import cli
+
+    rec = simulate("ship-roll", duration=90, seed=6)
+    good = tmp_path / "good.csv"
+    formats.write(rec, good)
+    g = rec["gyro"].copy()
+    g = {"flip_x": g * [-1, 1, 1], "scale_3": g * 3}[fault]
+    bad_rec = rec.copy()
+    bad_rec.channels["gyro"] = g
+    bad = tmp_path / "bad.csv"
+    formats.write(bad_rec, bad)
+    for path, broken in ((good, False), (bad, True)):
+        out = tmp_path / f"est_{path.stem}.csv"
+        run = CliRunner().invoke(cli, ["filter", str(path), "-o", str(out), "--json"])
+        assert run.exit_code == 0, run.output
+        summary = json.loads(run.stdout)
+        est = formats.read(out)
+        if broken:
+            assert summary["inconsistent_share"] > 0.1 and summary["inconsistent_spans_s"]
+            assert "self-check failed" in run.stderr
+            assert any("self-check" in w for w in est.meta["warnings"])
+            assert est["inconsistent"].mean() > 0.1
+        else:
+            assert summary["inconsistent_samples"] == 0 and "self-check" not in run.stderr
+            assert est["inconsistent"].max() == 0
+
+
+def test_params_toml_round_trip_and_cli(tmp_path):
+    """EkfParams is the one parameter set: TOML out and back equal; --params/--param/--save-params on the CLI;
+    the parameters used are in the output metadata; unknown names and out-of-range values are one-line errors."""
+    from imutool.attitude import PARAM_DOC
+    from imutool.cli import cli
+
+    p = EkfParams(mag_noise_deg=12.5, init_bias=(0.001, 0.0, -0.002), mag_mode="full", mag_bias=False)
+    f = tmp_path / "ekf.toml"
+    f.write_text(p.to_toml())
+    assert EkfParams.from_toml(str(f)) == p
+    assert set(PARAM_DOC) == set(vars(EkfParams()))  # every constant documented, nothing undocumented
+    rec = simulate("ship-roll", duration=20, seed=1)
+    src = tmp_path / "roll.csv"
+    formats.write(rec, src)
+    run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / "e.csv"), "-q", "--params", str(f),
+                                   "--param", "bias_rw=3e-5", "--save-params", str(tmp_path / "used.toml")])
+    assert run.exit_code == 0, run.output
+    used = EkfParams.from_toml(str(tmp_path / "used.toml"))
+    assert used.mag_noise_deg == 12.5 and used.bias_rw == 3e-5 and used.mag_mode == "full"
+    assert formats.read(tmp_path / "e.csv").meta["filter"]["bias_rw"] == 3e-5
+    for args, needle in ((["--param", "nonsense=1"], "nonsense"), (["--param", "gyro_noise=nan"], "gyro_noise"),
+                         (["--param", "accel_lp_tau=-1"], "accel_lp_tau")):
+        code, _, err = _main(["filter", str(src), "-o", str(tmp_path / "x.csv"), *args])
+        assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
+        assert not (tmp_path / "x.csv").exists()
+    f.write_text("[ekf]\nmag_noise_deg = 'ten'\n")
+    code, _, err = _main(["filter", str(src), "-o", str(tmp_path / "y.csv"), "--params", str(f)])
+    assert code == 2 and "mag_noise_deg" in err
+
+
+def _main(args: list[str]) -> tuple[int, str, str]:
+    """imutool's console entry point in-process: (exit status, stdout, stderr)."""
+    import contextlib
+    import io
+
+    from imutool.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main(args)
+        except SystemExit as e:
+            return int(e.code or 0), out.getvalue(), err.getvalue()
+    return 0, out.getvalue(), err.getvalue()
+
+
+def test_smooth_summary_reports_both_errors(tmp_path):
+    """`filter --smooth` on a recording with truth: causal and smoothed RMSE are printed, and smoothing helps."""
+    from imutool.cli import cli
+
+    src = tmp_path / "roll.csv"
+    formats.write(simulate("ship-roll", duration=40, seed=1), src)
+    run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / "s.csv"), "--smooth", "--json"])
+    assert run.exit_code == 0, run.output
+    gain = json.loads(run.stdout)["smoother_gain"]
+    assert gain["smoothed_rmse_deg"]["roll"] < gain["causal_rmse_deg"]["roll"] < 1.0
+
+
+BROAD_VQF = {  # VQF 2.1.2 causal 9D, default parameters, total / inclination RMSE (deg): ../shared/data/broad/MANIFEST
+    "01": (1.99, 0.60), "02": (1.38, 0.43), "04": (1.07, 0.79), "05": (0.99, 0.35), "06": (4.03, 0.80),
+    "07": (1.75, 1.02), "10": (1.80, 0.30), "11": (0.90, 0.42), "16": (0.74, 0.54), "21": (4.08, 1.72),
+    "24": (1.55, 0.61), "26": (1.75, 0.56), "28": (4.04, 1.21), "29": (2.38, 1.06), "33": (3.75, 0.60),
+    "35": (1.09, 0.66)}
+
+
+def test_broad_all_16_trials_no_divergence(shared):
+    """All 16 shared BROAD trials, one default parameter set (chosen on all of them and on the simulator, never on
+    one file). Regression guard for what the defaults reach today (benchmarks/attitude_broad.py): no trial diverges
+    (the old shock gate gave 129.9° on trial 16), every trial within 1.15 × issue 13's ceiling max(2 × VQF,
+    VQF + 2°), means near VQF's. Issue 13's full target (means ≤ VQF's 2.08° / 0.73°) is NOT met yet: see
+    docs/attitude.md."""
+    from imutool.metrics import evaluate_quaternion
+
+    folder = shared("broad")
+    rows = []
+    for f in sorted(folder.glob("*.csv")):
+        rec = formats.read(f)
+        res, _ = run_ekf(rec.time, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), rec["mag"])
+        m = evaluate_quaternion(res.q, rec["ref_q"], rec["movement"] > 0)
+        tot, inc = m["total"]["rmse"], m["inclination"]["rmse"]
+        vt, vi = BROAD_VQF[f.name[:2]]
+        rows.append((tot, inc, tot / max(2 * vt, vt + 2), inc / max(2 * vi, vi + 2)))
+    r = np.array(rows)
+    assert len(r) == 16
+    assert r[:, 2:].max() <= 1.15, r
+    assert r[:, 0].mean() <= 2.35 and r[:, 1].mean() <= 0.80, r.mean(axis=0)
