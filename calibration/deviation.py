@@ -233,8 +233,9 @@ def card_warnings(card: DeviationCard, limit_deg: float = DEVIATION_LIMIT_DEG,
     mx = card.max_abs_deg()
     if mx > ABSURD_DEG or not card.invertible():
         out.append(f"absurd card: |deviation| reaches {mx:.0f}°" + ("" if card.invertible() else
-                   " and the card cannot be inverted") + " — almost always a magnetometer calibration or "
-                   "mounting that does not belong to this recording; do not issue this card")
+                   " and the card cannot be inverted") + " — an uncalibrated magnetometer (calibrate mag --method "
+                   "swing first) or a calibration/mounting that does not belong to this recording; do not issue this "
+                   "card")
     elif mx > limit_deg:
         dd = card.deviation_deg(np.arange(0.0, 360.0, 0.5))
         out.append(f"deviation reaches {ew(dd[np.argmax(np.abs(dd))])} (> {limit_deg:g}°): the compass should be "
@@ -301,7 +302,11 @@ def card_text(card: DeviationCard, header: dict[str, Any] | None = None, step_de
                      f"{q['n']} samples, {q['heading_coverage_deg']:.0f}° of the circle swung")
     ws = card.warnings or card_warnings(card)
     if ws:
-        lines += [""] + [f"WARNING: {w}" for w in ws]
+        import textwrap
+
+        lines.append("")
+        for w in ws:
+            lines += textwrap.wrap(f"WARNING: {w}", width=110, subsequent_indent="         ")
     lines += ["", "Adjusted / swung by: ______________________________   Signature: ____________________   "
               "Date: ____________", ""]
     return "\n".join(lines)

@@ -203,6 +203,24 @@ def plan_rate(row_bytes: int, baud: int, rate_hz: float | None, input_hz: float,
     return RatePlan(float(r), row_bytes, row_bytes * r, cap, baud, True)
 
 
+def heading_rate(t: np.ndarray, heading_deg: np.ndarray, window_s: float = 1.0) -> np.ndarray:
+    """Rate of turn (deg/min, + = clockwise) from a heading (deg): its unwrapped change over the last
+    ``window_s`` seconds (causal); NaN before a full window and where the heading is missing."""
+    h = np.asarray(heading_deg, dtype=float)
+    ok = np.isfinite(h)
+    out = np.full(len(h), np.nan)
+    if ok.sum() < 2:
+        return out
+    tt = t[ok]
+    u = np.degrees(np.unwrap(np.radians(h[ok])))
+    t0 = t - window_s
+    valid = ok & (t0 >= tt[0])
+    u_then = np.interp(t0[valid], tt, u)
+    u_now = np.interp(t[valid], tt, u)
+    out[valid] = (u_now - u_then) / window_s * 60.0
+    return out
+
+
 def output_rows(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     """Row indices for a uniform output grid at ``rate_hz`` (first row at or after each grid point)."""
     n = len(t)
@@ -217,7 +235,8 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
                card: Any = None, variation_deg: float | None = None, ths_mode: str = "auto",
                heave_positive: str = "up", xdr_roll_id: str = "ROLL", xdr_pitch_id: str = "PTCH",
                xdr_roll_sign: int = 1, xdr_pitch_sign: int = 1, talkers: dict[str, str] | None = None,
-               roll_kw: dict | None = None, utc_start: datetime | None = None) -> Iterator[tuple[float, str]]:
+               roll_kw: dict | None = None, utc_start: datetime | None = None,
+               rot_window_s: float = 1.0) -> Iterator[tuple[float, str]]:
     """(time s, sentence or TSS1 frame without CR/LF) for each output row; see the module docstring.
 
     Channels: ``roll``/``heel`` and ``pitch`` (deg), a heading (``heading`` as ``heading_ref``;
@@ -282,7 +301,8 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
     true_arr = hs.true if hs is not None else None
     if "PASHR" in sents and true_arr is None and hdg is not None:
         true_arr = resolve_headings(hdg, ref, card, deviation_deg, variation_deg).true
-    # rate of turn (deg/min): rot channel, else gyro z (body z down: + = bow to starboard), else d(heading)/dt
+    # rate of turn (deg/min): rot channel, else gyro z (body z down: + = bow to starboard), else the heading's
+    # change over the last rot_window_s (causal; V before a full window)
     rot = None
     if "ROT" in sents:
         rot, _ = _ch(rec, ("rot",), "deg/min")
@@ -290,9 +310,7 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
             g = rec.get("gyro", "rad/s") if rec.units.get("gyro") else rec["gyro"]
             rot = np.degrees(np.asarray(g, float)[:, 2]) * 60.0
         if rot is None and hdg is not None and n >= 2:
-            unwrapped = np.degrees(np.unwrap(np.radians(np.nan_to_num(hdg, nan=0.0))))
-            rot = np.gradient(unwrapped, t) * 60.0
-            rot[~np.isfinite(hdg)] = np.nan
+            rot = heading_rate(t, hdg, rot_window_s)
         if rot is None:
             raise ImutoolError("ROT needs 'rot' (deg/min), 'gyro' or a heading channel")
     # TSS1 accelerations: vertical from d(heave rate)/dt (same sign as heave), horizontal from accel x/y
@@ -398,7 +416,8 @@ def header_lines(*, source: str, sentences: list[str], plan: RatePlan | None, he
         lines.append(f"heading input: {heading_ref}; deviation {dev}; variation {ew(variation_deg)}; "
                      f"source {heading_source} (HDT/THS/ROT talker {talkers.get('THS', '?')}, HDG talker "
                      f"{talkers.get('HDG', '?')})")
-    lines.append("UTC: " + (utc or "not known (no start time in the recording): PASHR time fields empty"))
+    lines.append("UTC: " + (utc or "not known (no start time in the recording)"
+                            + (": PASHR time fields empty" if "PASHR" in sentences else "")))
     if "PASHR" in sentences:
         lines.append("PASHR: heave empty and IMU status 0 while the heave settles (settled = 0); aiding flag "
                      "1 only with GNSS in the recording")

@@ -171,8 +171,16 @@ def test_xdr_ids_signs_and_forced_talkers():
 
 def test_rot_from_gyro_and_from_heading():
     rec = est(duration=5.0)
-    rots = [decode(s)["rot"] for _, s in nmea_lines(rec, ["ROT"], None)]
-    assert np.median(rots) == pytest.approx(120.0, abs=0.2)  # 2 °/s = 120 °/min, bow to starboard
+    rec.channels["heading"][0] = 200.0  # an initialisation jump must not come out as a huge rate of turn
+    out = list(nmea_lines(rec, ["ROT"], None))
+    for t, s in out:
+        _check_line(s)
+        if t < 1.0 - 1e-9:  # causal 1 s window: not valid before a full window
+            assert s.split(",")[2][0] == "V"
+        else:
+            assert s.split(",")[2][0] == "A"
+        if t > 1.1:  # once the window has passed the jump: 2 °/s = 120 °/min, bow to starboard
+            assert decode(s)["rot"] == pytest.approx(120.0, abs=0.06)
     g = np.zeros((len(rec), 3))
     g[:, 2] = np.radians(-0.5)
     rec.add("gyro", g, "rad/s")

@@ -342,7 +342,7 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
                 lat, lon, pos_src = plat, plon, f"first fix in {os.path.basename(cand)}"
             break
     when = _swing_date(date_opt or info.get("date"), rec, ref_rec if reference else None) or log_day
-    var_src = "given (--variation)" if variation is not None else None
+    var_src = "given with --variation" if variation is not None else None
     notes: list[str] = []
     if kind == "true" and variation is None:
         if lat is None or when is None:

@@ -162,8 +162,10 @@ def nmea_cmd(input_path: str, output: str | None, sentences: str, rate_hz: float
                "generated_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")}
     lines = [f"{input_path}: {sum(counts.values())} sentences ({', '.join(f'{k} {v}' for k, v in counts.items())})"
              + (f" → {output}" if output else "") + (f" → {serial_port}" if serial_port else ""),
-             f"  rate {plan.describe()}", f"  heave positive {heave_positive}; UTC "
-             + (utc_txt or "not known: PASHR time fields empty")]
+             f"  rate {plan.describe()}"]
+    if "PASHR" in sents or "TSS1" in sents:
+        lines.append(f"  heave positive {heave_positive}; UTC "
+                     + (utc_txt or "not known (no start time in the recording): PASHR time fields empty"))
     emit_summary(summary, as_json, quiet, lines)
 
 
