@@ -10,9 +10,9 @@ Guarantees (docs/batch.md):
 - each job is independent: an exception is recorded as that job's one-line error and the batch goes on;
 - a killed run's temporary files (``.<output name>.*.tmp``) are removed before the output is redone;
 - completion marker: after a job succeeds its worker writes ``.<output name>.imutool-done.json`` beside the
-  output (atomically) with the input's and the output's size and mtime; ``resume=True`` skips a job only when
-  that marker exists and still matches both files, so an output half-written when the batch was killed (or an
-  input changed since) is redone;
+  output (atomically) with the input's and the output's size and mtime and the job signature (the command line);
+  ``resume=True`` skips a job only when that marker exists and still matches both files and the signature, so
+  an output half-written when the batch was killed (or an input or the options changed since) is redone;
 - execution by :class:`concurrent.futures.ProcessPoolExecutor` (default: all usable cores) or by
   ``dask.distributed`` (``scheduler='tcp://host:8786'`` for a running cluster, ``'local'`` for a LocalCluster);
   no scheduler of our own.
@@ -245,8 +245,9 @@ def _stamp(path: str) -> dict[str, int] | None:
     return {"size": int(size), "mtime_ns": int(st.st_mtime_ns)}
 
 
-def is_complete(job: Job) -> dict[str, Any] | None:
-    """The stored result if ``job`` completed earlier and neither its input nor its output changed since."""
+def is_complete(job: Job, signature: str | None = None) -> dict[str, Any] | None:
+    """The stored result if ``job`` completed earlier with the same ``signature`` (e.g. the command line) and
+    neither its input nor its output changed since."""
     if job.output is None:
         return None
     m = marker_path(job.output)
@@ -255,6 +256,8 @@ def is_complete(job: Job) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     if rec.get("output_stamp") != _stamp(job.output) or rec.get("input_stamp") != _stamp(job.input):
+        return None
+    if rec.get("signature") != signature:
         return None
     return rec
 
@@ -273,8 +276,8 @@ def remove_stale_temporaries(output: str) -> list[str]:
     return gone
 
 
-def _write_marker(job: Job, result: JobResult) -> None:
-    rec = {"input": job.input, "output": job.output, "input_stamp": _stamp(job.input),
+def _write_marker(job: Job, result: JobResult, signature: str | None) -> None:
+    rec = {"input": job.input, "output": job.output, "signature": signature, "input_stamp": _stamp(job.input),
            "output_stamp": _stamp(job.output), "result": result.as_dict(), "finished": time.time()}
     with atomic_path(marker_path(job.output)) as tmp:  # type: ignore[arg-type]
         tmp.write_text(json.dumps(rec, default=str), encoding="utf-8")
@@ -303,7 +306,8 @@ def key_figures(summary: dict[str, Any], keys: Iterable[str] | None = None, limi
     return out
 
 
-def execute(runner: Callable[[Job], dict[str, Any]], job: Job, figures: tuple[str, ...] | None = None) -> JobResult:
+def execute(runner: Callable[[Job], dict[str, Any]], job: Job, figures: tuple[str, ...] | None = None,
+            signature: str | None = None) -> JobResult:
     """Run one job in the current process: time it, turn any exception into a one-line error, write the marker."""
     t0 = time.perf_counter()
     worker = f"{socket.gethostname()}:{os.getpid()}"
@@ -325,7 +329,7 @@ def execute(runner: Callable[[Job], dict[str, Any]], job: Job, figures: tuple[st
         if not os.path.exists(job.output):
             res.status, res.error = "failed", f"finished but wrote no output {job.output!r}"
             return res
-        _write_marker(job, res)
+        _write_marker(job, res, signature)
     return res
 
 
@@ -339,18 +343,19 @@ def usable_cores() -> int:
 def run_batch(jobs: list[Job], runner: Callable[[Job], dict[str, Any]], *, workers: int | None = None,
               scheduler: str | None = None, resume: bool = False, figures: tuple[str, ...] | None = None,
               on_result: Callable[[JobResult], None] | None = None,
-              dask_threads_per_worker: int = 1) -> list[JobResult]:
+              dask_threads_per_worker: int = 1, signature: str | None = None) -> list[JobResult]:
     """Run every job; returns results in job order (``on_result`` is called as each one finishes).
 
     workers: local processes (default all usable cores; 1 runs in this process, no pool). scheduler: None
     (local process pool), ``'local'`` (a dask LocalCluster of ``workers`` processes with
     ``dask_threads_per_worker`` threads each) or a Dask scheduler address ``tcp://host:8786`` (the workers must
-    have imutool installed and see the same paths). resume: skip jobs whose completion marker still matches.
+    have imutool installed and see the same paths). resume: skip jobs whose completion marker still matches
+    (same input and output files, same ``signature`` — the CLI passes the command line, so changed options redo).
     """
     results: list[JobResult | None] = [None] * len(jobs)
     todo: list[int] = []
     for i, job in enumerate(jobs):
-        done = is_complete(job) if resume else None
+        done = is_complete(job, signature) if resume else None
         if done is not None:
             prev = done.get("result", {})
             r = JobResult(job.input, job.output, "skipped", None, prev.get("rows"), 0.0, prev.get("figures", {}),
@@ -360,7 +365,7 @@ def run_batch(jobs: list[Job], runner: Callable[[Job], dict[str, Any]], *, worke
                 on_result(r)
         else:
             todo.append(i)
-    fn = functools.partial(execute, runner, figures=figures)
+    fn = functools.partial(execute, runner, figures=figures, signature=signature)
     for i, r in _dispatch(fn, [jobs[i] for i in todo], todo, workers, scheduler, dask_threads_per_worker):
         results[i] = r
         if on_result:

@@ -166,7 +166,8 @@ def batch_cmd(command: str, inputs: tuple[str, ...], template: str | None, manif
     t0 = time.perf_counter()
     try:
         results = _batch.run_batch(jobs, runner, workers=workers, scheduler="local" if use_dask else scheduler,
-                                   resume=resume, figures=figures or None, on_result=cb)
+                                   resume=resume, figures=figures or None, on_result=cb,
+                                   signature=json.dumps([a for a in argv if a != "--force"]))
     finally:
         close()
     wall = time.perf_counter() - t0

@@ -20,6 +20,7 @@ SCENARIOS: dict[str, tuple[str, str]] = {
     "ship-at-sea": ("imutool.sim.voyage", "ship_at_sea"),
     "static": ("imutool.sim.ship", "static"),
     "sea-state": ("imutool.sim.sea", "sea_state"),
+    "parametric-roll": ("imutool.sim.parametric", "parametric_roll"),
     "heave-platform": ("imutool.sim.sea", "heave_platform"),
     "compass-swing": ("imutool.sim.magnetic", "compass_swing"),
     "mag-sphere": ("imutool.sim.magnetic", "mag_sphere"),
