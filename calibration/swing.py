@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from formats.errors import ImutoolError
 
-from .magnetometer import MagFit
+from .magnetometer import COVERAGE_WINDOW, MagFit
 
 
 def roll_pitch_from_accel(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -97,8 +97,15 @@ def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, hori
     if len(m) < 20:
         raise ImutoolError(f"swing fit needs at least 20 valid samples; got {len(m)}")
     c2, a2 = _ellipse2d(m[:, 0], m[:, 1])
-    ang = np.degrees(np.arctan2(*((m[:, :2] - c2) @ a2.T)[:, ::-1].T))
-    covered = float(np.count_nonzero(np.bincount(((ang + 180) // 10).astype(int) % 36, minlength=36)) * 10)
+    # headings of the field, not of the noise: moving means (noise ÷ 5) whose corrected radius is within ±30 % of
+    # the fitted ellipse; a motionless recording collapses to the centre or to one heading (as for the sphere)
+    w = int(max(1, min(COVERAGE_WINDOW, len(m) // 20)))
+    cs = np.cumsum(np.vstack([np.zeros((1, 2)), m[:, :2]]), axis=0)
+    u = ((cs[w:] - cs[:-w]) / w - c2) @ a2.T
+    u = u[np.abs(np.hypot(u[:, 0], u[:, 1]) - 1.0) <= 0.3]
+    ang = np.degrees(np.arctan2(u[:, 1], u[:, 0]))
+    counts = np.bincount(((ang + 180) // 10).astype(int) % 36, minlength=36)
+    covered = float(np.count_nonzero(counts >= max(1, int(0.05 * len(u) / 36))) * 10)
     if covered < min_turn_deg:
         raise ImutoolError(f"the heading swing covers only {covered:.0f}° (< {min_turn_deg:.0f}° needed); "
                            "turn the vessel through a full circle")

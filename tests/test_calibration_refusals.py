@@ -132,3 +132,17 @@ def test_bad_calibration_refused_by_filter_and_append(case, tmp_path, capsys):
     assert not (tmp_path / "o.csv").exists()
     code, out, err = run(["calibrate", "gyro", p, "-o", cal, "--append"], capsys)
     assert code == 2 and cal.read_text() == text  # not rewritten
+
+
+def test_heading_swing_coverage_counts_field_headings_not_noise(static, shared):
+    from calibration.swing import calibrate_swing
+
+    with pytest.raises(ImutoolError, match=r"covers only \d+°"):
+        calibrate_swing(static["mag"], static["accel"])
+    swing = simulate("compass-swing", duration=200, rate_hz=5, seed=9)
+    assert calibrate_swing(swing["mag"], swing["accel"]).coverage > 0.95
+    d = ("mag_hmc5883l", "unmoved-with-x-pointing-forward-10min", "hmc5883l_compass.csv")
+    with pytest.raises(ImutoolError, match="turn the vessel through a full circle"):
+        calibrate_swing(formats.read(shared(*d)).get("mag", "uT"), None)
+    turn = formats.read(shared("mag_hmc5883l", "rotate-ccw-around-z-pointing-up", "hmc5883l_compass.csv"))
+    assert calibrate_swing(turn.get("mag", "uT"), None).coverage > 0.9
