@@ -178,3 +178,20 @@ def test_bridge_absurd_library_rules(roll):
     r2["gyro"][:] = 1e3
     out2, rep2 = bridge_absurd(r2)
     assert out2 is r2 and any("unit or scale error" in w for w in rep2.warnings)
+
+
+def test_filter_skips_a_long_run_set_to_nan(roll, tmp_path, capsys):
+    """A run too long to interpolate becomes NaN; the attitude EKF skips those rows and recovers."""
+    clean = tmp_path / "clean.csv"
+    formats.write(roll, clean)
+    bad = roll.copy()
+    bad["gyro"][3000:3110, 0] = 1e200  # 0.55 s
+    p = tmp_path / "bad.csv"
+    formats.write(bad, p)
+    assert run(["filter", clean, "-o", tmp_path / "a.csv", "-q"], capsys)[0] == 0
+    code, out, err = run(["filter", p, "-o", tmp_path / "b.csv", "--json"], capsys)
+    assert code == 0 and json.loads(out)["validation"][0]["absurd_samples_set_nan"] == {"gyro": 110}
+    a, b = formats.read(tmp_path / "a.csv"), formats.read(tmp_path / "b.csv")
+    after = b.time > 16.0  # 0.5 s after the run
+    assert np.all(np.isfinite(b["roll"][after]))
+    assert np.max(np.abs(a["roll"][after] - b["roll"][after])) < 1.0
