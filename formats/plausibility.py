@@ -432,6 +432,13 @@ def dropped_rows(n_in: int, n_out: int, validation: dict[str, Any], meta: dict[s
     reasons: dict[str, int] = {}
     if skipped:
         reasons["malformed rows (unparseable fields or wrong column count)"] = skipped
+    bag = meta.get("bag")
+    if isinstance(bag, dict):  # messages the bag reader could not decode
+        topics = bag.get("topics") or {}
+        bad = sum(int(v.get("undecodable_skipped", 0) or 0) for v in topics.values() if isinstance(v, dict))
+        if bad:
+            reasons["undecodable bag messages"] = bad
+            skipped += bad
     nd = int(validation.get("duplicate_timestamps", 0) or 0)
     lost = n_in - n_out
     if nd and lost > 0:
@@ -456,7 +463,11 @@ def dropped_rows(n_in: int, n_out: int, validation: dict[str, Any], meta: dict[s
             fix = " — check the file's format (`imutool info` lists the first malformed lines)"
         warns.append(f"DROPPED: validation dropped {dropped} of {total_read} rows ({100 * dropped / total_read:.1f}%): "
                      f"{why}{fix}")
-    bag = meta.get("bag")
-    if isinstance(bag, dict) and bag.get("partial_read"):
-        warns.append(f"DROPPED: {bag['partial_read']}")
+    if isinstance(bag, dict):
+        if bag.get("partial_read"):
+            warns.append(f"DROPPED: {bag['partial_read']}")
+        lost = [n for n in bag.get("notes") or [] if "skipped" in str(n) or "could not" in str(n)]
+        if lost:
+            warns.append("DROPPED: " + "; ".join(str(n) for n in lost[:3])
+                         + (f" (and {len(lost) - 3} more)" if len(lost) > 3 else ""))
     return info, warns

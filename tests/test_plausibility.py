@@ -195,3 +195,17 @@ def test_filter_skips_a_long_run_set_to_nan(roll, tmp_path, capsys):
     after = b.time > 16.0  # 0.5 s after the run
     assert np.all(np.isfinite(b["roll"][after]))
     assert np.max(np.abs(a["roll"][after] - b["roll"][after])) < 1.0
+
+
+def test_corrupt_bag_chunks_are_reported_not_silent(tmp_path, capsys):
+    data = bytearray(shared_data("rosbags", "robot_localization", "test2.bag").read_bytes())
+    rng = np.random.default_rng(1)
+    for i in rng.integers(len(data) // 3, len(data), 16):
+        data[i] ^= 1 << int(rng.integers(0, 8))
+    p = tmp_path / "flipped.bag"
+    p.write_bytes(bytes(data))
+    code, out, err = run(["filter", p, "-o", tmp_path / "o.csv", "--json"], capsys)
+    assert code == 0 and "DROPPED" in err and "skipped" in err
+    assert any("DROPPED" in w for w in json.loads(out)["warnings"])
+    code, out, err = run(["filter", p, "-o", tmp_path / "o2.csv", "--strict"], capsys)
+    assert code == 2 and "DROPPED" in err

@@ -88,6 +88,9 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
         report.update(drops)
         checks.warnings += warns
         rec, checks = plausibility.bridge_absurd(rec, rep=checks)
+    else:  # what the reader itself could not read is reported all the same
+        report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
+        checks.warnings += warns
     if calibration_file:
         from calibration import load_calibration
 
@@ -106,7 +109,7 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
             rec.meta["validation"] = {k: v for k, v in report.items()
                                       if k not in ("plausibility_figures", "warnings")}
         else:
-            report.update(rows_read=len(rec), rows_kept=len(rec), validated=False)
+            report["validated"] = False
         if checks.warnings:
             rec.meta["warnings"] = list(rec.meta.get("warnings") or []) + checks.warnings
         _note_input(path, report, checks.warnings, strict)
