@@ -398,6 +398,10 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
     """
     if kind not in KINDS:
         raise ImutoolError(f"unknown fit kind {kind!r} (offset, diag, full, auto)")
+    if field_ut is not None and not (np.isfinite(field_ut) and field_ut > 0):
+        raise ImutoolError(f"field strength {field_ut} µT: must be a positive number (the Earth's is 20–70 µT)")
+    if min_coverage is not None and not (np.isfinite(min_coverage) and 0 <= min_coverage <= 1):
+        raise ImutoolError(f"minimum coverage {min_coverage}: must be between 0 and 1")
     m = np.asarray(mag_ut, dtype=float)
     m = m[np.all(np.isfinite(m), axis=1)]
     if len(m) < 20:

@@ -83,6 +83,11 @@ def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, hori
     a33_prior: vertical scale (default √det A_xy, i.e. the same sensitivity as the horizontal axes).
     Refuses when the horizontal field direction turns through less than ``min_turn_deg``.
     """
+    for name, v in (("horizontal field", horizontal_ut), ("vertical soft-iron prior", a33_prior)):
+        if v is not None and not (np.isfinite(v) and v > 0):
+            raise ImutoolError(f"{name} {v}: must be a positive number")
+    if not np.isfinite(bz_prior):
+        raise ImutoolError(f"vertical hard-iron prior {bz_prior} µT: must be a finite number")
     m = np.asarray(mag_ut, dtype=float)
     ok = np.all(np.isfinite(m), axis=1)
     warns: list[str] = []
@@ -137,6 +142,11 @@ def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, hori
     p = p0.copy()
     p[free] = sol.x
     b, a = unpack(p)
+    from .magnetometer import check_soft_iron
+
+    why = check_soft_iron(b, a, "swing fit:")
+    if why is not None:
+        raise ImutoolError(f"{why}; the swing did not determine the soft iron: turn through a full, steady circle")
     det2 = float(np.linalg.det(a[:2, :2]))
     if det2 <= 0:
         raise ImutoolError("swing fit: horizontal soft-iron matrix is not positive-definite (data too noisy?)")

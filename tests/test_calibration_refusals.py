@@ -146,3 +146,14 @@ def test_heading_swing_coverage_counts_field_headings_not_noise(static, shared):
         calibrate_swing(formats.read(shared(*d)).get("mag", "uT"), None)
     turn = formats.read(shared("mag_hmc5883l", "rotate-ccw-around-z-pointing-up", "hmc5883l_compass.csv"))
     assert calibrate_swing(turn.get("mag", "uT"), None).coverage > 0.9
+
+
+def test_impossible_field_strengths_refused_before_fitting():
+    from calibration.swing import calibrate_swing
+
+    m = simulate("mag-sphere", duration=20, seed=2)["mag"]
+    for bad in (-50.0, 0.0, float("nan"), float("inf")):
+        with pytest.raises(ImutoolError, match="must be a positive number"):
+            calibrate_sphere(m, "auto", field_ut=bad)
+        with pytest.raises(ImutoolError, match="must be a positive number"):
+            calibrate_swing(m, None, horizontal_ut=bad)
