@@ -1,0 +1,165 @@
+"""Parquet speed and memory: imutool vs pyarrow directly (and polars when installed), and a large file streamed.
+
+Usage::
+
+    python benchmarks/parquet.py                   # 1 M rows x 10 columns: write/read, imutool vs pyarrow/polars/CSV
+    python benchmarks/parquet.py --stream 10000000 # also: a 10 M-row Parquet file streamed Parquet -> Parquet
+                                                   # and Parquet -> CSV (imutool convert's route), peak RSS
+    python benchmarks/parquet.py --rows 200000 --repeat 3
+
+Rates are CPU time of this process (``time.process_time``; the 2-core machine is shared, wall time is noisy)
+with wall time alongside; best of ``--repeat``. Files go to a temporary folder (``--tmp`` to choose). Peak RSS of
+the streamed conversions is measured in a fresh child process (ru_maxrss), next to the in-memory size of the data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import pyarrow as pa  # noqa: E402
+import pyarrow.parquet as pq  # noqa: E402
+
+from formats import Recording  # noqa: E402
+from formats.csv import read_csv, write_csv  # noqa: E402
+from formats.parquet import read_parquet, write_parquet  # noqa: E402
+
+
+def make_recording(rows: int, seed: int = 0) -> Recording:
+    """time + gyro + accel + mag: 10 float64 columns of arbitrary doubles."""
+    rng = np.random.default_rng(seed)
+    rec = Recording(np.arange(rows) / 100.0, meta={"benchmark": "parquet"})
+    rec.add("gyro", rng.standard_normal((rows, 3)) * 0.2)
+    rec.add("accel", rng.standard_normal((rows, 3)) + [0.0, 0.0, -9.81])
+    rec.add("mag", rng.standard_normal((rows, 3)) * 20)
+    return rec
+
+
+def best(f: Callable[[], object], repeat: int) -> tuple[float, float]:
+    """(CPU s, wall s) of the fastest of ``repeat`` runs."""
+    runs = []
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        f()
+        runs.append((time.process_time() - c0, time.perf_counter() - w0))
+    return min(runs)
+
+
+def compare(rows: int, repeat: int, tmp: Path) -> None:
+    rec = make_recording(rows)
+    arrays = [rec.time] + [rec[ch][:, j] for ch in ("gyro", "accel", "mag") for j in range(3)]
+    cols = dict(zip(rec.column_names(), arrays, strict=True))
+    mb = rows * 10 * 8 / 1e6
+    p_imu, p_pa, p_pl = (tmp / f"b_{k}.parquet" for k in ("imu", "pa", "pl"))
+    p_csv = tmp / "b.csv"
+    res: list[tuple[str, str, float, float]] = []
+
+    def row(what: str, op: str, f: Callable[[], object]) -> None:
+        cpu, wall = best(f, repeat)
+        res.append((what, op, cpu, wall))
+
+    row("imutool write_parquet", "write", lambda: write_parquet(rec, p_imu))
+    row("pyarrow pq.write_table", "write",
+        lambda: pq.write_table(pa.table({k: pa.array(v) for k, v in cols.items()}), p_pa))
+    row("imutool read_parquet", "read", lambda: read_parquet(p_imu))
+    row("pyarrow pq.read_table → numpy", "read",
+        lambda: [c.to_numpy() for c in pq.read_table(p_pa).columns])
+    try:
+        import polars as pl
+
+        df = pl.DataFrame(cols)
+        row("polars write_parquet", "write", lambda: df.write_parquet(p_pl))
+        row("polars read_parquet → numpy", "read", lambda: pl.read_parquet(p_pl).to_numpy())
+    except ImportError:
+        print("polars not installed (pip install 'imutool[bench]'): skipped")
+    row("imutool write_csv (for scale)", "write", lambda: write_csv(rec, str(p_csv)))
+    row("imutool read_csv (for scale)", "read", lambda: read_csv(str(p_csv)))
+    print(f"\n{rows:,} rows x 10 float64 columns ({mb:.0f} MB in memory); best of {repeat}; "
+          f"Parquet {p_imu.stat().st_size / 1e6:.0f} MB (snappy), CSV {p_csv.stat().st_size / 1e6:.0f} MB")
+    print(f"{'':34s} {'op':5s} {'CPU s':>7s} {'wall s':>7s} {'M rows/s (CPU)':>15s}")
+    for what, op, cpu, wall in res:
+        print(f"{what:34s} {op:5s} {cpu:7.3f} {wall:7.3f} {rows / max(cpu, 1e-9) / 1e6:15.1f}")
+
+
+_MAKE = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from formats import Recording
+    from formats.parquet import ParquetWriter
+    n_total, chunk = int(sys.argv[2]), 500_000
+    with ParquetWriter(sys.argv[1]) as w:
+        for i in range(0, n_total, chunk):
+            n = min(chunk, n_total - i)
+            rng = np.random.default_rng(i)
+            t = (i + np.arange(n)) / 200.0
+            w.write(Recording(t, {"gyro": rng.normal(size=(n, 3)), "accel": rng.normal(size=(n, 3)),
+                                  "mag": rng.normal(size=(n, 3))}))
+""")
+
+_STREAM = textwrap.dedent("""
+    import sys, time
+    import imutool.convert, formats.parquet, formats.csv
+    def hwm_mib():  # VmHWM: this process's peak RSS (ru_maxrss would include the parent's peak before exec)
+        for line in open("/proc/self/status"):
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    base = hwm_mib()
+    t0, c0 = time.perf_counter(), time.process_time()
+    if sys.argv[2] == "-":
+        rows = sum(len(c) for c in formats.parquet.iter_parquet(sys.argv[1], chunk_rows=int(sys.argv[3])))
+    else:
+        rows = imutool.convert.stream_convert(sys.argv[1], sys.argv[2], chunk_rows=int(sys.argv[3]))["rows_out"]
+    print(rows, time.perf_counter() - t0, time.process_time() - c0, base, hwm_mib())
+""")
+
+
+def stream(rows: int, chunk_rows: int, tmp: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    src = tmp / "big.parquet"
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", _MAKE, str(src), str(rows)], check=True, env=env)
+    print(f"\nstreamed: {rows:,} rows x 10 columns ({rows * 80 / 2**20:.0f} MiB as float64), Parquet "
+          f"{src.stat().st_size / 1e6:.0f} MB written by ParquetWriter in {time.perf_counter() - t0:.1f} s wall; "
+          f"chunks of {chunk_rows:,} rows")
+    for label, dst in (("iter_parquet (read only)", "-"), ("Parquet -> Parquet", str(tmp / "out.parquet")),
+                       ("Parquet -> CSV", str(tmp / "out.csv"))):
+        r = subprocess.run([sys.executable, "-c", _STREAM, str(src), dst, str(chunk_rows)], check=True, env=env,
+                           capture_output=True, text=True)
+        n, wall, cpu, base, peak = r.stdout.split()
+        print(f"  {label:26s} {int(n) / float(cpu) / 1e6:6.2f} M rows/s CPU ({float(wall):6.1f} s wall)  peak RSS "
+              f"{float(peak):6.0f} MiB (after imports {float(base):4.0f} MiB)")
+        if dst != "-":
+            os.unlink(dst)
+    print(f"  (this process: peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rows", type=int, default=1_000_000)
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--stream", type=int, default=0, metavar="ROWS", help="also stream a file of ROWS rows")
+    ap.add_argument("--chunk-rows", type=int, default=500_000)
+    ap.add_argument("--tmp", default=None)
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory(dir=a.tmp) as d:
+        compare(a.rows, a.repeat, Path(d))
+        if a.stream:
+            stream(a.stream, a.chunk_rows, Path(d))
+
+
+if __name__ == "__main__":
+    main()
