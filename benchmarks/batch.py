@@ -1,0 +1,94 @@
+"""Batch scaling: `imutool batch` over N simulated voyages with 1, 2, ... local workers and a Dask LocalCluster.
+
+Usage::
+
+    python benchmarks/batch.py                          # 8 voyages of 600 s at 50 Hz, `filter`; 1 and 2 workers
+                                                        # and a 2-worker Dask LocalCluster
+    python benchmarks/batch.py --voyages 16 --workers 1,2,4 --command 'events detect' \\
+        --args '--roll-channel ref_roll --pitch-channel ref_pitch'
+
+Each configuration runs the real command line (``imutool batch COMMAND DIR -o ... --json``) in a fresh process
+and prints wall time, files/s, rows/s and rows/s per worker (speed-up = ideal scaling would keep rows/s per
+worker constant). One warm-up run first fills the numba cache so no configuration pays the JIT compile. The
+machine is shared; run on a quiet machine for figures worth quoting.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import formats  # noqa: E402
+from imutool.sim import simulate  # noqa: E402
+
+
+def _imutool(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", "from imutool.cli import main; main()", *args], env=env,
+                          capture_output=True, text=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--voyages", type=int, default=8)
+    ap.add_argument("--duration", type=float, default=600.0, help="s per voyage")
+    ap.add_argument("--rate", type=float, default=50.0, help="Hz")
+    ap.add_argument("--command", default="filter")
+    ap.add_argument("--args", default="", help="options for the command")
+    ap.add_argument("--workers", default="1,2", help="local worker counts, comma-separated")
+    ap.add_argument("--dask", type=int, default=2, help="Dask LocalCluster workers (0: skip)")
+    ap.add_argument("--tmp", default=None)
+    a = ap.parse_args()
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    with tempfile.TemporaryDirectory(dir=a.tmp) as d:
+        src = Path(d) / "voyages"
+        src.mkdir()
+        rows = 0
+        for k in range(a.voyages):
+            rec = simulate("ship-at-sea", duration=a.duration, rate_hz=a.rate, seed=k)
+            formats.write(rec, src / f"voyage{k:03d}.csv")
+            rows += len(rec)
+        ext = ".json" if a.command.startswith("events") else ".csv"
+        print(f"{a.voyages} voyages x {a.duration:.0f} s at {a.rate:g} Hz ({rows:,} rows, "
+              f"{sum(p.stat().st_size for p in src.iterdir()) / 1e6:.0f} MB CSV); command: imutool {a.command} "
+              f"{a.args}; {os.cpu_count()} CPUs")
+        one = next(iter(sorted(src.iterdir())))
+        warm = _imutool([*shlex.split(a.command), str(one), "-o", str(Path(d) / f"warm{ext}"), *shlex.split(a.args)],
+                        env)
+        if warm.returncode:
+            sys.exit(f"warm-up failed: {warm.stderr.strip()}")
+        configs = [(f"local {n} worker{'s' if n > 1 else ''}", n, []) for n in map(int, a.workers.split(","))]
+        if a.dask:
+            configs.append((f"dask LocalCluster {a.dask} workers", a.dask, ["--dask"]))
+        print(f"{'configuration':32s} {'wall s':>7s} {'files/s':>8s} {'k rows/s':>9s} {'k rows/s/worker':>16s} "
+              f"{'ok':>4s}")
+        base = None
+        for label, n, extra in configs:
+            out = Path(d) / f"out_{label.replace(' ', '_')}"
+            t0 = time.perf_counter()
+            r = _imutool(["batch", a.command, str(src), "-o", str(out / f"{{stem}}{ext}"), "-j", str(n), *extra,
+                          "--args", a.args, "--json"], env)
+            wall = time.perf_counter() - t0
+            try:
+                tot = json.loads(r.stdout)["totals"]
+            except (ValueError, KeyError):
+                print(f"{label:32s} failed: {r.stderr.strip()[-300:]}")
+                continue
+            rate = rows / wall
+            base = base or rate
+            print(f"{label:32s} {wall:7.1f} {a.voyages / wall:8.2f} {rate / 1e3:9.1f} {rate / n / 1e3:16.1f} "
+                  f"{tot['ok']:4d}   speed-up {rate / base:.2f}")
+
+
+if __name__ == "__main__":
+    main()
