@@ -126,7 +126,10 @@ class ParquetWriter:
 
         if self._writer is None:
             self._schema = _schema(rec)
-            self._writer = pq.ParquetWriter(str(self._tmp), self._schema, compression=self.compression)
+            # no dictionary encoding: float sensor data rarely repeats enough to pay for it, and trying it per
+            # row group cost 3-5x the write time (benchmarks/parquet.py)
+            self._writer = pq.ParquetWriter(str(self._tmp), self._schema, compression=self.compression,
+                                            use_dictionary=False)
         elif rec.column_names() != self._schema.names:
             raise ImutoolError(f"Parquet: chunk columns {rec.column_names()} differ from the first chunk's "
                                f"{self._schema.names}", path=self.path)
