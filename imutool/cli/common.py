@@ -111,7 +111,9 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
         else:
             report["validated"] = False
         if checks.warnings:
-            rec.meta["warnings"] = list(rec.meta.get("warnings") or []) + checks.warnings
+            prev = rec.meta.get("warnings")
+            prev = list(prev) if isinstance(prev, (list, tuple)) else [str(prev)] if prev else []
+            rec.meta["warnings"] = prev + [w for w in checks.warnings if w not in prev]
         _note_input(path, report, checks.warnings, strict)
     return rec, report
 
