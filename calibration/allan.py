@@ -208,8 +208,15 @@ class AllanResult:
 
 
 def analyse(y: np.ndarray, rate_hz: float, name: str, unit: str, per_decade: int = 10) -> AllanResult:
+    if not (np.isfinite(rate_hz) and 1e-6 < rate_hz < 1e7):
+        raise ImutoolError(f"Allan deviation: sample rate {rate_hz:.3g} Hz is not plausible (check the time column)")
     taus, adev, n_eff = allan_deviation(y, rate_hz, per_decade)
     adev2 = adev if adev.ndim == 2 else adev[:, None]
+    if not np.all(np.isfinite(adev2)):
+        raise ImutoolError("Allan deviation is not finite (values too large for double precision?)")
+    if np.any(adev2 <= 0):
+        raise ImutoolError(f"{name}: the signal does not change at some cluster times (Allan deviation 0): a "
+                           "constant or stuck channel has no noise terms to fit")
     terms = [fit_noise_terms(taus, adev2[:, j], n_eff) for j in range(adev2.shape[1])]
     return AllanResult(name, unit, taus, adev2, n_eff, terms)
 

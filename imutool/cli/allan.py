@@ -19,6 +19,8 @@ _LABEL = {"gyro": ("ARW", "rad/s/√Hz"), "accel": ("VRW", "m/s²/√Hz"), "mag"
 def _rate(t: np.ndarray) -> tuple[float, str]:
     """Sample rate for the Allan analysis: samples / span. Host timestamps of a buffered sensor often come in
     bursts (median step ≪ mean step); the sensor itself samples uniformly at the mean rate."""
+    if len(t) < 2 or not float(t[-1] - t[0]) > 0:
+        raise ImutoolError(f"Allan deviation needs a time series: {len(t)} row(s) spanning no time")
     mean_rate = (len(t) - 1) / float(t[-1] - t[0])
     med = float(np.median(np.diff(t)))
     if abs(med * mean_rate - 1.0) > 0.05:
