@@ -156,3 +156,22 @@ def test_mismatched_calibration_gives_a_flagged_absurd_card(swing, tmp_path):
     assert s["max_abs_deviation_deg"] > 20.0
     assert any(w.startswith("absurd card") for w in s["warnings"]) and "absurd card" in r.stderr
     assert "WARNING: absurd card" in (tmp_path / "c.txt").read_text()
+
+
+def test_position_and_date_from_an_nmea_reference_log(tmp_path):
+    from calibration.wmm import parse_position, position_from_nmea
+
+    log = tmp_path / "gyro.nmea"
+    log.write_text("$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n"
+                   "$HEHDT,84.4,T*17\r\n"
+                   "$GPRMC,123520,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*60\r\n")
+    lat, lon, day = position_from_nmea(str(log))
+    assert lat == pytest.approx(48.1173, abs=1e-4) and lon == pytest.approx(11.5167, abs=1e-4)
+    assert day == date(1994, 3, 23)
+    void = tmp_path / "void.nmea"  # status V and fix 0: no position
+    void.write_text("$GPRMC,123520,V,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*77\r\n"
+                    "$GPGGA,123519,4807.038,N,01131.000,E,0,08,0.9,545.4,M,46.9,M,,*46\r\n")
+    assert position_from_nmea(str(void))[:2] == (None, None)
+    assert parse_position("-33.87,151.21") == (-33.87, 151.21)
+    with pytest.raises(formats.ImutoolError, match="latitude"):
+        parse_position("95,10")
