@@ -382,14 +382,16 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
                                      _v(vacc, i) or 0.0)
 
 
-def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_rows: int = 200,
+def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_rows: int = 400,
               **kw: Any) -> int:
-    """Largest number of bytes (with CR/LF) one output instant takes, over the first ``sample_rows`` rows
-    (+ 2 bytes a sentence of margin for wider numbers later on)."""
-    sub = rec.slice_time(None, float(rec.time[min(len(rec), sample_rows) - 1])) if len(rec) > sample_rows else rec
+    """Largest number of bytes (with CR/LF) one output instant takes, over about ``sample_rows`` instants spread
+    evenly over the whole recording (fields fill in as it goes: HRM's period and peak hold, ...), + 2 bytes a
+    sentence of margin for wider numbers."""
+    dur = float(rec.time[-1] - rec.time[0]) if len(rec) > 1 else 0.0
+    probe = None if len(rec) <= sample_rows or dur <= 0 else sample_rows / dur
     per: dict[float, int] = {}
     count: dict[float, int] = {}
-    for ti, s in nmea_lines(sub, sentences, None, **{k: v for k, v in kw.items() if k != "card_from"}):
+    for ti, s in nmea_lines(rec, sentences, probe, **{k: v for k, v in kw.items() if k != "card_from"}):
         per[ti] = per.get(ti, 0) + len(s) + 2
         count[ti] = count.get(ti, 0) + 1
     if not per:
