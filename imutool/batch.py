@@ -315,6 +315,7 @@ def execute(runner: Callable[[Job], dict[str, Any]], job: Job, figures: tuple[st
         if job.output:
             Path(job.output).parent.mkdir(parents=True, exist_ok=True)
             remove_stale_temporaries(job.output)
+            marker_path(job.output).unlink(missing_ok=True)  # being redone: not complete until it succeeds
         summary = runner(job) or {}
         rows = summary.get("rows", summary.get("rows_out"))
         res = JobResult(job.input, job.output, "ok", None, int(rows) if isinstance(rows, (int, float)) else None,
