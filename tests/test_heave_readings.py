@@ -63,3 +63,20 @@ def test_evaluate_reports_the_readings(tmp_path):
     assert r.exit_code == 0, r.output
     rd = json.loads(r.stdout)["heave"]["heave"]["readings"]
     assert rd["significant"]["pass"] and not rd["amplitude"]["pass"] and not rd["per_sample"]["pass"]
+
+
+def test_evaluate_compares_a_positive_down_file_as_positive_up(tmp_path):
+    rec = formats.Recording(T.copy())
+    rec.add("heave", -(REF + 0.01), "m")  # an SBG-style file: heave positive down
+    rec.add("settled", np.ones(len(T)), "1")
+    rec.meta["heave_positive"] = "down"
+    formats.write(rec, tmp_path / "down.csv")
+    ref = formats.Recording(T.copy())
+    ref.add("ref_heave", REF, "m")
+    formats.write(ref, tmp_path / "ref.csv")
+    r = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "down.csv"), "--reference", str(tmp_path / "ref.csv"),
+                                 "--channel", "heave", "--max-lag", "0", "--json"])
+    assert r.exit_code == 0, r.output
+    h = json.loads(r.stdout)["heave"]
+    assert h["heave"]["rmse"] == pytest.approx(0.01, abs=1e-6) and "estimate down" in h["compared"]
+    assert h["heave"]["readings"]["amplitude"]["pass"]

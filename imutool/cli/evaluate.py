@@ -106,7 +106,14 @@ def evaluate_cmd(est_path: str, ref_path: str | None, channel: str | None, max_l
     ref = _load(ref_path) if ref_path else est
     summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
     if channel == "heave":
+        signs = {"estimate": str(est.meta.get("heave_positive", "up")),
+                 "reference": str(ref.meta.get("heave_positive", "up"))}
+        same = ref is est
+        est = _heave_up(est)
+        ref = est if same else _heave_up(ref)
         summary["heave"] = _external("imutool.heave", "evaluate_heave", "heave")(est, ref, max_lag)
+        summary["heave"]["compared"] = (f"positive up (files: estimate {signs['estimate']}, "
+                                        f"reference {signs['reference']})")
         _heave_readings(est, ref, summary["heave"])
     elif channel == "position":
         summary["position"] = _external("imutool.ins", "evaluate_position", "position")(est, ref)
@@ -136,6 +143,21 @@ def evaluate_cmd(est_path: str, ref_path: str | None, channel: str | None, max_l
             lines.append(f"BROAD ({qv['rows']}): total {qv['total']['rmse']:.3f}°, heading "
                          f"{qv['heading']['rmse']:.3f}°, inclination {qv['inclination']['rmse']:.3f}° RMSE")
     emit_summary(summary, as_json, quiet, lines)
+
+
+_HEAVE_COLUMNS = ("heave", "heave_delayed", "heave_rate", "heave_rate_delayed", "ref_heave", "ref_heave_rate")
+
+
+def _heave_up(rec):
+    """The recording with every heave column positive up (metadata ``heave_positive: down`` → negated copy)."""
+    if str(rec.meta.get("heave_positive", "up")).lower() != "down":
+        return rec
+    out = rec.copy()
+    for name in _HEAVE_COLUMNS:
+        if name in out.channels:
+            out.add(name, -out[name], out.units.get(name))
+    out.meta["heave_positive"] = "up"
+    return out
 
 
 def _heave_readings(est, ref, out: dict[str, Any]) -> None:
