@@ -8,9 +8,10 @@ Usage::
         --args '--roll-channel ref_roll --pitch-channel ref_pitch'
 
 Each configuration runs the real command line (``imutool batch COMMAND DIR -o ... --json``) in a fresh process
-and prints wall time, files/s, rows/s and rows/s per worker (speed-up = ideal scaling would keep rows/s per
-worker constant). One warm-up run first fills the numba cache so no configuration pays the JIT compile. The
-machine is shared; run on a quiet machine for figures worth quoting.
+and prints wall time, files/s, rows/s and rows/s per worker (ideal scaling keeps rows/s per worker constant), and
+the summed time of the jobs themselves (job s; wall minus job s / workers ≈ start-up: pool or cluster,
+imports). One warm-up run first fills the numba cache so no configuration pays the JIT compile. The machine is
+shared; run on a quiet machine for figures worth quoting.
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ def main() -> None:
         if a.dask:
             configs.append((f"dask LocalCluster {a.dask} workers", a.dask, ["--dask"]))
         print(f"{'configuration':32s} {'wall s':>7s} {'files/s':>8s} {'k rows/s':>9s} {'k rows/s/worker':>16s} "
-              f"{'ok':>4s}")
+              f"{'ok':>4s} {'job s':>7s}")
         base = None
         for label, n, extra in configs:
             out = Path(d) / f"out_{label.replace(' ', '_')}"
@@ -87,7 +88,7 @@ def main() -> None:
             rate = rows / wall
             base = base or rate
             print(f"{label:32s} {wall:7.1f} {a.voyages / wall:8.2f} {rate / 1e3:9.1f} {rate / n / 1e3:16.1f} "
-                  f"{tot['ok']:4d}   speed-up {rate / base:.2f}")
+                  f"{tot['ok']:4d} {tot['job_seconds']:7.1f}   speed-up {rate / base:.2f}")
 
 
 if __name__ == "__main__":
