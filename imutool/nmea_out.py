@@ -18,7 +18,8 @@ Honesty rules:
   variation (or a source not stated). THS mode: ``V`` where the heading is missing, ``S`` for a simulated
   recording, else ``A``;
 - heave while the estimator settles (``settled`` = 0): $PASHR heave field empty and IMU status 0 (Applanix:
-  0 = IMU out / not valid, 1 = satisfactory); TSS1 status letter in lower case (settling). No GNSS channel
+  0 = IMU out / not valid, 1 = satisfactory); TSS1 status letter in lower case (settling); PASHR accuracies
+  from ``roll_std``/``pitch_std``/``heading_std`` (1 σ, deg) when the recording has them. No GNSS channel
   (sog, cog, lat, lon) → PASHR aiding flag 0 (no aiding) and TSS1 ``U``/``u`` (unaided);
 - UTC only from the recording's real time (:func:`formats.nmea.utc_offset_s`, or ``utc_start`` given by the
   caller); otherwise PASHR's time field is empty;
@@ -292,6 +293,7 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
     if "PASHR" in sents and all(x is None for x in (hdg, heel, pitch, heave)):
         raise ImutoolError(f"PASHR needs heading, roll, pitch or heave; has {', '.join(rec.channels)}")
     settled, _ = _ch(rec, ("settled",), "1")
+    stds = [_ch(rec, (name,), "deg")[0] for name in ("roll_std", "pitch_std", "heading_std")]
     gnss = np.zeros(n, dtype=bool)
     for name in GNSS_CHANNELS:
         a, _ = _ch(rec, (name,), rec.units.get(name) or "1")
@@ -370,9 +372,10 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
                 yield ti, rot_sentence(r, valid=r is not None, talker=tk["ROT"])
             elif s == "PASHR":
                 hv = _v(heave, i) if ok_heave else None
+                sd = [_v(a, i) for a in stds]
                 yield ti, pashr_sentence(None if off is None else ti + off, _v(true_arr, i), _v(heel, i),
-                                         _v(pitch, i), hv, aiding=1 if gnss[i] else 0,
-                                         imu_status=1 if ok_heave else 0)
+                                         _v(pitch, i), hv, sd[0], sd[1], sd[2] if _v(true_arr, i) is not None else None,
+                                         aiding=1 if gnss[i] else 0, imu_status=1 if ok_heave else 0)
             elif s == "TSS1":
                 hv, r, p = _v(heave, i), _v(heel, i), _v(pitch, i)
                 if hv is None or r is None or p is None:

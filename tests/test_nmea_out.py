@@ -206,6 +206,11 @@ def test_pashr_flags_settling_no_gnss_and_utc():
     (t0, s0), (t1, s1) = list(nmea_lines(rec, ["PASHR"], None, heading_ref="true"))[100:102]
     f = s0.split(",")
     assert f[1] == "100010.000" and f[10] == "1"  # row 100 at 10 Hz = 10 s after 10:00:00
+    # the filter's one-sigma channels fill the accuracy fields
+    rec.add("roll_std", np.full(len(rec), 0.05), "deg")
+    rec.add("heading_std", np.full(len(rec), 0.8), "deg")
+    f = next(iter(nmea_lines(rec, ["PASHR"], None, heading_ref="true")))[1].split("*")[0].split(",")
+    assert f[7:10] == ["0.050", "", "0.800"]
     # no heading channel: heading and its 'T' both empty (the old writer sent ',,T,')
     rec.remove("heading")
     s = next(iter(nmea_lines(rec, ["PASHR"], None)))[1]
