@@ -166,7 +166,8 @@ def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray,
     crossover, σ_min² = 2NK/√3 at τ = √3 N/K, which is *not* a bias instability (B is then only an upper bound) —
     or ``"upper bound"`` when σ still falls at the longest τ. ``K_resolved``: the +½ slope is seen (K > 0, the
     minimum is not at the end, and the K term carries ≥ ``flicker_share`` of σ² at the longest τ); ``K_upper``:
-    the bound K ≤ min over τ of σ(τ) √(3/τ), valid whatever the noise is.
+    the bound K ≤ min over τ of σ(τ) √(3/τ) (σ²(τ) ≥ K²τ/3 whatever the other noise), with σ(τ) raised by twice
+    its estimation error 1/√(2 n_eff) so that the scatter of few long clusters does not push the bound below K.
     """
     a2 = adev ** 2
     w = np.sqrt(n_eff) / a2  # relative weighting: each point's σ² has relative std ≈ 1/√(n_eff/2)
@@ -185,7 +186,8 @@ def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray,
     return {"N": float(n_), "B": float(adev[i] / BI_FACTOR), "K": float(k_), "tau_min_s": float(taus[i]),
             "adev_min": float(adev[i]), "flat_B_fit": float(b0 / BI_FACTOR),
             "B_upper_bound": kind != "bias instability", "B_kind": kind,
-            "K_resolved": k_resolved, "K_upper": float(np.min(adev * np.sqrt(3.0 / taus)))}
+            "K_resolved": k_resolved,
+            "K_upper": float(np.min(adev * (1.0 + 2.0 / np.sqrt(2.0 * n_eff)) * np.sqrt(3.0 / taus)))}
 
 
 @dataclass

@@ -104,6 +104,7 @@ def test_white_plus_random_walk_minimum_is_labelled_a_crossover():
         assert t["adev_min"] == pytest.approx(np.sqrt(2 * n_d * k_rw / np.sqrt(3)), rel=0.15)
         assert t["tau_min_s"] == pytest.approx(np.sqrt(3) * n_d / k_rw, rel=0.6)
         assert t["flat_B_fit"] < 0.3 * t["B"]
+        assert 0.9 * k_rw < t["K_upper"] < 2.0 * k_rw  # the fallback bound is near K, not below it by much
 
 
 def _flicker(n, fs, level, rng):
