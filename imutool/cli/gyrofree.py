@@ -20,12 +20,13 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--check-layout", is_flag=True, help="Only check observability/conditioning of the layout.")
 @click.option("--noise", type=float, default=None,
               help="Accelerometer noise σ per sample (m/s²) [default: layout noise_density·√fs, else estimated].")
-@click.option("--initial-rate", default=None, metavar="WX,WY,WZ", help="Initial ω (rad/s) [default from data].")
+@click.option("--initial-rate", default=None, metavar="WX,WY,WZ", help="Initial ω (deg/s) [default from data].")
 @click.option("--initial-sign", type=click.Choice(["+", "-"]), default="+", show_default=True,
               help="Sign of the largest initial ω component (h(ω) = h(−ω)).")
 @click.option("--tilt-gain", type=float, default=0.0, show_default=True,
               help="Gravity tilt correction gain (1/s) from the centre specific force (0 = pure integration).")
-@click.option("--rate-rw", type=float, default=1e-4, show_default=True, help="ω random walk (rad/s/√s) in Q.")
+@click.option("--rate-rw", type=float, default=None,
+              help="ω random walk in Q, deg/s/√s [default 0.00573 = 1e-4 rad/s/√s].")
 @click.option("--planar", default=None, metavar="COL1,COL2",
               help="Reduced mode: two parallel single-axis accelerometers (layout sensors' columns) → roll.")
 @click.option("--causal", is_flag=True, help="Planar mode: causal band-pass integration (default zero-phase).")
@@ -73,7 +74,8 @@ def gyrofree_cmd(input_path: str | None, output: str | None, layout_path: str, c
         summary = {"mode": "planar roll", "columns": names, "cutoff_hz": round(res["cutoff_hz"], 4),
                    "integration": "causal" if causal else "zero-phase"}
     else:
-        w0 = parse_vector(initial_rate, 3, "--initial-rate") if initial_rate else None
+        w0 = np.radians(parse_vector(initial_rate, 3, "--initial-rate")) if initial_rate else None
+        rate_rw = 1e-4 if rate_rw is None else float(np.radians(rate_rw))  # options in degrees, SI inside
         out, summary = gf.gyrofree_recording(rec, layout, noise, 1.0 if initial_sign == "+" else -1.0, w0,
                                              tilt_gain, rate_rw)
     formats.write(out, output)
