@@ -42,7 +42,16 @@ from formats.errors import ImutoolError
 from imutool.metrics import best_lag, error_stats, interp_to
 
 GRAVITY = 9.80665
-METHODS = ("realtime", "paper", "bandpass", "envelope")
+METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
+TILT_GAIN = 0.07  # 1/s: tilt-filter gain (+ integral gyro-bias term gain²/4: a critically damped PI loop)
+RT_ORDER = 6  # real-time corrected integrator: order,
+RT_RATIO = 0.3  # corner as a fraction of the tracked dominant frequency,
+RT_SMOOTH_PERIODS = 5.0  # smoothing of the corner (time constant in tracked periods),
+RT_WINDOW_S = 240.0  # s, frequency-tracking window of the real-time method,
+RT_SHORT_WINDOW_S = 90.0  # s, the quick look for a change of sea,
+RT_CHANGE = 0.4  # relative disagreement of the two looks that marks a change of sea,
+RT_SPREAD = (0.08, 0.10)  # spectral spread ν: ≤ first → harmonic KF (line spectrum), ≥ second → bank,
+RT_SHAPE = "butterworth"  # and pole pattern (chosen on the whole benchmark grid, see docs/heave.md)
 AUTO_USES_EKF = False  # --attitude auto: q columns, else the tilt filter (the EKF on request: same heave, slower)
 
 
@@ -50,8 +59,10 @@ AUTO_USES_EKF = False  # --attitude auto: q columns, else the tilt filter (the E
 # Vertical acceleration
 # ------------------------------------------------------------------------------------------------------------------
 @njit(cache=True)
-def _complementary_kernel(dt, gyro, accel, gain):  # pragma: no cover - numba
-    """Quaternion (body→NED) from gyro integration with a proportional tilt correction toward −f (gravity)."""
+def _complementary_kernel(dt, gyro, accel, gain, bias_gain):  # pragma: no cover - numba
+    """Quaternion (body→NED) from gyro integration with a proportional-integral tilt correction toward −f
+    (gravity); the integral term (``bias_gain``, 1/s²) estimates the roll/pitch gyro bias, so a constant or
+    slowly drifting gyro bias leaves no standing tilt error (which would leak g·δ²/2 into the vertical)."""
     n = gyro.shape[0]
     q = np.zeros((n, 4))
     # initial roll/pitch from the first accelerometer sample (FRD reads −g on z when level)
@@ -60,6 +71,7 @@ def _complementary_kernel(dt, gyro, accel, gain):  # pragma: no cover - numba
     pitch = np.arctan2(fx, np.sqrt(fy * fy + fz * fz))
     cr, sr, cp, sp = np.cos(roll / 2), np.sin(roll / 2), np.cos(pitch / 2), np.sin(pitch / 2)
     w, x, y, z = cr * cp, sr * cp, cr * sp, -sr * sp
+    bx = by = bz = 0.0
     for k in range(n):
         if k > 0:
             # gravity direction predicted in body axes: "up" = third row of R(q) (down) negated
@@ -75,25 +87,37 @@ def _complementary_kernel(dt, gyro, accel, gain):  # pragma: no cover - numba
                 ex = my * dz - mz * dy
                 ey = mz * dx - mx * dz
                 ez = mx * dy - my * dx
-            gx = gyro[k, 0] + gain * ex
-            gy = gyro[k, 1] + gain * ey
-            gz = gyro[k, 2] + gain * ez
-            h = 0.5 * dt[k]
-            w2 = w - h * (x * gx + y * gy + z * gz)
-            x2 = x + h * (w * gx + y * gz - z * gy)
-            y2 = y + h * (w * gy - x * gz + z * gx)
-            z2 = z + h * (w * gz + x * gy - y * gx)
+            bx -= bias_gain * ex * dt[k]
+            by -= bias_gain * ey * dt[k]
+            bz -= bias_gain * ez * dt[k]
+            # rate over the interval: mean of its end samples (a ship's roll at a few Hz sampling would
+            # otherwise leave a motion-rectified tilt drift), rotation applied exactly: q ⊗ exp(ω·dt/2)
+            gx = 0.5 * (gyro[k, 0] + gyro[k - 1, 0]) - bx + gain * ex
+            gy = 0.5 * (gyro[k, 1] + gyro[k - 1, 1]) - by + gain * ey
+            gz = 0.5 * (gyro[k, 2] + gyro[k - 1, 2]) - bz + gain * ez
+            ang = np.sqrt(gx * gx + gy * gy + gz * gz) * 0.5 * dt[k]
+            c = np.cos(ang)
+            sc = np.sin(ang) / ang * 0.5 * dt[k] if ang > 1e-12 else 0.5 * dt[k]
+            w2 = c * w - sc * (x * gx + y * gy + z * gz)
+            x2 = c * x + sc * (w * gx + y * gz - z * gy)
+            y2 = c * y + sc * (w * gy - x * gz + z * gx)
+            z2 = c * z + sc * (w * gz + x * gy - y * gx)
             nq = np.sqrt(w2 * w2 + x2 * x2 + y2 * y2 + z2 * z2)
             w, x, y, z = w2 / nq, x2 / nq, y2 / nq, z2 / nq
         q[k, 0], q[k, 1], q[k, 2], q[k, 3] = w, x, y, z
     return q
 
 
-def complementary_attitude(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gain: float = 0.05) -> np.ndarray:
-    """Simple tilt estimate q (N,4) body→NED: gyro (rad/s, FRD) integration + gravity correction (gain 1/s)."""
+def complementary_attitude(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gain: float = TILT_GAIN,
+                           bias_gain: float | None = None) -> np.ndarray:
+    """Simple tilt estimate q (N,4) body→NED: gyro (rad/s, FRD) integration + gravity correction (gain 1/s)
+    with an integral gyro-bias term (``bias_gain`` 1/s²; default gain²/4, a critically damped loop; 0 =
+    proportional only)."""
+    if bias_gain is None:
+        bias_gain = gain * gain / 4.0
     dt = np.diff(t, prepend=t[0])
     return _complementary_kernel(dt, np.ascontiguousarray(gyro, float), np.ascontiguousarray(accel, float),
-                                 float(gain))
+                                 float(gain), float(bias_gain))
 
 
 def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.ndarray, str]:
@@ -119,12 +143,12 @@ def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.n
             if attitude == "ekf":
                 raise ImutoolError(f"attitude EKF not usable here: {e}") from None
     return complementary_attitude(rec.time, rec["gyro"], rec["accel"], tilt_gain), \
-        f"complementary tilt filter (gain {tilt_gain} 1/s)"
+        f"complementary PI tilt filter (gain {tilt_gain} 1/s, bias gain {tilt_gain ** 2 / 4:.3g} 1/s²)"
 
 
 def vertical_acceleration(rec: Recording, columns: list[str] | None = None, sign: str = "up",
                           attitude: str = "auto", lever_arm: np.ndarray | None = None,
-                          tilt_gain: float = 0.05) -> tuple[np.ndarray, dict[str, Any]]:
+                          tilt_gain: float = TILT_GAIN) -> tuple[np.ndarray, dict[str, Any]]:
     """Vertical acceleration (m/s², positive up; constant part still included) and a description.
 
     ``columns``: channel names of single vertical accelerometers (averaged; ``sign`` 'up' or 'down' says where
@@ -262,6 +286,8 @@ class Tracking:
     freqs: np.ndarray
     dominant: np.ndarray
     window_s: np.ndarray = field(default_factory=lambda: np.array([]))
+    median: np.ndarray = field(default_factory=lambda: np.array([]))  # Hz: half the heave energy lies below
+    spread: np.ndarray = field(default_factory=lambda: np.array([]))  # ν = √(m₀m₂/m₁² − 1) of the heave band
 
 
 def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 120.0, hop_s: float = 10.0,
@@ -284,7 +310,7 @@ def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 12
     ad = np.asarray(a[: nd * dec], float).reshape(nd, dec).mean(1)
     td = t[: nd * dec].reshape(nd, dec).mean(1)
     fsd = fs / dec
-    starts, freqs, dom, wins = [], [], [], []
+    starts, freqs, dom, wins, med, spr = [], [], [], [], [], []
     tk = t[0] + min_window_s
     while tk <= t[-1] + 1e-9:
         lo = np.searchsorted(td, tk - window_s)
@@ -313,11 +339,16 @@ def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 12
                 freqs.append(row)
                 dom.append(fdom)
                 wins.append((hi - lo) / fsd)
+                cs = np.cumsum(s)
+                med.append(float(f[min(len(f) - 1, int(np.searchsorted(cs, 0.5 * cs[-1])))]))
+                m0, m1, m2 = float(s.sum()), float((f * s).sum()), float((f * f * s).sum())
+                spr.append(float(np.sqrt(max(0.0, m0 * m2 / max(m1 * m1, 1e-300) - 1.0))))
         tk += hop_s
     if not starts:
         raise ImutoolError(f"recording too short for frequency tracking: {t[-1] - t[0]:.1f} s < "
                            f"--min-window {min_window_s:g} s")
-    return Tracking(np.array(starts), np.array(freqs), np.array(dom), np.array(wins))
+    return Tracking(np.array(starts), np.array(freqs), np.array(dom), np.array(wins), np.array(med),
+                    np.array(spr))
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -643,14 +674,206 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
 
 
 # ------------------------------------------------------------------------------------------------------------------
+# Real-time heave: a bank of phase-corrected (complementary) double integrators
+# ------------------------------------------------------------------------------------------------------------------
+def _denominator(n: int, shape: str) -> np.ndarray:
+    """Monic D(s) = sⁿ + p₁sⁿ⁻¹ + … + pₙ for a unit corner: 'binomial' (s + 1)ⁿ or 'butterworth'."""
+    if shape == "binomial":
+        return np.poly(-np.ones(n))
+    if shape == "butterworth":
+        _, p, _ = signal.butter(n, 1.0, analog=True, output="zpk")
+        return np.real(np.poly(p))
+    raise ImutoolError(f"unknown filter shape {shape!r} (binomial or butterworth)")
+
+
+def corrected_integrator(n: int, wc: float, shape: str = "binomial") -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                              np.ndarray]:
+    """Continuous state-space (A, B, C heave, C rate) of the phase-corrected double integrator of order n ≥ 4 at
+    corner ωc (rad/s), input vertical acceleration (m/s², up), output heave (m, up) and heave rate (m/s).
+
+    Transfer: y/a = H(s)/s² with H(s) = (sⁿ + p₁sⁿ⁻¹ + … + pₙ₋₃s³)/D(s): the high-pass H keeps three zeros at s = 0
+    (a constant accelerometer bias gives no heave, a bias ramp a bounded offset) and 1 − H = (pₙ₋₂s² + pₙ₋₁s +
+    pₙ)/D(s) falls as (ωc/ω)ⁿ⁻², so gain and phase error in the wave band are O((ωc/ω)ⁿ⁻²) instead of the
+    O(ωc/ω) phase lead of a plain high-pass. Realisation with physical states, so a bank of such filters can be
+    blended and a corner changed without corrupting the state: x = [h, ḣ, I₁, …, Iₙ₋₃, b] with Iⱼ the j-th
+    integral of h and b the accelerometer-bias estimate:
+    ḣ = v, v̇ = a − b − p₁v − p₂h − Σ pⱼ₊₂Iⱼ, İ₁ = h, İⱼ = Iⱼ₋₁, ḃ = pₙIₙ₋₃; heave y = h + Σⱼ₌₁ⁿ⁻³ pⱼIⱼ.
+    """
+    if n < 4:
+        raise ImutoolError(f"the corrected integrator needs order ≥ 4, got {n}")
+    p = _denominator(n, shape) * wc ** np.arange(n + 1)
+    a = np.zeros((n, n))
+    b = np.zeros(n)
+    a[0, 1] = 1.0
+    b[1] = 1.0
+    a[1, 0], a[1, 1], a[1, n - 1] = -p[2], -p[1], -1.0
+    for j in range(1, n - 2):  # I_j at index 1 + j
+        a[1, 1 + j] = -p[j + 2]
+        a[1 + j, 0 if j == 1 else j] = 1.0
+    a[n - 1, n - 2] = p[n]
+    c = np.zeros(n)
+    c[0] = 1.0
+    for j in range(1, n - 2):
+        c[1 + j] = p[j]
+    cv = c @ a  # ẏ = C A x (C B = 0)
+    return a, b, c, cv
+
+
+@njit(cache=True)
+def _bank_kernel(a, ads, bds, cs, cvs, idx, frac):  # pragma: no cover - numba
+    """Run K discretised filters (trapezoidal, input linear between samples) on a; output at sample i the blend
+    (1 − frac)·filter idx + frac·filter idx+1 (heave, rate)."""
+    n = a.shape[0]
+    k_all, s = bds.shape
+    x = np.zeros((k_all, s))
+    xn = np.zeros(s)
+    y = np.empty(n)
+    v = np.empty(n)
+    for i in range(n):
+        if i > 0:
+            u = 0.5 * (a[i - 1] + a[i])
+            for k in range(k_all):
+                for r in range(s):
+                    acc = bds[k, r] * u
+                    for c in range(s):
+                        acc += ads[k, r, c] * x[k, c]
+                    xn[r] = acc
+                for r in range(s):
+                    x[k, r] = xn[r]
+        k0 = idx[i]
+        k1 = min(k0 + 1, k_all - 1)
+        w1 = frac[i]
+        y0 = y1 = v0 = v1 = 0.0
+        for r in range(s):
+            y0 += cs[k0, r] * x[k0, r]
+            y1 += cs[k1, r] * x[k1, r]
+            v0 += cvs[k0, r] * x[k0, r]
+            v1 += cvs[k1, r] * x[k1, r]
+        y[i] = (1.0 - w1) * y0 + w1 * y1
+        v[i] = (1.0 - w1) * v0 + w1 * v1
+    return y, v
+
+
+def filter_settle_time(n: int, wc: float, shape: str = "binomial", tol: float = 0.01) -> float:
+    """Start-up time (s) of the corrected integrator: after it the response to the initial state (the motion
+    already under way when the filter starts from rest) has decayed below ``tol`` of its peak (slowest mode)."""
+    a, _, c, _ = corrected_integrator(n, 1.0, shape)
+    tt = np.linspace(0, 60, 1201)
+    env = np.zeros_like(tt)
+    for j in range(n):
+        x0 = np.zeros(n)
+        x0[j] = 1.0
+        _, y = signal.impulse((a, x0[:, None], c[None, :], np.zeros((1, 1))), T=tt)
+        env = np.maximum(env, np.abs(y) / max(1e-300, np.abs(y).max()))
+    # last time the envelope exceeds tol (unit corner), scaled to ωc
+    over = np.nonzero(env > tol)[0]
+    return float(tt[over[-1]] if len(over) else 0.0) / wc
+
+
+def wave_onset(t: np.ndarray, a: np.ndarray, i_first: int, f: float, level: float = 0.3) -> float:
+    """Time (s) the wave motion began, from the data before sample ``i_first`` only: the first time the
+    one-period moving RMS of the acceleration (mean removed) exceeded ``level`` × its value at ``i_first``."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    w = max(2, int(round(fs / f)))
+    x = np.asarray(a[: i_first + 1], float)
+    if len(x) <= w:
+        return float(t[0])
+    x = x - np.mean(x[-min(len(x), 8 * w):])
+    c = np.concatenate([[0.0], np.cumsum(x * x)])
+    rms = np.sqrt((c[w:] - c[:-w]) / w)  # rms[j]: samples j .. j + w − 1
+    above = np.nonzero(rms >= level * rms[-1])[0]
+    return float(t[above[0]]) if len(above) else float(t[0])
+
+
+def spread_weight(t: np.ndarray, tracking: Tracking, smooth_periods: float = RT_SMOOTH_PERIODS) -> np.ndarray:
+    """Per-sample share (0–1) of the corrected-integrator bank in the real-time output: 1 for a broad sea
+    spectrum (spread ν ≥ RT_SPREAD[1]), 0 for a line spectrum (ν ≤ RT_SPREAD[0]), linear between; 1 before the
+    first estimate; first-order lag of ``smooth_periods`` tracked periods between updates (causal)."""
+    lo, hi = RT_SPREAD
+    goal = np.clip((np.asarray(tracking.spread, float) - lo) / (hi - lo), 0.0, 1.0)
+    w = np.ones(len(t))
+    ends = np.append(tracking.start[1:], len(t))
+    cur = goal[0]
+    for k, (i0, i1) in enumerate(zip(tracking.start, ends, strict=True)):
+        if k == 0:
+            w[i0:i1] = cur
+            continue
+        tau = smooth_periods / tracking.dominant[k]
+        w[i0:i1] = goal[k] + (cur - goal[k]) * np.exp(-(t[i0:i1] - t[i0]) / tau)
+        cur = float(w[i1 - 1])
+    return w
+
+
+def heave_realtime(t: np.ndarray, a: np.ndarray, tracking: Tracking, ratio: float = RT_RATIO,
+                   order: int = RT_ORDER, shape: str = RT_SHAPE, default_hz: float = 0.1,
+                   smooth_periods: float = RT_SMOOTH_PERIODS, step: float = 2 ** 0.25,
+                   basis: str = "median") -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Causal heave (m, up) and rate (m/s) from vertical acceleration a (m/s², up): a bank of corrected
+    integrators (:func:`corrected_integrator`) with corners ``step`` apart, all run from the start, blended at
+    each sample by the corner ``ratio`` × the tracked heave frequency (``basis`` 'median': half the tracked
+    displacement energy lies below it — steadier than the spectral peak; or 'dominant': the peak), log-
+    interpolated and smoothed with a time constant of ``smooth_periods`` periods; before the first frequency
+    estimate the corner is ``ratio`` × ``default_hz``."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    dt = 1.0 / fs
+    seg = np.zeros(len(t), dtype=np.int64)
+    seg[tracking.start] = 1
+    seg = np.cumsum(seg) - 1
+    fref = tracking.median if basis == "median" and len(tracking.median) else tracking.dominant
+    # corner (log Hz) per sample: the default until the first estimate, then a first-order lag (time constant
+    # ``smooth_periods`` tracked periods) toward ratio × the latest estimate, in closed form per hop
+    lsm = np.full(len(t), np.log(ratio * default_hz))
+    ends = np.append(tracking.start[1:], len(t))
+    cur = np.log(ratio * fref[0])
+    for k, (i0, i1) in enumerate(zip(tracking.start, ends, strict=True)):
+        goal = np.log(ratio * fref[k])
+        if k > 0:
+            decay = np.exp(-(t[i0:i1] - t[i0]) * fref[k] / smooth_periods)
+            lsm[i0:i1] = goal + (cur - goal) * decay
+            cur = goal + (cur - goal) * np.exp(-(t[i1 - 1] + dt - t[i0]) * fref[k] / smooth_periods)
+        else:
+            lsm[i0:i1] = goal
+            cur = goal
+    lo, hi = float(lsm.min()), float(lsm.max())
+    base = np.log(step)
+    k0 = int(np.floor(lo / base))
+    k1 = int(np.ceil(hi / base))
+    corners = np.exp(base * np.arange(k0, max(k1, k0 + 1) + 1))
+    corners = corners[corners < 0.45 * fs / 2]
+    kk = len(corners)
+    ads = np.zeros((kk, order, order))
+    bds = np.zeros((kk, order))
+    cs = np.zeros((kk, order))
+    cvs = np.zeros((kk, order))
+    eye = np.eye(order)
+    for k, fcr in enumerate(corners):
+        am, bm, cm, cvm = corrected_integrator(order, 2 * np.pi * fcr, shape)
+        mi = np.linalg.inv(eye - am * dt / 2)
+        ads[k] = mi @ (eye + am * dt / 2)
+        bds[k] = mi @ bm * dt
+        cs[k], cvs[k] = cm, cvm
+    pos = np.clip((lsm - base * k0) / base, 0.0, kk - 1.0)
+    idx = np.minimum(np.floor(pos).astype(np.int64), kk - 1)
+    frac = pos - idx
+    a0 = np.ascontiguousarray(np.asarray(a, float) - a[0])
+    y, v = _bank_kernel(a0, ads, bds, cs, cvs, idx, np.ascontiguousarray(frac))
+    info = {"realtime_filter": f"corrected double integrator, order {order} ({shape}), corner {ratio:g} × dominant",
+            "realtime_corners_hz": [round(float(c), 5) for c in corners],
+            "corner_hz": np.exp(lsm)}
+    return y, v, info
+
+
+# ------------------------------------------------------------------------------------------------------------------
 # Driver
 # ------------------------------------------------------------------------------------------------------------------
 def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", harmonics: int | None = None,
-                   cutoff: float | None = None, order: int = 3, window_s: float = 120.0, hop_s: float = 10.0,
-                   min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0, bandwidth: float = 0.03,
+                   cutoff: float | None = None, order: int | None = None, window_s: float | None = None,
+                   hop_s: float = 10.0, min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0,
+                   bandwidth: float = 0.03,
                    meas_noise: float = 0.002, residual_noise: float = 0.02, delayed_cutoff: float | None = None,
                    lowpass: float | None = None, settle_periods: float = 4.0,
-                   cutoff_ratio: float = 0.2, lowpass_ratio: float = 4.0) -> HeaveResult:
+                   cutoff_ratio: float | None = None, lowpass_ratio: float = 4.0,
+                   shape: str | None = None, smooth_periods: float | None = None) -> HeaveResult:
     """Heave (m, positive up) from vertical acceleration a_up (m/s², positive up) sampled at times t (s).
 
     ``harmonics``: oscillators in the model (default 3 for ``paper``, 5 for ``realtime``).
@@ -664,6 +887,12 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         raise ImutoolError(f"unknown heave method {method!r}; choose one of {', '.join(METHODS)}")
     if harmonics is None:
         harmonics = 3 if method == "paper" else 5
+    if cutoff_ratio is None:
+        cutoff_ratio = RT_RATIO if method == "realtime" else 0.2
+    if order is None:
+        order = RT_ORDER if method == "realtime" else 3
+    if window_s is None:  # the bank's corner wants a steadier frequency than the KF's lines
+        window_s = RT_WINDOW_S if method == "realtime" else 120.0
     if harmonics < 1 or harmonics > 8:
         raise ImutoolError(f"--harmonics must be 1..8, got {harmonics}")
     t = np.asarray(t, float)
@@ -696,9 +925,9 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         hd, vd = np.interp(t, tb, hb), np.interp(t, tb, vb)
     else:
         hd, vd, lat_d = heave_delayed(a, fs, fcd, lowpass=lp)
-    sos = bandpass_integrator(fs, fc, order)
-    a0 = a - a[0]
-    d = signal.sosfilt(sos, a0)
+    if method != "realtime":
+        sos = bandpass_integrator(fs, fc, order)
+        d = signal.sosfilt(sos, a - a[0])
     period = np.full(len(t), np.nan)
     seg = np.zeros(len(t), dtype=np.int64)
     seg[tr.start] = 1
@@ -706,7 +935,45 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     ok = seg >= 0
     period[ok] = 1.0 / tr.dominant[seg[ok]]
     info: dict[str, Any] = {}
-    if method == "bandpass":
+    bank_settle = None
+    if method == "realtime":
+        shape = shape or RT_SHAPE
+        sp = RT_SMOOTH_PERIODS if smooth_periods is None else smooth_periods
+        # a quick look (RT_SHORT_WINDOW_S) beside the steady long window: a longer period showing up (a new
+        # swell, a turn that lowers the encounter frequency) lowers the corner at once — a corner too low costs
+        # only noise, one too high costs phase and gain — and a disagreement of the two marks a change of sea
+        trs = track_frequencies(t, a, 1, RT_SHORT_WINDOW_S, hop_s, min_window_s, fmin, fmax, "centroids",
+                                min_periods=4.0)
+        j = np.searchsorted(trs.start, tr.start, side="right") - 1
+        f_short = np.where(j >= 0, trs.median[np.maximum(j, 0)], tr.median)
+        off = np.abs(f_short / tr.median - 1.0) > RT_CHANGE
+        change = off & np.concatenate([[False], off[:-1]])  # two updates in a row: not one noisy short look
+        tr_bank = Tracking(tr.start, tr.freqs, tr.dominant, tr.window_s, np.minimum(tr.median, f_short),
+                           tr.spread)
+        h, v, info = heave_realtime(t, a, tr_bank, ratio=cutoff_ratio, order=order, shape=shape,
+                                    smooth_periods=sp)
+        corner = info.pop("corner_hz")
+        fc = float(corner[tr.start[0]])
+        # start-up of the bank: its transient after the motion began (the first sample, or a later onset of
+        # waves found causally in the data before the first frequency estimate) must have died out
+        bank_settle = (wave_onset(t, a, int(tr.start[0]), f_first)
+                       + filter_settle_time(order, 2 * np.pi * fc, shape))
+        # a line spectrum (regular waves, swell: spread ν ≤ RT_SPREAD[0]) is followed by the harmonic KF with
+        # exact per-line phase correction instead (faster to settle, rejects the off-line noise), blended
+        # linearly up to ν = RT_SPREAD[1]; weights smoothed like the corner
+        w_bank = spread_weight(t, tr, sp)
+        if np.any(w_bank < 1.0):
+            fc_h = 0.2 * f_first
+            sos = bandpass_integrator(fs, fc_h, 3)
+            d = signal.sosfilt(sos, a - a[0])
+            hk, vk, kinfo = kalman_multistep(d, fs, tr, sos, per_harmonic=True, bandwidth=bandwidth,
+                                             meas_noise=meas_noise, residual_noise=residual_noise)
+            h = w_bank * h + (1.0 - w_bank) * hk
+            v = w_bank * v + (1.0 - w_bank) * vk
+            info.update(kinfo)
+        info["realtime_bank_share"] = round(float(np.mean(w_bank[tr.start[0]:])), 3)
+        latency = "0 s (causal; phase-corrected double integrator bank, or the harmonic KF on line spectra)"
+    elif method == "bandpass":
         h = d
         v = np.gradient(d) * fs
         latency = "0 s (causal; phase lead of the high-pass)"
@@ -715,7 +982,7 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         v = np.gradient(h) * fs
         latency = "offline (whole record)"
     else:
-        h, v, info = kalman_multistep(d, fs, tr, sos, per_harmonic=(method == "realtime"), bandwidth=bandwidth,
+        h, v, info = kalman_multistep(d, fs, tr, sos, per_harmonic=(method == "harmonic"), bandwidth=bandwidth,
                                       meas_noise=meas_noise, residual_noise=residual_noise)
         latency = "0 s (causal; phase lead cancelled by multi-step prediction)"
     # settled: after the first frequency estimate + settle_periods, outside the start-up of the band-pass
@@ -731,6 +998,14 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
             settled[(t >= t[i0]) & (t < t[i0] + settle_periods / tr.dominant[k])] = 0.0
     if method == "envelope":
         settled[t > t[-1] - 2.0 / f_rec] = 0.0
+    if bank_settle is not None:  # the bank's share of the output must be past its start-up
+        settled[(t < bank_settle) & (w_bank > 0.0)] = 0.0
+        # a change of sea in progress (short and long looks disagree), and settle_periods after it
+        for k in np.nonzero(change)[0]:
+            i0 = tr.start[k]
+            i1 = tr.start[k + 1] if k + 1 < len(tr.start) else len(t)
+            settled[(t >= t[i0]) & (t < t[i1 - 1] + settle_periods / min(f_short[k], tr.median[k]))] = 0.0
+        t_settle = float(t[np.argmax(settled > 0.5)]) if np.any(settled > 0.5) else float(t[-1])
     # the delayed output needs data on both sides: its first and last 1/f_c seconds are start-up/run-out
     settled_d = ((t >= t[0] + 1.0 / fcd) & (t <= t[-1] - 1.0 / fcd)).astype(float)
     summary = {
@@ -756,7 +1031,7 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
 
 def heave_recording(rec: Recording, method: str = "realtime", vertical: list[str] | None = None,
                     vertical_sign: str = "up", attitude: str = "auto", lever_arm: np.ndarray | None = None,
-                    tilt_gain: float = 0.05, **options: Any) -> tuple[Recording, dict[str, Any]]:
+                    tilt_gain: float = TILT_GAIN, **options: Any) -> tuple[Recording, dict[str, Any]]:
     """Heave of a recording: columns time, heave, heave_rate, heave_delayed, heave_rate_delayed, period,
     settled (+ ref_heave / ref_heave_rate copied when present). Returns (recording, summary)."""
     a, vinfo = vertical_acceleration(rec, vertical, vertical_sign, attitude, lever_arm, tilt_gain)
@@ -809,7 +1084,9 @@ def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> di
         if len(tt) < 10:
             raise ImutoolError("too few settled samples to evaluate heave")
         if max_lag_s > 0:
-            lag, _ = best_lag(tt, xx, ref.time, rh, max_lag_s)
+            # a lag grid finer than the sample interval (at 10 Hz a ±0.1 s search would have three points)
+            step = min(float(np.median(np.diff(tt))), max_lag_s / 10)
+            lag, _ = best_lag(tt, xx, ref.time, rh, max_lag_s, step_s=step)
         else:
             lag = 0.0
         r = interp_to(tt - lag, ref.time, rh)

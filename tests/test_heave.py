@@ -144,3 +144,106 @@ def test_cli_heave_writes_positive_up_and_reports_bad_column(tmp_path):
     assert "positive UP" in text.split("time,")[0]
     with pytest.raises(ImutoolError, match="nope"):
         H.heave_recording(rec, vertical=["nope"])
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# Real-time heave (issue 17): phase-corrected integrator bank, ≤ 5 % of Hs across Tp 5–15 s, honest settled flag
+# ------------------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("hs", "tp", "seed"), [(2.0, 5.0, 11), (1.0, 9.0, 12), (4.0, 12.0, 13), (1.0, 15.0, 14)])
+def test_realtime_rms_within_5pct_of_hs_across_the_period_range(hs, tp, seed):
+    # seeds differ from the benchmark grid's (100+): this is a fresh draw, not the tuning data
+    rec = sea_state(duration=700, rate_hz=10, hs=hs, tp=tp, seed=seed)
+    a, _ = H.vertical_acceleration(rec)  # imutool's own tilt filter: realistic attitude error, no truth
+    res = H.estimate_heave(rec.time, a, method="realtime")
+    ref = rec["ref_heave"]
+    m = res.settled > 0.5
+    assert m.mean() > 0.4  # settles within the record (not vacuously "accurate" on a handful of samples)
+    rms = float(np.sqrt(np.mean((res.heave - ref)[m] ** 2)))
+    assert rms <= 0.05 * hs
+    assert res.summary["realtime_bank_share"] > 0.9  # a broad sea spectrum: the corrected-integrator bank
+    old = H.estimate_heave(rec.time, a, method="bandpass")
+    assert rms < 0.5 * float(np.sqrt(np.mean((old.heave - ref)[m & (old.settled > 0.5)] ** 2)))
+
+
+def test_corrected_integrator_transfer_and_bias_rejection():
+    for n, shape in ((5, "butterworth"), (6, "binomial")):
+        wc = 2 * np.pi * 0.02
+        a, b, c, cv = H.corrected_integrator(n, wc, shape)
+        p = H._denominator(n, shape)  # unit corner
+        sos = H.bandpass_integrator(10.0, 0.02, 3)  # the plain 3rd-order high-pass double integrator
+        for f in (0.1, 0.2):
+            s = 2j * np.pi * f
+            g = c @ np.linalg.solve(s * np.eye(n) - a, b) * s**2  # relative to the ideal double integrator
+            # 1 − H = (p_{n−2}s² + p_{n−1}s + p_n)/D: error O((f_c/f)^{n−2}), far below a plain high-pass's lead
+            assert abs(g - 1) <= 1.5 * p[n - 2] * (0.02 / f) ** (n - 2)
+            plain = H.integrator_response(sos, 10.0, [f])[0]
+            assert abs(np.angle(g)) < 0.15 * abs(np.angle(plain))
+            assert cv @ np.linalg.solve(s * np.eye(n) - a, b) == pytest.approx(s * (g / s**2), rel=1e-9)
+        assert np.all(np.linalg.eigvals(a).real < 0)
+        # three zeros at s = 0: a constant accelerometer bias leaves no steady heave (a = B·u, x = −A⁻¹B u)
+        x_ss = -np.linalg.solve(a, b)
+        assert abs(c @ x_ss) < 1e-9 and abs(x_ss[-1] - 1.0) < 1e-9  # the bias state holds the bias
+    with pytest.raises(ImutoolError, match="order"):
+        H.corrected_integrator(3, 1.0)
+
+
+def _changing_sea():
+    """1000 s: Tp 6 s, then within 40 s (480–520 s) a Tp 12 s sea (Hs 2 m both), blended on the heave itself so
+    the acceleration is exact; the sensor and tilt errors of the first simulation ride on top."""
+    s1 = sea_state(duration=1000, rate_hz=10, hs=2.0, tp=6.0, seed=21)
+    s2 = sea_state(duration=1000, rate_hz=10, hs=2.0, tp=12.0, seed=22)
+    t = s1.time
+    x = np.clip((t - 480.0) / 40.0, 0, 1)
+    w = 1 - (3 * x**2 - 2 * x**3)
+    dw = -(6 * x - 6 * x**2) / 40.0
+    ddw = -(6 - 12 * x) / 1600.0 * ((x > 0) & (x < 1))
+    h1, v1, a1 = s1["ref_heave"], s1["ref_heave_rate"], s1["ref_heave_accel"]
+    h2, v2, a2 = s2["ref_heave"], s2["ref_heave_rate"], s2["ref_heave_accel"]
+    acc = w * a1 + (1 - w) * a2 + 2 * dw * (v1 - v2) + ddw * (h1 - h2)
+    va, _ = H.vertical_acceleration(s1)
+    return t, acc + (va - a1), w * h1 + (1 - w) * h2
+
+
+def test_settled_flag_is_honest_and_marks_a_change_of_sea():
+    t, acc, ref = _changing_sea()
+    res = H.estimate_heave(t, acc, method="realtime")
+    s = res.settled
+    err = np.abs(res.heave - ref)
+    assert s[0] == 0 and s[t < 30].max() == 0  # nothing trustworthy before a frequency estimate
+    t_settle = res.summary["settle_time_s"]
+    assert 30 < t_settle < 200
+    first = (t >= t_settle) & (t < 480)
+    assert s[first].mean() > 0.8
+    assert np.sqrt(np.mean(err[first & (s > 0.5)] ** 2)) <= 0.05 * 2.0
+    assert err[t < t_settle].max() > 0.5  # what the flag hid at the start was a real start-up transient
+    # the change of sea (480–520 s) is flagged within 80 s of its start (two 10-s updates of the 90-s look agreeing
+    # that the period moved > 40 %); docs/heave.md states that latency and the error inside it
+    assert s[(t > 480) & (t < 560)].min() == 0
+    late = (t > 700) & (s > 0.5)
+    assert late.mean() > 0.2 and np.sqrt(np.mean(err[late] ** 2)) <= 0.05 * 2.0
+
+
+def test_line_spectrum_uses_the_harmonic_kf_and_a_sea_the_bank():
+    rec = heave_platform(duration=200, rate_hz=50, amplitude=0.04, seed=1)
+    out, summ = H.heave_recording(rec, method="realtime")
+    assert summ["realtime_bank_share"] < 0.05
+    assert _rmse(out, rec["ref_heave"]) <= 0.004
+    t = np.arange(0, 600, 0.1)
+    tr = H.Tracking(np.array([100, 1500]), np.array([[0.1], [0.1]]), np.array([0.1, 0.1]),
+                    spread=np.array([0.3, 0.02]))
+    w = H.spread_weight(t, tr, 5.0)
+    assert w[0] == 1 and w[1000] == 1 and w[-1] < 0.01 and np.all(np.diff(w) <= 1e-12)
+
+
+@pytest.mark.parametrize(("name", "today"), [("3012_1.csv", 0.00165), ("4061_1.csv", 0.00413)])
+def test_ntnu_realtime_no_worse_than_before(shared, name, today):
+    from imutool.metrics import best_lag, interp_to
+
+    rec = formats.read(str(shared("ntnu_waves", name)))
+    out, _ = H.heave_recording(rec, vertical=["acc_heave_sb", "acc_heave_ps"])
+    m = out["settled"] > 0.5
+    cam = rec["heave"]
+    lag, _ = best_lag(rec.time[m], out["heave"][m], rec.time, cam, 0.1)
+    e = float(np.sqrt(np.nanmean((out["heave"][m] - interp_to(rec.time[m] - lag, rec.time, cam)) ** 2)))
+    # the real-time RMSE measured before issue 17 (1.65 / 4.13 mm, same evaluation), 2 % slack for rounding
+    assert e <= 1.02 * today

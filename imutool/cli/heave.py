@@ -12,10 +12,11 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.command("heave", epilog="Example: imutool simulate sea-state -o sea.csv && imutool heave sea.csv -o heave.csv")
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output (.csv, ...): heave m positive UP.")
-@click.option("--method", type=click.Choice(["realtime", "paper", "bandpass", "envelope"]), default="realtime",
-              show_default=True, help="realtime: KF observer with per-harmonic phase cancellation; paper: the "
-              "heave paper's KF multi-step observer; bandpass: causal HPₙ/s² baseline; envelope: the "
-              "'traditional' envelope detrend (offline).")
+@click.option("--method", type=click.Choice(["realtime", "harmonic", "paper", "bandpass", "envelope"]),
+              default="realtime", show_default=True,
+              help="realtime: phase-corrected double-integrator bank (harmonic KF on line spectra); harmonic: KF "
+              "observer with per-harmonic phase cancellation; paper: the heave paper's KF multi-step observer; "
+              "bandpass: causal HPₙ/s² baseline; envelope: the 'traditional' envelope detrend (offline).")
 @click.option("--harmonics", type=int, default=None, help="Oscillators in the KF model [default 3 paper, 5 realtime].")
 @click.option("--vertical", default=None, metavar="COL[,COL]",
               help="Single vertical accelerometer column(s), averaged (e.g. ACC_Heave_SB,ACC_HEAVE_PS). "
@@ -25,17 +26,19 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option("--attitude", type=click.Choice(["auto", "q", "ekf", "tilt", "ref"]), default="auto",
               show_default=True, help="Vertical from: q columns (auto if present), the attitude EKF, a "
               "complementary tilt filter, or ref_q truth (testing only).")
-@click.option("--tilt-gain", type=float, default=0.05, show_default=True, help="Tilt filter gain (1/s).")
+@click.option("--tilt-gain", type=float, default=0.07, show_default=True,
+              help="Tilt filter gain (1/s); its gyro-bias integral gain is gain²/4 (critically damped).")
 @click.option("--lever-arm", default=None, metavar="X,Y,Z",
               help="Monitoring point relative to the IMU, m body FRD (x bow, y starboard, z down).")
 @click.option("--cutoff", type=float, default=None, help="Causal band-pass cut-off Hz [default 0.2 × dominant].")
-@click.option("--cutoff-ratio", type=float, default=0.2, show_default=True,
-              help="Auto cut-off as a fraction of the first tracked dominant frequency.")
-@click.option("--order", type=int, default=3, show_default=True, help="High-pass order of the band-pass (≥ 3).")
+@click.option("--cutoff-ratio", type=float, default=None,
+              help="Corner as a fraction of the tracked heave frequency [default 0.2; realtime: its tuned value].")
+@click.option("--order", type=int, default=None,
+              help="High-pass order (≥ 3) [default 3; realtime: the corrected integrator's tuned order ≥ 4].")
 @click.option("--delayed-cutoff", type=float, default=None,
               help="Zero-phase delayed heave cut-off Hz [default 0.35 × record dominant frequency].")
-@click.option("--window", "window_s", type=float, default=120.0, show_default=True,
-              help="Frequency-tracking window (s).")
+@click.option("--window", "window_s", type=float, default=None,
+              help="Frequency-tracking window (s) [default 240 realtime, 120 the KF methods].")
 @click.option("--hop", "hop_s", type=float, default=10.0, show_default=True,
               help="Tracking update interval (s).")
 @click.option("--min-window", "min_window_s", type=float, default=10.0, show_default=True,
@@ -65,7 +68,8 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @safe_outputs("output", "nmea_path")
 def heave_cmd(input_path: str, output: str, method: str, harmonics: int | None, vertical: str | None,
               vertical_sign: str, attitude: str, tilt_gain: float, lever_arm: str | None, cutoff: float | None,
-              cutoff_ratio: float, order: int, delayed_cutoff: float | None, window_s: float, hop_s: float,
+              cutoff_ratio: float | None, order: int | None, delayed_cutoff: float | None, window_s: float | None,
+              hop_s: float,
               min_window_s: float, fmin: float, fmax: float, bandwidth: float, meas_noise: float,
               residual_noise: float, nmea_path: str | None, nmea_sentences: str, nmea_rate: float | None,
               nmea_baud: int, heave_positive: str, as_json: bool, quiet: bool, **inopts) -> None:

@@ -68,11 +68,14 @@ def _synth(t, w, c):
     return x, dx, ddx
 
 
-def _finish(t, heave, dheave, ddheave, roll, droll, pitch, dpitch, heading, rng, accel_errors, meta):
+def _finish(t, heave, dheave, ddheave, roll, droll, pitch, dpitch, heading, rng, accel_errors, meta,
+            accel_horizontal=None):
     rates = body_rates_from_euler(roll, pitch, droll, dpitch, np.zeros_like(t))
     q = euler_to_quat(roll, pitch, np.full_like(t, heading))
     accel_ned = np.zeros((len(t), 3))
     accel_ned[:, 2] = -ddheave  # NED down = −heave
+    if accel_horizontal is not None:
+        accel_ned[:, :2] = accel_horizontal  # surge/sway in waves: what disturbs a real tilt filter
     rec = imu_recording(t, q, accel_ned, rng, gyro_errors=MPU6050_GYRO, accel_errors=accel_errors,
                         mag_errors=None, gyro_true=rates, meta=meta)
     rec.add("ref_heave", heave, "m")
@@ -87,12 +90,16 @@ def sea_state(duration: float | None = None, rate_hz: float | None = None, seed:
               roll_period: float = 11.0, roll_damping: float = 0.08, pitch_period: float = 6.5,
               pitch_damping: float = 0.3, wave_direction_deg: float = 60.0, heading_deg: float = 30.0,
               components: int = 240, accel_noise_ug: float = HEAVE_ACCEL_NOISE_UG,
-              accel_bias_up: float = HEAVE_ACCEL_BIAS_UP, accel_bias_rw: float = HEAVE_ACCEL_BIAS_RW) -> Recording:
+              accel_bias_up: float = HEAVE_ACCEL_BIAS_UP, accel_bias_rw: float = HEAVE_ACCEL_BIAS_RW,
+              horizontal: float = 1.0) -> Recording:
     """A vessel in a JONSWAP sea (Hs m, Tp s, γ) with a 6-axis MEMS IMU at its centre of gravity.
 
     Heave = wave elevation through a damped 2nd-order response (natural period ``heave_period`` s); roll and
     pitch = wave slope k·ζ (k = ω²/g, deep water) through 2nd-order responses, projected by the relative wave
-    direction (deg, 0 = head seas). Defaults: 1200 s at 50 Hz. Truth: ref_heave/ref_heave_rate (m, m/s, up),
+    direction (deg, 0 = head seas). Surge/sway: the deep-water orbital motion (horizontal amplitude = the
+    elevation's, a quarter period ahead, along the wave direction) through the heave response, scaled by
+    ``horizontal`` (0 = none); these horizontal accelerations are what gives a real tilt filter its attitude
+    error in waves. Defaults: 1200 s at 50 Hz. Truth: ref_heave/ref_heave_rate (m, m/s, up),
     ref_q, ref_roll/pitch/heading, ref_gyro, ref_accel. ``meta``: significant heave 4·std(heave), sea parameters.
     """
     duration = 1200.0 if duration is None else float(duration)
@@ -107,14 +114,19 @@ def sea_state(duration: float | None = None, rate_hz: float | None = None, seed:
     cr = zeta * k * np.sin(beta) * _second_order(w, 2 * np.pi / roll_period, roll_damping)
     cp = zeta * k * np.cos(beta) * 0.6 * _second_order(w, 2 * np.pi / pitch_period, pitch_damping)
     heave, dheave, ddheave = _synth(t, w, ch)
+    acc_h = None
+    if horizontal:
+        _, _, ddx = _synth(t, w, -1j * ch * float(horizontal))
+        wave_dir = np.radians(heading_deg + wave_direction_deg)  # propagation direction, clockwise from north
+        acc_h = np.stack([np.cos(wave_dir) * ddx, np.sin(wave_dir) * ddx], axis=1)
     roll, droll, _ = _synth(t, w, cr)
     pitch, dpitch, _ = _synth(t, w, cp)
     meta = {"scenario_sea": "JONSWAP", "hs_m": hs, "tp_s": tp, "gamma": gamma,
             "significant_heave_m": round(float(4 * np.std(heave)), 4),
             "accel_noise_ug_per_rthz": accel_noise_ug, "accel_bias_up_mps2": accel_bias_up,
-            "accel_bias_rw_mps2_per_rts": accel_bias_rw}
+            "accel_bias_rw_mps2_per_rts": accel_bias_rw, "horizontal_motion": float(horizontal)}
     return _finish(t, heave, dheave, ddheave, roll, droll, pitch, dpitch, np.radians(heading_deg), rng,
-                   _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw), meta)
+                   _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw), meta, acc_h)
 
 
 def heave_platform(duration: float | None = None, rate_hz: float | None = None, seed: int = 0,
