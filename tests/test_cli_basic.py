@@ -62,7 +62,8 @@ def test_info_text_and_json(messy_csv):
     assert s["rate_hz"] == pytest.approx(100.0, rel=1e-6)
     assert s["step_s"]["min"] == pytest.approx(0.01) and s["step_s"]["max"] == pytest.approx(0.51)
     g = s["channels"]["gyro"]
-    assert g["unit"] == "deg/s" and g["unit_in_file"] == "rad/s" and g["columns"] == ["gyro_x", "gyro_y", "gyro_z"] and len(g["mean"]) == 3
+    assert g["unit"] == "deg/s" and g["unit_in_file"] == "rad/s"
+    assert g["columns"] == ["gyro_x", "gyro_y", "gyro_z"] and len(g["mean"]) == 3
     assert s["metadata"]["sensor"] == "unit-test"
     assert s["skipped_rows"] == 1 and "line" in s["skipped_rows_first"][0]
     assert any("dropped 2 rows" in a for a in s["validation_actions"])
