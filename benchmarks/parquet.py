@@ -6,6 +6,7 @@ Usage::
     python benchmarks/parquet.py --stream 10000000 # also: a 10 M-row Parquet file streamed Parquet -> Parquet
                                                    # and Parquet -> CSV (imutool convert's route), peak RSS
     python benchmarks/parquet.py --rows 200000 --repeat 3
+    python benchmarks/parquet.py --rows 0 --filter-hours 1   # `imutool filter` on 1 h at 200 Hz: CSV vs Parquet
 
 Rates are CPU time of this process (``time.process_time``; the 2-core machine is shared, wall time is noisy)
 with wall time alongside; best of ``--repeat``. Files go to a temporary folder (``--tmp`` to choose). Peak RSS of
@@ -147,18 +148,67 @@ def stream(rows: int, chunk_rows: int, tmp: Path) -> None:
     print(f"  (this process: peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB)")
 
 
+_FILTER = textwrap.dedent("""
+    import atexit, json, resource, sys, time
+    t0 = time.perf_counter()
+    def report():
+        hwm = next(int(l.split()[1]) / 1024 for l in open("/proc/self/status") if l.startswith("VmHWM:"))
+        ru = resource.getrusage(resource.RUSAGE_SELF)
+        print(json.dumps({"wall": time.perf_counter() - t0, "cpu": ru.ru_utime + ru.ru_stime, "peak_mib": hwm}),
+              file=sys.stderr)
+    atexit.register(report)
+    from imutool.cli import main
+    main(sys.argv[1:])
+""")
+
+
+def filter_compare(hours: float, tmp: Path) -> None:
+    """`imutool filter` on the same recording as CSV and as Parquet (input → output of the same format)."""
+    import json
+
+    from formats import write
+    from imutool.sim import simulate
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    rec = simulate("static", duration=hours * 3600.0, rate_hz=200.0)
+    n = len(rec)
+    for ext in (".csv", ".parquet"):
+        write(rec, tmp / f"rec{ext}")
+    del rec
+    mb = {e: (tmp / f"rec{e}").stat().st_size / 1e6 for e in (".csv", ".parquet")}
+    print(f"\n`imutool filter` on {hours:g} h at 200 Hz ({n:,} rows, static scenario, 9-axis + truth columns); "
+          f"CSV {mb['.csv']:.0f} MB, Parquet {mb['.parquet']:.0f} MB")
+    # warm-up (numba cache), then the timed runs
+    subprocess.run([sys.executable, "-c", _FILTER, "filter", str(tmp / "rec.parquet"), "-o", str(tmp / "warm.csv"),
+                    "-q"], env=env, capture_output=True)
+    for src, dst in (("rec.csv", "est.csv"), ("rec.parquet", "est.parquet"), ("rec.parquet", "est2.csv")):
+        r = subprocess.run([sys.executable, "-c", _FILTER, "filter", str(tmp / src), "-o", str(tmp / dst), "-q"],
+                           env=env, capture_output=True, text=True)
+        if r.returncode:
+            print(f"  {src} -> {dst}: failed: {r.stderr.strip()[-300:]}")
+            continue
+        m = json.loads(r.stderr.strip().splitlines()[-1])
+        print(f"  {src:12s} -> {dst:12s} {m['wall']:6.1f} s wall  {m['cpu']:6.1f} s CPU  "
+              f"peak RSS {m['peak_mib']:6.0f} MiB")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--stream", type=int, default=0, metavar="ROWS", help="also stream a file of ROWS rows")
     ap.add_argument("--chunk-rows", type=int, default=500_000)
+    ap.add_argument("--filter-hours", type=float, default=0.0, metavar="H",
+                    help="also time `imutool filter` on H hours at 200 Hz as CSV and as Parquet")
     ap.add_argument("--tmp", default=None)
     a = ap.parse_args()
     with tempfile.TemporaryDirectory(dir=a.tmp) as d:
-        compare(a.rows, a.repeat, Path(d))
+        if a.rows:
+            compare(a.rows, a.repeat, Path(d))
         if a.stream:
             stream(a.stream, a.chunk_rows, Path(d))
+        if a.filter_hours:
+            filter_compare(a.filter_hours, Path(d))
 
 
 if __name__ == "__main__":
