@@ -188,6 +188,7 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
     """Bounded-memory EKF over a large CSV/Parquet: chunks streamed, state carried, rows appended to the output."""
     from formats.csv import CsvWriter
     from imutool.attitude import F_INCONSISTENT, nominal_dt, result_recording, run_ekf, self_check
+    from imutool.convert import chunk_writer
     from imutool.progress import estimate_rows
 
     cal = mounting = None  # read once, applied to every chunk
@@ -209,7 +210,10 @@ def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, 
             if formats.kind_of(path) == "csv" else {})
     flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
     total = estimate_rows(path) if formats.kind_of(path) == "csv" else None
-    with CsvWriter(output, background=True) as w, bar("filter", total=total, unit="rows", quiet=quiet) as b:
+    # a .csv output is written by a background writer thread; a .parquet output row group by row group
+    writer = (CsvWriter(output, background=True) if formats.kind_of(output, for_output=True) == "csv"
+              else chunk_writer(output))
+    with writer as w, bar("filter", total=total, unit="rows", quiet=quiet) as b:
         for chunk in formats.iter_chunks(path, chunk_rows=chunk_rows, **opts):
             keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
             if not keep.all():
