@@ -85,7 +85,8 @@ def _finish(ev: dict, plots: dict, pdf: str, jpath: str, as_json: bool, quiet: b
         s = it["stats"]
         mx = f"max|e| {s['max_abs']:.3f}  RMS {s['rmse']:.3f}  p95 {s['p95_abs']:.3f}" if s.get("max_abs") is not None \
             else ""
-        lines.append(f"  {it['id']:20s} {it['status']:17s} N={s.get('n', 0):<6} {mx}")
+        derived = f"  (derived by imutool, would be: {it['derived_result']})" if it.get("derived_result") else ""
+        lines.append(f"  {it['id']:20s} {it['status']:17s} N={s.get('n', 0):<6} {mx}{derived}")
     for w in ev["warnings"]:
         lines.append(f"  warning: {w}")
     emit_summary(summary, as_json, quiet, lines)
