@@ -152,7 +152,7 @@ class Layout:
             self._new_page()
 
     def heading(self, s: str, size: float = 12.0) -> None:
-        self._need(size * 1.6 + 30)  # keep a heading with at least two lines of what follows
+        self._need(size * 1.6 + 90)  # keep a heading with the first lines of what follows
         self.y -= size * 0.6
         for ln in self.m.wrap(s, TW, size, "bold"):
             self.y -= size * 1.25
@@ -182,6 +182,10 @@ class Layout:
 
     def kv(self, pairs: list[tuple[str, str]], size: float = 8.5, key_w: float = 170.0) -> None:
         lh = size * 1.3
+        total = sum(max(len(self.m.wrap(k, key_w - 8, size, "bold")), len(self.m.wrap(v, TW - key_w, size))) * lh + 2
+                    for k, v in pairs)
+        if total <= 250.0:  # a short list stays on one page
+            self._need(total)
         for k, v in pairs:
             kl = self.m.wrap(k, key_w - 8, size, "bold")
             vl = self.m.wrap(v, TW - key_w, size)
@@ -283,6 +287,7 @@ class Layout:
     def signatures(self, roles: list[str]) -> None:
         size = 8.5
         h = 62.0
+        self._need(h * len(roles))  # the sign-off stays on one page
         for role in roles:
             self._need(h)
             self.y -= 14
