@@ -293,9 +293,9 @@ class Layout:
             self.y -= 14
             self.text(ML, self.y, role, size, "bold")
             self.y -= 30
-            cols = (("Name", 0.0), ("Signature", 190.0), ("Date", 370.0))
+            cols = (("Name", 0.0), ("Signature", 175.0), ("Date", 350.0))  # three 149 pt lines inside the margins
             for label, dx in cols:
-                self.page.append(("line", ML + dx, self.y, ML + dx + 160, self.y, 0.6))
+                self.page.append(("line", ML + dx, self.y, ML + dx + 149, self.y, 0.6))
                 self.text(ML + dx, self.y - 10, label, 7.0, color="#444444")
             self.y -= 18
 
