@@ -19,9 +19,13 @@ Methods (``estimate_heave(method=...)``):
   dominant frequency. Note on the paper: a *lead* is cancelled by stepping *back* (m = −φ/(ωT), equivalently
   forward by (2π − φ)/(ωT)); §2.2 writes m = φ/(ωT) with a forward step, which would double the lead. The lead
   here is computed from the known filter response, not from the reference (the paper compared with the laser).
-- ``realtime`` (default; this project's refinement of ``paper``): oscillator frequencies at the energy centroids
-  of the tracked spectrum, the residual Δh not output (it carries the drift), and each harmonic rotated and
-  re-scaled by its own exact filter response: X̂ᵢ ← e^{Fᵢ(−φᵢ/ωᵢ)} X̂ᵢ / |G(ωᵢ)|.
+- ``harmonic`` (this project's refinement of ``paper``; the real-time default before issue 17): oscillator
+  frequencies at the energy centroids of the tracked spectrum, the residual Δh not output (it carries the drift),
+  and each harmonic rotated and re-scaled by its own exact filter response: X̂ᵢ ← e^{Fᵢ(−φᵢ/ωᵢ)} X̂ᵢ / |G(ωᵢ)|.
+- ``realtime`` (default): a bank of phase-corrected double integrators (:func:`corrected_integrator`: gain and
+  phase error O((f_c/f)ⁿ⁻²) instead of a high-pass's O(f_c/f) lead), blended at the corner that follows the tracked
+  heave frequency (:func:`heave_realtime`); on a line spectrum (regular waves, spread ν ≤ 0.08) the ``harmonic``
+  KF instead. ≤ 5 % of Hs RMS over Hs 1–4 m × Tp 5–15 s (docs/heave.md).
 - delayed heave (every method): zero-phase — X(f) = −A(f)·W(f)/(2πf)² with W a zero-phase Butterworth
   high-pass magnitude — exact phase, only gain |W| ≈ 1 in the wave band; its latency is the time the non-causal
   impulse response needs to decay below 1 % (reported as ``delayed_latency_s``).
@@ -876,10 +880,12 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
                    shape: str | None = None, smooth_periods: float | None = None) -> HeaveResult:
     """Heave (m, positive up) from vertical acceleration a_up (m/s², positive up) sampled at times t (s).
 
-    ``harmonics``: oscillators in the model (default 3 for ``paper``, 5 for ``realtime``).
-    ``cutoff`` (Hz) of the causal band-pass: default ``cutoff_ratio`` (0.2) × the first tracked dominant
-    frequency (the value known
-    after ``min_window_s``; the filter is fixed from then on). ``delayed_cutoff`` default 0.35 × the
+    ``harmonics``: oscillators in the model (default 3 for ``paper``, 5 for ``harmonic``/``realtime``).
+    ``cutoff`` (Hz) of the causal band-pass (``bandpass``, ``paper``, ``harmonic``): default ``cutoff_ratio``
+    (0.2) × the first tracked dominant frequency (the value known after ``min_window_s``; the filter is fixed from
+    then on). ``realtime``: ``order`` (RT_ORDER), ``shape`` (RT_SHAPE) and ``cutoff_ratio`` (RT_RATIO, × the
+    tracked median heave frequency) of the corrected-integrator bank, ``window_s`` default RT_WINDOW_S, corner
+    smoothing ``smooth_periods``; ``cutoff`` is not used. ``delayed_cutoff`` default 0.35 × the
     whole-record dominant frequency (the delayed output is offline anyway); its zero-phase low-pass ``lowpass``
     Hz defaults to ``lowpass_ratio`` (4) × that frequency.
     """
@@ -899,6 +905,8 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     a = np.asarray(a_up, float)
     if len(t) < 32:
         raise ImutoolError(f"too few samples for heave ({len(t)})")
+    if not np.isfinite(a).any():
+        raise ImutoolError("no finite vertical acceleration sample")
     if not np.all(np.isfinite(a)):
         bad = int((~np.isfinite(a)).sum())
         good = np.isfinite(a)
@@ -907,6 +915,12 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     else:
         nan_filled = 0
     fs = 1.0 / float(np.median(np.diff(t)))
+    if not np.isfinite(fs) or fs < 0.5:
+        raise ImutoolError(f"sample rate {fs:.3g} Hz is too low for heave (needs ≥ 0.5 Hz; check the time column)")
+    span = float(t[-1] - t[0])
+    if not np.isfinite(span) or span / hop_s > 5e6:
+        raise ImutoolError(f"the time column spans {span:.3g} s (a gap or a wrong time unit?); heave tracks "
+                           f"the sea every {hop_s:g} s and refuses more than 5e6 updates")
     mode = "peaks" if method == "paper" else "centroids"
     tr = track_frequencies(t, a, harmonics, window_s, hop_s, min_window_s, fmin, fmax, mode)
     f_first = float(tr.dominant[0])
@@ -1035,6 +1049,9 @@ def heave_recording(rec: Recording, method: str = "realtime", vertical: list[str
     """Heave of a recording: columns time, heave, heave_rate, heave_delayed, heave_rate_delayed, period,
     settled (+ ref_heave / ref_heave_rate copied when present). Returns (recording, summary)."""
     a, vinfo = vertical_acceleration(rec, vertical, vertical_sign, attitude, lever_arm, tilt_gain)
+    if not np.isfinite(a).any():
+        raise ImutoolError("no finite vertical acceleration sample (all accelerometer values missing)",
+                           path=str(rec.meta.get("source") or "") or None)
     res = estimate_heave(rec.time, a, method=method, **options)
     out = Recording(rec.time.copy())
     out.add("heave", res.heave, "m")
