@@ -108,6 +108,9 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
         if _within(in_real, real):
             raise ImutoolError(f"output is a folder holding the input {in_given}; choose another output name",
                                path=given)
+        if os.path.isdir(in_real) and _within(real, in_real):
+            raise ImutoolError(f"output is inside the input folder {in_given}; choose another output name",
+                               path=given)
     # the first existing ancestor must be a folder (a parent that is a file cannot hold the output)
     parent = Path(real).parent
     while not parent.exists() and parent != parent.parent:

@@ -182,7 +182,9 @@ class _BlockParser:
         self.strict = strict
         self.rep = rep
         self.line = hdr.data_line  # line number of the next unparsed line
-        self.fb = np.empty((4096, 4), np.int64)
+        # room for at least one whole row of fallback tokens: with fewer slots than columns the kernel could
+        # never finish a row (a file with more than 4 096 columns used to loop for ever)
+        self.fb = np.empty((max(4096, 2 * self.ncol), 4), np.int64)
         self.bad = np.empty((8, 3), np.int64)
 
     def parse(self, buf: np.ndarray, end: int, rows_hint: int) -> np.ndarray:
@@ -633,9 +635,6 @@ class CsvWriter:
         except BaseException as e:
             self.abort(e)
             raise
-        if self._pool is not None:
-            self._pool.shutdown()
-        self._f.close()
         self._ctx.__exit__(None, None, None)
 
     def abort(self, exc: BaseException) -> None:

@@ -95,6 +95,9 @@ def default_columns(name: str, width: int) -> list[str]:
     return [f"{name}_{i}" for i in range(width)]
 
 
+MAX_TIME_S = 1e11  # |time| beyond this (s) is refused by validation: a unit error, not a clock
+
+
 @dataclass
 class TimeReport:
     """What :meth:`Recording.validated` found and did (counts are of input rows)."""
@@ -278,6 +281,10 @@ class Recording:
         if not np.all(np.isfinite(t)):
             bad = int(np.flatnonzero(~np.isfinite(t))[0])
             raise ImutoolError(f"time is not finite at row {bad + 1}", path=src)
+        if len(t) and float(np.max(np.abs(t))) > MAX_TIME_S:  # 1e300 would make every window loop endless
+            bad = int(np.flatnonzero(np.abs(t) > MAX_TIME_S)[0])
+            raise ImutoolError(f"time {t[bad]:.6g} s at row {bad + 1} is beyond ±{MAX_TIME_S:.0e} s (3 000 years): "
+                               "not seconds? give the time column's unit (--columns 'stamp=time:ms')", path=src)
         if len(rec) >= 2:
             d = np.diff(t)
             nb = int(np.count_nonzero(d < 0))

@@ -102,13 +102,22 @@ def _parse_axis(v: Any, where: str) -> np.ndarray:
     return a / np.linalg.norm(a)
 
 
+def _noise_density(doc: dict[str, Any], source: str) -> float | None:
+    v = doc.get("noise_density")
+    if v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+        raise ImutoolError(f"{source}: noise_density must be a positive number (m/s²/√Hz), got {v!r}")
+    return float(v)
+
+
 def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
     """Build a layout from a parsed TOML document (see docs/gyrofree.md for the format)."""
     if "preset" in doc:
         if doc["preset"] != "paper":
             raise ImutoolError(f"{source}: unknown preset {doc['preset']!r} (known: paper)")
         lay = paper_layout(float(doc.get("r", 0.1)), str(doc.get("prefix", "a")))
-        lay.noise_density = doc.get("noise_density")
+        lay.noise_density = _noise_density(doc, source)
         return lay
     default_unit = str(doc.get("unit", "m/s^2"))
     items = doc.get("sensor")
@@ -119,9 +128,12 @@ def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
         where = f"{source}: sensor {i + 1} ({it.get('name', '?')})"
         if "position" not in it:
             raise ImutoolError(f"{where}: missing position = [x, y, z] (m, body FRD)")
-        pos = np.asarray(it["position"], float)
-        if pos.shape != (3,):
-            raise ImutoolError(f"{where}: position must be [x, y, z] in metres")
+        try:
+            pos = np.asarray(it["position"], float)
+        except (TypeError, ValueError):
+            pos = np.full(0, np.nan)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise ImutoolError(f"{where}: position must be [x, y, z], finite numbers in metres")
         if "direction" in it:  # single-axis
             col = it.get("column")
             if not isinstance(col, str):
@@ -141,7 +153,7 @@ def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
                 raise ImutoolError(f"{where}: columns must list {len(axes)} CSV column names")
         sensors.append(Sensor(str(it.get("name", f"S{i + 1}")), pos, axes, [str(c) for c in cols],
                               str(it.get("unit", default_unit))))
-    return Layout(sensors, name=str(doc.get("name", source)), noise_density=doc.get("noise_density"))
+    return Layout(sensors, name=str(doc.get("name", source)), noise_density=_noise_density(doc, source))
 
 
 def load_layout(path: str) -> Layout:

@@ -84,6 +84,10 @@ def main(argv: list[str] | None = None) -> None:
 
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
+    if not debug:  # numpy's RuntimeWarnings (overflow, empty slice...) are no message for a user
+        import warnings
+
+        warnings.simplefilter("ignore", RuntimeWarning)
     try:
         try:
             cli.main(args=args, prog_name="imutool", standalone_mode=False)

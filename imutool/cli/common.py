@@ -256,16 +256,22 @@ def safe_outputs(*names: str, append: str | None = None) -> Callable:
                 elif v:
                     outs.append(str(v))
             merging = [o for o in outs if o.lower().endswith(".toml")] if append and kwargs.get(append) else []
+            merged = {os.path.realpath(o) for o in merging}
             ins: list[str] = []
             for k, v in kwargs.items():
                 if k in names:
                     continue
                 for x in v if isinstance(v, (tuple, list)) else (v,):
-                    if isinstance(x, str) and x and x not in merging and os.path.exists(x):
+                    if isinstance(x, str) and x and os.path.exists(x) and os.path.realpath(x) not in merged:
                         ins.append(x)
             with output_guard(force=force):
                 check_outputs(outs, ins, exists_ok=merging)
-                return f(*args, **kwargs)
+                try:
+                    return f(*args, **kwargs)
+                except ImutoolError as e:
+                    if e.path is None and ins and ins[0] not in str(e):  # about the data: name the input
+                        raise ImutoolError(str(e), path=ins[0]) from None
+                    raise
 
         return click.option("--force", is_flag=True,
                             help="Replace existing output files (never an input, never a folder other than a ROS2 "

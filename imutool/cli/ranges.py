@@ -59,6 +59,10 @@ RANGES: dict[str, Bound] = {
     # physical quantities
     "field_ut": (0, 10_000, True, False), "horizontal_field": (0, 10_000, True, False), "bz_prior": ANY,
     "a33_prior": POS, "gravity": (9.7, 9.9, False, False), "height": (-11_000, 100_000, False, False),
+    # deviation card, heave NMEA, roll events
+    "max_deviation": POS, "nmea_baud": (50, 10_000_000, False, False), "threshold_deg": POS,
+    "merge_gap_s": NONNEG, "hour_s": POS, "tuning_tol": POS, "min_growth": NONNEG, "min_amplitude_deg": NONNEG,
+    "min_lock": FRACTION,
     # order of a Butterworth filter (higher orders are numerically useless at sensor rates)
     "order": (1, 8, False, False),
     "heave order": (3, 8, False, False),
@@ -75,6 +79,13 @@ def _range_type(param: click.Parameter, bound: Bound) -> click.ParamType:
 
 def is_numeric(param: click.Parameter) -> bool:
     return isinstance(param.type, (click.types.IntParamType, click.types.FloatParamType))
+
+
+def declared(param: click.Parameter, path: str) -> bool:
+    """True when a numeric option has a range: in the table, or a bounded IntRange/FiniteFloat of its own."""
+    t = param.type
+    own = isinstance(t, (click.IntRange, FiniteFloat)) and (t.min is not None or t.max is not None)
+    return own or bound_for(path, param.name or "") is not None
 
 
 def bound_for(path: str, name: str) -> Bound | None:
@@ -94,6 +105,10 @@ def apply_ranges(cmd: click.Command, path: str | None = None) -> click.Command:
         return cmd
     for p in cmd.params:
         if not is_numeric(p) or isinstance(p.type, (FiniteFloat, click.IntRange)):
+            continue  # declared by the command itself
+        if isinstance(p.type, click.FloatRange):  # declared, but click's FloatRange lets NaN through
+            t = p.type
+            p.type = FiniteFloat(t.min, t.max, min_open=t.min_open, max_open=t.max_open, clamp=t.clamp)
             continue
         bound = bound_for(path, p.name or "")
         if bound is not None:

@@ -65,4 +65,17 @@ def simulate(name: str, **options_) -> Recording:
     if unknown:
         raise ImutoolError(f"scenario {name!r} has no option {', '.join(map(repr, unknown))}; "
                            f"valid: {', '.join(valid)}")
+    import inspect
+
+    defaults = {k: v.default for k, v in inspect.signature(scenario(name)).parameters.items()}
+    dur, rate = options_.get("duration", defaults.get("duration")), options_.get("rate_hz", defaults.get("rate_hz"))
+    try:  # a scenario's own defaults are small; an unknown default rate counts as 1 kHz
+        rows = float(dur or 0.0) * float(rate or 1000.0)
+    except (TypeError, ValueError):
+        rows = 0.0
+    if not rows < MAX_ROWS:  # also NaN: an array that size cannot be allocated
+        raise ImutoolError(f"scenario {name!r}: --duration {dur} s gives {rows:.3g} samples; at most {MAX_ROWS:.0e}")
     return scenario(name)(**options_)
+
+
+MAX_ROWS = 2e8  # samples one simulation may produce (≈ 11.6 days at 200 Hz; 10 columns of float64 = 16 GB)
