@@ -933,7 +933,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         if is_upd:
             st[S_NUPD] += 1
             # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
-            if acc_ok:
+            if acc_ok and na > 0:
                 if not rej or force:
                     if use_lp:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
                         if not ri_now:
@@ -942,7 +942,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         ax = RI[0, 0] * l0 + RI[1, 0] * l1 + RI[2, 0] * l2
                         ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2
                         az = RI[0, 2] * l0 + RI[1, 2] * l1 + RI[2, 2] * l2
-                        na = np.sqrt(ax * ax + ay * ay + az * az)
+                        na = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-300)
                     h0, h1, h2 = -R[2, 0], -R[2, 1], -R[2, 2]
                     y0, y1, y2 = ax / na - h0, ay / na - h1, az / na - h2
                     # independent error sources add in variance: model floor² + (gain·σ_w/g)²
@@ -1208,6 +1208,8 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) 
     if i_acc < 0:
         raise ImutoolError("no valid accelerometer sample to initialise the attitude")
     a = accel[i_acc]
+    if not np.any(np.linalg.norm(accel[i_acc:i_acc + 100_000], axis=1) > 0):
+        raise ImutoolError("the accelerometer reads exactly zero: no specific force to level the attitude with")
     roll = np.arctan2(-a[1], -a[2])
     pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
     heading = 0.0
@@ -1226,7 +1228,10 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) 
             heading = np.arctan2(-mw[1], mw[0])
             mnorm = float(np.linalg.norm(m))
             hor = np.hypot(mw[0], mw[1])
-            mref = np.array([hor, 0.0, mw[2]]) / mnorm
+            if mnorm > 0:
+                mref = np.array([hor, 0.0, mw[2]]) / mnorm
+            else:  # a zero field: no heading, no reference (the updates skip a zero-norm field)
+                heading, mnorm = 0.0, 0.0
     from formats.frames import euler_to_quat
 
     st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading)
