@@ -267,6 +267,8 @@ def _reader_case(corpus, tmp_path, cmd: str, infile: str, ok: bool) -> None:
     template, outname = READERS[cmd]
     out = tmp_path / (outname or "none")
     args, inputs, _ = _expand(template, corpus, infile, out)
+    if cmd == "gyrofree":
+        inputs.append(LAYOUT)  # a message may name the layout the recording does not match
     args.append("-q") if cmd not in ("info", "evaluate") else None
     check(args, inputs=inputs, outputs=[out] if outname else [], ok=ok)
 
@@ -510,13 +512,15 @@ WRITERS = {
     "gyrofree": ["gyrofree", "@array.csv", "--layout", str(LAYOUT), "-o", "OUT"],
     "simulate": ["simulate", "ship-roll", "-o", "OUT", "--duration", "5"],
     "evaluate-plot": ["evaluate", "@est.csv", "--reference", "@roll.csv", "--plot", "OUT"],
+    "events": ["events", "detect", "@est.csv", "-o", "OUT"],
+    "events-csv": ["events", "detect", "@est.csv", "-o", "NEW.json", "--events-csv", "OUT"],
 }
 EXT = {"convert": ".csv", "convert-o": ".csv", "filter": ".csv", "plot": ".png", "allan": ".yaml",
        "allan-kalibr": ".yaml", "allan-plot": ".png", "heave": ".csv", "heave-nmea": ".nmea", "zvi": ".csv",
        "zvi-flags": ".csv", "ins": ".csv", "ins-strides": ".csv", "cal-mag": ".toml", "cal-mag-plot": ".png",
        "cal-gyro": ".toml", "cal-gyro-append": ".toml", "cal-accel": ".toml", "cal-deviation": ".toml",
        "roll": ".csv", "roll-cycles": ".csv", "nmea": ".nmea", "report": ".pdf", "report-json": ".json",
-       "gyrofree": ".csv", "simulate": ".csv", "evaluate-plot": ".png"}
+       "gyrofree": ".csv", "simulate": ".csv", "evaluate-plot": ".png", "events": ".json", "events-csv": ".csv"}
 
 
 def _writer(corpus, tmp_path, cmd: str, out) -> tuple[list, list]:
@@ -536,9 +540,19 @@ def _writer(corpus, tmp_path, cmd: str, out) -> tuple[list, list]:
     return args, inputs
 
 
+def _lead_pending(cmd: str) -> None:
+    """filter.py belongs to the lead: until it carries @safe_outputs("output") its input/--force cases xfail."""
+    if cmd == "filter":
+        from imutool.cli.filter import filter_cmd
+
+        if not any(p.name == "force" for p in filter_cmd.params):
+            pytest.xfail("imutool/cli/filter.py lacks @safe_outputs('output') (the lead adds it)")
+
+
 @pytest.mark.parametrize("cmd", [c for c in WRITERS if c != "simulate"])
 def test_output_is_an_input(corpus, tmp_path, cmd):
     """-o onto the command's own input: refused, the input byte-identical."""
+    _lead_pending(cmd)
     args, inputs = _writer(corpus, tmp_path, cmd, "IN")
     if not inputs:
         pytest.skip("no input file")
@@ -550,6 +564,7 @@ def test_output_is_an_input(corpus, tmp_path, cmd):
 @pytest.mark.parametrize("cmd", ["convert", "filter", "heave", "cal-gyro", "roll", "nmea", "allan-kalibr"])
 def test_output_is_an_input_through_a_link(corpus, tmp_path, cmd):
     """A symbolic or hard link to the input is the input."""
+    _lead_pending(cmd)
     args, inputs = _writer(corpus, tmp_path, cmd, "LINK")
     sym = tmp_path / ("sym" + EXT[cmd])
     sym.symlink_to(inputs[0])
@@ -628,9 +643,8 @@ def test_existing_output_needs_force(corpus, tmp_path, cmd):
     out.write_text("an older result\n")
     args, inputs = _writer(corpus, tmp_path, cmd, out)
     before = digest(out)
+    _lead_pending(cmd)
     code, _, err = run(args)
-    if cmd == "filter" and code == 0:
-        pytest.xfail("imutool/cli/filter.py has no output check yet (lead: add @safe_outputs('output'))")
     assert code == 2 and "--force" in err and len(err.strip().splitlines()) == 1, err
     assert digest(out) == before
     code, _, err = run([*args, "--force"])

@@ -11,7 +11,7 @@ import click
 
 from formats.errors import ImutoolError
 from imutool import events as _events
-from imutool.cli.common import emit_summary
+from imutool.cli.common import emit_summary, safe_outputs
 
 D = _events.DEFAULTS
 
@@ -59,6 +59,7 @@ def events_group() -> None:
                    "'(?P<ship>[^/]+)/(?P<voyage>[^/]+)/'.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
+@safe_outputs("output", "events_csv", "hourly_csv")
 def detect_cmd(input_path: str, output: str | None, events_csv: str | None, hourly_csv: str | None,
                roll_channel: str | None, pitch_channel: str | None, heave_channel: str | None, as_json: bool,
                quiet: bool, utc_start: str | None, ship: str | None, voyage: str | None, path_regex: str | None,
@@ -94,6 +95,7 @@ def detect_cmd(input_path: str, output: str | None, events_csv: str | None, hour
 @click.option("--plot", "plot_path", default=None, type=click.Path(), help="Plot (.png/.pdf/.svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
+@safe_outputs("output", "voyages_path", "plot_path")
 def fleet_cmd(inputs: tuple[str, ...], output: str, voyages_path: str | None, plot_path: str | None, as_json: bool,
               quiet: bool) -> None:
     """One table across many `events detect` results (JSON files, folders or globs): events per ship/voyage."""
