@@ -282,8 +282,6 @@ def test_bad_file(corpus, tmp_path, cmd, infile):
 @pytest.mark.parametrize("infile", DEGENERATE)
 @pytest.mark.parametrize("cmd", list(READERS))
 def test_degenerate_file(corpus, tmp_path, cmd, infile):
-    if (cmd, infile) == ("filter", "zero_data.csv"):
-        pytest.xfail("ZeroDivisionError in imutool/attitude.py ekf_kernel on an all-zero accelerometer (lead's)")
     _reader_case(corpus, tmp_path, cmd, infile, ok=True)
 
 
