@@ -22,3 +22,13 @@ def shared_data(*parts: str) -> Path:
 @pytest.fixture
 def shared():
     return shared_data
+
+
+def run_main(args, capsys) -> tuple[int, str, str]:
+    """imutool's console entry point in-process (the real error handling): (exit status, stdout, stderr)."""
+    from imutool.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main([str(a) for a in args])
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err

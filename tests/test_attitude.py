@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import run_main
 
 import formats
 from formats.frames import quat_to_euler, wrap_deg180
@@ -332,7 +333,7 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
             assert est["inconsistent"].max() == 0
 
 
-def test_params_toml_round_trip_and_cli(tmp_path):
+def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     """EkfParams is the one parameter set: TOML out and back equal; --params/--param/--save-params on the CLI;
     the parameters used are in the output metadata; unknown names and out-of-range values are one-line errors."""
     from imutool.attitude import PARAM_DOC
@@ -354,28 +355,12 @@ def test_params_toml_round_trip_and_cli(tmp_path):
     assert formats.read(tmp_path / "e.csv").meta["filter"]["bias_rw"] == 3e-5
     for args, needle in ((["--param", "nonsense=1"], "nonsense"), (["--param", "gyro_noise=nan"], "gyro_noise"),
                          (["--param", "accel_lp_tau=-1"], "accel_lp_tau")):
-        code, _, err = _main(["filter", str(src), "-o", str(tmp_path / "x.csv"), *args])
+        code, _, err = run_main(["filter", src, "-o", tmp_path / "x.csv", *args], capsys)
         assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
         assert not (tmp_path / "x.csv").exists()
     f.write_text("[ekf]\nmag_noise_deg = 'ten'\n")
-    code, _, err = _main(["filter", str(src), "-o", str(tmp_path / "y.csv"), "--params", str(f)])
+    code, _, err = run_main(["filter", src, "-o", tmp_path / "y.csv", "--params", f], capsys)
     assert code == 2 and "mag_noise_deg" in err
-
-
-def _main(args: list[str]) -> tuple[int, str, str]:
-    """imutool's console entry point in-process: (exit status, stdout, stderr)."""
-    import contextlib
-    import io
-
-    from imutool.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main(args)
-        except SystemExit as e:
-            return int(e.code or 0), out.getvalue(), err.getvalue()
-    return 0, out.getvalue(), err.getvalue()
 
 
 def test_smooth_summary_reports_both_errors(tmp_path):

@@ -6,18 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from conftest import run_main as run
 
 import formats
 from calibration import load_calibration
-from imutool.cli import main
 from imutool.sim import simulate
-
-
-def run(args, capsys):
-    with pytest.raises(SystemExit) as e:
-        main([str(a) for a in args])
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 @pytest.fixture(scope="module")

@@ -4,20 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import run_main as run
 
 import formats
 from calibration import calibrate_sphere, load_calibration
 from calibration.magnetometer import check_soft_iron, field_direction_coverage, sphere_fit_linear
 from formats.errors import ImutoolError
-from imutool.cli import main
 from imutool.sim import simulate
-
-
-def run(args, capsys):
-    with pytest.raises(SystemExit) as e:
-        main([str(a) for a in args])
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 @pytest.fixture(scope="module")

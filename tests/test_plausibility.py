@@ -6,19 +6,12 @@ import json
 
 import numpy as np
 import pytest
+from conftest import run_main as run
 from conftest import shared_data
 
 import formats
 from formats.plausibility import bridge_absurd, check_recording, gyro_tilt_ratio
-from imutool.cli import main
 from imutool.sim import simulate
-
-
-def run(args, capsys):
-    with pytest.raises(SystemExit) as e:
-        main([str(a) for a in args])
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 @pytest.fixture(scope="module")
