@@ -763,6 +763,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
     dip_lo = np.sin(dip_ref - prm[P_MAG_DIP_GATE]) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi else -2.0
     dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
+    use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0  # once per chunk, not per sample
     for k in range(n):
         flag = 0
         gk0, gk1, gk2 = gyro[k, 0], gyro[k, 1], gyro[k, 2]
@@ -865,7 +866,6 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         na = 0.0
         dev_a = 0.0
         ri_now = False  # RI = R(q_I) computed for this sample
-        use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0
         if use_lever and dt > 0:
             # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
             # differentiated (bias-free rate; the bias cancels in ω̇ and is negligible in ω × (ω × r))

@@ -6,6 +6,7 @@ degree sign and ± render. A4 portrait, 8.27 × 11.69 in.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 from typing import Any
@@ -685,25 +686,16 @@ def render_pdf(ev: dict[str, Any], plots: dict[str, Any], path: str) -> int:
     tail.pages = [p for p in tail.pages if p]
     figs = _inclinometer_figures(ev, plots) if ev["report"] == "inclinometer" else _heading_figures(ev, plots)
     total = len(head.pages) + len(figs) + len(tail.pages)
-    k = 0
+    def text_page(ops):
+        fig = plt.figure(figsize=A4)
+        _draw_page(fig, ops)
+        return fig
+
+    # lazily: one text page drawn, written and closed at a time
+    pages = itertools.chain((text_page(ops) for ops in head.pages), figs, (text_page(ops) for ops in tail.pages))
     with atomic_path(path) as tmp:
         with PdfPages(tmp) as pdf:
-            for ops in head.pages:
-                fig = plt.figure(figsize=A4)
-                _draw_page(fig, ops)
-                k += 1
-                _footer(fig, ev, k, total)
-                pdf.savefig(fig)
-                plt.close(fig)
-            for fig in figs:
-                k += 1
-                _footer(fig, ev, k, total)
-                pdf.savefig(fig)
-                plt.close(fig)
-            for ops in tail.pages:
-                fig = plt.figure(figsize=A4)
-                _draw_page(fig, ops)
-                k += 1
+            for k, fig in enumerate(pages, start=1):  # footer (report number, page k of total) on every page
                 _footer(fig, ev, k, total)
                 pdf.savefig(fig)
                 plt.close(fig)
