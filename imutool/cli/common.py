@@ -11,7 +11,6 @@ from typing import Any, TypeVar
 import click
 import numpy as np
 
-import formats
 from formats import Recording
 from formats.errors import ImutoolError
 
@@ -63,59 +62,27 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
                validate: bool = True, strict: bool | None = None) -> tuple[Recording, dict[str, Any]]:
     """Read, validate, bridge absurd samples, apply calibration and mounting, check plausibility.
 
-    Returns (recording, validation report dict). What validation did (rows read/kept/dropped and why, samples
-    bridged) and every plausibility warning (formats.plausibility) go to stderr, into ``rec.meta`` (written
-    into the output's header by estimators that carry the input's metadata) and, through the click context,
-    into the command's summary (:func:`emit_summary`). ``strict`` (default: the ``--strict`` option) turns the
-    warnings into an ImutoolError.
+    Returns (recording, validation report dict): the library's :func:`imutool.loading.load_recording`, plus
+    :func:`note_input` — what validation did (rows read/kept/dropped and why, samples bridged) and every
+    plausibility warning go to stderr and, through the click context, into the command's summary
+    (:func:`emit_summary`); they are also in ``rec.meta`` (written into the output's header by estimators that
+    carry the input's metadata). ``strict`` (default: the ``--strict`` option) turns the warnings into an
+    ImutoolError.
     """
-    from formats import plausibility
+    from imutool.loading import load_recording
 
-    kind = formats.kind_of(path)
-    opts: dict[str, Any] = {}
-    if kind == "csv":
-        opts = {"columns": columns, "profile": profile}
-    elif kind in ("ros1", "ros2"):
-        opts = {"topic": topic, "stamp": stamp}
-    rec = formats.read(path, **opts)
-    report: dict[str, Any] = {}
-    checks = plausibility.PlausibilityReport()
-    if validate:
-        n_in = len(rec)
-        rec, rep = rec.validated(duplicates=duplicates, backwards=backwards, source=path)
-        report = rep.as_dict()
-        drops, warns = plausibility.dropped_rows(n_in, len(rec), report, rec.meta, duplicates)
-        report.update(drops)
-        checks.warnings += warns
-        rec, checks = plausibility.bridge_absurd(rec, rep=checks)
-    else:  # what the reader itself could not read is reported all the same
-        report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
-        checks.warnings += warns
-    if calibration_file:
-        from calibration import load_calibration
-
-        rec = load_calibration(calibration_file).apply(rec)
-    if mounting:
-        remap, mis = formats.parse_mounting(mounting)
-        rec = rec.mounted(remap, mis)
-    if len(rec):  # also for commands that read without validating (info, plot): they show the warnings
-        ok = np.all(np.diff(rec.time) > 0) if len(rec) > 1 else True
-        found = plausibility.check_recording(rec if ok else rec.select(np.argsort(rec.time, kind="stable")), mounting)
-        checks.warnings += found.warnings
-        checks.figures.update(found.figures)
-        report.update({k: v for k, v in checks.as_dict().items() if k != "figures"})
-        report["plausibility_figures"] = checks.figures
-        if validate:
-            rec.meta["validation"] = {k: v for k, v in report.items()
-                                      if k not in ("plausibility_figures", "warnings")}
-        else:
-            report["validated"] = False
-        if checks.warnings:
-            prev = rec.meta.get("warnings")
-            prev = list(prev) if isinstance(prev, (list, tuple)) else [str(prev)] if prev else []
-            rec.meta["warnings"] = prev + [w for w in checks.warnings if w not in prev]
-        _note_input(path, report, checks.warnings, strict)
+    rec, report = load_recording(path, columns=columns, profile=profile, topic=topic, stamp=stamp,
+                                 duplicates=duplicates, backwards=backwards, mounting=mounting,
+                                 calibration_file=calibration_file, validate=validate)
+    if len(rec):
+        note_input(path, report, strict)
     return rec, report
+
+
+def note_input(path: str, report: dict[str, Any], strict: bool | None = None) -> None:
+    """After a library function loaded ``path`` (report from :func:`imutool.loading.load_recording`): its
+    warnings to stderr (an error under ``--strict``), the report kept for the command's summary."""
+    _note_input(path, report, list(report.get("warnings") or []), strict)
 
 
 def _note_input(path: str, report: dict[str, Any], warnings: list[str], strict: bool | None) -> None:
@@ -124,7 +91,9 @@ def _note_input(path: str, report: dict[str, Any], warnings: list[str], strict: 
     if strict is None:
         strict = bool(ctx is not None and ctx.meta.get("imutool.strict"))
     if warnings and strict:
-        raise ImutoolError("; ".join(warnings) + " (an error because of --strict)", path=path)
+        from imutool.loading import strict_message
+
+        raise ImutoolError(strict_message(warnings), path=path)
     for w in warnings:
         click.echo(f"warning: {path}: {w}", err=True)
     if ctx is not None:
@@ -194,6 +163,38 @@ def progress(items: Iterable[T], total: int | None, label: str, quiet: bool, uni
 
     with bar(label, total=total, unit=unit, quiet=quiet) as b:
         yield from b.iterate(items, weight)
+
+
+class LazyBar:
+    """A :data:`imutool.progress.Progress` callable for a library function that loads its own input: the bar
+    (:func:`imutool.progress.bar`) is drawn at the first progress call, so warnings printed while loading keep a
+    clean line. Use as a context manager, like the bar itself."""
+
+    def __init__(self, label: str, unit: str = "it", quiet: bool = False) -> None:
+        self.label, self.unit, self.quiet = label, unit, quiet
+        self.bar: Any = None
+
+    def __call__(self, done: int, total: int | None = None) -> None:
+        if self.bar is None:
+            from imutool.progress import bar
+
+            self.bar = bar(self.label, total=total, unit=self.unit, quiet=self.quiet)
+        self.bar(done, total)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+    def __enter__(self) -> LazyBar:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def lazy_bar(label: str, unit: str = "it", quiet: bool = False) -> LazyBar:
+    """A progress bar drawn from the first progress call (see :class:`LazyBar`)."""
+    return LazyBar(label, unit, quiet)
 
 
 def require_channels(rec: Recording, names: Iterable[str], path: str) -> None:

@@ -1,17 +1,26 @@
-"""`imutool filter INPUT -o OUTPUT`: roll/pitch/heading by quaternion EKF, compass KF or low-pass baseline."""
+"""`imutool filter INPUT -o OUTPUT`: roll/pitch/heading by quaternion EKF, compass KF or low-pass baseline.
+
+Only option parsing and printing here; the work (loading, streaming, GNSS, smoother summary) is
+:func:`imutool.filtering.run_filter`, the same route `imutool batch filter` and a Python user take.
+"""
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import click
 import numpy as np
 
-import formats
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector, safe_outputs
-from imutool.progress import bar
+from imutool.cli.common import (
+    emit_summary,
+    input_options,
+    lazy_bar,
+    note_input,
+    output_options,
+    parse_vector,
+    safe_outputs,
+)
 
 
 @click.command("filter", epilog="Example: imutool simulate ship-roll -o roll.csv && "
@@ -70,6 +79,9 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
     filter's self-check); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
     works directly. EKF tuning: --params FILE / --param NAME=VALUE (list and units: --save-params).
     """
+    from imutool.compass import CompassParams
+    from imutool.filtering import run_filter
+
     params = ekf_params(params_file, param_items, update_every, mag_mode)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
@@ -79,49 +91,16 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
 
         with atomic_path(save_params) as tmp:
             tmp.write_text(params.to_toml(), encoding="utf-8")
-    if (method == "ekf" and not smooth and gnss_path is None and formats.kind_of(input_path) in ("csv", "parquet")
-            and os.path.getsize(input_path) > stream_mb * 1e6):
-        summary = _stream_ekf(input_path, output, params, chunk_rows, no_gnss, io, lever, quiet)
-        _warn(summary)
-        emit_summary(summary, as_json, quiet)
-        return
-    rec, validation = load_input(input_path, **io)
-    summary: dict[str, Any] = {"input": input_path, "output": output, "rows": len(rec)}
-    if method == "ekf":
-        from imutool.attitude import ekf_recording
-
-        if gnss_path and not no_gnss:
-            rec = _attach_gnss(rec, gnss_path)
-        with bar("filter", total=len(rec), unit="samples", quiet=quiet) as b:
-            out, s = ekf_recording(rec, params, smooth=smooth, use_gnss=not no_gnss, lever_arm=lever, progress=b)
-        if smooth and ("ref_q" in rec.channels or "ref_roll" in rec.channels):
-            from imutool.metrics import attitude_rmse
-
-            causal, _ = ekf_recording(rec, params, use_gnss=not no_gnss, lever_arm=lever)
-            s["smoother_gain"] = {"causal_rmse_deg": attitude_rmse(causal, rec),
-                                  "smoothed_rmse_deg": attitude_rmse(out, rec)}
-        if params_file:
-            out.meta["filter_params_file"] = params_file
-    elif method in ("lpf", "accel"):
-        from imutool.baseline import lpf_attitude
-
-        out, s = lpf_attitude(rec, cutoff if method == "lpf" else None, order)
-    else:
-        from imutool.compass import CompassParams, compass_recording
-
-        dev = None
-        if io.get("calibration_file"):
-            from calibration import load_calibration
-
-            dev = load_calibration(io["calibration_file"]).deviation
-        out, s = compass_recording(rec, CompassParams(q=comp_q, r=comp_r, model=compass_model,
-                                                      variation_deg=variation, paper_init=paper_init), dev)
-    summary.update(s)
-    if validation.get("rows_with_nan"):
-        summary["input_rows_with_nan"] = validation["rows_with_nan"]
-    _warn(summary)
-    formats.write(out, output)
-    emit_summary(summary, as_json, quiet)
+    with lazy_bar("filter", unit="samples", quiet=quiet) as b:
+        res = run_filter(input_path, output, method=method, params=params, smooth=smooth, lever_arm=lever,
+                         gnss=gnss_path if gnss_path and not no_gnss else None, use_gnss=not no_gnss,
+                         cutoff_hz=cutoff, order=order,
+                         compass=CompassParams(q=comp_q, r=comp_r, model=compass_model, variation_deg=variation,
+                                               paper_init=paper_init),
+                         params_file=params_file, chunk_rows=chunk_rows, stream_mb=stream_mb, progress=b,
+                         on_input=note_input, **io)
+    _warn(res.summary)
+    emit_summary(res.summary, as_json, quiet)
 
 
 def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None,
@@ -165,103 +144,3 @@ def _param_value(name: str, text: str, default: Any) -> Any:
 def _warn(summary: dict[str, Any]) -> None:
     for w in summary.get("warnings") or []:
         click.echo(f"warning: {w}", err=True)
-
-
-def _attach_gnss(rec, path: str):
-    g = formats.read(path)
-    if "sog" not in g.channels or "cog" not in g.channels:
-        raise ImutoolError(f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns "
-                           "sog (m/s), cog (deg)", path=path)
-    sog = g.get("sog", "m/s") if "sog" in g.units else g["sog"]
-    cog = np.unwrap(np.radians(np.asarray(g.get("cog", "deg") if "cog" in g.units else g["cog"], float)))
-    ok = np.isfinite(sog) & np.isfinite(cog)
-    if ok.sum() < 2:
-        raise ImutoolError("fewer than two valid sog/cog fixes", path=path)
-    out = rec.copy()
-    out.add("sog", np.interp(rec.time, g.time[ok], sog[ok], left=np.nan, right=np.nan), "m/s")
-    out.add("cog", np.degrees(np.interp(rec.time, g.time[ok], cog[ok], left=np.nan, right=np.nan)) % 360, "deg")
-    return out
-
-
-def _stream_ekf(path: str, output: str, params, chunk_rows: int, no_gnss: bool, io: dict, lever=None,
-                quiet: bool = True) -> dict[str, Any]:
-    """Bounded-memory EKF over a large CSV/Parquet: chunks streamed, state carried, rows appended to the output."""
-    from formats.csv import CsvWriter
-    from imutool.attitude import F_INCONSISTENT, nominal_dt, result_recording, run_ekf, self_check
-    from imutool.convert import chunk_writer
-    from imutool.progress import estimate_rows
-
-    cal = mounting = None  # read once, applied to every chunk
-    if io.get("calibration_file"):
-        from calibration import load_calibration
-
-        cal = load_calibration(io["calibration_file"])
-    if io.get("mounting"):
-        mounting = formats.parse_mounting(io["mounting"])
-    state = None
-    dt_nom = None
-    t_last = -np.inf
-    summary: dict[str, Any] = {"input": path, "output": output, "rows": 0, "method": "ekf (streamed)",
-                               "dropped_non_increasing_rows": 0}
-    totals: dict[str, int] = {}
-    # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
-    # while the EKF runs on this one (the compiled kernels release the GIL)
-    opts = ({"columns": io.get("columns"), "profile": io.get("profile"), "prefetch": True}
-            if formats.kind_of(path) == "csv" else {})
-    flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
-    total = estimate_rows(path) if formats.kind_of(path) == "csv" else None
-    # a .csv output is written by a background writer thread; a .parquet output row group by row group
-    writer = (CsvWriter(output, background=True) if formats.kind_of(output, for_output=True) == "csv"
-              else chunk_writer(output))
-    with writer as w, bar("filter", total=total, unit="rows", quiet=quiet) as b:
-        for chunk in formats.iter_chunks(path, chunk_rows=chunk_rows, **opts):
-            keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
-            if not keep.all():
-                summary["dropped_non_increasing_rows"] += int((~keep).sum())
-                chunk = chunk.select(keep)
-            if len(chunk) == 0:
-                continue
-            if cal is not None:
-                chunk = cal.apply(chunk)
-            if mounting is not None:
-                chunk = chunk.mounted(*mounting)
-            for ch in ("gyro", "accel"):
-                if ch not in chunk.channels:
-                    raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
-            if dt_nom is None:
-                dt_nom = nominal_dt(chunk.time)
-            sog = cog = None
-            if not no_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
-                sog, cog = chunk["sog"], chunk["cog"]
-            res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
-                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever)
-            bad = (res.flags & F_INCONSISTENT) > 0
-            if bad.any():
-                flagged_t.append(res.time[bad])
-            for k, v in res.summary.items():
-                if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
-                    totals[k] = int(v)  # the state carries cumulative counters
-            est = result_recording(chunk, res, params)
-            if lever is not None:
-                est.meta["lever_arm_m"] = [float(x) for x in lever]
-            w.write(est)
-            t_last = float(chunk.time[-1])
-            summary["rows"] += len(chunk)
-            b(summary["rows"], total)
-            if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
-                summary["skipped_rows"] = chunk.meta["skipped_rows"]
-                summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
-    summary.update(totals)
-    summary["samples"] = summary["rows"]
-    if flagged_t:  # spans from the flagged times: a gap longer than 1 s between flagged samples splits a span
-        tf = np.concatenate(flagged_t)
-        flags = np.full(len(tf), F_INCONSISTENT, np.uint8)
-        split = np.flatnonzero(np.diff(tf) > 1.0)
-        times = np.insert(tf, split + 1, np.nan)
-        flags = np.insert(flags, split + 1, 0)
-        check, warnings = self_check(times, flags, n_total=summary["rows"])
-        summary.update(check)
-        summary["warnings"] = warnings
-    if lever is not None:
-        summary["lever_arm_m"] = [float(x) for x in lever]
-    return summary

@@ -1,0 +1,298 @@
+"""Roll, pitch and heading over a whole recording: the one route behind ``imutool filter``, ``imutool batch
+filter`` and a Python user.
+
+:func:`run_filter` takes a path (any format imutool reads) or a :class:`formats.Recording` and the estimator's
+parameters, runs the quaternion EKF (:mod:`imutool.attitude`), the low-pass baseline (:mod:`imutool.baseline`)
+or the compass Kalman filter (:mod:`imutool.compass`), writes the estimate (format by the output's extension)
+and returns it with the summary. A large CSV/Parquet input to the causal EKF is streamed in chunks (row groups
+for Parquet) in bounded memory (:func:`stream_ekf`). Angles in the outputs are degrees; SI inside.
+
+    from imutool.filtering import run_filter
+    res = run_filter("roll.csv", "est.csv", smooth=True)      # or run_filter(rec) → res.recording
+    res.summary["smoother_gain"]                              # causal vs smoothed RMSE when the input has truth
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+import formats
+from formats import Recording
+from formats.errors import ImutoolError
+from imutool.convert import STREAMABLE
+from imutool.progress import Progress, report
+
+METHODS = ("ekf", "lpf", "accel", "compass")
+LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
+
+
+@dataclass
+class FilterResult:
+    """What :func:`run_filter` produced.
+
+    recording: the estimate (None when streamed: the rows went straight to the output file); summary: rows,
+    method, the estimator's counters and self-check, ``warnings`` (also in the output's metadata), smoother gain;
+    validation: what loading the input did (rows read/kept/dropped, warnings; empty for a Recording or a stream).
+    """
+
+    recording: Recording | None
+    summary: dict[str, Any]
+    validation: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self.summary.get("warnings") or [])
+
+
+def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
+            method: str = "ekf", smooth: bool = False, gnss: str | os.PathLike | None = None,
+            stream_mb: float = 300.0) -> bool:
+    """Whether :func:`run_filter` streams: causal EKF, no GNSS file, a CSV/Parquet input larger than ``stream_mb``
+    MB, and an output file to stream into."""
+    if isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None:
+        return False
+    return formats.kind_of(source) in STREAMABLE and os.path.getsize(source) > stream_mb * 1e6
+
+
+def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
+               method: str = "ekf", params: Any = None, smooth: bool = False,
+               lever_arm: Any = None, gnss: str | os.PathLike | None = None, use_gnss: bool = True,
+               cutoff_hz: float = 0.5, order: int = 2, compass: Any = None, params_file: str | None = None,
+               chunk_rows: int = 1_000_000, stream_mb: float = 300.0, strict: bool = False,
+               progress: Progress | None = None,
+               on_input: Callable[[str, dict[str, Any]], None] | None = None,
+               **load_options: Any) -> FilterResult:
+    """Estimate roll, pitch, heading (deg) from ``source``; write them to ``output`` when given.
+
+    method: ``ekf`` (quaternion EKF with gyro-bias states; ``params`` an :class:`imutool.attitude.EkfParams`,
+    ``smooth`` adds the RTS backward pass, ``lever_arm`` the sensor position from the centre of rotation, m,
+    body FRD, ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg), ``use_gnss=False`` ignores sog/cog), ``lpf``
+    (Butterworth low-passed accelerometer tilt + magnetic heading, ``cutoff_hz``, ``order``), ``accel``
+    (unfiltered accelerometer tilt) or ``compass`` (heading KF; ``compass`` an
+    :class:`imutool.compass.CompassParams`; the deviation card of ``calibration_file`` is applied).
+
+    A path is loaded by :func:`imutool.loading.load_recording` with ``load_options`` (columns, profile, topic,
+    stamp, duplicates, backwards, mounting, calibration_file) and ``strict``; ``on_input(path, report)`` is called
+    right after (the CLI prints the input warnings there). A large CSV/Parquet input to the causal EKF streams
+    (see :func:`streams`; ``chunk_rows`` rows per chunk). With ``smooth`` and truth (``ref_q``/``ref_roll``) in
+    the input the summary gets ``smoother_gain``: causal vs smoothed RMSE (deg). ``params_file`` is recorded in
+    the output's metadata. ``progress(done, total)`` is called in samples.
+    """
+    unknown = set(load_options) - set(LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"run_filter() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    if method not in METHODS:
+        raise ImutoolError(f"filter method {method!r}: expected one of {', '.join(METHODS)}")
+    lever = _lever_arm(lever_arm)
+    if method == "ekf":
+        from imutool.attitude import EkfParams
+
+        params = params if params is not None else EkfParams()
+    if not isinstance(source, Recording) and streams(source, output, method=method, smooth=smooth, gnss=gnss,
+                                                     stream_mb=stream_mb):
+        summary = stream_ekf(source, output, params, chunk_rows=chunk_rows,  # type: ignore[arg-type]
+                             use_gnss=use_gnss, lever_arm=lever, progress=progress,
+                             **{k: load_options.get(k) for k in ("columns", "profile", "mounting",
+                                                                 "calibration_file")})
+        return FilterResult(None, summary)
+    validation: dict[str, Any] = {}
+    if isinstance(source, Recording):
+        rec = source
+        name = str(rec.meta.get("source", "<recording>"))
+    else:
+        from imutool.loading import load_recording
+
+        name = os.fspath(source)
+        rec, validation = load_recording(name, strict=strict, **load_options)
+        if on_input is not None and len(rec):
+            on_input(name, validation)
+    summary: dict[str, Any] = {"input": name, "output": None if output is None else os.fspath(output),
+                               "rows": len(rec)}
+    if method == "ekf":
+        from imutool.attitude import ekf_recording
+
+        if gnss is not None and use_gnss:
+            rec = attach_gnss(rec, gnss)
+        out, s = ekf_recording(rec, params, smooth=smooth, use_gnss=use_gnss, lever_arm=lever, progress=progress)
+        if smooth:
+            gain = smoother_gain(rec, out, params, use_gnss=use_gnss, lever_arm=lever)
+            if gain is not None:
+                s["smoother_gain"] = gain
+        if params_file:
+            out.meta["filter_params_file"] = params_file
+    elif method in ("lpf", "accel"):
+        from imutool.baseline import lpf_attitude
+
+        out, s = lpf_attitude(rec, cutoff_hz if method == "lpf" else None, order)
+        report(progress, len(rec), len(rec))
+    else:
+        from imutool.compass import CompassParams, compass_recording
+
+        dev = None
+        if load_options.get("calibration_file"):
+            from calibration import load_calibration
+
+            dev = load_calibration(load_options["calibration_file"]).deviation
+        out, s = compass_recording(rec, compass if compass is not None else CompassParams(), dev)
+        report(progress, len(rec), len(rec))
+    summary.update(s)
+    if validation.get("rows_with_nan"):
+        summary["input_rows_with_nan"] = validation["rows_with_nan"]
+    if output is not None:
+        formats.write(out, output)
+    return FilterResult(out, summary, validation)
+
+
+def _lever_arm(lever_arm: Any) -> np.ndarray | None:
+    if lever_arm is None:
+        return None
+    v = np.asarray(lever_arm, dtype=float).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ImutoolError(f"lever arm {lever_arm!r}: expected three finite numbers (m)")
+    return v
+
+
+def smoother_gain(rec: Recording, smoothed: Recording, params: Any, *, use_gnss: bool = True,
+                  lever_arm: np.ndarray | None = None) -> dict[str, Any] | None:
+    """Causal vs smoothed attitude RMSE (deg) against the truth in ``rec`` (``ref_q`` or ``ref_roll``...); None
+    without truth. Runs the causal EKF once more."""
+    if "ref_q" not in rec.channels and "ref_roll" not in rec.channels:
+        return None
+    from imutool.attitude import ekf_recording
+    from imutool.metrics import attitude_rmse
+
+    causal, _ = ekf_recording(rec, params, use_gnss=use_gnss, lever_arm=lever_arm)
+    return {"causal_rmse_deg": attitude_rmse(causal, rec), "smoothed_rmse_deg": attitude_rmse(smoothed, rec)}
+
+
+def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
+    """A copy of ``rec`` with ``sog`` (m/s) and ``cog`` (deg) interpolated from an NMEA (RMC/VTG) or CSV file
+    (NaN outside the file's time span); cog is interpolated unwrapped."""
+    path = os.fspath(path)
+    g = formats.read(path)
+    if "sog" not in g.channels or "cog" not in g.channels:
+        raise ImutoolError(f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns "
+                           "sog (m/s), cog (deg)", path=path)
+    sog = g.get("sog", "m/s") if "sog" in g.units else g["sog"]
+    cog = np.unwrap(np.radians(np.asarray(g.get("cog", "deg") if "cog" in g.units else g["cog"], float)))
+    ok = np.isfinite(sog) & np.isfinite(cog)
+    if ok.sum() < 2:
+        raise ImutoolError("fewer than two valid sog/cog fixes", path=path)
+    out = rec.copy()
+    out.add("sog", np.interp(rec.time, g.time[ok], sog[ok], left=np.nan, right=np.nan), "m/s")
+    out.add("cog", np.degrees(np.interp(rec.time, g.time[ok], cog[ok], left=np.nan, right=np.nan)) % 360, "deg")
+    return out
+
+
+def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, *, chunk_rows: int = 1_000_000,
+               use_gnss: bool = True, lever_arm: np.ndarray | None = None, columns: str | None = None,
+               profile: str | None = None, mounting: str | None = None, calibration_file: str | None = None,
+               progress: Progress | None = None) -> dict[str, Any]:
+    """Bounded-memory causal EKF over a large CSV/Parquet file: chunks streamed (Parquet by row groups), the
+    filter state carried from chunk to chunk, rows appended to a .csv or .parquet output; returns the summary.
+
+    Memory is O(chunk_rows), not O(file). Rows whose time is not after the previous row's are dropped (counted
+    in ``dropped_non_increasing_rows``); streaming cannot sort. Calibration and mounting are applied per chunk.
+    """
+    from formats.csv import CsvWriter
+    from imutool.attitude import F_INCONSISTENT, nominal_dt, result_recording, run_ekf, self_check
+    from imutool.convert import chunk_writer
+
+    path, output = os.fspath(path), os.fspath(output)
+    if params is None:
+        from imutool.attitude import EkfParams
+
+        params = EkfParams()
+    cal = mount = None  # read once, applied to every chunk
+    if calibration_file:
+        from calibration import load_calibration
+
+        cal = load_calibration(calibration_file)
+    if mounting:
+        mount = formats.parse_mounting(mounting)
+    state = None
+    dt_nom = None
+    t_last = -np.inf
+    summary: dict[str, Any] = {"input": path, "output": output, "rows": 0, "method": "ekf (streamed)",
+                               "dropped_non_increasing_rows": 0}
+    totals: dict[str, int] = {}
+    # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
+    # while the EKF runs on this one (the compiled kernels release the GIL)
+    kind = formats.kind_of(path)
+    opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
+    flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
+    total = _row_count(path, kind)
+    # a .csv output is written by a background writer thread; a .parquet output row group by row group
+    writer = (CsvWriter(output, background=True) if formats.kind_of(output, for_output=True) == "csv"
+              else chunk_writer(output))
+    with writer as w:
+        for chunk in formats.iter_chunks(path, chunk_rows=chunk_rows, **opts):
+            keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
+            if not keep.all():
+                summary["dropped_non_increasing_rows"] += int((~keep).sum())
+                chunk = chunk.select(keep)
+            if len(chunk) == 0:
+                continue
+            if cal is not None:
+                chunk = cal.apply(chunk)
+            if mount is not None:
+                chunk = chunk.mounted(*mount)
+            for ch in ("gyro", "accel"):
+                if ch not in chunk.channels:
+                    raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
+            if dt_nom is None:
+                dt_nom = nominal_dt(chunk.time)
+            sog = cog = None
+            if use_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
+                sog, cog = chunk["sog"], chunk["cog"]
+            res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
+                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm)
+            bad = (res.flags & F_INCONSISTENT) > 0
+            if bad.any():
+                flagged_t.append(res.time[bad])
+            for k, v in res.summary.items():
+                if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+                    totals[k] = int(v)  # the state carries cumulative counters
+            est = result_recording(chunk, res, params)
+            if lever_arm is not None:
+                est.meta["lever_arm_m"] = [float(x) for x in lever_arm]
+            w.write(est)
+            t_last = float(chunk.time[-1])
+            summary["rows"] += len(chunk)
+            report(progress, summary["rows"], total)
+            if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
+                summary["skipped_rows"] = chunk.meta["skipped_rows"]
+                summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
+    summary.update(totals)
+    summary["samples"] = summary["rows"]
+    if flagged_t:  # spans from the flagged times: a gap longer than 1 s between flagged samples splits a span
+        tf = np.concatenate(flagged_t)
+        flags = np.full(len(tf), F_INCONSISTENT, np.uint8)
+        split = np.flatnonzero(np.diff(tf) > 1.0)
+        times = np.insert(tf, split + 1, np.nan)
+        flags = np.insert(flags, split + 1, 0)
+        check, warnings = self_check(times, flags, n_total=summary["rows"])
+        summary.update(check)
+        summary["warnings"] = warnings
+    if lever_arm is not None:
+        summary["lever_arm_m"] = [float(x) for x in lever_arm]
+    return summary
+
+
+def _row_count(path: str, kind: str) -> int | None:
+    """Rows to expect (for progress): the Parquet footer's count, a CSV estimate from its first MiB."""
+    if kind == "parquet":
+        from formats.parquet import parquet_info
+
+        try:
+            return int(parquet_info(path)["rows"])
+        except ImutoolError:
+            return None
+    from imutool.progress import estimate_rows
+
+    return estimate_rows(path)
