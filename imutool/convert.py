@@ -1,23 +1,29 @@
-"""Streamed conversion between the chunked formats (imutool CSV and Parquet) in bounded memory.
+"""Conversion between every format imutool reads and writes: the one route behind ``imutool convert``,
+``imutool batch convert`` and a Python user.
 
-:func:`stream_convert` is the library route behind ``imutool convert`` for CSV/Parquet → CSV/Parquet: the input is
-read chunk by chunk (:func:`formats.iter_chunks`), each chunk validated (plus a check across chunk boundaries),
-calibrated and mounted if asked, and appended to an atomic writer (CSV or Parquet by the output's extension).
+:func:`convert` picks the route. CSV/Parquet → CSV/Parquet streams (:func:`stream_convert`): the input is read
+chunk by chunk (:func:`formats.iter_chunks`, Parquet by row groups), each chunk validated (plus a check across chunk
+boundaries), calibrated and mounted if asked, and appended to an atomic writer — bounded memory. Anything else
+(bags, NMEA, or a policy that needs the whole file: ``backwards='sort'``, ``duplicates='mean'``) is read whole,
+validated, calibrated, mounted and written; bags convert REP-103 FLU/ENU ↔ FRD/NED at the boundary
+(:mod:`formats.rosbag`). Returns the summary (rows in/out, channels, conversions applied, what the output format
+could not carry).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 import formats
-from formats import Recording
 from formats.errors import ImutoolError
+from imutool.progress import Progress, report
 
 STREAMABLE = ("csv", "parquet")
+LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
 def chunk_writer(path: str | os.PathLike) -> Any:
@@ -38,11 +44,12 @@ def chunk_writer(path: str | os.PathLike) -> Any:
 def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: str | None = None,
                    profile: str | None = None, duplicates: str = "drop", backwards: str = "error",
                    mounting: str | None = None, calibration_file: str | None = None,
-                   progress: Callable[[Iterable[Recording]], Iterator[Recording]] | None = None) -> dict[str, Any]:
+                   progress: Progress | None = None) -> dict[str, Any]:
     """Convert ``src`` to ``dst`` (CSV or Parquet each) chunk by chunk; returns the summary dict.
 
     Validation is per chunk plus a check across chunk boundaries (a time not after the previous chunk's last
     one is dropped, or refused with ``backwards='error'``/``duplicates='error'``); streaming cannot sort.
+    ``progress(rows_read, rows_expected)`` after each chunk (expected: Parquet footer count, CSV estimate).
     """
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
@@ -53,9 +60,8 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
         cal = load_calibration(calibration_file)
     mount = formats.parse_mounting(mounting) if mounting else None
     opts: dict[str, Any] = {"columns": columns, "profile": profile} if formats.kind_of(src) == "csv" else {}
-    chunks: Iterable[Recording] = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
-    if progress is not None:
-        chunks = progress(chunks)
+    chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
+    total = expected_rows(src) if progress is not None else None
     rows_in = 0
     dropped_boundary = 0
     actions: list[str] = []
@@ -64,6 +70,7 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
     with chunk_writer(dst) as w:
         for chunk in chunks:
             rows_in += len(chunk)
+            report(progress, rows_in, total)
             if len(chunk) and chunk.time[0] <= last_t:
                 early = chunk.time <= last_t
                 back = chunk.time < last_t
@@ -93,3 +100,137 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
         actions.append(f"dropped {dropped_boundary} rows at chunk boundaries (time not after the previous chunk)")
     return {"rows_in": rows_in, "rows_out": rows_out, "channels": channels, "streamed": True,
             "validation_actions": actions}
+
+
+def expected_rows(path: str | os.PathLike) -> int | None:
+    """Rows to expect (for progress totals): a Parquet file's footer count, a CSV's estimate from its first MiB;
+    None for other formats or when unreadable."""
+    kind = formats.kind_of(path)
+    if kind == "parquet":
+        from formats.parquet import parquet_info
+
+        try:
+            return int(parquet_info(path)["rows"])
+        except ImutoolError:
+            return None
+    if kind == "csv":
+        from imutool.progress import estimate_rows
+
+        return estimate_rows(path)
+    return None
+
+
+def streams(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = True, duplicates: str = "drop",
+            backwards: str = "error") -> bool:
+    """Whether :func:`convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
+    whole file (``backwards='sort'``, ``duplicates='mean'``)."""
+    return (stream and formats.kind_of(src) in STREAMABLE and formats.kind_of(dst, for_output=True) in STREAMABLE
+            and backwards != "sort" and duplicates != "mean")
+
+
+def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = True, chunk_rows: int = 500_000,
+            sentences: str | tuple[str, ...] = ("HDT", "XDR"), nmea_rate: float | None = None,
+            talker: str | None = None, imu_topic: str = "/imu/data", mag_topic: str = "/imu/mag",
+            frame_id: str | None = None, storage: str | None = None, compression: str = "none",
+            vector3_mag_unit: str = "T", strict: bool = False, progress: Progress | None = None,
+            stage: Callable[[str], None] | None = None,
+            on_input: Callable[[str, dict[str, Any]], None] | None = None, **load_options: Any) -> dict[str, Any]:
+    """Convert ``src`` to ``dst`` (format from each name's extension: .csv, .parquet, .bag, .db3/.mcap or a folder,
+    .nmea/.log); returns the summary.
+
+    load_options: columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (as
+    :func:`imutool.loading.load_recording`; a bag input is read with topic/stamp/``vector3_mag_unit``, validated,
+    calibrated and mounted without the plausibility checks). NMEA output: ``sentences`` (e.g. 'HDT,XDR'),
+    ``nmea_rate`` Hz, ``talker``; roll/pitch/heading (deg) are derived from ``q`` when only a quaternion is there.
+    Bag output: ``imu_topic``, ``mag_topic``, ``frame_id``, ``storage`` (ROS2 sqlite3/mcap), ``compression``
+    (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
+    ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
+    """
+    unknown = set(load_options) - set(LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    src, dst = os.fspath(src), os.fspath(dst)
+    opt = {k: load_options.get(k) for k in LOAD_OPTIONS}
+    duplicates = opt["duplicates"] or "drop"
+    backwards = opt["backwards"] or "error"
+    mounting, calibration_file = opt["mounting"], opt["calibration_file"]
+    kin = formats.kind_of(src)
+    kout = formats.kind_of(dst, for_output=True)
+    summary: dict[str, Any] = {"input": src, "output": dst, "from": kin, "to": kout}
+    conversions: list[str] = []
+    if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards):
+        summary.update(stream_convert(src, dst, chunk_rows=chunk_rows, columns=opt["columns"], profile=opt["profile"],
+                                      duplicates=duplicates, backwards=backwards, mounting=mounting,
+                                      calibration_file=calibration_file, progress=progress))
+        summary["conversions"] = ["none (same frames and units)"]
+        return summary
+    if stage is not None:
+        stage("reading")
+    if kin in ("ros1", "ros2"):
+        rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header",
+                           vector3_mag_unit=vector3_mag_unit)
+        rows_in = len(rec)
+        bag = rec.meta.get("bag", {})
+        conversions += [f"in: {c}" for c in bag.get("conversions", [])]
+        summary["bag_in"] = {"format": bag.get("format"), "stamp": bag.get("stamp"),
+                             "topics": {k: v.get("topic") for k, v in bag.get("topics", {}).items()},
+                             "frame_id": bag.get("frame_id")}
+        if bag.get("partial_read"):
+            summary["warning"] = bag["partial_read"]
+        if bag.get("notes"):
+            summary["notes"] = bag["notes"]
+        rec, rep = rec.validated(duplicates=duplicates, backwards=backwards, source=src)
+        summary["validation_actions"] = rep.actions
+        if calibration_file:
+            from calibration import load_calibration
+
+            rec = load_calibration(calibration_file).apply(rec)
+        if mounting:
+            rec = rec.mounted(*formats.parse_mounting(mounting))
+    else:
+        from imutool.loading import load_recording
+
+        rec, rep2 = load_recording(src, strict=strict, **{k: v for k, v in opt.items() if v is not None})
+        if on_input is not None and len(rec):
+            on_input(src, rep2)
+        rows_in = int(rep2.get("rows", len(rec)))
+        summary["validation_actions"] = rep2.get("actions", [])
+    if mounting:
+        conversions.append(f"mounting {mounting} applied (sensor → body)")
+    opts: dict[str, Any] = {}
+    if kout in ("ros1", "ros2"):
+        opts = {"topic": imu_topic, "mag_topic": mag_topic, "frame_id": frame_id}
+        if kout == "ros2" and storage:
+            opts["storage"] = storage
+        if kout == "ros1" and compression != "none":
+            opts["compression"] = compression
+    elif kout == "nmea":
+        if "q" in rec and not any(k in rec for k in ("roll", "pitch", "heading")):
+            from formats.frames import quat_to_euler
+
+            r, p, h = quat_to_euler(rec["q"])
+            rec = rec.copy()
+            for name, v in (("roll", r), ("pitch", p), ("heading", h)):
+                rec.add(name, np.degrees(v), "deg")
+            conversions.append("roll/pitch/heading (deg, ZYX) derived from q (body FRD → NED) for NMEA")
+        names = sentences.split(",") if isinstance(sentences, str) else sentences
+        opts = {"sentences": tuple(s.strip().upper() for s in names if s.strip()), "rate_hz": nmea_rate,
+                "talker": talker}
+    if stage is not None:
+        stage("writing")
+    res = formats.write(rec, dst, **opts)
+    summary["rows_in"] = rows_in
+    summary["channels"] = list(rec.channels)
+    if kout in ("ros1", "ros2") and isinstance(res, dict):
+        summary["rows_out"] = max(res["messages"].values()) if res["messages"] else 0
+        summary["messages_out"] = res["messages"]
+        summary["channels_written"] = res["channels_written"]
+        summary["channels_not_written"] = res["channels_not_written"]
+        conversions += [f"out: {c}" for c in res["conversions"]]
+    elif kout == "nmea" and isinstance(res, dict):
+        summary["rows_out"] = len(rec)
+        summary["sentences_out"] = res.get("sentences")
+    else:
+        summary["rows_out"] = len(rec)
+    summary["conversions"] = conversions or ["none (same frames and units)"]
+    return summary

@@ -24,7 +24,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.convert import STREAMABLE
+from imutool.convert import STREAMABLE, expected_rows
 from imutool.progress import Progress, report
 
 METHODS = ("ekf", "lpf", "accel", "compass")
@@ -226,7 +226,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     kind = formats.kind_of(path)
     opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
     flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
-    total = _row_count(path, kind)
+    total = expected_rows(path)
     # a .csv output is written by a background writer thread; a .parquet output row group by row group
     writer = (CsvWriter(output, background=True) if formats.kind_of(output, for_output=True) == "csv"
               else chunk_writer(output))
@@ -283,16 +283,3 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         summary["lever_arm_m"] = [float(x) for x in lever_arm]
     return summary
 
-
-def _row_count(path: str, kind: str) -> int | None:
-    """Rows to expect (for progress): the Parquet footer's count, a CSV estimate from its first MiB."""
-    if kind == "parquet":
-        from formats.parquet import parquet_info
-
-        try:
-            return int(parquet_info(path)["rows"])
-        except ImutoolError:
-            return None
-    from imutool.progress import estimate_rows
-
-    return estimate_rows(path)

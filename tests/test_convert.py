@@ -162,3 +162,49 @@ def test_bag_to_nmea_derives_heading_from_q(shared, tmp_path, capsys):
     assert "derived from q" in out
     first = out_nmea.read_text().splitlines()[0]
     assert first.split(",")[1] == "69.3"
+
+
+@pytest.mark.parametrize("ext,extra", [(".parquet", []), (".bag", []), (".nmea", ["--sentences", "HDT,XDR"]),
+                                       (".csv", ["--no-stream", "--mounting", "x,-y,-z"])])
+def test_python_convert_equals_cli(tmp_path, csv_in, capsys, ext, extra):
+    """imutool.convert.convert (the library route) writes what `imutool convert` writes and returns its summary."""
+    import formats
+    from imutool.convert import convert
+
+    a, b = tmp_path / f"cli{ext}", tmp_path / f"lib{ext}"
+    code, out, err = run(["convert", csv_in, a, "--json", *extra], capsys)
+    assert code == 0, err
+    kw = {"stream": "--no-stream" not in extra, "sentences": "HDT,XDR"}
+    if "--mounting" in extra:
+        kw["mounting"] = "x,-y,-z"
+    s = convert(csv_in, b, **kw)
+    cli = json.loads(out)
+    assert {k: v for k, v in s.items() if k != "output"} == {k: cli[k] for k in s if k != "output"}
+    if ext == ".nmea":
+        assert a.read_text() == b.read_text() and a.read_text().count("$") > 100
+        return
+    ra, rb = formats.read(a), formats.read(b)
+    assert len(ra) == len(rb) == 300 and np.array_equal(ra.time, rb.time)
+    for k in ra.channels:
+        assert np.array_equal(ra[k], rb[k], equal_nan=True), k
+    if "--mounting" in extra:  # x,-y,-z: y and z flip sign
+        assert np.allclose(ra["gyro"][:, 1], -read_csv(csv_in)["gyro"][:, 1])
+
+
+def test_python_convert_progress_and_refusals(tmp_path, csv_in):
+    from formats.errors import ImutoolError
+    from imutool.convert import convert, streams
+
+    calls: list[tuple[int, int | None]] = []
+    stages: list[str] = []
+    s = convert(csv_in, tmp_path / "o.parquet", chunk_rows=100, progress=lambda d, t: calls.append((d, t)),
+                stage=stages.append)
+    assert s["streamed"] and [d for d, _ in calls] == [100, 200, 300] and not stages
+    s = convert(tmp_path / "o.parquet", tmp_path / "o.bag", stage=stages.append)
+    assert stages == ["reading", "writing"] and s["rows_in"] == 300
+    assert streams(csv_in, "x.parquet") and not streams(csv_in, "x.parquet", backwards="sort")
+    assert not streams(csv_in, "x.bag") and not streams(csv_in, "x.csv", stream=False)
+    with pytest.raises(ImutoolError, match="overwrite"):
+        convert(csv_in, csv_in)
+    with pytest.raises(TypeError, match="colums"):
+        convert(csv_in, tmp_path / "z.csv", colums="a=b")
