@@ -284,6 +284,30 @@ def _write_marker(job: Job, result: JobResult, signature: str | None) -> None:
 
 
 # -- running ----------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Call:
+    """A runner calling a library function the way the commands do: ``func(job.input, job.output, **kwargs)``.
+
+    E.g. ``Call(imutool.filtering.run_filter, smooth=True)``, ``Call(imutool.convert.convert)``,
+    ``Call(imutool.calibrate.calibrate_mag, method="swing")``. The result's ``summary`` (or the dict returned)
+    is the job's summary. Picklable when ``func`` is a module-level function, so it runs in worker processes
+    and on Dask workers alike.
+    """
+
+    func: Callable[..., Any]
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def __init__(self, func: Callable[..., Any], **kwargs: Any) -> None:
+        object.__setattr__(self, "func", func)
+        object.__setattr__(self, "kwargs", kwargs)
+
+    def __call__(self, job: Job) -> dict[str, Any]:
+        args = (job.input,) if job.output is None else (job.input, job.output)
+        res = self.func(*args, **self.kwargs)
+        summary = getattr(res, "summary", res)
+        return dict(summary) if isinstance(summary, dict) else {}
+
+
 def _one_line(text: str) -> str:
     return " ".join(part.strip() for part in str(text).splitlines() if part.strip())[:500]
 

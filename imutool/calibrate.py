@@ -303,7 +303,7 @@ def swing_date(date_opt: str | None, *recs: Any) -> Any:
     return None
 
 
-def deviation_card(source: str | os.PathLike | Recording, outputs: tuple[str, ...] | list[str], *,
+def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.PathLike | tuple[str, ...] | list[str], *,
                    reference: str | os.PathLike | None = None, reference_column: str | None = None,
                    reference_kind: str = "auto", variation: float | None = None, position: str | None = None,
                    date: str | None = None, vessel: str | None = None, compass: str | None = None,
@@ -322,7 +322,8 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: tuple[str, ..
     an NMEA reference) and a ``date`` for the World Magnetic Model. ``time_offset`` s is added to the reference
     times; a GNSS course is used only at ``sog`` ≥ ``min_speed`` kn; compass headings covering less than
     ``min_span`` deg are refused. Header fields from ``info`` (dict or TOML path) overridden by the keywords.
-    ``outputs``: .pdf/.png/.svg card plot, .txt text card, .toml section [deviation] (merged with ``append``).
+    ``outputs`` (one or a list): .pdf/.png/.svg card plot, .txt text card, .toml section [deviation] (merged
+    with ``append``).
     ``details`` of the result: compass_source, reference_source, reference_column, reference_kind, variation,
     variation_source.
     """
@@ -335,7 +336,7 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: tuple[str, ..
 
     input_path = _source_name(source)
     reference = os.fspath(reference) if reference else None
-    outputs = [os.fspath(o) for o in outputs]
+    outputs = [os.fspath(outputs)] if isinstance(outputs, (str, os.PathLike)) else [os.fspath(o) for o in outputs]
     for o in outputs:
         if not o.lower().endswith(CARD_OUTPUTS):
             raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card plot), .txt (text card) or .toml "
