@@ -72,7 +72,8 @@ S_BIASMAX = 86  # |b_i| bound (rad/s, copied from the parameters; ≤ 0: none)
 S_NIS_A, S_NIS_M, S_NINC = 87, 88, 89  # windowed mean NIS per degree of freedom (accel, mag heading); flagged count
 S_WLP, S_WDOT, S_WINIT = 90, 93, 96  # lever arm: low-passed body rate (3), its derivative (3), started flag
 S_SHOCK_T = 97  # continuous time (s) the accelerometer has been beyond the shock gate
-STATE_SIZE = 98
+S_MDIST = 98  # magnetic disturbance level (peak-held deviation measure, decays with mag_disturbance_hold)
+STATE_SIZE = 99
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -83,7 +84,8 @@ P_ACC_TAU, P_GYRO_PREV_W, P_ACC_ADAPT, P_ACC_SOFT, P_ACC_WN_GAIN = 17, 18, 19, 2
 P_MAG_BIAS, P_ACC_BIAS_DEV, P_BIAS_MAX, P_BIAS_HOLD = 22, 23, 24, 25
 P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
-N_PARAMS = 32
+P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
+N_PARAMS = 36
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 8, 16, 32
@@ -95,6 +97,9 @@ F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 
 PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "gyro_noise": ("rad/s/√Hz", (1e-7, 1.0), "gyro white-noise density: process noise of the attitude"),
     "gyro_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise (scale-factor/misalignment errors)"),
+    "heading_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise about the world vertical only: "
+                                             "the heading uncertainty that gyro scale-factor errors add while "
+                                             "the body turns (gravity corrects the tilt part; 0: off)"),
     "bias_rw": ("rad/s/√s", (0.0, 1.0), "gyro bias random walk: process noise of the bias"),
     "accel_noise": ("rad", (1e-5, 3.0), "σ floor of the normalised accelerometer direction per update"),
     "accel_noise_gain": ("1", (0.0, 100.0), "σ² += (gain × learned accelerometer white-noise σ / g)²"),
@@ -113,11 +118,20 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                             "exceeds this, and for bias_hold s after (0: always learn)"),
     "bias_hold": ("s", (0.0, 1e3), "hold-off after a large | |a| − g | before the bias learns again"),
     "bias_max": ("rad/s", (0.0, 10.0), "bound on each gyro-bias component (0: none)"),
+    "accel_heading": ("bool", (0, 1), "accelerometer updates may move heading through cross-covariances (false: "
+                                      "they correct inclination only, as gravity observes no heading)"),
+    "accel_vertical_bias": ("bool", (0, 1), "accelerometer updates may correct the gyro-bias component about the "
+                                            "world vertical (which gravity does not observe; false: only the "
+                                            "heading and rest detection learn it)"),
     "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading per update ('full' mode: of m̂, rad)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
     "mag_norm_soft": ("1", (0.0, 10.0), "mag σ² × (1 + (norm deviation / this)²): de-weighting (0: off)"),
     "mag_dip_soft_deg": ("deg", (0.0, 90.0), "mag σ² × (1 + (dip deviation / this)²): de-weighting (0: off)"),
+    "mag_disturbance_hold": ("s", (0.0, 1e3), "the magnetic de-weighting follows the largest recent deviation "
+                                              "(norm, dip, a gate rejection), decaying with this time constant, "
+                                              "so samples that pass by chance inside a disturbance stay "
+                                              "de-weighted (0: per sample)"),
     "mag_bias": ("bool", (0, 1), "magnetic heading updates may correct the gyro bias"),
     "gravity": ("m/s^2", (9.7, 9.9), "local gravity"),
     "rest_gyro": ("rad/s", (0.0, 10.0), "rest: |ω − b| below this on every axis ..."),
@@ -152,10 +166,11 @@ class EkfParams:
 
     gyro_noise: float = 1e-3
     gyro_scale_noise: float = 0.0
+    heading_scale_noise: float = 0.0005
     bias_rw: float = 2e-5
     accel_noise: float = 0.03
     accel_noise_gain: float = 4.0
-    accel_lp_tau: float = 1.0
+    accel_lp_tau: float = 1.5
     accel_gate: float = 0.0
     accel_nis_gate: float = 0.0
     accel_nis_soft: bool = False
@@ -165,6 +180,9 @@ class EkfParams:
     accel_bias_dev: float = 0.0
     bias_hold: float = 1.0
     bias_max: float = 0.0
+    accel_vertical_bias: bool = False
+    accel_heading: bool = False
+    mag_disturbance_hold: float = 0.5
     mag_noise_deg: float = 20.0
     mag_norm_gate: float = 0.15
     mag_dip_gate_deg: float = 10.0
@@ -304,6 +322,10 @@ class EkfParams:
         p[P_NIS_LIMIT] = self.nis_limit
         p[P_LEVER_TAU] = self.lever_arm_lp_tau
         p[P_SHOCK_MAX] = self.shock_max
+        p[P_ACC_VBIAS] = 1.0 if self.accel_vertical_bias else 0.0
+        p[P_ACC_HEAD] = 1.0 if self.accel_heading else 0.0
+        p[P_MAG_HOLD] = self.mag_disturbance_hold
+        p[P_HEAD_SCALE] = self.heading_scale_noise
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -727,6 +749,42 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False):
 
 
 @njit(cache=True, inline="always")
+def _vertical_forms(P, r0, r1, r2):
+    """rᵀ P_θθ r, rᵀ P_θb r, rᵀ P_bb r for a unit vector r (body axes)."""
+    a = (r0 * r0 * P[0, 0] + r1 * r1 * P[1, 1] + r2 * r2 * P[2, 2]
+         + 2 * (r0 * r1 * P[0, 1] + r0 * r2 * P[0, 2] + r1 * r2 * P[1, 2]))
+    x = (r0 * (r0 * P[0, 3] + r1 * P[0, 4] + r2 * P[0, 5]) + r1 * (r0 * P[1, 3] + r1 * P[1, 4] + r2 * P[1, 5])
+         + r2 * (r0 * P[2, 3] + r1 * P[2, 4] + r2 * P[2, 5]))
+    b = (r0 * r0 * P[3, 3] + r1 * r1 * P[4, 4] + r2 * r2 * P[5, 5]
+         + 2 * (r0 * r1 * P[3, 4] + r0 * r2 * P[3, 5] + r1 * r2 * P[4, 5]))
+    return a, x, b
+
+
+@njit(cache=True, inline="always")
+def _drop_vertical(P, fa, fx, fb, r0, r1, r2, drop_att, drop_bias, dx):
+    """Turn the vector update just made into one that leaves the attitude (drop_att) and/or the gyro bias
+    (drop_bias) unchanged along r, the world vertical in body axes: gain K' = T K, T = I − Π, Π = diag(α r rᵀ,
+    β r rᵀ). Joseph form for that gain is P_opt + Π G Π with G = P_before − P_opt; every block of Π G Π is a
+    multiple of r rᵀ: (α², αβ, β²) × rᵀ G_block r. fa, fx, fb: :func:`_vertical_forms` of P before the update."""
+    ga, gx, gb = _vertical_forms(P, r0, r1, r2)
+    al = 1.0 if drop_att else 0.0
+    be = 1.0 if drop_bias else 0.0
+    sa, sx, sb = al * (fa - ga), al * be * (fx - gx), be * (fb - gb)
+    va = al * (r0 * dx[0] + r1 * dx[1] + r2 * dx[2])
+    vb = be * (r0 * dx[3] + r1 * dx[4] + r2 * dx[5])
+    rr = (r0, r1, r2)
+    for i in range(3):
+        dx[i] -= rr[i] * va
+        dx[3 + i] -= rr[i] * vb
+        for j in range(3):
+            o = rr[i] * rr[j]
+            P[i, j] += sa * o
+            P[3 + i, 3 + j] += sb * o
+            P[i, 3 + j] += sx * o
+            P[3 + j, i] += sx * o
+
+
+@njit(cache=True, inline="always")
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
@@ -814,6 +872,22 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                                      abs(st[S_DQ]))
                 qa += (prm[P_GYRO_SCALE] * ang / T) ** 2 * T
             _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa, prm[P_BIAS_RW] ** 2 * T)
+            if prm[P_HEAD_SCALE] > 0:  # scale-factor heading noise ∝ angle turned, about the world vertical r
+                ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2),
+                                     abs(st[S_DQ]))
+                qh = (prm[P_HEAD_SCALE] * ang / T) ** 2 * T  # white rate noise of density ε·|ω|
+                z0 = 2 * (st[1] * st[3] - st[0] * st[2])
+                z1 = 2 * (st[2] * st[3] + st[0] * st[1])
+                z2 = 1 - 2 * (st[1] * st[1] + st[2] * st[2])
+                P[0, 0] += qh * z0 * z0
+                P[1, 1] += qh * z1 * z1
+                P[2, 2] += qh * z2 * z2
+                P[0, 1] += qh * z0 * z1
+                P[1, 0] += qh * z0 * z1
+                P[0, 2] += qh * z0 * z2
+                P[2, 0] += qh * z0 * z2
+                P[1, 2] += qh * z1 * z2
+                P[2, 1] += qh * z1 * z2
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
         st[S_INIT] = 1.0
@@ -952,9 +1026,19 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
                         sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
                     cons = st[S_BHOLD] > 0
+                    # gravity observes neither heading nor the bias about the vertical: optionally keep the update
+                    # from moving them through cross-covariances (exact Joseph form for the projected gain)
+                    vb = prm[P_ACC_VBIAS] == 0.0 and not cons
+                    va = prm[P_ACC_HEAD] == 0.0
+                    vdrop = va or vb
+                    fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)
                     ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons)
+                    if ok and vdrop:
+                        _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
                     if not ok and prm[P_ACC_SOFT] > 0:  # de-weight instead of skipping (flagged as rejected)
                         _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
+                        if vdrop:
+                            _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
                         _apply_correction(st, dx)
                         _rmat(st[0], st[1], st[2], st[3], R)
                     if prm[P_NIS_TAU] > 0 and dt > 0:  # self-check: windowed NIS per degree of freedom
@@ -985,16 +1069,24 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     # |asin(m_z/|m|) − dip_ref| > gate ⇔ m_z/|m| outside [sin(dip_ref − gate), sin(dip_ref + gate)]
                     sz = mw2 / nm
                     rej = sz < dip_lo or sz > dip_hi
+                # deviation measure of the field from its reference (norm and dip, relative to their soft scales)
+                dev_m = 0.0
+                if nm > 0 and prm[P_MAG_NORM_SOFT] > 0 and st[S_MNORM] > 0:
+                    dev_m += ((nm / st[S_MNORM] - 1.0) / prm[P_MAG_NORM_SOFT]) ** 2
+                if nm > 0 and prm[P_MAG_DIP_SOFT] > 0:
+                    dev_m += ((np.arcsin(min(1.0, max(-1.0, mw2 / nm))) - dip_ref) / prm[P_MAG_DIP_SOFT]) ** 2
+                if prm[P_MAG_HOLD] > 0:  # peak hold with exponential decay: a disturbance is a state, not a sample
+                    if rej:
+                        dev_m = max(dev_m, 100.0)
+                    decay = np.exp(-dt * update_every / prm[P_MAG_HOLD]) if dt > 0 else 1.0
+                    st[S_MDIST] = max(dev_m, st[S_MDIST] * decay)
+                    dev_m = st[S_MDIST]
                 if rej:
                     flag |= F_MAG_REJ
                     st[S_NMREJ] += 1
                 elif mag_mode == 1:
                     yh = -_atan2(mw1, mw0)  # heading error: the horizontal field should point north
-                    sm2 = prm[P_MAG_NOISE] ** 2
-                    if prm[P_MAG_NORM_SOFT] > 0 and st[S_MNORM] > 0:
-                        sm2 *= 1.0 + ((nm / st[S_MNORM] - 1.0) / prm[P_MAG_NORM_SOFT]) ** 2
-                    if prm[P_MAG_DIP_SOFT] > 0:
-                        sm2 *= 1.0 + ((np.arcsin(min(1.0, max(-1.0, mw2 / nm))) - dip_ref) / prm[P_MAG_DIP_SOFT]) ** 2
+                    sm2 = prm[P_MAG_NOISE] ** 2 * (1.0 + dev_m)
                     nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2, dx, prm[P_MAG_BIAS] == 0.0)
                     if prm[P_NIS_TAU] > 0 and dt > 0:
                         st[S_NIS_M] += min(1.0, dt * update_every / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
