@@ -216,3 +216,39 @@ def test_library_call_runner_equals_the_command(tmp_path, capsys):
         a = (tmp_path / "cli" / f"v{i}.csv").read_text().splitlines()
         b = (tmp_path / "lib" / f"v{i}.csv").read_text().splitlines()
         assert a == b and len(a) > 2001
+
+
+def _on_pty(args: list[str], cwd: Path) -> tuple[int, str]:
+    """`imutool ARGS` with stderr on a pseudo-terminal; (exit status, what the terminal showed)."""
+    import pty
+
+    env = {**os.environ, "COLUMNS": "100", "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    master, slave = pty.openpty()
+    try:
+        p = subprocess.Popen([sys.executable, "-c", "from imutool.cli import main; main()", *args], cwd=cwd,
+                             stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL, env=env)
+        os.close(slave)
+        chunks = []
+        while True:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        p.wait(timeout=120)
+        return p.returncode, b"".join(chunks).decode(errors="replace")
+    finally:
+        os.close(master)
+
+
+def test_progress_is_the_shared_bar_and_respects_quiet(tmp_path):
+    """The batch bar is imutool.progress.bar (label, done/total files, ETA) on a terminal; --quiet: nothing."""
+    for i in range(3):
+        _write_good(tmp_path / "in" / f"v{i}.csv", 200, i)
+    rc, term = _on_pty(["batch", "convert", "in", "-o", "a/{stem}.parquet", "-j", "1"], tmp_path)
+    assert rc == 0, term
+    assert "batch:" in term and "/3 [" in term and "file/s" in term, term  # done/total, elapsed<ETA, rate
+    rc, term = _on_pty(["batch", "convert", "in", "-o", "b/{stem}.parquet", "-j", "1", "--quiet"], tmp_path)
+    assert rc == 0 and "batch:" not in term and "file" not in term, term

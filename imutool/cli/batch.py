@@ -21,6 +21,7 @@ import click
 from formats.errors import ImutoolError
 from imutool import batch as _batch
 from imutool.cli.common import emit_summary
+from imutool.progress import bar
 
 
 def _render_args(argv: list[str], fields: dict[str, str]) -> list[str]:
@@ -71,25 +72,6 @@ def _resolve(command: list[str]) -> click.Command:
             raise click.UsageError(f"unknown command {' '.join(command)!r} (see 'imutool --help')")
     assert cmd is not None
     return cmd
-
-
-def _progress(total: int, quiet: bool) -> tuple[Any, Any]:
-    """(callback, closer) showing a tqdm bar with ETA on stderr when interactive."""
-    if quiet or not sys.stderr.isatty():
-        return (lambda r: None), (lambda: None)
-    try:
-        from tqdm import tqdm
-    except ImportError:
-        return (lambda r: None), (lambda: None)
-    bar = tqdm(total=total, unit="file", file=sys.stderr, dynamic_ncols=True)
-    failed = [0]
-
-    def cb(r: _batch.JobResult) -> None:
-        failed[0] += r.status == "failed"
-        bar.set_postfix_str(f"failed {failed[0]}" if failed[0] else "")
-        bar.update(1)
-
-    return cb, bar.close
 
 
 @click.command("batch", context_settings={"ignore_unknown_options": False},
@@ -162,14 +144,11 @@ def batch_cmd(command: str, inputs: tuple[str, ...], template: str | None, manif
     from functools import partial
 
     runner = partial(run_command, argv)
-    cb, close = _progress(len(jobs), quiet or as_json)
     t0 = time.perf_counter()
-    try:
+    with bar("batch", total=len(jobs), unit="file", quiet=quiet or as_json) as b:  # done/total, rate, ETA
         results = _batch.run_batch(jobs, runner, workers=workers, scheduler="local" if use_dask else scheduler,
-                                   resume=resume, figures=figures or None, on_result=cb,
+                                   resume=resume, figures=figures or None, on_result=lambda r: b.advance(1),
                                    signature=json.dumps([a for a in argv if a != "--force"]))
-    finally:
-        close()
     wall = time.perf_counter() - t0
     tot = _batch.totals(results, wall)
     if summary_path:
