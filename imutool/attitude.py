@@ -772,16 +772,52 @@ def _drop_vertical(P, fa, fx, fb, r0, r1, r2, drop_att, drop_bias, dx):
     sa, sx, sb = al * (fa - ga), al * be * (fx - gx), be * (fb - gb)
     va = al * (r0 * dx[0] + r1 * dx[1] + r2 * dx[2])
     vb = be * (r0 * dx[3] + r1 * dx[4] + r2 * dx[5])
-    rr = (r0, r1, r2)
-    for i in range(3):
-        dx[i] -= rr[i] * va
-        dx[3 + i] -= rr[i] * vb
-        for j in range(3):
-            o = rr[i] * rr[j]
-            P[i, j] += sa * o
-            P[3 + i, 3 + j] += sb * o
-            P[i, 3 + j] += sx * o
-            P[3 + j, i] += sx * o
+    dx[0] -= r0 * va
+    dx[1] -= r1 * va
+    dx[2] -= r2 * va
+    dx[3] -= r0 * vb
+    dx[4] -= r1 * vb
+    dx[5] -= r2 * vb
+    o00, o11, o22, o01, o02, o12 = r0 * r0, r1 * r1, r2 * r2, r0 * r1, r0 * r2, r1 * r2
+    if drop_att:
+        P[0, 0] += sa * o00
+        P[1, 1] += sa * o11
+        P[2, 2] += sa * o22
+        P[0, 1] += sa * o01
+        P[1, 0] += sa * o01
+        P[0, 2] += sa * o02
+        P[2, 0] += sa * o02
+        P[1, 2] += sa * o12
+        P[2, 1] += sa * o12
+    if drop_bias:
+        P[3, 3] += sb * o00
+        P[4, 4] += sb * o11
+        P[5, 5] += sb * o22
+        P[3, 4] += sb * o01
+        P[4, 3] += sb * o01
+        P[3, 5] += sb * o02
+        P[5, 3] += sb * o02
+        P[4, 5] += sb * o12
+        P[5, 4] += sb * o12
+    if drop_att and drop_bias:  # cross block P_θb (and its transpose): sx · r rᵀ
+        P[0, 3] += sx * o00
+        P[3, 0] += sx * o00
+        P[1, 4] += sx * o11
+        P[4, 1] += sx * o11
+        P[2, 5] += sx * o22
+        P[5, 2] += sx * o22
+        P[0, 4] += sx * o01
+        P[4, 0] += sx * o01
+        P[1, 3] += sx * o01
+        P[3, 1] += sx * o01
+        P[0, 5] += sx * o02
+        P[5, 0] += sx * o02
+        P[2, 3] += sx * o02
+        P[3, 2] += sx * o02
+        P[1, 5] += sx * o12
+        P[5, 1] += sx * o12
+        P[2, 4] += sx * o12
+        P[4, 2] += sx * o12
 
 
 @njit(cache=True, inline="always")
@@ -873,9 +909,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 qa += (prm[P_GYRO_SCALE] * ang / T) ** 2 * T
             _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa, prm[P_BIAS_RW] ** 2 * T)
             if prm[P_HEAD_SCALE] > 0:  # scale-factor heading noise ∝ angle turned, about the world vertical r
-                ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2),
-                                     abs(st[S_DQ]))
-                qh = (prm[P_HEAD_SCALE] * ang / T) ** 2 * T  # white rate noise of density ε·|ω|
+                # white rate noise of density ε·|ω|: (ε·angle/T)²·T, angle² ≈ 4‖vector part of Δq‖² (small angle)
+                ang2 = 4.0 * (st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2)
+                qh = prm[P_HEAD_SCALE] ** 2 * ang2 / T
                 z0 = 2 * (st[1] * st[3] - st[0] * st[2])
                 z1 = 2 * (st[2] * st[3] + st[0] * st[1])
                 z2 = 1 - 2 * (st[1] * st[1] + st[2] * st[2])
@@ -1078,7 +1114,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 if prm[P_MAG_HOLD] > 0:  # peak hold with exponential decay: a disturbance is a state, not a sample
                     if rej:
                         dev_m = max(dev_m, 100.0)
-                    decay = np.exp(-dt * update_every / prm[P_MAG_HOLD]) if dt > 0 else 1.0
+                    decay = 1.0 / (1.0 + max(dt, 0.0) * update_every / prm[P_MAG_HOLD])  # ≈ exp(−dt/hold)
                     st[S_MDIST] = max(dev_m, st[S_MDIST] * decay)
                     dev_m = st[S_MDIST]
                 if rej:
