@@ -7,6 +7,9 @@ Usage::
                                                    # and Parquet -> CSV (imutool convert's route), peak RSS
     python benchmarks/parquet.py --rows 200000 --repeat 3
     python benchmarks/parquet.py --rows 0 --filter-hours 1   # `imutool filter` on 1 h at 200 Hz: CSV vs Parquet
+    python benchmarks/parquet.py --rows 0 --24h             # `imutool filter` on 24 h at 200 Hz (17.28 M rows) as
+                                                            # CSV vs as Parquet (streamed), wall, CPU, peak RSS
+    python benchmarks/parquet.py --rows 0 --day-rows 10000000   # the same on a 10 M-row recording
 
 Rates are CPU time of this process (``time.process_time``; the 2-core machine is shared, wall time is noisy)
 with wall time alongside; best of ``--repeat``. Files go to a temporary folder (``--tmp`` to choose). Peak RSS of
@@ -16,6 +19,7 @@ the streamed conversions is measured in a fresh child process (ru_maxrss), next 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import subprocess
@@ -164,8 +168,6 @@ _FILTER = textwrap.dedent("""
 
 def filter_compare(hours: float, tmp: Path) -> None:
     """`imutool filter` on the same recording as CSV and as Parquet (input → output of the same format)."""
-    import json
-
     from formats import write
     from imutool.sim import simulate
 
@@ -192,6 +194,55 @@ def filter_compare(hours: float, tmp: Path) -> None:
               f"peak RSS {m['peak_mib']:6.0f} MiB")
 
 
+def build_day(rows: int, folder: Path, env: dict[str, str]) -> tuple[Path, Path]:
+    """The long recording as CSV, built as benchmarks/attitude.py --24h builds its 24 h file (one simulated
+    ship-roll hour per seed, gyro/accel/mag, appended), then converted to Parquet with `imutool convert`."""
+    import formats
+    from formats.csv import CsvWriter
+    from imutool.sim import simulate
+
+    csv, pq_path = folder / "day.csv", folder / "day.parquet"
+    t0 = time.perf_counter()
+    hour = 720_000
+    with CsvWriter(str(csv)) as w:
+        for i in range(-(-rows // hour)):
+            n = min(hour, rows - i * hour)
+            r = simulate("ship-roll", duration=(n - 1) / 200.0, seed=i)
+            r.time = r.time + 3600.0 * i
+            w.write(formats.Recording(r.time, {c: r[c] for c in ("gyro", "accel", "mag")}))
+    t1 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-c", _FILTER, "convert", str(csv), str(pq_path), "-q"], env=env,
+                       capture_output=True, text=True, check=True)
+    m = json.loads(r.stderr.strip().splitlines()[-1])
+    print(f"\n{rows:,} rows (ship-roll, {rows / 720_000:.2f} h at 200 Hz, gyro/accel/mag): CSV "
+          f"{csv.stat().st_size / 1e9:.2f} GB written in {t1 - t0:.0f} s; `imutool convert` CSV -> Parquet "
+          f"{m['wall']:.1f} s wall, {m['cpu']:.1f} s CPU, peak RSS {m['peak_mib']:.0f} MiB -> "
+          f"{pq_path.stat().st_size / 1e9:.2f} GB Parquet")
+    return csv, pq_path
+
+
+def filter_day(rows: int, tmp: Path) -> None:
+    """`imutool filter` (defaults: EKF, streamed above --stream-mb 300) on a long recording, CSV vs Parquet."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    csv, pq_path = build_day(rows, tmp, env)
+    print(f"  in-memory size of the input arrays: {rows * 10 * 8 / 2**20:.0f} MiB (time + 9 axes, float64); of "
+          f"the estimate: {rows * 17 * 8 / 2**20:.0f} MiB (17 columns)")
+    subprocess.run([sys.executable, "-c", _FILTER, "filter", str(pq_path), "-o", str(tmp / "warm.csv"), "-q",
+                    "--chunk-rows", "1000", "--stream-mb", "1e9"], env=env, capture_output=True)  # numba cache
+    for src, dst in ((csv, "est.csv"), (pq_path, "est.parquet"), (pq_path, "est2.csv")):
+        cmd = ["filter", str(src), "-o", str(tmp / dst), "-q"]
+        load0 = os.getloadavg()[0]
+        r = subprocess.run([sys.executable, "-c", _FILTER, *cmd], env=env, capture_output=True, text=True)
+        if r.returncode:
+            print(f"  {src.name} -> {dst}: failed: {r.stderr.strip()[-300:]}")
+            continue
+        m = json.loads(r.stderr.strip().splitlines()[-1])
+        print(f"  imutool filter {src.name:12s} -o {dst:12s} {m['wall']:6.1f} s wall  {m['cpu']:6.1f} s CPU  "
+              f"peak RSS {m['peak_mib']:6.0f} MiB  (load {load0:.1f} -> {os.getloadavg()[0]:.1f}; output "
+              f"{(tmp / dst).stat().st_size / 1e9:.2f} GB)")
+        (tmp / dst).unlink()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=1_000_000)
@@ -200,8 +251,13 @@ def main() -> None:
     ap.add_argument("--chunk-rows", type=int, default=500_000)
     ap.add_argument("--filter-hours", type=float, default=0.0, metavar="H",
                     help="also time `imutool filter` on H hours at 200 Hz as CSV and as Parquet")
+    ap.add_argument("--24h", dest="day", action="store_true",
+                    help="also time `imutool filter` on 24 h at 200 Hz (17.28 M rows) as CSV and as Parquet")
+    ap.add_argument("--day-rows", type=int, default=0, metavar="ROWS",
+                    help="the same on ROWS rows (e.g. 10000000); --24h is 17280000")
     ap.add_argument("--tmp", default=None)
     a = ap.parse_args()
+    day_rows = a.day_rows or (17_280_000 if a.day else 0)
     with tempfile.TemporaryDirectory(dir=a.tmp) as d:
         if a.rows:
             compare(a.rows, a.repeat, Path(d))
@@ -209,6 +265,8 @@ def main() -> None:
             stream(a.stream, a.chunk_rows, Path(d))
         if a.filter_hours:
             filter_compare(a.filter_hours, Path(d))
+        if day_rows:
+            filter_day(day_rows, Path(d))
 
 
 if __name__ == "__main__":

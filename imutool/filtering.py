@@ -52,11 +52,24 @@ class FilterResult:
 def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
             method: str = "ekf", smooth: bool = False, gnss: str | os.PathLike | None = None,
             stream_mb: float = 300.0) -> bool:
-    """Whether :func:`run_filter` streams: causal EKF, no GNSS file, a CSV/Parquet input larger than ``stream_mb``
-    MB, and an output file to stream into."""
+    """Whether :func:`run_filter` streams: causal EKF, no GNSS file, an output file to stream into, and a CSV
+    input larger than ``stream_mb`` MB, or a Parquet input whose data take more than that in memory (rows ×
+    columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold 2 GB of float64)."""
     if isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None:
         return False
-    return formats.kind_of(source) in STREAMABLE and os.path.getsize(source) > stream_mb * 1e6
+    kind = formats.kind_of(source)
+    if kind not in STREAMABLE:
+        return False
+    size = os.path.getsize(source)
+    if kind == "parquet":
+        from formats.parquet import parquet_info
+
+        try:
+            info = parquet_info(source)
+            size = max(size, int(info["rows"]) * len(info["columns"]) * 8)
+        except ImutoolError:
+            pass  # unreadable: decided by the file size; reading it will say what is wrong
+    return size > stream_mb * 1e6
 
 
 def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,

@@ -110,6 +110,11 @@ def test_streams_decision(roll_csv, tmp_path):
     assert not streams(roll_csv, "o.csv", stream_mb=0, smooth=True)  # the smoother needs the whole file
     assert not streams(roll_csv, "o.csv", stream_mb=0, method="lpf")
     assert not streams(rec, "o.csv", stream_mb=0)
+    # Parquet: decided by the data's in-memory size (6001 rows × 29 columns × 8 B = 1.39 MB), not the file's
+    pq_path = tmp_path / "roll.parquet"
+    formats.write(rec, pq_path)
+    assert pq_path.stat().st_size < 1.3e6
+    assert streams(pq_path, "o.csv", stream_mb=1.3) and not streams(pq_path, "o.csv", stream_mb=1.4)
 
 
 def test_errors_and_strict(roll_csv, tmp_path):

@@ -63,7 +63,8 @@ from imutool.cli.common import (
 @click.option("--chunk-rows", type=int, default=1_000_000, show_default=True,
               help="EKF on CSV/Parquet: stream the file in chunks of this many rows when larger than --stream-mb.")
 @click.option("--stream-mb", type=float, default=300.0, show_default=True,
-              help="EKF on CSV/Parquet: stream (bounded memory) when the input is larger than this (MB).")
+              help="EKF on CSV/Parquet: stream (bounded memory) when the input is larger than this (MB; Parquet: "
+                   "its data as float64 in memory).")
 @input_options
 @output_options
 @safe_outputs("output", "save_params")
