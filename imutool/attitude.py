@@ -778,46 +778,24 @@ def _drop_vertical(P, fa, fx, fb, r0, r1, r2, drop_att, drop_bias, dx):
     dx[3] -= r0 * vb
     dx[4] -= r1 * vb
     dx[5] -= r2 * vb
-    o00, o11, o22, o01, o02, o12 = r0 * r0, r1 * r1, r2 * r2, r0 * r1, r0 * r2, r1 * r2
     if drop_att:
-        P[0, 0] += sa * o00
-        P[1, 1] += sa * o11
-        P[2, 2] += sa * o22
-        P[0, 1] += sa * o01
-        P[1, 0] += sa * o01
-        P[0, 2] += sa * o02
-        P[2, 0] += sa * o02
-        P[1, 2] += sa * o12
-        P[2, 1] += sa * o12
+        _add_rrt(P, 0, 0, sa, r0, r1, r2)
     if drop_bias:
-        P[3, 3] += sb * o00
-        P[4, 4] += sb * o11
-        P[5, 5] += sb * o22
-        P[3, 4] += sb * o01
-        P[4, 3] += sb * o01
-        P[3, 5] += sb * o02
-        P[5, 3] += sb * o02
-        P[4, 5] += sb * o12
-        P[5, 4] += sb * o12
-    if drop_att and drop_bias:  # cross block P_θb (and its transpose): sx · r rᵀ
-        P[0, 3] += sx * o00
-        P[3, 0] += sx * o00
-        P[1, 4] += sx * o11
-        P[4, 1] += sx * o11
-        P[2, 5] += sx * o22
-        P[5, 2] += sx * o22
-        P[0, 4] += sx * o01
-        P[4, 0] += sx * o01
-        P[1, 3] += sx * o01
-        P[3, 1] += sx * o01
-        P[0, 5] += sx * o02
-        P[5, 0] += sx * o02
-        P[2, 3] += sx * o02
-        P[3, 2] += sx * o02
-        P[1, 5] += sx * o12
-        P[5, 1] += sx * o12
-        P[2, 4] += sx * o12
-        P[4, 2] += sx * o12
+        _add_rrt(P, 3, 3, sb, r0, r1, r2)
+    if drop_att and drop_bias:  # cross block P_θb (and its transpose P_bθ)
+        _add_rrt(P, 0, 3, sx, r0, r1, r2)
+
+
+@njit(cache=True, inline="always")
+def _add_rrt(P, i0, j0, s, r0, r1, r2):
+    """P[i0:i0+3, j0:j0+3] += s·r rᵀ, mirrored into P[j0:j0+3, i0:i0+3] when that is another block."""
+    r = (r0, r1, r2)
+    for i in range(3):
+        for j in range(3):
+            v = s * r[i] * r[j]
+            P[i0 + i, j0 + j] += v
+            if i0 != j0:
+                P[j0 + j, i0 + i] += v
 
 
 @njit(cache=True, inline="always")
