@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -110,7 +111,8 @@ class ParquetWriter:
     chunk; every later chunk must have the same columns. ``row_group_rows`` caps the rows per row group.
     """
 
-    def __init__(self, path: str | os.PathLike, compression: str = "snappy", row_group_rows: int = ROW_GROUP_ROWS):
+    def __init__(self, path: str | os.PathLike, compression: str = "snappy", row_group_rows: int = ROW_GROUP_ROWS,
+                 background: bool = False):
         _pa()
         self.path = os.fspath(path)
         self.compression = compression
@@ -120,6 +122,10 @@ class ParquetWriter:
         self._writer: Any = None
         self._schema: Any = None
         self.rows = 0
+        # background: a chunk is converted and written (pyarrow releases the GIL) while the caller works on the
+        # next one; one chunk in flight, its error raised at the next write or at close
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="imutool-parquet") if background else None
+        self._pending: Any = None
 
     def write(self, rec: Recording) -> None:
         import pyarrow.parquet as pq
@@ -134,11 +140,26 @@ class ParquetWriter:
             raise ImutoolError(f"Parquet: chunk columns {rec.column_names()} differ from the first chunk's "
                                f"{self._schema.names}", path=self.path)
         if len(rec):
-            self._writer.write_table(_table(rec, self._schema), row_group_size=self.row_group_rows)
+            if self._pool is None:
+                self._write_table(rec)
+            else:
+                self._wait()
+                self._pending = self._pool.submit(self._write_table, rec)
         self.rows += len(rec)
+
+    def _write_table(self, rec: Recording) -> None:
+        self._writer.write_table(_table(rec, self._schema), row_group_size=self.row_group_rows)
+
+    def _wait(self) -> None:
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            pending.result()
 
     def close(self) -> None:
         try:
+            self._wait()
+            if self._pool is not None:
+                self._pool.shutdown()
             if self._writer is None:
                 raise ImutoolError("Parquet: nothing written (no chunk)", path=self.path)
             self._writer.close()
@@ -148,6 +169,8 @@ class ParquetWriter:
         self._ctx.__exit__(None, None, None)
 
     def abort(self, exc: BaseException) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
         if self._writer is not None:
             try:
                 self._writer.close()

@@ -26,17 +26,18 @@ STREAMABLE = ("csv", "parquet")
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
-def chunk_writer(path: str | os.PathLike) -> Any:
-    """An atomic incremental writer (``with w: w.write(chunk)``; ``w.rows``) for a .csv or .parquet output."""
+def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
+    """An atomic incremental writer (``with w: w.write(chunk)``; ``w.rows``) for a .csv or .parquet output;
+    ``background``: each chunk is written by a worker thread while the caller prepares the next."""
     kind = formats.kind_of(path, for_output=True)
     if kind == "csv":
         from formats.csv import CsvWriter
 
-        return CsvWriter(os.fspath(path))
+        return CsvWriter(os.fspath(path), background=background)
     if kind == "parquet":
         from formats.parquet import ParquetWriter
 
-        return ParquetWriter(os.fspath(path))
+        return ParquetWriter(os.fspath(path), background=background)
     raise ImutoolError(f"streamed output must be .csv or .parquet (got {formats.kind_of(path, True)})",
                        path=os.fspath(path))
 

@@ -240,11 +240,17 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
     flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
     total = expected_rows(path)
-    # a .csv output is written by a background writer thread; a .parquet output row group by row group
+    # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
+    # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
     writer = (CsvWriter(output, background=True) if formats.kind_of(output, for_output=True) == "csv"
-              else chunk_writer(output))
+              else chunk_writer(output, background=True))
+    chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
+    if kind == "parquet":
+        from formats.csv import in_background
+
+        chunks = in_background(chunks)
     with writer as w:
-        for chunk in formats.iter_chunks(path, chunk_rows=chunk_rows, **opts):
+        for chunk in chunks:
             keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
             if not keep.all():
                 summary["dropped_non_increasing_rows"] += int((~keep).sum())

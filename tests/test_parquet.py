@@ -121,6 +121,32 @@ def test_writer_appends_row_groups_and_is_atomic(tmp_path):
     assert [f for f in os.listdir(tmp_path) if f.endswith(".tmp")] == []
 
 
+def test_background_writer_same_file_and_errors_surface(tmp_path):
+    """background=True (a worker thread converts and writes each chunk): the same bytes as the plain writer; a
+    failure inside the worker is raised to the caller, and nothing is left behind."""
+    rec = _rec(3000)
+    files = {}
+    for bg in (False, True):
+        files[bg] = tmp_path / f"bg{bg}.parquet"
+        with ParquetWriter(files[bg], background=bg) as w:
+            for i in range(0, 3000, 700):
+                w.write(rec.select(slice(i, i + 700)))
+    assert files[True].read_bytes() == files[False].read_bytes()
+    _same(rec, read_parquet(files[True]))
+    q = tmp_path / "fails.parquet"
+    with pytest.raises(RuntimeError, match="worker failed"):
+        with ParquetWriter(q, background=True) as w:
+            w.write(rec.select(slice(0, 10)))
+
+            def boom(_rec):
+                raise RuntimeError("worker failed")
+
+            w._write_table = boom  # the next chunk fails in the worker thread
+            w.write(rec.select(slice(10, 20)))
+            w.write(rec.select(slice(20, 30)))  # the error of the chunk in flight is raised here (or at close)
+    assert not q.exists() and [f for f in os.listdir(tmp_path) if f.endswith(".tmp")] == []
+
+
 def test_foreign_parquet_and_errors(tmp_path):
     n = 50
     t = pa.array(np.datetime64("2024-03-01T12:00:00", "ns") + np.arange(n) * np.timedelta64(10, "ms"))
