@@ -1,32 +1,20 @@
-"""``imutool allan``: overlapping Allan deviation → ARW/VRW, bias instability, RRW; noise.yaml and kalibr imu.yaml."""
+"""``imutool allan``: overlapping Allan deviation → ARW/VRW, bias instability, RRW; noise.yaml and kalibr imu.yaml.
+
+Options and printing only; the analysis and the files are :func:`imutool.noise.allan_noise`.
+"""
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import click
 import numpy as np
 
-from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
+from imutool.cli.common import emit_summary, input_options, note_input, output_options, safe_outputs
+from imutool.noise import SI as _SI
+from imutool.progress import stages
 
-_IN_KEYS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
-_SI = {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT"}
 _LABEL = {"gyro": ("ARW", "rad/s/√Hz"), "accel": ("VRW", "m/s²/√Hz"), "mag": ("white", "µT/√Hz")}
-
-
-def _rate(t: np.ndarray) -> tuple[float, str]:
-    """Sample rate for the Allan analysis: samples / span. Host timestamps of a buffered sensor often come in
-    bursts (median step ≪ mean step); the sensor itself samples uniformly at the mean rate."""
-    if len(t) < 2 or not float(t[-1] - t[0]) > 0:
-        raise ImutoolError(f"Allan deviation needs a time series: {len(t)} row(s) spanning no time")
-    mean_rate = (len(t) - 1) / float(t[-1] - t[0])
-    med = float(np.median(np.diff(t)))
-    if abs(med * mean_rate - 1.0) > 0.05:
-        return mean_rate, (f"irregular timestamps (median step {1e3 * med:.2f} ms vs mean {1e3 / mean_rate:.2f} ms): "
-                           f"samples taken as uniform at the mean rate {mean_rate:.3f} Hz")
-    return mean_rate, "regular"
 
 
 @click.command("allan", epilog="Example: imutool allan static.csv -o noise.yaml --plot allan.png --kalibr imu.yaml")
@@ -59,79 +47,14 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
     The summary gives the gyro in
     degrees (ARW °/√h, B °/h, K °/h/√h), accelerometer and magnetometer in SI; the noise file is SI throughout.
     """
-    from calibration.allan import analyse, plot_allan
-    from calibration.noise import write_kalibr, write_noise
+    from imutool.noise import allan_noise
 
-    if not output.lower().endswith((".yaml", ".yml")):
-        raise ImutoolError(f"the noise file must be .yaml: {output!r}")
     wanted = [c.strip() for c in channels.split(",") if c.strip()]
-    for c in wanted:
-        if c not in _SI:
-            raise ImutoolError(f"--channels: unknown channel {c!r} (gyro, accel, mag)")
-    results = []
-    values: dict[str, Any] = {}
-    info: dict[str, Any] = {}
-    rates = []
-    from imutool.progress import stages
-
     steps = stages("allan", [*inputs, *wanted, "writing"], quiet)
-    for path in inputs:
-        steps.stage(f"reading {os.path.basename(path)}")
-        rec, rep = load_input(path, **{k: io.get(k) for k in _IN_KEYS if io.get(k) is not None})
-        if start is not None or end is not None:
-            rec = rec.slice_time(start, end)
-        for name in wanted:
-            if name not in rec.channels or any(r.name == name for r in results):
-                continue
-            y = rec.get(name, _SI[name])
-            ok = np.all(np.isfinite(y), axis=1)
-            if not ok.all():
-                y = y[ok]
-            fs, timing = _rate(rec.time)
-            rates.append(fs)
-            steps.stage(f"Allan deviation of {name}")
-            res = analyse(y, fs, name, _SI[name], per_decade)
-            results.append(res)
-            sm = res.summary()
-            n_, b_, k_ = (sm[k] for k in ("N", "B", "K"))
-            values[f"{name}_noise_density"] = float(np.mean(n_))
-            values[f"{name}_noise_density_xyz"] = [float(v) for v in n_]
-            # a bias instability only where a flicker floor is seen; else the minimum's bound, labelled
-            if all(k == "bias instability" for k in sm["B_kind"]):
-                values[f"{name}_bias_instability"] = float(np.mean(b_))
-                values[f"{name}_bias_instability_xyz"] = [float(v) for v in b_]
-            else:
-                values[f"{name}_bias_instability_upper_bound"] = float(np.max(b_))
-            values[f"{name}_allan_minimum_xyz"] = list(sm["B_kind"])
-            # a random walk only where the +1/2 slope is seen; else its upper bound, labelled (never a silent 0)
-            if all(sm["K_resolved"]):
-                values[f"{name}_random_walk"] = float(np.mean(k_))
-                values[f"{name}_random_walk_xyz"] = [float(v) for v in k_]
-            else:
-                values[f"{name}_random_walk_upper_bound"] = float(np.max(sm["K_upper"]))
-            info[name] = {"file": path, "rate_hz": round(fs, 3), "samples": int(len(y)),
-                          "duration_s": round(float(len(y) / fs), 1), "dropped_nan_rows": int((~ok).sum()),
-                          "timing": timing,
-                          "gaps": len(rep.get("gaps", [])),
-                          "N": n_, "B": b_, "K": k_, "tau_min_s": res.summary()["tau_min_s"],
-                          "B_upper_bound": sm["B_upper_bound"], "allan_minimum": sm["B_kind"],
-                          "K_resolved": sm["K_resolved"], "K_upper_bound": sm["K_upper"],
-                          "units": {"N": f"{_SI[name]}/√Hz", "B": _SI[name], "K": f"{_SI[name]}/√s"}}
-            if name == "gyro":  # degrees at the user surface
-                info[name]["deg"] = {"ARW_deg_per_rt_h": [float(np.degrees(v) * 60) for v in n_],
-                                     "B_deg_per_h": [float(np.degrees(v) * 3600) for v in b_],
-                                     "K_deg_per_h_per_rt_h": [float(np.degrees(v) * 3600 * 60) for v in k_]}
-    if not results:
-        raise ImutoolError(f"none of the channels {', '.join(wanted)} found in {', '.join(inputs)}")
-    values["rate_hz"] = float(max(rates))
-    values["source"] = ", ".join(inputs)
-    steps.stage("writing")
-    write_noise(output, values)
-    warnings: list[str] = []
-    if kalibr:
-        warnings = write_kalibr(kalibr, values, topic_name, fallback=kalibr_fallback)
-    if plot:
-        plot_allan(results, plot, title=f"Allan deviation — {', '.join(os.path.basename(p) for p in inputs)}")
+    run = allan_noise(inputs, output, plot=plot, kalibr=kalibr, topic_name=topic_name, kalibr_fallback=kalibr_fallback,
+                      channels=channels, per_decade=per_decade, start=start, end=end, stage=steps.stage,
+                      on_input=note_input, **io)
+    results, info, warnings = run.results, run.info, run.summary["warnings"]
     lines = [f"Allan deviation → {output}" + (f", {kalibr}" if kalibr else "") + (f", {plot}" if plot else "")]
     for r in results:
         lab, unit = _LABEL[r.name]
@@ -164,5 +87,4 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
     steps.close()
     for w in warnings:
         click.echo(f"warning: {w}", err=True)
-    emit_summary({"output": output, "kalibr": kalibr, "plot": plot, "channels": info, "warnings": warnings},
-                 as_json, quiet, lines)
+    emit_summary(run.summary, as_json, quiet, lines)
