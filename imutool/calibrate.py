@@ -24,6 +24,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.loading import require_channels
 
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 OnInput = Callable[[str, dict[str, Any]], None]
@@ -103,6 +104,17 @@ def _source_name(source: str | os.PathLike | Recording) -> str:
     return str(source.meta.get("source", "")) if isinstance(source, Recording) else os.fspath(source)
 
 
+def _read_for_fit(source: str | os.PathLike | Recording, kind: str, load_options: dict[str, Any] | None,
+                  with_files: tuple[str, ...] | list[str], on_input: OnInput | None,
+                  stage: Stage | None) -> Recording:
+    """The reading stage of a calibration run: load (with the --with files), then require the ``kind`` channel."""
+    _stage(stage, "reading")
+    rec = load_for_fit(source, load_options, with_files, fitting=kind, on_input=on_input)
+    _stage(stage, "fitting")
+    require_channels(rec, [kind], _source_name(source))
+    return rec
+
+
 def _stage(stage: Stage | None, name: str) -> None:
     if stage is not None:
         stage(name)
@@ -123,10 +135,7 @@ def calibrate_mag(source: str | os.PathLike | Recording, output: str | os.PathLi
 
     input_path = _source_name(source)
     check_toml_output(output, append)
-    _stage(stage, "reading")
-    rec = load_for_fit(source, load_options, with_files, fitting="mag", on_input=on_input)
-    _stage(stage, "fitting")
-    _require(rec, ["mag"], input_path)
+    rec = _read_for_fit(source, "mag", load_options, with_files, on_input, stage)
     m = rec.get("mag", "uT")
     if method == "sphere":
         from calibration.magnetometer import calibrate_sphere
@@ -161,11 +170,6 @@ def calibrate_mag(source: str | os.PathLike | Recording, output: str | os.PathLi
     return CalibrationRun(fit, summary, rec)
 
 
-def _require(rec: Recording, names: list[str], path: str) -> None:
-    missing = [n for n in names if n not in rec.channels]
-    if missing:
-        raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}",
-                           path=path)
 
 
 # -- gyro and accelerometer ----------------------------------------------------------------------------------------
@@ -190,10 +194,7 @@ def calibrate_gyro(source: str | os.PathLike | Recording, output: str | os.PathL
 
     input_path = _source_name(source)
     check_toml_output(output, append)
-    _stage(stage, "reading")
-    rec = load_for_fit(source, load_options, with_files, fitting="gyro", on_input=on_input)
-    _stage(stage, "fitting")
-    _require(rec, ["gyro"], input_path)
+    rec = _read_for_fit(source, "gyro", load_options, with_files, on_input, stage)
     acc = rec.get("accel", "m/s^2") if "accel" in rec.channels else None
     temp = rec["temp"] if "temp" in rec.channels else None
     cal = fit_gyro(rec.time, rec.get("gyro", "rad/s"), acc, temp, min_temp_range=min_temp_range,
@@ -225,10 +226,7 @@ def calibrate_accel(source: str | os.PathLike | Recording, output: str | os.Path
 
     input_path = _source_name(source)
     check_toml_output(output, append)
-    _stage(stage, "reading")
-    rec = load_for_fit(source, load_options, with_files, fitting="accel", on_input=on_input)
-    _stage(stage, "fitting")
-    _require(rec, ["accel"], input_path)
+    rec = _read_for_fit(source, "accel", load_options, with_files, on_input, stage)
     if gravity is None:
         gravity = normal_gravity(latitude, height) if latitude is not None else 9.80665
     gyro = rec.get("gyro", "rad/s") if "gyro" in rec.channels else None
@@ -348,11 +346,11 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.Path
     # compass heading
     if heading_column or "heading" in rec.channels:
         col = heading_column or "heading"
-        _require(rec, [col], input_path)
+        require_channels(rec, [col], input_path)
         compass_hdg = np.asarray(rec[col], dtype=float) % 360.0
         src = f"column {col}"
     else:
-        _require(rec, ["mag"], input_path)
+        require_channels(rec, ["mag"], input_path)
         m = rec.get("mag", "uT")
         if "accel" in rec.channels:
             r, p = roll_pitch_from_accel(rec.get("accel", "m/s^2"))

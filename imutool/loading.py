@@ -84,3 +84,11 @@ def load_recording(path: str | os.PathLike, *, columns: str | None = None, profi
 def strict_message(warnings: list[str]) -> str:
     """The one-line error the input warnings become under ``strict``."""
     return "; ".join(warnings) + " (an error because of --strict)"
+
+
+def require_channels(rec: Recording, names: list[str] | tuple[str, ...], path: str) -> None:
+    """Refuse (ImutoolError naming ``path``) a recording that lacks any of the channels ``names``."""
+    missing = [n for n in names if n not in rec.channels]
+    if missing:
+        raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}",
+                           path=path)

@@ -32,3 +32,31 @@ def run_main(args, capsys) -> tuple[int, str, str]:
         main([str(a) for a in args])
     out = capsys.readouterr()
     return e.value.code, out.out, out.err
+
+
+def run_cli_on_pty(args: list[str], cwd, env: dict) -> tuple[int, str, str]:
+    """`imutool ARGS` in a subprocess with stderr on a pseudo-terminal (a real tty, as on deck) and stdout on a
+    pipe; returns (exit status, stdout, what the terminal showed)."""
+    import pty
+    import subprocess
+    import sys
+
+    master, slave = pty.openpty()
+    try:
+        p = subprocess.Popen([sys.executable, "-c", "from imutool.cli import main; main()", *args], cwd=cwd,
+                             stdout=subprocess.PIPE, stderr=slave, stdin=subprocess.DEVNULL, env=env)
+        os.close(slave)
+        chunks = []
+        while True:
+            try:
+                data = os.read(master, 65536)
+            except OSError:  # EIO: the child closed the terminal
+                break
+            if not data:
+                break
+            chunks.append(data)
+        out = p.stdout.read().decode()
+        p.wait(timeout=120)
+        return p.returncode, out, b"".join(chunks).decode(errors="replace")
+    finally:
+        os.close(master)

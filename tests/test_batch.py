@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_cli_on_pty
 
 import formats
 from formats import Recording
@@ -220,27 +221,9 @@ def test_library_call_runner_equals_the_command(tmp_path, capsys):
 
 def _on_pty(args: list[str], cwd: Path) -> tuple[int, str]:
     """`imutool ARGS` with stderr on a pseudo-terminal; (exit status, what the terminal showed)."""
-    import pty
-
     env = {**os.environ, "COLUMNS": "100", "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
-    master, slave = pty.openpty()
-    try:
-        p = subprocess.Popen([sys.executable, "-c", "from imutool.cli import main; main()", *args], cwd=cwd,
-                             stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL, env=env)
-        os.close(slave)
-        chunks = []
-        while True:
-            try:
-                data = os.read(master, 65536)
-            except OSError:  # EIO: the child closed the terminal
-                break
-            if not data:
-                break
-            chunks.append(data)
-        p.wait(timeout=120)
-        return p.returncode, b"".join(chunks).decode(errors="replace")
-    finally:
-        os.close(master)
+    rc, _, term = run_cli_on_pty(args, cwd, env)
+    return rc, term
 
 
 def test_progress_is_the_shared_bar_and_respects_quiet(tmp_path):

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import io
 import os
-import pty
 import subprocess
 import sys
+
+from conftest import run_cli_on_pty
 
 from imutool.progress import Bar, chunk_ranges, estimate_rows, report, stages
 
@@ -65,24 +66,7 @@ def _run(args, cwd, tty: bool) -> tuple[int, str, str]:
     if not tty:
         r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=120, env=env)
         return r.returncode, r.stdout, r.stderr
-    master, slave = pty.openpty()
-    try:
-        p = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=slave, stdin=subprocess.DEVNULL, env=env)
-        os.close(slave)
-        chunks = []
-        while True:
-            try:
-                data = os.read(master, 65536)
-            except OSError:  # EIO: the child closed the terminal
-                break
-            if not data:
-                break
-            chunks.append(data)
-        out = p.stdout.read().decode()
-        p.wait(timeout=120)
-        return p.returncode, out, b"".join(chunks).decode(errors="replace")
-    finally:
-        os.close(master)
+    return run_cli_on_pty(args, cwd, env)
 
 
 def test_cli_bar_on_a_pty_and_silent_when_piped(tmp_path):

@@ -13,6 +13,7 @@ import numpy as np
 
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.loading import require_channels  # noqa: F401  (re-exported for the click modules)
 
 T = TypeVar("T")
 
@@ -197,11 +198,6 @@ def lazy_bar(label: str, unit: str = "it", quiet: bool = False) -> LazyBar:
     return LazyBar(label, unit, quiet)
 
 
-def require_channels(rec: Recording, names: Iterable[str], path: str) -> None:
-    missing = [n for n in names if n not in rec.channels]
-    if missing:
-        raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}",
-                           path=path)
 
 
 def parse_vector(text: str, n: int = 3, what: str = "value") -> np.ndarray:
