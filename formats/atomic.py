@@ -23,8 +23,10 @@ import shutil
 import stat
 import tempfile
 from collections.abc import Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from .errors import ImutoolError
 
@@ -250,3 +252,93 @@ def atomic_path(target: str | os.PathLike, *, is_dir: bool = False) -> Iterator[
         if isinstance(e, OSError):
             raise _os_error(e, target) from None
         raise
+
+
+class AtomicChunkWriter:
+    """Base of the streaming writers (CSV, Parquet): chunks written to a temporary file beside ``path``, renamed
+    on :meth:`close`, dropped on :meth:`abort` or an exception inside ``with``.
+
+    ``background=True``: a chunk is converted and written in one worker thread while the caller works on the
+    next (one chunk in flight); its error (disk full, ...) is raised at the next :meth:`write` or at close.
+    Subclasses implement ``_first(chunk)`` (header/schema, once, in the caller's thread), ``_check(chunk)``,
+    ``_write_chunk(chunk)`` (may run in the worker), ``_finish()`` (flush and close the file) and ``_discard()``
+    (close without raising). A write failure (OSError) surfaces as the one-line :class:`ImutoolError`.
+    """
+
+    def __init__(self, path: str | os.PathLike, background: bool = False, thread_name: str = "imutool-writer"):
+        self.path = os.fspath(path)
+        self._ctx = atomic_path(self.path)
+        self._tmp = self._ctx.__enter__()
+        self.rows = 0
+        self._started = False
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix=thread_name) if background else None
+        self._pending: Future | None = None
+
+    def write(self, chunk: Any) -> None:
+        if not self._started:
+            self._first(chunk)
+            self._started = True
+        else:
+            self._check(chunk)
+        if len(chunk):
+            if self._pool is None:
+                self._write_chunk(chunk)
+            else:
+                self._wait()
+                self._pending = self._pool.submit(self._write_chunk, chunk)
+        self.rows += len(chunk)
+
+    def _wait(self) -> None:
+        """Finish the chunk in flight (its error is raised here)."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            pending.result()
+
+    def close(self) -> None:
+        try:
+            self._wait()
+            if self._pool is not None:
+                self._pool.shutdown()
+            self._finish()  # the last flush can fail too (disk full)
+        except BaseException as e:
+            self.abort(e)
+            raise
+        self._ctx.__exit__(None, None, None)
+
+    def abort(self, exc: BaseException) -> None:
+        """Drop the temporary file; a write failure (OSError) is raised as the one-line ImutoolError."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        self._discard()
+        try:
+            self._ctx.__exit__(type(exc), exc, exc.__traceback__)
+        except ImutoolError as e:
+            if isinstance(exc, OSError):
+                raise e from None
+        except BaseException:
+            pass
+
+    def __enter__(self) -> AtomicChunkWriter:
+        return self
+
+    def __exit__(self, et, ev, tb) -> None:
+        if et is None:
+            self.close()
+        else:
+            self.abort(ev)
+
+    # ---- per format ----
+    def _first(self, chunk: Any) -> None:
+        raise NotImplementedError
+
+    def _check(self, chunk: Any) -> None:
+        """Refuse a chunk that does not fit the first one (default: accept)."""
+
+    def _write_chunk(self, chunk: Any) -> None:
+        raise NotImplementedError
+
+    def _finish(self) -> None:
+        raise NotImplementedError
+
+    def _discard(self) -> None:
+        raise NotImplementedError

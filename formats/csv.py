@@ -28,7 +28,7 @@ import numpy as np
 
 from . import csv_engine as _eng
 from . import units as _units
-from .atomic import atomic_path
+from .atomic import AtomicChunkWriter, atomic_path
 from .columns import Mapping, infer_mapping, load_profile, mapping_from_profile, parse_mapping_option
 from .errors import ImutoolError
 from .recording import Recording, canonical_unit, group_columns
@@ -592,72 +592,28 @@ def write_csv(rec: Recording, path: str) -> None:
         _write_rows(f, rec)
 
 
-class CsvWriter:
+class CsvWriter(AtomicChunkWriter):
     """Incremental imutool CSV writer for streaming conversion; atomic on :meth:`close`.
 
     Usage: ``with CsvWriter(path) as w: w.write(chunk) ...`` — the header comes from the first chunk.
+    ``background=True``: formatting and writing of a chunk overlap the caller's next chunk (one in flight).
     """
 
     def __init__(self, path: str, background: bool = False):
-        self.path = path
-        self._ctx = atomic_path(path)
-        self._tmp = self._ctx.__enter__()
+        super().__init__(path, background, "imutool-writer")
         self._f = open(self._tmp, "wb")
-        self._header_written = False
-        self.rows = 0
-        # background: formatting and writing of a chunk overlap the caller's next chunk (one chunk in flight)
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="imutool-writer") if background else None
-        self._pending: Any = None
 
-    def write(self, rec: Recording) -> None:
-        if not self._header_written:
-            self._f.write(header_text(rec).encode("utf-8"))
-            self._header_written = True
-        if self._pool is None:
-            _write_rows(self._f, rec)
-        else:
-            self._wait()
-            self._pending = self._pool.submit(_write_rows, self._f, rec)
-        self.rows += len(rec)
+    def _first(self, rec: Recording) -> None:
+        self._f.write(header_text(rec).encode("utf-8"))
 
-    def _wait(self) -> None:
-        """Finish the chunk in flight (its error, e.g. disk full, is raised here)."""
-        if self._pending is not None:
-            pending, self._pending = self._pending, None
-            pending.result()
+    def _write_chunk(self, rec: Recording) -> None:
+        _write_rows(self._f, rec)
 
-    def close(self) -> None:
-        try:
-            self._wait()
-            if self._pool is not None:
-                self._pool.shutdown()
-            self._f.close()  # the last flush can fail too (disk full)
-        except BaseException as e:
-            self.abort(e)
-            raise
-        self._ctx.__exit__(None, None, None)
+    def _finish(self) -> None:
+        self._f.close()
 
-    def abort(self, exc: BaseException) -> None:
-        """Drop the temporary file; a write failure (OSError) is raised as the one-line ImutoolError."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+    def _discard(self) -> None:
         try:
             self._f.close()
         except OSError:
             pass
-        try:
-            self._ctx.__exit__(type(exc), exc, exc.__traceback__)
-        except ImutoolError as e:
-            if isinstance(exc, OSError):
-                raise e from None
-        except BaseException:
-            pass
-
-    def __enter__(self) -> CsvWriter:
-        return self
-
-    def __exit__(self, et, ev, tb) -> None:
-        if et is None:
-            self.close()
-        else:
-            self.abort(ev)

@@ -21,13 +21,12 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 
 from . import units as _units
-from .atomic import atomic_path
+from .atomic import AtomicChunkWriter
 from .errors import ImutoolError
 from .recording import Recording, canonical_unit, group_columns
 
@@ -104,91 +103,52 @@ def _table(rec: Recording, schema: Any) -> Any:
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
-class ParquetWriter:
+class ParquetWriter(AtomicChunkWriter):
     """Incremental Parquet writer (row groups appended per chunk); atomic on :meth:`close`.
 
     Usage: ``with ParquetWriter(path) as w: w.write(chunk) ...`` — schema and metadata come from the first
     chunk; every later chunk must have the same columns. ``row_group_rows`` caps the rows per row group.
+    ``background=True``: a chunk is converted and written (pyarrow releases the GIL) while the caller works on
+    the next one.
     """
 
     def __init__(self, path: str | os.PathLike, compression: str = "snappy", row_group_rows: int = ROW_GROUP_ROWS,
                  background: bool = False):
         _pa()
-        self.path = os.fspath(path)
+        super().__init__(path, background, "imutool-parquet")
         self.compression = compression
         self.row_group_rows = int(row_group_rows)
-        self._ctx = atomic_path(self.path)
-        self._tmp = self._ctx.__enter__()
         self._writer: Any = None
         self._schema: Any = None
-        self.rows = 0
-        # background: a chunk is converted and written (pyarrow releases the GIL) while the caller works on the
-        # next one; one chunk in flight, its error raised at the next write or at close
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="imutool-parquet") if background else None
-        self._pending: Any = None
 
-    def write(self, rec: Recording) -> None:
+    def _first(self, rec: Recording) -> None:
         import pyarrow.parquet as pq
 
-        if self._writer is None:
-            self._schema = _schema(rec)
-            # no dictionary encoding: float sensor data rarely repeats enough to pay for it, and trying it per
-            # row group cost 3-5x the write time (benchmarks/parquet.py)
-            self._writer = pq.ParquetWriter(str(self._tmp), self._schema, compression=self.compression,
-                                            use_dictionary=False)
-        elif rec.column_names() != self._schema.names:
+        self._schema = _schema(rec)
+        # no dictionary encoding: float sensor data rarely repeats enough to pay for it, and trying it per row
+        # group cost 3-5x the write time (benchmarks/parquet.py)
+        self._writer = pq.ParquetWriter(str(self._tmp), self._schema, compression=self.compression,
+                                        use_dictionary=False)
+
+    def _check(self, rec: Recording) -> None:
+        if rec.column_names() != self._schema.names:
             raise ImutoolError(f"Parquet: chunk columns {rec.column_names()} differ from the first chunk's "
                                f"{self._schema.names}", path=self.path)
-        if len(rec):
-            if self._pool is None:
-                self._write_table(rec)
-            else:
-                self._wait()
-                self._pending = self._pool.submit(self._write_table, rec)
-        self.rows += len(rec)
 
-    def _write_table(self, rec: Recording) -> None:
+    def _write_chunk(self, rec: Recording) -> None:
         self._writer.write_table(_table(rec, self._schema), row_group_size=self.row_group_rows)
 
-    def _wait(self) -> None:
-        if self._pending is not None:
-            pending, self._pending = self._pending, None
-            pending.result()
+    def _finish(self) -> None:
+        if self._writer is None:
+            raise ImutoolError("Parquet: nothing written (no chunk)", path=self.path)
+        self._writer.close()
 
-    def close(self) -> None:
-        try:
-            self._wait()
-            if self._pool is not None:
-                self._pool.shutdown()
-            if self._writer is None:
-                raise ImutoolError("Parquet: nothing written (no chunk)", path=self.path)
-            self._writer.close()
-        except BaseException as e:
-            self.abort(e)
-            raise
-        self._ctx.__exit__(None, None, None)
-
-    def abort(self, exc: BaseException) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+    def _discard(self) -> None:
         if self._writer is not None:
             try:
                 self._writer.close()
             except Exception:
                 pass
-        try:
-            self._ctx.__exit__(type(exc), exc, exc.__traceback__)
-        except BaseException:
-            pass
-
-    def __enter__(self) -> ParquetWriter:
-        return self
-
-    def __exit__(self, et, ev, tb) -> None:
-        if et is None:
-            self.close()
-        else:
-            self.abort(ev)
 
 
 def write_parquet(rec: Recording, path: str | os.PathLike, compression: str = "snappy",

@@ -141,7 +141,7 @@ def test_background_writer_same_file_and_errors_surface(tmp_path):
             def boom(_rec):
                 raise RuntimeError("worker failed")
 
-            w._write_table = boom  # the next chunk fails in the worker thread
+            w._write_chunk = boom  # the next chunk fails in the worker thread
             w.write(rec.select(slice(10, 20)))
             w.write(rec.select(slice(20, 30)))  # the error of the chunk in flight is raised here (or at close)
     assert not q.exists() and [f for f in os.listdir(tmp_path) if f.endswith(".tmp")] == []
