@@ -93,6 +93,15 @@ def _finite_rows(a: np.ndarray) -> np.ndarray:
     return np.all(np.isfinite(a), axis=1)
 
 
+def _finite_xyz(rec: Recording, channel: str, min_rows: int = 10) -> np.ndarray | None:
+    """The finite rows of a 3-axis channel, or None when it is absent, not (N, 3) or has fewer than min_rows."""
+    a = rec.channels.get(channel)
+    if a is None or a.ndim != 2 or a.shape[1] != 3:
+        return None
+    a = a[_finite_rows(a)]
+    return a if len(a) >= min_rows else None
+
+
 def _moving_mean(a: np.ndarray, w: int) -> np.ndarray:
     if w <= 1:
         return a
@@ -130,11 +139,8 @@ def _declared(rec: Recording, channel: str) -> tuple[str, float]:
 
 def _magnitude_check(rec: Recording, rep: PlausibilityReport, channel: str, lo: float, hi: float,
                      candidates: tuple[str, ...], what: str, expected: str) -> None:
-    a = rec.channels.get(channel)
-    if a is None or a.ndim != 2 or a.shape[1] != 3:
-        return
-    a = a[_finite_rows(a)]
-    if len(a) < 10:
+    a = _finite_xyz(rec, channel)
+    if a is None:
         return
     med = float(np.median(np.linalg.norm(a, axis=1)))
     si = {"accel": "m/s²", "mag": "µT"}[channel]
@@ -238,11 +244,8 @@ def _tilt_ratio_one(rec: Recording, step_s: float) -> dict[str, float] | None:
 
 def check_gyro_units(rec: Recording, rep: PlausibilityReport) -> None:
     """Gyro scale against the accelerometer's tilting (:func:`gyro_tilt_ratio`), else against any gyro's range."""
-    w = rec.channels.get("gyro")
-    if w is None or w.ndim != 2 or w.shape[1] != 3:
-        return
-    wf = w[_finite_rows(w)]
-    if len(wf) < 10:
+    wf = _finite_xyz(rec, "gyro")
+    if wf is None:
         return
     unit, factor = _declared(rec, "gyro")
     note = _unit_note(rec, "gyro", unit)
@@ -313,11 +316,8 @@ def _remap_for_up_axis(axis: int, sign: float) -> str:
 
 
 def check_gravity_direction(rec: Recording, rep: PlausibilityReport, mounting: str | None = None) -> None:
-    a = rec.channels.get("accel")
-    if a is None or a.ndim != 2 or a.shape[1] != 3:
-        return
-    a = a[_finite_rows(a)]
-    if len(a) < 10:
+    a = _finite_xyz(rec, "accel")
+    if a is None:
         return
     na = np.linalg.norm(a, axis=1)
     a = a[na > 0]
