@@ -73,7 +73,8 @@ S_NIS_A, S_NIS_M, S_NINC = 87, 88, 89  # windowed mean NIS per degree of freedom
 S_WLP, S_WDOT, S_WINIT = 90, 93, 96  # lever arm: low-passed body rate (3), its derivative (3), started flag
 S_SHOCK_T = 97  # continuous time (s) the accelerometer has been beyond the shock gate
 S_MDIST = 98  # magnetic disturbance level (peak-held deviation measure, decays with mag_disturbance_hold)
-STATE_SIZE = 99
+S_AFLOOR = 99  # accel white-noise floor (m²/s⁴): the 10-s mean followed down at once, up with accel_noise_rise_time
+STATE_SIZE = 100
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -85,7 +86,8 @@ P_MAG_BIAS, P_ACC_BIAS_DEV, P_BIAS_MAX, P_BIAS_HOLD = 22, 23, 24, 25
 P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
-N_PARAMS = 36
+P_ACC_NOISE_RISE = 36
+N_PARAMS = 37
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 8, 16, 32
@@ -103,6 +105,10 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "bias_rw": ("rad/s/√s", (0.0, 1.0), "gyro bias random walk: process noise of the bias"),
     "accel_noise": ("rad", (1e-5, 3.0), "σ floor of the normalised accelerometer direction per update"),
     "accel_noise_gain": ("1", (0.0, 100.0), "σ² += (gain × learned accelerometer white-noise σ / g)²"),
+    "accel_noise_rise_time": ("s", (0.0, 1e6), "the learned accelerometer white noise is a sensor property: its "
+                                               "floor follows the 10-s mean down at once and up with this time "
+                                               "constant, so the jerk of a spell of fast motion is not taken for "
+                                               "sensor noise (0: the 10-s mean itself)"),
     "accel_lp_tau": ("s", (0.0, 100.0), "low-pass time constant of the specific force in the quasi-inertial "
                                          "frame (0: raw accelerometer, as in the paper)"),
     "accel_gate": ("m/s^2", (0.0, 1e3), "shock gate: accelerometer samples with | |a| − g | above this are "
@@ -170,6 +176,7 @@ class EkfParams:
     bias_rw: float = 2e-5
     accel_noise: float = 0.03
     accel_noise_gain: float = 4.0
+    accel_noise_rise_time: float = 300.0
     accel_lp_tau: float = 1.5
     accel_gate: float = 0.0
     accel_nis_gate: float = 0.0
@@ -326,6 +333,7 @@ class EkfParams:
         p[P_ACC_HEAD] = 1.0 if self.accel_heading else 0.0
         p[P_MAG_HOLD] = self.mag_disturbance_hold
         p[P_HEAD_SCALE] = self.heading_scale_noise
+        p[P_ACC_NOISE_RISE] = self.accel_noise_rise_time
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -922,6 +930,12 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     cnt = st[S_NAVAR] - 1.0
                     bw = max(1.0 / cnt, dt / 10.0) if dt > 0 else 1.0 / cnt
                     st[S_AVAR] += bw * (dd - st[S_AVAR])
+                    # the floor: at start-up (running mean) and whenever quieter, the 10-s mean itself; louder, it
+                    # rises with accel_noise_rise_time (a sensor's noise does not change with the motion)
+                    if prm[P_ACC_NOISE_RISE] <= 0 or bw > dt / 10.0 or st[S_AVAR] < st[S_AFLOOR]:
+                        st[S_AFLOOR] = st[S_AVAR]
+                    else:
+                        st[S_AFLOOR] += dt / prm[P_ACC_NOISE_RISE] * (st[S_AVAR] - st[S_AFLOOR])
             st[S_NAVAR] += 1.0
             st[S_APREV2], st[S_APREV2 + 1], st[S_APREV2 + 2] = st[S_APREV], st[S_APREV + 1], st[S_APREV + 2]
             st[S_APREV], st[S_APREV + 1], st[S_APREV + 2] = ax, ay, az
@@ -1036,7 +1050,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     # independent error sources add in variance: model floor² + (gain·σ_w/g)²
                     sig2 = prm[P_ACC_NOISE] * prm[P_ACC_NOISE]
                     if prm[P_ACC_WN_GAIN] > 0:
-                        sig2 += prm[P_ACC_WN_GAIN] * prm[P_ACC_WN_GAIN] * st[S_AVAR] / (g * g)
+                        sig2 += prm[P_ACC_WN_GAIN] * prm[P_ACC_WN_GAIN] * st[S_AFLOOR] / (g * g)
                     if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
                         sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
                     cons = st[S_BHOLD] > 0
@@ -1152,7 +1166,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
 
 
 @njit(cache=True, fastmath=_FASTMATH)
-def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, gap_rate, gyro_prev_w, q_s, b_s, p_s):
+def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_rw, gap_dt, gap_rate, gyro_prev_w,
+               q_s, b_s, p_s):
     """Error-state Rauch–Tung–Striebel backward pass over a full-rate-covariance EKF run.
 
     With the filtered posterior (q_k, b_k, P_k) the prior at k+1 is recomputed (same prediction as the
@@ -1198,6 +1213,11 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, bias_rw, gap_dt, 
         T = dt if dt > 0 else 0.0
         wn2 = w0 * w0 + w1 * w1 + w2 * w2 if not gap else 0.0
         _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F, tmp6)
+        if head_scale > 0 and T > 0:  # the filter's heading noise ∝ angle turned, about the world vertical
+            z0 = 2 * (qp1 * qp3 - qp0 * qp2)
+            z1 = 2 * (qp2 * qp3 + qp0 * qp1)
+            z2 = 1 - 2 * (qp1 * qp1 + qp2 * qp2)
+            _add_rrt(Pp, 0, 0, head_scale * head_scale * wn2 * T, z0, z1, z2)
         if gap:
             inc = (gap_rate * dt) ** 2
             for i in range(3):
@@ -1448,7 +1468,8 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     q_s = np.empty((n, 4))
     b_s = np.empty((n, 3))
     p_s = np.empty((n, 6, 6))
-    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise, params.bias_rw,
+    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise,
+               params.heading_scale_noise, params.bias_rw,
                params.gap_factor * dt_nominal,
                params.gap_rate_sigma, params.gyro_prev_weight(), q_s, b_s, p_s)
     std = euler_std(q_s, p_s)

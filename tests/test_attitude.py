@@ -387,8 +387,8 @@ def test_broad_all_16_trials_no_divergence(shared):
     """All 16 shared BROAD trials, one default parameter set (chosen on all of them and on the simulator, never on
     one file; benchmarks/attitude_broad.py). Issue 13's acceptance where it is met: no trial above the ceiling
     max(2 × VQF, VQF + 2°) (the old shock gate gave 129.9° on trial 16), causal mean total ≤ VQF's 2.08°, smoother
-    mean total ≤ offline VQF's 1.95°. The inclination means are NOT at VQF's yet (causal 0.78° vs 0.73°, smoother
-    0.60° vs 0.53°): guarded here at what is reached, see docs/attitude.md."""
+    mean total ≤ offline VQF's 1.95°. The inclination means are NOT at VQF's yet (causal 0.75° vs 0.73°, smoother
+    0.59° vs 0.53°): guarded here at what is reached, see docs/attitude.md."""
     from imutool.metrics import evaluate_quaternion
 
     folder = shared("broad")
@@ -408,7 +408,7 @@ def test_broad_all_16_trials_no_divergence(shared):
     assert len(r) == 16
     assert r[:, 2:4].max() <= 1.0, r  # no trial above its ceiling
     assert r[:, 0].mean() <= 2.08 and r[:, 4].mean() <= 1.95, r.mean(axis=0)  # VQF / offline VQF totals
-    assert r[:, 1].mean() <= 0.80 and r[:, 5].mean() <= 0.62, r.mean(axis=0)  # guard (target 0.73 / 0.53)
+    assert r[:, 1].mean() <= 0.77 and r[:, 5].mean() <= 0.61, r.mean(axis=0)  # guard (target 0.73 / 0.53)
 
 
 def test_broad_attached_magnet_6d_heading_does_not_follow_the_accelerometer(shared):
@@ -520,3 +520,32 @@ def test_streamed_filter_on_parquet_equals_in_memory(tmp_path):
         outs[name] = formats.read(out)
     assert np.allclose(outs["mem"]["roll"], outs["stream"]["roll"], atol=1e-6)
     assert np.allclose(outs["mem"]["q"], outs["stream"]["q"], atol=1e-9)
+
+
+def test_accel_noise_floor_is_a_sensor_property_not_the_motion():
+    """The learned accelerometer white noise (which de-weights the accelerometer) follows a quieter level at once
+    but rises towards a louder one only with accel_noise_rise_time: 60 s of motion jerk (4× the sensor's noise in
+    the second differences) must not de-weight the accelerometer as if the sensor had become 4× noisier.
+    With rise time 0 the floor is the 10-s mean itself (the earlier behaviour)."""
+    from imutool.attitude import S_AFLOOR, S_AVAR
+
+    rng = np.random.default_rng(3)
+    fs, sigma = 200.0, 0.05
+    t = np.arange(0, 140, 1 / fs)
+    acc = np.tile([0.0, 0.0, -9.80665], (len(t), 1)) + rng.normal(0, sigma, (len(t), 3))
+    loud = (t >= 20) & (t < 80)
+    acc[loud] += rng.normal(0, 4 * sigma, (loud.sum(), 3))
+    gyro = rng.normal(0, 1e-3, (len(t), 3))
+    floors = {}
+    for rise in (0.0, 300.0):
+        prm = EkfParams(accel_noise_rise_time=rise, mag_mode="off")
+        _, st_loud = run_ekf(t[t < 80], gyro[t < 80], acc[t < 80], None, prm)
+        _, st_end = run_ekf(t, gyro, acc, None, prm)
+        floors[rise] = (st_loud[S_AFLOOR], st_loud[S_AVAR], st_end[S_AFLOOR])
+    quiet = sigma ** 2  # the estimator's target: σ² per axis
+    f0, avar0, end0 = floors[0.0]
+    f1, avar1, end1 = floors[300.0]
+    assert avar1 > 10 * quiet and f0 == avar0  # the 10-s mean sees the jerk; rise time 0 uses it as is
+    # the floor rose by about 1 − e^(−60/300) ≈ 18 % of the step in 60 s of jerk, not all the way
+    assert f1 - quiet < 0.25 * (avar1 - quiet), floors
+    assert abs(end1 - quiet) < 0.3 * quiet and abs(end0 - quiet) < 0.3 * quiet, floors  # quiet again: back at once
