@@ -376,6 +376,12 @@ def _rotvec_quat(x, y, z):
 
 
 @njit(cache=True, inline="always")
+def _vertical_in_body(q0, q1, q2, q3):
+    """The world vertical (NED down) in body axes for q body→NED: the third row of R(q)."""
+    return 2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)
+
+
+@njit(cache=True, inline="always")
 def _atan_series(t):
     """atan(t) for |t| ≤ 0.1: odd Taylor series to t¹⁷ (truncation < |t|¹⁹/19 ≈ 5e-21, below 1 ulp)."""
     u = t * t
@@ -897,19 +903,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if prm[P_HEAD_SCALE] > 0:  # scale-factor heading noise ∝ angle turned, about the world vertical r
                 # white rate noise of density ε·|ω|: (ε·angle/T)²·T, angle² ≈ 4‖vector part of Δq‖² (small angle)
                 ang2 = 4.0 * (st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2)
-                qh = prm[P_HEAD_SCALE] ** 2 * ang2 / T
-                z0 = 2 * (st[1] * st[3] - st[0] * st[2])
-                z1 = 2 * (st[2] * st[3] + st[0] * st[1])
-                z2 = 1 - 2 * (st[1] * st[1] + st[2] * st[2])
-                P[0, 0] += qh * z0 * z0
-                P[1, 1] += qh * z1 * z1
-                P[2, 2] += qh * z2 * z2
-                P[0, 1] += qh * z0 * z1
-                P[1, 0] += qh * z0 * z1
-                P[0, 2] += qh * z0 * z2
-                P[2, 0] += qh * z0 * z2
-                P[1, 2] += qh * z1 * z2
-                P[2, 1] += qh * z1 * z2
+                z0, z1, z2 = _vertical_in_body(st[0], st[1], st[2], st[3])
+                _add_rrt(P, 0, 0, prm[P_HEAD_SCALE] ** 2 * ang2 / T, z0, z1, z2)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
         st[S_INIT] = 1.0
@@ -1214,9 +1209,7 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
         wn2 = w0 * w0 + w1 * w1 + w2 * w2 if not gap else 0.0
         _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F, tmp6)
         if head_scale > 0 and T > 0:  # the filter's heading noise ∝ angle turned, about the world vertical
-            z0 = 2 * (qp1 * qp3 - qp0 * qp2)
-            z1 = 2 * (qp2 * qp3 + qp0 * qp1)
-            z2 = 1 - 2 * (qp1 * qp1 + qp2 * qp2)
+            z0, z1, z2 = _vertical_in_body(qp0, qp1, qp2, qp3)
             _add_rrt(Pp, 0, 0, head_scale * head_scale * wn2 * T, z0, z1, z2)
         if gap:
             inc = (gap_rate * dt) ** 2

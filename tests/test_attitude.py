@@ -539,13 +539,15 @@ def test_accel_noise_floor_is_a_sensor_property_not_the_motion():
     floors = {}
     for rise in (0.0, 300.0):
         prm = EkfParams(accel_noise_rise_time=rise, mag_mode="off")
-        _, st_loud = run_ekf(t[t < 80], gyro[t < 80], acc[t < 80], None, prm)
+        res_loud, st_loud = run_ekf(t[t < 80], gyro[t < 80], acc[t < 80], None, prm)
         _, st_end = run_ekf(t, gyro, acc, None, prm)
-        floors[rise] = (st_loud[S_AFLOOR], st_loud[S_AVAR], st_end[S_AFLOOR])
+        floors[rise] = (st_loud[S_AFLOOR], st_loud[S_AVAR], st_end[S_AFLOOR], res_loud.std[-1, 0])
     quiet = sigma ** 2  # the estimator's target: σ² per axis
-    f0, avar0, end0 = floors[0.0]
-    f1, avar1, end1 = floors[300.0]
+    f0, avar0, end0, roll_sd0 = floors[0.0]
+    f1, avar1, end1, roll_sd1 = floors[300.0]
     assert avar1 > 10 * quiet and f0 == avar0  # the 10-s mean sees the jerk; rise time 0 uses it as is
     # the floor rose by about 1 − e^(−60/300) ≈ 18 % of the step in 60 s of jerk, not all the way
     assert f1 - quiet < 0.25 * (avar1 - quiet), floors
     assert abs(end1 - quiet) < 0.3 * quiet and abs(end0 - quiet) < 0.3 * quiet, floors  # quiet again: back at once
+    # and the update uses the floor: the accelerometer keeps its weight, so roll σ after the jerk stays smaller
+    assert roll_sd1 < 0.8 * roll_sd0, floors
