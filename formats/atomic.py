@@ -263,6 +263,9 @@ class AtomicChunkWriter:
     Subclasses implement ``_first(chunk)`` (header/schema, once, in the caller's thread), ``_check(chunk)``,
     ``_write_chunk(chunk)`` (may run in the worker), ``_finish()`` (flush and close the file) and ``_discard()``
     (close without raising). A write failure (OSError) surfaces as the one-line :class:`ImutoolError`.
+
+    Metadata known only at the end of a stream (the warnings of a streamed run) are handed to
+    :meth:`set_final_meta` before :meth:`close`; each format merges them over the first chunk's metadata.
     """
 
     def __init__(self, path: str | os.PathLike, background: bool = False, thread_name: str = "imutool-writer"):
@@ -273,6 +276,11 @@ class AtomicChunkWriter:
         self._started = False
         self._pool = ThreadPoolExecutor(1, thread_name_prefix=thread_name) if background else None
         self._pending: Future | None = None
+        self.final_meta: dict[str, Any] = {}
+
+    def set_final_meta(self, meta: dict[str, Any]) -> None:
+        """Metadata that replace the first chunk's keys of the same name when the file is closed."""
+        self.final_meta.update(meta)
 
     def write(self, chunk: Any) -> None:
         if not self._started:

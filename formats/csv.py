@@ -18,6 +18,7 @@ import io
 import json
 import os
 import queue
+import shutil
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -592,25 +593,58 @@ def write_csv(rec: Recording, path: str) -> None:
         _write_rows(f, rec)
 
 
+def _padding(n: int) -> bytes:
+    """A blank comment line of exactly ``n`` bytes (n ≥ 2); readers skip it."""
+    return b"#" + b" " * (n - 2) + b"\n"
+
+
 class CsvWriter(AtomicChunkWriter):
     """Incremental imutool CSV writer for streaming conversion; atomic on :meth:`close`.
 
     Usage: ``with CsvWriter(path) as w: w.write(chunk) ...`` — the header comes from the first chunk.
     ``background=True``: formatting and writing of a chunk overlap the caller's next chunk (one in flight).
+    ``reserve_meta`` (bytes): room left in the header, as a blank comment line, for the metadata handed to
+    :meth:`set_final_meta`; they are written into it at close (a larger block rewrites the file once, header
+    first). Readers take the last line of a key, so these lines replace the first chunk's.
     """
 
-    def __init__(self, path: str, background: bool = False):
+    def __init__(self, path: str, background: bool = False, reserve_meta: int = 0):
         super().__init__(path, background, "imutool-writer")
         self._f = open(self._tmp, "wb")
+        self._reserve = max(int(reserve_meta), 0)
+        self._reserved_at = 0
 
     def _first(self, rec: Recording) -> None:
-        self._f.write(header_text(rec).encode("utf-8"))
+        meta_lines, names = header_text(rec).encode("utf-8")[:-1].rsplit(b"\n", 1)
+        self._f.write(meta_lines + b"\n")
+        self._reserved_at = self._f.tell()  # where end-of-file metadata go: before the column names
+        if self._reserve:
+            self._f.write(_padding(self._reserve))
+        self._f.write(names + b"\n")
 
     def _write_chunk(self, rec: Recording) -> None:
         _write_rows(self._f, rec)
 
     def _finish(self) -> None:
         self._f.close()
+        if not self.final_meta:
+            return
+        block = "".join(f"# {k}: {_fmt_meta(v)}\n" for k, v in self.final_meta.items()).encode("utf-8")
+        if self._reserve and len(block) + 2 <= self._reserve:  # fits: written in place, the rows are not touched
+            with open(self._tmp, "r+b") as f:
+                f.seek(self._reserved_at)
+                f.write(block + _padding(self._reserve - len(block)))
+            return
+        moved = str(self._tmp) + ".meta"  # does not fit: one copy of the file with the longer header
+        try:
+            with open(self._tmp, "rb") as src, open(moved, "wb") as dst:
+                dst.write(src.read(self._reserved_at) + block)
+                src.seek(self._reserved_at + self._reserve)
+                shutil.copyfileobj(src, dst, 1 << 22)
+            os.replace(moved, self._tmp)
+        finally:
+            if os.path.exists(moved):
+                os.unlink(moved)
 
     def _discard(self) -> None:
         try:

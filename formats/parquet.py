@@ -7,10 +7,12 @@ missing. The recording's metadata travel in the Parquet key-value metadata under
     {"format": "imutool-parquet", "version": 1, "meta": {...}, "units": {channel: unit},
      "columns": {channel: [column names]}}
 
-and each field carries its unit in the field metadata (``unit``) for other tools. A Parquet file without
-that key (written by another tool) is read column by column: numeric columns become channels (vector columns
-grouped like the CSV's ``*_x/_y/_z``), a timestamp ``time`` column becomes seconds since the Unix epoch, other
-columns are skipped and listed in ``meta['skipped_columns']``.
+A streamed write may add, in the file footer under ``imutool_final``, a JSON object of metadata known only at
+the end (a streamed run's warnings); the reader merges it over ``meta``. Each field carries its unit in the
+field metadata (``unit``) for other tools. A Parquet file without the ``imutool`` key (written by another tool)
+is read column by column: numeric columns become channels (vector columns grouped like the CSV's ``*_x/_y/_z``),
+a timestamp ``time`` column becomes seconds since the Unix epoch, other columns are skipped and listed in
+``meta['skipped_columns']``.
 
 Needs ``pyarrow`` (the ``[parquet]`` extra). Reading is streamed row group by row group (:func:`iter_parquet`),
 writing appends row groups (:class:`ParquetWriter`), so files larger than memory pass through in bounded memory.
@@ -31,6 +33,7 @@ from .errors import ImutoolError
 from .recording import Recording, canonical_unit, group_columns
 
 META_KEY = b"imutool"
+FINAL_META_KEY = b"imutool_final"  # metadata known only at the end of a streamed write (JSON), merged over "meta"
 FORMAT_NAME = "imutool-parquet"
 VERSION = 1
 ROW_GROUP_ROWS = 262_144  # rows per row group written (≈ 21 MB of float64 per 10 columns)
@@ -141,6 +144,9 @@ class ParquetWriter(AtomicChunkWriter):
     def _finish(self) -> None:
         if self._writer is None:
             raise ImutoolError("Parquet: nothing written (no chunk)", path=self.path)
+        if self.final_meta:  # the schema's metadata are fixed at the first chunk: these go into the footer
+            blob = json.dumps(self.final_meta, default=_jsonable, separators=(",", ":"))
+            self._writer.add_key_value_metadata({FINAL_META_KEY.decode(): blob})
         self._writer.close()
 
     def _discard(self) -> None:
@@ -162,7 +168,7 @@ def write_parquet(rec: Recording, path: str | os.PathLike, compression: str = "s
 class _Plan:
     """How the file's columns become channels (decided once from the schema)."""
 
-    def __init__(self, schema: Any, path: str):
+    def __init__(self, schema: Any, path: str, file_meta: dict[bytes, bytes] | None = None):
         pa = _pa()
         self.path = path
         blob = (schema.metadata or {}).get(META_KEY)
@@ -177,6 +183,12 @@ class _Plan:
             raise ImutoolError(f"Parquet: imutool-parquet version {info.get('version')} is newer than this "
                                f"reader ({VERSION}); upgrade imutool", path=path)
         self.meta: dict[str, Any] = dict(info.get("meta", {})) if self.imutool else {}
+        final = (file_meta or {}).get(FINAL_META_KEY)
+        if self.imutool and final is not None:
+            try:
+                self.meta.update(json.loads(final.decode("utf-8")))
+            except ValueError:
+                raise ImutoolError("Parquet: the imutool end-of-file metadata is not valid JSON", path=path) from None
         units: dict[str, str] = dict(info.get("units", {})) if self.imutool else {}
         numeric: list[str] = []
         skipped: list[str] = []
@@ -248,7 +260,7 @@ def _open(path: str | os.PathLike) -> Any:
 def parquet_info(path: str | os.PathLike) -> dict[str, Any]:
     """Rows, row groups, columns and the imutool metadata of a Parquet file, without reading the data."""
     pf = _open(path)
-    plan = _Plan(pf.schema_arrow, os.fspath(path))
+    plan = _Plan(pf.schema_arrow, os.fspath(path), pf.metadata.metadata)
     return {"rows": pf.metadata.num_rows, "row_groups": pf.metadata.num_row_groups,
             "columns": pf.schema_arrow.names, "imutool": plan.imutool, "meta": plan.meta}
 
@@ -260,7 +272,7 @@ def iter_parquet(path: str | os.PathLike, chunk_rows: int = 500_000) -> Iterator
     names; memory is O(row group + chunk), not O(file).
     """
     pf = _open(path)
-    plan = _Plan(pf.schema_arrow, os.fspath(path))
+    plan = _Plan(pf.schema_arrow, os.fspath(path), pf.metadata.metadata)
     try:
         for batch in pf.iter_batches(batch_size=int(chunk_rows), columns=plan.read_columns):
             if batch.num_rows:
@@ -275,7 +287,7 @@ def iter_parquet(path: str | os.PathLike, chunk_rows: int = 500_000) -> Iterator
 def read_parquet(path: str | os.PathLike) -> Recording:
     """Read a whole Parquet file into a Recording (imutool layout, or any table with a numeric ``time``)."""
     pf = _open(path)
-    plan = _Plan(pf.schema_arrow, os.fspath(path))
+    plan = _Plan(pf.schema_arrow, os.fspath(path), pf.metadata.metadata)
     try:
         table = pf.read(columns=plan.read_columns)
     except Exception as e:

@@ -47,6 +47,32 @@ class PlausibilityReport:
     bridged: dict[str, int] = field(default_factory=dict)  # samples interpolated, per channel
     set_nan: dict[str, int] = field(default_factory=dict)  # samples set to NaN (runs too long to bridge)
     figures: dict[str, Any] = field(default_factory=dict)
+    # absurd samples per channel: [absurd, samples looked at, left as they are (too many: a unit error), first t]
+    absurd: dict[str, list[float]] = field(default_factory=dict)
+
+    def add_absurd(self, other: PlausibilityReport) -> None:
+        """Add another report's absurd-sample counts to this one (a file checked chunk by chunk)."""
+        for name, (nb, n, kept, t0) in other.absurd.items():
+            mine = self.absurd.setdefault(name, [0, 0, 0, t0])
+            mine[0], mine[1], mine[2], mine[3] = mine[0] + nb, mine[1] + n, mine[2] + kept, min(mine[3], t0)
+        for mine, theirs in ((self.bridged, other.bridged), (self.set_nan, other.set_nan)):
+            for name, k in theirs.items():
+                mine[name] = mine.get(name, 0) + k
+
+    def absurd_warnings(self, limits: dict[str, float] | None = None) -> list[str]:
+        """One warning per channel with absurd samples: what was bridged, or why nothing was (a unit error)."""
+        lim = dict(PHYSICAL_LIMITS, **(limits or {}))
+        out = []
+        for name, (nb, n, kept, t0) in self.absurd.items():
+            if kept:
+                out.append(f"{int(kept)} of {int(n)} {name} samples ({100 * kept / n:.1f}%) are beyond any sensor's "
+                           f"range (|value| > {lim[name]:g} in SI units or infinite): a unit or scale error, not "
+                           f"corruption — check the {name} unit (not bridged)")
+            if nb > kept:
+                out.append(f"{int(nb - kept)} absurd {name} sample(s) (beyond the physical range or infinite; first "
+                           f"at t = {t0:.6g} s): {self.bridged.get(name, 0)} interpolated from their neighbours, "
+                           f"{self.set_nan.get(name, 0)} set to NaN (skipped by the estimators)")
+        return out
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"warnings": list(self.warnings)}
@@ -388,6 +414,7 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
     Returns (recording, report); the input is not modified.
     """
     rep = rep if rep is not None else PlausibilityReport()
+    found = PlausibilityReport()  # this call's counts, added to ``rep`` with their warnings at the end
     lim = dict(PHYSICAL_LIMITS, **(limits or {}))
     out = rec
     for name in _SENSORS:
@@ -403,11 +430,8 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
         nb = int(np.count_nonzero(bad))
         if not nb:
             continue
-        if nb > max_fraction * len(a):
-            rep.warnings.append(
-                f"{nb} of {len(a)} {name} samples ({100 * nb / len(a):.1f}%) are beyond any sensor's range "
-                f"(|value| > {lim[name]:g} in SI units or infinite): a unit or scale error, not corruption — "
-                f"check the {name} unit (not bridged)")
+        if nb > max_fraction * len(a):  # a unit or scale problem, not corruption: left as it is
+            found.absurd[name] = [nb, len(a), nb, float(rec.time[np.argmax(bad)])]
             continue
         if out is rec:
             out = rec.copy()
@@ -429,13 +453,12 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
             else:
                 n_nan += run
         if n_interp:
-            rep.bridged[name] = rep.bridged.get(name, 0) + n_interp
+            found.bridged[name] = int(n_interp)
         if n_nan:
-            rep.set_nan[name] = rep.set_nan.get(name, 0) + n_nan
-        first = int(idx[0])
-        rep.warnings.append(
-            f"{nb} absurd {name} sample(s) (beyond the physical range or infinite; first at t = {t[first]:.6g} s): "
-            f"{n_interp} interpolated from their neighbours, {n_nan} set to NaN (skipped by the estimators)")
+            found.set_nan[name] = int(n_nan)
+        found.absurd[name] = [nb, len(a), 0, float(t[idx[0]])]
+    rep.add_absurd(found)
+    rep.warnings += found.absurd_warnings(limits)
     return out, rep
 
 

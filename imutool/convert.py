@@ -26,14 +26,18 @@ STREAMABLE = ("csv", "parquet")
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
-def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
+META_ROOM = 8192  # bytes left in a streamed CSV output's header for the warnings known only at the end
+
+
+def chunk_writer(path: str | os.PathLike, background: bool = False, reserve_meta: int = 0) -> Any:
     """An atomic incremental writer (``with w: w.write(chunk)``; ``w.rows``) for a .csv or .parquet output;
-    ``background``: each chunk is written by a worker thread while the caller prepares the next."""
+    ``background``: each chunk is written by a worker thread while the caller prepares the next;
+    ``reserve_meta``: header room (bytes) a CSV keeps for :meth:`set_final_meta` (Parquet needs none)."""
     kind = formats.kind_of(path, for_output=True)
     if kind == "csv":
         from formats.csv import CsvWriter
 
-        return CsvWriter(os.fspath(path), background=background)
+        return CsvWriter(os.fspath(path), background=background, reserve_meta=reserve_meta)
     if kind == "parquet":
         from formats.parquet import ParquetWriter
 
@@ -44,31 +48,31 @@ def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
 
 def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: str | None = None,
                    profile: str | None = None, duplicates: str = "drop", backwards: str = "error",
-                   mounting: str | None = None, calibration_file: str | None = None,
+                   mounting: str | None = None, calibration_file: str | None = None, strict: bool = False,
                    progress: Progress | None = None) -> dict[str, Any]:
     """Convert ``src`` to ``dst`` (CSV or Parquet each) chunk by chunk; returns the summary dict.
 
     Validation is per chunk plus a check across chunk boundaries (a time not after the previous chunk's last
-    one is dropped, or refused with ``backwards='error'``/``duplicates='error'``); streaming cannot sort.
+    one is dropped, or refused with ``backwards='error'``/``duplicates='error'``); streaming cannot sort. The
+    input checks of a whole-file load are made chunk by chunk (:class:`imutool.loading.ChunkChecks`); their
+    report is the summary's ``validation``, and it and the warnings go into the output's metadata at the end.
     ``progress(rows_read, rows_expected)`` after each chunk (expected: Parquet footer count, CSV estimate).
     """
+    from imutool.loading import ChunkChecks
+
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
-    cal = None
-    if calibration_file:
-        from calibration import load_calibration
-
-        cal = load_calibration(calibration_file)
-    mount = formats.parse_mounting(mounting) if mounting else None
+    checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
     opts: dict[str, Any] = {"columns": columns, "profile": profile} if formats.kind_of(src) == "csv" else {}
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
     rows_in = 0
-    dropped_boundary = 0
+    dropped_boundary = duplicates_dropped = 0
     actions: list[str] = []
     channels: list[str] = []
     last_t = -np.inf
-    with chunk_writer(dst) as w:
+    skipped = 0
+    with chunk_writer(dst, reserve_meta=META_ROOM) as w:
         for chunk in chunks:
             rows_in += len(chunk)
             report(progress, rows_in, total)
@@ -81,26 +85,29 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
                 if (early & ~back).any() and duplicates == "error":
                     raise ImutoolError("duplicate timestamp across a chunk boundary", path=src)
                 dropped_boundary += int(early.sum())
+                duplicates_dropped += int((early & ~back).sum())
                 chunk = chunk.select(~early)
+            skipped = int(chunk.meta.get("skipped_rows", skipped) or 0)  # the reader's running total
             if len(chunk) == 0:
                 continue
             chunk, rep = chunk.validated(duplicates=duplicates, backwards="error" if backwards == "sort"
                                          else backwards, source=src)
             actions += rep.actions
-            if cal is not None:
-                chunk = cal.apply(chunk)
-            if mount is not None:
-                chunk = chunk.mounted(*mount)
+            duplicates_dropped += int(rep.duplicates)
+            chunk = checks.prepare(chunk)
             last_t = float(chunk.time[-1])
             channels = list(chunk.channels)
             w.write(chunk)
         if rows_in == 0:
             raise ImutoolError("no data rows", path=src)
         rows_out = w.rows
+        validation, warnings = checks.finish(rows_in, rows_out, duplicates=duplicates_dropped, skipped=skipped)
+        w.set_final_meta({"validation": validation, **({"warnings": warnings} if warnings else {})})
     if dropped_boundary:
         actions.append(f"dropped {dropped_boundary} rows at chunk boundaries (time not after the previous chunk)")
+    validation["warnings"] = warnings
     return {"rows_in": rows_in, "rows_out": rows_out, "channels": channels, "streamed": True,
-            "validation_actions": actions}
+            "validation_actions": actions, "validation": validation}
 
 
 def expected_rows(path: str | os.PathLike) -> int | None:
@@ -140,13 +147,15 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
     .nmea/.log); returns the summary.
 
     load_options: columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (as
-    :func:`imutool.loading.load_recording`; a bag input is read with topic/stamp/``vector3_mag_unit``, validated,
-    calibrated and mounted without the plausibility checks). NMEA output: ``sentences`` (e.g. 'HDT,XDR'),
+    :func:`imutool.loading.load_recording`; a bag input is read with topic/stamp/``vector3_mag_unit`` and gets
+    the same checks through :class:`imutool.loading.ChunkChecks`). NMEA output: ``sentences`` (e.g. 'HDT,XDR'),
     ``nmea_rate`` Hz, ``talker``; roll/pitch/heading (deg) are derived from ``q`` when only a quaternion is there.
     Bag output: ``imu_topic``, ``mag_topic``, ``frame_id``, ``storage`` (ROS2 sqlite3/mcap), ``compression``
     (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
     ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
     """
+    from imutool.loading import ChunkChecks
+
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
@@ -162,8 +171,11 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
     if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards):
         summary.update(stream_convert(src, dst, chunk_rows=chunk_rows, columns=opt["columns"], profile=opt["profile"],
                                       duplicates=duplicates, backwards=backwards, mounting=mounting,
-                                      calibration_file=calibration_file, progress=progress))
+                                      calibration_file=calibration_file, strict=strict, progress=progress))
         summary["conversions"] = ["none (same frames and units)"]
+        validation = summary.pop("validation")
+        if on_input is not None:
+            on_input(src, validation)
         return summary
     if stage is not None:
         stage("reading")
@@ -182,12 +194,14 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
             summary["notes"] = bag["notes"]
         rec, rep = rec.validated(duplicates=duplicates, backwards=backwards, source=src)
         summary["validation_actions"] = rep.actions
-        if calibration_file:
-            from calibration import load_calibration
-
-            rec = load_calibration(calibration_file).apply(rec)
-        if mounting:
-            rec = rec.mounted(*formats.parse_mounting(mounting))
+        checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
+        rec = checks.prepare(rec)  # the bag whole, as one chunk: the checks of any other input
+        report, warns = checks.finish(rows_in, len(rec), duplicates=rep.duplicates, reader_meta=rec.meta)
+        rec.meta["validation"] = report
+        if warns:
+            rec.meta["warnings"] = [*(rec.meta.get("warnings") or []), *warns]
+        if on_input is not None and len(rec):
+            on_input(src, {**report, "warnings": warns})
     else:
         from imutool.loading import load_recording
 

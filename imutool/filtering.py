@@ -37,7 +37,8 @@ class FilterResult:
 
     recording: the estimate (None when streamed: the rows went straight to the output file); summary: rows,
     method, the estimator's counters and self-check, ``warnings`` (also in the output's metadata), smoother gain;
-    validation: what loading the input did (rows read/kept/dropped, warnings; empty for a Recording or a stream).
+    validation: what loading the input did (rows read/kept/dropped, samples bridged, warnings; for a stream, over
+    all its chunks; empty for a Recording).
     """
 
     recording: Recording | None
@@ -109,10 +110,13 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
     if not isinstance(source, Recording) and streams(source, output, method=method, smooth=smooth, gnss=gnss,
                                                      stream_mb=stream_mb):
         summary = stream_ekf(source, output, params, chunk_rows=chunk_rows,  # type: ignore[arg-type]
-                             use_gnss=use_gnss, lever_arm=lever, progress=progress,
+                             use_gnss=use_gnss, lever_arm=lever, strict=strict, progress=progress,
                              **{k: load_options.get(k) for k in ("columns", "profile", "mounting",
                                                                  "calibration_file")})
-        return FilterResult(None, summary)
+        validation = summary.pop("validation")
+        if on_input is not None:
+            on_input(os.fspath(source), validation)
+        return FilterResult(None, summary, validation)
     validation: dict[str, Any] = {}
     if isinstance(source, Recording):
         rec = source
@@ -205,29 +209,28 @@ def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
 def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, *, chunk_rows: int = 1_000_000,
                use_gnss: bool = True, lever_arm: np.ndarray | None = None, columns: str | None = None,
                profile: str | None = None, mounting: str | None = None, calibration_file: str | None = None,
-               progress: Progress | None = None) -> dict[str, Any]:
+               strict: bool = False, progress: Progress | None = None) -> dict[str, Any]:
     """Bounded-memory causal EKF over a large CSV/Parquet file: chunks streamed (Parquet by row groups), the
     filter state carried from chunk to chunk, rows appended to a .csv or .parquet output; returns the summary.
 
     Memory is O(chunk_rows), not O(file). Rows whose time is not after the previous row's are dropped (counted
-    in ``dropped_non_increasing_rows``); streaming cannot sort. Calibration and mounting are applied per chunk.
+    in ``dropped_non_increasing_rows``); streaming cannot sort. Each chunk gets the input checks of an
+    in-memory run (:class:`imutool.loading.ChunkChecks`: absurd samples bridged, calibration, mounting,
+    plausibility on the first chunk, the > 1 % dropped-rows warning): their report, with the input's warnings,
+    is the summary's ``validation``; the self-check's warnings are its ``warnings``. Both sets are written, at
+    the end, into the output's metadata (``warnings``, ``validation``).
     """
-    from formats.csv import CsvWriter
     from imutool.attitude import F_INCONSISTENT, nominal_dt, result_recording, run_ekf, self_check
-    from imutool.convert import chunk_writer
+    from imutool.convert import META_ROOM, chunk_writer
+    from imutool.loading import ChunkChecks
 
     path, output = os.fspath(path), os.fspath(output)
     if params is None:
         from imutool.attitude import EkfParams
 
         params = EkfParams()
-    cal = mount = None  # read once, applied to every chunk
-    if calibration_file:
-        from calibration import load_calibration
-
-        cal = load_calibration(calibration_file)
-    if mounting:
-        mount = formats.parse_mounting(mounting)
+    checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict)
+    rows_read = duplicates = 0
     state = None
     dt_nom = None
     t_last = -np.inf
@@ -242,8 +245,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
-    writer = (CsvWriter(output, background=True) if formats.kind_of(output, for_output=True) == "csv"
-              else chunk_writer(output, background=True))
+    writer = chunk_writer(output, background=True, reserve_meta=META_ROOM)
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         from formats.csv import in_background
@@ -251,16 +253,16 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         chunks = in_background(chunks)
     with writer as w:
         for chunk in chunks:
-            keep = chunk.time > np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
+            rows_read += len(chunk)
+            before = np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
+            keep = chunk.time > before
             if not keep.all():
                 summary["dropped_non_increasing_rows"] += int((~keep).sum())
+                duplicates += int((chunk.time == before).sum())
                 chunk = chunk.select(keep)
             if len(chunk) == 0:
                 continue
-            if cal is not None:
-                chunk = cal.apply(chunk)
-            if mount is not None:
-                chunk = chunk.mounted(*mount)
+            chunk = checks.prepare(chunk)
             for ch in ("gyro", "accel"):
                 if ch not in chunk.channels:
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
@@ -287,16 +289,26 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
                 summary["skipped_rows"] = chunk.meta["skipped_rows"]
                 summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
+        validation, input_warnings = checks.finish(rows_read, summary["rows"], duplicates=duplicates,
+                                                   skipped=int(summary.get("skipped_rows", 0) or 0))
+        validation["warnings"] = input_warnings
+        warnings: list[str] = []
+        if flagged_t:  # spans from the flagged times: a gap longer than 1 s between flagged samples splits a span
+            tf = np.concatenate(flagged_t)
+            flags = np.full(len(tf), F_INCONSISTENT, np.uint8)
+            split = np.flatnonzero(np.diff(tf) > 1.0)
+            times = np.insert(tf, split + 1, np.nan)
+            flags = np.insert(flags, split + 1, 0)
+            check, filter_warnings = self_check(times, flags, n_total=summary["rows"])
+            summary.update(check)
+            warnings += filter_warnings
+        everything = input_warnings + warnings
+        w.set_final_meta({"validation": {k: v for k, v in validation.items() if k != "warnings"},
+                          **({"warnings": everything} if everything else {})})
     summary.update(totals)
     summary["samples"] = summary["rows"]
-    if flagged_t:  # spans from the flagged times: a gap longer than 1 s between flagged samples splits a span
-        tf = np.concatenate(flagged_t)
-        flags = np.full(len(tf), F_INCONSISTENT, np.uint8)
-        split = np.flatnonzero(np.diff(tf) > 1.0)
-        times = np.insert(tf, split + 1, np.nan)
-        flags = np.insert(flags, split + 1, 0)
-        check, warnings = self_check(times, flags, n_total=summary["rows"])
-        summary.update(check)
+    summary["validation"] = validation
+    if warnings:
         summary["warnings"] = warnings
     if lever_arm is not None:
         summary["lever_arm_m"] = [float(x) for x in lever_arm]

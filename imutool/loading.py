@@ -92,3 +92,71 @@ def require_channels(rec: Recording, names: list[str] | tuple[str, ...], path: s
     if missing:
         raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}",
                            path=path)
+
+
+class ChunkChecks:
+    """What :func:`load_recording` does to a whole file, done to a file read chunk by chunk (the streamed
+    ``filter`` and ``convert``), so a large file is checked as a small one is.
+
+    :meth:`prepare` bridges each chunk's absurd samples (counted over the run), applies the calibration and the
+    mounting, and runs the plausibility checks (units, axes, gravity direction) on the first chunk — they look
+    at about 60 000 rows, which a chunk of the default size holds. :meth:`finish` accounts for every row the
+    run dropped with the same > 1 % warning and returns all the warnings, for stderr, the summary and the
+    output's metadata. ``strict``: a warning raises an ImutoolError (inside a streamed writer: no output).
+    """
+
+    def __init__(self, path: str, *, mounting: str | None = None, calibration_file: str | None = None,
+                 strict: bool = False):
+        from formats import plausibility
+
+        self.path = path
+        self.mounting = mounting
+        self.strict = strict
+        self.cal = None
+        if calibration_file:
+            from calibration import load_calibration
+
+            self.cal = load_calibration(calibration_file)
+        self.mount = formats.parse_mounting(mounting) if mounting else None
+        self.warnings: list[str] = []  # the first chunk's plausibility warnings
+        self.figures: dict[str, Any] = {}
+        self._absurd = plausibility.PlausibilityReport()
+        self._checked = False
+
+    def prepare(self, chunk: Recording) -> Recording:
+        """The chunk to use: absurd samples bridged, calibrated, mounted (its times must already increase)."""
+        from formats import plausibility
+
+        chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd)
+        if self.cal is not None:
+            chunk = self.cal.apply(chunk)
+        if self.mount is not None:
+            chunk = chunk.mounted(*self.mount)
+        if not self._checked and len(chunk):
+            self._checked = True
+            found = plausibility.check_recording(chunk, self.mounting)
+            self.warnings += found.warnings
+            self.figures = found.figures
+            self._refuse(found.warnings)
+        return chunk
+
+    def finish(self, rows_read: int, rows_kept: int, *, duplicates: int = 0, skipped: int = 0,
+               reader_meta: dict[str, Any] | None = None) -> tuple[dict[str, Any], list[str]]:
+        """(validation report, every warning of the run). rows_read: rows the reader returned; rows_kept: rows
+        used; duplicates: of the rows dropped, those whose time repeated the row before; skipped: malformed
+        rows the reader skipped (or ``reader_meta``: the reader's metadata, e.g. a bag's, which hold them)."""
+        from formats import plausibility
+
+        report, dropped = plausibility.dropped_rows(rows_read, rows_kept, {"duplicate_timestamps": duplicates},
+                                                    reader_meta if reader_meta is not None
+                                                    else {"skipped_rows": skipped})
+        for counts in self._absurd.absurd.values():
+            counts[1] = rows_read  # the share of a unit error is over the whole run
+        absurd = self._absurd.absurd_warnings()
+        report.update({k: v for k, v in self._absurd.as_dict().items() if k.startswith("absurd_")})
+        self._refuse(absurd + dropped)
+        return report, self.warnings + absurd + dropped
+
+    def _refuse(self, warnings: list[str]) -> None:
+        if self.strict and warnings:
+            raise ImutoolError(strict_message(warnings), path=self.path)

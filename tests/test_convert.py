@@ -208,3 +208,37 @@ def test_python_convert_progress_and_refusals(tmp_path, csv_in):
         convert(csv_in, csv_in)
     with pytest.raises(TypeError, match="colums"):
         convert(csv_in, tmp_path / "z.csv", colums="a=b")
+
+
+def test_streamed_and_bag_conversions_check_their_input(tmp_path, capsys):
+    """A streamed conversion and a bag input get the checks of a whole-file CSV load: absurd samples bridged and
+    counted over all chunks, a gyro in deg/s labelled rad/s warned — on stderr, in the summary and in the
+    output's metadata; under --strict the warning is an error and nothing is written."""
+    from imutool.sim import simulate
+
+    rec = simulate("ship-roll", duration=20, seed=3)
+    rec.channels["gyro"] = np.degrees(rec["gyro"])
+    rec.channels["gyro"][1500:1502] = 1e6  # two corrupt samples in the second chunk
+    src = tmp_path / "degs.csv"
+    write_csv(rec, src)
+    out = tmp_path / "o.csv"
+    code, stdout, err = run(["convert", src, out, "--chunk-rows", "1000", "--json"], capsys)
+    assert code == 0, err
+    s = json.loads(stdout)
+    assert s["streamed"] and s["validation"][0]["absurd_samples_interpolated"] == {"gyro": 2}
+    assert "UNITS: gyro" in err and "2 absurd gyro sample(s)" in err
+    meta = read_csv(out).meta
+    assert any(w.startswith("UNITS: gyro") for w in meta["warnings"])
+    assert meta["validation"]["absurd_samples_interpolated"] == {"gyro": 2}
+    assert np.all(np.abs(read_csv(out)["gyro"]) < 100)  # bridged, not copied through
+    code, _, err = run(["convert", src, tmp_path / "strict.csv", "--chunk-rows", "1000", "--strict"], capsys)
+    assert code == 2 and "UNITS" in err and not (tmp_path / "strict.csv").exists()
+
+    pytest.importorskip("rosbags", reason="bags need rosbags")
+    bag = tmp_path / "degs.bag"
+    code, _, err = run(["convert", out, bag], capsys)
+    assert code == 0, err
+    code, stdout, err = run(["convert", bag, tmp_path / "back.csv", "--json"], capsys)
+    assert code == 0 and "UNITS: gyro" in err
+    assert any(w.startswith("UNITS: gyro") for w in json.loads(stdout)["warnings"])
+    assert any(w.startswith("UNITS: gyro") for w in read_csv(tmp_path / "back.csv").meta["warnings"])

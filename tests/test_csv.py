@@ -514,3 +514,38 @@ def test_latin1_header_with_degree_sign(tmp_path):
     p = _write_text(tmp_path / "l1.csv", text.encode("latin-1"))
     rec = read_csv(p)
     assert rec["gyro"][0, 0] == pytest.approx(math.pi)
+
+
+@pytest.mark.parametrize("n_warnings", [2, 400])
+def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings):
+    """Metadata known only after the last row (a streamed run's warnings) are written into the header: into the
+    room reserved for them when they fit (the rows are not moved: same file size), else by one rewrite of the
+    file with a longer header. Readers take the later line of a key, so they replace the first chunk's."""
+    t = np.arange(1000) * 0.01
+    rec = Recording(t, {"gyro": np.sin(t)[:, None] * [1.0, 2.0, 3.0]}, meta={"warnings": ["first chunk"]})
+    room = 2048
+    p = tmp_path / "s.csv"
+    with CsvWriter(str(p), reserve_meta=room) as w:
+        w.write(rec.select(slice(0, 400)))
+        w.write(rec.select(slice(400, 1000)))
+    plain = p.stat().st_size
+    assert read_csv(str(p)).meta["warnings"] == ["first chunk"]
+    p.unlink()
+    final = {"warnings": ["first chunk"] + [f"warning {i}: ≈ {'x' * 30}" for i in range(n_warnings)],
+             "validation": {"rows_read": 1000, "absurd_samples_interpolated": {"gyro": 3}}}
+    with CsvWriter(str(p), reserve_meta=room) as w:
+        w.write(rec.select(slice(0, 400)))
+        w.write(rec.select(slice(400, 1000)))
+        w.set_final_meta(final)
+    back = read_csv(str(p))
+    assert back.meta["warnings"] == final["warnings"] and back.meta["validation"] == final["validation"]
+    assert np.array_equal(back.time, rec.time) and np.array_equal(back["gyro"], rec["gyro"])
+    fits = n_warnings == 2
+    assert (p.stat().st_size == plain) == fits  # in place, or rewritten with the longer header
+    assert not [f for f in tmp_path.iterdir() if f.name != "s.csv"]  # no temporary file left
+    # a writer with no room reserved rewrites the file just the same
+    q = tmp_path / "q.csv"
+    with CsvWriter(str(q)) as w:
+        w.write(rec)
+        w.set_final_meta(final)
+    assert read_csv(str(q)).meta["warnings"] == final["warnings"]

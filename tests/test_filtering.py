@@ -95,10 +95,14 @@ def test_progress_and_on_input(roll_csv, tmp_path):
     assert seen == [str(roll_csv)] and calls and calls[-1] == (6001, 6001)
     calls.clear()
     seen.clear()
+    reports: list[dict] = []
     res = run_filter(str(roll_csv), str(tmp_path / "b.parquet"), stream_mb=0, chunk_rows=2500,
-                     progress=lambda d, t: calls.append((d, t)), on_input=lambda p, rep: seen.append(p))
+                     progress=lambda d, t: calls.append((d, t)),
+                     on_input=lambda p, rep: (seen.append(p), reports.append(rep)))
     assert res.summary["method"] == "ekf (streamed)" and res.summary["rows"] == 6001
-    assert [d for d, _ in calls] == [2500, 5000, 6001] and not seen  # streamed: no whole-file load
+    assert [d for d, _ in calls] == [2500, 5000, 6001]  # streamed: chunk by chunk, no whole-file load
+    # the input's report comes once, at the end, over all the chunks
+    assert seen == [str(roll_csv)] and reports[0]["rows_read"] == reports[0]["rows_kept"] == 6001
     assert len(formats.read(tmp_path / "b.parquet")) == 6001
 
 
@@ -200,3 +204,56 @@ def test_parquet_filter_streams_with_bounded_memory(tmp_path):
         dst.unlink()
     whole_mib = 1_600_000 * 27 * 8 / 2**20
     assert grew[2_000_000] - grew[400_000] < 0.15 * whole_mib, f"peak RSS above imports: {grew} MiB"
+
+
+def test_streamed_filter_checks_its_input_like_an_in_memory_run(roll_csv, tmp_path, capsys):
+    """A file large enough to stream gets the input checks of a small one, and says what they found where an
+    in-memory run says it: absurd samples bridged (same values as in memory), a gyro in deg/s labelled rad/s
+    warned (UNITS), the self-check's warning — on stderr, in the JSON summary and in the output's metadata, for a
+    CSV (written into the header at the end) and a Parquet output (in its footer)."""
+    from click.testing import CliRunner
+
+    from imutool.cli import cli
+
+    rec = formats.read(roll_csv)
+    absurd = rec.copy()
+    absurd.channels["gyro"][3000:3003] = 1e6  # three corrupt samples, away from the chunk boundaries
+    src = tmp_path / "absurd.csv"
+    formats.write(absurd, src)
+    outs = {}
+    for name, extra in (("memory", []), ("stream", ["--stream-mb", "0", "--chunk-rows", "2500"])):
+        outs[name] = tmp_path / f"{name}.csv"
+        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(outs[name]), "--json", *extra])
+        assert run.exit_code == 0, run.output
+        s = json.loads(run.stdout)
+        assert s["validation"][0]["absurd_samples_interpolated"] == {"gyro": 3}, name
+        assert any("3 absurd gyro sample(s)" in w for w in s["warnings"]), name
+        assert "3 absurd gyro sample(s)" in run.stderr, name
+    a, b = formats.read(outs["memory"]), formats.read(outs["stream"])
+    assert any("3 absurd gyro" in w for w in b.meta["warnings"])
+    assert b.meta["validation"]["absurd_samples_interpolated"] == {"gyro": 3}
+    for ch in ("roll", "pitch", "heading", "gyro_bias"):
+        assert np.array_equal(a[ch], b[ch]), ch
+
+    degs = rec.copy()
+    degs.channels["gyro"] = np.degrees(rec["gyro"])
+    src = tmp_path / "degs.csv"
+    formats.write(degs, src)
+    for out in (tmp_path / "degs_out.csv", tmp_path / "degs_out.parquet"):
+        if out.suffix == ".parquet":
+            pytest.importorskip("pyarrow", reason="Parquet needs the [parquet] extra (pyarrow)")
+        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "--json", "--stream-mb", "0",
+                                       "--chunk-rows", "2500"])
+        assert run.exit_code == 0, run.output
+        s = json.loads(run.stdout)
+        assert s["method"] == "ekf (streamed)"
+        assert "UNITS: gyro rates are" in run.stderr and "self-check failed" in run.stderr
+        meta = formats.read(out).meta
+        assert any(w.startswith("UNITS: gyro") for w in meta["warnings"]), out.suffix
+        assert any("self-check failed" in w for w in meta["warnings"]), out.suffix
+        assert meta["validation"]["rows_kept"] == len(rec)
+    # --strict: the plausibility warning of the first chunk is an error, and nothing is written
+    out = tmp_path / "strict.csv"
+    code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--strict"], capsys)
+    assert code == 2 and "UNITS" in err and len(err.strip().splitlines()) == 1 and not out.exists()
+    assert not list(tmp_path.glob(".strict.csv.*"))  # no temporary file left behind

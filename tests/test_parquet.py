@@ -249,3 +249,23 @@ def test_large_parquet_streams_with_bounded_memory(tmp_path):
         dst.unlink()
     data_mib = 1_500_000 * 17 * 8 / 2**20
     assert grew[2_000_000] - grew[500_000] < 0.25 * data_mib, f"peak RSS above imports: {grew} MiB"
+
+
+def test_final_meta_goes_into_the_footer(tmp_path):
+    """The schema's metadata are fixed at the first chunk; metadata known only at the end (a streamed run's
+    warnings) go into the footer (``imutool_final``) and the reader merges them over the first chunk's."""
+    rec = _rec(3000)
+    p = tmp_path / "s.parquet"
+    with ParquetWriter(p) as w:
+        w.write(rec.select(slice(0, 1000)))
+        w.write(rec.select(slice(1000, 3000)))
+        w.set_final_meta({"warnings": ["UNITS: something"], "note": "replaced", "rows_seen": np.int64(3000)})
+    back = read_parquet(p)
+    assert back.meta["warnings"] == ["UNITS: something"] and back.meta["note"] == "replaced"
+    assert back.meta["rows_seen"] == 3000 and back.meta["sensor"] == "test IMU"
+    assert np.array_equal(back.time, rec.time)
+    assert next(iter_parquet(p, chunk_rows=500)).meta["note"] == "replaced"
+    # another tool's file with a stray key of that name is not ours: its metadata are not taken
+    pq.write_table(pa.table({"time": [0.0, 1.0]}).replace_schema_metadata({"imutool_final": '{"x": 1}'}),
+                   tmp_path / "other.parquet")
+    assert "x" not in read_parquet(tmp_path / "other.parquet").meta

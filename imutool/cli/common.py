@@ -57,6 +57,12 @@ def _remember_strict(ctx: click.Context, param: click.Parameter, value: bool) ->
     return value
 
 
+def strict_requested() -> bool:
+    """Whether the running command got ``--strict`` (for a streamed run, which checks its input as it goes)."""
+    ctx = click.get_current_context(silent=True)
+    return bool(ctx is not None and ctx.meta.get("imutool.strict"))
+
+
 def load_input(path: str, *, columns: str | None = None, profile: str | None = None, topic: str | None = None,
                stamp: str = "header", duplicates: str = "drop", backwards: str = "error",
                mounting: str | None = None, calibration_file: str | None = None,
@@ -90,7 +96,7 @@ def _note_input(path: str, report: dict[str, Any], warnings: list[str], strict: 
     """Warnings to stderr (or an error under --strict); the report kept for the command's summary."""
     ctx = click.get_current_context(silent=True)
     if strict is None:
-        strict = bool(ctx is not None and ctx.meta.get("imutool.strict"))
+        strict = strict_requested()
     if warnings and strict:
         from imutool.loading import strict_message
 

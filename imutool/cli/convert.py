@@ -11,7 +11,15 @@ from typing import Any
 
 import click
 
-from imutool.cli.common import emit_summary, input_options, lazy_bar, note_input, output_options, safe_outputs
+from imutool.cli.common import (
+    emit_summary,
+    input_options,
+    lazy_bar,
+    note_input,
+    output_options,
+    safe_outputs,
+    strict_requested,
+)
 from imutool.progress import stages
 
 
@@ -66,7 +74,8 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
                           nmea_rate=nmea_rate, talker=talker, imu_topic=imu_topic, mag_topic=mag_topic,
                           frame_id=frame_id, storage=storage, compression=compression,
                           vector3_mag_unit=vector3_mag_unit, progress=None if stage else bar, stage=stage,
-                          on_input=note_input, columns=columns, profile=profile, topic=topic, stamp=stamp,
+                          strict=strict_requested(), on_input=note_input, columns=columns, profile=profile,
+                          topic=topic, stamp=stamp,
                           duplicates=duplicates, backwards=backwards, mounting=mounting,
                           calibration_file=calibration_file)
     emit_summary(summary, as_json, quiet, lines=_lines(summary))

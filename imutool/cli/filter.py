@@ -20,6 +20,7 @@ from imutool.cli.common import (
     output_options,
     parse_vector,
     safe_outputs,
+    strict_requested,
 )
 
 
@@ -99,7 +100,7 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
                          compass=CompassParams(q=comp_q, r=comp_r, model=compass_model, variation_deg=variation,
                                                paper_init=paper_init),
                          params_file=params_file, chunk_rows=chunk_rows, stream_mb=stream_mb, progress=b,
-                         on_input=note_input, **io)
+                         strict=strict_requested(), on_input=note_input, **io)
     _warn(res.summary)
     emit_summary(res.summary, as_json, quiet)
 
