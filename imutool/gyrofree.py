@@ -35,6 +35,7 @@ from numba import njit
 
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.loading import input_notes
 
 UNKNOWNS = ["f_O_x", "f_O_y", "f_O_z", "wdot_x", "wdot_y", "wdot_z",
             "wx2", "wy2", "wz2", "wxwy", "wxwz", "wywz"]
@@ -453,7 +454,7 @@ def gyrofree_recording(rec: Recording, layout: Layout, noise: float | None = Non
     w, sd = ekf_rates(rec.time, wdot, quad, cov, max(sigma, 1e-6), w0, sign, rate_rw)
     q = complementary_attitude(rec.time, w, f0, tilt_gain)
     roll, pitch, heading = quat_to_euler(q)
-    out = Recording(rec.time.copy())
+    out = Recording(rec.time.copy(), meta=input_notes(rec.meta))
     out.add("gyro", w, "rad/s")
     out.add("gyro_std", sd, "rad/s")
     out.add("angular_accel", wdot, "rad/s^2", columns=["angular_accel_x", "angular_accel_y", "angular_accel_z"])

@@ -43,6 +43,7 @@ from scipy.linalg import expm
 
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
 
 GRAVITY = 9.80665
@@ -1068,7 +1069,7 @@ def heave_recording(rec: Recording, method: str = "realtime", vertical: list[str
     out.meta.update({"heave": "m, positive UP (heave_delayed: zero-phase, latency "
                               f"{res.summary['delayed_latency_s']} s)",
                      "heave_method": method, "heave_latency": res.summary["latency"],
-                     "source": rec.meta.get("source", "")})
+                     "source": rec.meta.get("source", ""), **input_notes(rec.meta)})
     return out, summary
 
 

@@ -31,6 +31,7 @@ from numba import njit
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
+from imutool.loading import input_notes
 
 NX = 15  # error-state size: δθ 0:3, δr 3:6, δv 6:9, δb_a 9:12, δb_g 12:15
 
@@ -489,7 +490,8 @@ def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
     if zvi is None:
         zvi = detect(rec, detector, **(detector_params or {})).flags
     res = run_ins(rec.time, gyro, accel, zvi, config)
-    out = Recording(rec.time.copy(), meta={k: v for k, v in rec.meta.items() if k in ("source", "sensor", "frame")})
+    out = Recording(rec.time.copy(), meta={**{k: v for k, v in rec.meta.items() if k in ("source", "sensor", "frame")},
+                                           **input_notes(rec.meta)})
     out.add("pos", res.pos, "m")
     out.add("vel", res.vel, "m/s")
     roll, pitch, heading = res.euler_deg()

@@ -160,3 +160,13 @@ class ChunkChecks:
     def _refuse(self, warnings: list[str]) -> None:
         if self.strict and warnings:
             raise ImutoolError(strict_message(warnings), path=self.path)
+
+
+INPUT_NOTES = ("warnings", "validation")
+
+
+def input_notes(meta: dict[str, Any]) -> dict[str, Any]:
+    """What loading found about an input (``warnings`` and ``validation`` in its metadata, from
+    :func:`load_recording`), for the metadata of an output built from it: an estimate says what was wrong with
+    the data it came from."""
+    return {k: meta[k] for k in INPUT_NOTES if meta.get(k)}

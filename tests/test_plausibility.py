@@ -202,3 +202,25 @@ def test_corrupt_bag_chunks_are_reported_not_silent(tmp_path, capsys):
     assert any("DROPPED" in w for w in json.loads(out)["warnings"])
     code, out, err = run(["filter", p, "-o", tmp_path / "o2.csv", "--strict"], capsys)
     assert code == 2 and "DROPPED" in err
+
+
+def test_every_estimate_says_what_was_wrong_with_its_input(roll, tmp_path, capsys):
+    """The warnings and the validation report of an input travel into the metadata of every estimate built from
+    it — heave, ZVI flags, the attitude and the roll statistics of that attitude — not only to stderr."""
+    bad = roll.copy()
+    bad.channels["gyro"] = np.degrees(roll["gyro"])  # deg/s under a rad/s header
+    bad.channels["gyro"][1000:1002] = 1e6  # two corrupt samples
+    src = tmp_path / "bad.csv"
+    formats.write(bad, src)
+    outs = {"heave": ["heave", src, "-o", tmp_path / "heave.csv"],
+            "zvi": ["zvi", src, "-o", tmp_path / "zvi.csv", "--flags", tmp_path / "zvi_flags.csv"],
+            "filter": ["filter", src, "-o", tmp_path / "filter.csv"],
+            "roll": ["roll", tmp_path / "filter.csv", "-o", tmp_path / "roll.csv"]}
+    for name, args in outs.items():
+        code, _, err = run([*args, "-q"], capsys)
+        assert code == 0, (name, err)
+        path = tmp_path / ("zvi_flags.csv" if name == "zvi" else f"{name}.csv")
+        meta = formats.read(path).meta
+        assert any(w.startswith("UNITS: gyro") for w in meta.get("warnings", [])), name
+        assert any("2 absurd gyro sample(s)" in w for w in meta["warnings"]), name
+        assert meta["validation"]["rows_kept"] == len(roll), name

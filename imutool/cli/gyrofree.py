@@ -9,6 +9,7 @@ import formats
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.cli.common import emit_summary, input_options, load_input, output_options, parse_vector, safe_outputs
+from imutool.loading import input_notes
 
 
 @click.command("gyrofree", epilog="Example: imutool simulate accel-array -o array.csv && "
@@ -66,7 +67,7 @@ def gyrofree_cmd(input_path: str | None, output: str | None, layout_path: str, c
         _, _, cols, _ = layout.rows()
         a1, a2 = y[:, cols.index(names[0])], y[:, cols.index(names[1])]
         res = gf.planar_roll(rec.time, a1, a2, s1.position, s2.position, s1.axes[0], cutoff, causal)
-        out = Recording(rec.time.copy())
+        out = Recording(rec.time.copy(), meta=input_notes(rec.meta))
         out.add("roll_accel", res["roll_accel"], "rad/s^2")
         out.add("roll_rate", res["roll_rate"], "rad/s")
         out.add("roll", np.degrees(res["roll"]), "deg")

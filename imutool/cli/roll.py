@@ -9,6 +9,7 @@ import click
 import formats
 from formats.errors import ImutoolError
 from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
+from imutool.loading import input_notes
 
 
 def parse_utc(text: str | None) -> datetime | None:
@@ -81,6 +82,7 @@ def roll_cmd(input_path: str, output: str, cycles_path: str | None, hysteresis_d
                     utc_start=parse_utc(utc_start))
     meta = {k: v for k, v in rec.meta.items() if k in ("sensor", "device", "frame", "mounting", "calibration")}
     meta["source"] = input_path
+    meta.update(input_notes(rec.meta))
     formats.write(rs.as_recording(meta), output)
     if cycles_path:
         formats.write(rs.cycles.as_recording(), cycles_path)

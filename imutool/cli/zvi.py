@@ -93,8 +93,10 @@ def zvi_cmd(input_path: str, output: str, detector: str, gamma: float | None, wi
     if flags_path:
         import formats
         from formats import Recording
+        from imutool.loading import input_notes
 
-        out = Recording(rec.time.copy(), meta={"source": input_path, "zvi_detector": detector})
+        out = Recording(rec.time.copy(), meta={"source": input_path, "zvi_detector": detector,
+                                               **input_notes(rec.meta)})
         out.add("zvi", res.flags.astype(float), "1")
         out.add("zvi_statistic", res.statistic, "1")
         formats.write(out, flags_path)
