@@ -627,7 +627,7 @@ class CsvWriter(AtomicChunkWriter):
 
     def _finish(self) -> None:
         self._f.close()
-        if not self.final_meta:
+        if not self.final_meta or not self._started:  # nothing written: no header to put them in
             return
         block = "".join(f"# {k}: {_fmt_meta(v)}\n" for k, v in self.final_meta.items()).encode("utf-8")
         if self._reserve and len(block) + 2 <= self._reserve:  # fits: written in place, the rows are not touched

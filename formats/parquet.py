@@ -146,6 +146,9 @@ class ParquetWriter(AtomicChunkWriter):
             raise ImutoolError("Parquet: nothing written (no chunk)", path=self.path)
         if self.final_meta:  # the schema's metadata are fixed at the first chunk: these go into the footer
             blob = json.dumps(self.final_meta, default=_jsonable, separators=(",", ":"))
+            if not hasattr(self._writer, "add_key_value_metadata"):
+                raise ImutoolError("Parquet: writing metadata at the end of a stream needs pyarrow >= 17 "
+                                   "(pip install -U pyarrow)", path=self.path)
             self._writer.add_key_value_metadata({FINAL_META_KEY.decode(): blob})
         self._writer.close()
 

@@ -402,7 +402,7 @@ def check_recording(rec: Recording, mounting: str | None = None) -> Plausibility
 
 # -- absurd samples ------------------------------------------------------------------------------------------
 def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_run_s: float = 0.5,
-                  max_fraction: float = 0.01, rep: PlausibilityReport | None = None
+                  max_fraction: float = 0.01, rep: PlausibilityReport | None = None, out_of: int = 0
                   ) -> tuple[Recording, PlausibilityReport]:
     """Bridge samples beyond the physical range (or ±inf) in the gyro/accel/mag channels.
 
@@ -410,7 +410,8 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
     :data:`PHYSICAL_LIMITS`). Runs of absurd samples no longer than ``max_run_s`` seconds (neighbour to
     neighbour) with valid neighbours on both sides are interpolated linearly in time; others are set to NaN.
     NaN samples are left alone. When more than ``max_fraction`` of a channel's samples are absurd nothing is
-    changed and a warning says so (that is a unit or scale problem, not corruption).
+    changed and a warning says so (that is a unit or scale problem, not corruption); ``out_of``: judge that share
+    against this many samples when more than the recording's (a stream: the rows seen so far).
     Returns (recording, report); the input is not modified.
     """
     rep = rep if rep is not None else PlausibilityReport()
@@ -430,7 +431,7 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
         nb = int(np.count_nonzero(bad))
         if not nb:
             continue
-        if nb > max_fraction * len(a):  # a unit or scale problem, not corruption: left as it is
+        if nb > max_fraction * max(len(a), out_of):  # a unit or scale problem, not corruption: left as it is
             found.absurd[name] = [nb, len(a), nb, float(rec.time[np.argmax(bad)])]
             continue
         if out is rec:

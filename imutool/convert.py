@@ -102,7 +102,8 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
             raise ImutoolError("no data rows", path=src)
         rows_out = w.rows
         validation, warnings = checks.finish(rows_in, rows_out, duplicates=duplicates_dropped, skipped=skipped)
-        w.set_final_meta({"validation": validation, **({"warnings": warnings} if warnings else {})})
+        everything = checks.meta_warnings(warnings)
+        w.set_final_meta({"validation": validation, **({"warnings": everything} if everything else {})})
     if dropped_boundary:
         actions.append(f"dropped {dropped_boundary} rows at chunk boundaries (time not after the previous chunk)")
     validation["warnings"] = warnings

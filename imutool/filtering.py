@@ -260,6 +260,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 summary["dropped_non_increasing_rows"] += int((~keep).sum())
                 duplicates += int((chunk.time == before).sum())
                 chunk = chunk.select(keep)
+            if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
+                summary["skipped_rows"] = chunk.meta["skipped_rows"]
+                summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
             if len(chunk) == 0:
                 continue
             chunk = checks.prepare(chunk)
@@ -286,9 +289,6 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
             report(progress, summary["rows"], total)
-            if chunk.meta.get("skipped_rows"):  # running total of malformed rows skipped by the reader
-                summary["skipped_rows"] = chunk.meta["skipped_rows"]
-                summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
         validation, input_warnings = checks.finish(rows_read, summary["rows"], duplicates=duplicates,
                                                    skipped=int(summary.get("skipped_rows", 0) or 0))
         validation["warnings"] = input_warnings
@@ -302,7 +302,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             check, filter_warnings = self_check(times, flags, n_total=summary["rows"])
             summary.update(check)
             warnings += filter_warnings
-        everything = input_warnings + warnings
+        if summary["rows"] == 0:
+            raise ImutoolError("no data rows", path=path)
+        everything = checks.meta_warnings(input_warnings, warnings)
         w.set_final_meta({"validation": {k: v for k, v in validation.items() if k != "warnings"},
                           **({"warnings": everything} if everything else {})})
     summary.update(totals)

@@ -98,10 +98,12 @@ class ChunkChecks:
     """What :func:`load_recording` does to a whole file, done to a file read chunk by chunk (the streamed
     ``filter`` and ``convert``), so a large file is checked as a small one is.
 
-    :meth:`prepare` bridges each chunk's absurd samples (counted over the run), applies the calibration and the
-    mounting, and runs the plausibility checks (units, axes, gravity direction) on the first chunk — they look
-    at about 60 000 rows, which a chunk of the default size holds. :meth:`finish` accounts for every row the
-    run dropped with the same > 1 % warning and returns all the warnings, for stderr, the summary and the
+    :meth:`prepare` bridges each chunk's absurd samples (counted over the run; more than 1 % of the rows seen so
+    far is a unit error; a run of them at a chunk's edge has no neighbour there and is set to NaN instead of
+    interpolated), applies the calibration and the mounting, and runs the plausibility checks (units, axes,
+    gravity direction) on the first chunk only — the start of the file, where an in-memory load samples six
+    stretches of the whole. :meth:`finish` accounts for every row the run dropped with the same > 1 % warning and
+    returns the warnings, for stderr and the summary; :meth:`meta_warnings` adds the input's own for the
     output's metadata. ``strict``: a warning raises an ImutoolError (inside a streamed writer: no output).
     """
 
@@ -119,21 +121,26 @@ class ChunkChecks:
             self.cal = load_calibration(calibration_file)
         self.mount = formats.parse_mounting(mounting) if mounting else None
         self.warnings: list[str] = []  # the first chunk's plausibility warnings
+        self.earlier: list[str] = []  # warnings the input file itself carries (an estimate's, ...)
         self.figures: dict[str, Any] = {}
         self._absurd = plausibility.PlausibilityReport()
         self._checked = False
+        self._rows = 0
 
     def prepare(self, chunk: Recording) -> Recording:
         """The chunk to use: absurd samples bridged, calibrated, mounted (its times must already increase)."""
         from formats import plausibility
 
-        chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd)
+        self._rows += len(chunk)
+        chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd, out_of=self._rows)
         if self.cal is not None:
             chunk = self.cal.apply(chunk)
         if self.mount is not None:
             chunk = chunk.mounted(*self.mount)
         if not self._checked and len(chunk):
             self._checked = True
+            prev = chunk.meta.get("warnings")
+            self.earlier = list(prev) if isinstance(prev, (list, tuple)) else [str(prev)] if prev else []
             found = plausibility.check_recording(chunk, self.mounting)
             self.warnings += found.warnings
             self.figures = found.figures
@@ -156,6 +163,13 @@ class ChunkChecks:
         report.update({k: v for k, v in self._absurd.as_dict().items() if k.startswith("absurd_")})
         self._refuse(absurd + dropped)
         return report, self.warnings + absurd + dropped
+
+    def meta_warnings(self, *more: list[str]) -> list[str]:
+        """The output's ``warnings``: the input's own, then these (each once)."""
+        out = list(self.earlier)
+        for ws in more:
+            out += [w for w in ws if w not in out]
+        return out
 
     def _refuse(self, warnings: list[str]) -> None:
         if self.strict and warnings:

@@ -257,3 +257,51 @@ def test_streamed_filter_checks_its_input_like_an_in_memory_run(roll_csv, tmp_pa
     code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--strict"], capsys)
     assert code == 2 and "UNITS" in err and len(err.strip().splitlines()) == 1 and not out.exists()
     assert not list(tmp_path.glob(".strict.csv.*"))  # no temporary file left behind
+
+
+def test_chunk_checks_across_chunk_edges_and_the_end_of_a_stream(roll_csv, tmp_path, capsys):
+    """ChunkChecks over chunks: absurd samples at a chunk's edge and in a short last chunk are taken out (not
+    mistaken for a unit error: the share is over the rows seen so far), the input's own warnings are kept for the
+    output, and a streamed run whose warnings come only at the end (rows dropped) fails under --strict without
+    leaving a file. A stream with no data rows is an error, not an empty output."""
+    from imutool.loading import ChunkChecks
+
+    rec = formats.read(roll_csv)
+    rec.meta["warnings"] = ["an earlier warning"]
+    bad = rec.copy()
+    for i in (2499, 2500, 5990):  # the last row of chunk 1, the first of chunk 2, inside an 11-row last chunk
+        bad.channels["gyro"][i] = 1e6
+    checks = ChunkChecks(str(roll_csv))
+    parts = [checks.prepare(bad.select(slice(a, b))) for a, b in ((0, 2500), (2500, 5990), (5990, len(bad)))]
+    gyro = np.concatenate([p["gyro"] for p in parts])
+    assert not np.any(np.abs(np.nan_to_num(gyro)) > 100)  # none left for the EKF
+    report, warns = checks.finish(len(bad), len(bad))
+    assert sum(report.get("absurd_samples_interpolated", {}).values()) + sum(
+        report.get("absurd_samples_set_nan", {}).values()) == 3
+    assert not any("unit or scale error" in w for w in warns)
+    assert checks.meta_warnings(warns)[0] == "an earlier warning"
+
+    src = tmp_path / "earlier.csv"
+    formats.write(rec, src)
+    out = tmp_path / "o.csv"
+    code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--chunk-rows", "2500", "-q"], capsys)
+    assert code == 0, err
+    assert formats.read(out).meta["warnings"][0] == "an earlier warning"
+
+    lines = roll_csv.read_text().splitlines(keepends=True)
+    head = [i for i, line in enumerate(lines) if not line.startswith("#")][0] + 1
+    dup = lines[:head] + [row for row in lines[head:] for _ in (0, 1)][: len(lines) - head + 200]  # 200 repeats
+    src = tmp_path / "dup.csv"
+    src.write_text("".join(dup))
+    out = tmp_path / "dup_out.csv"
+    code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--chunk-rows", "2500", "--strict"],
+                            capsys)
+    assert code == 2 and "DROPPED" in err and not out.exists(), err
+    assert not [f for f in tmp_path.iterdir() if f.name.startswith(".dup_out")]
+    code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--chunk-rows", "2500", "--json"], capsys)
+    assert code == 0 and "DROPPED" in err and "DROPPED" in formats.read(out).meta["warnings"][0]
+
+    empty = tmp_path / "empty.csv"
+    empty.write_text("".join(lines[:head]))
+    code, _, err = run_main(["filter", empty, "-o", tmp_path / "e.csv", "--stream-mb", "0"], capsys)
+    assert code == 2 and "no data rows" in err and not (tmp_path / "e.csv").exists()
