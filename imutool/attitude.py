@@ -54,6 +54,7 @@ from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler
+from imutool.loading import merged_warnings
 from imutool.progress import Progress, chunk_ranges
 
 # ---- state vector layout (float64, carried between chunks) -------------------------------------------------
@@ -1542,7 +1543,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         out.meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
         out.meta["lever_arm_frame"] = "body FRD, sensor relative to the centre of rotation"
     if warnings:
-        out.meta["warnings"] = list(out.meta.get("warnings") or []) + warnings
+        out.meta["warnings"] = merged_warnings(out.meta, warnings)
         summary["warnings"] = list(summary.get("warnings") or []) + warnings
     summary["method"] = "ekf" + ("+rts" if smooth else "")
     return out, summary

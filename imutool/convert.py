@@ -155,7 +155,7 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
     (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
     ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
     """
-    from imutool.loading import ChunkChecks
+    from imutool.loading import ChunkChecks, merged_warnings
 
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
@@ -200,7 +200,7 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
         report, warns = checks.finish(rows_in, len(rec), duplicates=rep.duplicates, reader_meta=rec.meta)
         rec.meta["validation"] = report
         if warns:
-            rec.meta["warnings"] = [*(rec.meta.get("warnings") or []), *warns]
+            rec.meta["warnings"] = merged_warnings(rec.meta, warns)
         if on_input is not None and len(rec):
             on_input(src, {**report, "warnings": warns})
     else:

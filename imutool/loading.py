@@ -73,12 +73,20 @@ def load_recording(path: str | os.PathLike, *, columns: str | None = None, profi
         else:
             report["validated"] = False
         if checks.warnings:
-            prev = rec.meta.get("warnings")
-            prev = list(prev) if isinstance(prev, (list, tuple)) else [str(prev)] if prev else []
-            rec.meta["warnings"] = prev + [w for w in checks.warnings if w not in prev]
+            rec.meta["warnings"] = merged_warnings(rec.meta, checks.warnings)
         if strict and checks.warnings:
             raise ImutoolError(strict_message(checks.warnings), path=path)
     return rec, report
+
+
+def merged_warnings(meta: dict[str, Any], *more: list[str]) -> list[str]:
+    """The ``warnings`` of ``meta`` (a list, or one string from another writer), then those of ``more`` that are
+    not already there: what an output built from that input says."""
+    prev = meta.get("warnings")
+    out = list(prev) if isinstance(prev, (list, tuple)) else [str(prev)] if prev else []
+    for ws in more:
+        out += [w for w in ws if w not in out]
+    return out
 
 
 def strict_message(warnings: list[str]) -> str:
@@ -122,7 +130,6 @@ class ChunkChecks:
         self.mount = formats.parse_mounting(mounting) if mounting else None
         self.warnings: list[str] = []  # the first chunk's plausibility warnings
         self.earlier: list[str] = []  # warnings the input file itself carries (an estimate's, ...)
-        self.figures: dict[str, Any] = {}
         self._absurd = plausibility.PlausibilityReport()
         self._checked = False
         self._rows = 0
@@ -139,11 +146,9 @@ class ChunkChecks:
             chunk = chunk.mounted(*self.mount)
         if not self._checked and len(chunk):
             self._checked = True
-            prev = chunk.meta.get("warnings")
-            self.earlier = list(prev) if isinstance(prev, (list, tuple)) else [str(prev)] if prev else []
+            self.earlier = merged_warnings(chunk.meta)
             found = plausibility.check_recording(chunk, self.mounting)
             self.warnings += found.warnings
-            self.figures = found.figures
             self._refuse(found.warnings)
         return chunk
 
@@ -166,10 +171,7 @@ class ChunkChecks:
 
     def meta_warnings(self, *more: list[str]) -> list[str]:
         """The output's ``warnings``: the input's own, then these (each once)."""
-        out = list(self.earlier)
-        for ws in more:
-            out += [w for w in ws if w not in out]
-        return out
+        return merged_warnings({"warnings": self.earlier}, *more)
 
     def _refuse(self, warnings: list[str]) -> None:
         if self.strict and warnings:
