@@ -155,6 +155,8 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                      "freedom over about this long (0: off)"),
     "nis_limit": ("1", (0.0, 1e6), "self-check: samples whose windowed NIS exceeds this are flagged "
                                    "inconsistent (0: off)"),
+    "mag_check_time": ("s", (0.0, 1e6), "self-check of the heading: warn where the magnetometer was rejected "
+                                        "for longer than this (the heading there is the gyro's alone; 0: off)"),
     "lever_arm_lp_tau": ("s", (0.0, 10.0), "low-pass of the body rate before differentiating it (lever arm)"),
     "init_roll_pitch_sigma_deg": ("deg", (0.0, 180.0), "initial σ of roll and pitch"),
     "init_heading_sigma_deg": ("deg", (0.0, 180.0), "initial σ of heading"),
@@ -209,6 +211,7 @@ class EkfParams:
     mag_mode: str = "heading"
     nis_window: float = 10.0
     nis_limit: float = 3.0
+    mag_check_time: float = 60.0
     lever_arm_lp_tau: float = 0.1
     init_roll_pitch_sigma_deg: float = 5.0
     init_heading_sigma_deg: float = 20.0
@@ -1511,6 +1514,51 @@ def self_check(time: np.ndarray, flags: np.ndarray, max_spans: int = 20,
     return info, [warn]
 
 
+class FlagSpans:
+    """Time spans (s) where a per-sample flag is set, fed chunk by chunk with O(spans) memory.
+
+    Flagged samples less than ``join_s`` apart belong to one span; closed spans shorter than ``min_s`` are
+    dropped as they close (a day of short rejections does not pile up)."""
+
+    def __init__(self, min_s: float, join_s: float = 1.0) -> None:
+        self.min_s, self.join_s = float(min_s), float(join_s)
+        self.spans: list[list[float]] = []
+
+    def add(self, time: np.ndarray, mask: np.ndarray) -> None:
+        tf = np.asarray(time)[np.asarray(mask, bool)]
+        if len(tf) == 0:
+            return
+        cut = np.flatnonzero(np.diff(tf) > self.join_s)
+        for a, b in zip(np.concatenate([[0], cut + 1]), np.concatenate([cut, [len(tf) - 1]]), strict=True):
+            if self.spans and tf[a] - self.spans[-1][1] <= self.join_s:
+                self.spans[-1][1] = float(tf[b])
+                continue
+            if self.spans and self.spans[-1][1] - self.spans[-1][0] < self.min_s:
+                self.spans.pop()
+            self.spans.append([float(tf[a]), float(tf[b])])
+
+    def long_spans(self) -> list[tuple[float, float]]:
+        return [(a, b) for a, b in self.spans if b - a >= self.min_s]
+
+
+def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str]]:
+    """Where the magnetometer was rejected for longer than ``spans.min_s`` (``mag_check_time``): summary and
+    warning. The rejection keeps a disturbed field out of the heading, but there the heading is the gyro's
+    alone and drifts with its bias and scale errors; the filter's σ does not show that drift in full."""
+    long = spans.long_spans()
+    if not long:
+        return {}, []
+    total = sum(b - a for a, b in long)
+    info = {"mag_rejected_spans_s": [[round(a, 3), round(b, 3)] for a, b in long[:max_spans]]}
+    shown = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in long[:5]) + (f" and {len(long) - 5} more"
+                                                                     if len(long) > 5 else "")
+    warn = (f"the magnetometer was rejected for {total:.0f} s in {len(long)} span(s) of more than "
+            f"{spans.min_s:g} s ({shown}): the field there differs from the one at the start (a magnet or steel "
+            "nearby, a new mounting or calibration?), so the heading is the gyro's alone and drifts with its "
+            "bias (column 'mag_rejected' = 1)")
+    return info, [warn]
+
+
 def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool = False,
                   use_gnss: bool = True, lever_arm: np.ndarray | None = None,
                   progress: Progress | None = None) -> tuple[Recording, dict]:
@@ -1536,6 +1584,12 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     summary = dict(res.summary)
     check, warnings = self_check(res.time, res.flags)
     summary.update(check)
+    if params.mag_check_time > 0:
+        spans = FlagSpans(params.mag_check_time)
+        spans.add(res.time, res.flags & F_MAG_REJ)
+        check, more = heading_check(spans)
+        summary.update(check)
+        warnings += more
     if smooth:
         res = rts_smooth(res, gyro, params)
     out = result_recording(rec, res, params)

@@ -220,7 +220,16 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     is the summary's ``validation``; the self-check's warnings are its ``warnings``. Both sets are written, at
     the end, into the output's metadata (``warnings``, ``validation``).
     """
-    from imutool.attitude import F_INCONSISTENT, nominal_dt, result_recording, run_ekf, self_check
+    from imutool.attitude import (
+        F_INCONSISTENT,
+        F_MAG_REJ,
+        FlagSpans,
+        heading_check,
+        nominal_dt,
+        result_recording,
+        run_ekf,
+        self_check,
+    )
     from imutool.convert import META_ROOM, chunk_writer
     from imutool.loading import ChunkChecks
 
@@ -242,6 +251,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     kind = formats.kind_of(path)
     opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
     flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
+    mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
@@ -279,6 +289,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             bad = (res.flags & F_INCONSISTENT) > 0
             if bad.any():
                 flagged_t.append(res.time[bad])
+            if params.mag_check_time > 0:
+                mag_spans.add(res.time, res.flags & F_MAG_REJ)
             for k, v in res.summary.items():
                 if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
                     totals[k] = int(v)  # the state carries cumulative counters
@@ -302,6 +314,10 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             check, filter_warnings = self_check(times, flags, n_total=summary["rows"])
             summary.update(check)
             warnings += filter_warnings
+        if params.mag_check_time > 0:
+            check, more = heading_check(mag_spans)
+            summary.update(check)
+            warnings += more
         if summary["rows"] == 0:
             raise ImutoolError("no data rows", path=path)
         everything = checks.meta_warnings(input_warnings, warnings)

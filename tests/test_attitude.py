@@ -334,6 +334,47 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
             assert est["inconsistent"].max() == 0
 
 
+@pytest.mark.parametrize("streamed", [False, True])
+def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
+    """The field changes for good 40 s in (×1.3: a new mounting, steel nearby): the magnetometer is rejected from
+    then on and the heading is the gyro's alone. That is said — on stderr, as spans in the JSON summary and in the
+    output's metadata — in memory and streamed alike. The intact recording says nothing of it."""
+    from imutool.cli import cli
+
+    rec = simulate("ship-roll", duration=150, seed=1)
+    changed = rec.copy()
+    changed.channels["mag"] = np.where((rec.time > 40)[:, None], rec["mag"] * 1.3, rec["mag"])
+    for name, r, broken in (("intact", rec, False), ("changed", changed, True)):
+        src, out = tmp_path / f"{name}.csv", tmp_path / f"{name}_est.csv"
+        formats.write(r, src)
+        extra = ["--stream-mb", "0", "--chunk-rows", "7000"] if streamed else []
+        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "--json", *extra])
+        assert run.exit_code == 0, run.output
+        summary = json.loads(run.stdout)
+        said = [w for w in formats.read(out).meta.get("warnings", []) if "magnetometer was rejected" in w]
+        if broken:
+            (a, b), = summary["mag_rejected_spans_s"]  # one span across the chunk edges, from the change to the end
+            assert 40.0 <= a < 41.0 and b == pytest.approx(rec.time[-1])
+            assert "magnetometer was rejected for 110 s" in run.stderr and len(said) == 1
+        else:
+            assert "mag_rejected_spans_s" not in summary and "magnetometer" not in run.stderr and not said
+
+
+def test_flag_spans_join_across_chunks_and_forget_short_ones():
+    from imutool.attitude import FlagSpans
+
+    t = np.arange(0.0, 100.0, 0.5)
+    mask = ((t >= 10) & (t < 12)) | ((t >= 20) & (t < 40.5)) | ((t >= 41) & (t < 75)) | (t >= 90)
+    spans = FlagSpans(min_s=30.0)
+    for sl in (slice(0, 50), slice(50, 51), slice(51, 137), slice(137, None)):  # chunk edges inside spans
+        spans.add(t[sl], mask[sl])
+    assert spans.long_spans() == [(20.0, 74.5)]  # 40.5 → 41: a 0.5 s hole joins; 10–12 and 90–99.5 too short
+    assert len(spans.spans) == 2  # the closed short span was dropped; only the last, still open one is kept
+    whole = FlagSpans(min_s=9.0)
+    whole.add(t, mask)
+    assert whole.long_spans() == [(20.0, 74.5), (90.0, 99.5)]
+
+
 def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     """EkfParams is the one parameter set: TOML out and back equal; --params/--param/--save-params on the CLI;
     the parameters used are in the output metadata; unknown names and out-of-range values are one-line errors."""
