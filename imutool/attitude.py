@@ -1498,12 +1498,17 @@ def self_check(time: np.ndarray, flags: np.ndarray, max_spans: int = 20,
 
     ``n_total``: number of samples the share refers to (default: len(flags)); a flag-0 row separates spans."""
     bad = (np.asarray(flags) & F_INCONSISTENT) > 0
-    share = float(bad.sum()) / max(1, len(bad) if n_total is None else n_total)
-    info: dict = {"inconsistent_samples": int(bad.sum()), "inconsistent_share": round(share, 6)}
-    if not bad.any():
-        return info, []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
     spans = [(float(time[a]), float(time[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return inconsistency_report(spans, int(bad.sum()), len(bad) if n_total is None else n_total, max_spans)
+
+
+def inconsistency_report(spans: list, n_flagged: int, n_total: int, max_spans: int = 20) -> tuple[dict, list[str]]:
+    """The self-check's summary and warning from its flagged spans [(start, end) s] and sample counts."""
+    share = float(n_flagged) / max(1, n_total)
+    info: dict = {"inconsistent_samples": int(n_flagged), "inconsistent_share": round(share, 6)}
+    if not n_flagged:
+        return info, []
     info["inconsistent_spans_s"] = [[round(a, 3), round(b, 3)] for a, b in spans[:max_spans]]
     shown = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in spans[:5]) + (f" and {len(spans) - 5} more"
                                                                         if len(spans) > 5 else "")

@@ -225,10 +225,10 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         F_MAG_REJ,
         FlagSpans,
         heading_check,
+        inconsistency_report,
         nominal_dt,
         result_recording,
         run_ekf,
-        self_check,
     )
     from imutool.convert import META_ROOM, chunk_writer
     from imutool.loading import ChunkChecks
@@ -250,7 +250,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
     opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
-    flagged_t: list[np.ndarray] = []  # times of samples the self-check flagged (to report spans)
+    flagged = FlagSpans(0.0)  # spans the self-check flagged (samples more than 1 s apart split a span)
+    n_flagged = 0
     mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
@@ -287,8 +288,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
                                  sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm)
             bad = (res.flags & F_INCONSISTENT) > 0
-            if bad.any():
-                flagged_t.append(res.time[bad])
+            n_flagged += int(bad.sum())
+            flagged.add(res.time, bad)
             if params.mag_check_time > 0:
                 mag_spans.add(res.time, res.flags & F_MAG_REJ)
             for k, v in res.summary.items():
@@ -305,13 +306,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                                                    skipped=int(summary.get("skipped_rows", 0) or 0))
         validation["warnings"] = input_warnings
         warnings: list[str] = []
-        if flagged_t:  # spans from the flagged times: a gap longer than 1 s between flagged samples splits a span
-            tf = np.concatenate(flagged_t)
-            flags = np.full(len(tf), F_INCONSISTENT, np.uint8)
-            split = np.flatnonzero(np.diff(tf) > 1.0)
-            times = np.insert(tf, split + 1, np.nan)
-            flags = np.insert(flags, split + 1, 0)
-            check, filter_warnings = self_check(times, flags, n_total=summary["rows"])
+        if n_flagged:
+            check, filter_warnings = inconsistency_report(flagged.spans, n_flagged, summary["rows"])
             summary.update(check)
             warnings += filter_warnings
         if params.mag_check_time > 0:

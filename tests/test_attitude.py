@@ -334,6 +334,27 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
             assert est["inconsistent"].max() == 0
 
 
+def test_streamed_self_check_finds_the_same_samples_and_spans(tmp_path):
+    """Streamed in chunks, the self-check flags the same samples as in memory, and its spans (flagged samples
+    less than 1 s apart joined, across chunk edges) cover every in-memory span."""
+    from imutool.cli import cli
+
+    rec = simulate("ship-roll", duration=90, seed=6)
+    rec.channels["gyro"] = rec["gyro"] * [-1, 1, 1]
+    src = tmp_path / "flip.csv"
+    formats.write(rec, src)
+    got = {}
+    for name, extra in (("memory", []), ("streamed", ["--stream-mb", "0", "--chunk-rows", "5000"])):
+        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / f"{name}.csv"), "--json", *extra])
+        assert run.exit_code == 0, run.output
+        got[name] = json.loads(run.stdout)
+    assert got["streamed"]["inconsistent_samples"] == got["memory"]["inconsistent_samples"] > 1000
+    streamed = got["streamed"]["inconsistent_spans_s"]
+    assert 0 < len(streamed) <= len(got["memory"]["inconsistent_spans_s"])
+    for a, b in got["memory"]["inconsistent_spans_s"]:
+        assert any(sa <= a and b <= sb for sa, sb in streamed), (a, b)
+
+
 @pytest.mark.parametrize("streamed", [False, True])
 def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
     """The field changes for good 40 s in (×1.3: a new mounting, steel nearby): the magnetometer is rejected from
