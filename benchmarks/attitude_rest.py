@@ -26,6 +26,7 @@ from attitude_broad import BROAD, ENU2NED, load_trials, score  # noqa: E402
 
 from formats.frames import quat_multiply  # noqa: E402
 from imutool.attitude import EkfParams, run_ekf  # noqa: E402
+from imutool.cli.filter import ekf_params  # noqa: E402
 
 
 def still_after_motion(d: dict) -> np.ndarray:
@@ -38,13 +39,11 @@ def still_after_motion(d: dict) -> np.ndarray:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--param", action="append", default=[], help="NAME=VALUE, an EkfParams field")
+    ap.add_argument("--param", action="append", default=[],
+                    help="NAME=VALUE, an EkfParams field (as imutool filter --param)")
     args = ap.parse_args()
-    kw = {}
-    for item in args.param:
-        k, v = item.split("=", 1)
-        kw[k] = type(getattr(EkfParams, k))(float(v))
-    prm = EkfParams(**kw)
+    prm = ekf_params(None, tuple(args.param), None, None)  # parsed and checked as `imutool filter --param`
+    kw = {k: v for k, v in vars(prm).items() if v != getattr(EkfParams(), k)}
     from vqf import VQF
 
     if not BROAD.is_dir():
