@@ -1,6 +1,6 @@
-"""Attitude benchmarks: EKF samples/s (full rate, multi-rate, with smoother) on 1 M samples; optionally the
-end-to-end `imutool filter` on a 24 h, 200 Hz CSV (17.28 M rows) with its peak RSS (``--24h``, slow: it first
-writes a ~3 GB file). Usage: python benchmarks/attitude.py [--24h] [--dir /tmp]
+"""Attitude benchmarks: EKF samples/s (full rate, multi-rate, with the RTS pass and the zero-lag smoother) on 1 M
+samples; optionally the end-to-end `imutool filter` on a 24 h, 200 Hz CSV (17.28 M rows) with its peak RSS
+(``--24h``, slow: it first writes a ~3 GB file). Usage: python benchmarks/attitude.py [--24h] [--dir /tmp]
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ def main() -> None:
     ap.add_argument("--24h", dest="day", action="store_true", help="also run the 24 h end-to-end case")
     ap.add_argument("--dir", default="/tmp")
     a = ap.parse_args()
-    from imutool.attitude import EkfParams, rts_smooth, run_ekf
+    from imutool.attitude import EkfParams, rts_smooth, run_ekf, zero_lag_smooth
     from imutool.sim import simulate
 
     rec = simulate("ship-roll", duration=5000, seed=0)  # 1 000 001 samples at 200 Hz
@@ -28,18 +28,22 @@ def main() -> None:
     run_ekf(t[:1000], g[:1000], acc[:1000], mag[:1000])  # compile / load the cache
     res, _ = run_ekf(t[:1000], g[:1000], acc[:1000], mag[:1000], keep_cov=True)
     rts_smooth(res, g[:1000])
+    zero_lag_smooth(res, g[:1000], acc[:1000], mag[:1000])
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall = elapsed, cpu = process_time)")
     import imutool.attitude  # the editable install may point at another checkout: say which code is measured
 
     print(f"measuring {imutool.attitude.__file__} (run with PYTHONPATH=<tree> to measure a given working tree)")
     cases = [("full rate", EkfParams(), False), ("multi-rate (update every 40)", EkfParams(update_every=40), False),
              ("full rate, raw accel (paper)", EkfParams(accel_lp_tau=0.0, accel_noise_gain=0.0), False),
-             ("full rate + RTS smoother", EkfParams(), True)]
+             ("full rate + RTS pass alone", EkfParams(), "rts"),
+             ("full rate + zero-lag smoother", EkfParams(), "zero-lag")]
     for label, prm, smooth in cases:
         t0, c0 = time.perf_counter(), time.process_time()
-        res, _ = run_ekf(t, g, acc, mag, prm, keep_cov=smooth)
-        if smooth:
+        res, _ = run_ekf(t, g, acc, mag, prm, keep_cov=bool(smooth))
+        if smooth == "rts":
             rts_smooth(res, g, prm)
+        elif smooth:
+            zero_lag_smooth(res, g, acc, mag, prm)
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
         print(f"EKF {label:30s}: {len(t) / dt / 1e6:6.2f} M samples/s wall, {len(t) / dc / 1e6:6.2f} M/s cpu "
               f"({dt:.2f} s wall, {dc:.2f} s cpu, {len(t)} samples)")

@@ -833,14 +833,20 @@ def _apply_correction(st, dx):
 
 @njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
-               lever, st, q_out, b_out, std_out, flags_out, p_store):
+               lever, st, q_out, b_out, std_out, flags_out, p_store, acc_meas, f_out):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
 
     t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
     outputs: q_out (N,4), b_out (N,3), std_out (N,3) roll/pitch/heading σ rad, flags_out (N,) bit mask,
     p_store (N,6,6) posterior P per sample when it has N rows (for the smoother), else unused.
+    acc_meas (N,3), when it has N rows: the accelerometer measurement (m/s², body), already compensated and
+    low-passed (the zero-lag smoother's), used in place of the filter's own causal low-pass; NaN: no update.
+    f_out (N,3), when it has N rows: the compensated specific force each sample fed to the low-pass (m/s², body;
+    NaN where none: a NaN row or a shock).
     """
     n = t.shape[0]
+    ext_meas = acc_meas.shape[0] == n
+    keep_f = f_out.shape[0] == n
     P = st[S_P:S_P + 36].reshape((6, 6))
     R = np.empty((3, 3))
     dx = np.zeros(6)
@@ -1011,7 +1017,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 st[S_SHOCK_T] = 0.0
             rej = (above and st[S_SHOCK_T] <= prm[P_SHOCK_MAX]) or not na > 0
             force = st[S_AREJ_T] >= prm[P_REJ_TIMEOUT]
-            if use_lp and (not rej or force):
+            if keep_f and (not rej or force):
+                f_out[k, 0], f_out[k, 1], f_out[k, 2] = ax, ay, az
+            if use_lp and not ext_meas and (not rej or force):
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
                 # (nearly) constant and translational acceleration averages out; two first-order stages τ/2.
                 _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
@@ -1035,8 +1043,11 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             st[S_NUPD] += 1
             # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
             if acc_ok and na > 0:
-                if not rej or force:
-                    if use_lp:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
+                if ext_meas:  # the smoother's zero-lag low-pass of the same compensated force
+                    ax, ay, az = acc_meas[k, 0], acc_meas[k, 1], acc_meas[k, 2]
+                    na = np.sqrt(ax * ax + ay * ay + az * az)  # NaN (none there): no update
+                if (not rej or force) and na > 0:
+                    if use_lp and not ext_meas:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
                         if not ri_now:
                             _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
                         l0, l1, l2 = st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2]
@@ -1281,6 +1292,66 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
                 p_s[k, j, i] = v
 
 
+@njit(cache=True, fastmath=_FASTMATH)
+def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
+    """The filter's accelerometer low-pass made zero-phase, for the smoother (VQF's offline idea, paper §4).
+
+    The specific force f (N,3) m/s² body (NaN: none) is rotated into the quasi-inertial frame I of the gyro
+    integrated with the smoothed bias (N,3) rad/s (same step rule as the filter), low-passed there by the filter's
+    two first-order stages of τ/2 each (s) forwards, then the same backwards in time (a symmetric kernel: no
+    lag), and rotated back into the body: out (N,3) m/s², NaN where f is NaN. NaN rows hold the low-pass;
+    each direction starts as a running mean, as the filter's does.
+    """
+    n = t.shape[0]
+    qi = np.empty((n, 4))
+    y = np.empty((n, 3))
+    R = np.empty((3, 3))
+    wp, wc = gyro_prev_w, 1.0 - gyro_prev_w
+    a0, a1, a2, a3 = 1.0, 0.0, 0.0, 0.0
+    for k in range(n):  # I: gyro-only integration; f into I
+        if k > 0:
+            dt = t[k] - t[k - 1]
+            dti = min(dt, gap_dt) if dt > 0 else 0.0
+            w0 = wc * gyro[k, 0] + wp * gyro[k - 1, 0] - bias[k, 0]
+            w1 = wc * gyro[k, 1] + wp * gyro[k - 1, 1] - bias[k, 1]
+            w2 = wc * gyro[k, 2] + wp * gyro[k - 1, 2] - bias[k, 2]
+            if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2) and dti > 0:
+                e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
+                a0, a1, a2, a3 = _qmul(a0, a1, a2, a3, e0, e1, e2, e3)
+                nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+                a0, a1, a2, a3 = a0 / nq, a1 / nq, a2 / nq, a3 / nq
+        qi[k, 0], qi[k, 1], qi[k, 2], qi[k, 3] = a0, a1, a2, a3
+        _rmat(a0, a1, a2, a3, R)
+        for i in range(3):
+            y[k, i] = R[i, 0] * f[k, 0] + R[i, 1] * f[k, 1] + R[i, 2] * f[k, 2]
+    half = 0.5 * tau
+    for direction in range(2):  # forwards, then backwards over the forward result
+        s1 = np.zeros(3)
+        s2 = np.zeros(3)
+        cnt = 0.0
+        for j in range(n):
+            k = j if direction == 0 else n - 1 - j
+            dt = 0.0
+            if j > 0:
+                dt = abs(t[k] - t[k - 1 if direction == 0 else k + 1])
+            v0, v1, v2 = y[k, 0], y[k, 1], y[k, 2]
+            if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
+                cnt += 1.0
+                al = max(dt / (half + dt) if dt > 0 else 0.0, 1.0 / cnt)
+                for i in range(3):
+                    v = v0 if i == 0 else (v1 if i == 1 else v2)
+                    s1[i] += al * (v - s1[i])
+                    s2[i] += al * (s1[i] - s2[i])
+            if cnt > 0 and np.isfinite(f[k, 0]):
+                y[k, 0], y[k, 1], y[k, 2] = s2[0], s2[1], s2[2]
+            else:
+                y[k, 0], y[k, 1], y[k, 2] = np.nan, np.nan, np.nan
+    for k in range(n):  # back into the body: out = R_Iᵀ y
+        _rmat(qi[k, 0], qi[k, 1], qi[k, 2], qi[k, 3], R)
+        for i in range(3):
+            out[k, i] = R[0, i] * y[k, 0] + R[1, i] * y[k, 1] + R[2, i] * y[k, 2]
+
+
 # ================================================ Python API ================================================
 
 @dataclass
@@ -1294,6 +1365,7 @@ class AttitudeResult:
     flags: np.ndarray  # (N,) bit mask F_*
     summary: dict = field(default_factory=dict)
     cov: np.ndarray | None = None  # (N,6,6) posterior P when kept (smoother input)
+    force: np.ndarray | None = None  # (N,3) compensated specific force fed to the low-pass, m/s² body (smoother input)
 
     def euler_deg(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r, p, h = quat_to_euler(self.q)
@@ -1400,11 +1472,15 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
             params: EkfParams | None = None, sog: np.ndarray | None = None, cog_deg: np.ndarray | None = None,
             state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
             cov_every_sample: bool | None = None, lever_arm: np.ndarray | None = None,
-            progress: Progress | None = None) -> tuple[AttitudeResult, np.ndarray]:
+            progress: Progress | None = None, accel_measurement: np.ndarray | None = None
+            ) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
-    :func:`rts_smooth`; 288 bytes/sample). GNSS compensation is used when ``sog`` (m/s) and ``cog_deg`` are given.
+    :func:`rts_smooth`; 288 bytes/sample) and the compensated specific force (:func:`zero_lag_smooth`; 24
+    bytes/sample). GNSS compensation is used when ``sog`` (m/s) and ``cog_deg`` are given.
+    ``accel_measurement`` (N,3) m/s² body replaces the filter's causal low-pass as the accelerometer measurement
+    (:func:`zero_lag_smooth`'s second pass).
     """
     params = params or EkfParams()
     t = np.ascontiguousarray(time, dtype=np.float64)
@@ -1429,6 +1505,13 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     std_out = np.empty((n, 3))
     flags = np.zeros(n, dtype=np.uint8)
     p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
+    f_out = np.full((n, 3), np.nan) if keep_cov else np.empty((0, 3))
+    if accel_measurement is None:
+        meas = np.empty((0, 3))
+    else:
+        meas = np.ascontiguousarray(accel_measurement, dtype=np.float64)
+        if meas.shape != (n, 3):
+            raise ImutoolError(f"accel_measurement must be ({n}, 3), not {meas.shape}")
     every = max(1, int(params.update_every))
     cov_each = keep_cov if cov_every_sample is None else cov_every_sample
     mode, cov_flag = params.mag_mode_code() if use_mag else 0, bool(cov_each or every == 1)
@@ -1436,14 +1519,16 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     for i0, i1 in ([(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress)):
         ekf_kernel(t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1], prm, every, mode,
                    cov_flag, use_gnss, lever, st, q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1],
-                   p_store[i0:i1] if keep_cov else p_store)
+                   p_store[i0:i1] if keep_cov else p_store, meas[i0:i1] if len(meas) else meas,
+                   f_out[i0:i1] if keep_cov else f_out)
     summary = {
         "samples": n, "updates": int(st[S_NUPD]), "accel_rejected": int(st[S_NAREJ]),
         "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
         "inconsistent_samples": int(st[S_NINC]),
     }
-    return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None), st
+    return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None,
+                          f_out if keep_cov else None), st
 
 
 def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None = None,
@@ -1455,12 +1540,7 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     t = res.time
     if dt_nominal is None:
         dt_nominal = nominal_dt(t)
-    g = np.array(gyro, dtype=np.float64)
-    bad = ~np.all(np.isfinite(g), axis=1)
-    if bad.any():  # same hold-last-good rule as the filter
-        idx = np.where(~bad, np.arange(len(g)), 0)
-        np.maximum.accumulate(idx, out=idx)
-        g = g[idx]
+    g = _held_gyro(gyro)
     n = len(t)
     q_s = np.empty((n, 4))
     b_s = np.empty((n, 3))
@@ -1472,6 +1552,64 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     std = euler_std(q_s, p_s)
     out = AttitudeResult(t, q_s, b_s, std, res.flags.copy(), dict(res.summary), None)
     out.summary["smoothed"] = True
+    return out
+
+
+def _held_gyro(gyro: np.ndarray) -> np.ndarray:
+    """The gyro with each NaN row replaced by the last good one (the filter's rule), float64."""
+    g = np.array(gyro, dtype=np.float64)
+    bad = ~np.all(np.isfinite(g), axis=1)
+    if bad.any():
+        idx = np.where(~bad, np.arange(len(g)), 0)
+        np.maximum.accumulate(idx, out=idx)
+        g = g[idx]
+    return g
+
+
+def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None,
+                    params: EkfParams | None = None, sog: np.ndarray | None = None,
+                    cog_deg: np.ndarray | None = None, lever_arm: np.ndarray | None = None,
+                    dt_nominal: float | None = None) -> AttitudeResult:
+    """The smoother for the low-passed accelerometer: the RTS pass on a filter run whose low-pass has no lag.
+
+    The RTS pass (:func:`rts_smooth`) assumes white measurement errors; the causal low-pass of the specific force
+    delays them by about τ, and the smoothed attitude keeps that delay's share of every translational acceleration.
+    VQF's offline idea (Laidig & Seel 2023) removes it: (1) the RTS pass over ``res`` (a run made with
+    ``keep_cov=True``, whose compensated specific force it carries) gives the bias; (2) the same force is
+    low-passed forwards and backwards in the quasi-inertial frame (:func:`zero_phase_lp_kernel`); (3) the filter
+    runs again with that as its accelerometer measurement, same parameters and inputs, and (4) the RTS pass over
+    it gives the inclination (roll, pitch, their σ, the bias) while the heading and its σ stay the first RTS
+    pass's: gravity observes no heading, so a better accelerometer measurement must not move it. Flags and
+    summary stay the causal run's (its self-check). About 1.3× the time of :func:`rts_smooth`, the same memory.
+    """
+    params = params or EkfParams()
+    if res.cov is None or res.force is None:
+        raise ImutoolError("smoothing needs the filter covariances (run_ekf(..., keep_cov=True))")
+    if params.accel_lp_tau <= 0:  # the raw accelerometer: no low-pass, no lag to remove
+        return rts_smooth(res, gyro, params, dt_nominal)
+    if dt_nominal is None:
+        dt_nominal = nominal_dt(res.time)
+    g = _held_gyro(gyro)
+    first = rts_smooth(res, g, params, dt_nominal)
+    meas = np.empty_like(res.force)
+    zero_phase_lp_kernel(res.time, g, first.bias, res.force, params.accel_lp_tau, params.gyro_prev_weight(),
+                         params.gap_factor * dt_nominal, meas)
+    again, _ = run_ekf(res.time, gyro, accel, mag, params, sog, cog_deg, keep_cov=True, dt_nominal=dt_nominal,
+                       lever_arm=lever_arm, accel_measurement=meas)
+    out = rts_smooth(again, g, params, dt_nominal)
+    del again, meas
+    # gravity observes no heading: keep the new inclination (the swing of the change, about a horizontal axis)
+    # and the first pass's heading (its twist about the world vertical)
+    d = quat_multiply(out.q, first.q * np.array([1.0, -1.0, -1.0, -1.0]))  # world-frame change q2 ⊗ q1*
+    twist = np.zeros_like(d)
+    twist[:, 0], twist[:, 3] = d[:, 0], d[:, 3]
+    twist /= np.maximum(np.linalg.norm(twist, axis=1, keepdims=True), 1e-300)
+    swing = quat_multiply(d, twist * np.array([1.0, -1.0, -1.0, -1.0]))
+    q = quat_multiply(swing, first.q)
+    out.q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    out.std[:, 2] = first.std[:, 2]
+    out.flags = res.flags.copy()
+    out.summary = dict(res.summary, smoothed=True)
     return out
 
 
@@ -1596,7 +1734,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         summary.update(check)
         warnings += more
     if smooth:
-        res = rts_smooth(res, gyro, params)
+        res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm)
     out = result_recording(rec, res, params)
     if lever_arm is not None:
         out.meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
@@ -1604,7 +1742,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
         summary["warnings"] = list(summary.get("warnings") or []) + warnings
-    summary["method"] = "ekf" + ("+rts" if smooth else "")
+    summary["method"] = "ekf" + ("+zero-lag smoother" if smooth else "")
     return out, summary
 
 

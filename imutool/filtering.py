@@ -84,10 +84,10 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
     """Estimate roll, pitch, heading (deg) from ``source``; write them to ``output`` when given.
 
     method: ``ekf`` (quaternion EKF with gyro-bias states; ``params`` an :class:`imutool.attitude.EkfParams`,
-    ``smooth`` adds the RTS backward pass, ``lever_arm`` the sensor position from the centre of rotation, m,
-    body FRD, ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg), ``use_gnss=False`` ignores sog/cog), ``lpf``
-    (Butterworth low-passed accelerometer tilt + magnetic heading, ``cutoff_hz``, ``order``), ``accel``
-    (unfiltered accelerometer tilt) or ``compass`` (heading KF; ``compass`` an
+    ``smooth`` adds the zero-lag smoother (:func:`imutool.attitude.zero_lag_smooth`), ``lever_arm`` the sensor
+    position from the centre of rotation, m, body FRD, ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg),
+    ``use_gnss=False`` ignores sog/cog), ``lpf`` (Butterworth low-passed accelerometer tilt + magnetic heading,
+    ``cutoff_hz``, ``order``), ``accel`` (unfiltered accelerometer tilt) or ``compass`` (heading KF; ``compass`` an
     :class:`imutool.compass.CompassParams`; the deviation card of ``calibration_file`` is applied).
 
     A path is loaded by :func:`imutool.loading.load_recording` with ``load_options`` (columns, profile, topic,

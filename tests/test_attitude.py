@@ -9,7 +9,15 @@ from conftest import run_main
 
 import formats
 from formats.frames import quat_to_euler, wrap_deg180
-from imutool.attitude import EkfParams, ekf_recording, initial_state, rts_smooth, run_ekf
+from imutool.attitude import (
+    EkfParams,
+    ekf_recording,
+    initial_state,
+    rts_smooth,
+    run_ekf,
+    zero_lag_smooth,
+    zero_phase_lp_kernel,
+)
 from imutool.baseline import lpf_attitude
 from imutool.sim import simulate
 
@@ -201,7 +209,7 @@ def test_broad_real_data_meets_vqf(shared):
         res, _ = run_ekf(rec.time, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), rec["mag"], keep_cov=True)
         m = evaluate_quaternion(res.q, rec["ref_q"], moving)
         causal.append((m["total"]["rmse"], m["inclination"]["rmse"]))
-        sm = rts_smooth(res, rec.get("gyro", "rad/s"))
+        sm = zero_lag_smooth(res, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), rec["mag"])
         m = evaluate_quaternion(sm.q, rec["ref_q"], moving)
         smoothed.append((m["total"]["rmse"], m["inclination"]["rmse"]))
     causal, smoothed = np.array(causal), np.array(smoothed)
@@ -278,6 +286,61 @@ def test_ship_at_sea_bridge_sensor_meets_msc363_with_lever_arm_and_gnss():
     no_lever, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"])
     er0, _ = _roll_pitch_err(no_lever, rec, 60)
     assert _rmse(er0, 0) > 2 * _rmse(er, 0) and np.abs(er0).max() > 1.5
+
+
+def test_zero_lag_smoother_on_the_bridge_low_passes_the_compensated_force():
+    """The smoother's second pass low-passes the specific force the filter compensated (lever arm, SOG/COG), not the
+    raw accelerometer: on the bridge sensor its roll error after the first minute is below the causal filter's and
+    the RTS pass's (measured 0.16° RMS vs 0.26° causal, 0.18° RTS alone); fed the raw force it would be 1.79°."""
+    rec = simulate("ship-at-sea", duration=300, seed=3, turn_start=100)
+    r = np.array(rec.meta["lever_arm_m"])
+    res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"], lever_arm=r,
+                     keep_cov=True)
+    assert not np.allclose(res.force, rec["accel"], atol=0.05)  # the lever arm and the turn were taken out
+    sm = zero_lag_smooth(res, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"], r)
+    rts = rts_smooth(res, rec["gyro"])
+    er, ep = _roll_pitch_err(sm, rec, 60)
+    assert _rmse(er, 0) <= 0.2 and np.abs(er).max() <= 0.8, (_rmse(er, 0), np.abs(er).max())
+    assert _rmse(ep, 0) <= 0.15, _rmse(ep, 0)
+    assert _rmse(er, 0) < _rmse(_roll_pitch_err(rts, rec, 60)[0], 0) < _rmse(_roll_pitch_err(res, rec, 60)[0], 0)
+    assert np.array_equal(sm.flags, res.flags)  # the self-check stays the causal run's
+
+
+def test_zero_phase_lowpass_has_no_lag_follows_the_body_and_skips_missing_rows():
+    """zero_phase_lp_kernel: (1) a tilted body spinning at 1 rad/s about z sees gravity turn in the body; in the
+    gyro frame it is constant, so the low-pass returns it unchanged (a frame or transpose error would not); (2) a
+    slow horizontal oscillation comes out without lag (the causal two-stage low-pass of the filter lags it by
+    ≈ τ = 1.5 s); (3) a NaN row stays NaN and does not spread."""
+    dt, tau = 0.01, 1.5
+    t = np.arange(0, 60, dt)
+    n = len(t)
+    w = 1.0
+    gyro = np.tile([0.0, 0.0, w], (n, 1))
+    g0 = np.array([3.0, 0.0, -9.3])  # body at rest at t = 0, tilted
+    ang = w * t  # body z turns by +ang: a fixed vector seen in the body turns by −ang
+    f = np.stack([g0[0] * np.cos(ang), -g0[0] * np.sin(ang), np.full(n, g0[2])], axis=1)
+    out = np.empty_like(f)
+    zero_phase_lp_kernel(t, gyro, np.zeros((n, 3)), f, tau, 0.0, 1.0, out)
+    assert np.abs(out - f).max() < 1e-6, np.abs(out - f).max()
+    # (2) no rotation, x oscillates with a 20-s period
+    x = np.sin(2 * np.pi * t / 20.0)
+    f = np.stack([x, np.zeros(n), np.full(n, -9.8)], axis=1)
+    f[3000] = np.nan
+    zero_phase_lp_kernel(t, np.zeros((n, 3)), np.zeros((n, 3)), f, tau, 0.0, 1.0, out)
+    mid = slice(1000, n - 1000)
+    lags = np.arange(-300, 301)
+    xc = [np.nansum(out[mid, 0] * np.roll(x, k)[mid]) for k in lags]
+    assert abs(lags[int(np.argmax(xc))]) <= 2, lags[int(np.argmax(xc))]
+    al = dt / (tau / 2 + dt)  # the filter's causal two stages, for comparison
+    s1 = s2 = 0.0
+    causal = np.empty(n)
+    for k in range(n):
+        s1 += al * (x[k] - s1)
+        s2 += al * (s1 - s2)
+        causal[k] = s2
+    xc = [np.sum(causal[mid] * np.roll(x, k)[mid]) for k in lags]
+    assert lags[int(np.argmax(xc))] >= 100  # 1 s or more behind: what the smoother removes
+    assert np.isnan(out[3000]).all() and np.isfinite(out[2999]).all() and np.isfinite(out[3001]).all()
 
 
 def test_lever_arm_cli_metadata_and_sign(tmp_path):
@@ -449,8 +512,9 @@ def test_broad_all_16_trials_no_divergence(shared):
     """All 16 shared BROAD trials, one default parameter set (chosen on all of them and on the simulator, never on
     one file; benchmarks/attitude_broad.py). Issue 13's acceptance where it is met: no trial above the ceiling
     max(2 × VQF, VQF + 2°) (the old shock gate gave 129.9° on trial 16), causal mean total ≤ VQF's 2.08°, smoother
-    mean total ≤ offline VQF's 1.95°. The inclination means are NOT at VQF's yet (causal 0.75° vs 0.73°, smoother
-    0.59° vs 0.53°): guarded here at what is reached, see docs/attitude.md."""
+    mean total ≤ offline VQF's 1.95°, smoother mean inclination at offline VQF's 0.53° (0.534° against 0.529° in
+    the same run: the zero-lag smoother; the RTS pass alone gave 0.594°). The causal inclination mean is NOT at
+    VQF's yet (0.752° vs 0.729°): guarded here at what is reached, see docs/attitude.md."""
     from imutool.metrics import evaluate_quaternion
 
     folder = shared("broad")
@@ -461,7 +525,8 @@ def test_broad_all_16_trials_no_divergence(shared):
         res, _ = run_ekf(rec.time, gyro, rec.get("accel", "m/s^2"), rec["mag"], keep_cov=True)
         moving = rec["movement"] > 0
         m = evaluate_quaternion(res.q, rec["ref_q"], moving)
-        ms = evaluate_quaternion(rts_smooth(res, gyro).q, rec["ref_q"], moving)
+        sm = zero_lag_smooth(res, gyro, rec.get("accel", "m/s^2"), rec["mag"])
+        ms = evaluate_quaternion(sm.q, rec["ref_q"], moving)
         tot, inc = m["total"]["rmse"], m["inclination"]["rmse"]
         vt, vi = BROAD_VQF[f.name[:2]]
         rows.append((tot, inc, tot / max(2 * vt, vt + 2), inc / max(2 * vi, vi + 2),
@@ -470,7 +535,8 @@ def test_broad_all_16_trials_no_divergence(shared):
     assert len(r) == 16
     assert r[:, 2:4].max() <= 1.0, r  # no trial above its ceiling
     assert r[:, 0].mean() <= 2.08 and r[:, 4].mean() <= 1.95, r.mean(axis=0)  # VQF / offline VQF totals
-    assert r[:, 1].mean() <= 0.77 and r[:, 5].mean() <= 0.61, r.mean(axis=0)  # guard (target 0.73 / 0.53)
+    assert r[:, 1].mean() <= 0.77, r.mean(axis=0)  # guard (target 0.73)
+    assert r[:, 5].mean() <= 0.54 and r[:, 5].max() <= 1.0, r.mean(axis=0)  # smoother (offline VQF 0.53 / 0.96)
 
 
 def test_broad_attached_magnet_6d_heading_does_not_follow_the_accelerometer(shared):

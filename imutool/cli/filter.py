@@ -43,7 +43,9 @@ from imutool.cli.common import (
 @click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default=None,
               help="EKF magnetometer use: heading only (default; never touches roll/pitch), full 3-D vector "
                    "(paper), off.")
-@click.option("--smooth", is_flag=True, help="EKF: add the RTS backward pass (zero-lag offline estimates).")
+@click.option("--smooth", is_flag=True,
+              help="EKF: add the offline smoother (the accelerometer low-pass run forwards and backwards, a second "
+                   "filter pass, the RTS backward pass: zero-lag estimates).")
 @click.option("--lever-arm", default=None, metavar="X,Y,Z",
               help="EKF: sensor position relative to the vessel's centre of rotation, m, body FRD (x bow, "
                    "y starboard, z down; a bridge 20 m above the roll centre is z = -20): the tangential and "
