@@ -1580,7 +1580,8 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
     runs again with that as its accelerometer measurement, same parameters and inputs, and (4) the RTS pass over
     it gives the inclination (roll, pitch, their σ, the bias) while the heading and its σ stay the first RTS
     pass's: gravity observes no heading, so a better accelerometer measurement must not move it. Flags and
-    summary stay the causal run's (its self-check). About 1.3× the time of :func:`rts_smooth`, the same memory.
+    summary stay the causal run's (its self-check). About 1.3× the time of :func:`rts_smooth` and 1.5× its
+    peak memory (three N×6×6 covariance arrays at once instead of two).
     """
     params = params or EkfParams()
     if res.cov is None or res.force is None:
