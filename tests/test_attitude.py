@@ -306,6 +306,25 @@ def test_zero_lag_smoother_on_the_bridge_low_passes_the_compensated_force():
     assert np.array_equal(sm.flags, res.flags)  # the self-check stays the causal run's
 
 
+def test_smoother_that_cannot_fit_in_memory_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """`filter --smooth` keeps every sample's covariance (~1.4 kB/sample): where the memory available cannot hold
+    it, one line naming the input and the need, exit 2, before anything is allocated or written."""
+    import imutool.attitude as att
+
+    src = tmp_path / "roll.csv"
+    formats.write(simulate("ship-roll", duration=20, seed=1), src)
+    monkeypatch.setattr(att, "available_memory", lambda: 1_000_000)  # 1 MB free
+    out = tmp_path / "sm.csv"
+    code, _, err = run_main(["filter", src, "-o", out, "--smooth"], capsys)
+    assert code == 2, err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "roll.csv" in lines[0] and "4001 samples need about 6.0 MB" in lines[0], err
+    assert not out.exists()
+    monkeypatch.setattr(att, "available_memory", lambda: None)  # unknown (not Linux): no refusal
+    code, _, err = run_main(["filter", src, "-o", out, "--smooth", "-q"], capsys)
+    assert code == 0 and out.exists(), err
+
+
 def test_zero_phase_lowpass_has_no_lag_follows_the_body_and_skips_missing_rows():
     """zero_phase_lp_kernel: (1) a tilted body spinning at 1 rad/s about z sees gravity turn in the body; in the
     gyro frame it is constant, so the low-pass returns it unchanged (a frame or transpose error would not); (2) a
