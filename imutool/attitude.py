@@ -1294,7 +1294,7 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
 
 @njit(cache=True, fastmath=_FASTMATH)
 def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
-    """The filter's accelerometer low-pass made zero-phase, for the smoother (VQF's offline idea, paper §4).
+    """The filter's accelerometer low-pass made zero-phase, for the smoother (no lag).
 
     The specific force f (N,3) m/s² body (NaN: none) is rotated into the quasi-inertial frame I of the gyro
     integrated with the smoothed bias (N,3) rad/s (same step rule as the filter), low-passed there by the filter's
@@ -1574,7 +1574,7 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
 
     The RTS pass (:func:`rts_smooth`) assumes white measurement errors; the causal low-pass of the specific force
     delays them by about τ, and the smoothed attitude keeps that delay's share of every translational acceleration.
-    VQF's offline idea (Laidig & Seel 2023) removes it: (1) the RTS pass over ``res`` (a run made with
+    Running that low-pass forwards and backwards (offline, the future is known) removes it: (1) the RTS pass over ``res`` (a run made with
     ``keep_cov=True``, whose compensated specific force it carries) gives the bias; (2) the same force is
     low-passed forwards and backwards in the quasi-inertial frame (:func:`zero_phase_lp_kernel`); (3) the filter
     runs again with that as its accelerometer measurement, same parameters and inputs, and (4) the RTS pass over
