@@ -1574,9 +1574,10 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
 
     The RTS pass (:func:`rts_smooth`) assumes white measurement errors; the causal low-pass of the specific force
     delays them by about τ, and the smoothed attitude keeps that delay's share of every translational acceleration.
-    Running that low-pass forwards and backwards (offline, the future is known) removes it: (1) the RTS pass over ``res`` (a run made with
-    ``keep_cov=True``, whose compensated specific force it carries) gives the bias; (2) the same force is
-    low-passed forwards and backwards in the quasi-inertial frame (:func:`zero_phase_lp_kernel`); (3) the filter
+    Running that low-pass forwards and backwards (offline, the future is known) removes it: (1) the RTS pass over
+    ``res`` (a run made with ``keep_cov=True``, whose compensated specific force it carries) gives the bias;
+    (2) the same force is low-passed forwards and backwards in the quasi-inertial frame
+    (:func:`zero_phase_lp_kernel`); (3) the filter
     runs again with that as its accelerometer measurement, same parameters and inputs, and (4) the RTS pass over
     it gives the inclination (roll, pitch, their σ, the bias) while the heading and its σ stay the first RTS
     pass's: gravity observes no heading, so a better accelerometer measurement must not move it. Flags and
