@@ -53,7 +53,7 @@ from numba import njit
 from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
-from formats.frames import quat_multiply, quat_to_euler
+from formats.frames import quat_conjugate, quat_multiply, quat_to_euler
 from imutool.loading import merged_warnings
 from imutool.progress import Progress, chunk_ranges
 
@@ -1602,12 +1602,11 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
     del again, meas
     # gravity observes no heading: keep the new inclination (the swing of the change, about a horizontal axis)
     # and the first pass's heading (its twist about the world vertical)
-    d = quat_multiply(out.q, first.q * np.array([1.0, -1.0, -1.0, -1.0]))  # world-frame change q2 ⊗ q1*
-    twist = np.zeros_like(d)
+    d = quat_multiply(out.q, quat_conjugate(first.q))  # world-frame (NED) change q2 ⊗ q1*
+    twist = np.zeros_like(d)  # its part about the world vertical (NED z)
     twist[:, 0], twist[:, 3] = d[:, 0], d[:, 3]
     twist /= np.maximum(np.linalg.norm(twist, axis=1, keepdims=True), 1e-300)
-    swing = quat_multiply(d, twist * np.array([1.0, -1.0, -1.0, -1.0]))
-    q = quat_multiply(swing, first.q)
+    q = quat_multiply(quat_multiply(d, quat_conjugate(twist)), first.q)  # swing ⊗ q1: sign kept continuous
     out.q = q / np.linalg.norm(q, axis=1, keepdims=True)
     out.std[:, 2] = first.std[:, 2]
     out.flags = res.flags.copy()
@@ -1822,8 +1821,6 @@ def carry_labels(src: Recording, dst: Recording) -> None:
 def quat_error_metrics(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """BROAD error angles (rad) per sample: d = q_est ⊗ q_ref* (world frame); total = 2·acos|d_w|,
     heading = 2·atan|d_z/d_w|, inclination = 2·acos√(d_w² + d_z²)."""
-    from formats.frames import quat_conjugate
-
     d = quat_multiply(q_est, quat_conjugate(q_ref))
     dw, dz = np.abs(d[..., 0]), d[..., 3]
     total = 2 * np.arccos(np.clip(dw, 0, 1))
