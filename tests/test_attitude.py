@@ -304,6 +304,13 @@ def test_zero_lag_smoother_on_the_bridge_low_passes_the_compensated_force():
     assert _rmse(ep, 0) <= 0.15, _rmse(ep, 0)
     assert _rmse(er, 0) < _rmse(_roll_pitch_err(rts, rec, 60)[0], 0) < _rmse(_roll_pitch_err(res, rec, 60)[0], 0)
     assert np.array_equal(sm.flags, res.flags)  # the self-check stays the causal run's
+    # gravity observes no heading: the heading and its σ are the first RTS pass's, only the inclination is new
+    # (BROAD's split of the difference sm ⊗ rts*: no rotation about the world vertical, some about the horizontal)
+    from imutool.attitude import quat_error_metrics
+
+    _, heading, incl = quat_error_metrics(sm.q, rts.q)
+    assert np.degrees(heading).max() < 1e-6 and np.degrees(incl).max() > 0.05, np.degrees(heading).max()
+    assert np.array_equal(sm.std[:, 2], rts.std[:, 2])
 
 
 def test_smoother_that_cannot_fit_in_memory_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
