@@ -1706,14 +1706,15 @@ def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str
 SMOOTHER_BYTES_PER_SAMPLE = 1500  # measured: 1.42 kB/sample at peak (1 M samples, three N×6×6 arrays + outputs)
 
 
-def gnss_heading_check(used_gnss: bool, has_mag: bool, params: EkfParams) -> list[str]:
+def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
     """The SOG/COG turn compensation turns the course into body axes with the filter's heading. Without a
     magnetometer nothing holds that heading (it starts at 0° and drifts with the gyro bias), so the compensation
     can add the error it is there to remove: one warning line then, none otherwise. Measured on `imutool simulate
     ship-at-sea` seeds 0 / 1 / 3 (lever arm + SOG/COG, roll RMS after the first minute): 0.19° with the
     magnetometer; without it 1.75 / 1.16 / 0.21° (max 4.9°), right only where the ship happened to head near 0°
-    at the start; lever arm alone without a magnetometer 1.20 / 1.15 / 1.19°."""
-    if not used_gnss or (has_mag and params.mag_mode != "off"):
+    at the start; lever arm alone without a magnetometer 1.20 / 1.15 / 1.19°. ``mag_used``: any magnetometer
+    update taken in the run (a `mag` column that is all NaN, or ``mag_mode = "off"``, holds no heading either)."""
+    if not used_gnss or mag_used:
         return []
     return ["SOG/COG turn compensation without a magnetometer heading: the course is turned into body axes with a "
             "heading nothing holds (starts at 0°, drifts with the gyro bias), so the compensation can add roll "
@@ -1777,7 +1778,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         check, more = heading_check(spans)
         summary.update(check)
         warnings += more
-    warnings += gnss_heading_check(sog is not None, mag is not None, params)
+    warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & F_MAG_USED)))
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm)
     out = result_recording(rec, res, params)

@@ -223,6 +223,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     from imutool.attitude import (
         F_INCONSISTENT,
         F_MAG_REJ,
+        F_MAG_USED,
         FlagSpans,
         gnss_heading_check,
         heading_check,
@@ -254,7 +255,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     flagged = FlagSpans(0.0)  # spans the self-check flagged (samples more than 1 s apart split a span)
     n_flagged = 0
     mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
-    gnss_used, has_mag = False, True  # SOG/COG used in some chunk; a magnetometer in every chunk
+    gnss_used = mag_used = False  # SOG/COG used in some chunk; a magnetometer update taken in some chunk
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
@@ -288,9 +289,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             if use_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
                 sog, cog = chunk["sog"], chunk["cog"]
                 gnss_used = True
-            has_mag = has_mag and "mag" in chunk.channels
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
                                  sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm)
+            mag_used = mag_used or bool(np.any(res.flags & F_MAG_USED))
             bad = (res.flags & F_INCONSISTENT) > 0
             n_flagged += int(bad.sum())
             flagged.add(res.time, bad)
@@ -318,7 +319,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             check, more = heading_check(mag_spans)
             summary.update(check)
             warnings += more
-        warnings += gnss_heading_check(gnss_used, has_mag, params)
+        warnings += gnss_heading_check(gnss_used, mag_used)
         if summary["rows"] == 0:
             raise ImutoolError("no data rows", path=path)
         everything = checks.meta_warnings(input_warnings, warnings)

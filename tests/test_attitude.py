@@ -474,16 +474,18 @@ def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
 def test_sog_cog_without_a_magnetometer_heading_is_said(tmp_path, streamed):
     """SOG/COG turn compensation needs the heading: without a magnetometer nothing holds it, and on this
     simulated bridge sensor the roll error is 1.7° RMS instead of 0.2° (gnss_heading_check). One warning,
-    on stderr and in the output's metadata, in memory and streamed; none with the magnetometer, none without
-    SOG/COG."""
+    on stderr and in the output's metadata, in memory and streamed, also where the `mag` column is there but
+    empty; none with the magnetometer, none without SOG/COG."""
     from imutool.cli import cli
 
     rec = simulate("ship-at-sea", duration=60, seed=0)
     nomag = rec.copy()
     del nomag.channels["mag"]
+    nanmag = rec.copy()
+    nanmag.channels["mag"] = np.full_like(rec["mag"], np.nan)  # the column is there, no field in it
     extra = ["--stream-mb", "0", "--chunk-rows", "2500"] if streamed else []
     for name, r, gnss, said in (("with_mag", rec, [], False), ("no_mag", nomag, [], True),
-                                ("no_mag_no_gnss", nomag, ["--no-gnss"], False)):
+                                ("nan_mag", nanmag, [], True), ("no_mag_no_gnss", nomag, ["--no-gnss"], False)):
         src, out = tmp_path / f"{name}.csv", tmp_path / f"{name}_est.csv"
         formats.write(r, src)
         run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), *gnss, *extra])
