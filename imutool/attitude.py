@@ -1642,6 +1642,12 @@ def self_check(time: np.ndarray, flags: np.ndarray, max_spans: int = 20,
     return inconsistency_report(spans, int(bad.sum()), len(bad) if n_total is None else n_total, max_spans)
 
 
+def _spans_text(spans: list, shown: int = 5) -> str:
+    """The first ``shown`` (start, end) spans in s for a warning line, "and N more" after them."""
+    text = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in spans[:shown])
+    return text + (f" and {len(spans) - shown} more" if len(spans) > shown else "")
+
+
 def inconsistency_report(spans: list, n_flagged: int, n_total: int, max_spans: int = 20) -> tuple[dict, list[str]]:
     """The self-check's summary and warning from its flagged spans [(start, end) s] and sample counts."""
     share = float(n_flagged) / max(1, n_total)
@@ -1649,8 +1655,7 @@ def inconsistency_report(spans: list, n_flagged: int, n_total: int, max_spans: i
     if not n_flagged:
         return info, []
     info["inconsistent_spans_s"] = [[round(a, 3), round(b, 3)] for a, b in spans[:max_spans]]
-    shown = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in spans[:5]) + (f" and {len(spans) - 5} more"
-                                                                        if len(spans) > 5 else "")
+    shown = _spans_text(spans)
     warn = (f"the attitude filter's self-check failed on {100 * share:.1f} % of samples ({shown}): its "
             "accelerometer/magnetometer innovations are far larger than its covariance allows, so the estimate "
             "is not trustworthy there (column 'inconsistent' = 1); sustained acceleration, a wrong mounting or "
@@ -1694,16 +1699,12 @@ def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str
         return {}, []
     total = sum(b - a for a, b in long)
     info = {"mag_rejected_spans_s": [[round(a, 3), round(b, 3)] for a, b in long[:max_spans]]}
-    shown = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in long[:5]) + (f" and {len(long) - 5} more"
-                                                                     if len(long) > 5 else "")
+    shown = _spans_text(long)
     warn = (f"the magnetometer was rejected for {total:.0f} s in {len(long)} span(s) of more than "
             f"{spans.min_s:g} s ({shown}): the field there differs from the one at the start (a magnet or steel "
             "nearby, a new mounting or calibration?), so the heading is the gyro's alone and drifts with its "
             "bias (column 'mag_rejected' = 1)")
     return info, [warn]
-
-
-SMOOTHER_BYTES_PER_SAMPLE = 1500  # measured: 1.42 kB/sample at peak (1 M samples, three N×6×6 arrays + outputs)
 
 
 def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
@@ -1720,6 +1721,9 @@ def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
             "heading nothing holds (starts at 0°, drifts with the gyro bias), so the compensation can add roll "
             "error instead of removing it (simulated bridge sensor: 0.2–1.8° roll RMS, max 4.9°, against 0.19° "
             "with a magnetometer); give the magnetometer or drop SOG/COG (--no-gnss)"]
+
+
+SMOOTHER_BYTES_PER_SAMPLE = 1500  # measured: 1.42 kB/sample at peak (1 M samples, three N×6×6 arrays + outputs)
 
 
 def available_memory() -> int | None:
