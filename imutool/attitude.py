@@ -75,7 +75,9 @@ S_WLP, S_WDOT, S_WINIT = 90, 93, 96  # lever arm: low-passed body rate (3), its 
 S_SHOCK_T = 97  # continuous time (s) the accelerometer has been beyond the shock gate
 S_MDIST = 98  # magnetic disturbance level (peak-held deviation measure, decays with mag_disturbance_hold)
 S_AFLOOR = 99  # accel white-noise floor (m²/s⁴): the 10-s mean followed down at once, up with accel_noise_rise_time
-STATE_SIZE = 100
+S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force low-pass stages (3+3), count, time
+S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
+STATE_SIZE = 110
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -87,8 +89,8 @@ P_MAG_BIAS, P_ACC_BIAS_DEV, P_BIAS_MAX, P_BIAS_HOLD = 22, 23, 24, 25
 P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
-P_ACC_NOISE_RISE = 36
-N_PARAMS = 37
+P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
+N_PARAMS = 39
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 8, 16, 32
@@ -155,6 +157,14 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                      "freedom over about this long (0: off)"),
     "nis_limit": ("1", (0.0, 1e6), "self-check: samples whose windowed NIS exceeds this are flagged "
                                    "inconsistent (0: off)"),
+    "tilt_check_window": ("s", (0.0, 1e4), "self-check of the vertical: the specific force in the world frame, "
+                                           "low-passed over about this long (two stages of half of it), must "
+                                           "point straight up, as a bounded velocity keeps its mean vertical "
+                                           "(0: off)"),
+    "tilt_check_deg": ("deg", (0.0, 90.0), "... samples where it tilts further than this from the estimate's "
+                                           "vertical (and than 3 σ of the estimate's own tilt) are flagged "
+                                           "inconsistent: a gyro in the wrong unit or scale, a reversed axis, "
+                                           "an acceleration the filter was not told of"),
     "mag_check_time": ("s", (0.0, 1e6), "self-check of the heading: warn where the magnetometer was rejected "
                                         "for longer than this (the heading there is the gyro's alone; 0: off)"),
     "lever_arm_lp_tau": ("s", (0.0, 10.0), "low-pass of the body rate before differentiating it (lever arm)"),
@@ -211,6 +221,8 @@ class EkfParams:
     mag_mode: str = "heading"
     nis_window: float = 10.0
     nis_limit: float = 3.0
+    tilt_check_window: float = 20.0
+    tilt_check_deg: float = 3.0
     mag_check_time: float = 60.0
     lever_arm_lp_tau: float = 0.1
     init_roll_pitch_sigma_deg: float = 5.0
@@ -338,6 +350,8 @@ class EkfParams:
         p[P_MAG_HOLD] = self.mag_disturbance_hold
         p[P_HEAD_SCALE] = self.heading_scale_noise
         p[P_ACC_NOISE_RISE] = self.accel_noise_rise_time
+        p[P_TILT_WIN] = self.tilt_check_window
+        p[P_TILT_LIM] = np.radians(self.tilt_check_deg)
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -817,6 +831,47 @@ def _add_rrt(P, i0, j0, s, r0, r1, r2):
 
 
 @njit(cache=True, inline="always")
+def _reset_cov(P, dx, r0, r1, r2):
+    """Error-state reset after the correction dx (rad, body axes) was put into q; r = the world vertical in body
+    axes before it. The tilt part of dx, dₜ = dx − (r·dx) r, moves the body-frame vertical; the heading uncertainty
+    must move with it, or a tilt correction turns heading variance into tilt variance and roll and pitch come to
+    depend on the magnetometer (up to 12° between a run with and one without it on `simulate ship-at-sea`
+    before this reset). So P_θθ ← G P_θθ Gᵀ, P_θb ← G P_θb with G = ΔR(dₜ)ᵀ, the rotation dₜ applies, exactly
+    orthogonal (a first-order G lets a large heading variance leak through). A heading correction (along r)
+    leaves r where it is: G = I. Solà 2017 eq. 287's first-order G = I − ½[dx×] still left half of the leak."""
+    v = r0 * dx[0] + r1 * dx[1] + r2 * dx[2]
+    # δq = (1, dₜ/2)/‖·‖ as in _apply_correction; G = R(δq)ᵀ
+    w, x, y, z = 1.0, 0.5 * (dx[0] - v * r0), 0.5 * (dx[1] - v * r1), 0.5 * (dx[2] - v * r2)
+    n2 = w * w + x * x + y * y + z * z
+    s = 2.0 / n2
+    g00, g01, g02 = 1 - s * (y * y + z * z), s * (x * y + w * z), s * (x * z - w * y)
+    g10, g11, g12 = s * (x * y - w * z), 1 - s * (x * x + z * z), s * (y * z + w * x)
+    g20, g21, g22 = s * (x * z + w * y), s * (y * z - w * x), 1 - s * (x * x + y * y)
+    for j in range(6):  # rows 0–2 of P ← G P (P_θθ and P_θb)
+        x0, x1, x2 = P[0, j], P[1, j], P[2, j]
+        P[0, j] = g00 * x0 + g01 * x1 + g02 * x2
+        P[1, j] = g10 * x0 + g11 * x1 + g12 * x2
+        P[2, j] = g20 * x0 + g21 * x1 + g22 * x2
+    for i in range(3):  # columns 0–2 of the attitude rows ← (G P_θθ) Gᵀ
+        x0, x1, x2 = P[i, 0], P[i, 1], P[i, 2]
+        P[i, 0] = g00 * x0 + g01 * x1 + g02 * x2
+        P[i, 1] = g10 * x0 + g11 * x1 + g12 * x2
+        P[i, 2] = g20 * x0 + g21 * x1 + g22 * x2
+    v = 0.5 * (P[0, 1] + P[1, 0])
+    P[0, 1] = v
+    P[1, 0] = v
+    v = 0.5 * (P[0, 2] + P[2, 0])
+    P[0, 2] = v
+    P[2, 0] = v
+    v = 0.5 * (P[1, 2] + P[2, 1])
+    P[1, 2] = v
+    P[2, 1] = v
+    for i in range(3):  # P_bθ = P_θbᵀ
+        for j in range(3, 6):
+            P[j, i] = P[i, j]
+
+
+@njit(cache=True, inline="always")
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
@@ -966,6 +1021,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                                 P[a_, b_] = v
                                 P[b_, a_] = v
                         _apply_correction(st, dx)
+                        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                     _rmat(st[0], st[1], st[2], st[3], R)
         # ---------------- accelerometer: kinematic compensation, gate, quasi-inertial low-pass ----------------
         rej = False
@@ -1019,6 +1075,22 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             force = st[S_AREJ_T] >= prm[P_REJ_TIMEOUT]
             if keep_f and (not rej or force):
                 f_out[k, 0], f_out[k, 1], f_out[k, 2] = ax, ay, az
+            if prm[P_TILT_WIN] > 0 and (not rej or force):
+                # tilt check: the compensated force in the world frame with the current attitude, two first-order
+                # stages of τ/2 (running mean until τ/2 is reached); its mean is −g·ẑ if the attitude is right,
+                # since a bounded velocity averages the acceleration out (|Δv| / τ)
+                fw0 = R[0, 0] * ax + R[0, 1] * ay + R[0, 2] * az
+                fw1 = R[1, 0] * ax + R[1, 1] * ay + R[1, 2] * az
+                fw2 = R[2, 0] * ax + R[2, 1] * ay + R[2, 2] * az
+                st[S_GWN] += 1.0
+                al = max(dt / (0.5 * prm[P_TILT_WIN] + dt) if dt > 0 else 0.0, 1.0 / st[S_GWN])
+                st[S_GW1] += al * (fw0 - st[S_GW1])
+                st[S_GW1 + 1] += al * (fw1 - st[S_GW1 + 1])
+                st[S_GW1 + 2] += al * (fw2 - st[S_GW1 + 2])
+                st[S_GW2] += al * (st[S_GW1] - st[S_GW2])
+                st[S_GW2 + 1] += al * (st[S_GW1 + 1] - st[S_GW2 + 1])
+                st[S_GW2 + 2] += al * (st[S_GW1 + 2] - st[S_GW2 + 2])
+                st[S_GWT] += max(dt, 0.0)
             if use_lp and not ext_meas and (not rej or force):
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
                 # (nearly) constant and translational acceleration averages out; two first-order stages τ/2.
@@ -1078,12 +1150,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                         if vdrop:
                             _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
                         _apply_correction(st, dx)
+                        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                         _rmat(st[0], st[1], st[2], st[3], R)
                     if prm[P_NIS_TAU] > 0 and dt > 0:  # self-check: windowed NIS per degree of freedom
                         aw = min(1.0, dt * update_every / prm[P_NIS_TAU])
                         st[S_NIS_A] += aw * (min(nis, 1e6) / 3.0 - st[S_NIS_A])
                     if ok:
                         _apply_correction(st, dx)
+                        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                         _rmat(st[0], st[1], st[2], st[3], R)
                         st[S_AREJ_T] = 0.0
                         flag |= F_ACC_USED
@@ -1128,7 +1202,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2, dx, prm[P_MAG_BIAS] == 0.0)
                     if prm[P_NIS_TAU] > 0 and dt > 0:
                         st[S_NIS_M] += min(1.0, dt * update_every / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
-                    _apply_correction(st, dx)
+                    _apply_correction(st, dx)  # dx along r: its reset is G = I
                     flag |= F_MAG_USED
                 else:
                     h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
@@ -1137,6 +1211,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     y0, y1, y2 = mx / nm - h0, my / nm - h1, mz / nm - h2
                     ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2, 0.0, True, dx)
                     _apply_correction(st, dx)
+                    _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                     flag |= F_MAG_USED
         # ---------------- outputs ----------------
         for i in range(4):
@@ -1165,7 +1240,21 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         std_out[k, 0] = np.sqrt(max(v0, 0.0))
         std_out[k, 1] = np.sqrt(max(v1, 0.0))
         std_out[k, 2] = np.sqrt(max(v2, 0.0))
-        if prm[P_NIS_LIMIT] > 0 and (st[S_NIS_A] > prm[P_NIS_LIMIT] or st[S_NIS_M] > prm[P_NIS_LIMIT]):
+        bad = prm[P_NIS_LIMIT] > 0 and (st[S_NIS_A] > prm[P_NIS_LIMIT] or st[S_NIS_M] > prm[P_NIS_LIMIT])
+        if prm[P_TILT_WIN] > 0 and st[S_GWT] >= prm[P_TILT_WIN]:
+            # the low-passed world force against the estimate's vertical: flagged beyond the limit and 3 σ of the
+            # estimate's own tilt (σ² of roll + pitch); tan x ≥ x keeps the arctangent off the common path
+            h2 = st[S_GW2] * st[S_GW2] + st[S_GW2 + 1] * st[S_GW2 + 1]
+            vz = -st[S_GW2 + 2]
+            tan2 = h2 / (vz * vz) if vz > 0.0 else 1e12
+            st[S_TILTMAX] = max(st[S_TILTMAX], tan2)
+            lim2 = prm[P_TILT_LIM] * prm[P_TILT_LIM] + 9.0 * (max(v0, 0.0) + max(v1, 0.0))
+            if tan2 > lim2:
+                ang = np.arctan2(np.sqrt(h2), vz)
+                if ang * ang > lim2:
+                    bad = True
+                    st[S_NTILT] += 1
+        if bad:
             flag |= F_INCONSISTENT
             st[S_NINC] += 1
         flags_out[k] = flag
@@ -1526,6 +1615,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
         "inconsistent_samples": int(st[S_NINC]),
+        "tilt_check_samples": int(st[S_NTILT]),
+        "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
     }
     return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None,
                           f_out if keep_cov else None), st
@@ -1707,6 +1798,27 @@ def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str
     return info, [warn]
 
 
+def tilt_check(summary: dict, params: EkfParams) -> list[str]:
+    """The warning of the vertical's self-check, from a run summary's ``tilt_check_samples`` and
+    ``tilt_check_max_deg`` (the largest tilt checked, flagged or not; both cumulative, so a streamed run's last
+    chunk gives the whole run's).
+
+    The innovation check compares the filter with its own low-passed accelerometer, which rotates with the same gyro:
+    a gyro in the wrong unit or with a reversed axis can leave both wrong together and the innovations small. The
+    world-frame mean of the specific force does not rotate with the gyro's error, and over tilt_check_window it is
+    vertical whatever the motion (|Δv| / τ: 3 m/s over 20 s is 0.9°). Measured (20 s, no flag at 3°): intact
+    ship-roll ≤ 0.4°, ship-at-sea ≤ 2.0° (1.8° without lever arm or SOG/COG), the 16 BROAD trials ≤ 1.2°; a gyro ×3
+    on ship-roll 3.2° median, an x axis reversed 6.3°."""
+    n = int(summary.get("tilt_check_samples", 0) or 0)
+    if not n:
+        return []
+    return [f"the estimate's vertical disagrees with gravity on {n} samples: the specific force in the world frame, "
+            f"low-passed over {params.tilt_check_window:g} s (its mean is vertical when the velocity is bounded), "
+            f"tilts up to {summary.get('tilt_check_max_deg', 0.0):.1f}° from it (limit {params.tilt_check_deg:g}° "
+            "and 3 σ of the estimate); a gyro in the wrong unit or scale, a reversed or swapped axis, or an "
+            "acceleration the filter was not told of (a turn without SOG/COG, a lever arm not given)"]
+
+
 def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
     """The SOG/COG turn compensation turns the course into body axes with the filter's heading. Without a
     magnetometer nothing holds that heading (it starts at 0° and drifts with the gyro bias), so the compensation
@@ -1782,6 +1894,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         check, more = heading_check(spans)
         summary.update(check)
         warnings += more
+    warnings += tilt_check(summary, params)
     warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & F_MAG_USED)))
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm)

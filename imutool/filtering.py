@@ -231,6 +231,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         nominal_dt,
         result_recording,
         run_ekf,
+        tilt_check,
     )
     from imutool.convert import META_ROOM, chunk_writer
     from imutool.loading import ChunkChecks
@@ -298,8 +299,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             if params.mag_check_time > 0:
                 mag_spans.add(res.time, res.flags & F_MAG_REJ)
             for k, v in res.summary.items():
-                if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
-                    totals[k] = int(v)  # the state carries cumulative counters
+                if isinstance(v, (int, float, np.number)) and not isinstance(v, bool):
+                    totals[k] = v  # the state carries cumulative counters (and the tilt check's running maximum)
             est = result_recording(chunk, res, params)
             if lever_arm is not None:
                 est.meta["lever_arm_m"] = [float(x) for x in lever_arm]
@@ -319,6 +320,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             check, more = heading_check(mag_spans)
             summary.update(check)
             warnings += more
+        warnings += tilt_check(totals, params)
         warnings += gnss_heading_check(gnss_used, mag_used)
         if summary["rows"] == 0:
             raise ImutoolError("no data rows", path=path)
