@@ -872,6 +872,18 @@ def _reset_cov(P, dx, r0, r1, r2):
 
 
 @njit(cache=True, inline="always")
+def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
+    """Two first-order low-pass stages of one 3-vector, in place in the state: st[s1:s1+3] follows x with the
+    gain al (= dt / (τ/2 + dt), or larger at start-up), st[s2:s2+3] follows st[s1:s1+3] with the same gain."""
+    st[s1] += al * (x0 - st[s1])
+    st[s1 + 1] += al * (x1 - st[s1 + 1])
+    st[s1 + 2] += al * (x2 - st[s1 + 2])
+    st[s2] += al * (st[s1] - st[s2])
+    st[s2 + 1] += al * (st[s1 + 1] - st[s2 + 1])
+    st[s2 + 2] += al * (st[s1 + 2] - st[s2 + 2])
+
+
+@njit(cache=True, inline="always")
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
@@ -1084,12 +1096,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 fw2 = R[2, 0] * ax + R[2, 1] * ay + R[2, 2] * az
                 st[S_GWN] += 1.0
                 al = max(dt / (0.5 * prm[P_TILT_WIN] + dt) if dt > 0 else 0.0, 1.0 / st[S_GWN])
-                st[S_GW1] += al * (fw0 - st[S_GW1])
-                st[S_GW1 + 1] += al * (fw1 - st[S_GW1 + 1])
-                st[S_GW1 + 2] += al * (fw2 - st[S_GW1 + 2])
-                st[S_GW2] += al * (st[S_GW1] - st[S_GW2])
-                st[S_GW2 + 1] += al * (st[S_GW1 + 1] - st[S_GW2 + 1])
-                st[S_GW2 + 2] += al * (st[S_GW1 + 2] - st[S_GW2 + 2])
+                _low_pass_two_stages(st, S_GW1, S_GW2, fw0, fw1, fw2, al)
                 st[S_GWT] += max(dt, 0.0)
             if use_lp and not ext_meas and (not rej or force):
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
@@ -1105,12 +1112,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 st[S_LPINIT] += 1.0
                 al = dt / (0.5 * prm[P_ACC_TAU] + dt) if dt > 0 else 0.0
                 al = max(al, 1.0 / st[S_LPINIT])  # start-up: running mean until the time constant is reached
-                st[S_LP1] += al * (i0 - st[S_LP1])
-                st[S_LP1 + 1] += al * (i1 - st[S_LP1 + 1])
-                st[S_LP1 + 2] += al * (i2 - st[S_LP1 + 2])
-                st[S_LP2] += al * (st[S_LP1] - st[S_LP2])
-                st[S_LP2 + 1] += al * (st[S_LP1 + 1] - st[S_LP2 + 1])
-                st[S_LP2 + 2] += al * (st[S_LP1 + 2] - st[S_LP2 + 2])
+                _low_pass_two_stages(st, S_LP1, S_LP2, i0, i1, i2, al)
         if is_upd:
             st[S_NUPD] += 1
             # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
