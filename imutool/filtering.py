@@ -248,7 +248,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     t_last = -np.inf
     summary: dict[str, Any] = {"input": path, "output": output, "rows": 0, "method": "ekf (streamed)",
                                "dropped_non_increasing_rows": 0}
-    totals: dict[str, int] = {}
+    totals: dict[str, float] = {}
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
@@ -300,7 +300,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 mag_spans.add(res.time, res.flags & F_MAG_REJ)
             for k, v in res.summary.items():
                 if isinstance(v, (int, float, np.number)) and not isinstance(v, bool):
-                    totals[k] = v  # the state carries cumulative counters (and the tilt check's running maximum)
+                    # the state carries cumulative counters (and the tilt check's running maximum)
+                    totals[k] = v.item() if isinstance(v, np.generic) else v
             est = result_recording(chunk, res, params)
             if lever_arm is not None:
                 est.meta["lever_arm_m"] = [float(x) for x in lever_arm]
