@@ -872,9 +872,17 @@ def _reset_cov(P, dx, r0, r1, r2):
 
 
 @njit(cache=True, inline="always")
+def _low_pass_gain(dt, half_tau, count):
+    """Gain of one first-order stage of time constant ``half_tau`` (s) over a step dt (s): dt / (τ/2 + dt), and
+    at least 1/count, so that a low-pass that has seen ``count`` samples starts as their running mean."""
+    return max(dt / (half_tau + dt) if dt > 0 else 0.0, 1.0 / count)
+
+
+@njit(cache=True, inline="always")
 def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
-    """Two first-order low-pass stages of one 3-vector, in place in the state: st[s1:s1+3] follows x with the
-    gain al (= dt / (τ/2 + dt), or larger at start-up), st[s2:s2+3] follows st[s1:s1+3] with the same gain."""
+    """Two first-order low-pass stages of one 3-vector, in place in an array (the filter state, or a local
+    buffer): st[s1:s1+3] follows x with the gain al (:func:`_low_pass_gain`), st[s2:s2+3] follows st[s1:s1+3]
+    with the same gain."""
     st[s1] += al * (x0 - st[s1])
     st[s1 + 1] += al * (x1 - st[s1 + 1])
     st[s1 + 2] += al * (x2 - st[s1 + 2])
@@ -1096,7 +1104,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 fw1 = R[1, 0] * ax + R[1, 1] * ay + R[1, 2] * az
                 fw2 = R[2, 0] * ax + R[2, 1] * ay + R[2, 2] * az
                 st[S_GWN] += 1.0
-                al = max(dt / (0.5 * prm[P_TILT_WIN] + dt) if dt > 0 else 0.0, 1.0 / st[S_GWN])
+                al = _low_pass_gain(dt, 0.5 * prm[P_TILT_WIN], st[S_GWN])
                 _low_pass_two_stages(st, S_GW1, S_GW2, fw0, fw1, fw2, al)
                 if not gap:  # the time the window has seen (a gap restarts it, above)
                     st[S_GWT] += max(dt, 0.0)
@@ -1112,8 +1120,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     st[S_LP1], st[S_LP1 + 1], st[S_LP1 + 2] = i0, i1, i2
                     st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2] = i0, i1, i2
                 st[S_LPINIT] += 1.0
-                al = dt / (0.5 * prm[P_ACC_TAU] + dt) if dt > 0 else 0.0
-                al = max(al, 1.0 / st[S_LPINIT])  # start-up: running mean until the time constant is reached
+                al = _low_pass_gain(dt, 0.5 * prm[P_ACC_TAU], st[S_LPINIT])  # running mean at start-up
                 _low_pass_two_stages(st, S_LP1, S_LP2, i0, i1, i2, al)
         if is_upd:
             st[S_NUPD] += 1
@@ -1418,9 +1425,9 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
         for i in range(3):
             y[k, i] = R[i, 0] * f[k, 0] + R[i, 1] * f[k, 1] + R[i, 2] * f[k, 2]
     half = 0.5 * tau
+    lp = np.zeros(6)  # the two stages (3 + 3), as the filter's
     for direction in range(2):  # forwards, then backwards over the forward result
-        s1 = np.zeros(3)
-        s2 = np.zeros(3)
+        lp[:] = 0.0
         cnt = 0.0
         for j in range(n):
             k = j if direction == 0 else n - 1 - j
@@ -1430,13 +1437,9 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
             v0, v1, v2 = y[k, 0], y[k, 1], y[k, 2]
             if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
                 cnt += 1.0
-                al = max(dt / (half + dt) if dt > 0 else 0.0, 1.0 / cnt)
-                for i in range(3):
-                    v = v0 if i == 0 else (v1 if i == 1 else v2)
-                    s1[i] += al * (v - s1[i])
-                    s2[i] += al * (s1[i] - s2[i])
+                _low_pass_two_stages(lp, 0, 3, v0, v1, v2, _low_pass_gain(dt, half, cnt))
             if cnt > 0 and np.isfinite(f[k, 0]):
-                y[k, 0], y[k, 1], y[k, 2] = s2[0], s2[1], s2[2]
+                y[k, 0], y[k, 1], y[k, 2] = lp[3], lp[4], lp[5]
             else:
                 y[k, 0], y[k, 1], y[k, 2] = np.nan, np.nan, np.nan
     for k in range(n):  # back into the body: out = R_Iᵀ y
