@@ -1568,13 +1568,14 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
             params: EkfParams | None = None, sog: np.ndarray | None = None, cog_deg: np.ndarray | None = None,
             state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
             cov_every_sample: bool | None = None, lever_arm: np.ndarray | None = None,
-            progress: Progress | None = None, accel_measurement: np.ndarray | None = None
-            ) -> tuple[AttitudeResult, np.ndarray]:
+            progress: Progress | None = None, accel_measurement: np.ndarray | None = None,
+            keep_force: bool = False) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
     :func:`rts_smooth`; 288 bytes/sample) and the compensated specific force (:func:`zero_lag_smooth`; 24
-    bytes/sample). GNSS compensation is used when ``sog`` (m/s) and ``cog_deg`` are given.
+    bytes/sample); ``keep_force`` keeps the force alone (:mod:`imutool.gyro_check`). GNSS compensation is used when
+    ``sog`` (m/s) and ``cog_deg`` are given.
     ``accel_measurement`` (N,3) m/s² body replaces the filter's causal low-pass as the accelerometer measurement
     (:func:`zero_lag_smooth`'s second pass).
     """
@@ -1601,7 +1602,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     std_out = np.empty((n, 3))
     flags = np.zeros(n, dtype=np.uint8)
     p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
-    f_out = np.full((n, 3), np.nan) if keep_cov else np.empty((0, 3))
+    keep_f = keep_cov or keep_force
+    f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
     if accel_measurement is None:
         meas = np.empty((0, 3))
     else:
@@ -1616,7 +1618,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         ekf_kernel(t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1], prm, every, mode,
                    cov_flag, use_gnss, lever, st, q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1],
                    p_store[i0:i1] if keep_cov else p_store, meas[i0:i1] if len(meas) else meas,
-                   f_out[i0:i1] if keep_cov else f_out)
+                   f_out[i0:i1] if keep_f else f_out)
     summary = {
         "samples": n, "updates": int(st[S_NUPD]), "accel_rejected": int(st[S_NAREJ]),
         "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
@@ -1626,7 +1628,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
     }
     return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None,
-                          f_out if keep_cov else None), st
+                          f_out if keep_f else None), st
 
 
 def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None = None,
@@ -1892,7 +1894,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     if smooth:
         check_smoother_memory(len(rec))
     res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth, lever_arm=lever_arm,
-                     progress=progress)
+                     progress=progress, keep_force=True)
     summary = dict(res.summary)
     check, warnings = self_check(res.time, res.flags)
     summary.update(check)
@@ -1904,6 +1906,13 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         warnings += more
     warnings += tilt_check(summary, params)
     warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & F_MAG_USED)))
+    from imutool.gyro_check import GyroScaleCheck  # it integrates with this module's kernels
+
+    scale_check = GyroScaleCheck(gap_dt=params.gap_factor * nominal_dt(res.time), gravity=params.gravity)
+    scale_check.add(res.time, gyro, res.bias, res.force)
+    check, more = scale_check.report()
+    summary.update(check)
+    warnings += more
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm)
     out = result_recording(rec, res, params)

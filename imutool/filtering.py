@@ -234,6 +234,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         tilt_check,
     )
     from imutool.convert import META_ROOM, chunk_writer
+    from imutool.gyro_check import GyroScaleCheck
     from imutool.loading import ChunkChecks
 
     path, output = os.fspath(path), os.fspath(output)
@@ -257,6 +258,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     n_flagged = 0
     mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
     gnss_used = mag_used = False  # SOG/COG used in some chunk; a magnetometer update taken in some chunk
+    scale_check = None  # the gyro's scale against gravity, summed chunk by chunk
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
@@ -291,7 +293,10 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 sog, cog = chunk["sog"], chunk["cog"]
                 gnss_used = True
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
-                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm)
+                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True)
+            if scale_check is None:
+                scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
+            scale_check.add(res.time, chunk["gyro"], res.bias, res.force)
             mag_used = mag_used or bool(np.any(res.flags & F_MAG_USED))
             bad = (res.flags & F_INCONSISTENT) > 0
             n_flagged += int(bad.sum())
@@ -323,6 +328,10 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             warnings += more
         warnings += tilt_check(totals, params)
         warnings += gnss_heading_check(gnss_used, mag_used)
+        if scale_check is not None:
+            check, more = scale_check.report()
+            summary.update(check)
+            warnings += more
         if summary["rows"] == 0:
             raise ImutoolError("no data rows", path=path)
         everything = checks.meta_warnings(input_warnings, warnings)

@@ -1,0 +1,175 @@
+"""Self-check of the gyro's scale against gravity: does the gyro turn the accelerometer's vertical as far as it turns?
+
+A gyro set to the wrong full-scale range, or read in the wrong unit, reads every rate k times too large. The
+attitude filter cannot see this from its innovations: its quasi-inertial low-pass and its own attitude turn with the
+same gyro, so both are wrong together, and the accelerometer updates pull the tilt back often enough that the world
+frame's mean force stays near vertical (a gyro ×2 costs 13° of inclination RMS on `simulate ship-roll` and raises
+neither the innovation check nor the tilt check).
+
+The check here uses the physics the filter relies on, without the filter's corrections:
+
+- cut the recording into windows of ``window`` s (frame of each pair of consecutive windows A, B: the gyro,
+  bias removed and scaled by a candidate s, integrated from the start of A — a quasi-inertial frame I_s);
+- the mean specific force over A and over B in I_s are both −g·ẑ when s is right, whatever the motion, because a
+  bounded velocity averages the acceleration out (|Δv| / window); with the wrong s, gravity turns in I_s by
+  (s_true − s) times the body's rotation, and the two means part;
+- J(s)² = mean over pairs of ‖m_A − m_B‖² / g² (rad², small angles) is least at the scale that makes the gyro
+  agree with gravity: ŝ (a log-spaced grid 1/128–128, fine from 0.25 to 4, refined by a parabola in log s).
+
+ŝ is the factor the gyro's rates would need: 0.5 for a gyro reading twice too fast. The check speaks when
+ŝ departs from 1 by more than ``SCALE_TOLERANCE`` (19 %: one grid step; calibration, not this check, is for
+smaller errors) **and** rescaling would remove at least ``MIN_DISCREPANCY_DEG`` of RMS window-to-window tilt
+discrepancy, E = √(J(1)² − J(ŝ)²) — a recording that hardly turns has a flat J and no verdict.
+
+Measured (window 5 s; ``python benchmarks/gyro_check.py``): ŝ = 1.00 on the 13 BROAD trials that rotate and
+E ≤ 0.6° on the 3 that hardly do; gyro ×1.5 and ×2 give ŝ = 0.67 and 0.50 on every rotating trial. On the
+simulator: intact ship-roll ŝ 1.1 (its 2 m lever arm is not given to the filter), ship-at-sea with lever arm and
+SOG/COG 0.9–1.0; ×1.5, ×2 and ×0.5 flagged on both. A bridge sensor 20 m above the roll centre run **without** its
+lever arm gives ŝ ≈ 1.5: the roll-synchronous acceleration there is what the check measures, so the warning names
+that cause too.
+
+Inputs are SI: time s, gyro and bias rad/s (body), force m/s² (body, the compensated specific force the filter fed
+its low-pass; NaN where none). The sums are additive, so a streamed run adds chunk after chunk (pairs do not span
+chunks: at most two windows per chunk are left out).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from imutool.attitude import _qmul, _rmat, _rotvec_quat
+
+WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that fast hand motion does not alias
+# candidate factors on the gyro's rates: 0.25 … 4 in steps of 2^¼ (wrong full-scale ranges), and coarse steps of 2
+# out to 1/128 and 128 (a rate in deg/s read as rad/s is 57× off)
+SCALES = 2.0 ** np.concatenate([[-7, -6, -5, -4, -3], np.arange(-8, 9) / 4.0, [3, 4, 5, 6, 7]])
+SCALE_TOLERANCE = 1.3  # ŝ within [1/1.3, 1.3]: no verdict (ranges come in steps of 1.5–2; calibration does less)
+MIN_DISCREPANCY_DEG = 1.5  # RMS window-to-window tilt discrepancy that rescaling must remove before it is said
+MAX_CHECKED_SAMPLES = 100_000  # per call: longer inputs are checked on evenly spread pairs (cost ∝ samples × scales)
+
+
+@njit(cache=True, nogil=True)
+def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max_samples, sums, counts):
+    """Add, for each candidate scale s (scales (S,)), Σ‖m_A − m_B‖²/g² over pairs of consecutive windows into
+    sums (S,) and the number of pairs into counts (S,). t (N,) s; gyro, bias (N,3) rad/s body; force (N,3) m/s²
+    body (NaN rows skipped); window s; a step > gap_dt s inside a pair drops the pair; at most ~max_samples
+    samples are integrated (pairs evenly spread)."""
+    n = t.shape[0]
+    starts = np.empty(n + 1, dtype=np.int64)
+    m = 0
+    starts[0] = 0
+    for k in range(1, n):
+        if t[k] - t[starts[m]] >= window:
+            m += 1
+            starts[m] = k
+    n_pairs = m - 1  # windows [starts[p], starts[p+1]) and [starts[p+1], starts[p+2])
+    if n_pairs <= 0:
+        return
+    per_pair = 2.0 * n / (m + 1.0)
+    stride = max(1, int(np.ceil(n_pairs * per_pair / max_samples)))
+    R = np.empty((3, 3))
+    for p in range(0, n_pairs, stride):
+        i0, i1, i2 = starts[p], starts[p + 1], starts[p + 2]
+        ok = True
+        for k in range(i0 + 1, i2):
+            if not t[k] - t[k - 1] <= gap_dt:
+                ok = False
+                break
+        if not ok:
+            continue
+        for si in range(scales.shape[0]):
+            s = scales[si]
+            a0, a1, a2, a3 = 1.0, 0.0, 0.0, 0.0
+            ma0 = ma1 = ma2 = mb0 = mb1 = mb2 = 0.0
+            ca = 0
+            cb = 0
+            for k in range(i0, i2):
+                if k > i0:
+                    dt = t[k] - t[k - 1]
+                    w0 = s * (gyro[k, 0] - bias[k, 0]) * dt
+                    w1 = s * (gyro[k, 1] - bias[k, 1]) * dt
+                    w2 = s * (gyro[k, 2] - bias[k, 2]) * dt
+                    if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2):
+                        e0, e1, e2, e3 = _rotvec_quat(w0, w1, w2)
+                        a0, a1, a2, a3 = _qmul(a0, a1, a2, a3, e0, e1, e2, e3)
+                        nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+                        a0, a1, a2, a3 = a0 / nq, a1 / nq, a2 / nq, a3 / nq
+                f0, f1, f2 = force[k, 0], force[k, 1], force[k, 2]
+                if not (np.isfinite(f0) and np.isfinite(f1) and np.isfinite(f2)):
+                    continue
+                _rmat(a0, a1, a2, a3, R)
+                v0 = R[0, 0] * f0 + R[0, 1] * f1 + R[0, 2] * f2
+                v1 = R[1, 0] * f0 + R[1, 1] * f1 + R[1, 2] * f2
+                v2 = R[2, 0] * f0 + R[2, 1] * f1 + R[2, 2] * f2
+                if k < i1:
+                    ma0 += v0
+                    ma1 += v1
+                    ma2 += v2
+                    ca += 1
+                else:
+                    mb0 += v0
+                    mb1 += v1
+                    mb2 += v2
+                    cb += 1
+            if 2 * ca < i1 - i0 or 2 * cb < i2 - i1:  # less than half of a window with a force: no pair
+                continue
+            d0, d1, d2 = ma0 / ca - mb0 / cb, ma1 / ca - mb1 / cb, ma2 / ca - mb2 / cb
+            sums[si] += (d0 * d0 + d1 * d1 + d2 * d2) / (g * g)
+            counts[si] += 1.0
+
+
+class GyroScaleCheck:
+    """Accumulates the window-pair discrepancy over one run (in memory: one :meth:`add`; streamed: one per chunk)
+    and gives the verdict (:meth:`report`)."""
+
+    def __init__(self, window: float = WINDOW_S, gap_dt: float = 0.5, gravity: float = 9.80665) -> None:
+        self.window, self.gap_dt, self.gravity = float(window), float(gap_dt), float(gravity)
+        self.sums = np.zeros(len(SCALES))
+        self.counts = np.zeros(len(SCALES))
+
+    def add(self, time: np.ndarray, gyro: np.ndarray, bias: np.ndarray, force: np.ndarray) -> None:
+        """One chunk: time (N,) s, gyro and the filter's bias (N,3) rad/s, compensated force (N,3) m/s² (body)."""
+        arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (time, gyro, bias, force)]
+        pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, SCALES, self.gravity, MAX_CHECKED_SAMPLES,
+                                self.sums, self.counts)
+
+    def estimate(self) -> tuple[float, float, int] | None:
+        """(ŝ, E rad, pairs): the gyro factor that best agrees with gravity and the RMS discrepancy it removes;
+        None without a pair."""
+        n = int(self.counts.min()) if len(self.counts) else 0
+        if n == 0:
+            return None
+        j2 = self.sums / self.counts
+        i = int(np.argmin(j2))
+        x = np.log2(SCALES)
+        best_x, best_j2 = x[i], j2[i]
+        if 0 < i < len(SCALES) - 1 and np.isclose(x[i] - x[i - 1], x[i + 1] - x[i]):  # parabola in log s
+            den = j2[i - 1] - 2 * j2[i] + j2[i + 1]
+            if den > 0:
+                off = 0.5 * (j2[i - 1] - j2[i + 1]) / den
+                best_x = x[i] + off * (x[i + 1] - x[i])
+                best_j2 = max(j2[i] - 0.25 * (j2[i - 1] - j2[i + 1]) * off, 0.0)
+        j2_one = float(j2[np.argmin(np.abs(x))])
+        return float(2.0 ** best_x), float(np.sqrt(max(j2_one - best_j2, 0.0))), n
+
+    def report(self) -> tuple[dict, list[str]]:
+        """Summary entry ``gyro_scale_check`` and the warning (one line) where the gyro disagrees with gravity."""
+        est = self.estimate()
+        if est is None:
+            return {"gyro_scale_check": {"pairs": 0, "window_s": self.window}}, []
+        scale, disc, pairs = est
+        at_edge = not SCALES[0] * 1.01 < scale < SCALES[-1] / 1.01  # beyond the grid: "at least"
+        entry = {"scale": round(scale, 3), "discrepancy_deg": round(float(np.degrees(disc)), 2), "pairs": pairs,
+                 "window_s": self.window}
+        off = scale > SCALE_TOLERANCE or scale < 1.0 / SCALE_TOLERANCE
+        if not (off and np.degrees(disc) >= MIN_DISCREPANCY_DEG):
+            return {"gyro_scale_check": entry}, []
+        entry["flagged"] = True
+        how = f"{max(scale, 1 / scale):.3g}× too " + ("fast" if scale < 1 else "slow")
+        how = "at least " + how if at_edge else how
+        return {"gyro_scale_check": entry}, [
+            f"gyro scale check: the gyro and gravity disagree on how far the sensor turns — its rates look "
+            f"{how} (scaling them by {scale:.3g} removes {np.degrees(disc):.1f}° "
+            f"RMS of tilt discrepancy between {self.window:g}-s windows); a gyro in the wrong range or unit, or an "
+            "acceleration the filter was not told of (a lever arm not given, an uncompensated turn)"]
