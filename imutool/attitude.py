@@ -394,6 +394,16 @@ def _rotvec_quat(x, y, z):
 
 
 @njit(cache=True, inline="always")
+def _turn(a0, a1, a2, a3, x, y, z):
+    """The unit quaternion a ⊗ exp(x, y, z) (a rotation vector in rad, body axes), renormalised: one step of a
+    gyro integration."""
+    e0, e1, e2, e3 = _rotvec_quat(x, y, z)
+    a0, a1, a2, a3 = _qmul(a0, a1, a2, a3, e0, e1, e2, e3)
+    nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+    return a0 / nq, a1 / nq, a2 / nq, a3 / nq
+
+
+@njit(cache=True, inline="always")
 def _vertical_in_body(q0, q1, q2, q3):
     """The world vertical (NED down) in body axes for q body→NED: the third row of R(q)."""
     return 2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)
@@ -1416,10 +1426,7 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
             w1 = wc * gyro[k, 1] + wp * gyro[k - 1, 1] - bias[k, 1]
             w2 = wc * gyro[k, 2] + wp * gyro[k - 1, 2] - bias[k, 2]
             if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2) and dti > 0:
-                e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
-                a0, a1, a2, a3 = _qmul(a0, a1, a2, a3, e0, e1, e2, e3)
-                nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-                a0, a1, a2, a3 = a0 / nq, a1 / nq, a2 / nq, a3 / nq
+                a0, a1, a2, a3 = _turn(a0, a1, a2, a3, w0 * dti, w1 * dti, w2 * dti)
         qi[k, 0], qi[k, 1], qi[k, 2], qi[k, 3] = a0, a1, a2, a3
         _rmat(a0, a1, a2, a3, R)
         for i in range(3):
@@ -1906,7 +1913,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         warnings += more
     warnings += tilt_check(summary, params)
     warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & F_MAG_USED)))
-    from imutool.gyro_check import GyroScaleCheck  # it integrates with this module's kernels
+    from imutool.gyro_check import GyroScaleCheck  # imported here: gyro_check uses this module's quaternion steps
 
     scale_check = GyroScaleCheck(gap_dt=params.gap_factor * nominal_dt(res.time), gravity=params.gravity)
     scale_check.add(res.time, gyro, res.bias, res.force)

@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from imutool.attitude import _qmul, _rmat, _rotvec_quat
+from imutool.attitude import _rmat, _turn
 
 WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that fast hand motion does not alias
 # candidate factors on the gyro's rates: 0.25 … 4 in steps of 2^¼ (wrong full-scale ranges), and coarse steps of 2
@@ -56,7 +56,8 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
     """Add, for each candidate scale s (scales (S,)), Σ‖m_A − m_B‖²/g² over pairs of consecutive windows into
     sums (S,) and the number of pairs into counts (S,). t (N,) s; gyro, bias (N,3) rad/s body; force (N,3) m/s²
     body (NaN rows skipped); window s; a step > gap_dt s inside a pair drops the pair; at most ~max_samples
-    samples are integrated (pairs evenly spread)."""
+    samples are integrated (pairs evenly spread). The rate over a step is the sample at its end (the filter's
+    default, ``gyro_integration = "rectangular"``)."""
     n = t.shape[0]
     starts = np.empty(n + 1, dtype=np.int64)
     m = 0
@@ -93,10 +94,7 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
                     w1 = s * (gyro[k, 1] - bias[k, 1]) * dt
                     w2 = s * (gyro[k, 2] - bias[k, 2]) * dt
                     if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2):
-                        e0, e1, e2, e3 = _rotvec_quat(w0, w1, w2)
-                        a0, a1, a2, a3 = _qmul(a0, a1, a2, a3, e0, e1, e2, e3)
-                        nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-                        a0, a1, a2, a3 = a0 / nq, a1 / nq, a2 / nq, a3 / nq
+                        a0, a1, a2, a3 = _turn(a0, a1, a2, a3, w0, w1, w2)
                 f0, f1, f2 = force[k, 0], force[k, 1], force[k, 2]
                 if not (np.isfinite(f0) and np.isfinite(f1) and np.isfinite(f2)):
                     continue
@@ -123,7 +121,8 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
 
 class GyroScaleCheck:
     """Accumulates the window-pair discrepancy over one run (in memory: one :meth:`add`; streamed: one per chunk)
-    and gives the verdict (:meth:`report`)."""
+    and gives the verdict (:meth:`report`). window s; gap_dt s (a longer step inside a pair drops the pair: the
+    filter's gap_factor × the nominal step); gravity m/s²."""
 
     def __init__(self, window: float = WINDOW_S, gap_dt: float = 0.5, gravity: float = 9.80665) -> None:
         self.window, self.gap_dt, self.gravity = float(window), float(gap_dt), float(gravity)
