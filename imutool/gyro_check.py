@@ -48,7 +48,10 @@ WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that f
 SCALES = 2.0 ** np.concatenate([[-7, -6, -5, -4, -3], np.arange(-8, 9) / 4.0, [3, 4, 5, 6, 7]])
 SCALE_TOLERANCE = 1.3  # ŝ within [1/1.3, 1.3]: no verdict (ranges come in steps of 1.5–2; calibration does less)
 MIN_DISCREPANCY_DEG = 1.5  # RMS window-to-window tilt discrepancy that rescaling must remove before it is said
-MAX_CHECKED_SAMPLES = 100_000  # per call: longer inputs are checked on evenly spread pairs (cost ∝ samples × scales)
+# cost ∝ samples integrated × scales (≈ 1.6 µs a sample): a run is checked whole up to FULL_CHECK_SAMPLES, beyond that
+# on evenly spread pairs, CHECKED_SHARE of its samples — per run, whatever the chunk size of a stream
+FULL_CHECK_SAMPLES = 100_000
+CHECKED_SHARE = 0.1
 
 
 @njit(cache=True, nogil=True)
@@ -56,8 +59,8 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
     """Add, for each candidate scale s (scales (S,)), Σ‖m_A − m_B‖²/g² over pairs of consecutive windows into
     sums (S,) and the number of pairs into counts (S,). t (N,) s; gyro, bias (N,3) rad/s body; force (N,3) m/s²
     body (NaN rows skipped); window s; a step > gap_dt s inside a pair drops the pair; at most ~max_samples
-    samples are integrated (pairs evenly spread). The rate over a step is the sample at its end (the filter's
-    default, ``gyro_integration = "rectangular"``)."""
+    samples are integrated (pairs evenly spread; ≤ 0: none). Returns the number of samples integrated. The rate
+    over a step is the sample at its end (the filter's default, ``gyro_integration = "rectangular"``)."""
     n = t.shape[0]
     starts = np.empty(n + 1, dtype=np.int64)
     m = 0
@@ -67,8 +70,9 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
             m += 1
             starts[m] = k
     n_pairs = m - 1  # windows [starts[p], starts[p+1]) and [starts[p+1], starts[p+2])
-    if n_pairs <= 0:
-        return
+    if n_pairs <= 0 or max_samples <= 0:
+        return 0
+    used = 0
     per_pair = 2.0 * n / (m + 1.0)
     stride = max(1, int(np.ceil(n_pairs * per_pair / max_samples)))
     R = np.empty((3, 3))
@@ -81,6 +85,7 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
                 break
         if not ok:
             continue
+        used += i2 - i0
         for si in range(scales.shape[0]):
             s = scales[si]
             a0, a1, a2, a3 = 1.0, 0.0, 0.0, 0.0
@@ -117,6 +122,7 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
             d0, d1, d2 = ma0 / ca - mb0 / cb, ma1 / ca - mb1 / cb, ma2 / ca - mb2 / cb
             sums[si] += (d0 * d0 + d1 * d1 + d2 * d2) / (g * g)
             counts[si] += 1.0
+    return used
 
 
 class GyroScaleCheck:
@@ -128,12 +134,15 @@ class GyroScaleCheck:
         self.window, self.gap_dt, self.gravity = float(window), float(gap_dt), float(gravity)
         self.sums = np.zeros(len(SCALES))
         self.counts = np.zeros(len(SCALES))
+        self.seen = self.checked = 0  # samples given, samples integrated (the budget is per run)
 
     def add(self, time: np.ndarray, gyro: np.ndarray, bias: np.ndarray, force: np.ndarray) -> None:
         """One chunk: time (N,) s, gyro and the filter's bias (N,3) rad/s, compensated force (N,3) m/s² (body)."""
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (time, gyro, bias, force)]
-        pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, SCALES, self.gravity, MAX_CHECKED_SAMPLES,
-                                self.sums, self.counts)
+        self.seen += len(arrays[0])
+        budget = int(max(FULL_CHECK_SAMPLES, CHECKED_SHARE * self.seen)) - self.checked
+        self.checked += pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, SCALES, self.gravity, budget,
+                                                self.sums, self.counts)
 
     def estimate(self) -> tuple[float, float, int] | None:
         """(ŝ, E rad, pairs): the gyro factor that best agrees with gravity and the RMS discrepancy it removes;
