@@ -91,3 +91,21 @@ def test_broad_intact_trials_are_not_flagged_and_a_doubled_gyro_is(shared):
             _, s2 = ekf_recording(_scaled(rec, 2.0))
             c2 = s2["gyro_scale_check"]
             assert c2["flagged"] and c2["scale"] == pytest.approx(0.5, abs=0.03), (f.name, c2)
+
+
+def test_the_checked_share_is_per_run_whatever_the_chunk_size():
+    """The cost is bounded per run (the first 100 000 samples whole, then 10 %): a stream in 10 000-row chunks
+    integrates no more than one call over the whole run (per-chunk budgets made a 24 h file cost 3× the filter)."""
+    n = 400_000
+    t = np.arange(n) / 100.0
+    gyro = np.zeros((n, 3))
+    gyro[:, 0] = 0.3 * np.sin(t)
+    force = np.tile([0.0, 0.0, -9.80665], (n, 1))
+    used = []
+    for chunk in (n, 10_000):
+        chk = GyroScaleCheck()
+        for i in range(0, n, chunk):
+            chk.add(t[i:i + chunk], gyro[i:i + chunk], np.zeros((min(chunk, n - i), 3)), force[i:i + chunk])
+        used.append(chk.checked)
+        assert chk.report()[0]["gyro_scale_check"]["pairs"] > 20
+    assert max(used) <= max(100_000, 0.1 * n) + 400, used  # + one pair of 2-s windows at 100 Hz
