@@ -77,7 +77,8 @@ S_MDIST = 98  # magnetic disturbance level (peak-held deviation measure, decays 
 S_AFLOOR = 99  # accel white-noise floor (m²/s⁴): the 10-s mean followed down at once, up with accel_noise_rise_time
 S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force low-pass stages (3+3), count, time
 S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
-STATE_SIZE = 110
+S_W1, S_W2 = 110, 119  # lag-weighted R_I of the two low-pass stages (3×3 each, s)
+STATE_SIZE = 128
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -90,7 +91,8 @@ P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
 P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
-N_PARAMS = 39
+P_ACC_LAG = 39
+N_PARAMS = 40
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 8, 16, 32
@@ -101,7 +103,9 @@ F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 
 # they were chosen on all 16 shared BROAD trials and the simulator, never on one file (docs/attitude.md).
 PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "gyro_noise": ("rad/s/√Hz", (1e-7, 1.0), "gyro white-noise density: process noise of the attitude"),
-    "gyro_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise (scale-factor/misalignment errors)"),
+    "gyro_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise of the tilt (across the world "
+                                          "vertical): the attitude uncertainty that gyro scale-factor and "
+                                          "misalignment errors add while the body turns (0: off)"),
     "heading_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise about the world vertical only: "
                                              "the heading uncertainty that gyro scale-factor errors add while "
                                              "the body turns (gravity corrects the tilt part; 0: off)"),
@@ -114,6 +118,8 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                                "sensor noise (0: the 10-s mean itself)"),
     "accel_lp_tau": ("s", (0.0, 100.0), "low-pass time constant of the specific force in the quasi-inertial "
                                          "frame (0: raw accelerometer, as in the paper)"),
+    "accel_lp_lag": ("bool", (0, 1), "the low-passed measurement lags a gyro-bias error by the low-pass's delay: "
+                                     "H holds that term (false: H sees the tilt only)"),
     "accel_gate": ("m/s^2", (0.0, 1e3), "shock gate: accelerometer samples with | |a| − g | above this are "
                                          "skipped for at most shock_max s (0: off)"),
     "accel_nis_gate": ("1", (0.0, 1e6), "skip accelerometer updates whose NIS exceeds this (0: off)"),
@@ -184,13 +190,14 @@ class EkfParams:
     """
 
     gyro_noise: float = 1e-3
-    gyro_scale_noise: float = 0.0
+    gyro_scale_noise: float = 0.003
     heading_scale_noise: float = 0.0005
     bias_rw: float = 2e-5
     accel_noise: float = 0.03
-    accel_noise_gain: float = 4.0
+    accel_noise_gain: float = 2.8
     accel_noise_rise_time: float = 300.0
-    accel_lp_tau: float = 1.5
+    accel_lp_tau: float = 3.0
+    accel_lp_lag: bool = True
     accel_gate: float = 0.0
     accel_nis_gate: float = 0.0
     accel_nis_soft: bool = False
@@ -352,6 +359,7 @@ class EkfParams:
         p[P_ACC_NOISE_RISE] = self.accel_noise_rise_time
         p[P_TILT_WIN] = self.tilt_check_window
         p[P_TILT_LIM] = np.radians(self.tilt_check_deg)
+        p[P_ACC_LAG] = 1.0 if self.accel_lp_lag else 0.0
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -902,6 +910,26 @@ def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
 
 
 @njit(cache=True, inline="always")
+def _shear_cov(P, M, s, X):
+    """P ← T P Tᵀ with T = [[I, s·M], [0, I]]: the covariance in error coordinates δθ' = δθ + s·M δb (M 3×3;
+    s = 1 there, s = −1 back). P_bb is unchanged, P'_ab = X = P_ab + s·M P_bb, P'_aa = P_aa + s(P_ab Mᵀ + M Xᵀ).
+    X: a 3×3 scratch array."""
+    for i in range(3):
+        for j in range(3):
+            X[i, j] = P[i, 3 + j] + s * (M[i, 0] * P[3, 3 + j] + M[i, 1] * P[4, 3 + j] + M[i, 2] * P[5, 3 + j])
+    for i in range(3):
+        for j in range(i, 3):
+            v = P[i, j] + s * (P[i, 3] * M[j, 0] + P[i, 4] * M[j, 1] + P[i, 5] * M[j, 2]
+                               + M[i, 0] * X[j, 0] + M[i, 1] * X[j, 1] + M[i, 2] * X[j, 2])
+            P[i, j] = v
+            P[j, i] = v
+    for i in range(3):
+        for j in range(3):
+            P[i, 3 + j] = X[i, j]
+            P[3 + j, i] = X[i, j]
+
+
+@njit(cache=True, inline="always")
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
@@ -941,6 +969,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     wp = prm[P_GYRO_PREV_W]  # weight of the previous gyro sample over the step (0.5: trapezoid, 0: rectangular)
     wc = 1.0 - wp
     RI = np.empty((3, 3))
+    MLAG = np.zeros((3, 3))
+    X33 = np.empty((3, 3))
     dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
     dip_lo = np.sin(dip_ref - prm[P_MAG_DIP_GATE]) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi else -2.0
     dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
@@ -981,6 +1011,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             for i in range(3):
                 P[i, i] = min(P[i, i] + inc, 10.0)
             st[S_GWN], st[S_GWT] = 0.0, 0.0  # the tilt check's window restarts: no mean across a gap
+            st[S_LPINIT] = 0.0  # so does the quasi-inertial low-pass: the frame I lost the gap's rotation
         st[S_TPREV] = t[k]
         st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2] = gk0, gk1, gk2
         st[S_COUNT] += 1.0
@@ -991,16 +1022,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             T = st[S_TACC]
             # mean rate over T from the accumulated rotation angle (for the rate-proportional noise)
             qa = prm[P_GYRO_NOISE] ** 2 * T
-            if prm[P_GYRO_SCALE] > 0:
-                ang = 2 * np.arctan2(np.sqrt(st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2),
-                                     abs(st[S_DQ]))
-                qa += (prm[P_GYRO_SCALE] * ang / T) ** 2 * T
-            _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa, prm[P_BIAS_RW] ** 2 * T)
-            if prm[P_HEAD_SCALE] > 0:  # scale-factor heading noise ∝ angle turned, about the world vertical r
-                # white rate noise of density ε·|ω|: (ε·angle/T)²·T, angle² ≈ 4‖vector part of Δq‖² (small angle)
-                ang2 = 4.0 * (st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2)
+            # gyro scale-factor noise ∝ angle turned: white rate noise of density ε·|ω|, (ε·angle/T)²·T with
+            # angle² ≈ 4‖vector part of Δq‖² (small angle); ε_tilt across the world vertical r, ε_head along it
+            ang2 = 4.0 * (st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2)
+            qs = prm[P_GYRO_SCALE] ** 2 * ang2 / T
+            _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa + qs, prm[P_BIAS_RW] ** 2 * T)
+            if prm[P_HEAD_SCALE] > 0 or qs > 0:
                 z0, z1, z2 = _vertical_in_body(st[0], st[1], st[2], st[3])
-                _add_rrt(P, 0, 0, prm[P_HEAD_SCALE] ** 2 * ang2 / T, z0, z1, z2)
+                _add_rrt(P, 0, 0, prm[P_HEAD_SCALE] ** 2 * ang2 / T - qs, z0, z1, z2)
             st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
             st[S_TACC] = 0.0
         st[S_INIT] = 1.0
@@ -1129,9 +1158,18 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 if st[S_LPINIT] == 0.0:
                     st[S_LP1], st[S_LP1 + 1], st[S_LP1 + 2] = i0, i1, i2
                     st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2] = i0, i1, i2
+                    for m in range(18):
+                        st[S_W1 + m] = 0.0
                 st[S_LPINIT] += 1.0
                 al = _low_pass_gain(dt, 0.5 * prm[P_ACC_TAU], st[S_LPINIT])  # running mean at start-up
                 _low_pass_two_stages(st, S_LP1, S_LP2, i0, i1, i2, al)
+                if prm[P_ACC_LAG] > 0:  # lag-weighted R_I: W1 = (1−α)(W1 + R_I dt), W2 = (1−α)(W2 + R_I dt) + α W1
+                    dtp = max(dt, 0.0)
+                    for a_ in range(3):
+                        for b_ in range(3):
+                            m = 3 * a_ + b_
+                            st[S_W1 + m] = (1.0 - al) * (st[S_W1 + m] + RI[a_, b_] * dtp)
+                            st[S_W2 + m] = (1.0 - al) * (st[S_W2 + m] + RI[a_, b_] * dtp) + al * st[S_W1 + m]
         if is_upd:
             st[S_NUPD] += 1
             # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
@@ -1162,11 +1200,25 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     vb = prm[P_ACC_VBIAS] == 0.0 and not cons
                     va = prm[P_ACC_HEAD] == 0.0
                     vdrop = va or vb
+                    lagh = prm[P_ACC_LAG] > 0 and use_lp and not ext_meas
+                    if lagh:  # M = R_Iᵀ W2: the low-pass output's tilt error per unit bias error (body, s)
+                        for a_ in range(3):
+                            for b_ in range(3):
+                                MLAG[a_, b_] = (RI[0, a_] * st[S_W2 + b_] + RI[1, a_] * st[S_W2 + 3 + b_]
+                                                + RI[2, a_] * st[S_W2 + 6 + b_])
+                        _shear_cov(P, MLAG, 1.0, X33)
                     fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)
                     ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons)
                     if ok and vdrop:
                         _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
+                    if lagh:
+                        _shear_cov(P, MLAG, -1.0, X33)
+                        if ok:
+                            for a_ in range(3):
+                                dx[a_] -= MLAG[a_, 0] * dx[3] + MLAG[a_, 1] * dx[4] + MLAG[a_, 2] * dx[5]
                     if not ok and prm[P_ACC_SOFT] > 0:  # de-weight instead of skipping (flagged as rejected)
+                        if lagh:  # the failed update left P as it was: its vertical forms, unsheared
+                            fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)
                         _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
                         if vdrop:
                             _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
@@ -1333,9 +1385,9 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
         T = dt if dt > 0 else 0.0
         wn2 = w0 * w0 + w1 * w1 + w2 * w2 if not gap else 0.0
         _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F, tmp6)
-        if head_scale > 0 and T > 0:  # the filter's heading noise ∝ angle turned, about the world vertical
-            z0, z1, z2 = _vertical_in_body(qp0, qp1, qp2, qp3)
-            _add_rrt(Pp, 0, 0, head_scale * head_scale * wn2 * T, z0, z1, z2)
+        if (head_scale > 0 or gyro_scale > 0) and T > 0:  # the filter's scale-factor noise: tilt across the
+            z0, z1, z2 = _vertical_in_body(qp0, qp1, qp2, qp3)  # world vertical, heading along it
+            _add_rrt(Pp, 0, 0, (head_scale * head_scale - gyro_scale * gyro_scale) * wn2 * T, z0, z1, z2)
         if gap:
             inc = (gap_rate * dt) ** 2
             for i in range(3):

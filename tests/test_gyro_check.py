@@ -76,7 +76,7 @@ def test_a_recording_that_hardly_turns_gives_no_verdict():
 
 
 def test_broad_intact_trials_are_not_flagged_and_a_doubled_gyro_is(shared):
-    """All 16 shared BROAD trials, intact: no warning, and ŝ within 3 % of 1 on every trial that turns (E ≥ 0.2°;
+    """All 16 shared BROAD trials, intact: no warning, and ŝ within 4 % of 1 on every trial that turns (E ≥ 0.2°;
     the slow-translation trial 10 hardly turns: its J is flat, ŝ 0.73 with 0.6° to explain, no verdict). Four
     trials of each kind with the gyro ×2: warned, ŝ = 0.50 ± 0.03."""
     folder = shared("broad")
@@ -86,7 +86,7 @@ def test_broad_intact_trials_are_not_flagged_and_a_doubled_gyro_is(shared):
         c = s["gyro_scale_check"]
         assert not c.get("flagged") and not any("gyro scale" in w for w in s.get("warnings", [])), (f.name, c)
         if f.name[:2] != "10":
-            assert abs(c["scale"] - 1.0) <= 0.035, (f.name, c)
+            assert abs(c["scale"] - 1.0) <= 0.04, (f.name, c)
         if f.name[:2] in ("02", "07", "16", "28"):
             _, s2 = ekf_recording(_scaled(rec, 2.0))
             c2 = s2["gyro_scale_check"]
