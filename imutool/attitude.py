@@ -33,6 +33,12 @@ filter.)
   average, shocks excluded; motion cancels to second order, so fast rotation does not pass for noise), so noisy
   and quiet sensors both get a consistent R without retuning. ``accel_lp_tau = 0`` gives the paper's
   raw-accelerometer update.
+- The low-passed measurement lags a gyro-bias error δb by the low-pass's delay: it sees the tilt error plus M·δb,
+  M = R_Iᵀ·W with W the rotation R_I weighted by the low-pass's survival function (= τ·I when still), tracked
+  exactly per stage (``accel_lp_lag``). H = [[ẑ×], [ẑ×]·M]; the update is made in the sheared error coordinates
+  δθ' = δθ + M δb (where H has the form above) and sheared back. After a data gap the low-pass restarts (its
+  frame missed the gap's rotation). ``gyro_scale_noise`` adds tilt process noise ∝ the angle turned (scale-factor
+  and misalignment errors), across the world vertical only.
 - Robustness beyond the paper: accelerometer sample skipped (not fed to the low-pass) when | ‖a‖ − g | >
   accel_gate (a shock); update skipped when its normalised innovation squared exceeds accel_nis_gate (off by
   default; forced back in after reject_timeout s of continuous rejection);
