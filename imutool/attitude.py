@@ -97,11 +97,11 @@ P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
 P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
-P_ACC_LAG = 39
-N_PARAMS = 40
+P_ACC_LAG, P_HDG_NOISE = 39, 40
+N_PARAMS = 41
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
-F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT = 1, 2, 4, 8, 16, 32
+F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
 
 
 # Every tuning constant of the EKF, with its unit, in one place (VQF's PyVQFParams is the model). Each entry:
@@ -144,6 +144,8 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "accel_vertical_bias": ("bool", (0, 1), "accelerometer updates may correct the gyro-bias component about the "
                                             "world vertical (which gravity does not observe; false: only the "
                                             "heading and rest detection learn it)"),
+    "heading_input_noise_deg": ("deg", (1e-3, 180.0), "σ of an external true heading per update (gyrocompass HDT/THS, "
+                                                      "channel heading_true); with one, the magnetometer is not used"),
     "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading per update ('full' mode: of m̂, rad)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
@@ -217,6 +219,7 @@ class EkfParams:
     accel_heading: bool = False
     mag_disturbance_hold: float = 0.5
     mag_noise_deg: float = 20.0
+    heading_input_noise_deg: float = 1.0
     mag_norm_gate: float = 0.15
     mag_dip_gate_deg: float = 10.0
     mag_norm_soft: float = 0.05
@@ -366,6 +369,7 @@ class EkfParams:
         p[P_TILT_WIN] = self.tilt_check_window
         p[P_TILT_LIM] = np.radians(self.tilt_check_deg)
         p[P_ACC_LAG] = 1.0 if self.accel_lp_lag else 0.0
+        p[P_HDG_NOISE] = np.radians(self.heading_input_noise_deg)
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -952,7 +956,7 @@ def _apply_correction(st, dx):
 
 @njit(cache=True, fastmath=_FASTMATH, nogil=True)
 def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
-               lever, st, q_out, b_out, std_out, flags_out, p_store, acc_meas, f_out):
+               lever, st, q_out, b_out, std_out, flags_out, p_store, acc_meas, f_out, hdg):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
 
     t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
@@ -962,6 +966,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     low-passed (the zero-lag smoother's), used in place of the filter's own causal low-pass; NaN: no update.
     f_out (N,3), when it has N rows: the compensated specific force each sample fed to the low-pass (m/s², body;
     NaN where none: a NaN row or a shock).
+    hdg (N,), when it has N rows: an external true heading of the body x axis (rad, NED; NaN: none), a scalar
+    heading update of σ ``heading_input_noise_deg`` projected on the world vertical, like the magnetometer's.
     """
     n = t.shape[0]
     ext_meas = acc_meas.shape[0] == n
@@ -1095,6 +1101,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         na = 0.0
         dev_a = 0.0
         ri_now = False  # RI = R(q_I) computed for this sample
+        fed = False  # this sample went into the accelerometer low-pass
         if use_lever and dt > 0:
             # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
             # differentiated (bias-free rate; the bias cancels in ω̇ and is negligible in ω × (ω × r))
@@ -1157,7 +1164,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
                 # (nearly) constant and translational acceleration averages out; two first-order stages τ/2.
                 _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
-                ri_now = True
+                ri_now = fed = True
                 i0 = RI[0, 0] * ax + RI[0, 1] * ay + RI[0, 2] * az
                 i1 = RI[1, 0] * ax + RI[1, 1] * ay + RI[1, 2] * az
                 i2 = RI[2, 0] * ax + RI[2, 1] * ay + RI[2, 2] * az
@@ -1176,6 +1183,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                             m = 3 * a_ + b_
                             st[S_W1 + m] = (1.0 - al) * (st[S_W1 + m] + RI[a_, b_] * dtp)
                             st[S_W2 + m] = (1.0 - al) * (st[S_W2 + m] + RI[a_, b_] * dtp) + al * st[S_W1 + m]
+        if (not fed and prm[P_ACC_LAG] > 0 and use_lp and not ext_meas and st[S_LPINIT] > 0 and dt > 0
+                and not gap):  # a row the low-pass skips (NaN, shock) still ages its content: α = 0
+            _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+            ri_now = True
+            for a_ in range(3):
+                for b_ in range(3):
+                    st[S_W1 + 3 * a_ + b_] += RI[a_, b_] * dt
+                    st[S_W2 + 3 * a_ + b_] += RI[a_, b_] * dt
         if is_upd:
             st[S_NUPD] += 1
             # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
@@ -1212,22 +1227,21 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                             for b_ in range(3):
                                 MLAG[a_, b_] = (RI[0, a_] * st[S_W2 + b_] + RI[1, a_] * st[S_W2 + 3 + b_]
                                                 + RI[2, a_] * st[S_W2 + 6 + b_])
+                    fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)  # before the update, error coordinates δθ
+                    if lagh:  # H = [[h×], [h×]M] is [[h×], 0] in δθ' = δθ + M δb: update there, shear back
                         _shear_cov(P, MLAG, 1.0, X33)
-                    fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)
                     ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons)
-                    if ok and vdrop:
-                        _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
+                    soft = not ok and prm[P_ACC_SOFT] > 0  # de-weight instead of skipping (flagged as rejected)
+                    if soft:
+                        _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
                     if lagh:
                         _shear_cov(P, MLAG, -1.0, X33)
-                        if ok:
+                        if ok or soft:
                             for a_ in range(3):
                                 dx[a_] -= MLAG[a_, 0] * dx[3] + MLAG[a_, 1] * dx[4] + MLAG[a_, 2] * dx[5]
-                    if not ok and prm[P_ACC_SOFT] > 0:  # de-weight instead of skipping (flagged as rejected)
-                        if lagh:  # the failed update left P as it was: its vertical forms, unsheared
-                            fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)
-                        _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
-                        if vdrop:
-                            _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
+                    if (ok or soft) and vdrop:  # in δθ coordinates, so the heading is not moved
+                        _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
+                    if soft:
                         _apply_correction(st, dx)
                         _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                         _rmat(st[0], st[1], st[2], st[3], R)
@@ -1292,6 +1306,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     _apply_correction(st, dx)
                     _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                     flag |= F_MAG_USED
+            # ---------------- external heading (gyrocompass) ----------------
+            if hdg.shape[0] > 0 and np.isfinite(hdg[k]):
+                _rmat(st[0], st[1], st[2], st[3], R)
+                yh = hdg[k] - _atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
+                yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
+                _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, prm[P_HDG_NOISE] ** 2, dx, False)
+                _apply_correction(st, dx)  # dx along r: its reset is G = I
+                flag |= F_HDG_USED
         # ---------------- outputs ----------------
         for i in range(4):
             q_out[k, i] = st[i]
@@ -1500,6 +1522,8 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
             if j > 0:
                 dt = abs(t[k] - t[k - 1 if direction == 0 else k + 1])
             v0, v1, v2 = y[k, 0], y[k, 1], y[k, 2]
+            if dt > gap_dt:
+                cnt = 0.0  # the filter's low-pass restarts after a gap (its frame missed the gap's rotation)
             if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
                 cnt += 1.0
                 _low_pass_two_stages(lp, 0, 3, v0, v1, v2, _low_pass_gain(dt, half, cnt))
@@ -1557,8 +1581,10 @@ def nominal_dt(t: np.ndarray) -> float:
     return float(np.median(d)) if d.size else 0.01
 
 
-def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) -> np.ndarray:
-    """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples."""
+def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
+                  heading: float | None = None) -> np.ndarray:
+    """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples; an
+    external true ``heading`` (rad) instead of the magnetometer's, with σ ``heading_input_noise_deg``."""
     st = np.zeros(STATE_SIZE)
     i_acc = _first_finite_row(accel)
     if i_acc < 0:
@@ -1568,7 +1594,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) 
         raise ImutoolError("the accelerometer reads exactly zero: no specific force to level the attitude with")
     roll = np.arctan2(-a[1], -a[2])
     pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
-    heading = 0.0
+    heading_mag = 0.0
     mref = np.array([np.cos(np.radians(60)), 0.0, np.sin(np.radians(60))])
     mnorm = 0.0
     if mag is not None:
@@ -1581,21 +1607,23 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams) 
 
             m = mag[i]
             mw = quat_rotate(euler_to_quat(roll, pitch, 0.0), m)
-            heading = np.arctan2(-mw[1], mw[0])
+            heading_mag = np.arctan2(-mw[1], mw[0])
             mnorm = float(np.linalg.norm(m))
             hor = np.hypot(mw[0], mw[1])
             if mnorm > 0:
                 mref = np.array([hor, 0.0, mw[2]]) / mnorm
             else:  # a zero field: no heading, no reference (the updates skip a zero-norm field)
-                heading, mnorm = 0.0, 0.0
+                heading_mag, mnorm = 0.0, 0.0
     from formats.frames import euler_to_quat
 
-    st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading)
+    if heading is not None:
+        heading = float(heading)
+    st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading if heading is not None else heading_mag)
     st[S_B:S_B + 3] = params.init_bias
     P = np.zeros((6, 6))
     rp = np.radians(params.init_roll_pitch_sigma_deg) ** 2
     P[0, 0] = P[1, 1] = rp
-    P[2, 2] = np.radians(params.init_heading_sigma_deg) ** 2
+    P[2, 2] = np.radians(params.heading_input_noise_deg if heading is not None else params.init_heading_sigma_deg) ** 2
     # express the NED-axis σ in body axes (heading σ is about the world vertical)
     from formats.frames import quat_to_matrix
 
@@ -1634,7 +1662,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
             state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
             cov_every_sample: bool | None = None, lever_arm: np.ndarray | None = None,
             progress: Progress | None = None, accel_measurement: np.ndarray | None = None,
-            keep_force: bool = False) -> tuple[AttitudeResult, np.ndarray]:
+            keep_force: bool = False, heading_deg: np.ndarray | None = None) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
@@ -1643,18 +1671,28 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     ``sog`` (m/s) and ``cog_deg`` are given.
     ``accel_measurement`` (N,3) m/s² body replaces the filter's causal low-pass as the accelerometer measurement
     (:func:`zero_lag_smooth`'s second pass).
+    ``heading_deg`` (N,) an external true heading (gyrocompass; deg, NaN where none): when given, it is the
+    heading measurement and the magnetometer is not used.
     """
     params = params or EkfParams()
     t = np.ascontiguousarray(time, dtype=np.float64)
     n = len(t)
     g = np.ascontiguousarray(gyro, dtype=np.float64)
     a = np.ascontiguousarray(accel, dtype=np.float64)
+    if heading_deg is None:
+        hdg = np.empty(0)
+    else:
+        hdg = np.radians(np.asarray(heading_deg, dtype=np.float64))
+        if hdg.shape != (n,):
+            raise ImutoolError(f"heading_deg must be ({n},), not {hdg.shape}")
+        mag = None  # a gyrocompass heading, not the magnetometer's
     use_mag = mag is not None and params.mag_mode != "off"
     m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
     if dt_nominal is None:
         dt_nominal = nominal_dt(t)
     if state is None:
-        state = initial_state(a, m if use_mag else None, params)
+        first = np.flatnonzero(np.isfinite(hdg[:100_000])) if len(hdg) else []
+        state = initial_state(a, m if use_mag else None, params, float(hdg[first[0]]) if len(first) else None)
     st = np.array(state, dtype=np.float64)
     prm = params.vector(dt_nominal)
     st[S_BIASMAX] = params.bias_max
@@ -1683,7 +1721,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         ekf_kernel(t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1], prm, every, mode,
                    cov_flag, use_gnss, lever, st, q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1],
                    p_store[i0:i1] if keep_cov else p_store, meas[i0:i1] if len(meas) else meas,
-                   f_out[i0:i1] if keep_f else f_out)
+                   f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else hdg)
     summary = {
         "samples": n, "updates": int(st[S_NUPD]), "accel_rejected": int(st[S_NAREJ]),
         "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
@@ -1734,7 +1772,7 @@ def _held_gyro(gyro: np.ndarray) -> np.ndarray:
 def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None,
                     params: EkfParams | None = None, sog: np.ndarray | None = None,
                     cog_deg: np.ndarray | None = None, lever_arm: np.ndarray | None = None,
-                    dt_nominal: float | None = None) -> AttitudeResult:
+                    dt_nominal: float | None = None, heading_deg: np.ndarray | None = None) -> AttitudeResult:
     """The smoother for the low-passed accelerometer: the RTS pass on a filter run whose low-pass has no lag.
 
     The RTS pass (:func:`rts_smooth`) assumes white measurement errors; the causal low-pass of the specific force
@@ -1762,7 +1800,7 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
     zero_phase_lp_kernel(res.time, g, first.bias, res.force, params.accel_lp_tau, params.gyro_prev_weight(),
                          params.gap_factor * dt_nominal, meas)
     again, _ = run_ekf(res.time, gyro, accel, mag, params, sog, cog_deg, keep_cov=True, dt_nominal=dt_nominal,
-                       lever_arm=lever_arm, accel_measurement=meas)
+                       lever_arm=lever_arm, accel_measurement=meas, heading_deg=heading_deg)
     out = rts_smooth(again, g, params, dt_nominal)
     del again, meas
     # gravity observes no heading: keep the new inclination (the swing of the change, about a horizontal axis)
@@ -1907,7 +1945,8 @@ def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
     return ["SOG/COG turn compensation without a magnetometer heading: the course is turned into body axes with a "
             "heading nothing holds (starts at 0°, drifts with the gyro bias), so the compensation can add roll "
             "error instead of removing it (simulated bridge sensor: 0.2–1.8° roll RMS, max 4.9°, against 0.19° "
-            "with a magnetometer); give the magnetometer or drop SOG/COG (--no-gnss)"]
+            "with a magnetometer); give the magnetometer or a gyrocompass heading (--heading, channel heading_true), "
+            "or drop SOG/COG (--no-gnss)"]
 
 
 SMOOTHER_BYTES_PER_SAMPLE = 1500  # measured: 1.42 kB/sample at peak (1 M samples, three N×6×6 arrays + outputs)
@@ -1936,6 +1975,29 @@ def check_smoother_memory(n: int) -> None:
                            f"and {size(have)} is available; smooth a shorter span or filter without --smooth")
 
 
+def _heading_channel(rec: Recording) -> np.ndarray | None:
+    """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None."""
+    if "heading_true" not in rec.channels:
+        return None
+    return np.asarray(rec.get("heading_true", "deg") if "heading_true" in rec.units else rec["heading_true"], float)
+
+
+def heading_source_report(heading_given: bool, mag_given: bool, heading_updates: int,
+                          params: EkfParams) -> tuple[dict, list[str]]:
+    """Where the heading came from (summary ``heading_source``, ``heading_input_updates``), and one warning
+    where an external heading was given (a ``heading_true`` channel or --heading) but held no usable value: the
+    magnetometer is then not used either, so the heading is the gyro's alone."""
+    if heading_given:
+        out = {"heading_source": "heading_true (external; magnetometer not used)",
+               "heading_input_updates": int(heading_updates)}
+        if heading_updates == 0:
+            return out, ["heading_true (external heading) holds no valid value in the run: the magnetometer is not "
+                         "used when one is given, so the heading is the gyro's alone (drop the column or fix the "
+                         "heading feed)"]
+        return out, []
+    return {"heading_source": "magnetometer" if mag_given and params.mag_mode != "off" else "none (gyro)"}, []
+
+
 def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool = False,
                   use_gnss: bool = True, lever_arm: np.ndarray | None = None,
                   progress: Progress | None = None) -> tuple[Recording, dict]:
@@ -1952,6 +2014,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     gyro = rec.get("gyro", "rad/s") if "gyro" in rec.units else rec["gyro"]
     accel = rec.get("accel", "m/s^2") if "accel" in rec.units else rec["accel"]
     mag = rec["mag"] if "mag" in rec.channels else None
+    heading = _heading_channel(rec)
     sog = cog = None
     if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
         sog = rec.get("sog", "m/s") if "sog" in rec.units else rec["sog"]
@@ -1959,9 +2022,13 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     if smooth:
         check_smoother_memory(len(rec))
     res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth, lever_arm=lever_arm,
-                     progress=progress, keep_force=True)
+                     progress=progress, keep_force=True, heading_deg=heading)
     summary = dict(res.summary)
     check, warnings = self_check(res.time, res.flags)
+    source, more = heading_source_report(heading is not None, mag is not None,
+                                         int(np.count_nonzero(res.flags & F_HDG_USED)), params)
+    summary.update(source)
+    warnings += more
     summary.update(check)
     if params.mag_check_time > 0:
         spans = FlagSpans(params.mag_check_time)
@@ -1970,7 +2037,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         summary.update(check)
         warnings += more
     warnings += tilt_check(summary, params)
-    warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & F_MAG_USED)))
+    warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & (F_MAG_USED | F_HDG_USED))))
     from imutool.gyro_check import GyroScaleCheck  # imported here: gyro_check uses this module's quaternion steps
 
     scale_check = GyroScaleCheck(gap_dt=params.gap_factor * nominal_dt(res.time), gravity=params.gravity)
@@ -1979,11 +2046,12 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     summary.update(check)
     warnings += more
     if smooth:
-        res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm)
+        res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
     if lever_arm is not None:
         out.meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
         out.meta["lever_arm_frame"] = "body FRD, sensor relative to the centre of rotation"
+    out.meta["heading_source"] = summary["heading_source"]
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
         summary["warnings"] = list(summary.get("warnings") or []) + warnings

@@ -52,11 +52,12 @@ class FilterResult:
 
 def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
             method: str = "ekf", smooth: bool = False, gnss: str | os.PathLike | None = None,
-            stream_mb: float = 300.0) -> bool:
+            stream_mb: float = 300.0, heading: str | os.PathLike | None = None) -> bool:
     """Whether :func:`run_filter` streams: causal EKF, no GNSS file, an output file to stream into, and a CSV
     input larger than ``stream_mb`` MB, or a Parquet input whose data take more than that in memory (rows ×
     columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold 2 GB of float64)."""
-    if isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None:
+    if (isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None
+            or heading is not None):
         return False
     kind = formats.kind_of(source)
     if kind not in STREAMABLE:
@@ -76,7 +77,8 @@ def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | N
 def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
                method: str = "ekf", params: Any = None, smooth: bool = False,
                lever_arm: Any = None, gnss: str | os.PathLike | None = None, use_gnss: bool = True,
-               cutoff_hz: float = 0.5, order: int = 2, compass: Any = None, params_file: str | None = None,
+               heading: str | os.PathLike | None = None, cutoff_hz: float = 0.5, order: int = 2,
+               compass: Any = None, params_file: str | None = None,
                chunk_rows: int = 1_000_000, stream_mb: float = 300.0, strict: bool = False,
                progress: Progress | None = None,
                on_input: Callable[[str, dict[str, Any]], None] | None = None,
@@ -86,9 +88,11 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
     method: ``ekf`` (quaternion EKF with gyro-bias states; ``params`` an :class:`imutool.attitude.EkfParams`,
     ``smooth`` adds the zero-lag smoother (:func:`imutool.attitude.zero_lag_smooth`), ``lever_arm`` the sensor
     position from the centre of rotation, m, body FRD, ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg),
-    ``use_gnss=False`` ignores sog/cog), ``lpf`` (Butterworth low-passed accelerometer tilt + magnetic heading,
-    ``cutoff_hz``, ``order``), ``accel`` (unfiltered accelerometer tilt) or ``compass`` (heading KF; ``compass`` an
-    :class:`imutool.compass.CompassParams`; the deviation card of ``calibration_file`` is applied).
+    ``use_gnss=False`` ignores sog/cog, ``heading`` an NMEA (HDT/THS) or CSV file with heading_true (deg), a
+    gyrocompass heading used instead of the magnetometer), ``lpf`` (Butterworth low-passed accelerometer tilt +
+    magnetic heading, ``cutoff_hz``, ``order``), ``accel`` (unfiltered accelerometer tilt) or ``compass``
+    (heading KF; ``compass`` an :class:`imutool.compass.CompassParams`; the deviation card of
+    ``calibration_file`` is applied).
 
     A path is loaded by :func:`imutool.loading.load_recording` with ``load_options`` (columns, profile, topic,
     stamp, duplicates, backwards, mounting, calibration_file) and ``strict``; ``on_input(path, report)`` is called
@@ -108,7 +112,7 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
 
         params = params if params is not None else EkfParams()
     if not isinstance(source, Recording) and streams(source, output, method=method, smooth=smooth, gnss=gnss,
-                                                     stream_mb=stream_mb):
+                                                     stream_mb=stream_mb, heading=heading):
         summary = stream_ekf(source, output, params, chunk_rows=chunk_rows,  # type: ignore[arg-type]
                              use_gnss=use_gnss, lever_arm=lever, strict=strict, progress=progress,
                              **{k: load_options.get(k) for k in ("columns", "profile", "mounting",
@@ -135,6 +139,8 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
 
         if gnss is not None and use_gnss:
             rec = attach_gnss(rec, gnss)
+        if heading is not None:
+            rec = attach_heading(rec, heading)
         out, s = ekf_recording(rec, params, smooth=smooth, use_gnss=use_gnss, lever_arm=lever, progress=progress)
         if smooth:
             gain = smoother_gain(rec, out, params, use_gnss=use_gnss, lever_arm=lever)
@@ -206,6 +212,35 @@ def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
     return out
 
 
+HEADING_MAX_GAP_S = 5.0  # a gyrocompass heading is interpolated between fixes at most this far apart (s)
+
+
+def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = HEADING_MAX_GAP_S) -> Recording:
+    """A copy of ``rec`` with ``heading_true`` (deg, [0, 360)) interpolated from an NMEA (HDT/THS) or CSV file
+    with a heading_true column: unwrapped, linear between fixes, NaN outside the file's time span and between
+    fixes more than ``max_gap_s`` apart (a gyrocompass that stopped is not drawn as a straight line). The
+    filter then takes its heading from it and not from the magnetometer."""
+    path = os.fspath(path)
+    h = formats.read(path)
+    # NMEA's true heading (HDT, THS, HDG with deviation and variation) is read as channel "heading"; a CSV's
+    # "heading" may be an estimate (imutool's own output has one), so a CSV must say heading_true
+    ch = "heading_true" if "heading_true" in h.channels else "heading" if formats.kind_of(path) == "nmea" else None
+    if ch is None or ch not in h.channels:
+        raise ImutoolError(f"no true heading (have {', '.join(h.channels)}); need HDT/THS sentences or a CSV "
+                           "column heading_true (deg)", path=path)
+    hd = np.asarray(h.get(ch, "deg") if ch in h.units else h[ch], float)
+    ok = np.isfinite(hd) & np.isfinite(h.time)
+    if ok.sum() < 2:
+        raise ImutoolError("fewer than two valid heading fixes", path=path)
+    tf, hf = h.time[ok], np.unwrap(np.radians(hd[ok]))
+    out = rec.copy()
+    val = np.degrees(np.interp(rec.time, tf, hf, left=np.nan, right=np.nan)) % 360
+    j = np.clip(np.searchsorted(tf, rec.time), 1, len(tf) - 1)
+    val[(tf[j] - tf[j - 1]) > max_gap_s] = np.nan
+    out.add("heading_true", val, "deg")
+    return out
+
+
 def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, *, chunk_rows: int = 1_000_000,
                use_gnss: bool = True, lever_arm: np.ndarray | None = None, columns: str | None = None,
                profile: str | None = None, mounting: str | None = None, calibration_file: str | None = None,
@@ -221,12 +256,14 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     the end, into the output's metadata (``warnings``, ``validation``).
     """
     from imutool.attitude import (
+        F_HDG_USED,
         F_INCONSISTENT,
         F_MAG_REJ,
         F_MAG_USED,
         FlagSpans,
         gnss_heading_check,
         heading_check,
+        heading_source_report,
         inconsistency_report,
         nominal_dt,
         result_recording,
@@ -257,7 +294,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     flagged = FlagSpans(0.0)  # spans the self-check flagged (samples more than 1 s apart split a span)
     n_flagged = 0
     mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
-    gnss_used = mag_used = False  # SOG/COG used in some chunk; a magnetometer update taken in some chunk
+    gnss_used = mag_used = False  # SOG/COG used in some chunk; a heading update (mag or external) taken in some chunk
+    heading_given = mag_given = False  # a heading_true / mag column in some chunk
+    heading_updates = 0
     scale_check = None  # the gyro's scale against gravity, summed chunk by chunk
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
@@ -293,11 +332,15 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 sog, cog = chunk["sog"], chunk["cog"]
                 gnss_used = True
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
-                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True)
+                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True,
+                                 heading_deg=chunk.channels.get("heading_true"))
             if scale_check is None:
                 scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
             scale_check.add(res.time, chunk["gyro"], res.bias, res.force)
-            mag_used = mag_used or bool(np.any(res.flags & F_MAG_USED))
+            mag_used = mag_used or bool(np.any(res.flags & (F_MAG_USED | F_HDG_USED)))
+            heading_given = heading_given or "heading_true" in chunk.channels
+            mag_given = mag_given or "mag" in chunk.channels
+            heading_updates += int(np.count_nonzero(res.flags & F_HDG_USED))
             bad = (res.flags & F_INCONSISTENT) > 0
             n_flagged += int(bad.sum())
             flagged.add(res.time, bad)
@@ -308,6 +351,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                     # the state carries cumulative counters (and the tilt check's running maximum)
                     totals[k] = v.item() if isinstance(v, np.generic) else v
             est = result_recording(chunk, res, params)
+            est.meta["heading_source"] = heading_source_report(heading_given, mag_given, heading_updates,
+                                                               params)[0]["heading_source"]  # final at the end
             if lever_arm is not None:
                 est.meta["lever_arm_m"] = [float(x) for x in lever_arm]
             w.write(est)
@@ -328,6 +373,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             warnings += more
         warnings += tilt_check(totals, params)
         warnings += gnss_heading_check(gnss_used, mag_used)
+        check, more = heading_source_report(heading_given, mag_given, heading_updates, params)
+        summary.update(check)
+        warnings += more
         if scale_check is not None:
             check, more = scale_check.report()
             summary.update(check)
@@ -336,6 +384,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             raise ImutoolError("no data rows", path=path)
         everything = checks.meta_warnings(input_warnings, warnings)
         w.set_final_meta({"validation": {k: v for k, v in validation.items() if k != "warnings"},
+                          "heading_source": summary["heading_source"],
                           **({"warnings": everything} if everything else {})})
     summary.update(totals)
     summary["samples"] = summary["rows"]

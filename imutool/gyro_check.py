@@ -21,10 +21,10 @@ The check here uses the physics the filter relies on, without the filter's corre
 smaller errors) **and** rescaling would remove at least ``MIN_DISCREPANCY_DEG`` of RMS window-to-window tilt
 discrepancy, E = √(J(1)² − J(ŝ)²) — a recording that hardly turns has a flat J and no verdict.
 
-Measured (window 2 s; ``python benchmarks/gyro_check.py``): on the 13 BROAD trials that turn, intact, ŝ 0.97–0.99
-(E ≤ 4.4°, none warned); the 3 that hardly turn have a flat J (trial 10: ŝ 0.73, E 0.6°, no verdict). Gyro ×1.5,
-×2, ×0.5 are warned on every rotating trial, ŝ 0.65–0.68, 0.47–0.51, 1.90–1.99 (at 400 °/s a wrong scale can alias
-in the 4-s pair: BROAD 21 ×1.5 is named 2.34 — still warned). On the simulator: intact ship-roll ŝ 1.08 (its 2 m
+Measured (window 2 s; ``python benchmarks/gyro_check.py``): on the 13 BROAD trials that turn, intact, ŝ 0.96–1.00
+(E ≤ 4.2°, none warned); the 3 that hardly turn have a flat J (trial 10: ŝ 0.71, E 0.7°, no verdict). Gyro ×1.5,
+×2, ×0.5 are warned on every rotating trial, ŝ 0.66–0.68, 0.48–0.50, 1.92–1.99 (at 400 °/s a wrong scale can alias
+in the 4-s pair: BROAD 21 ×1.5 is named 14.65 — still warned). On the simulator: intact ship-roll ŝ 1.08 (its 2 m
 lever arm is not given to the filter), ship-at-sea with lever arm and SOG/COG 0.84–0.97 (E ≤ 0.9°); ×1.5, ×2 and
 ×0.5 warned on both. A bridge sensor 36 m from the roll centre run **without** its lever arm gives ŝ 1.58, E 3.5°
 and is warned: the roll-synchronous acceleration there is what the check measures (and its roll is 1.2–2° off), so

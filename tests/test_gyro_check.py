@@ -77,7 +77,7 @@ def test_a_recording_that_hardly_turns_gives_no_verdict():
 
 def test_broad_intact_trials_are_not_flagged_and_a_doubled_gyro_is(shared):
     """All 16 shared BROAD trials, intact: no warning, and ŝ within 4 % of 1 on every trial that turns (E ≥ 0.2°;
-    the slow-translation trial 10 hardly turns: its J is flat, ŝ 0.73 with 0.6° to explain, no verdict). Four
+    the slow-translation trial 10 hardly turns: its J is flat, ŝ 0.71 with 0.7° to explain, no verdict). Four
     trials of each kind with the gyro ×2: warned, ŝ = 0.50 ± 0.03."""
     folder = shared("broad")
     for f in sorted(folder.glob("*.csv")):

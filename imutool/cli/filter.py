@@ -54,6 +54,10 @@ from imutool.cli.common import (
               help="EKF: NMEA or CSV file with sog (m/s) and cog (deg) for centripetal compensation "
                    "(sog/cog columns of INPUT are used automatically).")
 @click.option("--no-gnss", is_flag=True, help="EKF: ignore sog/cog even when present.")
+@click.option("--heading", "heading_path", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="EKF: NMEA (HDT/THS) or CSV file with heading_true (deg) from a gyrocompass: the filter's heading "
+                   "measurement instead of the magnetometer (a heading_true column of INPUT is used "
+                   "automatically).")
 @click.option("--cutoff", type=float, default=0.5, show_default=True, help="lpf: cutoff frequency, Hz.")
 @click.option("--order", type=int, default=2, show_default=True, help="lpf: Butterworth order.")
 @click.option("--compass-model", type=click.Choice(["auto", "scalar", "gyro"]), default="auto", show_default=True,
@@ -73,7 +77,8 @@ from imutool.cli.common import (
 @safe_outputs("output", "save_params")
 def filter_cmd(input_path: str, output: str, method: str, params_file: str | None, param_items: tuple[str, ...],
                save_params: str | None, update_every: int | None, mag_mode: str | None, smooth: bool,
-               lever_arm: str | None, gnss_path: str | None, no_gnss: bool, cutoff: float, order: int,
+               lever_arm: str | None, gnss_path: str | None, no_gnss: bool, heading_path: str | None,
+               cutoff: float, order: int,
                compass_model: str, comp_q: float, comp_r: float, variation: float, paper_init: bool,
                chunk_rows: int, stream_mb: float, as_json: bool, quiet: bool, **io: Any) -> None:
     """Estimate roll, pitch and heading (deg) from INPUT (gyro/accel/mag, or an NMEA heading for compass).
@@ -98,6 +103,7 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
     with lazy_bar("filter", unit="samples", quiet=quiet) as b:
         res = run_filter(input_path, output, method=method, params=params, smooth=smooth, lever_arm=lever,
                          gnss=gnss_path if gnss_path and not no_gnss else None, use_gnss=not no_gnss,
+                         heading=heading_path,
                          cutoff_hz=cutoff, order=order,
                          compass=CompassParams(q=comp_q, r=comp_r, model=compass_model, variation_deg=variation,
                                                paper_init=paper_init),
