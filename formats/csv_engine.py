@@ -380,6 +380,8 @@ def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: i
                         val = decimal_to_double(w, q)
                         if neg:
                             val = -val
+            elif p != p0:  # a decimal point and no digit (".", ".nan", "-.inf"): not a number float() reads
+                fstat = _GARBAGE
             else:
                 n = _match_word(buf, p, end, "nan")
                 if n:

@@ -549,3 +549,13 @@ def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings):
         w.write(rec)
         w.set_final_meta(final)
     assert read_csv(str(q)).meta["warnings"] == final["warnings"]
+
+
+def test_a_decimal_point_without_digits_is_not_a_number(tmp_path):
+    """'.nan', '-.inf' and '.' are not numbers to float(); the reader skipped none of them before (it took the
+    word after the point: '.nan' read as NaN — found by the fuzz test above). They are counted, skipped rows."""
+    p = tmp_path / "dots.csv"
+    p.write_text("time,a,b\n0,0,.nan\n1,1,-.inf\n2,2,.\n3,3,nan\n4,4,-.5e1\n")
+    rec = read_csv(str(p))
+    assert rec.meta["skipped_rows"] == 3
+    assert np.array_equal(rec.time, [3.0, 4.0]) and np.isnan(rec["b"][0]) and rec["b"][1] == -5.0
