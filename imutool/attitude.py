@@ -84,7 +84,8 @@ S_AFLOOR = 99  # accel white-noise floor (m²/s⁴): the 10-s mean followed down
 S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force low-pass stages (3+3), count, time
 S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
 S_W1, S_W2 = 110, 119  # lag-weighted R_I of the two low-pass stages (3×3 each, s)
-STATE_SIZE = 128
+S_HLAST, S_HREJ_T, S_NHREJ = 128, 129, 130  # external heading: last update time (s), time rejected (s), count
+STATE_SIZE = 131
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -97,8 +98,8 @@ P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
 P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
-P_ACC_LAG, P_HDG_NOISE = 39, 40
-N_PARAMS = 41
+P_ACC_LAG, P_HDG_NOISE, P_HDG_EVERY = 39, 40, 41
+N_PARAMS = 42
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
@@ -146,6 +147,10 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                             "heading and rest detection learn it)"),
     "heading_input_noise_deg": ("deg", (1e-3, 180.0), "σ of an external true heading per update (gyrocompass HDT/THS, "
                                                       "channel heading_true); with one, the magnetometer is not used"),
+    "heading_input_interval": ("s", (0.0, 3600.0), "the external heading is used at most once per this interval: "
+                                                   "a gyrocompass's errors are correlated over seconds, and an "
+                                                   "interpolated or held column must not count each IMU sample "
+                                                   "as an independent fix (0: every sample)"),
     "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading per update ('full' mode: of m̂, rad)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
@@ -220,6 +225,7 @@ class EkfParams:
     mag_disturbance_hold: float = 0.5
     mag_noise_deg: float = 20.0
     heading_input_noise_deg: float = 1.0
+    heading_input_interval: float = 1.0
     mag_norm_gate: float = 0.15
     mag_dip_gate_deg: float = 10.0
     mag_norm_soft: float = 0.05
@@ -370,6 +376,7 @@ class EkfParams:
         p[P_TILT_LIM] = np.radians(self.tilt_check_deg)
         p[P_ACC_LAG] = 1.0 if self.accel_lp_lag else 0.0
         p[P_HDG_NOISE] = np.radians(self.heading_input_noise_deg)
+        p[P_HDG_EVERY] = self.heading_input_interval
         return p
 
     def gyro_prev_weight(self) -> float:
@@ -940,6 +947,27 @@ def _shear_cov(P, M, s, X):
 
 
 @njit(cache=True, inline="always")
+def _reset_heading(st, P, r0, r1, r2, y, s2):
+    """Take a heading outright: turn q by y (rad) about the world vertical and let P forget the heading (its
+    covariance along r, the world vertical in body axes, with everything) before setting its variance to s2
+    (rad²): P_θθ ← (I − r rᵀ) P_θθ (I − r rᵀ) + s2 r rᵀ, P_θb ← (I − r rᵀ) P_θb."""
+    c, s = np.cos(0.5 * y), np.sin(0.5 * y)
+    q0, q1, q2, q3 = _qmul(c, 0.0, 0.0, s, st[0], st[1], st[2], st[3])
+    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    st[0], st[1], st[2], st[3] = q0 / n, q1 / n, q2 / n, q3 / n
+    r = (r0, r1, r2)
+    for j in range(6):  # rows: (I − r rᵀ) applied to the attitude rows
+        v = r0 * P[0, j] + r1 * P[1, j] + r2 * P[2, j]
+        for i in range(3):
+            P[i, j] -= r[i] * v
+    for i in range(6):  # columns: the same on the attitude columns
+        v = P[i, 0] * r0 + P[i, 1] * r1 + P[i, 2] * r2
+        for j in range(3):
+            P[i, j] -= v * r[j]
+    _add_rrt(P, 0, 0, s2, r0, r1, r2)
+
+
+@njit(cache=True, inline="always")
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
@@ -1307,13 +1335,28 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                     flag |= F_MAG_USED
             # ---------------- external heading (gyrocompass) ----------------
-            if hdg.shape[0] > 0 and np.isfinite(hdg[k]):
+            if hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
+                dth = t[k] - st[S_HLAST] if np.isfinite(st[S_HLAST]) else 0.0
+                st[S_HLAST] = t[k]
                 _rmat(st[0], st[1], st[2], st[3], R)
                 yh = hdg[k] - _atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
                 yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
-                _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, prm[P_HDG_NOISE] ** 2, dx, False)
-                _apply_correction(st, dx)  # dx along r: its reset is G = I
-                flag |= F_HDG_USED
+                s2h = prm[P_HDG_NOISE] ** 2
+                # a glitched fix is skipped (innovation beyond 4σ), for at most 5 s running: a heading that stays
+                # away that long is the gyrocompass's, and the filter's own is the one to give way
+                vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
+                if yh * yh > 16.0 * (vh + s2h) and st[S_HREJ_T] < 5.0:
+                    st[S_HREJ_T] += dth
+                    st[S_NHREJ] += 1
+                elif yh * yh > 16.0 * (vh + s2h):  # rejected for 5 s: the gyrocompass's heading is taken outright
+                    st[S_HREJ_T] = 0.0
+                    _reset_heading(st, P, R[2, 0], R[2, 1], R[2, 2], yh, s2h)
+                    flag |= F_HDG_USED
+                else:
+                    st[S_HREJ_T] = 0.0
+                    _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, s2h, dx, False)
+                    _apply_correction(st, dx)  # dx along r: its reset is G = I
+                    flag |= F_HDG_USED
         # ---------------- outputs ----------------
         for i in range(4):
             q_out[k, i] = st[i]
@@ -1584,7 +1627,7 @@ def nominal_dt(t: np.ndarray) -> float:
 def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
                   heading: float | None = None) -> np.ndarray:
     """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples; an
-    external true ``heading`` (rad) instead of the magnetometer's, with σ ``heading_input_noise_deg``."""
+    external true ``heading`` (rad) instead of the magnetometer's (σ ``init_heading_sigma_deg`` either way)."""
     st = np.zeros(STATE_SIZE)
     i_acc = _first_finite_row(accel)
     if i_acc < 0:
@@ -1623,7 +1666,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
     P = np.zeros((6, 6))
     rp = np.radians(params.init_roll_pitch_sigma_deg) ** 2
     P[0, 0] = P[1, 1] = rp
-    P[2, 2] = np.radians(params.heading_input_noise_deg if heading is not None else params.init_heading_sigma_deg) ** 2
+    P[2, 2] = np.radians(params.init_heading_sigma_deg) ** 2  # a first fix may be a glitch: the filter stays open
     # express the NED-axis σ in body axes (heading σ is about the world vertical)
     from formats.frames import quat_to_matrix
 
@@ -1635,6 +1678,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
     st[S_MNORM] = mnorm
     st[S_DQ] = 1.0
     st[S_QI] = 1.0
+    st[S_HLAST] = -np.inf
     return st
 
 
@@ -1690,9 +1734,12 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
     if dt_nominal is None:
         dt_nominal = nominal_dt(t)
-    if state is None:
-        first = np.flatnonzero(np.isfinite(hdg[:100_000])) if len(hdg) else []
-        state = initial_state(a, m if use_mag else None, params, float(hdg[first[0]]) if len(first) else None)
+    if state is None:  # the initial heading: a fix within 100 samples of the first valid accelerometer row (the
+        # same in memory and streamed); later fixes pull the heading in through the filter's updates
+        i_acc = _first_finite_row(a)
+        near = hdg[max(i_acc, 0):max(i_acc, 0) + 100] if len(hdg) else hdg
+        first = np.flatnonzero(np.isfinite(near))
+        state = initial_state(a, m if use_mag else None, params, float(near[first[0]]) if len(first) else None)
     st = np.array(state, dtype=np.float64)
     prm = params.vector(dt_nominal)
     st[S_BIASMAX] = params.bias_max
@@ -1730,6 +1777,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         "tilt_check_samples": int(st[S_NTILT]),
         "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
     }
+    if len(hdg):
+        summary["heading_input_rejected"] = int(st[S_NHREJ])
     return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None,
                           f_out if keep_f else None), st
 
@@ -1983,13 +2032,20 @@ def _heading_channel(rec: Recording) -> np.ndarray | None:
 
 
 def heading_source_report(heading_given: bool, mag_given: bool, heading_updates: int,
-                          params: EkfParams) -> tuple[dict, list[str]]:
+                          params: EkfParams, duration_s: float = 0.0) -> tuple[dict, list[str]]:
     """Where the heading came from (summary ``heading_source``, ``heading_input_updates``), and one warning
-    where an external heading was given (a ``heading_true`` channel or --heading) but held no usable value: the
-    magnetometer is then not used either, so the heading is the gyro's alone."""
+    where an external heading was given (a ``heading_true`` channel or --heading) but held no usable value, or
+    covered less than half of the run's ``duration_s`` (s): the magnetometer is then not used either, so the
+    heading is the gyro's alone there."""
     if heading_given:
         out = {"heading_source": "heading_true (external; magnetometer not used)",
                "heading_input_updates": int(heading_updates)}
+        if heading_updates and duration_s > 0 and params.heading_input_interval > 0:
+            share = heading_updates * params.heading_input_interval / duration_s
+            if share < 0.5:
+                return out, [f"the external heading (heading_true) was used {heading_updates} times over "
+                             f"{duration_s:.0f} s: it covers about {100 * min(share, 1):.0f} % of the run; in between "
+                             "the heading is the gyro's alone (the magnetometer is not used when one is given)"]
         if heading_updates == 0:
             return out, ["heading_true (external heading) holds no valid value in the run: the magnetometer is not "
                          "used when one is given, so the heading is the gyro's alone (drop the column or fix the "
@@ -2026,7 +2082,8 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     summary = dict(res.summary)
     check, warnings = self_check(res.time, res.flags)
     source, more = heading_source_report(heading is not None, mag is not None,
-                                         int(np.count_nonzero(res.flags & F_HDG_USED)), params)
+                                         int(np.count_nonzero(res.flags & F_HDG_USED)), params,
+                                         float(res.time[-1] - res.time[0]) if len(res.time) else 0.0)
     summary.update(source)
     warnings += more
     summary.update(check)

@@ -217,9 +217,11 @@ HEADING_MAX_GAP_S = 5.0  # a gyrocompass heading is interpolated between fixes a
 
 def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = HEADING_MAX_GAP_S) -> Recording:
     """A copy of ``rec`` with ``heading_true`` (deg, [0, 360)) interpolated from an NMEA (HDT/THS) or CSV file
-    with a heading_true column: unwrapped, linear between fixes, NaN outside the file's time span and between
-    fixes more than ``max_gap_s`` apart (a gyrocompass that stopped is not drawn as a straight line). The
-    filter then takes its heading from it and not from the magnetometer."""
+    with a heading_true column: fixes sorted by time (of equal times the last read), unwrapped, linear between
+    fixes, NaN outside the file's time span and strictly between fixes more than ``max_gap_s`` apart (a
+    gyrocompass that stopped is not drawn as a straight line). THS fixes in mode S, M or V are dropped; a file
+    without a clock (NMEA without time stamps or RMC/ZDA) is refused. The filter then takes its heading from it
+    (at most once per ``heading_input_interval``) and not from the magnetometer."""
     path = os.fspath(path)
     h = formats.read(path)
     # NMEA's true heading (HDT, THS, HDG with deviation and variation) is read as channel "heading"; a CSV's
@@ -228,15 +230,28 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     if ch is None or ch not in h.channels:
         raise ImutoolError(f"no true heading (have {', '.join(h.channels)}); need HDT/THS sentences or a CSV "
                            "column heading_true (deg)", path=path)
+    if h.meta.get("time_source") == "index":
+        raise ImutoolError("the heading file has no clock (no line time stamps, no RMC/ZDA time): its fixes cannot "
+                           "be placed on the IMU's time", path=path)
     hd = np.asarray(h.get(ch, "deg") if ch in h.units else h[ch], float)
+    if "ths_mode" in h.channels:  # THS: only autonomous (A) and estimated (E) headings are a ship's heading
+        mode = np.asarray(h["ths_mode"], float)
+        hd = np.where(np.isfinite(mode) & ~np.isin(mode, [ord("A"), ord("E")]), np.nan, hd)
     ok = np.isfinite(hd) & np.isfinite(h.time)
     if ok.sum() < 2:
         raise ImutoolError("fewer than two valid heading fixes", path=path)
-    tf, hf = h.time[ok], np.unwrap(np.radians(hd[ok]))
+    tf, hd = h.time[ok], hd[ok]
+    order = np.argsort(tf, kind="stable")  # fixes in time order; of equal times the last one read
+    tf, hd = tf[order], hd[order]
+    last = np.append(tf[1:] != tf[:-1], True)
+    tf, hf = tf[last], np.unwrap(np.radians(hd[last]))
+    if len(tf) < 2:
+        raise ImutoolError("fewer than two heading fixes at distinct times", path=path)
     out = rec.copy()
     val = np.degrees(np.interp(rec.time, tf, hf, left=np.nan, right=np.nan)) % 360
     j = np.clip(np.searchsorted(tf, rec.time), 1, len(tf) - 1)
-    val[(tf[j] - tf[j - 1]) > max_gap_s] = np.nan
+    inside = (rec.time > tf[j - 1]) & (rec.time < tf[j])  # strictly between two fixes (a fix's own time is kept)
+    val[inside & ((tf[j] - tf[j - 1]) > max_gap_s)] = np.nan
     out.add("heading_true", val, "deg")
     return out
 
@@ -261,6 +276,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         F_MAG_REJ,
         F_MAG_USED,
         FlagSpans,
+        _heading_channel,
         gnss_heading_check,
         heading_check,
         heading_source_report,
@@ -297,6 +313,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     gnss_used = mag_used = False  # SOG/COG used in some chunk; a heading update (mag or external) taken in some chunk
     heading_given = mag_given = False  # a heading_true / mag column in some chunk
     heading_updates = 0
+    t_first = np.nan  # time of the first row filtered
     scale_check = None  # the gyro's scale against gravity, summed chunk by chunk
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
@@ -327,13 +344,15 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
+                t_first = float(chunk.time[0])
             sog = cog = None
             if use_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
-                sog, cog = chunk["sog"], chunk["cog"]
+                sog = chunk.get("sog", "m/s") if "sog" in chunk.units else chunk["sog"]
+                cog = chunk.get("cog", "deg") if "cog" in chunk.units else chunk["cog"]
                 gnss_used = True
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
                                  sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True,
-                                 heading_deg=chunk.channels.get("heading_true"))
+                                 heading_deg=_heading_channel(chunk))
             if scale_check is None:
                 scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
             scale_check.add(res.time, chunk["gyro"], res.bias, res.force)
@@ -373,7 +392,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             warnings += more
         warnings += tilt_check(totals, params)
         warnings += gnss_heading_check(gnss_used, mag_used)
-        check, more = heading_source_report(heading_given, mag_given, heading_updates, params)
+        check, more = heading_source_report(heading_given, mag_given, heading_updates, params,
+                                            t_last - t_first if np.isfinite(t_first) else 0.0)
         summary.update(check)
         warnings += more
         if scale_check is not None:

@@ -8,6 +8,7 @@ from click.testing import CliRunner
 from conftest import run_main
 
 import formats
+from formats.errors import ImutoolError
 from formats.frames import quat_to_euler, quat_to_matrix, wrap_deg180
 from imutool.attitude import (
     S_QI,
@@ -922,7 +923,8 @@ def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
             assert est.meta["heading_source"] == "none (gyro)"
             assert roll.max() > 2.0, roll.max()  # measured 4.7°
             continue
-        assert s["heading_source"].startswith("heading_true") and s["heading_input_updates"] > 0.9 * len(rec)
+        duration = rec.time[-1] - rec.time[0]  # one update a second (heading_input_interval)
+        assert s["heading_source"].startswith("heading_true") and s["heading_input_updates"] > 0.9 * duration
         assert est.meta["heading_source"] == s["heading_source"]
         assert "SOG/COG" not in run.stderr, run.stderr
         assert np.sqrt(np.mean(roll ** 2)) <= 0.5 and roll.max() <= 1.0, (name, roll.max())  # 0.14 / 0.42
@@ -951,3 +953,77 @@ def test_an_empty_heading_input_is_said_and_a_stopped_gyrocompass_is_not_interpo
     h = out["heading_true"]
     assert np.all(np.isnan(h[(t > 20) & (t < 40)])) and np.all(np.isfinite(h[(t > 1) & (t < 19)]))
     assert np.abs(wrap_deg180(h[(t > 41) & (t < 59)] - rec["ref_heading"][(t > 41) & (t < 59)])).max() < 1.5
+
+
+def test_a_glitched_or_wrong_gyrocompass_fix_is_handled(tmp_path):
+    """One fix 120° off mid-run is skipped (beyond 4σ): the heading moves < 0.5°. A wrong *first* fix (150° off for
+    0.6 s) is disagreed with for 5 s, then the gyrocompass's heading is taken outright: within 1° from 10 s on
+    (the linear update alone left 16° at 40 s). A heading_true in rad is read in its unit in memory and streamed
+    alike; a feed that covers a fifth of the run is said."""
+    from imutool.cli import cli
+
+    rec = simulate("ship-at-sea", duration=120, seed=0)
+    t = rec.time - rec.time[0]
+    tf, hf = _gyrocompass(rec)
+    h = np.degrees(np.interp(rec.time, tf, np.unwrap(np.radians(hf)))) % 360
+    runs = {}
+    for name in ("clean", "glitch", "first"):
+        hh = h.copy()
+        if name == "glitch":
+            hh[(t >= 60) & (t < 60.5)] += 120.0
+        if name == "first":
+            hh[t < 0.6] += 150.0
+        res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], None, EkfParams(), rec["sog"], rec["cog"],
+                         lever_arm=np.array(rec.meta["lever_arm_m"]), heading_deg=hh % 360)
+        runs[name] = (np.degrees(quat_to_euler(res.q)[2]), res.summary)
+    assert runs["glitch"][1]["heading_input_rejected"] >= 1 and runs["clean"][1]["heading_input_rejected"] == 0
+    assert np.abs(wrap_deg180(runs["glitch"][0] - runs["clean"][0])).max() < 0.5
+    late = t >= 10
+    assert np.abs(wrap_deg180(runs["first"][0] - rec["ref_heading"]))[late].max() < 1.0
+    # the unit: heading_true in rad, in memory and streamed
+    tmp_dir = tmp_path
+    r = formats.Recording(rec.time, {c: rec[c] for c in rec.channels if c != "mag"}, dict(rec.meta))
+    r.add("heading_true", np.radians(h), "rad")
+    src = f"{tmp_dir}/rad.csv"
+    formats.write(r, src)
+    lever = ",".join(str(x) for x in rec.meta["lever_arm_m"])
+    outs = []
+    for extra in ([], ["--stream-mb", "0", "--chunk-rows", "3000"]):
+        out = f"{tmp_dir}/est{len(extra)}.csv"
+        run = CliRunner().invoke(cli, ["filter", src, "-o", out, "--lever-arm", lever, *extra])
+        assert run.exit_code == 0, run.output
+        outs.append(formats.read(out)["heading"])
+    for o in outs:
+        assert np.abs(wrap_deg180(o - rec["ref_heading"]))[t >= 10].max() < 1.0
+    # a feed that covers a fifth of the run
+    part = h.copy()
+    part[t > 24] = np.nan
+    rp = rec.copy()
+    rp.add("heading_true", part, "deg")
+    _, s = ekf_recording(rp)
+    assert any("covers about 2" in w for w in s["warnings"]), s["warnings"]
+
+
+def test_attach_heading_sorts_refuses_a_file_without_clock_and_keeps_fix_times(tmp_path, monkeypatch):
+    """Fixes out of time order are sorted (of equal times the last read wins), a fix's own time keeps its value,
+    the inside of a gap over 5 s is NaN, and an NMEA file without a clock is refused (its sentence index would be
+    taken for seconds)."""
+    from formats.nmea import checksum
+    from imutool import filtering
+
+    rec = simulate("ship-roll", duration=30, seed=1)
+    t0 = rec.time[0]
+    fixes = [(1, 10.0), (3, 30.0), (2, 20.0), (2, 21.0), (10, 100.0), (11, 110.0)]
+    unsorted = formats.Recording(t0 + np.array([f[0] for f in fixes], float),
+                                 {"heading_true": np.array([f[1] for f in fixes])}, {})
+    monkeypatch.setattr(filtering.formats, "read", lambda path: unsorted)
+    out = filtering.attach_heading(rec, tmp_path / "h.csv")["heading_true"]
+    monkeypatch.undo()
+    at = {round(x - t0, 3): v for x, v in zip(rec.time, out, strict=True)}
+    assert at[2.0] == pytest.approx(21.0) and at[2.5] == pytest.approx(25.5)  # sorted; the last of equal times
+    assert np.isnan(at[5.0]) and at[10.0] == pytest.approx(100.0)  # inside a 7 s gap: none; at a fix: the fix
+    assert np.isnan(at[0.5]) and np.isnan(at[20.0])  # outside the feed
+    nmea = tmp_path / "noclock.nmea"
+    nmea.write_text("".join(f"$HEHDT,{h:.1f},T*{checksum(f'HEHDT,{h:.1f},T')}\n" for h in (10.0, 11.0, 12.0)))
+    with pytest.raises(ImutoolError, match="no clock"):
+        filtering.attach_heading(rec, nmea)
