@@ -195,6 +195,11 @@ class Recording:
             raise ImutoolError(f"channel {name!r} has no unit; cannot convert to {unit!r}")
         return _units.convert(a, have, unit)
 
+    def in_unit(self, name: str, unit: str) -> np.ndarray:
+        """Channel values in ``unit``: converted when the channel states a unit, as stored when it states none
+        (the caller's unit is then taken as the channel's, as for a CSV column read without one)."""
+        return self.get(name, unit) if self.units.get(name) else self[name]
+
     def add(self, name: str, data: Any, unit: str | None = None, columns: list[str] | None = None) -> None:
         """Add or replace a channel (unit defaults to the canonical unit of the name)."""
         a = self._check(name, data)

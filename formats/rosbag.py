@@ -1257,7 +1257,7 @@ def _imu_payloads(rec: Recording, fmt: str, frame_id: str) -> tuple[np.ndarray, 
     for name, vs, cs in (("gyro", 13, 16), ("accel", 25, 28)):
         if name in rec and rec[name].shape[1:] == (3,):
             unit = "rad/s" if name == "gyro" else "m/s^2"
-            v = rec.get(name, unit) if rec.units.get(name) else rec[name]
+            v = rec.in_unit(name, unit)
             floats[:, vs: vs + 3] = v * _FLIP
             used.append(name)
             c = _cov_from(rec, name, 1.0)

@@ -2028,7 +2028,7 @@ def _heading_channel(rec: Recording) -> np.ndarray | None:
     """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None."""
     if "heading_true" not in rec.channels:
         return None
-    return np.asarray(rec.get("heading_true", "deg") if "heading_true" in rec.units else rec["heading_true"], float)
+    return np.asarray(rec.in_unit("heading_true", "deg"), float)
 
 
 def heading_source_report(heading_given: bool, mag_given: bool, heading_updates: int,
@@ -2067,14 +2067,14 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     for ch in ("gyro", "accel"):
         if ch not in rec.channels:
             raise ImutoolError(f"the EKF needs channel {ch!r}; the recording has {', '.join(rec.channels)}")
-    gyro = rec.get("gyro", "rad/s") if "gyro" in rec.units else rec["gyro"]
-    accel = rec.get("accel", "m/s^2") if "accel" in rec.units else rec["accel"]
+    gyro = rec.in_unit("gyro", "rad/s")
+    accel = rec.in_unit("accel", "m/s^2")
     mag = rec["mag"] if "mag" in rec.channels else None
     heading = _heading_channel(rec)
     sog = cog = None
     if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
-        sog = rec.get("sog", "m/s") if "sog" in rec.units else rec["sog"]
-        cog = rec.get("cog", "deg") if "cog" in rec.units else rec["cog"]
+        sog = rec.in_unit("sog", "m/s")
+        cog = rec.in_unit("cog", "deg")
     if smooth:
         check_smoother_memory(len(rec))
     res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth, lever_arm=lever_arm,

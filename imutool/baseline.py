@@ -76,7 +76,7 @@ def lpf_attitude(rec: Recording, cutoff_hz: float | None = 0.5, order: int = 2) 
     if "accel" not in rec.channels:
         raise ImutoolError(f"the low-pass baseline needs 'accel'; the recording has {', '.join(rec.channels)}")
     fs = rec.rate_hz
-    acc = rec.get("accel", "m/s^2") if "accel" in rec.units else rec["accel"]
+    acc = rec.in_unit("accel", "m/s^2")
     mag = rec["mag"] if "mag" in rec.channels else None
     if cutoff_hz and cutoff_hz > 0:
         acc = butter_lowpass(acc, cutoff_hz, fs, order)

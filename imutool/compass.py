@@ -110,7 +110,7 @@ def raw_heading(rec: Recording, deviation=None) -> tuple[np.ndarray, str]:
     if "mag" in rec.channels:
         mag = rec["mag"]
         if "accel" in rec.channels:
-            roll, pitch = accel_tilt(rec.get("accel", "m/s^2") if "accel" in rec.units else rec["accel"])
+            roll, pitch = accel_tilt(rec.in_unit("accel", "m/s^2"))
             src = "tilt-compensated magnetometer"
         else:
             roll = pitch = np.zeros(len(rec))
@@ -139,9 +139,9 @@ def vertical_rate_deg_s(rec: Recording) -> np.ndarray | None:
     if "gyro" in rec.channels:
         from imutool.baseline import accel_tilt
 
-        g = rec.get("gyro", "rad/s") if "gyro" in rec.units else rec["gyro"]
+        g = rec.in_unit("gyro", "rad/s")
         if "accel" in rec.channels:
-            roll, pitch = accel_tilt(rec.get("accel", "m/s^2") if "accel" in rec.units else rec["accel"])
+            roll, pitch = accel_tilt(rec.in_unit("accel", "m/s^2"))
         else:
             roll = pitch = np.zeros(len(rec))
         return np.degrees((g[:, 1] * np.sin(roll) + g[:, 2] * np.cos(roll)) / np.maximum(np.cos(pitch), 1e-3))

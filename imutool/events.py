@@ -295,7 +295,7 @@ def parametric_roll(t: np.ndarray, heel: np.ndarray, wave: np.ndarray, cycles: A
 
 # -- one recording ------------------------------------------------------------------------------------------------
 def _channel(rec: Recording, name: str, unit: str) -> np.ndarray:
-    return np.asarray(rec.get(name, unit) if rec.units.get(name) else rec[name], float)
+    return np.asarray(rec.in_unit(name, unit), float)
 
 
 def identify(rec: Recording, path: str | None, ship: str | None = None, voyage: str | None = None,

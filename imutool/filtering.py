@@ -201,8 +201,8 @@ def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
     if "sog" not in g.channels or "cog" not in g.channels:
         raise ImutoolError(f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns "
                            "sog (m/s), cog (deg)", path=path)
-    sog = g.get("sog", "m/s") if "sog" in g.units else g["sog"]
-    cog = np.unwrap(np.radians(np.asarray(g.get("cog", "deg") if "cog" in g.units else g["cog"], float)))
+    sog = g.in_unit("sog", "m/s")
+    cog = np.unwrap(np.radians(np.asarray(g.in_unit("cog", "deg"), float)))
     ok = np.isfinite(sog) & np.isfinite(cog)
     if ok.sum() < 2:
         raise ImutoolError("fewer than two valid sog/cog fixes", path=path)
@@ -233,7 +233,7 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     if h.meta.get("time_source") == "index":
         raise ImutoolError("the heading file has no clock (no line time stamps, no RMC/ZDA time): its fixes cannot "
                            "be placed on the IMU's time", path=path)
-    hd = np.asarray(h.get(ch, "deg") if ch in h.units else h[ch], float)
+    hd = np.asarray(h.in_unit(ch, "deg"), float)
     if "ths_mode" in h.channels:  # THS: only autonomous (A) and estimated (E) headings are a ship's heading
         mode = np.asarray(h["ths_mode"], float)
         hd = np.where(np.isfinite(mode) & ~np.isin(mode, [ord("A"), ord("E")]), np.nan, hd)
@@ -347,8 +347,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 t_first = float(chunk.time[0])
             sog = cog = None
             if use_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
-                sog = chunk.get("sog", "m/s") if "sog" in chunk.units else chunk["sog"]
-                cog = chunk.get("cog", "deg") if "cog" in chunk.units else chunk["cog"]
+                sog = chunk.in_unit("sog", "m/s")
+                cog = chunk.in_unit("cog", "deg")
                 gnss_used = True
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
                                  sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True,
