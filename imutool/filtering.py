@@ -193,6 +193,12 @@ def smoother_gain(rec: Recording, smoothed: Recording, params: Any, *, use_gnss:
     return {"causal_rmse_deg": attitude_rmse(causal, rec), "smoothed_rmse_deg": attitude_rmse(smoothed, rec)}
 
 
+def _interp_angle_deg(t: np.ndarray, tf: np.ndarray, deg: np.ndarray) -> np.ndarray:
+    """Angles (deg, finite, at increasing times ``tf`` s) interpolated onto ``t`` (s) the short way round:
+    unwrapped, linear, back in [0, 360); NaN outside [tf[0], tf[-1]]."""
+    return np.degrees(np.interp(t, tf, np.unwrap(np.radians(deg)), left=np.nan, right=np.nan)) % 360
+
+
 def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
     """A copy of ``rec`` with ``sog`` (m/s) and ``cog`` (deg) interpolated from an NMEA (RMC/VTG) or CSV file
     (NaN outside the file's time span); cog is interpolated unwrapped."""
@@ -202,13 +208,13 @@ def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
         raise ImutoolError(f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns "
                            "sog (m/s), cog (deg)", path=path)
     sog = g.in_unit("sog", "m/s")
-    cog = np.unwrap(np.radians(np.asarray(g.in_unit("cog", "deg"), float)))
-    ok = np.isfinite(sog) & np.isfinite(cog)
+    cog = np.asarray(g.in_unit("cog", "deg"), float)
+    ok = np.isfinite(sog) & np.isfinite(cog)  # unwrapped after: one empty course must not void those after it
     if ok.sum() < 2:
         raise ImutoolError("fewer than two valid sog/cog fixes", path=path)
     out = rec.copy()
     out.add("sog", np.interp(rec.time, g.time[ok], sog[ok], left=np.nan, right=np.nan), "m/s")
-    out.add("cog", np.degrees(np.interp(rec.time, g.time[ok], cog[ok], left=np.nan, right=np.nan)) % 360, "deg")
+    out.add("cog", _interp_angle_deg(rec.time, g.time[ok], cog[ok]), "deg")
     return out
 
 
@@ -244,11 +250,11 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     order = np.argsort(tf, kind="stable")  # fixes in time order; of equal times the last one read
     tf, hd = tf[order], hd[order]
     last = np.append(tf[1:] != tf[:-1], True)
-    tf, hf = tf[last], np.unwrap(np.radians(hd[last]))
+    tf, hd = tf[last], hd[last]
     if len(tf) < 2:
         raise ImutoolError("fewer than two heading fixes at distinct times", path=path)
     out = rec.copy()
-    val = np.degrees(np.interp(rec.time, tf, hf, left=np.nan, right=np.nan)) % 360
+    val = _interp_angle_deg(rec.time, tf, hd)
     j = np.clip(np.searchsorted(tf, rec.time), 1, len(tf) - 1)
     inside = (rec.time > tf[j - 1]) & (rec.time < tf[j])  # strictly between two fixes (a fix's own time is kept)
     val[inside & ((tf[j] - tf[j - 1]) > max_gap_s)] = np.nan

@@ -1027,3 +1027,25 @@ def test_attach_heading_sorts_refuses_a_file_without_clock_and_keeps_fix_times(t
     nmea.write_text("".join(f"$HEHDT,{h:.1f},T*{checksum(f'HEHDT,{h:.1f},T')}\n" for h in (10.0, 11.0, 12.0)))
     with pytest.raises(ImutoolError, match="no clock"):
         filtering.attach_heading(rec, nmea)
+
+
+def test_attach_gnss_keeps_the_courses_after_an_empty_one(tmp_path):
+    """A receiver leaves RMC's course empty when it does not know it (at low speed, say). The courses after such
+    a fix were lost: the unwrap ran over the NaN, which voided every course after it, and the SOG/COG
+    compensation silently stopped there."""
+    from formats.nmea import checksum
+    from imutool.filtering import attach_gnss
+
+    rec = simulate("turn", duration=60, seed=4, straight_s=15, ramp_s=5)
+    lines = []
+    for n, i in enumerate(np.flatnonzero(np.diff(np.floor(rec.time), prepend=-1) > 0)):
+        kn, cog = rec["ref_sog"][i] / (1852 / 3600), rec["ref_cog"][i] % 360
+        course = "" if n == 10 else f"{cog:.2f}"
+        body = f"GPRMC,000000,A,,,,,{kn:.2f},{course},010125,,,A"
+        lines.append(f"{rec.time[i]:.3f};A;${body}*{checksum(body)}")
+    gnss = tmp_path / "gnss.nmea"
+    gnss.write_text("\n".join(lines) + "\n")
+    out = attach_gnss(rec, gnss)
+    late = (rec.time - rec.time[0] > 12) & (rec.time - rec.time[0] < 58)
+    assert np.all(np.isfinite(out["cog"][late]))
+    assert np.abs(wrap_deg180(out["cog"][late] - rec["ref_cog"][late])).max() < 3.0
