@@ -104,6 +104,10 @@ N_PARAMS = 42
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
 
+# external heading (gyrocompass): a fix whose innovation is beyond this many σ is a glitch and skipped, for at most
+# this many seconds running; beyond, the heading that stayed away is taken outright
+HEADING_GATE_SIGMA, HEADING_REJECT_MAX_S = 4.0, 5.0
+
 
 # Every tuning constant of the EKF, with its unit, in one place (VQF's PyVQFParams is the model). Each entry:
 # name -> (unit, (lowest, highest) allowed, one-line meaning). The defaults are the dataclass defaults below;
@@ -1342,13 +1346,14 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 yh = hdg[k] - _atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
                 yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
                 s2h = prm[P_HDG_NOISE] ** 2
-                # a glitched fix is skipped (innovation beyond 4σ), for at most 5 s running: a heading that stays
-                # away that long is the gyrocompass's, and the filter's own is the one to give way
+                # a glitched fix is skipped, for a bounded time: a heading that stays away that long is the
+                # gyrocompass's, and the filter's own is the one to give way
                 vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
-                if yh * yh > 16.0 * (vh + s2h) and st[S_HREJ_T] < 5.0:
+                glitch = yh * yh > HEADING_GATE_SIGMA ** 2 * (vh + s2h)
+                if glitch and st[S_HREJ_T] < HEADING_REJECT_MAX_S:
                     st[S_HREJ_T] += dth
                     st[S_NHREJ] += 1
-                elif yh * yh > 16.0 * (vh + s2h):  # rejected for 5 s: the gyrocompass's heading is taken outright
+                elif glitch:  # away for HEADING_REJECT_MAX_S: the gyrocompass's heading is taken outright
                     st[S_HREJ_T] = 0.0
                     _reset_heading(st, P, R[2, 0], R[2, 1], R[2, 2], yh, s2h)
                     flag |= F_HDG_USED
@@ -1659,9 +1664,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
                 heading_mag, mnorm = 0.0, 0.0
     from formats.frames import euler_to_quat
 
-    if heading is not None:
-        heading = float(heading)
-    st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading if heading is not None else heading_mag)
+    st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading_mag if heading is None else float(heading))
     st[S_B:S_B + 3] = params.init_bias
     P = np.zeros((6, 6))
     rp = np.radians(params.init_roll_pitch_sigma_deg) ** 2

@@ -53,9 +53,10 @@ class FilterResult:
 def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
             method: str = "ekf", smooth: bool = False, gnss: str | os.PathLike | None = None,
             stream_mb: float = 300.0, heading: str | os.PathLike | None = None) -> bool:
-    """Whether :func:`run_filter` streams: causal EKF, no GNSS file, an output file to stream into, and a CSV
-    input larger than ``stream_mb`` MB, or a Parquet input whose data take more than that in memory (rows ×
-    columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold 2 GB of float64)."""
+    """Whether :func:`run_filter` streams: causal EKF, no GNSS or heading file (those are attached in memory), an
+    output file to stream into, and a CSV input larger than ``stream_mb`` MB, or a Parquet input whose data take
+    more than that in memory (rows × columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold
+    2 GB of float64)."""
     if (isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None
             or heading is not None):
         return False
