@@ -655,14 +655,20 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     wy1 = w01 * y0 + w11 * y1 + w12 * y2
     wy2 = w02 * y0 + w12 * y1 + w22 * y2
     nis = y0 * wy0 + y1 * wy1 + y2 * wy2
-    if nis_gate > 0 and nis > nis_gate and not force:
-        return False, nis
+    accepted = not (nis_gate > 0 and nis > nis_gate and not force)
+    # straight-line code, no early return (either costs an array refcount per call in the compiled loop): a
+    # rejected update runs with a zero gain (P and dx unchanged), a consider (Schmidt) update with a zero bias gain
+    # (the bias is neither corrected nor its variance reduced)
+    ga = 1.0 if accepted else 0.0
+    cb = 0.0 if consider_bias else 1.0
+    w00, w01, w02, w11, w12, w22 = ga * w00, ga * w01, ga * w02, ga * w11, ga * w12, ga * w22
+    wy0, wy1, wy2 = ga * wy0, ga * wy1, ga * wy2
     dx[0] = m00 * wy0 + m01 * wy1 + m02 * wy2
     dx[1] = m10 * wy0 + m11 * wy1 + m12 * wy2
     dx[2] = m20 * wy0 + m21 * wy1 + m22 * wy2
-    dx[3] = m30 * wy0 + m31 * wy1 + m32 * wy2
-    dx[4] = m40 * wy0 + m41 * wy1 + m42 * wy2
-    dx[5] = m50 * wy0 + m51 * wy1 + m52 * wy2
+    dx[3] = cb * (m30 * wy0 + m31 * wy1 + m32 * wy2)
+    dx[4] = cb * (m40 * wy0 + m41 * wy1 + m42 * wy2)
+    dx[5] = cb * (m50 * wy0 + m51 * wy1 + m52 * wy2)
     # P ← P − K Mᵀ, K = M W
     k00 = m00 * w00 + m01 * w01 + m02 * w02
     k01 = m00 * w01 + m01 * w11 + m02 * w12
@@ -673,15 +679,15 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     k20 = m20 * w00 + m21 * w01 + m22 * w02
     k21 = m20 * w01 + m21 * w11 + m22 * w12
     k22 = m20 * w02 + m21 * w12 + m22 * w22
-    k30 = m30 * w00 + m31 * w01 + m32 * w02
-    k31 = m30 * w01 + m31 * w11 + m32 * w12
-    k32 = m30 * w02 + m31 * w12 + m32 * w22
-    k40 = m40 * w00 + m41 * w01 + m42 * w02
-    k41 = m40 * w01 + m41 * w11 + m42 * w12
-    k42 = m40 * w02 + m41 * w12 + m42 * w22
-    k50 = m50 * w00 + m51 * w01 + m52 * w02
-    k51 = m50 * w01 + m51 * w11 + m52 * w12
-    k52 = m50 * w02 + m51 * w12 + m52 * w22
+    k30 = cb * (m30 * w00 + m31 * w01 + m32 * w02)
+    k31 = cb * (m30 * w01 + m31 * w11 + m32 * w12)
+    k32 = cb * (m30 * w02 + m31 * w12 + m32 * w22)
+    k40 = cb * (m40 * w00 + m41 * w01 + m42 * w02)
+    k41 = cb * (m40 * w01 + m41 * w11 + m42 * w12)
+    k42 = cb * (m40 * w02 + m41 * w12 + m42 * w22)
+    k50 = cb * (m50 * w00 + m51 * w01 + m52 * w02)
+    k51 = cb * (m50 * w01 + m51 * w11 + m52 * w12)
+    k52 = cb * (m50 * w02 + m51 * w12 + m52 * w22)
     P[0, 0] = p00 - (k00 * m00 + k01 * m01 + k02 * m02)
     v = p01 - (k00 * m10 + k01 * m11 + k02 * m12)
     P[0, 1] = v
@@ -733,11 +739,7 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     P[4, 5] = v
     P[5, 4] = v
     P[5, 5] = p55 - (k50 * m50 + k51 * m51 + k52 * m52)
-    if consider_bias:  # Schmidt (consider) update: the bias is neither corrected nor its variance reduced
-        dx[3], dx[4], dx[5] = 0.0, 0.0, 0.0
-        P[3, 3], P[4, 4], P[5, 5] = p33, p44, p55
-        P[3, 4], P[4, 3], P[3, 5], P[5, 3], P[4, 5], P[5, 4] = p34, p34, p35, p35, p45, p45
-    return True, nis
+    return accepted, nis
 
 
 @njit(cache=True, inline="always")
@@ -977,16 +979,13 @@ def _apply_correction(st, dx):
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
     n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     st[0], st[1], st[2], st[3] = q0 / n, q1 / n, q2 / n, q3 / n
-    st[4] += dx[3]
-    st[5] += dx[4]
-    st[6] += dx[5]
-    bm = st[S_BIASMAX]
-    if bm > 0:
-        for i in range(4, 7):
-            st[i] = min(bm, max(-bm, st[i]))
+    bm = st[S_BIASMAX] if st[S_BIASMAX] > 0 else np.inf  # straight-line code: no array refcount per call
+    st[4] = min(bm, max(-bm, st[4] + dx[3]))
+    st[5] = min(bm, max(-bm, st[5] + dx[4]))
+    st[6] = min(bm, max(-bm, st[6] + dx[5]))
 
 
-@njit(cache=True, fastmath=_FASTMATH, nogil=True)
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
                lever, st, q_out, b_out, std_out, flags_out, p_store, acc_meas, f_out, hdg):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
@@ -1015,7 +1014,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     RI = np.empty((3, 3))
     MLAG = np.zeros((3, 3))
     X33 = np.empty((3, 3))
-    dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
+    sin_dip_ref = min(1.0, max(-1.0, st[S_MREF + 2]))
+    cos_dip_ref = np.sqrt(1.0 - sin_dip_ref * sin_dip_ref)
+    dip_ref = np.arcsin(sin_dip_ref)
     dip_lo = np.sin(dip_ref - prm[P_MAG_DIP_GATE]) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi else -2.0
     dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
     use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0  # once per chunk, not per sample
@@ -1443,10 +1444,9 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
         dt = t[k + 1] - t[k]
         gap = dt > gap_dt
         dti = gap_dt if gap else dt
-        g0, g1 = gyro[k], gyro[k + 1]
-        w0 = gyro_prev_w * g0[0] + (1.0 - gyro_prev_w) * g1[0] - b_f[k, 0]
-        w1 = gyro_prev_w * g0[1] + (1.0 - gyro_prev_w) * g1[1] - b_f[k, 1]
-        w2 = gyro_prev_w * g0[2] + (1.0 - gyro_prev_w) * g1[2] - b_f[k, 2]
+        w0 = gyro_prev_w * gyro[k, 0] + (1.0 - gyro_prev_w) * gyro[k + 1, 0] - b_f[k, 0]
+        w1 = gyro_prev_w * gyro[k, 1] + (1.0 - gyro_prev_w) * gyro[k + 1, 1] - b_f[k, 1]
+        w2 = gyro_prev_w * gyro[k, 2] + (1.0 - gyro_prev_w) * gyro[k + 1, 2] - b_f[k, 2]
         if not (np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)):
             w0, w1, w2 = 0.0, 0.0, 0.0
         e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
