@@ -60,6 +60,7 @@ from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply, quat_to_euler
+from imutool.heading_lag import heading_lag_check, measure_heading_lag
 from imutool.loading import merged_warnings
 from imutool.progress import Progress, chunk_ranges
 
@@ -155,6 +156,9 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                                    "a gyrocompass's errors are correlated over seconds, and an "
                                                    "interpolated or held column must not count each IMU sample "
                                                    "as an independent fix (0: every sample)"),
+    "heading_input_latency": ("s", (0.0, 10.0), "delay of the external heading: a fix stamped t is the heading at "
+                                               "t − latency (a gyrocompass's HDT is often 0.1–1 s late; at 3 °/s "
+                                               "0.5 s is 1.5° of heading); the heading is read that much later"),
     "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading per update ('full' mode: of m̂, rad)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
@@ -230,6 +234,7 @@ class EkfParams:
     mag_noise_deg: float = 20.0
     heading_input_noise_deg: float = 1.0
     heading_input_interval: float = 1.0
+    heading_input_latency: float = 0.0
     mag_norm_gate: float = 0.15
     mag_dip_gate_deg: float = 10.0
     mag_norm_soft: float = 0.05
@@ -1014,9 +1019,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     RI = np.empty((3, 3))
     MLAG = np.zeros((3, 3))
     X33 = np.empty((3, 3))
-    sin_dip_ref = min(1.0, max(-1.0, st[S_MREF + 2]))
-    cos_dip_ref = np.sqrt(1.0 - sin_dip_ref * sin_dip_ref)
-    dip_ref = np.arcsin(sin_dip_ref)
+    dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
     dip_lo = np.sin(dip_ref - prm[P_MAG_DIP_GATE]) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi else -2.0
     dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
     use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0  # once per chunk, not per sample
@@ -2027,11 +2030,24 @@ def check_smoother_memory(n: int) -> None:
                            f"and {size(have)} is available; smooth a shorter span or filter without --smooth")
 
 
-def _heading_channel(rec: Recording) -> np.ndarray | None:
-    """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None."""
+def _heading_channel(rec: Recording, latency_s: float = 0.0) -> np.ndarray | None:
+    """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None; with a
+    ``latency_s`` (s) > 0 the value at t is the column's at t + latency (read that much later: the fix describes
+    the heading latency_s before its stamp), unwrapped and linear between samples, NaN where either neighbour is
+    NaN or past the end."""
     if "heading_true" not in rec.channels:
         return None
-    return np.asarray(rec.in_unit("heading_true", "deg"), float)
+    h = np.asarray(rec.in_unit("heading_true", "deg"), float)
+    if latency_s <= 0:
+        return h
+    t = rec.time
+    ok = np.isfinite(h) & np.isfinite(t)
+    if ok.sum() < 2:
+        return np.full_like(h, np.nan)
+    later = t + latency_s
+    val = np.degrees(np.interp(later, t[ok], np.unwrap(np.radians(h[ok])), left=np.nan, right=np.nan)) % 360
+    both = np.interp(later, t, ok.astype(float), left=0.0, right=0.0) >= 1.0 - 1e-12  # both neighbours valid
+    return np.where(both, val, np.nan)
 
 
 def heading_source_report(heading_given: bool, mag_given: bool, heading_updates: int,
@@ -2073,7 +2089,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     gyro = rec.in_unit("gyro", "rad/s")
     accel = rec.in_unit("accel", "m/s^2")
     mag = rec["mag"] if "mag" in rec.channels else None
-    heading = _heading_channel(rec)
+    heading = _heading_channel(rec, params.heading_input_latency)
     sog = cog = None
     if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
         sog = rec.in_unit("sog", "m/s")
@@ -2089,6 +2105,11 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
                                          float(res.time[-1] - res.time[0]) if len(res.time) else 0.0)
     summary.update(source)
     warnings += more
+    if heading is not None:  # how late the feed is against the gyro, measured on the feed as it came
+        lag, more = heading_lag_check(measure_heading_lag(rec.time, _heading_channel(rec), res.q, gyro, res.bias),
+                                      params.heading_input_latency)
+        summary.update(lag)
+        warnings += more
     summary.update(check)
     if params.mag_check_time > 0:
         spans = FlagSpans(params.mag_check_time)
@@ -2112,6 +2133,8 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         out.meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
         out.meta["lever_arm_frame"] = "body FRD, sensor relative to the centre of rotation"
     out.meta["heading_source"] = summary["heading_source"]
+    if "heading_input_lag_s" in summary:
+        out.meta["heading_input_lag_s"] = summary["heading_input_lag_s"]
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
         summary["warnings"] = list(summary.get("warnings") or []) + warnings

@@ -52,13 +52,13 @@ class FilterResult:
 
 def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
             method: str = "ekf", smooth: bool = False, gnss: str | os.PathLike | None = None,
-            stream_mb: float = 300.0, heading: str | os.PathLike | None = None) -> bool:
-    """Whether :func:`run_filter` streams: causal EKF, no GNSS or heading file (those are attached in memory), an
-    output file to stream into, and a CSV input larger than ``stream_mb`` MB, or a Parquet input whose data take
-    more than that in memory (rows × columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold
-    2 GB of float64)."""
+            stream_mb: float = 300.0, heading: str | os.PathLike | None = None, heading_latency: float = 0.0) -> bool:
+    """Whether :func:`run_filter` streams: causal EKF, no GNSS or heading file (those are attached in memory) and no
+    heading latency (a heading read later needs the rows after a chunk's end), an output file to stream into, and
+    a CSV input larger than ``stream_mb`` MB, or a Parquet input whose data take more than that in memory (rows ×
+    columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold 2 GB of float64)."""
     if (isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None
-            or heading is not None):
+            or heading is not None or heading_latency > 0):
         return False
     kind = formats.kind_of(source)
     if kind not in STREAMABLE:
@@ -113,7 +113,8 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
 
         params = params if params is not None else EkfParams()
     if not isinstance(source, Recording) and streams(source, output, method=method, smooth=smooth, gnss=gnss,
-                                                     stream_mb=stream_mb, heading=heading):
+                                                     stream_mb=stream_mb, heading=heading,
+                                                     heading_latency=getattr(params, "heading_input_latency", 0.0)):
         summary = stream_ekf(source, output, params, chunk_rows=chunk_rows,  # type: ignore[arg-type]
                              use_gnss=use_gnss, lever_arm=lever, strict=strict, progress=progress,
                              **{k: load_options.get(k) for k in ("columns", "profile", "mounting",
@@ -200,29 +201,57 @@ def _interp_angle_deg(t: np.ndarray, tf: np.ndarray, deg: np.ndarray) -> np.ndar
     return np.degrees(np.interp(t, tf, np.unwrap(np.radians(deg)), left=np.nan, right=np.nan)) % 360
 
 
-def attach_gnss(rec: Recording, path: str | os.PathLike) -> Recording:
-    """A copy of ``rec`` with ``sog`` (m/s) and ``cog`` (deg) interpolated from an NMEA (RMC/VTG) or CSV file
-    (NaN outside the file's time span); cog is interpolated unwrapped."""
+FIX_MAX_GAP_S = 5.0  # a GNSS or gyrocompass feed is interpolated between fixes at most this far apart (s)
+
+
+def _fixes_in_time_order(src: Recording, path: str, what: str, *values: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The rows of ``values`` that are all finite, sorted by time; of equal times the last one read. Refuses a file
+    without a clock (NMEA without time stamps or RMC/ZDA time: its sentence index would be taken for seconds) and
+    one with fewer than two such fixes. Returns (times s, *values)."""
+    if src.meta.get("time_source") == "index":
+        raise ImutoolError(f"the {what} file has no clock (no line time stamps, no RMC/ZDA time): its fixes cannot "
+                           "be placed on the IMU's time", path=path)
+    ok = np.isfinite(src.time)
+    for v in values:
+        ok &= np.isfinite(v)
+    tf = src.time[ok]
+    order = np.argsort(tf, kind="stable")
+    tf = tf[order]
+    last = np.append(tf[1:] != tf[:-1], True)  # of equal times, the last one read
+    if last.sum() < 2:
+        raise ImutoolError(f"fewer than two valid {what} fixes at distinct times", path=path)
+    return (tf[last],) + tuple(np.asarray(v)[ok][order][last] for v in values)
+
+
+def _blank_long_gaps(t: np.ndarray, tf: np.ndarray, val: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """``val`` (interpolated onto ``t`` from fixes at ``tf``) with NaN strictly between two fixes more than
+    ``max_gap_s`` apart: a feed that stopped is not drawn as a straight line (a fix's own time is kept)."""
+    j = np.clip(np.searchsorted(tf, t), 1, len(tf) - 1)
+    inside = (t > tf[j - 1]) & (t < tf[j])
+    return np.where(inside & ((tf[j] - tf[j - 1]) > max_gap_s), np.nan, val)
+
+
+def attach_gnss(rec: Recording, path: str | os.PathLike, max_gap_s: float = FIX_MAX_GAP_S) -> Recording:
+    """A copy of ``rec`` with ``sog`` (m/s) and ``cog`` (deg) interpolated from an NMEA (RMC/VTG) or CSV file:
+    fixes sorted by time (of equal times the last read), cog unwrapped, linear between fixes, NaN outside the
+    file's time span and strictly between fixes more than ``max_gap_s`` apart (no compensation across an outage:
+    a course drawn straight through a turn is a wrong acceleration). A file without a clock is refused."""
     path = os.fspath(path)
     g = formats.read(path)
     if "sog" not in g.channels or "cog" not in g.channels:
         raise ImutoolError(f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns "
                            "sog (m/s), cog (deg)", path=path)
-    sog = g.in_unit("sog", "m/s")
-    cog = np.asarray(g.in_unit("cog", "deg"), float)
-    ok = np.isfinite(sog) & np.isfinite(cog)  # unwrapped after: one empty course must not void those after it
-    if ok.sum() < 2:
-        raise ImutoolError("fewer than two valid sog/cog fixes", path=path)
+    # the empty fixes are dropped before the course is unwrapped: one empty course must not void those after it
+    tf, sog, cog = _fixes_in_time_order(g, path, "sog/cog", g.in_unit("sog", "m/s"),
+                                        np.asarray(g.in_unit("cog", "deg"), float))
     out = rec.copy()
-    out.add("sog", np.interp(rec.time, g.time[ok], sog[ok], left=np.nan, right=np.nan), "m/s")
-    out.add("cog", _interp_angle_deg(rec.time, g.time[ok], cog[ok]), "deg")
+    out.add("sog", _blank_long_gaps(rec.time, tf, np.interp(rec.time, tf, sog, left=np.nan, right=np.nan),
+                                    max_gap_s), "m/s")
+    out.add("cog", _blank_long_gaps(rec.time, tf, _interp_angle_deg(rec.time, tf, cog), max_gap_s), "deg")
     return out
 
 
-HEADING_MAX_GAP_S = 5.0  # a gyrocompass heading is interpolated between fixes at most this far apart (s)
-
-
-def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = HEADING_MAX_GAP_S) -> Recording:
+def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = FIX_MAX_GAP_S) -> Recording:
     """A copy of ``rec`` with ``heading_true`` (deg, [0, 360)) interpolated from an NMEA (HDT/THS) or CSV file
     with a heading_true column: fixes sorted by time (of equal times the last read), unwrapped, linear between
     fixes, NaN outside the file's time span and strictly between fixes more than ``max_gap_s`` apart (a
@@ -237,29 +266,13 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     if ch is None or ch not in h.channels:
         raise ImutoolError(f"no true heading (have {', '.join(h.channels)}); need HDT/THS sentences or a CSV "
                            "column heading_true (deg)", path=path)
-    if h.meta.get("time_source") == "index":
-        raise ImutoolError("the heading file has no clock (no line time stamps, no RMC/ZDA time): its fixes cannot "
-                           "be placed on the IMU's time", path=path)
     hd = np.asarray(h.in_unit(ch, "deg"), float)
     if "ths_mode" in h.channels:  # THS: only autonomous (A) and estimated (E) headings are a ship's heading
         mode = np.asarray(h["ths_mode"], float)
         hd = np.where(np.isfinite(mode) & ~np.isin(mode, [ord("A"), ord("E")]), np.nan, hd)
-    ok = np.isfinite(hd) & np.isfinite(h.time)
-    if ok.sum() < 2:
-        raise ImutoolError("fewer than two valid heading fixes", path=path)
-    tf, hd = h.time[ok], hd[ok]
-    order = np.argsort(tf, kind="stable")  # fixes in time order; of equal times the last one read
-    tf, hd = tf[order], hd[order]
-    last = np.append(tf[1:] != tf[:-1], True)
-    tf, hd = tf[last], hd[last]
-    if len(tf) < 2:
-        raise ImutoolError("fewer than two heading fixes at distinct times", path=path)
+    tf, hd = _fixes_in_time_order(h, path, "heading", hd)
     out = rec.copy()
-    val = _interp_angle_deg(rec.time, tf, hd)
-    j = np.clip(np.searchsorted(tf, rec.time), 1, len(tf) - 1)
-    inside = (rec.time > tf[j - 1]) & (rec.time < tf[j])  # strictly between two fixes (a fix's own time is kept)
-    val[inside & ((tf[j] - tf[j - 1]) > max_gap_s)] = np.nan
-    out.add("heading_true", val, "deg")
+    out.add("heading_true", _blank_long_gaps(rec.time, tf, _interp_angle_deg(rec.time, tf, hd), max_gap_s), "deg")
     return out
 
 
@@ -403,6 +416,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                                             t_last - t_first if np.isfinite(t_first) else 0.0)
         summary.update(check)
         warnings += more
+        if heading_given:  # the lag check needs the whole run in memory (imutool.heading_lag): not measured here
+            summary["heading_input_lag_s"] = "not measured (streamed run)"
         if scale_check is not None:
             check, more = scale_check.report()
             summary.update(check)

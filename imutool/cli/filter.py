@@ -57,7 +57,7 @@ from imutool.cli.common import (
 @click.option("--heading", "heading_path", type=click.Path(exists=True, dir_okay=False), default=None,
               help="EKF: NMEA (HDT/THS) or CSV file with heading_true (deg) from a gyrocompass: the filter's heading "
                    "measurement instead of the magnetometer (a heading_true column of INPUT is used "
-                   "automatically).")
+                   "automatically); its delay: --param heading_input_latency=SECONDS.")
 @click.option("--cutoff", type=float, default=0.5, show_default=True, help="lpf: cutoff frequency, Hz.")
 @click.option("--order", type=int, default=2, show_default=True, help="lpf: Butterworth order.")
 @click.option("--compass-model", type=click.Choice(["auto", "scalar", "gyro"]), default="auto", show_default=True,

@@ -1,0 +1,97 @@
+"""How late an external heading (gyrocompass HDT/THS, channel ``heading_true``) is against the gyro.
+
+A gyrocompass's heading is often 0.1–1 s late; at 3 °/s a 0.5 s delay is a 1.5° heading error. The filter can read
+the feed that much later (``heading_input_latency``), but the user must know the delay. This module measures it
+from the run itself: the gyro's heading ψ_g (the Euler heading rate ψ̇ = (sin φ ω_y + cos φ ω_z) / cos θ, ZYX,
+ω the bias-corrected body rate in rad/s, integrated over time) against the feed h. For a trial lag L the
+difference h(t) − ψ_g(t − L) is high-passed (a centred 30 s moving mean removed: the gyro's drift and the feed's
+offset go) and its mean square is the cost; the lag is where the cost is least (grid of 0.05 s over −1…3 s,
+refined by a parabola). A lag is only measurable where the heading moves (a turn, the ship's yaw): the cost's
+curvature says how well, and the check says nothing where the data cannot tell.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from formats.frames import quat_to_euler
+
+LAG_GRID_S = np.round(np.arange(-1.0, 3.0 + 1e-9, 0.05), 2)  # trial lags (s)
+HIGH_PASS_S = 30.0  # the moving mean removed from the difference (s)
+STEP_S = 0.25  # the difference is evaluated on a grid this fine (s)
+MIN_SPAN_S = 60.0  # fewer seconds of feed than this: no measurement
+WARN_LAG_S = 0.2  # a measured lag this far from the configured latency is said ...
+WARN_COST_RATIO = 1.25  # ... when the configured latency's cost is this many times the least (a mean square of
+# ~300 independent 1 Hz fixes has a relative standard error of √(2/300) ≈ 8 %: 25 % is ≈ 3σ)
+
+
+def _moving_mean(x: np.ndarray, ok: np.ndarray, width: int) -> np.ndarray:
+    """Centred moving mean of x over ``width`` samples, counting only ``ok`` samples (NaN where none)."""
+    k = np.ones(width)
+    s = np.convolve(np.where(ok, x, 0.0), k, mode="same")
+    c = np.convolve(ok.astype(float), k, mode="same")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return s / c
+
+
+def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray,
+                        bias: np.ndarray) -> dict | None:
+    """The external heading's lag behind the gyro (s; positive: the feed is late), or None where the run cannot
+    tell (under a minute of feed). time (N,) s; heading_deg (N,) the feed on the IMU time (deg, NaN: none);
+    q (N,4) the filter's attitude body→NED; gyro, bias (N,3) rad/s body.
+
+    Returns ``lag_s`` (the least-cost lag), ``cost_deg2`` (the high-passed mean square at that lag, deg²),
+    ``curvature`` (the cost's second derivative there, deg²/s²: its rise for a lag 1 s off, halved) and the
+    function ``cost_at(L)`` for a given latency (deg²)."""
+    t = np.asarray(time, float)
+    h = np.asarray(heading_deg, float)
+    ok = np.isfinite(h) & np.isfinite(t)
+    if ok.sum() < 2 or t[ok][-1] - t[ok][0] < MIN_SPAN_S:
+        return None
+    roll, pitch, _ = quat_to_euler(q)
+    w = np.asarray(gyro, float) - np.asarray(bias, float)
+    rate = (np.sin(roll) * w[:, 1] + np.cos(roll) * w[:, 2]) / np.maximum(np.cos(pitch), 1e-6)
+    rate = np.where(np.isfinite(rate), rate, 0.0)
+    psi_g = np.degrees(np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))]))
+    grid = np.arange(t[ok][0], t[ok][-1], STEP_S)
+    hg = np.interp(grid, t[ok], np.degrees(np.unwrap(np.radians(h[ok]))))
+    near = np.interp(grid, t, ok.astype(float)) >= 1.0 - 1e-12  # the feed was there (not inside a gap)
+    width = max(3, int(round(HIGH_PASS_S / STEP_S)) | 1)
+
+    def cost_at(lag: float) -> float:
+        d = hg - np.interp(grid - lag, t, psi_g)
+        hp = d - _moving_mean(d, near, width)
+        use = near & np.isfinite(hp)
+        return float(np.mean(hp[use] ** 2)) if use.any() else np.nan
+
+    costs = np.array([cost_at(lag) for lag in LAG_GRID_S])
+    if not np.any(np.isfinite(costs)):
+        return None
+    i = int(np.nanargmin(costs))
+    lag, curv = float(LAG_GRID_S[i]), 0.0
+    if 0 < i < len(LAG_GRID_S) - 1:  # parabola through the three points around the least cost
+        c0, c1, c2 = costs[i - 1], costs[i], costs[i + 1]
+        step = LAG_GRID_S[1] - LAG_GRID_S[0]
+        den = c0 - 2 * c1 + c2
+        if den > 0:
+            lag += 0.5 * step * (c0 - c2) / den
+            curv = den / step ** 2
+    return {"lag_s": round(lag, 2), "cost_deg2": float(costs[i]), "curvature": float(curv), "cost_at": cost_at}
+
+
+def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, list[str]]:
+    """Summary entries (``heading_input_lag_s``, the lag measured) and one warning where the measured lag is
+    ≥ WARN_LAG_S from the configured ``latency_s`` (s) and the data tell the two apart (the configured latency's
+    cost ≥ WARN_COST_RATIO × the least)."""
+    if measured is None:
+        return {"heading_input_lag_s": None}, []
+    out = {"heading_input_lag_s": measured["lag_s"]}
+    lag = measured["lag_s"]
+    if abs(lag - latency_s) < WARN_LAG_S:
+        return out, []
+    if measured["cost_at"](latency_s) < WARN_COST_RATIO * measured["cost_deg2"]:
+        return out, []  # the run's heading hardly moved: it cannot tell the two apart
+    return out, [f"the external heading (heading_true) lags the gyro by about {lag:.2f} s, measured in this run "
+                 f"(heading_input_latency is {latency_s:g} s): through a turn that is a heading error of "
+                 f"{abs(lag - latency_s):.2f} s × the turn rate; set --param heading_input_latency={max(lag, 0):.2f} "
+                 "if the gyrocompass's delay is that"]
