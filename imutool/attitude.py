@@ -984,10 +984,12 @@ def _apply_correction(st, dx):
     q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
     n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
     st[0], st[1], st[2], st[3] = q0 / n, q1 / n, q2 / n, q3 / n
-    bm = st[S_BIASMAX] if st[S_BIASMAX] > 0 else np.inf  # straight-line code: no array refcount per call
-    st[4] = min(bm, max(-bm, st[4] + dx[3]))
-    st[5] = min(bm, max(-bm, st[5] + dx[4]))
-    st[6] = min(bm, max(-bm, st[6] + dx[5]))
+    # no loop (an array refcount per call); without a bound a NaN stays NaN, as before (min/max would make it −inf)
+    bm = st[S_BIASMAX]
+    b0, b1, b2 = st[4] + dx[3], st[5] + dx[4], st[6] + dx[5]
+    st[4] = min(bm, max(-bm, b0)) if bm > 0 else b0
+    st[5] = min(bm, max(-bm, b1)) if bm > 0 else b1
+    st[6] = min(bm, max(-bm, b2)) if bm > 0 else b2
 
 
 @njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")

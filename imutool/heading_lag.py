@@ -41,7 +41,9 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
     q (N,4) the filter's attitude body→NED; gyro, bias (N,3) rad/s body.
 
     Returns ``lag_s`` (the least-cost lag), ``cost_deg2`` (the high-passed mean square at that lag, deg²),
-    ``curvature`` (the cost's second derivative there, deg²/s²: its rise for a lag 1 s off, halved) and the
+    ``curvature`` (the cost's second derivative there, deg²/s²: twice its rise for a lag 1 s off), ``resolved``
+    (False where the least cost is at an end of LAG_GRID_S or the cost over the whole grid stays within
+    WARN_COST_RATIO of the least: the run cannot tell the lag, and ``lag_s`` is then not a measurement) and the
     function ``cost_at(L)`` for a given latency (deg²)."""
     t = np.asarray(time, float)
     h = np.asarray(heading_deg, float)
@@ -59,9 +61,10 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
     width = max(3, int(round(HIGH_PASS_S / STEP_S)) | 1)
 
     def cost_at(lag: float) -> float:
-        d = hg - np.interp(grid - lag, t, psi_g)
-        hp = d - _moving_mean(d, near, width)
-        use = near & np.isfinite(hp)
+        d = hg - np.interp(grid - lag, t, psi_g, left=np.nan, right=np.nan)  # no gyro heading held past the ends
+        have = near & np.isfinite(d)
+        hp = d - _moving_mean(d, have, width)
+        use = have & np.isfinite(hp)
         return float(np.mean(hp[use] ** 2)) if use.any() else np.nan
 
     costs = np.array([cost_at(lag) for lag in LAG_GRID_S])
@@ -69,6 +72,8 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
         return None
     i = int(np.nanargmin(costs))
     lag, curv = float(LAG_GRID_S[i]), 0.0
+    at_edge = not 0 < i < len(LAG_GRID_S) - 1
+    resolved = bool(not at_edge and np.nanmax(costs) >= WARN_COST_RATIO * costs[i])
     if 0 < i < len(LAG_GRID_S) - 1:  # parabola through the three points around the least cost
         c0, c1, c2 = costs[i - 1], costs[i], costs[i + 1]
         step = LAG_GRID_S[1] - LAG_GRID_S[0]
@@ -76,7 +81,8 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
         if den > 0:
             lag += 0.5 * step * (c0 - c2) / den
             curv = den / step ** 2
-    return {"lag_s": round(lag, 2), "cost_deg2": float(costs[i]), "curvature": float(curv), "cost_at": cost_at}
+    return {"lag_s": round(lag, 2), "cost_deg2": float(costs[i]), "curvature": float(curv), "resolved": resolved,
+            "at_edge": at_edge, "cost_at": cost_at}
 
 
 def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, list[str]]:
@@ -84,6 +90,14 @@ def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, li
     ≥ WARN_LAG_S from the configured ``latency_s`` (s) and the data tell the two apart (the configured latency's
     cost ≥ WARN_COST_RATIO × the least)."""
     if measured is None:
+        return {"heading_input_lag_s": None}, []  # under a minute of feed
+    if not measured.get("resolved", True):  # the heading never moved enough, or the lag is off the grid
+        if (measured.get("at_edge") and abs(measured["lag_s"] - latency_s) >= WARN_LAG_S
+                and measured["cost_at"](latency_s) >= WARN_COST_RATIO * measured["cost_deg2"]):
+            return {"heading_input_lag_s": None}, [
+                f"the external heading (heading_true) is off from the gyro by {measured['lag_s']:+.2f} s or more "
+                f"(the end of the lags tried, {LAG_GRID_S[0]:g}…{LAG_GRID_S[-1]:g} s; heading_input_latency is "
+                f"{latency_s:g} s): check the heading feed's clock against the IMU's"]
         return {"heading_input_lag_s": None}, []
     out = {"heading_input_lag_s": measured["lag_s"]}
     lag = measured["lag_s"]
@@ -91,7 +105,11 @@ def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, li
         return out, []
     if measured["cost_at"](latency_s) < WARN_COST_RATIO * measured["cost_deg2"]:
         return out, []  # the run's heading hardly moved: it cannot tell the two apart
+    if lag < 0:  # a feed ahead of the gyro is a clock offset, not a latency the parameter can take
+        return out, [f"the external heading (heading_true) leads the gyro by about {-lag:.2f} s, measured in this "
+                     f"run (heading_input_latency is {latency_s:g} s): its time stamps are late against the IMU's "
+                     "(a clock offset); align the clocks, heading_input_latency cannot be negative"]
     return out, [f"the external heading (heading_true) lags the gyro by about {lag:.2f} s, measured in this run "
                  f"(heading_input_latency is {latency_s:g} s): through a turn that is a heading error of "
-                 f"{abs(lag - latency_s):.2f} s × the turn rate; set --param heading_input_latency={max(lag, 0):.2f} "
+                 f"{abs(lag - latency_s):.2f} s × the turn rate; set --param heading_input_latency={lag:.2f} "
                  "if the gyrocompass's delay is that"]

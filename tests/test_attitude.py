@@ -926,7 +926,7 @@ def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
         duration = rec.time[-1] - rec.time[0]  # one update a second (heading_input_interval)
         assert s["heading_source"].startswith("heading_true") and s["heading_input_updates"] > 0.9 * duration
         if streamed:  # the lag check needs the whole run in memory: said, not left out
-            assert s["heading_input_lag_s"] == "not measured (streamed run)"
+            assert s["heading_input_lag_s"] is None and s["heading_input_lag_note"] == "not measured (streamed run)"
         else:
             assert abs(s["heading_input_lag_s"]) <= 0.2 and "lags the gyro" not in run.stderr, s
         assert est.meta["heading_source"] == s["heading_source"]
@@ -1055,11 +1055,10 @@ def test_attach_gnss_keeps_the_courses_after_an_empty_one(tmp_path):
     assert np.abs(wrap_deg180(out["cog"][late] - rec["ref_cog"][late])).max() < 3.0
 
 
-def test_attach_gnss_sorts_blanks_an_outage_and_refuses_a_file_without_clock(tmp_path, monkeypatch):
-    """SOG/COG fixes out of time order were handed to np.interp unsorted (a silently wrong speed), a receiver
-    outage was bridged by a straight course however long, and a VTG-only NMEA file (no clock) was squeezed onto
-    its sentence index as seconds. Now: sorted (of equal times the last read), NaN strictly inside a gap over
-    5 s, the clock-less file refused."""
+def test_attach_gnss_sorts_bridges_an_outage_and_refuses_a_file_without_clock(tmp_path, monkeypatch):
+    """SOG/COG fixes out of time order were handed to np.interp unsorted (a silently wrong speed), and a VTG-only
+    NMEA file (no clock) was squeezed onto its sentence index as seconds. Now: sorted (of equal times the last
+    read), the clock-less file refused; an outage is bridged (blanking it measured worse: docs/attitude.md)."""
     from formats.nmea import checksum
     from imutool import filtering
 
@@ -1075,7 +1074,7 @@ def test_attach_gnss_sorts_blanks_an_outage_and_refuses_a_file_without_clock(tmp
     at = {round(x - t0, 3): (s, c) for x, s, c in zip(rec.time, out["sog"], out["cog"], strict=True)}
     assert at[2.0] == pytest.approx((2.5, 25.0)) and at[1.5] == pytest.approx((1.75, 17.5))  # sorted, last wins
     assert at[2.5] == pytest.approx((2.75, 27.5))
-    assert np.isnan(at[5.0][0]) and np.isnan(at[5.0][1])  # inside the 7 s outage: no compensation
+    assert at[5.0] == pytest.approx((5.0, 50.0))  # a 7 s outage is bridged (a steady turn's course is linear)
     assert at[10.0] == pytest.approx((10.0, 100.0)) and at[10.5] == pytest.approx((10.5, 105.0))
     vtg = tmp_path / "vtg_only.nmea"
     bodies = [f"GPVTG,{c:.1f},T,,M,{k:.1f},N,{k * 1.852:.1f},K,A" for c, k in ((10, 5), (11, 5), (12, 5))]
@@ -1084,14 +1083,13 @@ def test_attach_gnss_sorts_blanks_an_outage_and_refuses_a_file_without_clock(tmp
         filtering.attach_gnss(rec, vtg)
 
 
-def test_a_late_gyrocompass_is_read_later_with_heading_input_latency(tmp_path):
+def test_a_late_gyrocompass_is_read_later_with_heading_input_latency(tmp_path, capsys):
     """A gyrocompass whose HDT is 0.8 s late: through the turn the heading lags by 0.8 s × 3 °/s. The run measures
     the lag against the gyro and says it (summary, metadata, one warning) until it is given; with
     `--param heading_input_latency=0.8` each fix is taken for the heading 0.8 s before its stamp (measured on this
     run: heading RMS 1.82° → 0.10° after the first minute). The parameter is written into the output's metadata,
-    and a run with it is not streamed (a heading read later needs the rows after a chunk's end)."""
+    and a streamed run refuses it (a heading read later needs the rows after a chunk's end)."""
     from formats.nmea import checksum
-    from imutool import filtering
     from imutool.cli import cli
 
     rec = simulate("ship-at-sea", duration=300, seed=0)
@@ -1121,8 +1119,14 @@ def test_a_late_gyrocompass_is_read_later_with_heading_input_latency(tmp_path):
         rms[latency] = float(np.sqrt(np.mean(wrap_deg180(est["heading"] - rec["ref_heading"])[late] ** 2)))
         assert est.meta["filter"]["heading_input_latency"] == latency
     assert rms[0.0] > 1.0 and rms[0.8] < 0.3, rms  # measured 1.82 / 0.10
-    assert filtering.streams(src, tmp_path / "o.csv", stream_mb=0) is True
-    assert filtering.streams(src, tmp_path / "o.csv", stream_mb=0, heading_latency=0.8) is False
+    with_col = nomag.copy()  # a heading_true column in a file large enough to stream: refused, in one line
+    with_col.add("heading_true", np.degrees(np.interp(rec.time, tf, np.unwrap(np.radians(hf)))) % 360, "deg")
+    formats.write(with_col, tmp_path / "with_col.csv")
+    out = tmp_path / "streamed.csv"
+    code, _, err = run_main(["filter", tmp_path / "with_col.csv", "-o", out, "--stream-mb", "0", "--param",
+                             "heading_input_latency=0.8", "-q"], capsys)
+    assert code == 2 and "heading_input_latency" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and not out.exists(), err
 
 
 def test_the_heading_lag_is_measured_where_the_heading_moves_and_not_said_where_it_cannot_be():
@@ -1144,7 +1148,7 @@ def test_the_heading_lag_is_measured_where_the_heading_moves_and_not_said_where_
             if scenario == "ship-roll":
                 assert summary["heading_input_lag_s"] == pytest.approx(lag, abs=0.1), (lag, m)
                 assert bool(warns) == (lag > 0), warns
-            else:
-                assert warns == [], (lag, m)
+            else:  # nothing moves: no lag is reported, nothing is said
+                assert summary == {"heading_input_lag_s": None} and warns == [], (lag, m)
     assert heading_lag_check(measure_heading_lag(rec.time[:5000], col[:5000], res.q[:5000], rec["gyro"][:5000],
                                                  res.bias[:5000]), 0.0) == ({"heading_input_lag_s": None}, [])
