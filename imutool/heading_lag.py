@@ -34,6 +34,34 @@ def _moving_mean(x: np.ndarray, ok: np.ndarray, width: int) -> np.ndarray:
         return s / c
 
 
+def _gyro_heading(t: np.ndarray, q: np.ndarray, gyro: np.ndarray, bias: np.ndarray,
+                  keep_s: float = 0.05, block: int = 1 << 20) -> tuple[np.ndarray, np.ndarray]:
+    """The gyro's heading (deg, from 0 at the first sample): ψ̇ = (sin φ ω_y + cos φ ω_z) / cos θ (rad/s; ω = gyro
+    − bias, body; φ, θ from q body→NED) integrated by trapezoids at the full rate, kept every ``keep_s`` s (and
+    the last sample): a day at 200 Hz is computed in blocks and held at 20 Hz. Returns (times s, headings deg)."""
+    n = len(t)
+    step = max(1, int(round(keep_s / max(float(np.median(np.diff(t[:1000]))) if n > 1 else keep_s, 1e-9))))
+    times, heads = [], []
+    psi, prev_rate = 0.0, None
+    for i0 in range(0, n, block):
+        i1 = min(n, i0 + block)
+        roll, pitch, _ = quat_to_euler(q[i0:i1])
+        w = np.asarray(gyro[i0:i1], float) - np.asarray(bias[i0:i1], float)
+        rate = (np.sin(roll) * w[:, 1] + np.cos(roll) * w[:, 2]) / np.maximum(np.cos(pitch), 1e-6)
+        rate = np.where(np.isfinite(rate), rate, 0.0)
+        tb = t[i0:i1] if i0 == 0 else t[i0 - 1:i1]
+        rb = rate if prev_rate is None else np.concatenate([[prev_rate], rate])
+        ps = psi + np.concatenate([[0.0], np.cumsum(0.5 * (rb[1:] + rb[:-1]) * np.diff(tb))])
+        ps = ps if i0 == 0 else ps[1:]
+        idx = np.arange((-i0) % step, i1 - i0, step)
+        if i1 == n and (len(idx) == 0 or idx[-1] != i1 - i0 - 1):
+            idx = np.append(idx, i1 - i0 - 1)
+        times.append(t[i0:i1][idx])
+        heads.append(ps[idx])
+        psi, prev_rate = float(ps[-1]), float(rate[-1])
+    return np.concatenate(times), np.degrees(np.concatenate(heads))
+
+
 def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray,
                         bias: np.ndarray) -> dict | None:
     """The external heading's lag behind the gyro (s; positive: the feed is late), or None where the run cannot
@@ -50,18 +78,14 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
     ok = np.isfinite(h) & np.isfinite(t)
     if ok.sum() < 2 or t[ok][-1] - t[ok][0] < MIN_SPAN_S:
         return None
-    roll, pitch, _ = quat_to_euler(q)
-    w = np.asarray(gyro, float) - np.asarray(bias, float)
-    rate = (np.sin(roll) * w[:, 1] + np.cos(roll) * w[:, 2]) / np.maximum(np.cos(pitch), 1e-6)
-    rate = np.where(np.isfinite(rate), rate, 0.0)
-    psi_g = np.degrees(np.concatenate([[0.0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))]))
+    t_g, psi_g = _gyro_heading(t, q, gyro, bias)
     grid = np.arange(t[ok][0], t[ok][-1], STEP_S)
     hg = np.interp(grid, t[ok], np.degrees(np.unwrap(np.radians(h[ok]))))
     near = np.interp(grid, t, ok.astype(float)) >= 1.0 - 1e-12  # the feed was there (not inside a gap)
     width = max(3, int(round(HIGH_PASS_S / STEP_S)) | 1)
 
     def cost_at(lag: float) -> float:
-        d = hg - np.interp(grid - lag, t, psi_g, left=np.nan, right=np.nan)  # no gyro heading held past the ends
+        d = hg - np.interp(grid - lag, t_g, psi_g, left=np.nan, right=np.nan)  # no gyro heading held past the ends
         have = near & np.isfinite(d)
         hp = d - _moving_mean(d, have, width)
         use = have & np.isfinite(hp)
