@@ -25,6 +25,7 @@ import formats
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.convert import STREAMABLE, expected_rows
+from imutool.heading_lag import HeadingLagTrack, heading_lag_check
 from imutool.progress import Progress, report
 
 METHODS = ("ekf", "lpf", "accel", "compass")
@@ -334,6 +335,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     gnss_used = mag_used = False  # SOG/COG used in some chunk; a heading update (mag or external) taken in some chunk
     heading_given = mag_given = False  # a heading_true / mag column in some chunk
     heading_updates = 0
+    lag_track = HeadingLagTrack()  # the heading input's lag against the gyro, fed chunk by chunk
     t_first = np.nan  # time of the first row filtered
     scale_check = None  # the gyro's scale against gravity, summed chunk by chunk
     total = expected_rows(path)
@@ -385,6 +387,8 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             heading_given = heading_given or "heading_true" in chunk.channels
             mag_given = mag_given or "mag" in chunk.channels
             heading_updates += int(np.count_nonzero(res.flags & F_HDG_USED))
+            if "heading_true" in chunk.channels:  # the same columns in every chunk of a file
+                lag_track.add(res.time, _heading_channel(chunk), res.q, chunk["gyro"], res.bias)
             bad = (res.flags & F_INCONSISTENT) > 0
             n_flagged += int(bad.sum())
             flagged.add(res.time, bad)
@@ -421,9 +425,10 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                                             t_last - t_first if np.isfinite(t_first) else 0.0)
         summary.update(check)
         warnings += more
-        if heading_given:  # the lag check needs the whole run in memory (imutool.heading_lag): not measured here
-            summary["heading_input_lag_s"] = None
-            summary["heading_input_lag_note"] = "not measured (streamed run)"
+        if heading_given:
+            check, more = heading_lag_check(lag_track.measure(), params.heading_input_latency)
+            summary.update(check)
+            warnings += more
         if scale_check is not None:
             check, more = scale_check.report()
             summary.update(check)
@@ -433,6 +438,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         everything = checks.meta_warnings(input_warnings, warnings)
         w.set_final_meta({"validation": {k: v for k, v in validation.items() if k != "warnings"},
                           "heading_source": summary["heading_source"],
+                          **({"heading_input_lag_s": summary["heading_input_lag_s"]} if heading_given else {}),
                           **({"warnings": everything} if everything else {})})
     summary.update(totals)
     summary["samples"] = summary["rows"]

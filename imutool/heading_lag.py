@@ -34,32 +34,60 @@ def _moving_mean(x: np.ndarray, ok: np.ndarray, width: int) -> np.ndarray:
         return s / c
 
 
-def _gyro_heading(t: np.ndarray, q: np.ndarray, gyro: np.ndarray, bias: np.ndarray,
-                  keep_s: float = 0.05, block: int = 1 << 20) -> tuple[np.ndarray, np.ndarray]:
-    """The gyro's heading (deg, from 0 at the first sample): ψ̇ = (sin φ ω_y + cos φ ω_z) / cos θ (rad/s; ω = gyro
-    − bias, body; φ, θ from q body→NED) integrated by trapezoids at the full rate, kept every ``keep_s`` s (and
-    the last sample): a day at 200 Hz is computed in blocks and held at 20 Hz. Returns (times s, headings deg)."""
-    n = len(t)
-    step = max(1, int(round(keep_s / max(float(np.median(np.diff(t[:1000]))) if n > 1 else keep_s, 1e-9))))
-    times, heads = [], []
-    psi, prev_rate = 0.0, None
-    for i0 in range(0, n, block):
-        i1 = min(n, i0 + block)
-        roll, pitch, _ = quat_to_euler(q[i0:i1])
-        w = np.asarray(gyro[i0:i1], float) - np.asarray(bias[i0:i1], float)
-        rate = (np.sin(roll) * w[:, 1] + np.cos(roll) * w[:, 2]) / np.maximum(np.cos(pitch), 1e-6)
-        rate = np.where(np.isfinite(rate), rate, 0.0)
-        tb = t[i0:i1] if i0 == 0 else t[i0 - 1:i1]
-        rb = rate if prev_rate is None else np.concatenate([[prev_rate], rate])
-        ps = psi + np.concatenate([[0.0], np.cumsum(0.5 * (rb[1:] + rb[:-1]) * np.diff(tb))])
-        ps = ps if i0 == 0 else ps[1:]
-        idx = np.arange((-i0) % step, i1 - i0, step)
-        if i1 == n and (len(idx) == 0 or idx[-1] != i1 - i0 - 1):
-            idx = np.append(idx, i1 - i0 - 1)
-        times.append(t[i0:i1][idx])
-        heads.append(ps[idx])
-        psi, prev_rate = float(ps[-1]), float(rate[-1])
-    return np.concatenate(times), np.degrees(np.concatenate(heads))
+class HeadingLagTrack:
+    """What the lag measurement keeps of a run, fed chunk by chunk (in memory: one chunk; streamed: each chunk as
+    it is filtered): the gyro's heading ψ_g (deg, from 0 at the first sample; ψ̇ = (sin φ ω_y + cos φ ω_z) / cos θ
+    in rad/s, ω = gyro − bias, body; φ, θ from q body→NED) integrated by trapezoids at the full rate across
+    chunks, and the feed (deg, NaN: none) — both kept at the first sample of every ``keep_s`` s and the last one:
+    a day at 200 Hz is held at 20 Hz."""
+
+    def __init__(self, keep_s: float = 0.05, block: int = 1 << 20) -> None:
+        self.keep_s, self.block = keep_s, block
+        self.psi = 0.0  # ψ_g at the last sample seen (rad)
+        self.last: tuple[float, float] | None = None  # (time s, ψ̇ rad/s) of the last sample seen
+        self.bin = -np.inf  # the keep_s bin of the last sample kept
+        self.t: list[np.ndarray] = []
+        self.psi_g: list[np.ndarray] = []
+        self.feed: list[np.ndarray] = []
+        self.tail: tuple[float, float, float] | None = None  # (time, ψ_g, feed) of the last sample seen
+
+    def add(self, time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray,
+            bias: np.ndarray) -> None:
+        """One chunk, in time order after the previous: time (N,) s, heading_deg (N,) the feed on the IMU time,
+        q (N,4) the filter's attitude, gyro and bias (N,3) rad/s body."""
+        for i0 in range(0, len(time), self.block):
+            sl = slice(i0, min(len(time), i0 + self.block))
+            t = np.asarray(time[sl], float)
+            roll, pitch, _ = quat_to_euler(q[sl])
+            w = np.asarray(gyro[sl], float) - np.asarray(bias[sl], float)
+            rate = (np.sin(roll) * w[:, 1] + np.cos(roll) * w[:, 2]) / np.maximum(np.cos(pitch), 1e-6)
+            rate = np.where(np.isfinite(rate), rate, 0.0)
+            tb = t if self.last is None else np.concatenate([[self.last[0]], t])
+            rb = rate if self.last is None else np.concatenate([[self.last[1]], rate])
+            ps = self.psi + np.concatenate([[0.0], np.cumsum(0.5 * (rb[1:] + rb[:-1]) * np.diff(tb))])
+            ps = ps if self.last is None else ps[1:]
+            bins = np.floor(t / self.keep_s)
+            keep = np.flatnonzero(bins > np.maximum.accumulate(np.concatenate([[self.bin], bins[:-1]])))
+            h = np.asarray(heading_deg[sl], float)
+            self.t.append(t[keep])
+            self.psi_g.append(ps[keep])
+            self.feed.append(h[keep])
+            if len(t):
+                self.bin = max(self.bin, float(bins.max()))
+                self.psi, self.last = float(ps[-1]), (float(t[-1]), float(rate[-1]))
+                self.tail = (float(t[-1]), float(ps[-1]), float(h[-1]))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(times s, ψ_g deg, feed deg) kept, the last sample seen included."""
+        t, psi, feed = (np.concatenate(x) if x else np.empty(0) for x in (self.t, self.psi_g, self.feed))
+        if self.tail is not None and (len(t) == 0 or t[-1] != self.tail[0]):
+            t, psi, feed = (np.append(a, v) for a, v in zip((t, psi, feed), self.tail, strict=True))
+        return t, np.degrees(psi), feed
+
+    def measure(self) -> dict | None:
+        """:func:`measure_heading_lag` of what was added."""
+        t, psi_g, h = self.arrays()
+        return _measure(t, psi_g, h)
 
 
 def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray,
@@ -73,12 +101,17 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
     (False where the least cost is at an end of LAG_GRID_S or the cost over the whole grid stays within
     WARN_COST_RATIO of the least: the run cannot tell the lag, and ``lag_s`` is then not a measurement) and the
     function ``cost_at(L)`` for a given latency (deg²)."""
-    t = np.asarray(time, float)
-    h = np.asarray(heading_deg, float)
+    track = HeadingLagTrack()
+    track.add(time, heading_deg, q, gyro, bias)
+    return track.measure()
+
+
+def _measure(t: np.ndarray, psi_g: np.ndarray, h: np.ndarray) -> dict | None:
+    """The lag from the gyro's heading ``psi_g`` and the feed ``h`` (deg, NaN: none) at times ``t`` (s)."""
+    t_g = t
     ok = np.isfinite(h) & np.isfinite(t)
     if ok.sum() < 2 or t[ok][-1] - t[ok][0] < MIN_SPAN_S:
         return None
-    t_g, psi_g = _gyro_heading(t, q, gyro, bias)
     grid = np.arange(t[ok][0], t[ok][-1], STEP_S)
     hg = np.interp(grid, t[ok], np.degrees(np.unwrap(np.radians(h[ok]))))
     near = np.interp(grid, t, ok.astype(float)) >= 1.0 - 1e-12  # the feed was there (not inside a gap)
