@@ -2032,17 +2032,19 @@ def check_smoother_memory(n: int) -> None:
                            f"and {size(have)} is available; smooth a shorter span or filter without --smooth")
 
 
-def _heading_channel(rec: Recording, latency_s: float = 0.0) -> np.ndarray | None:
-    """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None; with a
-    ``latency_s`` (s) > 0 the value at t is the column's at t + latency (read that much later: the fix describes
-    the heading latency_s before its stamp), unwrapped and linear between samples, NaN where either neighbour is
-    NaN or past the end."""
+def _heading_channel(rec: Recording) -> np.ndarray | None:
+    """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None."""
     if "heading_true" not in rec.channels:
         return None
-    h = np.asarray(rec.in_unit("heading_true", "deg"), float)
+    return np.asarray(rec.in_unit("heading_true", "deg"), float)
+
+
+def _read_later(t: np.ndarray, h: np.ndarray, latency_s: float) -> np.ndarray:
+    """A heading column ``h`` (deg at times ``t`` s) read ``latency_s`` (s) later: the value at t is the column's
+    at t + latency (the fix describes the heading latency_s before its stamp), unwrapped and linear between
+    samples, NaN where either neighbour is NaN or past the end; ``h`` itself when the latency is 0."""
     if latency_s <= 0:
         return h
-    t = rec.time
     ok = np.isfinite(h) & np.isfinite(t)
     if ok.sum() < 2:
         return np.full_like(h, np.nan)
@@ -2091,7 +2093,8 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     gyro = rec.in_unit("gyro", "rad/s")
     accel = rec.in_unit("accel", "m/s^2")
     mag = rec["mag"] if "mag" in rec.channels else None
-    heading = _heading_channel(rec, params.heading_input_latency)
+    heading_raw = _heading_channel(rec)  # deg, as it came
+    heading = None if heading_raw is None else _read_later(rec.time, heading_raw, params.heading_input_latency)
     sog = cog = None
     if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
         sog = rec.in_unit("sog", "m/s")
@@ -2108,7 +2111,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     summary.update(source)
     warnings += more
     if heading is not None:  # how late the feed is against the gyro, measured on the feed as it came
-        lag, more = heading_lag_check(measure_heading_lag(rec.time, _heading_channel(rec), res.q, gyro, res.bias),
+        lag, more = heading_lag_check(measure_heading_lag(rec.time, heading_raw, res.q, gyro, res.bias),
                                       params.heading_input_latency)
         summary.update(lag)
         warnings += more

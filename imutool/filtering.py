@@ -201,12 +201,13 @@ def _interp_angle_deg(t: np.ndarray, tf: np.ndarray, deg: np.ndarray) -> np.ndar
     return np.degrees(np.interp(t, tf, np.unwrap(np.radians(deg)), left=np.nan, right=np.nan)) % 360
 
 
-FIX_MAX_GAP_S = 5.0  # a GNSS or gyrocompass feed is interpolated between fixes at most this far apart (s)
+HEADING_MAX_GAP_S = 5.0  # a gyrocompass feed is interpolated between fixes at most this far apart (s)
 
 
 def _fixes_in_time_order(src: Recording, path: str, what: str, *values: np.ndarray) -> tuple[np.ndarray, ...]:
     """The rows of ``values`` that are all finite, sorted by time; of equal times the last one read. Refuses a file
-    without a clock (NMEA without time stamps or RMC/ZDA time: its sentence index would be taken for seconds) and
+    without a clock (NMEA without line time stamps or a sentence with a time of day: its sentence index would be
+    taken for seconds) and
     one with fewer than two such fixes. Returns (times s, *values)."""
     if src.meta.get("time_source") == "index":
         raise ImutoolError(f"the {what} file has no clock (no line time stamps, no sentence with a time of day): its "
@@ -253,12 +254,12 @@ def attach_gnss(rec: Recording, path: str | os.PathLike, max_gap_s: float = np.i
     return out
 
 
-def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = FIX_MAX_GAP_S) -> Recording:
+def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = HEADING_MAX_GAP_S) -> Recording:
     """A copy of ``rec`` with ``heading_true`` (deg, [0, 360)) interpolated from an NMEA (HDT/THS) or CSV file
     with a heading_true column: fixes sorted by time (of equal times the last read), unwrapped, linear between
     fixes, NaN outside the file's time span and strictly between fixes more than ``max_gap_s`` apart (a
     gyrocompass that stopped is not drawn as a straight line). THS fixes in mode S, M or V are dropped; a file
-    without a clock (NMEA without time stamps or RMC/ZDA) is refused. The filter then takes its heading from it
+    without a clock is refused (:func:`_fixes_in_time_order`). The filter then takes its heading from it
     (at most once per ``heading_input_interval``) and not from the magnetometer."""
     path = os.fspath(path)
     h = formats.read(path)
@@ -377,18 +378,19 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 raise ImutoolError("heading_input_latency reads the heading_true column later, past a chunk's end: "
                                    "a streamed run cannot apply it (run in memory: --stream-mb above the file's size, "
                                    "or give the heading as a file with --heading)", path=path)
+            heading = _heading_channel(chunk)  # deg, or None
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
                                  sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True,
-                                 heading_deg=_heading_channel(chunk))
+                                 heading_deg=heading)
             if scale_check is None:
                 scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
             scale_check.add(res.time, chunk["gyro"], res.bias, res.force)
             mag_used = mag_used or bool(np.any(res.flags & (F_MAG_USED | F_HDG_USED)))
-            heading_given = heading_given or "heading_true" in chunk.channels
+            heading_given = heading_given or heading is not None
             mag_given = mag_given or "mag" in chunk.channels
             heading_updates += int(np.count_nonzero(res.flags & F_HDG_USED))
-            if "heading_true" in chunk.channels:  # the same columns in every chunk of a file
-                lag_track.add(res.time, _heading_channel(chunk), res.q, chunk["gyro"], res.bias)
+            if heading is not None:  # the same columns in every chunk of a file
+                lag_track.add(res.time, heading, res.q, chunk["gyro"], res.bias)
             bad = (res.flags & F_INCONSISTENT) > 0
             n_flagged += int(bad.sum())
             flagged.add(res.time, bad)

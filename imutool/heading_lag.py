@@ -6,8 +6,8 @@ from the run itself: the gyro's heading ψ_g (the Euler heading rate ψ̇ = (sin
 ω the bias-corrected body rate in rad/s, integrated over time) against the feed h. For a trial lag L the
 difference h(t) − ψ_g(t − L) is high-passed (a centred 30 s moving mean removed: the gyro's drift and the feed's
 offset go) and its mean square is the cost; the lag is where the cost is least (grid of 0.05 s over −1…3 s,
-refined by a parabola). A lag is only measurable where the heading moves (a turn, the ship's yaw): the cost's
-curvature says how well, and the check says nothing where the data cannot tell.
+refined by a parabola). A lag is only measurable where the heading moves (a turn, the ship's yaw): where the cost
+never rises WARN_COST_RATIO above its least, or the least is at an end of the grid, no lag is reported.
 """
 
 from __future__ import annotations
@@ -96,8 +96,7 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
     tell (under a minute of feed). time (N,) s; heading_deg (N,) the feed on the IMU time (deg, NaN: none);
     q (N,4) the filter's attitude body→NED; gyro, bias (N,3) rad/s body.
 
-    Returns ``lag_s`` (the least-cost lag), ``cost_deg2`` (the high-passed mean square at that lag, deg²),
-    ``curvature`` (the cost's second derivative there, deg²/s²: twice its rise for a lag 1 s off), ``resolved``
+    Returns ``lag_s`` (the least-cost lag), ``cost_deg2`` (the high-passed mean square at that lag, deg²), ``resolved``
     (False where the least cost is at an end of LAG_GRID_S or the cost over the whole grid stays within
     WARN_COST_RATIO of the least: the run cannot tell the lag, and ``lag_s`` is then not a measurement) and the
     function ``cost_at(L)`` for a given latency (deg²)."""
@@ -108,7 +107,6 @@ def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray
 
 def _measure(t: np.ndarray, psi_g: np.ndarray, h: np.ndarray) -> dict | None:
     """The lag from the gyro's heading ``psi_g`` and the feed ``h`` (deg, NaN: none) at times ``t`` (s)."""
-    t_g = t
     ok = np.isfinite(h) & np.isfinite(t)
     if ok.sum() < 2 or t[ok][-1] - t[ok][0] < MIN_SPAN_S:
         return None
@@ -118,7 +116,7 @@ def _measure(t: np.ndarray, psi_g: np.ndarray, h: np.ndarray) -> dict | None:
     width = max(3, int(round(HIGH_PASS_S / STEP_S)) | 1)
 
     def cost_at(lag: float) -> float:
-        d = hg - np.interp(grid - lag, t_g, psi_g, left=np.nan, right=np.nan)  # no gyro heading held past the ends
+        d = hg - np.interp(grid - lag, t, psi_g, left=np.nan, right=np.nan)  # no gyro heading held past the ends
         have = near & np.isfinite(d)
         hp = d - _moving_mean(d, have, width)
         use = have & np.isfinite(hp)
@@ -128,17 +126,16 @@ def _measure(t: np.ndarray, psi_g: np.ndarray, h: np.ndarray) -> dict | None:
     if not np.any(np.isfinite(costs)):
         return None
     i = int(np.nanargmin(costs))
-    lag, curv = float(LAG_GRID_S[i]), 0.0
+    lag = float(LAG_GRID_S[i])
     at_edge = not 0 < i < len(LAG_GRID_S) - 1
     resolved = bool(not at_edge and np.nanmax(costs) >= WARN_COST_RATIO * costs[i])
-    if 0 < i < len(LAG_GRID_S) - 1:  # parabola through the three points around the least cost
+    if not at_edge:  # parabola through the three points around the least cost
         c0, c1, c2 = costs[i - 1], costs[i], costs[i + 1]
         step = LAG_GRID_S[1] - LAG_GRID_S[0]
         den = c0 - 2 * c1 + c2
         if den > 0:
             lag += 0.5 * step * (c0 - c2) / den
-            curv = den / step ** 2
-    return {"lag_s": round(lag, 2), "cost_deg2": float(costs[i]), "curvature": float(curv), "resolved": resolved,
+    return {"lag_s": round(lag, 2), "cost_deg2": float(costs[i]), "resolved": resolved,
             "at_edge": at_edge, "cost_at": cost_at}
 
 
