@@ -135,7 +135,7 @@ def _measure(t: np.ndarray, psi_g: np.ndarray, h: np.ndarray) -> dict | None:
         den = c0 - 2 * c1 + c2
         if den > 0:
             lag += 0.5 * step * (c0 - c2) / den
-    return {"lag_s": round(lag, 2), "cost_deg2": float(costs[i]), "resolved": resolved,
+    return {"lag_s": round(float(lag), 2), "cost_deg2": float(costs[i]), "resolved": resolved,
             "at_edge": at_edge, "cost_at": cost_at}
 
 
@@ -161,7 +161,7 @@ def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, li
         return out, []  # the run's heading hardly moved: it cannot tell the two apart
     if lag < 0:  # a feed ahead of the gyro is a clock offset, not a latency the parameter can take
         return out, [f"the external heading (heading_true) leads the gyro by about {-lag:.2f} s, measured in this "
-                     f"run (heading_input_latency is {latency_s:g} s): its time stamps are late against the IMU's "
+                     f"run (heading_input_latency is {latency_s:g} s): its time stamps are early against the IMU's "
                      "(a clock offset); align the clocks, heading_input_latency cannot be negative"]
     return out, [f"the external heading (heading_true) lags the gyro by about {lag:.2f} s, measured in this run "
                  f"(heading_input_latency is {latency_s:g} s): through a turn that is a heading error of "

@@ -1160,3 +1160,10 @@ def test_the_heading_lag_is_measured_where_the_heading_moves_and_not_said_where_
                 assert summary == {"heading_input_lag_s": None} and warns == [], (lag, m)
     assert heading_lag_check(measure_heading_lag(rec.time[:5000], col[:5000], res.q[:5000], rec["gyro"][:5000],
                                                  res.bias[:5000]), 0.0) == ({"heading_input_lag_s": None}, [])
+    rec = simulate("ship-roll", duration=200, seed=1)  # a feed stamped 0.6 s early: a clock offset, said so
+    early = np.degrees(np.interp(rec.time + 0.6, rec.time, np.unwrap(np.radians(rec["ref_heading"])))) % 360
+    res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], None, heading_deg=early)
+    summary, warns = heading_lag_check(measure_heading_lag(rec.time, early, res.q, rec["gyro"], res.bias), 0.0)
+    lag = summary["heading_input_lag_s"]
+    assert lag == pytest.approx(-0.6, abs=0.1) and type(lag) is float, lag
+    assert len(warns) == 1 and "leads the gyro" in warns[0] and "stamps are early" in warns[0], warns
