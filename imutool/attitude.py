@@ -16,8 +16,14 @@ filter.)
   [0, I]], Φ = exp(−[ω×] dt); Q = diag(σ_g² dt I, σ_b² dt I) (eq. 10). A step longer than ``gap_dt`` is a gap: the
   rotation is integrated over at most ``gap_dt`` and the attitude variance grows by (gap_rate_sigma·dt)², so accel/mag
   re-converge after it.
-- Update (eq. 7–18) every ``update_every`` samples (paper: every 40th at 200 Hz; P is then propagated only at
-  update steps with the accumulated rotation Φ = ΔRᵀ, as in the paper's multi-rate scheme):
+- Update (eq. 7–18) every N samples (``update_every``; default ⌊sample rate / ``update_rate_hz``⌋, 4 at 200 Hz;
+  paper: every 40th at 200 Hz). The attitude is integrated every sample; P is propagated only before an update,
+  with the rotation accumulated since the last one (Φ = ΔRᵀ), as in the paper's multi-rate scheme. The noise
+  figures stay per sample: an update stands for the n usable samples since the previous one of that sensor
+  (accelerometer: fed to the low-pass; magnetometer: accepted; rest: still), R = σ²/n, and each sensor is used at
+  its first usable sample once due (a sensor at half the rate, or NaN rows, never alias with N). So N changes the
+  speed, not the filter (BROAD, N = 1…10: inclination 0.7388–0.7389°). The self-check's NIS is taken against σ², as
+  at N = 1. The raw accelerometer (``accel_lp_tau`` 0) is one sample, not an average: N defaults to 1 there.
   accelerometer z = a/‖a‖, ẑ = Rᵀ(q)·[0,0,−1], H = [[ẑ×], 0] (eq. 8–12), K = PHᵀS⁻¹ (eq. 14), δx = K y
   (eq. 15), b += δb (16), q ← q ⊗ δq (17), P ← (I − KH)P (18).
   Magnetometer, ``mag_mode``: "full" = the paper's normalised 3-vector (ẑ = Rᵀ m_ref); "heading" (default) =
@@ -68,7 +74,7 @@ from imutool.progress import Progress, chunk_ranges
 S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)
 S_MREF, S_MNORM = 43, 46  # unit reference field in NED (3), reference norm
 S_TPREV, S_GPREV = 47, 48  # previous time, previous gyro (3)
-S_REST_T, S_AREJ_T, S_COUNT, S_INIT = 51, 52, 53, 54
+S_REST_T, S_AREJ_T, S_CNT_A, S_INIT = 51, 52, 53, 54  # S_CNT_A: samples since the last accel update
 S_DQ = 55  # accumulated rotation since the last covariance propagation (4)
 S_TACC = 59  # accumulated time since the last covariance propagation
 S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
@@ -86,7 +92,10 @@ S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force
 S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
 S_W1, S_W2 = 110, 119  # lag-weighted R_I of the two low-pass stages (3×3 each, s)
 S_HLAST, S_HREJ_T, S_NHREJ = 128, 129, 130  # external heading: last update time (s), time rejected (s), count
-STATE_SIZE = 131
+# multi-rate (update every N samples): per sensor, samples since its last update (mag, rest; accel: S_CNT_A) and
+# the usable samples among them (accel: fed to the low-pass; mag: accepted; rest: still)
+S_CNT_M, S_CNT_R, S_USE_A, S_USE_M, S_USE_R = 131, 132, 133, 134, 135
+STATE_SIZE = 136
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -122,7 +131,8 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                              "the heading uncertainty that gyro scale-factor errors add while "
                                              "the body turns (gravity corrects the tilt part; 0: off)"),
     "bias_rw": ("rad/s/√s", (0.0, 1.0), "gyro bias random walk: process noise of the bias"),
-    "accel_noise": ("rad", (1e-5, 3.0), "σ floor of the normalised accelerometer direction per update"),
+    "accel_noise": ("rad", (1e-5, 3.0), "σ floor of the normalised accelerometer direction, per sample "
+                                        "(an update of n samples uses σ²/n)"),
     "accel_noise_gain": ("1", (0.0, 100.0), "σ² += (gain × learned accelerometer white-noise σ / g)²"),
     "accel_noise_rise_time": ("s", (0.0, 1e6), "the learned accelerometer white noise is a sensor property: its "
                                                "floor follows the 10-s mean down at once and up with this time "
@@ -159,7 +169,8 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "heading_input_latency": ("s", (0.0, 10.0), "delay of the external heading: a fix stamped t is the heading at "
                                                "t − latency (a gyrocompass's HDT is often 0.1–1 s late; at 3 °/s "
                                                "0.5 s is 1.5° of heading); the heading is read that much later"),
-    "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading per update ('full' mode: of m̂, rad)"),
+    "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading, per sample ('full' mode: of m̂, "
+                                            "rad; an update of n samples uses σ²/n)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
     "mag_norm_soft": ("1", (0.0, 10.0), "mag σ² × (1 + (norm deviation / this)²): de-weighting (0: off)"),
@@ -177,7 +188,13 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "gap_factor": ("1", (1.0, 1e6), "a time step longer than this × the median step is a gap"),
     "gap_rate_sigma": ("rad/s", (0.0, 100.0), "attitude variance growth over a gap: (σ · gap)²"),
     "gyro_integration": ("rectangular|trapezoid", (0, 0), "rate over a step: ω_k or ½(ω_{k−1} + ω_k)"),
-    "update_every": ("samples", (1, 1e6), "covariance propagation + updates every N samples (paper: 40)"),
+    "update_every": ("samples", (0, 1e6), "covariance propagation + measurement updates every N samples (paper: "
+                                          "40); 0: N from update_rate_hz. The measurement σ stay per sample (an "
+                                          "update stands for the n usable samples since that sensor's last one: "
+                                          "R = σ²/n), so N changes the speed, not the filter"),
+    "update_rate_hz": ("Hz", (0.0, 1e6), "with update_every 0: updates at least this often, every N = ⌊sample "
+                                         "rate / this⌋ samples (1 with the raw accelerometer, accel_lp_tau 0; "
+                                         "0: every sample)"),
     "mag_mode": ("heading|full|off", (0, 0), "magnetometer use: heading only (never touches roll/pitch), "
                                              "the paper's full 3-D vector, or none"),
     "nis_window": ("s", (0.0, 1e4), "self-check window: mean normalised innovation squared per degree of "
@@ -248,7 +265,8 @@ class EkfParams:
     gap_factor: float = 5.0
     gap_rate_sigma: float = 0.2
     gyro_integration: str = "rectangular"
-    update_every: int = 1
+    update_every: int = 0
+    update_rate_hz: float = 50.0
     mag_mode: str = "heading"
     nis_window: float = 10.0
     nis_limit: float = 3.0
@@ -387,6 +405,14 @@ class EkfParams:
         p[P_HDG_NOISE] = np.radians(self.heading_input_noise_deg)
         p[P_HDG_EVERY] = self.heading_input_interval
         return p
+
+    def samples_per_update(self, dt_nominal: float) -> int:
+        """N: covariance propagation and measurement updates every N samples of nominal step ``dt_nominal`` (s)."""
+        if self.update_every >= 1:
+            return int(self.update_every)
+        if self.update_rate_hz <= 0 or self.accel_lp_tau <= 0 or not dt_nominal > 0:
+            return 1
+        return max(1, int(np.floor(1.0 / (dt_nominal * self.update_rate_hz) + 1e-6)))
 
     def gyro_prev_weight(self) -> float:
         try:
@@ -527,6 +553,25 @@ def _propagate_cov(P, phi, T, qa, qb, F, tmp):
 
 
 @njit(cache=True, inline="always")
+def _propagate_pending(st, P, prm):
+    """Propagate P over the rotation and time accumulated since its last propagation (S_DQ, S_TACC), if any.
+    Process noise (eq. 10) + the gyro scale-factor noise ∝ the angle turned: white rate noise of density ε·|ω|,
+    (ε·angle/T)²·T with angle² ≈ 4‖vector part of Δq‖² (small angle); ε_tilt across the world vertical r,
+    ε_head along it."""
+    T = st[S_TACC]
+    if T > 0:
+        qa = prm[P_GYRO_NOISE] ** 2 * T
+        ang2 = 4.0 * (st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2)
+        qs = prm[P_GYRO_SCALE] ** 2 * ang2 / T
+        _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa + qs, prm[P_BIAS_RW] ** 2 * T)
+        if prm[P_HEAD_SCALE] > 0 or qs > 0:
+            z0, z1, z2 = _vertical_in_body(st[0], st[1], st[2], st[3])
+            _add_rrt(P, 0, 0, prm[P_HEAD_SCALE] ** 2 * ang2 / T - qs, z0, z1, z2)
+        st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
+        st[S_TACC] = 0.0
+
+
+@njit(cache=True, inline="always")
 def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
     """P ← F P Fᵀ + Q as block algebra (the bias block of F is I), F = [[Φ, −T I], [0, I]], Φ = ΔRᵀ with ΔR =
     R(d) the rotation accumulated over T; Q = diag(qa I, qb I):
@@ -614,9 +659,11 @@ def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
 
 
 @njit(cache=True, inline="always")
-def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_bias=False):
+def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_bias=False, nis_extra=0.0):
     """Update with a unit-vector measurement: H = [[h×], 0], R = sig2·I (the zero block of H exploited;
-    3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code."""
+    3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code.
+    The NIS (and its gate) is taken against S + nis_extra·I: an update standing for N samples has R = σ²/N, and
+    its NIS is the one of an update of R = σ² (nis_extra = σ² − σ²/N), so the self-check reads the same at any N."""
     p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
     p11, p12, p13, p14, p15 = P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5]
     p22, p23, p24, p25 = P[2, 2], P[2, 3], P[2, 4], P[2, 5]
@@ -659,7 +706,11 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     wy0 = w00 * y0 + w01 * y1 + w02 * y2
     wy1 = w01 * y0 + w11 * y1 + w12 * y2
     wy2 = w02 * y0 + w12 * y1 + w22 * y2
-    nis = y0 * wy0 + y1 * wy1 + y2 * wy2
+    an, dn, fn = a + nis_extra, d + nis_extra, f + nis_extra  # S + nis_extra·I, its inverse by cofactors
+    An, Bn, Cn = dn * fn - e * e, c * e - b * fn, b * e - c * dn
+    detn = an * An + b * Bn + c * Cn
+    nis = (y0 * (An * y0 + Bn * y1 + Cn * y2) + y1 * (Bn * y0 + (an * fn - c * c) * y1 + (b * c - an * e) * y2)
+           + y2 * (Cn * y0 + (b * c - an * e) * y1 + (an * dn - b * b) * y2)) / detn
     accepted = not (nis_gate > 0 and nis > nis_gate and not force)
     # straight-line code, no early return (either costs an array refcount per call in the compiled loop): a
     # rejected update runs with a zero gain (P and dx unchanged), a consider (Schmidt) update with a zero bias gain
@@ -748,9 +799,9 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
 
 
 @njit(cache=True, inline="always")
-def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False):
+def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0.0):
     """Scalar heading update H = [r, 0] (r = world vertical in body axes) with the correction projected on the world
-    vertical (Joseph form). Straight-line code."""
+    vertical (Joseph form). Straight-line code. Returns the NIS y² / (S + nis_extra) (see :func:`_vec_update`)."""
     p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
     p11, p12, p13, p14, p15 = P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5]
     p22, p23, p24, p25 = P[2, 2], P[2, 3], P[2, 4], P[2, 5]
@@ -823,7 +874,7 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False):
     P[4, 5] = v
     P[5, 4] = v
     P[5, 5] = p55 - k5 * m5 - m5 * k5 + S * k5 * k5
-    return y * y / S
+    return y * y / (S + nis_extra)
 
 
 @njit(cache=True, inline="always")
@@ -1064,24 +1115,13 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             st[S_LPINIT] = 0.0  # so does the quasi-inertial low-pass: the frame I lost the gap's rotation
         st[S_TPREV] = t[k]
         st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2] = gk0, gk1, gk2
-        st[S_COUNT] += 1.0
-        is_upd = st[S_COUNT] >= update_every
-        if is_upd:
-            st[S_COUNT] = 0.0
-        if (is_upd or cov_every_sample) and st[S_TACC] > 0:
-            T = st[S_TACC]
-            # mean rate over T from the accumulated rotation angle (for the rate-proportional noise)
-            qa = prm[P_GYRO_NOISE] ** 2 * T
-            # gyro scale-factor noise ∝ angle turned: white rate noise of density ε·|ω|, (ε·angle/T)²·T with
-            # angle² ≈ 4‖vector part of Δq‖² (small angle); ε_tilt across the world vertical r, ε_head along it
-            ang2 = 4.0 * (st[S_DQ + 1] ** 2 + st[S_DQ + 2] ** 2 + st[S_DQ + 3] ** 2)
-            qs = prm[P_GYRO_SCALE] ** 2 * ang2 / T
-            _propagate_cov_q(P, st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3], T, qa + qs, prm[P_BIAS_RW] ** 2 * T)
-            if prm[P_HEAD_SCALE] > 0 or qs > 0:
-                z0, z1, z2 = _vertical_in_body(st[0], st[1], st[2], st[3])
-                _add_rrt(P, 0, 0, prm[P_HEAD_SCALE] ** 2 * ang2 / T - qs, z0, z1, z2)
-            st[S_DQ], st[S_DQ + 1], st[S_DQ + 2], st[S_DQ + 3] = 1.0, 0.0, 0.0, 0.0
-            st[S_TACC] = 0.0
+        # multi-rate: each sensor is used every N samples, at its first usable sample once due; P is propagated
+        # only before an update (and every sample when the smoother stores it)
+        st[S_CNT_A] += 1.0
+        st[S_CNT_M] += 1.0
+        st[S_CNT_R] += 1.0
+        if cov_every_sample:
+            _propagate_pending(st, P, prm)
         st[S_INIT] = 1.0
         _rmat(st[0], st[1], st[2], st[3], R)
         ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
@@ -1118,8 +1158,12 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if st[S_REST_T] >= prm[P_REST_TIME]:
                 flag |= F_REST
                 st[S_NREST] += 1
-                if is_upd:
-                    r_rest = prm[P_REST_NOISE] ** 2
+                st[S_USE_R] += 1.0
+                if st[S_CNT_R] >= update_every:
+                    _propagate_pending(st, P, prm)
+                    # σ per sample: the update stands for the still samples since the last one (R = σ²/n)
+                    r_rest = prm[P_REST_NOISE] ** 2 / st[S_USE_R]
+                    st[S_CNT_R], st[S_USE_R] = 0.0, 0.0
                     for i in range(3):
                         s_ = P[3 + i, 3 + i] + r_rest
                         yy = (gk0 if i == 0 else (gk1 if i == 1 else gk2)) - st[4 + i]
@@ -1212,6 +1256,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     for m in range(18):
                         st[S_W1 + m] = 0.0
                 st[S_LPINIT] += 1.0
+                st[S_USE_A] += 1.0
                 al = _low_pass_gain(dt, 0.5 * prm[P_ACC_TAU], st[S_LPINIT])  # running mean at start-up
                 _low_pass_two_stages(st, S_LP1, S_LP2, i0, i1, i2, al)
                 if prm[P_ACC_LAG] > 0:  # lag-weighted R_I: W1 = (1−α)(W1 + R_I dt), W2 = (1−α)(W2 + R_I dt) + α W1
@@ -1229,145 +1274,168 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 for b_ in range(3):
                     st[S_W1 + 3 * a_ + b_] += RI[a_, b_] * dt
                     st[S_W2 + 3 * a_ + b_] += RI[a_, b_] * dt
-        if is_upd:
+        if ext_meas and np.isfinite(acc_meas[k, 0]):
+            st[S_USE_A] += 1.0  # the smoother's zero-lag low-pass had this sample
+        # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
+        # a sample the gate turns away (a shock) is flagged as rejected, and a due update waits for the next one
+        gated = acc_ok and rej and not force
+        if gated:
+            flag |= F_ACC_REJ
+            st[S_NAREJ] += 1
+            st[S_AREJ_T] += dt
+        if ext_meas and acc_ok:  # the smoother's zero-lag low-pass of the same compensated force (NaN: none)
+            ax, ay, az = acc_meas[k, 0], acc_meas[k, 1], acc_meas[k, 2]
+            na = np.sqrt(ax * ax + ay * ay + az * az)
+        if st[S_CNT_A] >= update_every and acc_ok and not gated and na > 0:
             st[S_NUPD] += 1
-            # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
-            if acc_ok and na > 0:
-                if ext_meas:  # the smoother's zero-lag low-pass of the same compensated force
-                    ax, ay, az = acc_meas[k, 0], acc_meas[k, 1], acc_meas[k, 2]
-                    na = np.sqrt(ax * ax + ay * ay + az * az)  # NaN (none there): no update
-                if (not rej or force) and na > 0:
-                    if use_lp and not ext_meas:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
-                        if not ri_now:
-                            _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
-                        l0, l1, l2 = st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2]
-                        ax = RI[0, 0] * l0 + RI[1, 0] * l1 + RI[2, 0] * l2
-                        ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2
-                        az = RI[0, 2] * l0 + RI[1, 2] * l1 + RI[2, 2] * l2
-                        na = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-300)
-                    h0, h1, h2 = -R[2, 0], -R[2, 1], -R[2, 2]
-                    y0, y1, y2 = ax / na - h0, ay / na - h1, az / na - h2
-                    # independent error sources add in variance: model floor² + (gain·σ_w/g)²
-                    sig2 = prm[P_ACC_NOISE] * prm[P_ACC_NOISE]
-                    if prm[P_ACC_WN_GAIN] > 0:
-                        sig2 += prm[P_ACC_WN_GAIN] * prm[P_ACC_WN_GAIN] * st[S_AFLOOR] / (g * g)
-                    if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
-                        sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
-                    cons = st[S_BHOLD] > 0
-                    # gravity observes neither heading nor the bias about the vertical: optionally keep the update
-                    # from moving them through cross-covariances (exact Joseph form for the projected gain)
-                    vb = prm[P_ACC_VBIAS] == 0.0 and not cons
-                    va = prm[P_ACC_HEAD] == 0.0
-                    vdrop = va or vb
-                    lagh = prm[P_ACC_LAG] > 0 and use_lp and not ext_meas
-                    if lagh:  # M = R_Iᵀ W2: the low-pass output's tilt error per unit bias error (body, s)
-                        for a_ in range(3):
-                            for b_ in range(3):
-                                MLAG[a_, b_] = (RI[0, a_] * st[S_W2 + b_] + RI[1, a_] * st[S_W2 + 3 + b_]
-                                                + RI[2, a_] * st[S_W2 + 6 + b_])
-                    fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)  # before the update, error coordinates δθ
-                    if lagh:  # H = [[h×], [h×]M] is [[h×], 0] in δθ' = δθ + M δb: update there, shear back
-                        _shear_cov(P, MLAG, 1.0, X33)
-                    ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons)
-                    soft = not ok and prm[P_ACC_SOFT] > 0  # de-weight instead of skipping (flagged as rejected)
-                    if soft:
-                        _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
-                    if lagh:
-                        _shear_cov(P, MLAG, -1.0, X33)
-                        if ok or soft:
-                            for a_ in range(3):
-                                dx[a_] -= MLAG[a_, 0] * dx[3] + MLAG[a_, 1] * dx[4] + MLAG[a_, 2] * dx[5]
-                    if (ok or soft) and vdrop:  # in δθ coordinates, so the heading is not moved
-                        _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
-                    if soft:
-                        _apply_correction(st, dx)
-                        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
-                        _rmat(st[0], st[1], st[2], st[3], R)
-                    if prm[P_NIS_TAU] > 0 and dt > 0:  # self-check: windowed NIS per degree of freedom
-                        aw = min(1.0, dt * update_every / prm[P_NIS_TAU])
-                        st[S_NIS_A] += aw * (min(nis, 1e6) / 3.0 - st[S_NIS_A])
-                    if ok:
-                        _apply_correction(st, dx)
-                        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
-                        _rmat(st[0], st[1], st[2], st[3], R)
-                        st[S_AREJ_T] = 0.0
-                        flag |= F_ACC_USED
-                    else:
-                        rej = True
-                if rej:
-                    flag |= F_ACC_REJ
-                    st[S_NAREJ] += 1
-                    st[S_AREJ_T] += dt * update_every
-            # ---------------- magnetometer update ----------------
-            mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
-            if mag_mode > 0 and np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz):
-                nm = np.sqrt(mx * mx + my * my + mz * mz)
-                mw0 = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz
-                mw1 = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz
-                mw2 = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz
-                rej = nm <= 0
-                if not rej and prm[P_MAG_NORM_GATE] > 0 and st[S_MNORM] > 0:
-                    rej = abs(nm / st[S_MNORM] - 1.0) > prm[P_MAG_NORM_GATE]
-                if not rej and prm[P_MAG_DIP_GATE] > 0:
-                    # |asin(m_z/|m|) − dip_ref| > gate ⇔ m_z/|m| outside [sin(dip_ref − gate), sin(dip_ref + gate)]
-                    sz = mw2 / nm
-                    rej = sz < dip_lo or sz > dip_hi
-                # deviation measure of the field from its reference (norm and dip, relative to their soft scales)
-                dev_m = 0.0
-                if nm > 0 and prm[P_MAG_NORM_SOFT] > 0 and st[S_MNORM] > 0:
-                    dev_m += ((nm / st[S_MNORM] - 1.0) / prm[P_MAG_NORM_SOFT]) ** 2
-                if nm > 0 and prm[P_MAG_DIP_SOFT] > 0:
-                    dev_m += ((np.arcsin(min(1.0, max(-1.0, mw2 / nm))) - dip_ref) / prm[P_MAG_DIP_SOFT]) ** 2
-                if prm[P_MAG_HOLD] > 0:  # peak hold with exponential decay: a disturbance is a state, not a sample
-                    if rej:
-                        dev_m = max(dev_m, 100.0)
-                    decay = 1.0 / (1.0 + max(dt, 0.0) * update_every / prm[P_MAG_HOLD])  # ≈ exp(−dt/hold)
-                    st[S_MDIST] = max(dev_m, st[S_MDIST] * decay)
-                    dev_m = st[S_MDIST]
-                if rej:
-                    flag |= F_MAG_REJ
-                    st[S_NMREJ] += 1
-                elif mag_mode == 1:
-                    yh = -_atan2(mw1, mw0)  # heading error: the horizontal field should point north
-                    sm2 = prm[P_MAG_NOISE] ** 2 * (1.0 + dev_m)
-                    nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2, dx, prm[P_MAG_BIAS] == 0.0)
-                    if prm[P_NIS_TAU] > 0 and dt > 0:
-                        st[S_NIS_M] += min(1.0, dt * update_every / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
-                    _apply_correction(st, dx)  # dx along r: its reset is G = I
-                    flag |= F_MAG_USED
-                else:
-                    h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
-                    h1 = R[0, 1] * st[S_MREF] + R[1, 1] * st[S_MREF + 1] + R[2, 1] * st[S_MREF + 2]
-                    h2 = R[0, 2] * st[S_MREF] + R[1, 2] * st[S_MREF + 1] + R[2, 2] * st[S_MREF + 2]
-                    y0, y1, y2 = mx / nm - h0, my / nm - h1, mz / nm - h2
-                    ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2, 0.0, True, dx)
-                    _apply_correction(st, dx)
-                    _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
-                    flag |= F_MAG_USED
-            # ---------------- external heading (gyrocompass) ----------------
-            if hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
-                dth = t[k] - st[S_HLAST] if np.isfinite(st[S_HLAST]) else 0.0
-                st[S_HLAST] = t[k]
+            st[S_CNT_A] = 0.0
+            n_use = max(st[S_USE_A], 1.0)
+            st[S_USE_A] = 0.0
+            _propagate_pending(st, P, prm)
+            if use_lp and not ext_meas:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
+                if not ri_now:
+                    _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                l0, l1, l2 = st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2]
+                ax = RI[0, 0] * l0 + RI[1, 0] * l1 + RI[2, 0] * l2
+                ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2
+                az = RI[0, 2] * l0 + RI[1, 2] * l1 + RI[2, 2] * l2
+                na = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-300)
+            h0, h1, h2 = -R[2, 0], -R[2, 1], -R[2, 2]
+            y0, y1, y2 = ax / na - h0, ay / na - h1, az / na - h2
+            # independent error sources add in variance: model floor² + (gain·σ_w/g)²
+            sig2 = prm[P_ACC_NOISE] * prm[P_ACC_NOISE]
+            if prm[P_ACC_WN_GAIN] > 0:
+                sig2 += prm[P_ACC_WN_GAIN] * prm[P_ACC_WN_GAIN] * st[S_AFLOOR] / (g * g)
+            if prm[P_ACC_ADAPT] > 0:  # de-weight by the non-gravitational part of ‖a‖
+                sig2 *= 1.0 + (dev_a / prm[P_ACC_ADAPT]) ** 2
+            # σ is per sample: the low-pass's output stands for the n samples it took in since the last
+            # update (R = σ²/n; the NIS still against σ²); a raw sample (no low-pass) is one sample
+            sig2_nis = sig2
+            if use_lp or ext_meas:
+                sig2 /= n_use
+            cons = st[S_BHOLD] > 0
+            # gravity observes neither heading nor the bias about the vertical: optionally keep the update
+            # from moving them through cross-covariances (exact Joseph form for the projected gain)
+            vb = prm[P_ACC_VBIAS] == 0.0 and not cons
+            va = prm[P_ACC_HEAD] == 0.0
+            vdrop = va or vb
+            lagh = prm[P_ACC_LAG] > 0 and use_lp and not ext_meas
+            if lagh:  # M = R_Iᵀ W2: the low-pass output's tilt error per unit bias error (body, s)
+                for a_ in range(3):
+                    for b_ in range(3):
+                        MLAG[a_, b_] = (RI[0, a_] * st[S_W2 + b_] + RI[1, a_] * st[S_W2 + 3 + b_]
+                                        + RI[2, a_] * st[S_W2 + 6 + b_])
+            fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)  # before the update, error coordinates δθ
+            if lagh:  # H = [[h×], [h×]M] is [[h×], 0] in δθ' = δθ + M δb: update there, shear back
+                _shear_cov(P, MLAG, 1.0, X33)
+            ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons,
+                                  sig2_nis - sig2)
+            soft = not ok and prm[P_ACC_SOFT] > 0  # de-weight instead of skipping (flagged as rejected)
+            if soft:
+                _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
+            if lagh:
+                _shear_cov(P, MLAG, -1.0, X33)
+                if ok or soft:
+                    for a_ in range(3):
+                        dx[a_] -= MLAG[a_, 0] * dx[3] + MLAG[a_, 1] * dx[4] + MLAG[a_, 2] * dx[5]
+            if (ok or soft) and vdrop:  # in δθ coordinates, so the heading is not moved
+                _drop_vertical(P, fa, fx, fb, -h0, -h1, -h2, va, vb, dx)
+            if soft:
+                _apply_correction(st, dx)
+                _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                 _rmat(st[0], st[1], st[2], st[3], R)
-                yh = hdg[k] - _atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
-                yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
-                s2h = prm[P_HDG_NOISE] ** 2
-                # a glitched fix is skipped, for a bounded time: a heading that stays away that long is the
-                # gyrocompass's, and the filter's own is the one to give way
-                vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
-                glitch = yh * yh > HEADING_GATE_SIGMA ** 2 * (vh + s2h)
-                if glitch and st[S_HREJ_T] < HEADING_REJECT_MAX_S:
-                    st[S_HREJ_T] += dth
-                    st[S_NHREJ] += 1
-                elif glitch:  # away for HEADING_REJECT_MAX_S: the gyrocompass's heading is taken outright
-                    st[S_HREJ_T] = 0.0
-                    _reset_heading(st, P, R[2, 0], R[2, 1], R[2, 2], yh, s2h)
-                    flag |= F_HDG_USED
-                else:
-                    st[S_HREJ_T] = 0.0
-                    _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, s2h, dx, False)
-                    _apply_correction(st, dx)  # dx along r: its reset is G = I
-                    flag |= F_HDG_USED
+            if prm[P_NIS_TAU] > 0 and dt > 0:  # self-check: windowed NIS per degree of freedom
+                aw = min(1.0, dt * update_every / prm[P_NIS_TAU])
+                st[S_NIS_A] += aw * (min(nis, 1e6) / 3.0 - st[S_NIS_A])
+            if ok:
+                _apply_correction(st, dx)
+                _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
+                _rmat(st[0], st[1], st[2], st[3], R)
+                st[S_AREJ_T] = 0.0
+                flag |= F_ACC_USED
+            else:  # the NIS gate turned the update away
+                flag |= F_ACC_REJ
+                st[S_NAREJ] += 1
+                st[S_AREJ_T] += dt * update_every
+        # ---------------- magnetometer: gates and disturbance level every sample, the update when due -------------
+        mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
+        if mag_mode > 0 and np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz):
+            nm = np.sqrt(mx * mx + my * my + mz * mz)
+            mw0 = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz
+            mw1 = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz
+            mw2 = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz
+            rej = nm <= 0
+            if not rej and prm[P_MAG_NORM_GATE] > 0 and st[S_MNORM] > 0:
+                rej = abs(nm / st[S_MNORM] - 1.0) > prm[P_MAG_NORM_GATE]
+            if not rej and prm[P_MAG_DIP_GATE] > 0:
+                # |asin(m_z/|m|) − dip_ref| > gate ⇔ m_z/|m| outside [sin(dip_ref − gate), sin(dip_ref + gate)]
+                sz = mw2 / nm
+                rej = sz < dip_lo or sz > dip_hi
+            # deviation measure of the field from its reference (norm and dip, relative to their soft scales)
+            dev_m = 0.0
+            if nm > 0 and prm[P_MAG_NORM_SOFT] > 0 and st[S_MNORM] > 0:
+                dev_m += ((nm / st[S_MNORM] - 1.0) / prm[P_MAG_NORM_SOFT]) ** 2
+            if nm > 0 and prm[P_MAG_DIP_SOFT] > 0:
+                dev_m += ((np.arcsin(min(1.0, max(-1.0, mw2 / nm))) - dip_ref) / prm[P_MAG_DIP_SOFT]) ** 2
+            if prm[P_MAG_HOLD] > 0:  # peak hold with exponential decay: a disturbance is a state, not a sample
+                if rej:
+                    dev_m = max(dev_m, 100.0)
+                decay = 1.0 / (1.0 + max(dt, 0.0) / prm[P_MAG_HOLD])  # ≈ exp(−dt/hold)
+                st[S_MDIST] = max(dev_m, st[S_MDIST] * decay)
+                dev_m = st[S_MDIST]
+            if rej:
+                flag |= F_MAG_REJ
+                st[S_NMREJ] += 1
+            else:
+                st[S_USE_M] += 1.0
+            due = not rej and st[S_CNT_M] >= update_every
+            n_use = st[S_USE_M]  # σ per sample: the update stands for the accepted samples since the last one
+            if due:
+                _propagate_pending(st, P, prm)
+                st[S_CNT_M], st[S_USE_M] = 0.0, 0.0
+            if due and mag_mode == 1:
+                yh = -_atan2(mw1, mw0)  # heading error: the horizontal field should point north
+                sm2 = prm[P_MAG_NOISE] ** 2 * (1.0 + dev_m)
+                nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2 / n_use, dx,
+                                        prm[P_MAG_BIAS] == 0.0, sm2 - sm2 / n_use)
+                if prm[P_NIS_TAU] > 0 and dt > 0:
+                    st[S_NIS_M] += min(1.0, dt * update_every / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
+                _apply_correction(st, dx)  # dx along r: its reset is G = I
+                flag |= F_MAG_USED
+            elif due:
+                h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
+                h1 = R[0, 1] * st[S_MREF] + R[1, 1] * st[S_MREF + 1] + R[2, 1] * st[S_MREF + 2]
+                h2 = R[0, 2] * st[S_MREF] + R[1, 2] * st[S_MREF + 1] + R[2, 2] * st[S_MREF + 2]
+                y0, y1, y2 = mx / nm - h0, my / nm - h1, mz / nm - h2
+                ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2 / n_use, 0.0, True, dx)
+                _apply_correction(st, dx)
+                _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
+                flag |= F_MAG_USED
+        # ---------------- external heading (gyrocompass) ----------------
+        if hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
+            dth = t[k] - st[S_HLAST] if np.isfinite(st[S_HLAST]) else 0.0
+            st[S_HLAST] = t[k]
+            _propagate_pending(st, P, prm)
+            _rmat(st[0], st[1], st[2], st[3], R)
+            yh = hdg[k] - _atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
+            yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
+            s2h = prm[P_HDG_NOISE] ** 2
+            # a glitched fix is skipped, for a bounded time: a heading that stays away that long is the
+            # gyrocompass's, and the filter's own is the one to give way
+            vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
+            glitch = yh * yh > HEADING_GATE_SIGMA ** 2 * (vh + s2h)
+            if glitch and st[S_HREJ_T] < HEADING_REJECT_MAX_S:
+                st[S_HREJ_T] += dth
+                st[S_NHREJ] += 1
+            elif glitch:  # away for HEADING_REJECT_MAX_S: the gyrocompass's heading is taken outright
+                st[S_HREJ_T] = 0.0
+                _reset_heading(st, P, R[2, 0], R[2, 1], R[2, 2], yh, s2h)
+                flag |= F_HDG_USED
+            else:
+                st[S_HREJ_T] = 0.0
+                _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, s2h, dx, False)
+                _apply_correction(st, dx)  # dx along r: its reset is G = I
+                flag |= F_HDG_USED
         # ---------------- outputs ----------------
         for i in range(4):
             q_out[k, i] = st[i]
@@ -1768,7 +1836,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         meas = np.ascontiguousarray(accel_measurement, dtype=np.float64)
         if meas.shape != (n, 3):
             raise ImutoolError(f"accel_measurement must be ({n}, 3), not {meas.shape}")
-    every = max(1, int(params.update_every))
+    every = params.samples_per_update(dt_nominal)
     cov_each = keep_cov if cov_every_sample is None else cov_every_sample
     mode, cov_flag = params.mag_mode_code() if use_mag else 0, bool(cov_each or every == 1)
     # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
@@ -1778,7 +1846,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
                    p_store[i0:i1] if keep_cov else p_store, meas[i0:i1] if len(meas) else meas,
                    f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else hdg)
     summary = {
-        "samples": n, "updates": int(st[S_NUPD]), "accel_rejected": int(st[S_NAREJ]),
+        "samples": n, "updates": int(st[S_NUPD]), "update_every": every, "accel_rejected": int(st[S_NAREJ]),
         "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
         "inconsistent_samples": int(st[S_NINC]),

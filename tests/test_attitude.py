@@ -1,6 +1,7 @@
 """Quaternion EKF: accuracy vs truth, honest sigmas (NEES), invariants, robustness, smoother, CLI, BROAD."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,6 +12,8 @@ import formats
 from formats.errors import ImutoolError
 from formats.frames import quat_to_euler, quat_to_matrix, wrap_deg180
 from imutool.attitude import (
+    F_ACC_USED,
+    F_MAG_USED,
     S_QI,
     S_W2,
     EkfParams,
@@ -63,6 +66,45 @@ def test_nees_and_invariants(roll_rec):
     sm = rts_smooth(res, roll_rec["gyro"], EkfParams())
     r2, p2, _ = (np.degrees(x) for x in quat_to_euler(sm.q))
     assert _rmse(r2, roll_rec["ref_roll"]) < 0.6 * _rmse(r, roll_rec["ref_roll"])
+
+
+def test_updates_every_n_samples_are_the_same_filter(roll_rec):
+    """The default updates at ≥ 50 Hz (every 4th sample at 200 Hz, every 2nd at 100 Hz, every sample with the raw
+    accelerometer). The noise figures are per sample (an update stands for its n samples: R = σ²/n), so the
+    estimate, its σ and the self-check are those of an update every sample. The scaling is what makes it so: with σ
+    per update (as before) the roll σ at N = 4 is 1.5× that of N = 1. A magnetometer at half the IMU rate and
+    accelerometer NaN rows on the update rows are used at the next usable sample, never aliased away."""
+    t, g, a, m, ref = roll_rec.time, roll_rec["gyro"], roll_rec["accel"], roll_rec["mag"], roll_rec["ref_roll"]
+    late = slice(len(t) // 3, None)
+
+    def run(prm, a=a, m=m):
+        res, _ = run_ekf(t, g, a, m, prm)
+        roll = np.degrees(quat_to_euler(res.q)[0])
+        return res, _rmse(roll, ref), np.median(res.std[late], axis=0)
+
+    one, rmse1, sd1 = run(EkfParams(update_every=1))
+    assert one.summary["update_every"] == 1
+    for prm, n in ((EkfParams(), 4), (EkfParams(update_every=10), 10)):
+        res, rmse, sd = run(prm)
+        assert res.summary["update_every"] == n
+        assert np.count_nonzero(res.flags & F_ACC_USED) == np.count_nonzero(res.flags & F_MAG_USED) == len(t) // n
+        assert abs(rmse - rmse1) < 0.02, (n, rmse, rmse1)
+        assert np.allclose(sd, sd1, rtol=0.03), (n, sd, sd1)  # roll, pitch, heading σ
+        assert res.summary["inconsistent_samples"] == 0
+    per_update = replace(EkfParams(), update_every=4, accel_noise=0.06, accel_noise_gain=5.6, mag_noise_deg=40.0,
+                         rest_noise=0.1)  # σ per update: each ×√4
+    assert run(per_update)[2][0] > 1.3 * sd1[0]
+    a2, m2 = a.copy(), m.copy()
+    a2[1::2] = np.nan  # every update row of N = 4 (rows 3, 7, ...) without an accelerometer sample
+    m2[1::2] = np.nan  # a magnetometer at half the rate
+    one, rmse1, sd1 = run(EkfParams(update_every=1), a2, m2)
+    res, rmse, sd = run(EkfParams(), a2, m2)
+    assert min(np.count_nonzero(res.flags & F_ACC_USED), np.count_nonzero(res.flags & F_MAG_USED)) >= len(t) // 5
+    assert abs(rmse - rmse1) < 0.03 and np.allclose(sd, sd1, rtol=0.03), (rmse, rmse1, sd, sd1)
+    half = run_ekf(t[::2], g[::2], a[::2], m[::2])[0]  # 100 Hz
+    assert half.summary["update_every"] == 2
+    raw = run_ekf(t, g, a, m, EkfParams(accel_lp_tau=0.0, accel_noise_gain=0.0))[0]
+    assert raw.summary["update_every"] == 1  # one raw sample is not an average of N
 
 
 def test_multirate_paper_schedule(roll_rec):

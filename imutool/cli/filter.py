@@ -39,7 +39,9 @@ from imutool.cli.common import (
 @click.option("--save-params", type=click.Path(dir_okay=False), default=None,
               help="EKF: write the parameters used (TOML, with units) to this file.")
 @click.option("--update-every", type=int, default=None,
-              help="EKF: covariance propagation + accel/mag update every N samples (paper: 40 at 200 Hz; default 1).")
+              help="EKF: covariance propagation + accel/mag updates every N samples (paper: 40 at 200 Hz). Default: "
+                   "N = ⌊sample rate / update_rate_hz⌋ (50 Hz: 4 at 200 Hz). The noise figures are per sample, so "
+                   "N sets the speed, not the filter.")
 @click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default=None,
               help="EKF magnetometer use: heading only (default; never touches roll/pitch), full 3-D vector "
                    "(paper), off.")
