@@ -19,11 +19,12 @@ filter.)
 - Update (eq. 7–18) every N samples (``update_every``; default ⌊sample rate / ``update_rate_hz``⌋, 4 at 200 Hz;
   paper: every 40th at 200 Hz). The attitude is integrated every sample; P is propagated only before an update,
   with the rotation accumulated since the last one (Φ = ΔRᵀ), as in the paper's multi-rate scheme. The noise
-  figures stay per sample: an update stands for the n usable samples since the previous one of that sensor
-  (accelerometer: fed to the low-pass; magnetometer: accepted; rest: still), R = σ²/n, and each sensor is used at
-  its first usable sample once due (a sensor at half the rate, or NaN rows, never alias with N). So N changes the
-  speed, not the filter (BROAD, N = 1…10: inclination 0.7388–0.7389°). The self-check's NIS is taken against σ², as
-  at N = 1. The raw accelerometer (``accel_lp_tau`` 0) is one sample, not an average: N defaults to 1 there.
+  figures stay per sample: an update is the average of the n usable samples since the previous one of that sensor
+  (accelerometer: the low-pass's output; magnetometer: the accepted samples' field direction in the world frame;
+  rest: the still samples' gyro rate), R = σ²/n, and each sensor is used at its first usable sample once due (a
+  sensor at half the rate, NaN rows or an interference at the update rate never alias with N). So N changes the
+  speed, not the filter (BROAD, N = 1…10: the same inclination). The self-check's NIS is taken against σ², as at
+  N = 1. The raw accelerometer (``accel_lp_tau`` 0) is one sample, not an average: N defaults to 1 there.
   accelerometer z = a/‖a‖, ẑ = Rᵀ(q)·[0,0,−1], H = [[ẑ×], 0] (eq. 8–12), K = PHᵀS⁻¹ (eq. 14), δx = K y
   (eq. 15), b += δb (16), q ← q ⊗ δq (17), P ← (I − KH)P (18).
   Magnetometer, ``mag_mode``: "full" = the paper's normalised 3-vector (ẑ = Rᵀ m_ref); "heading" (default) =
@@ -92,10 +93,12 @@ S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force
 S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
 S_W1, S_W2 = 110, 119  # lag-weighted R_I of the two low-pass stages (3×3 each, s)
 S_HLAST, S_HREJ_T, S_NHREJ = 128, 129, 130  # external heading: last update time (s), time rejected (s), count
-# multi-rate (update every N samples): per sensor, samples since its last update (mag, rest; accel: S_CNT_A) and
-# the usable samples among them (accel: fed to the low-pass; mag: accepted; rest: still)
+# multi-rate (update every N samples): per sensor, samples since its last update (mag, rest; accel: S_CNT_A), the
+# usable samples among them (accel: fed to the low-pass; mag: accepted; rest: still) and what the update averages:
+# the accepted magnetometer directions in the world frame (unit vectors, summed) and the still gyro samples (rad/s)
 S_CNT_M, S_CNT_R, S_USE_A, S_USE_M, S_USE_R = 131, 132, 133, 134, 135
-STATE_SIZE = 136
+S_MSUM, S_RSUM = 136, 139
+STATE_SIZE = 142
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -219,6 +222,25 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
 }
 
 
+def _toml_table(path: str) -> dict:
+    """The ``[ekf]`` table of a parameters file (or its top level)."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except OSError as e:
+        raise ImutoolError(f"cannot read parameters: {e.strerror}", path=path) from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ImutoolError(f"not a valid TOML parameters file: {e}", path=path) from None
+    table = data.get("ekf", data)
+    if not isinstance(table, dict):
+        raise ImutoolError("[ekf] must be a table", path=path)
+    return table
+
+
 @dataclass
 class EkfParams:
     """Every tuning constant of :func:`run_ekf` (units and meaning: :data:`PARAM_DOC`). One-sigma noise figures.
@@ -328,21 +350,15 @@ class EkfParams:
     @classmethod
     def from_toml(cls, path: str) -> EkfParams:
         """Read a parameters file: keys at the top level or under ``[ekf]`` (as :meth:`to_toml` writes)."""
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib
-        try:
-            with open(path, "rb") as f:
-                data = tomllib.load(f)
-        except OSError as e:
-            raise ImutoolError(f"cannot read parameters: {e.strerror}", path=path) from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-            raise ImutoolError(f"not a valid TOML parameters file: {e}", path=path) from None
-        table = data.get("ekf", data)
-        if not isinstance(table, dict):
-            raise ImutoolError("[ekf] must be a table", path=path)
+        table = _toml_table(path)
         return cls.from_dict({k: v for k, v in table.items() if k != "imutool_params"}, source=str(path))
+
+    @staticmethod
+    def pins_every_sample(path: str) -> bool:
+        """True for a parameters file written before updates every N samples became the default (2026-11-26): it
+        says ``update_every = 1`` (the old default, written into every saved file) and has no ``update_rate_hz``."""
+        table = _toml_table(path)
+        return table.get("update_every") == 1 and "update_rate_hz" not in table
 
     def to_toml(self) -> str:
         """The parameters as a commented TOML ``[ekf]`` table (units and meaning on every line)."""
@@ -1113,6 +1129,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 P[i, i] = min(P[i, i] + inc, 10.0)
             st[S_GWN], st[S_GWT] = 0.0, 0.0  # the tilt check's window restarts: no mean across a gap
             st[S_LPINIT] = 0.0  # so does the quasi-inertial low-pass: the frame I lost the gap's rotation
+            # and what the next updates average: nothing from before the gap
+            st[S_USE_A], st[S_USE_M], st[S_USE_R] = 0.0, 0.0, 0.0
+            for i in range(3):
+                st[S_MSUM + i], st[S_RSUM + i] = 0.0, 0.0
         st[S_TPREV] = t[k]
         st[S_GPREV], st[S_GPREV + 1], st[S_GPREV + 2] = gk0, gk1, gk2
         # multi-rate: each sensor is used every N samples, at its first usable sample once due; P is propagated
@@ -1159,14 +1179,19 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 flag |= F_REST
                 st[S_NREST] += 1
                 st[S_USE_R] += 1.0
+                st[S_RSUM] += gk0
+                st[S_RSUM + 1] += gk1
+                st[S_RSUM + 2] += gk2
                 if st[S_CNT_R] >= update_every:
                     _propagate_pending(st, P, prm)
-                    # σ per sample: the update stands for the still samples since the last one (R = σ²/n)
-                    r_rest = prm[P_REST_NOISE] ** 2 / st[S_USE_R]
+                    # σ per sample: the update is the mean rate of the still samples since the last one, and
+                    # stands for them (R = σ²/n; a vibration at the update rate averages out, not aliases)
+                    n_use = st[S_USE_R]
+                    r_rest = prm[P_REST_NOISE] ** 2 / n_use
                     st[S_CNT_R], st[S_USE_R] = 0.0, 0.0
                     for i in range(3):
                         s_ = P[3 + i, 3 + i] + r_rest
-                        yy = (gk0 if i == 0 else (gk1 if i == 1 else gk2)) - st[4 + i]
+                        yy = st[S_RSUM + i] / n_use - st[4 + i]
                         for j in range(6):
                             dx[j] = P[j, 3 + i] / s_ * yy
                         for a_ in range(6):
@@ -1176,7 +1201,11 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                                 P[b_, a_] = v
                         _apply_correction(st, dx)
                         _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
+                    st[S_RSUM], st[S_RSUM + 1], st[S_RSUM + 2] = 0.0, 0.0, 0.0
                     _rmat(st[0], st[1], st[2], st[3], R)
+            elif st[S_USE_R] > 0:  # the rest ended between updates: its samples are not carried to the next rest
+                st[S_USE_R] = 0.0
+                st[S_RSUM], st[S_RSUM + 1], st[S_RSUM + 2] = 0.0, 0.0, 0.0
         # ---------------- accelerometer: kinematic compensation, gate, quasi-inertial low-pass ----------------
         rej = False
         force = False
@@ -1288,6 +1317,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             na = np.sqrt(ax * ax + ay * ay + az * az)
         if st[S_CNT_A] >= update_every and acc_ok and not gated and na > 0:
             st[S_NUPD] += 1
+            t_since = dt * st[S_CNT_A]  # since the last accelerometer update (s): the self-check's window weight
             st[S_CNT_A] = 0.0
             n_use = max(st[S_USE_A], 1.0)
             st[S_USE_A] = 0.0
@@ -1345,7 +1375,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
                 _rmat(st[0], st[1], st[2], st[3], R)
             if prm[P_NIS_TAU] > 0 and dt > 0:  # self-check: windowed NIS per degree of freedom
-                aw = min(1.0, dt * update_every / prm[P_NIS_TAU])
+                aw = min(1.0, t_since / prm[P_NIS_TAU])
                 st[S_NIS_A] += aw * (min(nis, 1e6) / 3.0 - st[S_NIS_A])
             if ok:
                 _apply_correction(st, dx)
@@ -1356,7 +1386,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             else:  # the NIS gate turned the update away
                 flag |= F_ACC_REJ
                 st[S_NAREJ] += 1
-                st[S_AREJ_T] += dt * update_every
+                st[S_AREJ_T] += t_since
         # ---------------- magnetometer: gates and disturbance level every sample, the update when due -------------
         mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
         if mag_mode > 0 and np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz):
@@ -1386,27 +1416,38 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if rej:
                 flag |= F_MAG_REJ
                 st[S_NMREJ] += 1
-            else:
+            else:  # the field's direction in the world frame, summed over the samples the update stands for
                 st[S_USE_M] += 1.0
+                st[S_MSUM] += mw0 / nm
+                st[S_MSUM + 1] += mw1 / nm
+                st[S_MSUM + 2] += mw2 / nm
             due = not rej and st[S_CNT_M] >= update_every
-            n_use = st[S_USE_M]  # σ per sample: the update stands for the accepted samples since the last one
+            # σ per sample: the update is the mean direction of the accepted samples since the last one and stands
+            # for them (R = σ²/n; an interference at the update rate averages out, not aliases)
+            n_use = st[S_USE_M]
+            m0, m1, m2 = st[S_MSUM], st[S_MSUM + 1], st[S_MSUM + 2]
+            t_since = dt * st[S_CNT_M]
             if due:
                 _propagate_pending(st, P, prm)
                 st[S_CNT_M], st[S_USE_M] = 0.0, 0.0
+                st[S_MSUM], st[S_MSUM + 1], st[S_MSUM + 2] = 0.0, 0.0, 0.0
             if due and mag_mode == 1:
-                yh = -_atan2(mw1, mw0)  # heading error: the horizontal field should point north
+                yh = -_atan2(m1, m0)  # heading error: the horizontal field should point north
                 sm2 = prm[P_MAG_NOISE] ** 2 * (1.0 + dev_m)
                 nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2 / n_use, dx,
                                         prm[P_MAG_BIAS] == 0.0, sm2 - sm2 / n_use)
                 if prm[P_NIS_TAU] > 0 and dt > 0:
-                    st[S_NIS_M] += min(1.0, dt * update_every / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
+                    st[S_NIS_M] += min(1.0, t_since / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
                 _apply_correction(st, dx)  # dx along r: its reset is G = I
                 flag |= F_MAG_USED
             elif due:
                 h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
                 h1 = R[0, 1] * st[S_MREF] + R[1, 1] * st[S_MREF + 1] + R[2, 1] * st[S_MREF + 2]
                 h2 = R[0, 2] * st[S_MREF] + R[1, 2] * st[S_MREF + 1] + R[2, 2] * st[S_MREF + 2]
-                y0, y1, y2 = mx / nm - h0, my / nm - h1, mz / nm - h2
+                nw = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)  # the mean direction, back in the body frame
+                y0 = (R[0, 0] * m0 + R[1, 0] * m1 + R[2, 0] * m2) / nw - h0
+                y1 = (R[0, 1] * m0 + R[1, 1] * m1 + R[2, 1] * m2) / nw - h1
+                y2 = (R[0, 2] * m0 + R[1, 2] * m1 + R[2, 2] * m2) / nw - h2
                 ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2 / n_use, 0.0, True, dx)
                 _apply_correction(st, dx)
                 _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])

@@ -39,9 +39,9 @@ from imutool.cli.common import (
 @click.option("--save-params", type=click.Path(dir_okay=False), default=None,
               help="EKF: write the parameters used (TOML, with units) to this file.")
 @click.option("--update-every", type=int, default=None,
-              help="EKF: covariance propagation + accel/mag updates every N samples (paper: 40 at 200 Hz). Default: "
-                   "N = ⌊sample rate / update_rate_hz⌋ (50 Hz: 4 at 200 Hz). The noise figures are per sample, so "
-                   "N sets the speed, not the filter.")
+              help="EKF: covariance propagation + accel/mag updates every N samples (paper: 40 at 200 Hz). Default "
+                   "(or 0): N = ⌊sample rate / update_rate_hz⌋ (50 Hz: 4 at 200 Hz; 1 with the raw accelerometer, "
+                   "accel_lp_tau 0). The noise figures are per sample, so N sets the speed, not the filter.")
 @click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default=None,
               help="EKF magnetometer use: heading only (default; never touches roll/pitch), full 3-D vector "
                    "(paper), off.")
@@ -94,6 +94,12 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
     from imutool.filtering import run_filter
 
     params = ekf_params(params_file, param_items, update_every, mag_mode)
+    if params_file and update_every is None and not quiet and params.update_every == 1 \
+            and params.pins_every_sample(params_file):
+        click.echo(f"note: {params_file} sets update_every = 1, as every parameters file saved before 2026-11-26 "
+                   "does: the filter updates every sample (the same filter, about 2.3x slower than the default); "
+                   "set update_every = 0 there, or --update-every 0, for updates every ⌊rate / update_rate_hz⌋ "
+                   "samples", err=True)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")

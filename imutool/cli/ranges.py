@@ -26,7 +26,7 @@ RANGES: dict[str, Bound] = {
     # times and windows (seconds on the recording clock; any finite value, start < end checked by the command)
     "start": ANY, "end": ANY, "t_start": ANY, "t_end": ANY, "time_offset": ANY,
     # sizes and counts
-    "chunk_rows": COUNT1, "update_every": COUNT1, "per_decade": (1, 1000, False, False),
+    "chunk_rows": COUNT1, "update_every": (0, None, False, False), "per_decade": (1, 1000, False, False),
     "grid_bands": (2, 90, False, False), "max_points": (2, None, False, False), "dpi": (10, 2400, False, False),
     "min_cycles": COUNT1, "min_steps_per_side": COUNT1, "min_headings": (2, None, False, False),
     "min_poses": COUNT1, "harmonics": (1, 20, False, False), "seed": (0, 2**32 - 1, False, False),
