@@ -327,7 +327,7 @@ def test_cli_filter_and_evaluate(tmp_path):
     assert ev.exit_code == 0, ev.output
     s = json.loads(ev.stdout)
     assert s["angles"]["roll"]["rmse"] < 1.0 and "snr_db" in s["angles"]["roll"]
-    bad = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / "x.csv"), "--update-every", "0"])
+    bad = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / "x.csv"), "--update-every", "-1"])
     assert bad.exit_code == 2 and "update-every" in bad.output
 
 

@@ -386,7 +386,7 @@ OPTION_CASES = {
     "filter-order-100": ["filter", "@roll.csv", "-o", "OUT.csv", "--method", "lpf", "--order", "100"],
     "filter-cutoff0": ["filter", "@roll.csv", "-o", "OUT.csv", "--method", "lpf", "--cutoff", "0"],
     "filter-variation-nan": ["filter", "@roll.csv", "-o", "OUT.csv", "--variation", "nan"],
-    "filter-update-every0": ["filter", "@roll.csv", "-o", "OUT.csv", "--update-every", "0"],
+    "filter-update-every-neg": ["filter", "@roll.csv", "-o", "OUT.csv", "--update-every", "-1"],
     "filter-gap-factor-neg": ["filter", "@roll.csv", "-o", "OUT.csv", "--gap-factor", "-1"],
     "mag-grid-bands0": ["calibrate", "mag", "@roll.csv", "-o", "OUT.toml", "--grid-bands", "0"],
     "mag-field-neg": ["calibrate", "mag", "@roll.csv", "-o", "OUT.toml", "--field", "-50"],
