@@ -678,8 +678,8 @@ def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
 def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_bias=False, nis_extra=0.0):
     """Update with a unit-vector measurement: H = [[h×], 0], R = sig2·I (the zero block of H exploited;
     3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code.
-    The NIS (and its gate) is taken against S + nis_extra·I: an update standing for N samples has R = σ²/N, and
-    its NIS is the one of an update of R = σ² (nis_extra = σ² − σ²/N), so the self-check reads the same at any N."""
+    The NIS (and its gate) is taken against S + nis_extra·I: an update standing for n samples has R = σ²/n, and
+    its NIS is the one of an update of R = σ² (nis_extra = σ² − σ²/n), so the self-check reads the same at any N."""
     p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
     p11, p12, p13, p14, p15 = P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5]
     p22, p23, p24, p25 = P[2, 2], P[2, 3], P[2, 4], P[2, 5]

@@ -14,6 +14,7 @@ from formats.frames import quat_to_euler, quat_to_matrix, wrap_deg180
 from imutool.attitude import (
     F_ACC_USED,
     F_MAG_USED,
+    S_NIS_A,
     S_QI,
     S_W2,
     EkfParams,
@@ -91,6 +92,9 @@ def test_updates_every_n_samples_are_the_same_filter(roll_rec):
         assert abs(rmse - rmse1) < 0.02, (n, rmse, rmse1)
         assert np.allclose(sd, sd1, rtol=0.03), (n, sd, sd1)  # roll, pitch, heading σ
         assert res.summary["inconsistent_samples"] == 0
+    # the self-check's NIS is taken against σ², not the σ²/n of the update: with R = σ²/4 it would read ~4×
+    nis1, nis4 = (run_ekf(t, g, a, m, EkfParams(update_every=n))[1][S_NIS_A] for n in (1, 4))
+    assert nis4 == pytest.approx(nis1, rel=0.1), (nis4, nis1)
     per_update = replace(EkfParams(), update_every=4, accel_noise=0.06, accel_noise_gain=5.6, mag_noise_deg=40.0,
                          rest_noise=0.1)  # σ per update: each ×√4
     assert run(per_update)[2][0] > 1.3 * sd1[0]
