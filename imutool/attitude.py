@@ -30,7 +30,8 @@ filter.)
   Magnetometer, ``mag_mode``: "full" = the paper's normalised 3-vector (ẑ = Rᵀ m_ref); "heading" (default) =
   the horizontal field direction only, a scalar heading innovation whose correction is projected onto the
   world vertical, so magnetic disturbance never reaches roll/pitch (Joseph-form covariance update for the
-  projected gain); "off".
+  projected gain); "off". Its σ is a density, ``mag_noise_density`` deg·√s: σ per sample = density / √dt_m with
+  dt_m the magnetometer's own interval, so the heading's time constant (≈ density / σ_g) is the same at any rate.
 - Accelerometer measurement beyond the paper (VQF's key idea, Laidig & Seel 2023, inside the EKF): the specific
   force is rotated into a quasi-inertial frame I given by the gyro-only integrated quaternion q_I, low-passed
   there (two first-order stages of τ/2 each, ``accel_lp_tau``; running mean at start-up) — gravity is constant in
@@ -98,7 +99,10 @@ S_HLAST, S_HREJ_T, S_NHREJ = 128, 129, 130  # external heading: last update time
 # the accepted magnetometer directions in the world frame (unit vectors, summed) and the still gyro samples (rad/s)
 S_CNT_M, S_CNT_R, S_USE_A, S_USE_M, S_USE_R = 131, 132, 133, 134, 135
 S_MSUM, S_RSUM = 136, 139
-STATE_SIZE = 142
+# the magnetometer's reference norm and dip follow the accepted field (mag_reference_tau): the norms summed since
+# the last update, and how many samples the reference stands for (1: the first sample; running mean at start-up)
+S_MNSUM, S_MREF_N = 142, 143
+STATE_SIZE = 144
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -111,8 +115,8 @@ P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
 P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
 P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
-P_ACC_LAG, P_HDG_NOISE, P_HDG_EVERY = 39, 40, 41
-N_PARAMS = 42
+P_ACC_LAG, P_HDG_NOISE, P_HDG_EVERY, P_MAG_REF_TAU = 39, 40, 41, 42
+N_PARAMS = 43
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
@@ -172,8 +176,13 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "heading_input_latency": ("s", (0.0, 10.0), "delay of the external heading: a fix stamped t is the heading at "
                                                "t − latency (a gyrocompass's HDT is often 0.1–1 s late; at 3 °/s "
                                                "0.5 s is 1.5° of heading); the heading is read that much later"),
-    "mag_noise_deg": ("deg", (0.01, 180.0), "σ of the magnetic heading, per sample ('full' mode: of m̂, "
-                                            "rad; an update of n samples uses σ²/n)"),
+    "mag_noise_density": ("deg*sqrt(s)", (0.01, 100.0), "σ of the magnetic heading as a noise density: σ per "
+                                                         "sample = this / √dt, so the heading's time constant "
+                                                         "(≈ this / gyro_noise) is the same at every sample rate "
+                                                         "('full' mode: of m̂, rad; an update of n samples uses "
+                                                         "σ²/n)"),
+    "mag_noise_deg": ("deg", (0.0, 180.0), "σ of the magnetic heading per sample, pinned whatever the rate (0: "
+                                           "from mag_noise_density; files saved before it existed pin 20)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
     "mag_norm_soft": ("1", (0.0, 10.0), "mag σ² × (1 + (norm deviation / this)²): de-weighting (0: off)"),
@@ -182,6 +191,11 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                               "(norm, dip, a gate rejection), decaying with this time constant, "
                                               "so samples that pass by chance inside a disturbance stay "
                                               "de-weighted (0: per sample)"),
+    "mag_reference_tau": ("s", (0.0, 1e6), "the reference norm and dip the magnetometer's gates compare with: the "
+                                           "mean of the accepted field, a running mean over the first this-many "
+                                           "seconds, then forgetting with this time constant (the earth's field "
+                                           "changes only as the vessel moves over it; 0: the first sample, for the "
+                                           "whole run)"),
     "mag_bias": ("bool", (0, 1), "magnetic heading updates may correct the gyro bias"),
     "gravity": ("m/s^2", (9.7, 9.9), "local gravity"),
     "rest_gyro": ("rad/s", (0.0, 10.0), "rest: |ω − b| below this on every axis ..."),
@@ -270,7 +284,9 @@ class EkfParams:
     accel_vertical_bias: bool = False
     accel_heading: bool = False
     mag_disturbance_hold: float = 0.5
-    mag_noise_deg: float = 20.0
+    mag_reference_tau: float = 3600.0
+    mag_noise_density: float = 1.2
+    mag_noise_deg: float = 0.0
     heading_input_noise_deg: float = 1.0
     heading_input_interval: float = 1.0
     heading_input_latency: float = 0.0
@@ -360,6 +376,14 @@ class EkfParams:
         table = _toml_table(path)
         return table.get("update_every") == 1 and "update_rate_hz" not in table
 
+    @staticmethod
+    def pins_mag_sigma(path: str) -> bool:
+        """True for a parameters file written before the magnetometer's σ became a density: it gives
+        ``mag_noise_deg`` (20, the old default, in every saved file) and no ``mag_noise_density``."""
+        table = _toml_table(path)
+        v = table.get("mag_noise_deg", 0)
+        return isinstance(v, (int, float)) and v > 0 and "mag_noise_density" not in table
+
     def to_toml(self) -> str:
         """The parameters as a commented TOML ``[ekf]`` table (units and meaning on every line)."""
         lines = ["# imutool EKF parameters (imutool filter --params FILE); units and meaning per line", "[ekf]"]
@@ -376,12 +400,14 @@ class EkfParams:
             lines.append(f"{name} = {txt}  # {unit}: {meaning}")
         return "\n".join(lines) + "\n"
 
-    def vector(self, dt_nominal: float) -> np.ndarray:
+    def vector(self, dt_nominal: float, dt_mag: float | None = None) -> np.ndarray:
+        """The kernel's parameter vector at nominal step ``dt_nominal`` (s); ``dt_mag`` (s) the magnetometer's
+        own interval where it is slower than the IMU (default: ``dt_nominal``)."""
         p = np.zeros(N_PARAMS)
         p[P_GYRO_NOISE] = self.gyro_noise
         p[P_BIAS_RW] = self.bias_rw
         p[P_ACC_NOISE] = self.accel_noise
-        p[P_MAG_NOISE] = np.radians(self.mag_noise_deg)
+        p[P_MAG_NOISE] = self.mag_sigma_per_sample(dt_mag if dt_mag else dt_nominal)
         p[P_ACC_GATE] = self.accel_gate
         p[P_ACC_NIS] = self.accel_nis_gate
         p[P_MAG_NORM_GATE] = self.mag_norm_gate
@@ -420,7 +446,20 @@ class EkfParams:
         p[P_ACC_LAG] = 1.0 if self.accel_lp_lag else 0.0
         p[P_HDG_NOISE] = np.radians(self.heading_input_noise_deg)
         p[P_HDG_EVERY] = self.heading_input_interval
+        p[P_MAG_REF_TAU] = self.mag_reference_tau
         return p
+
+    def mag_sigma_per_sample(self, dt_mag: float) -> float:
+        """σ of one magnetometer sample (rad), the magnetometer sampled every ``dt_mag`` (s): ``mag_noise_deg``
+        where a file pins it, else ``mag_noise_density`` / √dt_mag. The magnetometer's heading error is not white
+        from sample to sample (calibration residuals, nearby iron), so a faster sensor must not be trusted more
+        per second: with a density the heading's correction time constant, ≈ density / gyro_noise (≈ 21 s), is
+        the same at 10 Hz as at 286 Hz (a fixed σ per sample made it 21 s at 286 Hz and 49 s at 50 Hz)."""
+        if self.mag_noise_deg > 0:
+            return float(np.radians(self.mag_noise_deg))
+        if not dt_mag > 0:
+            return float(np.radians(self.mag_noise_density))
+        return float(np.radians(self.mag_noise_density) / np.sqrt(dt_mag))
 
     def samples_per_update(self, dt_nominal: float) -> int:
         """N: covariance propagation and measurement updates every N samples of nominal step ``dt_nominal`` (s)."""
@@ -992,6 +1031,18 @@ def _low_pass_gain(dt, half_tau, count):
 
 
 @njit(cache=True, inline="always")
+def _dip_gate(sin_dip, cos_gate, sin_gate):
+    """The reference dip (rad) from its sine, and the magnetometer's dip gate as bounds on the sine of a sample's
+    dip: |asin(m_z/|m|) − dip| > gate ⇔ m_z/|m| outside [lo, hi] = sin(dip ∓ gate) (±2 where dip ∓ gate passes a
+    pole; sin(dip ∓ gate) = sin dip cos gate ∓ cos dip sin gate, cos dip ≥ 0)."""
+    s = min(1.0, max(-1.0, sin_dip))
+    c = np.sqrt(1.0 - s * s)
+    lo = s * cos_gate - c * sin_gate if s > -cos_gate else -2.0
+    hi = s * cos_gate + c * sin_gate if s < cos_gate else 2.0
+    return np.arcsin(s), lo, hi
+
+
+@njit(cache=True, inline="always")
 def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
     """Two first-order low-pass stages of one 3-vector, in place in an array (the filter state, or a local
     buffer): st[s1:s1+3] follows x with the gain al (:func:`_low_pass_gain`), st[s2:s2+3] follows st[s1:s1+3]
@@ -1088,9 +1139,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     RI = np.empty((3, 3))
     MLAG = np.zeros((3, 3))
     X33 = np.empty((3, 3))
-    dip_ref = np.arcsin(min(1.0, max(-1.0, st[S_MREF + 2])))
-    dip_lo = np.sin(dip_ref - prm[P_MAG_DIP_GATE]) if dip_ref - prm[P_MAG_DIP_GATE] > -0.5 * np.pi else -2.0
-    dip_hi = np.sin(dip_ref + prm[P_MAG_DIP_GATE]) if dip_ref + prm[P_MAG_DIP_GATE] < 0.5 * np.pi else 2.0
+    cos_gate, sin_gate = np.cos(prm[P_MAG_DIP_GATE]), np.sin(prm[P_MAG_DIP_GATE])
+    dip_ref, dip_lo, dip_hi = _dip_gate(st[S_MREF + 2], cos_gate, sin_gate)
     use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0  # once per chunk, not per sample
     for k in range(n):
         flag = 0
@@ -1130,7 +1180,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             st[S_GWN], st[S_GWT] = 0.0, 0.0  # the tilt check's window restarts: no mean across a gap
             st[S_LPINIT] = 0.0  # so does the quasi-inertial low-pass: the frame I lost the gap's rotation
             # and what the next updates average: nothing from before the gap
-            st[S_USE_A], st[S_USE_M], st[S_USE_R] = 0.0, 0.0, 0.0
+            st[S_USE_A], st[S_USE_M], st[S_USE_R], st[S_MNSUM] = 0.0, 0.0, 0.0, 0.0
             for i in range(3):
                 st[S_MSUM + i], st[S_RSUM + i] = 0.0, 0.0
         st[S_TPREV] = t[k]
@@ -1418,6 +1468,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 st[S_NMREJ] += 1
             else:  # the field's direction in the world frame, summed over the samples the update stands for
                 st[S_USE_M] += 1.0
+                st[S_MNSUM] += nm
                 st[S_MSUM] += mw0 / nm
                 st[S_MSUM + 1] += mw1 / nm
                 st[S_MSUM + 2] += mw2 / nm
@@ -1429,7 +1480,18 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             t_since = dt * st[S_CNT_M]
             if due:
                 _propagate_pending(st, P, prm)
-                st[S_CNT_M], st[S_USE_M] = 0.0, 0.0
+                if prm[P_MAG_REF_TAU] > 0 and n_use > 0:
+                    # the reference norm and dip follow the accepted field: a running mean at start-up (one
+                    # noisy or disturbed first sample must not set the gates for the whole run), then τ_ref
+                    cnt = st[S_MREF_N] + n_use
+                    al = min(1.0, max(n_use / cnt, t_since / prm[P_MAG_REF_TAU]))
+                    st[S_MREF_N] = cnt
+                    st[S_MNORM] += al * (st[S_MNSUM] / n_use - st[S_MNORM])
+                    szr = st[S_MREF + 2] + al * (m2 / n_use - st[S_MREF + 2])
+                    szr = min(1.0, max(-1.0, szr))
+                    st[S_MREF], st[S_MREF + 1], st[S_MREF + 2] = np.sqrt(1.0 - szr * szr), 0.0, szr
+                    dip_ref, dip_lo, dip_hi = _dip_gate(szr, cos_gate, sin_gate)
+                st[S_CNT_M], st[S_USE_M], st[S_MNSUM] = 0.0, 0.0, 0.0
                 st[S_MSUM], st[S_MSUM + 1], st[S_MSUM + 2] = 0.0, 0.0, 0.0
             if due and mag_mode == 1:
                 yh = -_atan2(m1, m0)  # heading error: the horizontal field should point north
@@ -1743,6 +1805,25 @@ def nominal_dt(t: np.ndarray) -> float:
     return float(np.median(d)) if d.size else 0.01
 
 
+def mag_interval(t: np.ndarray, mag: np.ndarray | None) -> float | None:
+    """The magnetometer's own sample interval (s): the median step between its finite rows (a magnetometer slower
+    than the IMU leaves NaN rows between its samples), over the first block of rows that has some (4096 rows, then
+    4× larger blocks: cheap on a day of samples); None where it has fewer than two finite rows."""
+    if mag is None:
+        return None
+    i0, step, n = 0, 4096, len(t)
+    while i0 < n:
+        i1 = min(n, i0 + step)
+        ok = np.flatnonzero(np.isfinite(mag[i0:i1]).all(axis=1))
+        if ok.size >= 2:
+            d = np.diff(np.asarray(t[i0:i1])[ok])
+            d = d[d > 0]
+            if d.size:
+                return float(np.median(d))
+        i0, step = i1, step * 4
+    return None
+
+
 def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
                   heading: float | None = None) -> np.ndarray:
     """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples; an
@@ -1793,6 +1874,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
     st[S_P:S_P + 36] = P.ravel()
     st[S_MREF:S_MREF + 3] = mref
     st[S_MNORM] = mnorm
+    st[S_MREF_N] = 1.0 if mnorm > 0 else 0.0
     st[S_DQ] = 1.0
     st[S_QI] = 1.0
     st[S_HLAST] = -np.inf
@@ -1823,7 +1905,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
             state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
             cov_every_sample: bool | None = None, lever_arm: np.ndarray | None = None,
             progress: Progress | None = None, accel_measurement: np.ndarray | None = None,
-            keep_force: bool = False, heading_deg: np.ndarray | None = None) -> tuple[AttitudeResult, np.ndarray]:
+            keep_force: bool = False, heading_deg: np.ndarray | None = None,
+            dt_mag: float | None = None) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
@@ -1834,6 +1917,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     (:func:`zero_lag_smooth`'s second pass).
     ``heading_deg`` (N,) an external true heading (gyrocompass; deg, NaN where none): when given, it is the
     heading measurement and the magnetometer is not used.
+    ``dt_mag`` (s) the magnetometer's own sample interval, which sets its σ per sample from
+    ``mag_noise_density`` (default: :func:`mag_interval` of these rows; a stream passes its first chunk's).
     """
     params = params or EkfParams()
     t = np.ascontiguousarray(time, dtype=np.float64)
@@ -1858,7 +1943,9 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         first = np.flatnonzero(np.isfinite(near))
         state = initial_state(a, m if use_mag else None, params, float(near[first[0]]) if len(first) else None)
     st = np.array(state, dtype=np.float64)
-    prm = params.vector(dt_nominal)
+    if dt_mag is None and use_mag:
+        dt_mag = mag_interval(t, m)
+    prm = params.vector(dt_nominal, dt_mag)
     st[S_BIASMAX] = params.bias_max
     sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)

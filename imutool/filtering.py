@@ -304,6 +304,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         heading_check,
         heading_source_report,
         inconsistency_report,
+        mag_interval,
         nominal_dt,
         result_recording,
         run_ekf,
@@ -321,7 +322,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict)
     rows_read = duplicates = 0
     state = None
-    dt_nom = None
+    dt_nom = dt_mag = None  # the IMU's and the magnetometer's nominal intervals (s), from the first chunk with them
     t_last = -np.inf
     summary: dict[str, Any] = {"input": path, "output": output, "rows": 0, "method": "ekf (streamed)",
                                "dropped_non_increasing_rows": 0}
@@ -379,9 +380,11 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                                    "a streamed run cannot apply it (run in memory: --stream-mb above the file's size, "
                                    "or give the heading as a file with --heading)", path=path)
             heading = _heading_channel(chunk)  # deg, or None
+            if dt_mag is None:
+                dt_mag = mag_interval(chunk.time, chunk.channels.get("mag"))
             res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
                                  sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True,
-                                 heading_deg=heading)
+                                 heading_deg=heading, dt_mag=dt_mag)
             if scale_check is None:
                 scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
             scale_check.add(res.time, chunk["gyro"], res.bias, res.force)

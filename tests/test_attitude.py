@@ -540,10 +540,14 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
     scale): the self-check flags it — warning on stderr, spans in the JSON summary, a warning in the output's
     metadata and an `inconsistent` column. The same recording intact: no flag, no warning.
 
-    With the error-state reset the gyro ×3 run is 26° off in inclination yet agrees with its own low-passed
-    accelerometer (which rotates with the same wrong gyro), so no innovation check fires: the check of the vertical
-    against the world-frame mean of the specific force is what says it (3.2° median tilt against 0.4° at most
-    intact)."""
+    With the error-state reset the gyro ×3 run is 10° RMS off in roll yet agrees with its own low-passed
+    accelerometer (which rotates with the same wrong gyro), so no innovation check fires. Its tilt error is an
+    oscillation at the roll period with zero mean, which the check of the vertical (the 20-s world-frame mean of the
+    specific force) sees only through its correlation with the heading error: it read 4.0–5.1° on seeds 1–8 with
+    the magnetometer's reference from the first sample, 2.5–3.7° (limit 3°) once the reference became the mean of
+    the accepted field, with the same roll error. So the ×3 run is said by the gyro scale check (2.9× named, whole
+    run: stderr, summary, metadata), not per sample; the reversed axis is flagged per sample either way (the check
+    of the vertical 4.4–5.1° on seeds 1–8)."""
     from imutool.cli import cli
 
     rec = simulate("ship-roll", duration=90, seed=6)
@@ -561,7 +565,11 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
         assert run.exit_code == 0, run.output
         summary = json.loads(run.stdout)
         est = formats.read(out)
-        if broken:
+        if broken and fault == "scale_3":
+            # said by the gyro scale check (whole run: stderr, summary, metadata), not per sample: see the docstring
+            assert summary["gyro_scale_check"]["flagged"] and 2.5 < 1 / summary["gyro_scale_check"]["scale"] < 3.5
+            assert "gyro scale check" in run.stderr and any("gyro scale check" in w for w in est.meta["warnings"])
+        elif broken:
             assert summary["inconsistent_share"] > 0.1 and summary["inconsistent_spans_s"]
             assert "self-check failed" in run.stderr
             assert any("self-check" in w for w in est.meta["warnings"])
@@ -707,15 +715,23 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     f.write_text("[ekf]\nmag_noise_deg = 'ten'\n")
     code, _, err = run_main(["filter", src, "-o", tmp_path / "y.csv", "--params", f], capsys)
     assert code == 2 and "mag_noise_deg" in err
-    # a file saved before updates every N samples became the default pins N = 1: kept, and said once
+    # a file saved before updates every N samples became the default pins N = 1, and one saved before the
+    # magnetometer's σ became a density pins σ per sample (every saved file had both): kept, and each said once
     old = tmp_path / "old.toml"
     old.write_text("[ekf]\nupdate_every = 1\nmag_noise_deg = 20.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o1.csv", "--params", old, "--json"], capsys)
     assert code == 0 and json.loads(out)["update_every"] == 1
     assert "note:" in err and "update_every = 1" in err and "--update-every 0" in err
+    assert "mag_noise_deg = 20" in err and "--param mag_noise_deg=0" in err and err.count("note:") == 2
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0",
                                "--json"], capsys)
-    assert code == 0 and json.loads(out)["update_every"] == 4 and "note:" not in err  # 200 Hz: every 4th
+    assert code == 0 and json.loads(out)["update_every"] == 4  # 200 Hz: every 4th
+    assert "update_every = 1" not in err and err.count("note:") == 1 and "mag_noise_deg = 20" in err
+    code, out, err = run_main(["filter", src, "-o", tmp_path / "o2b.csv", "--params", old, "--update-every", "0",
+                               "--param", "mag_noise_deg=0"], capsys)
+    assert code == 0 and "note:" not in err
+    meta = formats.read(tmp_path / "o2b.csv").meta["filter"]
+    assert meta["mag_noise_deg"] == 0 and meta["mag_noise_density"] == EkfParams().mag_noise_density
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o3.csv", "--params", f.with_name("used.toml"),
                                "--json"], capsys)
     assert code == 0 and json.loads(out)["update_every"] == 4 and "note:" not in err  # a file saved now
@@ -746,7 +762,7 @@ def test_broad_all_16_trials_no_divergence(shared):
     max(2 × VQF, VQF + 2°) (the old shock gate gave 129.9° on trial 16), causal mean total ≤ VQF's 2.08°, smoother
     mean total ≤ offline VQF's 1.95°, smoother mean inclination at offline VQF's 0.53° (0.534° against 0.529° in
     the same run: the zero-lag smoother; the RTS pass alone gave 0.594°). The causal inclination mean is NOT at
-    VQF's yet (0.752° vs 0.729°): guarded here at what is reached, see docs/attitude.md."""
+    VQF's yet (0.739° vs 0.729°): guarded here at what is reached, see docs/attitude.md."""
     from imutool.metrics import evaluate_quaternion
 
     folder = shared("broad")
@@ -770,8 +786,59 @@ def test_broad_all_16_trials_no_divergence(shared):
     assert len(r) == 16
     assert r[:, 2:4].max() <= 1.0, r  # no trial above its ceiling
     assert r[:, 0].mean() <= 2.08 and r[:, 4].mean() <= 1.95, r.mean(axis=0)  # VQF / offline VQF totals
-    assert r[:, 1].mean() <= 0.77, r.mean(axis=0)  # guard (target 0.73)
+    assert r[:, 1].mean() <= 0.745, r.mean(axis=0)  # guard at what is reached (0.739; target 0.729)
     assert r[:, 5].mean() <= 0.54 and r[:, 5].max() <= 1.0, r.mean(axis=0)  # smoother (offline VQF 0.53 / 0.96)
+
+
+def _boxcar(x: np.ndarray, k: int) -> np.ndarray:
+    n = (len(x) // k) * k
+    return x[:n].reshape(-1, k, *x.shape[1:]).mean(axis=1)
+
+
+# VQF 2.1.2 causal 9D, default parameters, per trial total / inclination RMSE (deg) on the 16 BROAD trials
+# boxcar-averaged by 3 (95 Hz) and by 6 (48 Hz), truth at each block's last sample; the means 2.28 / 0.861 and
+# 2.77 / 1.156 (`python benchmarks/attitude_broad.py --rates`)
+BROAD_VQF_LOWER_RATES = {
+    3: {
+        "01": (1.97, 0.68), "02": (1.43, 0.45), "04": (1.16, 0.89), "05": (1.02, 0.38), "06": (4.20, 0.82),
+        "07": (2.55, 1.05), "10": (1.79, 0.30), "11": (0.89, 0.42), "16": (0.74, 0.53), "21": (4.47, 2.46),
+        "24": (1.60, 0.61), "26": (1.94, 0.57), "28": (4.79, 1.67), "29": (3.05, 1.31), "33": (3.73, 0.76),
+        "35": (1.24, 0.88)},
+    6: {
+        "01": (1.98, 0.82), "02": (1.49, 0.51), "04": (1.30, 1.05), "05": (1.09, 0.44), "06": (4.75, 0.87),
+        "07": (4.75, 1.48), "10": (1.77, 0.29), "11": (0.87, 0.41), "16": (0.93, 0.60), "21": (4.87, 3.82),
+        "24": (1.67, 0.62), "26": (2.29, 0.59), "28": (6.16, 2.56), "29": (4.85, 2.15), "33": (3.77, 1.04),
+        "35": (1.72, 1.24)}}
+
+
+def test_broad_at_lower_sample_rates(shared):
+    """Other recordings come at other rates. The 16 BROAD trials averaged down to 95 and 48 Hz (as a sensor with a
+    lower output rate averages): the causal mean total stays at or below VQF's at the same rate, no trial goes
+    above its ceiling, and no run diverges. Measured 2.14 / 0.865 (VQF 2.28 / 0.861) and 2.71 / 1.170 (VQF 2.77 /
+    1.156). With the magnetometer's σ fixed per sample (the old mag_noise_deg = 20) the 48 Hz total was 2.92, above
+    VQF's: the heading's time constant grew from 21 s to 49 s (test_heading_follows_the_magnetometer_...)."""
+    from imutool.metrics import evaluate_quaternion
+
+    files = sorted(shared("broad").glob("*.csv"))
+    trials = [formats.read(f) for f in files]
+    assert len(trials) == 16
+    for k, vqf in BROAD_VQF_LOWER_RATES.items():
+        rows = []
+        for f, rec in zip(files, trials, strict=True):
+            t = rec.time[: (len(rec.time) // k) * k].reshape(-1, k)[:, -1]
+            q_ref = rec["ref_q"][: len(t) * k].reshape(-1, k, 4)[:, -1]
+            moving = (rec["movement"][: len(t) * k].reshape(-1, k)[:, -1]) > 0
+            res, _ = run_ekf(t, _boxcar(rec.get("gyro", "rad/s"), k), _boxcar(rec.get("accel", "m/s^2"), k),
+                             _boxcar(rec["mag"], k))
+            assert res.summary["inconsistent_samples"] == 0, (k, f.name)
+            m = evaluate_quaternion(res.q, q_ref, moving)
+            tot, inc = m["total"]["rmse"], m["inclination"]["rmse"]
+            vt, vi = vqf[f.name[:2]]
+            assert tot <= max(2 * vt, vt + 2) and inc <= max(2 * vi, vi + 2), (k, f.name, tot, inc)
+            rows.append((tot, inc, vt, vi))
+        r = np.array(rows)
+        # the total at or below VQF's; the inclination within 0.02° of it (the gap at the native rate, 0.01°)
+        assert r[:, 0].mean() <= r[:, 2].mean() and r[:, 1].mean() <= r[:, 3].mean() + 0.02, (k, r.mean(axis=0))
 
 
 def test_broad_attached_magnet_6d_heading_does_not_follow_the_accelerometer(shared):
@@ -838,6 +905,62 @@ def test_magnetic_disturbance_is_a_state_not_a_sample():
 
     held, per_sample = worst(EkfParams().mag_disturbance_hold), worst(0.0)
     assert held <= 15.0 and per_sample >= 2.5 * held, (held, per_sample)
+
+
+def _heading_follows_a_turned_field(rate_hz: float, prm: EkfParams, turn_deg: float = 15.0,
+                                    first_second_scale: float = 1.0) -> np.ndarray:
+    """Fraction of a 15° turn of the earth's field about the vertical (norm and dip kept, so no gate sees it; at
+    60 s of a rolling ship) that the heading has followed 5, 10 and 20 s later: the heading's time constant.
+    ``first_second_scale``: the field's norm over the first second (a start beside steel)."""
+    rec = simulate("ship-roll", duration=90, seed=1, rate_hz=rate_hz)
+    c = quat_to_matrix(rec["ref_q"])  # body → NED
+    after = rec.time >= rec.time[0] + 60.0
+    ct, st = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
+    rz = np.array([[ct, -st, 0.0], [st, ct, 0.0], [0.0, 0.0, 1.0]])
+    m = rec["mag"].copy()
+    m[rec.time < rec.time[0] + 1.0] *= first_second_scale
+    m[after] = np.einsum("nji,nj->ni", c[after], np.einsum("nij,nj->ni", c[after], m[after]) @ rz.T)
+    res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], m, prm)
+    e = _heading_error_deg(res.q, rec["ref_q"])
+    t = rec.time - rec.time[0]
+    return np.array([abs(np.mean(e[(t >= 60 + s - 0.5) & (t < 60 + s + 0.5)])) / turn_deg for s in (5, 10, 20)])
+
+
+def test_heading_follows_the_magnetometer_at_the_same_pace_at_any_rate():
+    """The magnetometer's σ is a density (deg·√s; σ per sample = density / √dt): its heading error is not white
+    from sample to sample, so a faster magnetometer must not be trusted more per second. The heading then follows
+    a field change at the same pace at 10, 50 and 200 Hz: with the gates' reference held at the first sample (to
+    see the σ alone) 0.35 / 0.59 / 0.91 of the turn after 5 / 10 / 20 s at 200 Hz, within 0.01 at 50 and 10 Hz.
+    With the old fixed σ per sample (mag_noise_deg = 20) the pace fell with the rate (0.34 → 0.29 after 5 s from
+    200 to 10 Hz; this test fails); on BROAD averaged down to 48 Hz that cost 0.19° of total
+    (test_broad_at_lower_sample_rates). The defaults (reference = the mean accepted field) agree within 0.03."""
+    fixed_ref = EkfParams(mag_reference_tau=0.0)
+    ref = _heading_follows_a_turned_field(200.0, fixed_ref)
+    assert 0.3 < ref[0] < ref[1] < ref[2] < 1.05, ref  # it follows, with a time constant of seconds, not a step
+    for rate in (50.0, 10.0):
+        assert np.abs(_heading_follows_a_turned_field(rate, fixed_ref) - ref).max() <= 0.02, rate
+    old = EkfParams(mag_noise_deg=20.0, mag_reference_tau=0.0)
+    assert np.abs(_heading_follows_a_turned_field(10.0, old) - _heading_follows_a_turned_field(200.0, old)).max() \
+        >= 0.05
+    defaults = [_heading_follows_a_turned_field(rate, EkfParams()) for rate in (200.0, 10.0)]
+    assert np.abs(defaults[0] - defaults[1]).max() <= 0.04, defaults
+
+
+def test_the_magnetometer_gates_compare_with_the_mean_field_not_the_first_sample():
+    """The reference norm and dip that the magnetometer's gates and de-weighting compare with is the mean of the
+    accepted field (a running mean, forgetting over mag_reference_tau = 1 h), not the first sample. A first second
+    read 12 % strong (a start beside steel) used to set the reference for the whole run: every later sample looked
+    11 % off and was de-weighted ×5.6, and the heading followed a field change more slowly (0.31 of the turn after
+    5 s against 0.38; with the mean reference 0.38 either way). On BROAD, trial 01's first samples read 5 % below
+    the trial's median field, so 1 µT of white noise on the magnetometer tripped the 15 % norm gate 640 times
+    (2.82° total instead of 1.72°); with the mean reference the 16 trials with that noise score 1.96° (2.16° before;
+    benchmarks/attitude_stress.py). Not covered: a start more than 15 % off locks the magnetometer out for the run
+    (before and now; the run says so, test_a_heading_without_its_magnetometer_is_said)."""
+    ref = _heading_follows_a_turned_field(200.0, EkfParams())
+    start = _heading_follows_a_turned_field(200.0, EkfParams(), first_second_scale=1.12)
+    assert np.abs(start - ref).max() <= 0.02, (start, ref)
+    first_sample = _heading_follows_a_turned_field(200.0, EkfParams(mag_reference_tau=0.0), first_second_scale=1.12)
+    assert first_sample[0] <= 0.88 * ref[0], (first_sample, ref)
 
 
 def test_heading_recovers_within_seconds_after_a_magnet_is_taken_away():
