@@ -5,7 +5,7 @@ no magnetometer. A default that wins on the 16 as recorded and loses on these ha
 Usage::
 
     pip install vqf                          # benchmark-only: never a dependency of the filter
-    python benchmarks/attitude_stress.py     # ~1 min
+    python benchmarks/attitude_stress.py     # 1–2 min
 
 Each case is applied to every trial with its own seeded random numbers (trial i: seed 100 + i), so a run is
 reproducible. Scoring as ``benchmarks/attitude_broad.py`` (BROAD's metric over the movement rows); "over ceiling"

@@ -30,8 +30,10 @@ filter.)
   Magnetometer, ``mag_mode``: "full" = the paper's normalised 3-vector (ẑ = Rᵀ m_ref); "heading" (default) =
   the horizontal field direction only, a scalar heading innovation whose correction is projected onto the
   world vertical, so magnetic disturbance never reaches roll/pitch (Joseph-form covariance update for the
-  projected gain); "off". Its σ is a density, ``mag_noise_density`` deg·√s: σ per sample = density / √dt_m with
-  dt_m the magnetometer's own interval, so the heading's time constant (≈ density / σ_g) is the same at any rate.
+  projected gain); "off". Its σ is a density, ``mag_heading_density`` deg·√s: σ per sample = density / √dt_m
+  with dt_m the magnetometer's own interval, so the heading's time constant (≈ radians(density) / σ_g ≈ 21 s) is
+  the same at any rate; at least ``mag_heading_floor_deg`` per sample (one sample's own white noise, which takes
+  over below ≈ 17 Hz).
 - Accelerometer measurement beyond the paper (VQF's key idea, Laidig & Seel 2023, inside the EKF): the specific
   force is rotated into a quasi-inertial frame I given by the gyro-only integrated quaternion q_I, low-passed
   there (two first-order stages of τ/2 each, ``accel_lp_tau``; running mean at start-up) — gravity is constant in
@@ -176,13 +178,18 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "heading_input_latency": ("s", (0.0, 10.0), "delay of the external heading: a fix stamped t is the heading at "
                                                "t − latency (a gyrocompass's HDT is often 0.1–1 s late; at 3 °/s "
                                                "0.5 s is 1.5° of heading); the heading is read that much later"),
-    "mag_noise_density": ("deg*sqrt(s)", (0.01, 100.0), "σ of the magnetic heading as a noise density: σ per "
+    "mag_heading_density": ("deg*sqrt(s)", (0.01, 100.0), "σ of the magnetic heading as a noise density: σ per "
                                                          "sample = this / √dt, so the heading's time constant "
-                                                         "(≈ this / gyro_noise) is the same at every sample rate "
+                                                         "(≈ radians(this) / gyro_noise ≈ 21 s) is the same at "
+                                                         "any rate "
                                                          "('full' mode: of m̂, rad; an update of n samples uses "
                                                          "σ²/n)"),
+    "mag_heading_floor_deg": ("deg", (0.0, 180.0), "... and at least this per sample: one sample's own white noise "
+                                                   "(≈ 1.5 µT on a 17 µT horizontal field), which a slow "
+                                                   "magnetometer's density alone would under-state"),
     "mag_noise_deg": ("deg", (0.0, 180.0), "σ of the magnetic heading per sample, pinned whatever the rate (0: "
-                                           "from mag_noise_density; files saved before it existed pin 20)"),
+                                           "from mag_heading_density; files saved before it existed pin 20; "
+                                           "else at least 0.01)"),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
     "mag_norm_soft": ("1", (0.0, 10.0), "mag σ² × (1 + (norm deviation / this)²): de-weighting (0: off)"),
@@ -285,7 +292,8 @@ class EkfParams:
     accel_heading: bool = False
     mag_disturbance_hold: float = 0.5
     mag_reference_tau: float = 3600.0
-    mag_noise_density: float = 1.2
+    mag_heading_density: float = 1.2
+    mag_heading_floor_deg: float = 5.0
     mag_noise_deg: float = 0.0
     heading_input_noise_deg: float = 1.0
     heading_input_interval: float = 1.0
@@ -340,6 +348,9 @@ class EkfParams:
                 raise ImutoolError(f"EKF parameter {name} = {v!r}: expected {want}")
             if not (np.all(np.isfinite(arr)) and np.all(arr >= lo) and np.all(arr <= hi)):
                 raise ImutoolError(f"EKF parameter {name} = {v!r} is outside [{lo:g}, {hi:g}] {unit}")
+            if name == "mag_noise_deg" and 0 < v < 0.01:
+                raise ImutoolError(f"EKF parameter mag_noise_deg = {v!r}: 0 (from mag_heading_density) or at least "
+                                   "0.01 deg")
 
     @classmethod
     def from_dict(cls, values: dict, source: str = "parameters") -> EkfParams:
@@ -377,12 +388,17 @@ class EkfParams:
         return table.get("update_every") == 1 and "update_rate_hz" not in table
 
     @staticmethod
+    def keys_in_file(path: str) -> set[str]:
+        """The parameter names a parameters file gives (the rest take their defaults)."""
+        return set(_toml_table(path))
+
+    @staticmethod
     def pins_mag_sigma(path: str) -> bool:
-        """True for a parameters file written before the magnetometer's σ became a density: it gives
-        ``mag_noise_deg`` (20, the old default, in every saved file) and no ``mag_noise_density``."""
+        """True for a parameters file that pins the magnetometer's σ per sample (``mag_noise_deg`` > 0): every file
+        written before it became a density does (20, the old default), and so does such a file saved again."""
         table = _toml_table(path)
         v = table.get("mag_noise_deg", 0)
-        return isinstance(v, (int, float)) and v > 0 and "mag_noise_density" not in table
+        return isinstance(v, (int, float)) and v > 0
 
     def to_toml(self) -> str:
         """The parameters as a commented TOML ``[ekf]`` table (units and meaning on every line)."""
@@ -407,7 +423,8 @@ class EkfParams:
         p[P_GYRO_NOISE] = self.gyro_noise
         p[P_BIAS_RW] = self.bias_rw
         p[P_ACC_NOISE] = self.accel_noise
-        p[P_MAG_NOISE] = self.mag_sigma_per_sample(dt_mag if dt_mag else dt_nominal)
+        usable = dt_mag is not None and bool(np.isfinite(dt_mag)) and dt_mag > 0
+        p[P_MAG_NOISE] = self.mag_sigma_per_sample(dt_mag if usable else dt_nominal)
         p[P_ACC_GATE] = self.accel_gate
         p[P_ACC_NIS] = self.accel_nis_gate
         p[P_MAG_NORM_GATE] = self.mag_norm_gate
@@ -451,15 +468,16 @@ class EkfParams:
 
     def mag_sigma_per_sample(self, dt_mag: float) -> float:
         """σ of one magnetometer sample (rad), the magnetometer sampled every ``dt_mag`` (s): ``mag_noise_deg``
-        where a file pins it, else ``mag_noise_density`` / √dt_mag. The magnetometer's heading error is not white
-        from sample to sample (calibration residuals, nearby iron), so a faster sensor must not be trusted more
-        per second: with a density the heading's correction time constant, ≈ density / gyro_noise (≈ 21 s), is
-        the same at 10 Hz as at 286 Hz (a fixed σ per sample made it 21 s at 286 Hz and 49 s at 50 Hz)."""
+        where a file pins it, else ``mag_heading_density`` / √dt_mag and at least ``mag_heading_floor_deg``. The
+        magnetometer's heading error is not white from sample to sample (calibration residuals, nearby iron), so a
+        faster sensor must not be trusted more per second: with a density the heading's correction time constant,
+        ≈ radians(density) / gyro_noise (≈ 21 s), is the same at 20 Hz as at 286 Hz (a fixed σ per sample made it
+        21 s at 286 Hz and 49 s at 50 Hz). Below ≈ 17 Hz the floor (one sample's white noise) takes over."""
         if self.mag_noise_deg > 0:
             return float(np.radians(self.mag_noise_deg))
-        if not dt_mag > 0:
-            return float(np.radians(self.mag_noise_density))
-        return float(np.radians(self.mag_noise_density) / np.sqrt(dt_mag))
+        if not (np.isfinite(dt_mag) and dt_mag > 0):
+            raise ImutoolError(f"the magnetometer's sample interval {dt_mag!r} s is not a positive number")
+        return float(np.radians(max(self.mag_heading_density / np.sqrt(dt_mag), self.mag_heading_floor_deg)))
 
     def samples_per_update(self, dt_nominal: float) -> int:
         """N: covariance propagation and measurement updates every N samples of nominal step ``dt_nominal`` (s)."""
@@ -1445,9 +1463,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             mw1 = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz
             mw2 = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz
             rej = nm <= 0
+            have_ref = st[S_MREF_N] > 0  # none yet (a zero first sample): the first accepted samples set it
             if not rej and prm[P_MAG_NORM_GATE] > 0 and st[S_MNORM] > 0:
                 rej = abs(nm / st[S_MNORM] - 1.0) > prm[P_MAG_NORM_GATE]
-            if not rej and prm[P_MAG_DIP_GATE] > 0:
+            if not rej and prm[P_MAG_DIP_GATE] > 0 and have_ref:
                 # |asin(m_z/|m|) − dip_ref| > gate ⇔ m_z/|m| outside [sin(dip_ref − gate), sin(dip_ref + gate)]
                 sz = mw2 / nm
                 rej = sz < dip_lo or sz > dip_hi
@@ -1455,7 +1474,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             dev_m = 0.0
             if nm > 0 and prm[P_MAG_NORM_SOFT] > 0 and st[S_MNORM] > 0:
                 dev_m += ((nm / st[S_MNORM] - 1.0) / prm[P_MAG_NORM_SOFT]) ** 2
-            if nm > 0 and prm[P_MAG_DIP_SOFT] > 0:
+            if nm > 0 and prm[P_MAG_DIP_SOFT] > 0 and have_ref:
                 dev_m += ((np.arcsin(min(1.0, max(-1.0, mw2 / nm))) - dip_ref) / prm[P_MAG_DIP_SOFT]) ** 2
             if prm[P_MAG_HOLD] > 0:  # peak hold with exponential decay: a disturbance is a state, not a sample
                 if rej:
@@ -1484,7 +1503,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     # the reference norm and dip follow the accepted field: a running mean at start-up (one
                     # noisy or disturbed first sample must not set the gates for the whole run), then τ_ref
                     cnt = st[S_MREF_N] + n_use
-                    al = min(1.0, max(n_use / cnt, t_since / prm[P_MAG_REF_TAU]))
+                    t_ref = min(dt, prm[P_GAP_DT]) * st[S_CNT_M]  # a gap's length is no time of accepted field
+                    al = min(1.0, max(n_use / cnt, t_ref / prm[P_MAG_REF_TAU]))
                     st[S_MREF_N] = cnt
                     st[S_MNORM] += al * (st[S_MNSUM] / n_use - st[S_MNORM])
                     szr = st[S_MREF + 2] + al * (m2 / n_use - st[S_MREF + 2])
@@ -1806,9 +1826,11 @@ def nominal_dt(t: np.ndarray) -> float:
 
 
 def mag_interval(t: np.ndarray, mag: np.ndarray | None) -> float | None:
-    """The magnetometer's own sample interval (s): the median step between its finite rows (a magnetometer slower
-    than the IMU leaves NaN rows between its samples), over the first block of rows that has some (4096 rows, then
-    4× larger blocks: cheap on a day of samples); None where it has fewer than two finite rows."""
+    """The magnetometer's own sample interval (s) from the steps between its finite rows (a magnetometer slower than
+    the IMU leaves NaN rows between its samples): their median, or where more than a tenth of them differ from it
+    (a rate that does not divide the IMU's) their mean without gaps (steps over 3× the median); over the first
+    block of rows that has some (4096 rows, then 4× larger blocks: cheap on a day of samples); None where it has
+    fewer than two finite rows."""
     if mag is None:
         return None
     i0, step, n = 0, 4096, len(t)
@@ -1819,7 +1841,12 @@ def mag_interval(t: np.ndarray, mag: np.ndarray | None) -> float | None:
             d = np.diff(np.asarray(t[i0:i1])[ok])
             d = d[d > 0]
             if d.size:
-                return float(np.median(d))
+                med = float(np.median(d))
+                # steps of mixed lengths (a 70 Hz magnetometer on 100 Hz rows steps 0.01 and 0.02 s): their mean
+                # without gaps; else the median, exact whatever a lost row (so a stream's first chunk gives the
+                # same as the whole file)
+                mixed = np.mean(np.abs(d - med) > 0.01 * med) > 0.1
+                return float(np.mean(d[d <= 3.0 * med])) if mixed else med
         i0, step = i1, step * 4
     return None
 
@@ -1918,7 +1945,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     ``heading_deg`` (N,) an external true heading (gyrocompass; deg, NaN where none): when given, it is the
     heading measurement and the magnetometer is not used.
     ``dt_mag`` (s) the magnetometer's own sample interval, which sets its σ per sample from
-    ``mag_noise_density`` (default: :func:`mag_interval` of these rows; a stream passes its first chunk's).
+    ``mag_heading_density`` (default: :func:`mag_interval` of these rows; a stream passes its first chunk's).
     """
     params = params or EkfParams()
     t = np.ascontiguousarray(time, dtype=np.float64)

@@ -101,12 +101,13 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
                    "set update_every = 0 there, or --update-every 0, for updates every ⌊rate / update_rate_hz⌋ "
                    "samples", err=True)
     if params_file and not quiet and params.mag_noise_deg > 0 and params.pins_mag_sigma(params_file):
-        click.echo(f"note: {params_file} sets mag_noise_deg = {params.mag_noise_deg:g}, as every parameters file "
-                   "saved before mag_noise_density existed does: the magnetometer's σ is that per sample at any "
-                   "rate, so its heading time constant grows as the rate falls (21 s at 286 Hz, 49 s at 50 Hz); "
-                   "set mag_noise_deg = 0 there, or --param mag_noise_deg=0, for mag_noise_density (deg·√s, the "
-                   "same at every rate). The gates' reference field is now the mean accepted field "
-                   "(mag_reference_tau = 0: the first sample, as before)", err=True)
+        click.echo(f"note: {params_file} sets mag_noise_deg = {params.mag_noise_deg:g}, a σ per sample at any rate "
+                   "(every parameters file saved before mag_heading_density existed does), so the heading's time "
+                   "constant grows as the rate falls (21 s at 286 Hz, 49 s at 50 Hz); set mag_noise_deg = 0 there, "
+                   "or --param mag_noise_deg=0, for mag_heading_density (deg·√s, the same at every rate)", err=True)
+        if "mag_reference_tau" not in params.keys_in_file(params_file):
+            click.echo("note: the magnetometer's gates now compare with the mean accepted field, not its first "
+                       "sample (mag_reference_tau = 0: as before)", err=True)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
