@@ -109,8 +109,9 @@ def _peak_rss_kb(pid: int) -> int | None:
 
 
 def day(folder: str) -> None:
-    """`imutool filter` on the 24 h file: wall time, CPU time (os.wait4) and peak RSS (its VmHWM, read every 0.1 s
-    until it exits) of that process alone. The file is written by a child process."""
+    """`imutool filter` on the 24 h file: wall time, CPU time (this process's children's rusage, before and after)
+    and peak RSS (its VmHWM, read every 0.1 s until it exits) of that process alone. The file is written by a
+    child process."""
     path = os.path.join(folder, "att_bench_24h.csv")
     if not os.path.exists(path):
         print("writing the 24 h file ...", flush=True)

@@ -181,9 +181,8 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "mag_heading_density": ("deg*sqrt(s)", (0.01, 100.0), "σ of the magnetic heading as a noise density: σ per "
                                                          "sample = this / √dt, so the heading's time constant "
                                                          "(≈ radians(this) / gyro_noise ≈ 21 s) is the same at "
-                                                         "any rate "
-                                                         "('full' mode: of m̂, rad; an update of n samples uses "
-                                                         "σ²/n)"),
+                                                         "any rate ('full' mode: of m̂, rad; an update of n "
+                                                         "samples uses σ²/n)"),
     "mag_heading_floor_deg": ("deg", (0.0, 180.0), "... and at least this per sample: one sample's own white noise "
                                                    "(≈ 1.5 µT on a 17 µT horizontal field), which a slow "
                                                    "magnetometer's density alone would under-state"),

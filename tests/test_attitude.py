@@ -962,6 +962,35 @@ def test_heading_follows_the_magnetometer_at_the_same_pace_at_any_rate():
     assert res.summary["inconsistent_samples"] > 0  # the density alone over-trusts it
 
 
+def test_the_magnetometer_interval_and_its_sigma_per_sample():
+    """σ per sample comes from the magnetometer's own interval: every 4th row of a 100 Hz IMU is 0.04 s; a 70 Hz
+    magnetometer on 100 Hz rows (steps of 0.01 and 0.02 s) is 1/70 s, not the median 0.01 s; one lost row leaves
+    a regular interval exact (a stream's first chunk and the whole file agree); no usable interval falls back to
+    the IMU's. σ = density / √dt, held at the floor for a slow magnetometer, pinned by mag_noise_deg."""
+    from imutool.attitude import P_MAG_NOISE, mag_interval
+
+    t = np.arange(10000) * 0.01
+    m = np.ones((10000, 3))
+    every4 = np.full_like(m, np.nan)
+    every4[::4] = 1.0
+    assert mag_interval(t, every4) == pytest.approx(0.04)
+    at70 = np.full_like(m, np.nan)
+    at70[np.unique(np.floor(np.arange(0, 10000, 100 / 70)).astype(int))] = 1.0
+    assert mag_interval(t, at70) == pytest.approx(1 / 70, rel=2e-3)
+    assert mag_interval(np.delete(t, 3000), np.ones((9999, 3))) == pytest.approx(0.01, abs=1e-12)
+    assert mag_interval(t, None) is None and mag_interval(t, np.full_like(m, np.nan)) is None
+    p = EkfParams()
+    sigma = np.degrees(p.vector(0.01)[P_MAG_NOISE])
+    assert sigma == pytest.approx(1.2 / np.sqrt(0.01))
+    assert np.degrees(p.vector(0.01, 0.04)[P_MAG_NOISE]) == pytest.approx(1.2 / np.sqrt(0.04))
+    for bad in (None, 0.0, -1.0, float("nan")):
+        assert np.degrees(p.vector(0.01, bad)[P_MAG_NOISE]) == pytest.approx(sigma)
+    assert np.degrees(p.vector(0.01, 1.0)[P_MAG_NOISE]) == pytest.approx(5.0)  # 1 Hz: the floor
+    assert np.degrees(EkfParams(mag_noise_deg=20.0).vector(0.01, 0.04)[P_MAG_NOISE]) == pytest.approx(20.0)
+    with pytest.raises(ImutoolError):
+        EkfParams(mag_noise_deg=0.001)
+
+
 def test_the_magnetometer_gates_compare_with_the_mean_field_not_the_first_sample():
     """The reference norm and dip that the magnetometer's gates and de-weighting compare with is the mean of the
     accepted field (a running mean, forgetting over mag_reference_tau = 1 h), not the first sample. A first second
