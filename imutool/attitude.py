@@ -104,7 +104,12 @@ S_MSUM, S_RSUM = 136, 139
 # the magnetometer's reference norm and dip follow the accepted field (mag_reference_tau): the norms summed since
 # the last update, and how many samples the reference stands for (1: the first sample; running mean at start-up)
 S_MNSUM, S_MREF_N = 142, 143
-STATE_SIZE = 144
+# a new field: where the magnetometer is rejected, the candidate field its samples agree on (norm µT, sine of the dip,
+# samples) and the time it has held while the body turned (s); how many times a candidate became the reference
+S_MCN, S_MCZ, S_MCCNT, S_MCT, S_NMNEW = 144, 145, 146, 147, 148
+S_MREF_T = 149  # the time the reference's own field has held while the body turned (s): confirmed at mag_new_first_time
+S_MCX, S_MCY = 150, 151  # the candidate's mean horizontal field direction in the world frame (north, east; unit)
+STATE_SIZE = 152
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -118,10 +123,13 @@ P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
 P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
 P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
 P_ACC_LAG, P_HDG_NOISE, P_HDG_EVERY, P_MAG_REF_TAU = 39, 40, 41, 42
-N_PARAMS = 43
+P_MAG_NEW_TIME, P_MAG_NEW_RATE, P_MAG_NEW_FIRST = 43, 44, 45
+P_MAG_BIAS_GATE = 46
+N_PARAMS = 47
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
+F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample
 
 # external heading (gyrocompass): a fix whose innovation is beyond this many σ is a glitch and skipped, for at most
 # this many seconds running; beyond, the heading that stayed away is taken outright
@@ -202,7 +210,24 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                            "seconds, then forgetting with this time constant (the earth's field "
                                            "changes only as the vessel moves over it; 0: the first sample, for the "
                                            "whole run)"),
+    "mag_new_time": ("s", (0.0, 1e6), "no lock-out of the magnetometer: a field its gates reject, but which stays "
+                                      "within those gates of itself (homogeneous) for this long while the body "
+                                      "turns, becomes the new reference (the sensor moved, or the field at the "
+                                      "start was the disturbed one; VQF's magNewTime; 0: never)"),
+    "mag_new_first_time": ("s", (0.0, 1e6), "... this long instead while the reference is not yet confirmed (its "
+                                            "own field has not yet held this long while the body turned: the field "
+                                            "where a recording starts may be the disturbed one; VQF's "
+                                            "magNewFirstTime)"),
+    "mag_new_min_rate": ("deg/s", (0.0, 1e4), "... only time while the body turns faster than this counts: a "
+                                              "magnet riding with the sensor changes the field's norm and dip as "
+                                              "the body turns, a new homogeneous field does not (VQF's "
+                                              "magNewMinGyr)"),
     "mag_bias": ("bool", (0, 1), "magnetic heading updates may correct the gyro bias"),
+    "mag_bias_gate": ("1", (0.0, 1e6), "... only from heading innovations within this many σ (σ² = the heading's "
+                                       "variance + the magnetometer's undisturbed σ² per update): a heading off "
+                                       "by more (a wrong start, a field the gates pass) is an error of the "
+                                       "heading, not of the gyro, so the bias is left as it is (a Schmidt update; "
+                                       "0: always)"),
     "gravity": ("m/s^2", (9.7, 9.9), "local gravity"),
     "rest_gyro": ("rad/s", (0.0, 10.0), "rest: |ω − b| below this on every axis ..."),
     "rest_accel": ("m/s^2", (0.0, 100.0), "... and | |a| − g | below this ..."),
@@ -291,6 +316,9 @@ class EkfParams:
     accel_heading: bool = False
     mag_disturbance_hold: float = 0.5
     mag_reference_tau: float = 3600.0
+    mag_new_time: float = 20.0
+    mag_new_min_rate: float = 20.0
+    mag_new_first_time: float = 5.0
     mag_heading_density: float = 1.2
     mag_heading_floor_deg: float = 5.0
     mag_noise_deg: float = 0.0
@@ -302,6 +330,7 @@ class EkfParams:
     mag_norm_soft: float = 0.05
     mag_dip_soft_deg: float = 5.0
     mag_bias: bool = True
+    mag_bias_gate: float = 3.0
     gravity: float = 9.80665
     rest_gyro: float = 0.05
     rest_accel: float = 0.3
@@ -463,6 +492,10 @@ class EkfParams:
         p[P_HDG_NOISE] = np.radians(self.heading_input_noise_deg)
         p[P_HDG_EVERY] = self.heading_input_interval
         p[P_MAG_REF_TAU] = self.mag_reference_tau
+        p[P_MAG_NEW_TIME] = self.mag_new_time
+        p[P_MAG_NEW_RATE] = np.radians(self.mag_new_min_rate)
+        p[P_MAG_NEW_FIRST] = self.mag_new_first_time
+        p[P_MAG_BIAS_GATE] = self.mag_bias_gate
         return p
 
     def mag_sigma_per_sample(self, dt_mag: float) -> float:
@@ -871,9 +904,11 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
 
 
 @njit(cache=True, inline="always")
-def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0.0):
+def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0.0, bias_gate2=0.0, sig2_0=0.0):
     """Scalar heading update H = [r, 0] (r = world vertical in body axes) with the correction projected on the world
-    vertical (Joseph form). Straight-line code. Returns the NIS y² / (S + nis_extra) (see :func:`_vec_update`)."""
+    vertical (Joseph form). Straight-line code. Returns the NIS y² / (S + nis_extra) (see :func:`_vec_update`).
+    The bias is left as it is (a Schmidt update) with ``consider_bias``, or where y² > bias_gate2 · (rᵀP r +
+    sig2_0): an innovation beyond the gate against the undisturbed σ² ``sig2_0`` (rad²)."""
     p00, p01, p02, p03, p04, p05 = P[0, 0], P[0, 1], P[0, 2], P[0, 3], P[0, 4], P[0, 5]
     p11, p12, p13, p14, p15 = P[1, 1], P[1, 2], P[1, 3], P[1, 4], P[1, 5]
     p22, p23, p24, p25 = P[2, 2], P[2, 3], P[2, 4], P[2, 5]
@@ -890,8 +925,8 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0
     S = hm + sig2
     ka = hm / S  # world-vertical part of the attitude gain
     kb = (m3 * r0 + m4 * r1 + m5 * r2) / S  # world-vertical part of the bias gain
-    if consider_bias:  # Schmidt: Joseph form with a zero bias gain is exact for that suboptimal gain
-        kb = 0.0
+    if consider_bias or (bias_gate2 > 0 and y * y > bias_gate2 * (hm + sig2_0)):
+        kb = 0.0  # Schmidt: Joseph form with a zero bias gain is exact for that suboptimal gain
     k0, k1, k2, k3, k4, k5 = r0 * ka, r1 * ka, r2 * ka, r0 * kb, r1 * kb, r2 * kb
     dx[0], dx[1], dx[2], dx[3], dx[4], dx[5] = k0 * y, k1 * y, k2 * y, k3 * y, k4 * y, k5 * y
     # Joseph: P ← (I − K H) P (I − K H)ᵀ + K sig2 Kᵀ = P − K Mᵀ − M Kᵀ + S K Kᵀ
@@ -1057,6 +1092,58 @@ def _dip_gate(sin_dip, cos_gate, sin_gate):
     lo = s * cos_gate - c * sin_gate if s > -cos_gate else -2.0
     hi = s * cos_gate + c * sin_gate if s < cos_gate else 2.0
     return np.arcsin(s), lo, hi
+
+
+@njit(cache=True, inline="always")
+def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, sin_gate):
+    """No lock-out of the magnetometer (VQF's new-field acceptance, Laidig & Seel 2023, Sec. IV-C). Called for a
+    sample the gates reject, of norm ``nm`` (µT), dip sine ``sz`` and horizontal direction ``hx``, ``hy`` (north
+    and east components of the unit field, world frame by the filter's attitude), ``dt`` (s) after the previous one,
+    ``turning`` when the body turns faster than mag_new_min_rate; r0..r2 the world vertical in body axes. Until the
+    reference's own field has held for mag_new_first_time s of turning (S_MREF_T, counted at the magnetometer
+    updates) a candidate needs that long, after it mag_new_time. The rejected samples that agree with one another
+    within the same gates (norm within mag_norm_gate of their mean, dip within mag_dip_gate_deg) form a candidate
+    field; a sample that does not starts a new one. Once the candidate has held for that time of turning (a magnet
+    riding with the sensor changes the norm and dip as the body turns; the earth's field in a new place does not),
+    it becomes the reference and True is returned. The heading was held to the old reference: its variance becomes
+    at least its disagreement with the new field (the candidate's mean horizontal direction) and its covariance with
+    the bias goes, so it converges to the new field without teaching the bias. Inlined: as a call in the kernel's
+    loop, even one never made, it cost 4 % of the kernel's speed. State: S_MCN, S_MCZ, S_MCX, S_MCY, S_MCCNT, S_MCT,
+    S_NMNEW."""
+    confirmed = st[S_MREF_T] >= prm[P_MAG_NEW_FIRST]
+    norm_gate, new_time = prm[P_MAG_NORM_GATE], prm[P_MAG_NEW_TIME] if confirmed else prm[P_MAG_NEW_FIRST]
+    c = st[S_MCCNT]
+    agree = c > 0
+    if agree and norm_gate > 0:
+        agree = abs(nm / st[S_MCN] - 1.0) <= norm_gate
+    if agree and prm[P_MAG_DIP_GATE] > 0:
+        _, lo, hi = _dip_gate(st[S_MCZ], cos_gate, sin_gate)
+        agree = lo <= sz <= hi
+    if not agree:
+        st[S_MCN], st[S_MCZ], st[S_MCX], st[S_MCY], st[S_MCCNT], st[S_MCT] = nm, sz, hx, hy, 1.0, 0.0
+        return False
+    c += 1.0
+    st[S_MCCNT] = c
+    st[S_MCN] += (nm - st[S_MCN]) / c
+    st[S_MCZ] += (sz - st[S_MCZ]) / c
+    st[S_MCX] += (hx - st[S_MCX]) / c
+    st[S_MCY] += (hy - st[S_MCY]) / c
+    if turning:
+        st[S_MCT] += dt
+    if st[S_MCT] < new_time:
+        return False
+    szr = min(1.0, max(-1.0, st[S_MCZ]))
+    st[S_MNORM] = st[S_MCN]
+    st[S_MREF], st[S_MREF + 1], st[S_MREF + 2] = np.sqrt(1.0 - szr * szr), 0.0, szr
+    st[S_MREF_N] = c  # the reference goes on as the running mean of the candidate's samples
+    st[S_MREF_T] = max(st[S_MREF_T], st[S_MCT])  # it held while the body turned: confirmed
+    st[S_MCCNT], st[S_MCT] = 0.0, 0.0
+    st[S_NMNEW] += 1.0
+    st[S_MDIST] = 0.0  # the disturbance it held was measured against the old reference
+    _propagate_pending(st, P, prm)
+    yc = _atan2(st[S_MCY], st[S_MCX])
+    _reset_heading(st, P, r0, r1, r2, 0.0, max(_vertical_forms(P, r0, r1, r2)[0], yc * yc))
+    return True
 
 
 @njit(cache=True, inline="always")
@@ -1481,6 +1568,12 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 decay = 1.0 / (1.0 + max(dt, 0.0) / prm[P_MAG_HOLD])  # ≈ exp(−dt/hold)
                 st[S_MDIST] = max(dev_m, st[S_MDIST] * decay)
                 dev_m = st[S_MDIST]
+            if rej and prm[P_MAG_NEW_TIME] > 0 and nm > 0 and have_ref:  # no lock-out: a new homogeneous field
+                if _new_field(st, P, prm, nm, mw2 / nm, mw0 / nm, mw1 / nm, min(max(dt, 0.0), prm[P_GAP_DT]),
+                              w0 * w0 + w1 * w1 + w2 * w2 >= prm[P_MAG_NEW_RATE] ** 2, R[2, 0], R[2, 1], R[2, 2],
+                              cos_gate, sin_gate):
+                    dip_ref, dip_lo, dip_hi = _dip_gate(st[S_MREF + 2], cos_gate, sin_gate)
+                    flag |= F_MAG_NEW
             if rej:
                 flag |= F_MAG_REJ
                 st[S_NMREJ] += 1
@@ -1498,6 +1591,12 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             t_since = dt * st[S_CNT_M]
             if due:
                 _propagate_pending(st, P, prm)
+                if dev_m < 1.0:  # undisturbed: a candidate new field is forgotten, and the reference's field has
+                    # held over the samples since the last update; while the body turns that confirms it
+                    st[S_MCCNT], st[S_MCT] = 0.0, 0.0
+                    turning = w0 * w0 + w1 * w1 + w2 * w2 >= prm[P_MAG_NEW_RATE] ** 2
+                    if st[S_MREF_T] < prm[P_MAG_NEW_FIRST] and turning:
+                        st[S_MREF_T] += min(dt, prm[P_GAP_DT]) * st[S_CNT_M]
                 if prm[P_MAG_REF_TAU] > 0 and n_use > 0:
                     # the reference norm and dip follow the accepted field: a running mean at start-up (one
                     # noisy or disturbed first sample must not set the gates for the whole run), then τ_ref
@@ -1515,8 +1614,11 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if due and mag_mode == 1:
                 yh = -_atan2(m1, m0)  # heading error: the horizontal field should point north
                 sm2 = prm[P_MAG_NOISE] ** 2 * (1.0 + dev_m)
-                nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2 / n_use, dx,
-                                        prm[P_MAG_BIAS] == 0.0, sm2 - sm2 / n_use)
+                # a heading off by more than mag_bias_gate σ (against the undisturbed σ: the de-weighting must not
+                # hide it) is the heading's error, not the gyro's: the bias does not learn from it
+                nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2 / n_use, dx, prm[P_MAG_BIAS] == 0.0,
+                                        sm2 - sm2 / n_use, prm[P_MAG_BIAS_GATE] ** 2,
+                                        prm[P_MAG_NOISE] ** 2 / n_use)
                 if prm[P_NIS_TAU] > 0 and dt > 0:
                     st[S_NIS_M] += min(1.0, t_since / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
                 _apply_correction(st, dx)  # dx along r: its reset is G = I
@@ -2001,7 +2103,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
                    f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else hdg)
     summary = {
         "samples": n, "updates": int(st[S_NUPD]), "update_every": every, "accel_rejected": int(st[S_NAREJ]),
-        "mag_rejected": int(st[S_NMREJ]), "rest_samples": int(st[S_NREST]), "gaps": int(st[S_NGAPS]),
+        "mag_rejected": int(st[S_NMREJ]), "mag_new_field": int(st[S_NMNEW]), "rest_samples": int(st[S_NREST]),
+        "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
         "inconsistent_samples": int(st[S_NINC]),
         "tilt_check_samples": int(st[S_NTILT]),
@@ -2185,7 +2288,26 @@ def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str
     warn = (f"the magnetometer was rejected for {total:.0f} s in {len(long)} span(s) of more than "
             f"{spans.min_s:g} s ({shown}): the field there differs from the one at the start (a magnet or steel "
             "nearby, a new mounting or calibration?), so the heading is the gyro's alone and drifts with its "
-            "bias (column 'mag_rejected' = 1)")
+            "bias (column 'mag_rejected' = 1); a steady new field becomes the reference only once it has held "
+            "while the sensor turned (mag_new_time, mag_new_min_rate), which a still or slowly turning one never "
+            "shows")
+    return info, [warn]
+
+
+def new_field_check(times: list[float], params: EkfParams, max_times: int = 20) -> tuple[dict, list[str]]:
+    """Where the magnetometer's reference field was replaced (``times``, s: the samples flagged F_MAG_NEW):
+    summary and warning. A field the gates rejected stayed within those gates of itself for ``mag_new_time`` s
+    while the body turned (``mag_new_first_time`` before the first reference held while turning): the sensor moved
+    to another field, or the field where the recording started was the disturbed one. The heading follows the
+    new field from there; were it a magnet riding with the sensor, that would be wrong, so it is said."""
+    if not times:
+        return {}, []
+    shown = ", ".join(f"{t:.1f}" for t in times[:max_times]) + (" …" if len(times) > max_times else "")
+    info = {"mag_new_field_s": [round(float(t), 3) for t in times[:max_times]]}
+    warn = (f"the magnetometer's reference field was replaced {len(times)} time(s), at t = {shown} s: a field its "
+            f"gates rejected held steady for {params.mag_new_time:g} s while the sensor turned (the sensor moved to "
+            "another field, or the field at the start was disturbed), and the heading follows that field from "
+            "there (column 'mag_rejected' shows the rejection before)")
     return info, [warn]
 
 
@@ -2344,6 +2466,9 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         check, more = heading_check(spans)
         summary.update(check)
         warnings += more
+    check, more = new_field_check(list(res.time[(res.flags & F_MAG_NEW) > 0]), params)
+    summary.update(check)
+    warnings += more
     warnings += tilt_check(summary, params)
     warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & (F_MAG_USED | F_HDG_USED))))
     from imutool.gyro_check import GyroScaleCheck  # imported here: gyro_check uses this module's quaternion steps

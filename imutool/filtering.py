@@ -296,6 +296,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     from imutool.attitude import (
         F_HDG_USED,
         F_INCONSISTENT,
+        F_MAG_NEW,
         F_MAG_REJ,
         F_MAG_USED,
         FlagSpans,
@@ -305,6 +306,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         heading_source_report,
         inconsistency_report,
         mag_interval,
+        new_field_check,
         nominal_dt,
         result_recording,
         run_ekf,
@@ -334,6 +336,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     flagged = FlagSpans(0.0)  # spans the self-check flagged (samples more than 1 s apart split a span)
     n_flagged = 0
     mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
+    new_fields: list[float] = []  # times the magnetometer's reference was replaced by a new field
     gnss_used = mag_used = False  # SOG/COG used in some chunk; a heading update (mag or external) taken in some chunk
     heading_given = mag_given = False  # a heading_true / mag column in some chunk
     heading_updates = 0
@@ -399,6 +402,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             flagged.add(res.time, bad)
             if params.mag_check_time > 0:
                 mag_spans.add(res.time, res.flags & F_MAG_REJ)
+            new_fields += [float(x) for x in res.time[(res.flags & F_MAG_NEW) > 0]]
             for k, v in res.summary.items():
                 if isinstance(v, (int, float, np.number)) and not isinstance(v, bool):
                     # the state carries cumulative counters (and the tilt check's running maximum)
@@ -424,6 +428,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             check, more = heading_check(mag_spans)
             summary.update(check)
             warnings += more
+        check, more = new_field_check(new_fields, params)
+        summary.update(check)
+        warnings += more
         warnings += tilt_check(totals, params)
         warnings += gnss_heading_check(gnss_used, mag_used)
         check, more = heading_source_report(heading_given, mag_given, heading_updates, params,
