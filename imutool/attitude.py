@@ -108,8 +108,10 @@ S_MNSUM, S_MREF_N = 142, 143
 # samples) and the time it has held while the body turned (s); how many times a candidate became the reference
 S_MCN, S_MCZ, S_MCCNT, S_MCT, S_NMNEW = 144, 145, 146, 147, 148
 S_MREF_T = 149  # the time the reference's own field has held while the body turned (s): confirmed at mag_new_first_time
-S_MCX, S_MCY = 150, 151  # the candidate's mean horizontal field direction in the world frame (north, east; unit)
-STATE_SIZE = 152
+# the candidate's mean horizontal field direction in the world frame: the means of the unit field's north and east
+# components (only their angle is used); the time since the last magnetometer sample (s, gaps counted at gap_dt)
+S_MCX, S_MCY, S_MDT = 150, 151, 152
+STATE_SIZE = 153
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -129,7 +131,7 @@ N_PARAMS = 47
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
-F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample
+F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample (the last bit of uint8)
 
 # external heading (gyrocompass): a fix whose innovation is beyond this many σ is a glitch and skipped, for at most
 # this many seconds running; beyond, the heading that stayed away is taken outright
@@ -217,17 +219,19 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "mag_new_first_time": ("s", (0.0, 1e6), "... this long instead while the reference is not yet confirmed (its "
                                             "own field has not yet held this long while the body turned: the field "
                                             "where a recording starts may be the disturbed one; VQF's "
-                                            "magNewFirstTime)"),
+                                            "magNewFirstTime; 0: the start's field counts as confirmed)"),
     "mag_new_min_rate": ("deg/s", (0.0, 1e4), "... only time while the body turns faster than this counts: a "
                                               "magnet riding with the sensor changes the field's norm and dip as "
                                               "the body turns, a new homogeneous field does not (VQF's "
-                                              "magNewMinGyr)"),
+                                              "magNewMinGyr; 0: any time counts, a still sensor's too, so a magnet "
+                                              "held beside it becomes the reference)"),
     "mag_bias": ("bool", (0, 1), "magnetic heading updates may correct the gyro bias"),
     "mag_bias_gate": ("1", (0.0, 1e6), "... only from heading innovations within this many σ (σ² = the heading's "
                                        "variance + the magnetometer's undisturbed σ² per update): a heading off "
                                        "by more (a wrong start, a field the gates pass) is an error of the "
                                        "heading, not of the gyro, so the bias is left as it is (a Schmidt update; "
-                                       "0: always)"),
+                                       "0: always; mag_mode heading only, the 'full' vector "
+                                       "update is not gated)"),
     "gravity": ("m/s^2", (9.7, 9.9), "local gravity"),
     "rest_gyro": ("rad/s", (0.0, 10.0), "rest: |ω − b| below this on every axis ..."),
     "rest_accel": ("m/s^2", (0.0, 100.0), "... and | |a| − g | below this ..."),
@@ -1096,22 +1100,23 @@ def _dip_gate(sin_dip, cos_gate, sin_gate):
 
 @njit(cache=True, inline="always")
 def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, sin_gate):
-    """No lock-out of the magnetometer (VQF's new-field acceptance, Laidig & Seel 2023, Sec. IV-C). Called for a
-    sample the gates reject, of norm ``nm`` (µT), dip sine ``sz`` and horizontal direction ``hx``, ``hy`` (north
-    and east components of the unit field, world frame by the filter's attitude), ``dt`` (s) after the previous one,
-    ``turning`` when the body turns faster than mag_new_min_rate; r0..r2 the world vertical in body axes. Until the
-    reference's own field has held for mag_new_first_time s of turning (S_MREF_T, counted at the magnetometer
-    updates) a candidate needs that long, after it mag_new_time. The rejected samples that agree with one another
-    within the same gates (norm within mag_norm_gate of their mean, dip within mag_dip_gate_deg) form a candidate
-    field; a sample that does not starts a new one. Once the candidate has held for that time of turning (a magnet
-    riding with the sensor changes the norm and dip as the body turns; the earth's field in a new place does not),
-    it becomes the reference and True is returned. The heading was held to the old reference: its variance becomes
-    at least its disagreement with the new field (the candidate's mean horizontal direction) and its covariance with
-    the bias goes, so it converges to the new field without teaching the bias. Inlined: as a call in the kernel's
-    loop, even one never made, it cost 4 % of the kernel's speed. State: S_MCN, S_MCZ, S_MCX, S_MCY, S_MCCNT, S_MCT,
-    S_NMNEW."""
+    """No lock-out of the magnetometer (VQF's new-field acceptance, Laidig & Seel 2023, Sec. IV-C). Called for a sample
+    the gates reject, of norm ``nm`` (µT), dip sine ``sz`` and horizontal direction ``hx``, ``hy`` (north and east
+    components of the unit field, world frame by the filter's attitude), ``dt`` (s) after the previous magnetometer
+    sample (gaps counted at gap_dt), ``turning`` when the body turns faster than mag_new_min_rate; r0..r2 the world
+    vertical in body axes. Until the reference's own field has held for mag_new_first_time s of turning (S_MREF_T,
+    counted at the magnetometer updates) a candidate needs that long, after it mag_new_time. The rejected samples that
+    agree with one another within the same gates (norm within mag_norm_gate of their mean, dip within mag_dip_gate_deg)
+    form a candidate field; a sample that does not starts a new one. Once the candidate has held for that time of
+    turning (a magnet riding with the sensor changes the norm and dip as the body turns; the earth's field in a new
+    place does not), it becomes the reference and True is returned. The heading was held to the old reference: its
+    variance becomes at least its disagreement with the new field (the candidate's mean horizontal direction) and its
+    covariance with the bias goes, so it converges to the new field without teaching the bias. Inlined: as a call in
+    the kernel's loop, even one never made, it cost 4 % of the kernel's speed. Reads and writes S_MCN, S_MCZ, S_MCX,
+    S_MCY, S_MCCNT, S_MCT; on a new field also S_MNORM, S_MREF, S_MREF_N, S_MREF_T, S_MDIST, S_NMNEW and P."""
     confirmed = st[S_MREF_T] >= prm[P_MAG_NEW_FIRST]
-    norm_gate, new_time = prm[P_MAG_NORM_GATE], prm[P_MAG_NEW_TIME] if confirmed else prm[P_MAG_NEW_FIRST]
+    new_time = prm[P_MAG_NEW_TIME] if confirmed else prm[P_MAG_NEW_FIRST]
+    norm_gate = prm[P_MAG_NORM_GATE]
     c = st[S_MCCNT]
     agree = c > 0
     if agree and norm_gate > 0:
@@ -1265,6 +1270,8 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         gap = dt > prm[P_GAP_DT]
         dti = prm[P_GAP_DT] if gap else dt
         if dt > 0:
+            st[S_MDT] += dti
+        if dt > 0:
             e0, e1, e2, e3 = _rotvec_quat(w0 * dti, w1 * dti, w2 * dti)
             q0, q1, q2, q3 = _qmul(st[0], st[1], st[2], st[3], e0, e1, e2, e3)
             nq = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
@@ -1282,6 +1289,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             for i in range(3):
                 P[i, i] = min(P[i, i] + inc, 10.0)
             st[S_GWN], st[S_GWT] = 0.0, 0.0  # the tilt check's window restarts: no mean across a gap
+            st[S_MCCNT], st[S_MCT] = 0.0, 0.0  # so does a candidate new field (the attitude after it is the gyro's)
             st[S_LPINIT] = 0.0  # so does the quasi-inertial low-pass: the frame I lost the gap's rotation
             # and what the next updates average: nothing from before the gap
             st[S_USE_A], st[S_USE_M], st[S_USE_R], st[S_MNSUM] = 0.0, 0.0, 0.0, 0.0
@@ -1568,8 +1576,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 decay = 1.0 / (1.0 + max(dt, 0.0) / prm[P_MAG_HOLD])  # ≈ exp(−dt/hold)
                 st[S_MDIST] = max(dev_m, st[S_MDIST] * decay)
                 dev_m = st[S_MDIST]
+            dtm = st[S_MDT]  # since the previous magnetometer sample (a slower magnetometer: several rows)
+            st[S_MDT] = 0.0
             if rej and prm[P_MAG_NEW_TIME] > 0 and nm > 0 and have_ref:  # no lock-out: a new homogeneous field
-                if _new_field(st, P, prm, nm, mw2 / nm, mw0 / nm, mw1 / nm, min(max(dt, 0.0), prm[P_GAP_DT]),
+                if _new_field(st, P, prm, nm, mw2 / nm, mw0 / nm, mw1 / nm, dtm,
                               w0 * w0 + w1 * w1 + w2 * w2 >= prm[P_MAG_NEW_RATE] ** 2, R[2, 0], R[2, 1], R[2, 2],
                               cos_gate, sin_gate):
                     dip_ref, dip_lo, dip_hi = _dip_gate(st[S_MREF + 2], cos_gate, sin_gate)
@@ -2071,6 +2081,8 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
         first = np.flatnonzero(np.isfinite(near))
         state = initial_state(a, m if use_mag else None, params, float(near[first[0]]) if len(first) else None)
     st = np.array(state, dtype=np.float64)
+    if st.shape != (STATE_SIZE,):  # the kernel indexes it unchecked
+        raise ImutoolError(f"an EKF state must have {STATE_SIZE} entries, not {st.shape} (from another release?)")
     if dt_mag is None and use_mag:
         dt_mag = mag_interval(t, m)
     prm = params.vector(dt_nominal, dt_mag)
@@ -2275,7 +2287,8 @@ class FlagSpans:
         return [(a, b) for a, b in self.spans if b - a >= self.min_s]
 
 
-def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str]]:
+def heading_check(spans: FlagSpans, max_spans: int = 20,
+                  params: EkfParams | None = None) -> tuple[dict, list[str]]:
     """Where the magnetometer was rejected for longer than ``spans.min_s`` (``mag_check_time``): summary and
     warning. The rejection keeps a disturbed field out of the heading, but there the heading is the gyro's
     alone and drifts with its bias and scale errors; the filter's σ does not show that drift in full."""
@@ -2288,9 +2301,12 @@ def heading_check(spans: FlagSpans, max_spans: int = 20) -> tuple[dict, list[str
     warn = (f"the magnetometer was rejected for {total:.0f} s in {len(long)} span(s) of more than "
             f"{spans.min_s:g} s ({shown}): the field there differs from the one at the start (a magnet or steel "
             "nearby, a new mounting or calibration?), so the heading is the gyro's alone and drifts with its "
-            "bias (column 'mag_rejected' = 1); a steady new field becomes the reference only once it has held "
-            "while the sensor turned (mag_new_time, mag_new_min_rate), which a still or slowly turning one never "
-            "shows")
+            "bias (column 'mag_rejected' = 1)")
+    if params is not None and params.mag_new_time > 0:
+        warn += (f"; a steady new field is taken as the reference only after it has held for "
+                 f"{params.mag_new_time:g} s while the sensor turned faster than {params.mag_new_min_rate:g} °/s, "
+                 "which a ship rolling at sea never does: on board the magnetometer stays rejected until the "
+                 "field it started with returns")
     return info, [warn]
 
 
@@ -2305,9 +2321,12 @@ def new_field_check(times: list[float], params: EkfParams, max_times: int = 20) 
     shown = ", ".join(f"{t:.1f}" for t in times[:max_times]) + (" …" if len(times) > max_times else "")
     info = {"mag_new_field_s": [round(float(t), 3) for t in times[:max_times]]}
     warn = (f"the magnetometer's reference field was replaced {len(times)} time(s), at t = {shown} s: a field its "
-            f"gates rejected held steady for {params.mag_new_time:g} s while the sensor turned (the sensor moved to "
-            "another field, or the field at the start was disturbed), and the heading follows that field from "
-            "there (column 'mag_rejected' shows the rejection before)")
+            f"gates rejected held steady for {params.mag_new_first_time:g} s ({params.mag_new_time:g} s once a "
+            f"reference had held) while the sensor turned faster than {params.mag_new_min_rate:g} °/s, so the "
+            "sensor moved to another field or the field at the start was disturbed; the heading follows the new "
+            "field from there. If a magnet or steel moved with the sensor then, or the magnetometer is not "
+            "calibrated (imutool calibrate mag), the heading after that time is wrong (--param mag_new_time=0 "
+            "keeps the first field)")
     return info, [warn]
 
 
@@ -2463,7 +2482,7 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
     if params.mag_check_time > 0:
         spans = FlagSpans(params.mag_check_time)
         spans.add(res.time, res.flags & F_MAG_REJ)
-        check, more = heading_check(spans)
+        check, more = heading_check(spans, params=params)
         summary.update(check)
         warnings += more
     check, more = new_field_check(list(res.time[(res.flags & F_MAG_NEW) > 0]), params)

@@ -425,7 +425,7 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
             summary.update(check)
             warnings += filter_warnings
         if params.mag_check_time > 0:
-            check, more = heading_check(mag_spans)
+            check, more = heading_check(mag_spans, params=params)
             summary.update(check)
             warnings += more
         check, more = new_field_check(new_fields, params)

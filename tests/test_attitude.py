@@ -854,10 +854,11 @@ def test_broad_started_beside_steel(shared):
     """The 16 BROAD trials as if each recording had started beside steel: a world-fixed field added to the
     magnetometer over the first 10 s (the sensor is still then; BROAD's motion starts after 27–46 s;
     benchmarks/attitude_stress.py has both cases beside VQF).
-    - 15 µT north, 10 µT up (the dip turned 13°, the heading right): the gates then reject the true field. With
-      that rejection for the whole run (mag_new_time = 0) the mean total was 3.89° (worst 11.0°); the field is now
-      taken as the reference once it has held for 5 s of turning (on 15 of 16 trials), 2.05° (intact 1.97°).
-    - 20 µT east (the field passes the gates, the heading starts ≈ 50° off): while the heading converged the
+    - 15 µT north, 10 µT up (the start's dip 24° flat, the heading right): the gates then reject the true field.
+      With that rejection for the whole run (mag_new_time = 0) the mean total was 3.89° (worst 11.0°); the field
+      is now taken as the reference once it has held for 5 s of turning (on all 16), 1.99° (intact 1.97°).
+    - 20 µT east (the start's norm 10 % strong, its dip 11° flat; the heading starts ≈ 50° off): while the
+      heading converged the
       magnetometer taught the gyro bias its error, and the turning put that into the tilt: mean inclination 0.91°
       with the bias learning ungated (mag_bias_gate = 0), 0.78° with the 3σ gate (intact 0.74°, VQF 0.73°). Its
       total, 8.7°, is VQF's 4.0° twice over: our heading is held to the first field while the sensor is still,
@@ -882,7 +883,7 @@ def test_broad_started_beside_steel(shared):
             row += [e["total"]["rmse"], e["inclination"]["rmse"], res.summary["mag_new_field"]]
         rows.append(row)
     r = np.array(rows)
-    assert r[:, 0].mean() <= 2.2 and r[:, 0].max() <= 4.5 and np.sum(r[:, 2] > 0) >= 12, r  # 2.05 / 4.18 / 15
+    assert r[:, 0].mean() <= 2.2 and r[:, 0].max() <= 4.5 and np.sum(r[:, 2] > 0) >= 12, r  # 1.99 / 4.18 / 16
     assert r[:, 4].mean() <= 0.80, r  # 0.785
 
 
@@ -1098,14 +1099,15 @@ def _inclination_error_deg(q, q_ref):
 
 
 def test_a_new_field_is_taken_once_it_has_held_while_the_sensor_turned():
-    """No lock-out of the magnetometer (VQF's new-field acceptance): a recording that starts beside steel (a field
-    12 µT off in norm and 20° in dip for the first 8 s, the heading taken from it 26° off) used to reject the
+    """No lock-out of the magnetometer (VQF's new-field acceptance): a recording that starts beside steel (for the
+    first 8 s a field 8 % weak with its dip 24° flat, the heading taken from it 26° off) used to reject the
     true field for the whole run, its heading 26° off to the end. A rejected field that stays within the gates
     of itself while the sensor turns faster than 20 °/s becomes the reference: after 5 s of turning before a
     first reference has held while turning, 20 s after. Taken at 15–17 s here (seeds 0–3). The heading held to
     the old reference then gets a variance of at least its disagreement with the new field and loses its
     covariance with the bias, so it converges to the new field at once without teaching the bias: within 0.8°
-    from 2 s after (without that it wandered by 5° for a minute, the bias taught 1 °/s by the convergence). The
+    from 2 s after (without that it wandered by 5° for a minute, the bias taught 1 °/s by the convergence). A
+    magnetometer on every 4th row is taken at the same time (its time counts the rows between its samples). The
     run says where (summary, warning). What must not be
     taken: a magnet riding with the sensor (a body-fixed 30 µT for 40 s: its norm and dip change as the body
     turns) and a magnet beside a still sensor (nothing turned)."""
@@ -1120,7 +1122,11 @@ def test_a_new_field_is_taken_once_it_has_held_while_the_sensor_turned():
         res, _ = run_ekf(t, g, a, m, EkfParams())
         taken = t[(res.flags & F_MAG_NEW) > 0]
         assert len(taken) == 1 and 14.0 < taken[0] < 18.0 and res.summary["mag_new_field"] == 1, taken
-        assert np.abs(_heading_error_deg(res.q, q)[t > taken[0] + 2.0]).max() < 1.2
+        assert np.abs(_heading_error_deg(res.q, q)[t > taken[0] + 2.0]).max() < 1.0
+        slow = m.copy()
+        slow[np.arange(len(t)) % 4 != 0] = np.nan  # a magnetometer at a quarter of the IMU's rate
+        res, _ = run_ekf(t, g, a, slow, EkfParams())
+        assert abs(t[(res.flags & F_MAG_NEW) > 0][0] - taken[0]) < 0.5
         # a magnet riding with the sensor for 40 s: rejected, never taken
         m = mag_of(field)
         ride = (t > 30) & (t < 70)
@@ -1158,18 +1164,19 @@ def test_a_new_field_is_said_in_memory_and_streamed(tmp_path, capsys):
         assert "reference field was replaced 1 time(s)" in err
         assert any("reference field was replaced" in w for w in formats.read(out).meta["warnings"])
         times.append(summary["mag_new_field_s"])
-    assert len(times[0]) == 1 and times[0] == pytest.approx(times[1], abs=0.02), times
+    assert len(times[0]) == 1 and times[0] == times[1], times
 
 
 def test_a_heading_far_off_does_not_teach_the_gyro_bias():
     """The magnetometer teaches the gyro bias about the vertical only from heading innovations within
     mag_bias_gate = 3 σ (σ² = the heading's variance + the magnetometer's undisturbed σ² per update): a heading
-    off by more is the heading's error, not the gyro's. A start beside steel (20 µT east for 8 s: the field
-    passes the gates, the heading starts 21° off): while the heading converged, the bias learnt its error and
-    the sensor's turning put it into the tilt — inclination RMS 1.9–2.5° against 0.3° intact (seeds 0–3); with
-    the gate 0.6–1.2°. On BROAD the same start (20 µT east for 10 s) costs 0.91° of inclination without the gate, 0.78°
-    with it (0.74° intact); trial 33's heading after its magnet costs 0.19° total (2.38 → 2.57°; the 16 trials
-    1.953 → 1.966°). The intact run is unchanged."""
+    off by more is the heading's error, not the gyro's. A start beside steel (20 µT east for 8 s: the field 8 %
+    strong and its dip 8° flat, inside the gates; the heading starts 43° off): while the heading converged, the
+    bias learnt its error and the sensor's turning put it into the tilt — inclination RMS 1.9–2.5° against 0.3°
+    intact (seeds 0–3); with the gate 0.6–1.2°. On BROAD the same start (20 µT east for 10 s) costs 0.91° of
+    inclination without the gate, 0.78° with it (0.74° intact; test_broad_started_beside_steel); trial 33's
+    heading inside its magnet costs 0.20° total (2.38 → 2.58°; the 16 trials 1.95 → 1.97°). The intact run is
+    unchanged."""
     for seed in (0, 1):
         t, g, a, mag_of, field, q = _hand_held(seed)
         intact = mag_of(field)

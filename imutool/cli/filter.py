@@ -108,12 +108,13 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
         if "mag_reference_tau" not in params.keys_in_file(params_file):
             click.echo("note: the magnetometer's gates now compare with the mean accepted field, not its first "
                        "sample (mag_reference_tau = 0: as before)", err=True)
-    if params_file and not quiet:
-        keys = params.keys_in_file(params_file)
-        if "mag_new_time" not in keys and ("mag_heading_density" in keys or params.pins_mag_sigma(params_file)):
-            click.echo(f"note: {params_file} was saved before the magnetometer's new-field acceptance "
-                       "(mag_new_time) and the gate on its bias learning (mag_bias_gate): their defaults apply "
-                       "(set either to 0 there for the behaviour before)", err=True)
+    given = params.keys_in_file(params_file) if params_file else set()
+    given |= {item.split("=", 1)[0].strip() for item in param_items}
+    if params_file and not quiet and "mag_new_time" not in given \
+            and ("mag_heading_density" in given or params.pins_mag_sigma(params_file)):
+        click.echo(f"note: {params_file} does not set mag_new_time or mag_bias_gate (files saved before "
+                   "2026-11-26's last release do not): the magnetometer's new-field acceptance and the gate on its "
+                   "bias learning apply with their defaults (set either to 0 for the behaviour before)", err=True)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
