@@ -12,7 +12,7 @@ Each case is applied to every trial with its own seeded random numbers (trial i:
 reproducible. Scoring as ``benchmarks/attitude_broad.py`` (BROAD's metric over the movement rows); "over ceiling"
 counts trials above max(2 × VQF, VQF + 2°) in total or inclination. The column "before" is the defaults with the
 magnetometer's new-field acceptance off (``mag_new_time = 0``: a field its gates reject is rejected for the
-whole run) and its bias learning ungated (``mag_bias_gate = 0``), as before 2026-11-26's last changes.
+whole run) and its bias learning ungated (``mag_bias_gate = 0``), as before the new-field acceptance (commit 1816144).
 """
 
 from __future__ import annotations

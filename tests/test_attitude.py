@@ -1104,7 +1104,7 @@ def test_a_new_field_is_taken_once_it_has_held_while_the_sensor_turned():
     true field for the whole run, its heading 26° off to the end. A rejected field that stays within the gates
     of itself while the sensor turns faster than 20 °/s becomes the reference: after 5 s of turning before a
     first reference has held while turning, 20 s after. Taken at 15–17 s here (seeds 0–3). The heading held to
-    the old reference then gets a variance of at least its disagreement with the new field and loses its
+    the old reference then gets a σ of at least its disagreement with the new field and loses its
     covariance with the bias, so it converges to the new field at once without teaching the bias: within 0.8°
     from 2 s after (without that it wandered by 5° for a minute, the bias taught 1 °/s by the convergence). A
     magnetometer on every 4th row is taken at the same time (its time counts the rows between its samples). The
@@ -1173,7 +1173,7 @@ def test_a_heading_far_off_does_not_teach_the_gyro_bias():
     off by more is the heading's error, not the gyro's. A start beside steel (20 µT east for 8 s: the field 8 %
     strong and its dip 8° flat, inside the gates; the heading starts 43° off): while the heading converged, the
     bias learnt its error and the sensor's turning put it into the tilt — inclination RMS 1.9–2.5° against 0.3°
-    intact (seeds 0–3); with the gate 0.6–1.2°. On BROAD the same start (20 µT east for 10 s) costs 0.91° of
+    intact (seeds 0–3); with the gate 0.6–1.2°. On BROAD the same start (20 µT east for 10 s) gives 0.91°
     inclination without the gate, 0.78° with it (0.74° intact; test_broad_started_beside_steel); trial 33's
     heading inside its magnet costs 0.20° total (2.38 → 2.58°; the 16 trials 1.95 → 1.97°). The intact run is
     unchanged."""

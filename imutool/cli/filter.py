@@ -112,9 +112,10 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
     given |= {item.split("=", 1)[0].strip() for item in param_items}
     if params_file and not quiet and "mag_new_time" not in given \
             and ("mag_heading_density" in given or params.pins_mag_sigma(params_file)):
-        click.echo(f"note: {params_file} does not set mag_new_time or mag_bias_gate (files saved before "
-                   "2026-11-26's last release do not): the magnetometer's new-field acceptance and the gate on its "
-                   "bias learning apply with their defaults (set either to 0 for the behaviour before)", err=True)
+        click.echo(f"note: {params_file} does not set mag_new_time or mag_bias_gate (files saved before the "
+                   "new-field acceptance, commit 1816144, do not): the magnetometer's new-field acceptance and the "
+                   "gate on its bias learning apply with their defaults (set either to 0 for the behaviour before)",
+                   err=True)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
