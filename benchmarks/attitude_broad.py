@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import multiprocessing
 import os
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -47,7 +49,7 @@ OTHER = ("10", "11", "16", "21", "24", "26", "28", "29", "33", "35")  # translat
 # low-pass's lag of a gyro-bias error, and the weight of the learned accelerometer noise. The noise floor's rise
 # time and the magnetic disturbance hold were on the grid before and won for every other combination (a law, not
 # a choice: docs/attitude.md), so they stay at their defaults here
-GRID = {"accel_lp_tau": (1.5, 2.0, 3.0, 4.0), "gyro_scale_noise": (0.0, 0.001, 0.003, 0.01),
+GRID = {"accel_lp_tau": (1.5, 2.0, 2.5, 3.0, 4.0), "gyro_scale_noise": (0.0, 0.001, 0.003, 0.01),
         "accel_lp_lag": (False, True), "accel_noise_gain": (2.0, 2.8, 4.0)}
 SHIP_ROLL_LIMIT = 0.4  # deg: the simulator guarantee every default must keep (tests/test_attitude.py)
 
@@ -145,6 +147,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="defaults only (no lower rates, no generalisation table)")
     ap.add_argument("--rates", action="store_true", help="only the trials averaged down to 95 and 48 Hz")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                    help="processes for the generalisation grid (default: one per core)")
     args = ap.parse_args()
     if not BROAD.is_dir():
         sys.exit(f"BROAD trials not found at {BROAD} (set IMUTOOL_SHARED_DATA)")
@@ -180,25 +184,37 @@ def main() -> None:
               f"{m[6]:.2f} / {m[7]:.3f} | | {m[8]:.2f} / {m[9]:.3f} |")
     if not args.quick:
         lower_rates(trials)
-        generalisation(trials, vqf)
+        generalisation(trials, vqf, args.jobs)
     print(f"\n({time.perf_counter() - t0:.0f} s)")
 
 
-def generalisation(trials: dict, vqf: dict) -> None:
+_TRIALS: dict = {}
+
+
+def _score_candidate(kw: dict) -> tuple[list[tuple[float, float]], float]:
+    """One grid candidate (in a worker process): causal (total, inclination) per trial, and its ship-roll RMSE."""
+    prm = candidate(kw)
+    return [run_ours(d, prm, smooth=False)[0] for d in _TRIALS.values()], ship_roll_rmse(prm)
+
+
+def generalisation(trials: dict, vqf: dict, jobs: int) -> None:
     """Choose the candidate with the lowest mean VQF-relative error on one group; score it on the other."""
     names = list(trials)
     cands = [dict(zip(GRID, vals, strict=True)) for vals in itertools.product(*GRID.values())]
     rel = np.zeros((len(cands), len(names)))  # mean of total/VQF and inclination/VQF per trial
     raw = np.zeros((len(cands), len(names), 2))
-    for i, kw in enumerate(cands):
+    global _TRIALS
+    _TRIALS = trials  # the worker processes (fork) read the trials from here
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
+        scored = list(pool.map(_score_candidate, cands))
+    for i, (per_trial, _) in enumerate(scored):
         for j, name in enumerate(names):
-            c, _, _ = run_ours(trials[name], candidate(kw), smooth=False)
-            v = vqf[name][0]
+            c, v = per_trial[j], vqf[name][0]
             raw[i, j] = c
             rel[i, j] = 0.5 * (c[0] / v[0] + c[1] / v[1])
     vq = np.array([vqf[n][0] for n in names])
     lim = np.stack([[limit(v) for v in vq[:, 0]], [limit(v) for v in vq[:, 1]]], axis=1)
-    ship = np.array([ship_roll_rmse(candidate(kw)) for kw in cands])
+    ship = np.array([ship_rmse for _, ship_rmse in scored])
     keeps = ship <= SHIP_ROLL_LIMIT
     print("\nEvery candidate on all 16 (worst/limit = the largest ratio of a trial's RMSE to its ceiling "
           "max(2 × VQF, VQF + 2°); ≤ 1 means no trial above it; ship-roll = the simulator guarantee, ≤ 0.4°):")

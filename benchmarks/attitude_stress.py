@@ -11,8 +11,9 @@ Usage::
 Each case is applied to every trial with its own seeded random numbers (trial i: seed 100 + i), so a run is
 reproducible. Scoring as ``benchmarks/attitude_broad.py`` (BROAD's metric over the movement rows); "over ceiling"
 counts trials above max(2 × VQF, VQF + 2°) in total or inclination. The column "before" is the defaults with the
-magnetometer's new-field acceptance off (``mag_new_time = 0``: a field its gates reject is rejected for the
-whole run) and its bias learning ungated (``mag_bias_gate = 0``), as before the new-field acceptance (commit 1816144).
+three values they had before the accelerometer's low-pass became a Butterworth (``accel_lp_tau`` 3 s,
+``gyro_scale_noise`` 0.003, ``accel_noise_gain`` 2.8), on this release's filter: what the new values do. What the
+release before did (two first-order stages) is this script run in a checkout of that commit (docs/attitude.md).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from attitude_broad import BROAD, ENU2NED, at_rate, limit, load_trials, score  #
 from formats.frames import matrix_to_quat, quat_conjugate, quat_multiply, quat_to_matrix  # noqa: E402
 from imutool.attitude import EkfParams, run_ekf  # noqa: E402
 
-BEFORE = replace(EkfParams(), mag_new_time=0.0, mag_bias_gate=0.0)
+BEFORE = replace(EkfParams(), accel_lp_tau=3.0, gyro_scale_noise=0.003, accel_noise_gain=2.8)
 
 
 def rotated_mounting(d: dict, rng: np.random.Generator) -> dict:

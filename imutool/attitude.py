@@ -36,8 +36,9 @@ filter.)
   over below ≈ 17 Hz).
 - Accelerometer measurement beyond the paper (VQF's key idea, Laidig & Seel 2023, inside the EKF): the specific
   force is rotated into a quasi-inertial frame I given by the gyro-only integrated quaternion q_I, low-passed
-  there (two first-order stages of τ/2 each, ``accel_lp_tau``; running mean at start-up) — gravity is constant in
-  I while translational accelerations average out — and rotated back, z = R(q_I)ᵀ·LP(R(q_I)·a). Its variance is
+  there (second-order Butterworth, VQF's filter, cut-off √2/τ, delay τ = ``accel_lp_tau``; a running mean for its
+  first τ/10) — gravity is constant in I while translational accelerations average out — and rotated back,
+  z = R(q_I)ᵀ·LP(R(q_I)·a). Its variance is
   ``accel_noise``² + (``accel_noise_gain`` · σ_w/g)² (independent error sources add in variance), with σ_w the
   accelerometer white noise learned online from second differences (E‖a_k − 2a_{k−1} + a_{k−2}‖²/18, ~10 s
   average, shocks excluded; motion cancels to second order, so fast rotation does not pass for noise), so noisy
@@ -45,7 +46,8 @@ filter.)
   raw-accelerometer update.
 - The low-passed measurement lags a gyro-bias error δb by the low-pass's delay: it sees the tilt error plus M·δb,
   M = R_Iᵀ·W with W the rotation R_I weighted by the low-pass's survival function (= τ·I when still), tracked
-  exactly per stage (``accel_lp_lag``). H = [[ẑ×], [ẑ×]·M]; the update is made in the sheared error coordinates
+  as the age-weighted companion of the low-pass's state (``accel_lp_lag``). H = [[ẑ×], [ẑ×]·M]; the update is
+  made in the sheared error coordinates
   δθ' = δθ + M δb (where H has the form above) and sheared back. After a data gap the low-pass restarts (its
   frame missed the gap's rotation). ``gyro_scale_noise`` adds tilt process noise ∝ the angle turned (scale-factor
   and misalignment errors), across the world vertical only.
@@ -74,6 +76,10 @@ from imutool.heading_lag import heading_lag_check, measure_heading_lag
 from imutool.loading import merged_warnings
 from imutool.progress import Progress, chunk_ranges
 
+# the accelerometer low-pass starts as the running mean of its samples for this fraction of τ (its first samples
+# averaged: 0.25 s at τ = 2.5 s), then runs as the Butterworth from that mean (docs/attitude.md, "The low-pass")
+LP_MEAN_START = 0.1
+
 # ---- state vector layout (float64, carried between chunks) -------------------------------------------------
 S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)
 S_MREF, S_MNORM = 43, 46  # unit reference field in NED (3), reference norm
@@ -82,7 +88,7 @@ S_REST_T, S_AREJ_T, S_CNT_A, S_INIT = 51, 52, 53, 54  # S_CNT_A: samples since t
 S_DQ = 55  # accumulated rotation since the last covariance propagation (4)
 S_TACC = 59  # accumulated time since the last covariance propagation
 S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
-S_QI, S_LP1, S_LP2, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass stages in I (3+3)
+S_QI, S_LPV, S_LPY, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass in I: rate, output
 S_AVAR, S_APREV, S_NAVAR = 77, 78, 81  # accel white-noise variance estimate (m²/s⁴), previous raw accel, count
 S_APREV2 = 82  # raw accel two samples back (3)
 S_BHOLD = 85  # time left (s) during which accel updates may not move the bias
@@ -94,7 +100,7 @@ S_MDIST = 98  # magnetic disturbance level (peak-held deviation measure, decays 
 S_AFLOOR = 99  # accel white-noise floor (m²/s⁴): the 10-s mean followed down at once, up with accel_noise_rise_time
 S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force low-pass stages (3+3), count, time
 S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
-S_W1, S_W2 = 110, 119  # lag-weighted R_I of the two low-pass stages (3×3 each, s)
+S_WV, S_WY = 110, 119  # lag-weighted R_I of the low-pass (3×3 each, s): rate's and output's companions (W = W_Y)
 S_HLAST, S_HREJ_T, S_NHREJ = 128, 129, 130  # external heading: last update time (s), time rejected (s), count
 # multi-rate (update every N samples): per sensor, samples since its last update (mag, rest; accel: S_CNT_A), the
 # usable samples among them (accel: fed to the low-pass; mag: accepted; rest: still) and what the update averages:
@@ -157,8 +163,12 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
                                                "floor follows the 10-s mean down at once and up with this time "
                                                "constant, so the jerk of a spell of fast motion is not taken for "
                                                "sensor noise (0: the 10-s mean itself)"),
-    "accel_lp_tau": ("s", (0.0, 100.0), "low-pass time constant of the specific force in the quasi-inertial "
-                                         "frame (0: raw accelerometer, as in the paper)"),
+    "accel_lp_tau": ("s", (0.0, 100.0), "delay of the specific force's low-pass in the quasi-inertial frame "
+                                         "(second-order Butterworth, cut-off √2/τ rad/s; 0: raw accelerometer, as "
+                                         "in the paper)"),
+    "smoother_lp_tau": ("s", (0.0, 100.0), "delay of the smoother's low-pass of the specific force, run forwards "
+                                            "and backwards (no lag: a longer τ costs it no delay; offline VQF's "
+                                            "3 s) (0: accel_lp_tau)"),
     "accel_lp_lag": ("bool", (0, 1), "the low-passed measurement lags a gyro-bias error by the low-pass's delay: "
                                      "H holds that term (false: H sees the tilt only)"),
     "accel_gate": ("m/s^2", (0.0, 1e3), "shock gate: accelerometer samples with | |a| − g | above this are "
@@ -299,13 +309,14 @@ class EkfParams:
     """
 
     gyro_noise: float = 1e-3
-    gyro_scale_noise: float = 0.003
+    gyro_scale_noise: float = 0.01
     heading_scale_noise: float = 0.0005
     bias_rw: float = 2e-5
     accel_noise: float = 0.03
-    accel_noise_gain: float = 2.8
+    accel_noise_gain: float = 4.0
     accel_noise_rise_time: float = 300.0
-    accel_lp_tau: float = 3.0
+    accel_lp_tau: float = 2.5
+    smoother_lp_tau: float = 3.0
     accel_lp_lag: bool = True
     accel_gate: float = 0.0
     accel_nis_gate: float = 0.0
@@ -1165,6 +1176,31 @@ def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
 
 
 @njit(cache=True, inline="always")
+def _butterworth_gains(dt, tau, count):
+    """Gains of one step dt (s) of the accelerometer's low-pass: second order, Butterworth (VQF's; cut-off
+    ω_c = √2/τ, damping ζ = 1/√2), so that its delay at low frequency is τ (s) and it attenuates translational
+    acceleration between 0.1 and 1 Hz 1.1–2× more than two first-order stages of τ/2 of the same delay. Discretised
+    by backward Euler (stable at any step, DC gain exactly 1). Returns (m, a, e): while the low-pass has seen less
+    than ≈ τ/2 s (``count`` samples; also at dt = 0) it is their running mean, m = 1/count; after, m = 0,
+    e = 1/(1 + 2ζω_c·dt + ω_c²·dt²) and a = ω_c²·dt·e (see :func:`_butterworth_step`)."""
+    if dt > 0 and 1.0 / count <= dt / (LP_MEAN_START * tau + dt):
+        k2dt = 2.0 * dt / (tau * tau)
+        e = 1.0 / (1.0 + 2.0 * dt / tau + k2dt * dt)
+        return 0.0, k2dt * e, e
+    return 1.0 / count, 0.0, 1.0
+
+
+@njit(cache=True, inline="always")
+def _butterworth_step(v, y, x, m, a, e, dt):
+    """One element of the low-pass of :func:`_butterworth_gains`: its output y follows the input x, v is y's rate
+    (per s). Returns the new (v, y): v ← e·v + a·(x − y), y ← y + dt·v."""
+    if m > 0:
+        return v, y + m * (x - y)
+    v = e * v + a * (x - y)
+    return v, y + dt * v
+
+
+@njit(cache=True, inline="always")
 def _shear_cov(P, M, s, X):
     """P ← T P Tᵀ with T = [[I, s·M], [0, I]]: the covariance in error coordinates δθ' = δθ + s·M δb (M 3×3;
     s = 1 there, s = −1 back). P_bb is unchanged, P'_ab = X = P_ab + s·M P_bb, P'_aa = P_aa + s(P_ab Mᵀ + M Xᵀ).
@@ -1435,36 +1471,39 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     st[S_GWT] += max(dt, 0.0)
             if use_lp and not ext_meas and (not rej or force):
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
-                # (nearly) constant and translational acceleration averages out; two first-order stages τ/2.
+                # (nearly) constant and translational acceleration averages out; second-order Butterworth, delay τ.
                 _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
                 ri_now = fed = True
                 i0 = RI[0, 0] * ax + RI[0, 1] * ay + RI[0, 2] * az
                 i1 = RI[1, 0] * ax + RI[1, 1] * ay + RI[1, 2] * az
                 i2 = RI[2, 0] * ax + RI[2, 1] * ay + RI[2, 2] * az
                 if st[S_LPINIT] == 0.0:
-                    st[S_LP1], st[S_LP1 + 1], st[S_LP1 + 2] = i0, i1, i2
-                    st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2] = i0, i1, i2
+                    st[S_LPV], st[S_LPV + 1], st[S_LPV + 2] = 0.0, 0.0, 0.0
+                    st[S_LPY], st[S_LPY + 1], st[S_LPY + 2] = i0, i1, i2
                     for m in range(18):
-                        st[S_W1 + m] = 0.0
+                        st[S_WV + m] = 0.0
                 st[S_LPINIT] += 1.0
                 st[S_USE_A] += 1.0
-                al = _low_pass_gain(dt, 0.5 * prm[P_ACC_TAU], st[S_LPINIT])  # running mean at start-up
-                _low_pass_two_stages(st, S_LP1, S_LP2, i0, i1, i2, al)
-                if prm[P_ACC_LAG] > 0:  # lag-weighted R_I: W1 = (1−α)(W1 + R_I dt), W2 = (1−α)(W2 + R_I dt) + α W1
+                tau = prm[P_ACC_TAU]
+                lm, la, le = _butterworth_gains(dt, tau, st[S_LPINIT])  # running mean at start-up
+                st[S_LPV], st[S_LPY] = _butterworth_step(st[S_LPV], st[S_LPY], i0, lm, la, le, dt)
+                st[S_LPV + 1], st[S_LPY + 1] = _butterworth_step(st[S_LPV + 1], st[S_LPY + 1], i1, lm, la, le, dt)
+                st[S_LPV + 2], st[S_LPY + 2] = _butterworth_step(st[S_LPV + 2], st[S_LPY + 2], i2, lm, la, le, dt)
+                if prm[P_ACC_LAG] > 0:
+                    # lag weight W = Σ_k h_k ∫_{t−k}^{t} R_I dt over the low-pass's weights h: the age-weighted
+                    # companion of its state, which every row ages by R_I·dt and the homogeneous step then filters
+                    # (W is the output's companion, W_V the rate's; a constant R_I gives W = τ·R_I)
                     dtp = max(dt, 0.0)
-                    for a_ in range(3):
-                        for b_ in range(3):
-                            m = 3 * a_ + b_
-                            st[S_W1 + m] = (1.0 - al) * (st[S_W1 + m] + RI[a_, b_] * dtp)
-                            st[S_W2 + m] = (1.0 - al) * (st[S_W2 + m] + RI[a_, b_] * dtp) + al * st[S_W1 + m]
+                    for m in range(9):
+                        st[S_WY + m] += RI[m // 3, m % 3] * dtp
+                        st[S_WV + m], st[S_WY + m] = _butterworth_step(st[S_WV + m], st[S_WY + m], 0.0, lm, la,
+                                                                       le, dt)
         if (not fed and prm[P_ACC_LAG] > 0 and use_lp and not ext_meas and st[S_LPINIT] > 0 and dt > 0
                 and not gap):  # a row the low-pass skips (NaN, shock) still ages its content: α = 0
             _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
             ri_now = True
-            for a_ in range(3):
-                for b_ in range(3):
-                    st[S_W1 + 3 * a_ + b_] += RI[a_, b_] * dt
-                    st[S_W2 + 3 * a_ + b_] += RI[a_, b_] * dt
+            for m in range(9):
+                st[S_WY + m] += RI[m // 3, m % 3] * dt
         if ext_meas and np.isfinite(acc_meas[k, 0]):
             st[S_USE_A] += 1.0  # the smoother's zero-lag low-pass had this sample
         # ---------------- accelerometer update (eq. 7–9, 11–18) ----------------
@@ -1487,7 +1526,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if use_lp and not ext_meas:  # the low-passed vector back in the body frame: z = R_Iᵀ·LP
                 if not ri_now:
                     _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
-                l0, l1, l2 = st[S_LP2], st[S_LP2 + 1], st[S_LP2 + 2]
+                l0, l1, l2 = st[S_LPY], st[S_LPY + 1], st[S_LPY + 2]
                 ax = RI[0, 0] * l0 + RI[1, 0] * l1 + RI[2, 0] * l2
                 ay = RI[0, 1] * l0 + RI[1, 1] * l1 + RI[2, 1] * l2
                 az = RI[0, 2] * l0 + RI[1, 2] * l1 + RI[2, 2] * l2
@@ -1512,11 +1551,11 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             va = prm[P_ACC_HEAD] == 0.0
             vdrop = va or vb
             lagh = prm[P_ACC_LAG] > 0 and use_lp and not ext_meas
-            if lagh:  # M = R_Iᵀ W2: the low-pass output's tilt error per unit bias error (body, s)
+            if lagh:  # M = R_Iᵀ W: the low-pass output's tilt error per unit bias error (body, s)
                 for a_ in range(3):
                     for b_ in range(3):
-                        MLAG[a_, b_] = (RI[0, a_] * st[S_W2 + b_] + RI[1, a_] * st[S_W2 + 3 + b_]
-                                        + RI[2, a_] * st[S_W2 + 6 + b_])
+                        MLAG[a_, b_] = (RI[0, a_] * st[S_WY + b_] + RI[1, a_] * st[S_WY + 3 + b_]
+                                        + RI[2, a_] * st[S_WY + 6 + b_])
             fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)  # before the update, error coordinates δθ
             if lagh:  # H = [[h×], [h×]M] is [[h×], 0] in δθ' = δθ + M δb: update there, shear back
                 _shear_cov(P, MLAG, 1.0, X33)
@@ -1866,8 +1905,7 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
         _rmat(a0, a1, a2, a3, R)
         for i in range(3):
             y[k, i] = R[i, 0] * f[k, 0] + R[i, 1] * f[k, 1] + R[i, 2] * f[k, 2]
-    half = 0.5 * tau
-    lp = np.zeros(6)  # the two stages (3 + 3), as the filter's
+    lp = np.zeros(6)  # the filter's low-pass: rate (3), output (3)
     for direction in range(2):  # forwards, then backwards over the forward result
         lp[:] = 0.0
         cnt = 0.0
@@ -1881,7 +1919,12 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
                 cnt = 0.0  # the filter's low-pass restarts after a gap (its frame missed the gap's rotation)
             if np.isfinite(v0) and np.isfinite(v1) and np.isfinite(v2):
                 cnt += 1.0
-                _low_pass_two_stages(lp, 0, 3, v0, v1, v2, _low_pass_gain(dt, half, cnt))
+                if cnt == 1.0:
+                    lp[0], lp[1], lp[2] = 0.0, 0.0, 0.0
+                lm, la, le = _butterworth_gains(dt, tau, cnt)
+                lp[0], lp[3] = _butterworth_step(lp[0], lp[3], v0, lm, la, le, dt)
+                lp[1], lp[4] = _butterworth_step(lp[1], lp[4], v1, lm, la, le, dt)
+                lp[2], lp[5] = _butterworth_step(lp[2], lp[5], v2, lm, la, le, dt)
             if cnt > 0 and np.isfinite(f[k, 0]):
                 y[k, 0], y[k, 1], y[k, 2] = lp[3], lp[4], lp[5]
             else:
@@ -2174,7 +2217,7 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
     Running that low-pass forwards and backwards (offline, the future is known) removes it: (1) the RTS pass over
     ``res`` (a run made with ``keep_cov=True``, whose compensated specific force it carries) gives the bias;
     (2) the same force is low-passed forwards and backwards in the quasi-inertial frame
-    (:func:`zero_phase_lp_kernel`); (3) the filter
+    (:func:`zero_phase_lp_kernel`, delay ``smoother_lp_tau``); (3) the filter
     runs again with that as its accelerometer measurement, same parameters and inputs, and (4) the RTS pass over
     it gives the inclination (roll, pitch, their σ, the bias) while the heading and its σ stay the first RTS
     pass's: gravity observes no heading, so a better accelerometer measurement must not move it. Flags and
@@ -2191,8 +2234,8 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
     g = _held_gyro(gyro)
     first = rts_smooth(res, g, params, dt_nominal)
     meas = np.empty_like(res.force)
-    zero_phase_lp_kernel(res.time, g, first.bias, res.force, params.accel_lp_tau, params.gyro_prev_weight(),
-                         params.gap_factor * dt_nominal, meas)
+    zero_phase_lp_kernel(res.time, g, first.bias, res.force, params.smoother_lp_tau or params.accel_lp_tau,
+                         params.gyro_prev_weight(), params.gap_factor * dt_nominal, meas)
     again, _ = run_ekf(res.time, gyro, accel, mag, params, sog, cog_deg, keep_cov=True, dt_nominal=dt_nominal,
                        lever_arm=lever_arm, accel_measurement=meas, heading_deg=heading_deg)
     out = rts_smooth(again, g, params, dt_nominal)

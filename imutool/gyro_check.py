@@ -30,6 +30,17 @@ lever arm is not given to the filter), ship-at-sea with lever arm and SOG/COG 0.
 and is warned: the roll-synchronous acceleration there is what the check measures (and its roll is 1.2–2° off), so
 the warning names that cause too.
 
+The same test names a reversed gyro axis: beside the scales, the seven sign patterns of the three axes are
+candidates (x, y or z reversed, two of them, all three). A gyro axis whose sign disagrees with the accelerometer's
+turns gravity in I by twice the body's rotation about that axis; the pattern that reverses it is the least J. The
+check speaks when a sign pattern is the best candidate of all, removes at least ``MIN_DISCREPANCY_DEG`` and at
+least ``AXIS_EXPLAINED`` (a fifth) of the mean-square discrepancy that the better of the gyro as it is and no
+rotation at all leave (what neither explains is the windows' own velocity change: a foot in gait, whose velocity
+changes by metres per second within a window, is not taken for a reversed axis). It does
+not depend on the filter: the filter's own check of the vertical sees a reversed axis only through the phase of its
+tilt error against the roll (4.4–5.1° on ship-roll seeds 1–8 with one low-pass, 3.0–3.7° with another, limit 3°).
+Axes swapped between the gyro and the accelerometer are not among the candidates.
+
 Inputs are SI: time s, gyro and bias rad/s (body), force m/s² (body, the compensated specific force the filter fed
 its low-pass; NaN where none). The sums are additive, so a streamed run adds chunk after chunk (pairs do not span
 chunks: at most two windows per chunk are left out).
@@ -46,6 +57,16 @@ WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that f
 # candidate factors on the gyro's rates: 0.25 … 4 in steps of 2^¼ (wrong full-scale ranges), and coarse steps of 2
 # out to 1/128 and 128 (a rate in deg/s read as rad/s is 57× off)
 SCALES = 2.0 ** np.concatenate([[-7, -6, -5, -4, -3], np.arange(-8, 9) / 4.0, [3, 4, 5, 6, 7]])
+# the sign patterns of the three axes other than (+, +, +): a reversed axis, two, all three
+AXIS_SIGNS = np.array([[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, -1]],
+                      dtype=np.float64)
+# a reversal must remove this share of the mean-square discrepancy that the gyro as it is or no rotation leave:
+# a reversed axis removes ≥ 0.26 at sea (waves change the velocity within a window), 0.19–0.99 on BROAD (the least
+# on the trials that hardly turn), 0.84–0.96 on ship-roll and a turn; a foot in gait, intact, 0.14 with y reversed
+AXIS_EXPLAINED = 0.2
+AXIS_TIE_DEG = 0.5  # sign patterns within this RMS discrepancy of the best one explain the data alike
+# every candidate as factors on the x, y, z rates: the scales (all axes alike), then the sign patterns
+CANDIDATES = np.vstack([np.outer(SCALES, np.ones(3)), AXIS_SIGNS])
 SCALE_TOLERANCE = 1.3  # ŝ within [1/1.3, 1.3]: no verdict (ranges come in steps of 1.5–2; calibration does less)
 MIN_DISCREPANCY_DEG = 1.5  # RMS window-to-window tilt discrepancy that rescaling must remove before it is said
 # cost ∝ samples integrated × scales (≈ 1.6 µs a sample): a run is checked whole up to FULL_CHECK_SAMPLES, beyond that
@@ -55,12 +76,13 @@ CHECKED_SHARE = 0.1
 
 
 @njit(cache=True, nogil=True)
-def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max_samples, sums, counts):
-    """Add, for each candidate scale s (scales (S,)), Σ‖m_A − m_B‖²/g² over pairs of consecutive windows into
-    sums (S,) and the number of pairs into counts (S,). t (N,) s; gyro, bias (N,3) rad/s body; force (N,3) m/s²
-    body (NaN rows skipped); window s; a step > gap_dt s inside a pair drops the pair; at most ~max_samples
-    samples are integrated (pairs evenly spread; ≤ 0: none). Returns the number of samples integrated. The rate
-    over a step is the sample at its end (the filter's default, ``gyro_integration = "rectangular"``)."""
+def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, factors, g, max_samples, sums, counts):
+    """Add, for each candidate (factors (C,3): the factors on the x, y, z rates), Σ‖m_A − m_B‖²/g² over pairs of
+    consecutive windows into sums (C,) and the number of pairs into counts (C,). t (N,) s; gyro, bias (N,3) rad/s
+    body; force (N,3) m/s² body (NaN rows skipped); window s; a step > gap_dt s inside a pair drops the pair; at
+    most ~max_samples samples are integrated (pairs evenly spread; ≤ 0: none). Returns the number of samples
+    integrated. The rate over a step is the sample at its end (the filter's default, ``gyro_integration =
+    "rectangular"``)."""
     n = t.shape[0]
     starts = np.empty(n + 1, dtype=np.int64)
     m = 0
@@ -86,8 +108,8 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
         if not ok:
             continue
         used += i2 - i0
-        for si in range(scales.shape[0]):
-            s = scales[si]
+        for si in range(factors.shape[0]):
+            s0, s1, s2 = factors[si, 0], factors[si, 1], factors[si, 2]
             a0, a1, a2, a3 = 1.0, 0.0, 0.0, 0.0
             ma0 = ma1 = ma2 = mb0 = mb1 = mb2 = 0.0
             ca = 0
@@ -95,9 +117,9 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, scales, g, max
             for k in range(i0, i2):
                 if k > i0:
                     dt = t[k] - t[k - 1]
-                    w0 = s * (gyro[k, 0] - bias[k, 0]) * dt
-                    w1 = s * (gyro[k, 1] - bias[k, 1]) * dt
-                    w2 = s * (gyro[k, 2] - bias[k, 2]) * dt
+                    w0 = s0 * (gyro[k, 0] - bias[k, 0]) * dt
+                    w1 = s1 * (gyro[k, 1] - bias[k, 1]) * dt
+                    w2 = s2 * (gyro[k, 2] - bias[k, 2]) * dt
                     if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2):
                         a0, a1, a2, a3 = _turn(a0, a1, a2, a3, w0, w1, w2)
                 f0, f1, f2 = force[k, 0], force[k, 1], force[k, 2]
@@ -132,8 +154,8 @@ class GyroScaleCheck:
 
     def __init__(self, window: float = WINDOW_S, gap_dt: float = 0.5, gravity: float = 9.80665) -> None:
         self.window, self.gap_dt, self.gravity = float(window), float(gap_dt), float(gravity)
-        self.sums = np.zeros(len(SCALES))
-        self.counts = np.zeros(len(SCALES))
+        self.sums = np.zeros(len(CANDIDATES))
+        self.counts = np.zeros(len(CANDIDATES))
         self.seen = self.checked = 0  # samples given, samples integrated (the budget is per run)
 
     def add(self, time: np.ndarray, gyro: np.ndarray, bias: np.ndarray, force: np.ndarray) -> None:
@@ -141,7 +163,7 @@ class GyroScaleCheck:
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (time, gyro, bias, force)]
         self.seen += len(arrays[0])
         budget = int(max(FULL_CHECK_SAMPLES, CHECKED_SHARE * self.seen)) - self.checked
-        self.checked += pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, SCALES, self.gravity, budget,
+        self.checked += pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, CANDIDATES, self.gravity, budget,
                                                 self.sums, self.counts)
 
     def estimate(self) -> tuple[float, float, int] | None:
@@ -150,7 +172,7 @@ class GyroScaleCheck:
         n = int(self.counts.min()) if len(self.counts) else 0
         if n == 0:
             return None
-        j2 = self.sums / self.counts
+        j2 = (self.sums / self.counts)[:len(SCALES)]
         i = int(np.argmin(j2))
         x = np.log2(SCALES)
         best_x, best_j2 = x[i], j2[i]
@@ -163,11 +185,47 @@ class GyroScaleCheck:
         j2_one = float(j2[np.argmin(np.abs(x))])
         return float(2.0 ** best_x), float(np.sqrt(max(j2_one - best_j2, 0.0))), n
 
+    def reversed_axes(self) -> tuple[str, float, bool] | None:
+        """The sign pattern that best agrees with gravity: (axes reversed, e.g. "x" or "x, z"; the RMS discrepancy
+        reversing them removes against the gyro as it is, rad; whether that pattern beats every candidate scale
+        and removes AXIS_EXPLAINED of the discrepancy); None without a pair."""
+        n = int(self.counts.min()) if len(self.counts) else 0
+        if n == 0:
+            return None
+        j2 = self.sums / self.counts
+        n_s = len(SCALES)
+        best = float(j2[n_s:].min())
+        j2_one = float(j2[int(np.argmin(np.abs(np.log2(SCALES))))])
+        # the fewest reversed axes that explain the data as well: within AXIS_TIE_DEG, or 5 % of what reversing
+        # explains (an axis the body hardly turns about, a ship's z, is reversed or not alike: gravity does not move
+        # about it, and the filter's bias, learnt with the reversed axis, leaves a little to either)
+        tie = max(np.radians(AXIS_TIE_DEG) ** 2, 0.05 * (j2_one - best))
+        i = min((n_s + k for k in range(len(AXIS_SIGNS)) if j2[n_s + k] <= best + tie),
+                key=lambda c: (int((CANDIDATES[c] < 0).sum()), j2[c]))
+        axes = ", ".join("xyz"[a] for a in range(3) if CANDIDATES[i, a] < 0)
+        # the reversal must remove AXIS_EXPLAINED of what the better of the gyro as it is and no rotation at all
+        # (the smallest scale) leave: what neither explains is the windows' own velocity change, not the gyro's
+        trivial = min(j2_one, float(j2[0]))
+        explains = j2[i] < j2[:n_s].min() and trivial - j2[i] >= AXIS_EXPLAINED * trivial
+        return axes, float(np.sqrt(max(j2_one - j2[i], 0.0))), bool(explains)
+
     def report(self) -> tuple[dict, list[str]]:
-        """Summary entry ``gyro_scale_check`` and the warning (one line) where the gyro disagrees with gravity."""
+        """Summary entry ``gyro_scale_check`` and the warning (one line) where the gyro disagrees with gravity: a
+        reversed axis (the best candidate of all is a sign pattern) or a wrong scale."""
         est = self.estimate()
         if est is None:
             return {"gyro_scale_check": {"pairs": 0, "window_s": self.window}}, []
+        axes, axis_disc, axis_best = self.reversed_axes()
+        if axis_best and np.degrees(axis_disc) >= MIN_DISCREPANCY_DEG:
+            entry = {"reversed_axes": axes, "discrepancy_deg": round(float(np.degrees(axis_disc)), 2),
+                     "pairs": est[2], "window_s": self.window, "flagged": True}
+            one = len(axes) == 1
+            return {"gyro_scale_check": entry}, [
+                f"gyro axis check: the gyro's {axes} {'axis looks' if one else 'axes look'} reversed against the "
+                f"accelerometer's (reversing {'it' if one else 'them'} removes "
+                f"{np.degrees(axis_disc):.1f}° RMS of tilt discrepancy between {self.window:g}-s windows): the "
+                "attitude is wrong while the sensor turns about that axis; fix the gyro's axis map (the device's "
+                "configuration, or a column scale of −1: --map 'COLUMN=gyro_x:UNIT*-1') and run again"]
         scale, disc, pairs = est
         at_edge = not SCALES[0] * 1.01 < scale < SCALES[-1] / 1.01  # beyond the grid: "at least"
         entry = {"scale": round(scale, 3), "discrepancy_deg": round(float(np.degrees(disc)), 2), "pairs": pairs,

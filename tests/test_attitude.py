@@ -18,7 +18,7 @@ from imutool.attitude import (
     F_MAG_USED,
     S_NIS_A,
     S_QI,
-    S_W2,
+    S_WY,
     EkfParams,
     ekf_recording,
     initial_state,
@@ -97,8 +97,9 @@ def test_updates_every_n_samples_are_the_same_filter(roll_rec):
     # the self-check's NIS is taken against σ², not the σ²/n of the update: with R = σ²/4 it would read ~4×
     nis1, nis4 = (run_ekf(t, g, a, m, EkfParams(update_every=n))[1][S_NIS_A] for n in (1, 4))
     assert nis4 == pytest.approx(nis1, rel=0.1), (nis4, nis1)
-    per_update = replace(EkfParams(), update_every=4, accel_noise=0.06, accel_noise_gain=5.6, mag_noise_deg=40.0,
-                         rest_noise=0.1)  # σ per update: each ×√4
+    d = EkfParams()
+    per_update = replace(d, update_every=4, accel_noise=2 * d.accel_noise, accel_noise_gain=2 * d.accel_noise_gain,
+                         mag_noise_deg=40.0, rest_noise=2 * d.rest_noise)  # σ per update: each ×√4
     assert run(per_update)[2][0] > 1.3 * sd1[0]
     a2, m2 = a.copy(), m.copy()
     a2[1::2] = np.nan  # every update row of N = 4 (rows 3, 7, ...) without an accelerometer sample
@@ -142,15 +143,16 @@ def test_turn_with_gnss_compensation():
 
 
 def _lag_matrix(st: np.ndarray) -> np.ndarray:
-    """M = R_Iᵀ W2 from a filter state: the low-passed measurement's tilt error per unit gyro-bias error (s)."""
-    return quat_to_matrix(st[S_QI:S_QI + 4]).T @ st[S_W2:S_W2 + 9].reshape(3, 3)
+    """M = R_Iᵀ W from a filter state: the low-passed measurement's tilt error per unit gyro-bias error (s)."""
+    return quat_to_matrix(st[S_QI:S_QI + 4]).T @ st[S_WY:S_WY + 9].reshape(3, 3)
 
 
 def test_the_low_pass_lag_of_a_bias_error_is_modelled():
     """The low-pass in the gyro-integrated frame delays gravity's apparent drift by τ, so a bias error δb shows in
     the measurement as a tilt of M·δb: M = τ·I on a still sensor; about a horizontal axis it averages out when the
-    body spins about the vertical (the drift turns with the body). With M in H the bridge sensor's roll error
-    is lower on every summary of eight seeds (start-up above all), and it fails without the term."""
+    body spins about the vertical (the drift turns with the body), to the low-pass's |(1 − H(jω))/jω| at the spin.
+    With M in H the bridge sensor's roll error is lower on every summary of eight seeds (start-up above all), and
+    it fails without the term."""
     tau = EkfParams().accel_lp_tau
     rec = simulate("static", duration=30, seed=0)
     _, st = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"])
@@ -160,7 +162,10 @@ def test_the_low_pass_lag_of_a_bias_error_is_modelled():
     g[:, 2] = 2.0  # 2 rad/s about the vertical
     _, st = run_ekf(t, g, np.tile([0.0, 0.0, -9.81], (n, 1)), None)
     m = _lag_matrix(st)
-    assert np.abs(m[:2, :2]).max() < 0.2 * tau and abs(m[2, 2] - tau) < 0.01 * tau
+    wc, jw = np.sqrt(2) / tau, 2.0j  # the Butterworth's cut-off (rad/s); the spin
+    g_spin = abs((jw + np.sqrt(2) * wc) / (jw * jw + np.sqrt(2) * wc * jw + wc * wc))  # |(1 − H)/s| at 2 rad/s
+    assert abs(np.hypot(m[0, 0], m[0, 1]) - g_spin) < 0.02 * g_spin and g_spin < 0.25 * tau
+    assert abs(m[2, 2] - tau) < 0.01 * tau
     a = rec["accel"].copy()
     a[1::2] = np.nan  # every other row skips the low-pass, whose content then ages twice as long per update
     _, st = run_ekf(rec.time, rec["gyro"], a, rec["mag"])
@@ -171,8 +176,10 @@ def test_the_low_pass_lag_of_a_bias_error_is_modelled():
         for lag in rms:
             res, _ = run_ekf(r.time, r["gyro"], r["accel"], r["mag"], EkfParams(accel_lp_lag=lag), keep_cov=False)
             rms[lag].append(_rmse(np.degrees(quat_to_euler(res.q)[0]), r["ref_roll"]))
-    assert np.mean(rms[True]) < 0.85 * np.mean(rms[False]), rms  # measured 0.381 vs 0.511
-    assert max(rms[True]) < 0.75 * max(rms[False]), rms  # 0.609 vs 0.939
+    # measured 0.382 vs 0.436 and 0.545 vs 0.657 (τ 2.5 s; with two first-order stages of τ 3 s: 0.381 vs 0.511,
+    # 0.609 vs 0.939 — a shorter delay leaves less for the term to model)
+    assert np.mean(rms[True]) < 0.92 * np.mean(rms[False]), rms
+    assert max(rms[True]) < 0.88 * max(rms[False]), rms
 
 
 def test_gyro_scale_noise_is_tilt_only():
@@ -548,8 +555,11 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
     specific force) sees only through its correlation with the heading error: it read 4.0–5.1° on seeds 1–8 with
     the magnetometer's reference from the first sample, 2.5–3.7° (limit 3°) once the reference became the mean of
     the accepted field, with the same roll error. So the ×3 run is said by the gyro scale check (2.9× named, whole
-    run: stderr, summary, metadata), not per sample; the reversed axis is flagged per sample either way (the check
-    of the vertical 4.4–5.1° on seeds 1–8)."""
+    run: stderr, summary, metadata), not per sample. The reversed axis is said by the gyro axis check, which
+    finds the axis whose reversal makes the gyro agree with gravity (whole run, the axis named); per sample only
+    where the phase of the tilt error against the roll moves the vertical's 20-s mean: the check of the vertical
+    read 4.4–5.1° on seeds 1–8 with two first-order low-pass stages, 3.2–3.7° with the Butterworth (limit 3°; seed 6
+    here flags no sample), so a whole-run check that does not hang on the filter's phase says it."""
     from imutool.cli import cli
 
     rec = simulate("ship-roll", duration=90, seed=6)
@@ -572,12 +582,11 @@ def test_self_check_says_when_the_filter_cannot_be_trusted(tmp_path, fault):
             assert summary["gyro_scale_check"]["flagged"] and 2.5 < 1 / summary["gyro_scale_check"]["scale"] < 3.5
             assert "gyro scale check" in run.stderr and any("gyro scale check" in w for w in est.meta["warnings"])
         elif broken:
-            assert summary["inconsistent_share"] > 0.1 and summary["inconsistent_spans_s"]
-            assert "self-check failed" in run.stderr
-            assert any("self-check" in w for w in est.meta["warnings"])
-            assert est["inconsistent"].mean() > 0.1
-            assert summary["tilt_check_samples"] > 0.1 * summary["samples"]
-            assert summary["tilt_check_max_deg"] > 3.0 and "disagrees with gravity" in run.stderr
+            c = summary["gyro_scale_check"]
+            assert c["flagged"] and c["reversed_axes"] == "x" and c["discrepancy_deg"] > 10.0, c
+            assert "gyro axis check: the gyro's x axis looks reversed" in run.stderr
+            assert any("gyro axis check" in w for w in est.meta["warnings"])
+            assert summary["tilt_check_max_deg"] > 3.0  # the vertical's largest error: beyond its limit
         else:
             assert summary["inconsistent_samples"] == 0 and "self-check" not in run.stderr
             assert est["inconsistent"].max() == 0
@@ -602,7 +611,7 @@ def test_streamed_self_check_finds_the_same_samples_and_spans(tmp_path):
     less than 1 s apart joined, across chunk edges) cover every in-memory span."""
     from imutool.cli import cli
 
-    rec = simulate("ship-roll", duration=90, seed=6)
+    rec = simulate("ship-roll", duration=90, seed=1)  # flags 14 % of its samples (seed 6, none: see above)
     rec.channels["gyro"] = rec["gyro"] * [-1, 1, 1]
     src = tmp_path / "flip.csv"
     formats.write(rec, src)
@@ -738,6 +747,11 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     last_release.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2c.csv", "--params", last_release], capsys)
     assert code == 0 and err.count("note:") == 1 and "mag_new_time" in err
+    two_stage = tmp_path / "two_stage.toml"  # saved before the Butterworth: every key of its day, no smoother_lp_tau
+    two_stage.write_text("[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
+                         "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
+    code, out, err = run_main(["filter", src, "-o", tmp_path / "o2d.csv", "--params", two_stage], capsys)
+    assert code == 0 and err.count("note:") == 1 and "Butterworth" in err and "accel_lp_tau = 3 " in err
     meta = formats.read(tmp_path / "o2b.csv").meta["filter"]
     assert meta["mag_noise_deg"] == 0 and meta["mag_heading_density"] == EkfParams().mag_heading_density
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o3.csv", "--params", f.with_name("used.toml"),
@@ -767,11 +781,11 @@ BROAD_VQF = {  # VQF 2.1.2 causal 9D, default parameters, total / inclination RM
 
 def test_broad_all_16_trials_no_divergence(shared):
     """All 16 shared BROAD trials, one default parameter set (chosen on all of them and on the simulator, never on
-    one file; benchmarks/attitude_broad.py). Issue 13's acceptance where it is met: no trial above the ceiling
-    max(2 × VQF, VQF + 2°) (the old shock gate gave 129.9° on trial 16), causal mean total ≤ VQF's 2.08°, smoother
-    mean total ≤ offline VQF's 1.95°, smoother mean inclination at offline VQF's 0.53° (0.534° against 0.529° in
-    the same run: the zero-lag smoother; the RTS pass alone gave 0.594°). The causal inclination mean is NOT at
-    VQF's yet (0.739° vs 0.729°): guarded here at what is reached, see docs/attitude.md."""
+    one file; benchmarks/attitude_broad.py). Issue 13's acceptance: no trial above the ceiling max(2 × VQF,
+    VQF + 2°) (the old shock gate gave 129.9° on trial 16), causal mean total and inclination ≤ VQF's 2.08° /
+    0.729° (1.96 / 0.727; 0.739° with two first-order low-pass stages), smoother mean total ≤ offline VQF's
+    1.95°, smoother mean inclination at offline VQF's 0.53° (0.530° against 0.529° in the same run: the zero-lag
+    smoother; the RTS pass alone gave 0.594°)."""
     from imutool.metrics import evaluate_quaternion
 
     folder = shared("broad")
@@ -795,8 +809,8 @@ def test_broad_all_16_trials_no_divergence(shared):
     assert len(r) == 16
     assert r[:, 2:4].max() <= 1.0, r  # no trial above its ceiling
     assert r[:, 0].mean() <= 2.08 and r[:, 4].mean() <= 1.95, r.mean(axis=0)  # VQF / offline VQF totals
-    assert r[:, 1].mean() <= 0.745, r.mean(axis=0)  # guard at what is reached (0.739; target 0.729)
-    assert r[:, 5].mean() <= 0.54 and r[:, 5].max() <= 1.0, r.mean(axis=0)  # smoother (offline VQF 0.53 / 0.96)
+    assert r[:, 1].mean() <= 0.729, r.mean(axis=0)  # VQF's inclination
+    assert r[:, 5].mean() <= 0.535 and r[:, 5].max() <= 1.0, r.mean(axis=0)  # smoother (offline VQF 0.529 / 0.96)
 
 
 def _boxcar(x: np.ndarray, k: int) -> np.ndarray:
@@ -822,10 +836,12 @@ BROAD_VQF_LOWER_RATES = {
 
 def test_broad_at_lower_sample_rates(shared):
     """Other recordings come at other rates. The 16 BROAD trials averaged down to 95 and 48 Hz (as a sensor with a
-    lower output rate averages): the causal mean total stays at or below VQF's at the same rate, no trial goes
-    above its ceiling, and no run diverges. Measured 2.14 / 0.865 (VQF 2.28 / 0.861) and 2.71 / 1.170 (VQF 2.77 /
-    1.156). With the magnetometer's σ fixed per sample (the old mag_noise_deg = 20) the 48 Hz total was 2.92, above
-    VQF's: the heading's time constant grew from 21 s to 49 s (test_heading_follows_the_magnetometer_...)."""
+    lower output rate averages): the causal mean total and inclination stay at or below VQF's at the same rate, no
+    trial goes above its ceiling, and no run diverges. Measured 2.12 / 0.852 (VQF 2.28 / 0.861) and 2.66 / 1.152
+    (VQF 2.77 / 1.156); with two first-order low-pass stages of 3 s (before the Butterworth) 2.14 / 0.865 and
+    2.71 / 1.170, the inclination above VQF's at both rates. With the magnetometer's σ fixed per sample (the old
+    mag_noise_deg = 20) the 48 Hz total was 2.92, above VQF's: the heading's time constant grew from 21 s to 49 s
+    (test_heading_follows_the_magnetometer_...)."""
     from imutool.metrics import evaluate_quaternion
 
     files = sorted(shared("broad").glob("*.csv"))
@@ -846,8 +862,7 @@ def test_broad_at_lower_sample_rates(shared):
             assert tot <= max(2 * vt, vt + 2) and inc <= max(2 * vi, vi + 2), (k, f.name, tot, inc)
             rows.append((tot, inc, vt, vi))
         r = np.array(rows)
-        # the total at or below VQF's; the inclination within 0.02° of it (the gap at the native rate, 0.01°)
-        assert r[:, 0].mean() <= r[:, 2].mean() and r[:, 1].mean() <= r[:, 3].mean() + 0.02, (k, r.mean(axis=0))
+        assert r[:, 0].mean() <= r[:, 2].mean() and r[:, 1].mean() <= r[:, 3].mean(), (k, r.mean(axis=0))
 
 
 def test_broad_started_beside_steel(shared):
