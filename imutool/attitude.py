@@ -1179,10 +1179,11 @@ def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
 def _butterworth_gains(dt, tau, count):
     """Gains of one step dt (s) of the accelerometer's low-pass: second order, Butterworth (VQF's; cut-off
     ω_c = √2/τ, damping ζ = 1/√2), so that its delay at low frequency is τ (s) and it attenuates translational
-    acceleration between 0.1 and 1 Hz 1.1–2× more than two first-order stages of τ/2 of the same delay. Discretised
-    by backward Euler (stable at any step, DC gain exactly 1). Returns (m, a, e): while the low-pass has seen less
-    than ≈ τ/2 s (``count`` samples; also at dt = 0) it is their running mean, m = 1/count; after, m = 0,
-    e = 1/(1 + 2ζω_c·dt + ω_c²·dt²) and a = ω_c²·dt·e (see :func:`_butterworth_step`)."""
+    acceleration between 0.2 and 1 Hz up to 2× more than two first-order stages of τ/2 of the same delay (the two
+    cross near 0.12 Hz). Discretised by backward Euler (stable at any step, DC gain exactly 1). Returns (m, a, e):
+    while the low-pass has seen less than ≈ LP_MEAN_START·τ s (``count`` samples; also at dt = 0) it is their
+    running mean, m = 1/count; after, m = 0, e = 1/(1 + 2ζω_c·dt + ω_c²·dt²) and a = ω_c²·dt·e (see
+    :func:`_butterworth_step`)."""
     if dt > 0 and 1.0 / count <= dt / (LP_MEAN_START * tau + dt):
         k2dt = 2.0 * dt / (tau * tau)
         e = 1.0 / (1.0 + 2.0 * dt / tau + k2dt * dt)
@@ -1882,9 +1883,9 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
 
     The specific force f (N,3) m/s² body (NaN: none) is rotated into the quasi-inertial frame I of the gyro
     integrated with the smoothed bias (N,3) rad/s (same step rule as the filter), low-passed there by the filter's
-    two first-order stages of τ/2 each (s) forwards, then the same backwards in time (a symmetric kernel: no
-    lag), and rotated back into the body: out (N,3) m/s², NaN where f is NaN. NaN rows hold the low-pass;
-    each direction starts as a running mean, as the filter's does.
+    second-order Butterworth of delay τ (s; ``smoother_lp_tau``) forwards, then the same backwards in time (a
+    symmetric kernel: no lag), and rotated back into the body: out (N,3) m/s², NaN where f is NaN. NaN rows hold
+    the low-pass; each direction starts as a running mean, as the filter's does.
     """
     n = t.shape[0]
     qi = np.empty((n, 4))

@@ -61,14 +61,16 @@ SCALES = 2.0 ** np.concatenate([[-7, -6, -5, -4, -3], np.arange(-8, 9) / 4.0, [3
 AXIS_SIGNS = np.array([[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, -1]],
                       dtype=np.float64)
 # a reversal must remove this share of the mean-square discrepancy that the gyro as it is or no rotation leave:
-# a reversed axis removes ≥ 0.26 at sea (waves change the velocity within a window), 0.19–0.99 on BROAD (the least
-# on the trials that hardly turn), 0.84–0.96 on ship-roll and a turn; a foot in gait, intact, 0.14 with y reversed
+# a reversed axis removes 0.26–0.33 at sea for y, 0.60–0.65 for x (waves change the velocity within a window), 0.47
+# or more on BROAD's trials that turn (0.19–0.20 on trial 10, which hardly does: no axis named, the scale check
+# warns), 0.84–0.96 on ship-roll and a turn; a foot in gait, intact, 0.14 with y reversed
 AXIS_EXPLAINED = 0.2
-AXIS_TIE_DEG = 0.5  # sign patterns within this RMS discrepancy of the best one explain the data alike
 # every candidate as factors on the x, y, z rates: the scales (all axes alike), then the sign patterns
 CANDIDATES = np.vstack([np.outer(SCALES, np.ones(3)), AXIS_SIGNS])
 SCALE_TOLERANCE = 1.3  # ŝ within [1/1.3, 1.3]: no verdict (ranges come in steps of 1.5–2; calibration does less)
 MIN_DISCREPANCY_DEG = 1.5  # RMS window-to-window tilt discrepancy that rescaling must remove before it is said
+AXIS_TIE_DEG = MIN_DISCREPANCY_DEG  # an axis more in a sign pattern must remove this much RMS …
+AXIS_TIE_SHARE = 0.1  # … and this share of the mean square the pattern without it leaves (at sea: waves leave 8–9°)
 # cost ∝ samples integrated × scales (≈ 1.6 µs a sample): a run is checked whole up to FULL_CHECK_SAMPLES, beyond that
 # on evenly spread pairs, CHECKED_SHARE of its samples — per run, whatever the chunk size of a stream
 FULL_CHECK_SAMPLES = 100_000
@@ -194,14 +196,25 @@ class GyroScaleCheck:
             return None
         j2 = self.sums / self.counts
         n_s = len(SCALES)
-        best = float(j2[n_s:].min())
+        i = n_s + int(np.argmin(j2[n_s:]))
         j2_one = float(j2[int(np.argmin(np.abs(np.log2(SCALES))))])
-        # the fewest reversed axes that explain the data as well: within AXIS_TIE_DEG, or 5 % of what reversing
-        # explains (an axis the body hardly turns about, a ship's z, is reversed or not alike: gravity does not move
-        # about it, and the filter's bias, learnt with the reversed axis, leaves a little to either)
-        tie = max(np.radians(AXIS_TIE_DEG) ** 2, 0.05 * (j2_one - best))
-        i = min((n_s + k for k in range(len(AXIS_SIGNS)) if j2[n_s + k] <= best + tie),
-                key=lambda c: (int((CANDIDATES[c] < 0).sum()), j2[c]))
+        # the fewest reversed axes that explain the data: an axis is kept in the verdict only where reversing it too
+        # removes at least AXIS_TIE_DEG RMS and AXIS_TIE_SHARE of what the pattern without it leaves (an axis the
+        # body hardly turns about, a ship's z, is reversed or not alike: gravity does not move about it, and the
+        # filter's bias, learnt with the wrong axis, leaves 1–2° to either; a ship's y reversed with its x removes
+        # 4–5°, a fifth or more)
+        index = {tuple(CANDIDATES[c] < 0): c for c in range(n_s, len(CANDIDATES))}
+        dropped = True
+        while dropped and (CANDIDATES[i] < 0).sum() > 1:
+            dropped = False
+            for ax in np.flatnonzero(CANDIDATES[i] < 0):
+                fewer = CANDIDATES[i] < 0
+                fewer[ax] = False
+                k = index[tuple(fewer)]
+                gain = j2[k] - j2[i]
+                if gain < np.radians(AXIS_TIE_DEG) ** 2 or gain < AXIS_TIE_SHARE * j2[k]:
+                    i, dropped = k, True
+                    break
         axes = ", ".join("xyz"[a] for a in range(3) if CANDIDATES[i, a] < 0)
         # the reversal must remove AXIS_EXPLAINED of what the better of the gyro as it is and no rotation at all
         # (the smallest scale) leave: what neither explains is the windows' own velocity change, not the gyro's
@@ -220,12 +233,14 @@ class GyroScaleCheck:
             entry = {"reversed_axes": axes, "discrepancy_deg": round(float(np.degrees(axis_disc)), 2),
                      "pairs": est[2], "window_s": self.window, "flagged": True}
             one = len(axes) == 1
+            cols = " and ".join(f"'COLUMN=gyro_{a}:UNIT*-1'" for a in axes.split(", "))
             return {"gyro_scale_check": entry}, [
                 f"gyro axis check: the gyro's {axes} {'axis looks' if one else 'axes look'} reversed against the "
                 f"accelerometer's (reversing {'it' if one else 'them'} removes "
                 f"{np.degrees(axis_disc):.1f}° RMS of tilt discrepancy between {self.window:g}-s windows): the "
-                "attitude is wrong while the sensor turns about that axis; fix the gyro's axis map (the device's "
-                "configuration, or a column scale of −1: --map 'COLUMN=gyro_x:UNIT*-1') and run again"]
+                f"attitude is wrong while the sensor turns about {'that axis' if one else 'those axes'}; fix the "
+                f"gyro's axis map (the device's configuration, or a column scale of −1: --columns {cols}) and run "
+                "again"]
         scale, disc, pairs = est
         at_edge = not SCALES[0] * 1.01 < scale < SCALES[-1] / 1.01  # beyond the grid: "at least"
         entry = {"scale": round(scale, 3), "discrepancy_deg": round(float(np.degrees(disc)), 2), "pairs": pairs,

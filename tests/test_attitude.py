@@ -169,7 +169,7 @@ def test_the_low_pass_lag_of_a_bias_error_is_modelled():
     a = rec["accel"].copy()
     a[1::2] = np.nan  # every other row skips the low-pass, whose content then ages twice as long per update
     _, st = run_ekf(rec.time, rec["gyro"], a, rec["mag"])
-    assert np.allclose(_lag_matrix(st), 2 * tau * np.eye(3), atol=0.01 * tau)  # 3·I if skipped rows were lost
+    assert np.allclose(_lag_matrix(st), 2 * tau * np.eye(3), atol=0.01 * tau)  # τ·I if skipped rows were lost
     rms = {True: [], False: []}
     for seed in range(8):
         r = simulate("ship-roll", duration=90, seed=seed)
@@ -751,7 +751,10 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     two_stage.write_text("[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
                          "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2d.csv", "--params", two_stage], capsys)
-    assert code == 0 and err.count("note:") == 1 and "Butterworth" in err and "accel_lp_tau = 3 " in err
+    assert code == 0 and err.count("note:") == 1 and "Butterworth" in err and "has no smoother_lp_tau" in err
+    code, out, err = run_main(["filter", src, "-o", tmp_path / "o2e.csv", "--params", f.with_name("used.toml"),
+                               "--param", "accel_lp_tau=2"], capsys)  # a file saved now, one override: no note
+    assert code == 0 and "Butterworth" not in err
     meta = formats.read(tmp_path / "o2b.csv").meta["filter"]
     assert meta["mag_noise_deg"] == 0 and meta["mag_heading_density"] == EkfParams().mag_heading_density
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o3.csv", "--params", f.with_name("used.toml"),

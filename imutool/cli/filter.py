@@ -116,12 +116,14 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
                    "new-field acceptance, commit 1816144, do not): the magnetometer's new-field acceptance and the "
                    "gate on its bias learning apply with their defaults (set either to 0 for the behaviour before)",
                    err=True)
-    if params_file and not quiet and "accel_lp_tau" in given and "smoother_lp_tau" not in given:
-        click.echo(f"note: {params_file} sets accel_lp_tau = {params.accel_lp_tau:g} and was saved before the "
-                   "accelerometer's low-pass became a second-order Butterworth (2026-11-27; such files have no "
-                   "smoother_lp_tau): the value is now the Butterworth's delay (at 3 s: 0.736° mean inclination on "
-                   "BROAD, 0.739 with the old two stages); the defaults are accel_lp_tau 2.5, gyro_scale_noise 0.01, "
-                   "accel_noise_gain 4 (0.727°) — delete those three keys to take them", err=True)
+    in_file = params.keys_in_file(params_file) if params_file else set()
+    if params_file and not quiet and "accel_lp_tau" in in_file and "smoother_lp_tau" not in in_file:
+        click.echo(f"note: {params_file} sets accel_lp_tau and has no smoother_lp_tau, as every parameters file "
+                   "saved before the accelerometer's low-pass became a second-order Butterworth (2026-11-27) does: "
+                   "if it is such a file, its accel_lp_tau is now the Butterworth's delay (its 3 s with 0.003 and "
+                   "2.8: 0.736° mean inclination on BROAD, 0.739 with the old two stages); the defaults are "
+                   "accel_lp_tau 2.5, gyro_scale_noise 0.01, accel_noise_gain 4 (0.727°) — delete those three keys "
+                   "to take them", err=True)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
