@@ -38,8 +38,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from attitude_broad import BROAD, at_rate, load_trials, run_vqf, score  # noqa: E402
+from attitude_rate import euler_deg, ship_roll_scores  # noqa: E402
 
-from formats.frames import quat_to_euler, quat_to_matrix  # noqa: E402
+from formats.frames import quat_to_matrix  # noqa: E402
 from imutool.attitude import EkfParams, run_ekf  # noqa: E402
 from imutool.sim import simulate  # noqa: E402
 
@@ -58,7 +59,7 @@ def leakage() -> None:
         fw = np.einsum("nij,nj->ni", quat_to_matrix(q), np.nan_to_num(d["a"]))
         held = np.maximum.accumulate(np.where(ok, np.arange(len(ok)), 0))  # a bad row holds the last good one
         fw = fw[held]
-        f0, x = fw[0], fw[held] - fw[0]  # the filters start at the first row's force: run them on the change
+        f0, x = fw[0], fw - fw[0]  # the filters start at the first row's force: run them on the change
         ts = float(np.median(np.diff(d["t"])))
         al = ts / (1.5 + ts)  # one stage of τ/2 = 1.5 s
         cells = [lfilter([al], [1, al - 1], lfilter([al], [1, al - 1], x, axis=0), axis=0)]
@@ -76,10 +77,6 @@ def leakage() -> None:
     print("| **mean** | " + " | ".join(f"{x:.3f}" for x in np.mean(rows, axis=0)) + " |")
 
 
-def _euler_deg(q: np.ndarray) -> list[np.ndarray]:
-    return [np.degrees(x) for x in quat_to_euler(q)]
-
-
 def _score_candidate(kw: dict) -> dict:
     """One candidate in a worker: BROAD mean (total, inclination) per rate, ship-roll and ship-at-sea figures."""
     prm = replace(EkfParams(), **kw)
@@ -87,22 +84,14 @@ def _score_candidate(kw: dict) -> dict:
     for k in RATES:
         r = np.array([score(run_ekf(d["t"], d["g"], d["a"], d["m"], prm)[0].q, d) for d in _DATA[k].values()])
         out[k] = r.mean(axis=0)
-    roll, nees = [], []
-    for rec in _DATA["ship-roll"]:
-        res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], prm)
-        ro, pi, _ = _euler_deg(res.q)
-        sd = np.degrees(res.std)
-        late = slice(len(ro) // 10, None)
-        roll.append(float(np.sqrt(np.mean((ro - rec["ref_roll"]) ** 2))))
-        nees.append(float(((((ro - rec["ref_roll"]) / sd[:, 0]) ** 2
-                            + ((pi - rec["ref_pitch"]) / sd[:, 1]) ** 2)[late]).mean()))
+    roll, nees = ship_roll_scores(prm, _DATA["ship-roll"])
     out["ship_roll"], out["ship_roll_worst"], out["nees"] = np.mean(roll), max(roll), (min(nees), max(nees))
     sea = []
     for rec in _DATA["ship-at-sea"]:
         after = rec.time - rec.time[0] >= 60
         res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], prm, rec["sog"], rec["cog"],
                          lever_arm=np.array(rec.meta["lever_arm_m"]))
-        err = (_euler_deg(res.q)[0] - rec["ref_roll"])[after]
+        err = (euler_deg(res.q)[0] - rec["ref_roll"])[after]
         sea.append((np.sqrt(np.mean(err ** 2)), np.abs(err).max()))
     out["sea"], out["sea_max"] = float(np.mean([s[0] for s in sea])), float(max(s[1] for s in sea))
     return out

@@ -36,6 +36,20 @@ def euler_deg(q: np.ndarray) -> list[np.ndarray]:
     return [np.degrees(x) for x in quat_to_euler(q)]
 
 
+def ship_roll_scores(prm: EkfParams, recs: list) -> tuple[list[float], list[float]]:
+    """Causal roll RMSE (deg) and roll + pitch NEES (after the first 10 %) on each ship-roll recording."""
+    roll, nees = [], []
+    for rec in recs:
+        res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], prm)
+        ro, pi, _ = euler_deg(res.q)
+        sd = np.degrees(res.std)
+        late = slice(len(ro) // 10, None)
+        roll.append(rms(ro - rec["ref_roll"]))
+        nees.append(float(((((ro - rec["ref_roll"]) / sd[:, 0]) ** 2
+                            + ((pi - rec["ref_pitch"]) / sd[:, 1]) ** 2)[late]).mean()))
+    return roll, nees
+
+
 def ship_roll() -> None:
     rec = simulate("ship-roll", seed=1)
     for name, prm in CASES.items():
@@ -48,17 +62,9 @@ def ship_roll() -> None:
                        f"{rms(wrap_deg180(he - rec['ref_heading'])):.3f}")
         print(f"ship-roll seed 1, {name} (N = {res.summary['update_every']}): roll / pitch / heading RMSE "
               f"causal {out[0]}, smoother {out[1]}")
+    recs = [simulate("ship-roll", duration=90, seed=seed) for seed in range(8)]
     for name, prm in CASES.items():
-        roll, nees = [], []
-        for seed in range(8):
-            rec = simulate("ship-roll", duration=90, seed=seed)
-            res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], prm)
-            ro, pi, _ = euler_deg(res.q)
-            sd = np.degrees(res.std)
-            late = slice(len(ro) // 10, None)
-            roll.append(rms(ro - rec["ref_roll"]))
-            nees.append(float(((((ro - rec["ref_roll"]) / sd[:, 0]) ** 2
-                                + ((pi - rec["ref_pitch"]) / sd[:, 1]) ** 2)[late]).mean()))
+        roll, nees = ship_roll_scores(prm, recs)
         print(f"ship-roll 90 s seeds 0-7, {name}: roll RMSE mean {np.mean(roll):.3f} worst {max(roll):.3f}; "
               f"NEES {min(nees):.2f}-{max(nees):.2f}, mean {np.mean(nees):.2f}")
 

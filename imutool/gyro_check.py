@@ -38,7 +38,8 @@ least ``AXIS_EXPLAINED`` (a fifth) of the mean-square discrepancy that the bette
 rotation at all leave (what neither explains is the windows' own velocity change: a foot in gait, whose velocity
 changes by metres per second within a window, is not taken for a reversed axis). It does
 not depend on the filter: the filter's own check of the vertical sees a reversed axis only through the phase of its
-tilt error against the roll (4.4–5.1° on ship-roll seeds 1–8 with one low-pass, 3.0–3.7° with another, limit 3°).
+tilt error against the roll (on ship-roll seeds 1–8: 4.4–5.1° with the two-stage low-pass, 3.2–3.7° with the
+Butterworth, limit 3°).
 Axes swapped between the gyro and the accelerometer are not among the candidates.
 
 Inputs are SI: time s, gyro and bias rad/s (body), force m/s² (body, the compensated specific force the filter fed
@@ -67,6 +68,7 @@ AXIS_SIGNS = np.array([[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, 1], [-1, 1, 
 AXIS_EXPLAINED = 0.2
 # every candidate as factors on the x, y, z rates: the scales (all axes alike), then the sign patterns
 CANDIDATES = np.vstack([np.outer(SCALES, np.ones(3)), AXIS_SIGNS])
+ONE = int(np.argmin(np.abs(np.log2(SCALES))))  # the candidate "the gyro as it is" (scale 1)
 SCALE_TOLERANCE = 1.3  # ŝ within [1/1.3, 1.3]: no verdict (ranges come in steps of 1.5–2; calibration does less)
 MIN_DISCREPANCY_DEG = 1.5  # RMS window-to-window tilt discrepancy that rescaling must remove before it is said
 AXIS_TIE_DEG = MIN_DISCREPANCY_DEG  # an axis more in a sign pattern must remove this much RMS …
@@ -168,13 +170,19 @@ class GyroScaleCheck:
         self.checked += pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, CANDIDATES, self.gravity, budget,
                                                 self.sums, self.counts)
 
+    def _mean_j2(self) -> np.ndarray | None:
+        """J² (rad²) of every candidate, the mean over the pairs seen; None without a pair."""
+        if not len(self.counts) or int(self.counts.min()) == 0:
+            return None
+        return self.sums / self.counts
+
     def estimate(self) -> tuple[float, float, int] | None:
         """(ŝ, E rad, pairs): the gyro factor that best agrees with gravity and the RMS discrepancy it removes;
         None without a pair."""
-        n = int(self.counts.min()) if len(self.counts) else 0
-        if n == 0:
+        j2_all = self._mean_j2()
+        if j2_all is None:
             return None
-        j2 = (self.sums / self.counts)[:len(SCALES)]
+        j2 = j2_all[:len(SCALES)]
         i = int(np.argmin(j2))
         x = np.log2(SCALES)
         best_x, best_j2 = x[i], j2[i]
@@ -184,20 +192,18 @@ class GyroScaleCheck:
                 off = 0.5 * (j2[i - 1] - j2[i + 1]) / den
                 best_x = x[i] + off * (x[i + 1] - x[i])
                 best_j2 = max(j2[i] - 0.25 * (j2[i - 1] - j2[i + 1]) * off, 0.0)
-        j2_one = float(j2[np.argmin(np.abs(x))])
-        return float(2.0 ** best_x), float(np.sqrt(max(j2_one - best_j2, 0.0))), n
+        return float(2.0 ** best_x), float(np.sqrt(max(float(j2[ONE]) - best_j2, 0.0))), int(self.counts.min())
 
     def reversed_axes(self) -> tuple[str, float, bool] | None:
         """The sign pattern that best agrees with gravity: (axes reversed, e.g. "x" or "x, z"; the RMS discrepancy
         reversing them removes against the gyro as it is, rad; whether that pattern beats every candidate scale
         and removes AXIS_EXPLAINED of the discrepancy); None without a pair."""
-        n = int(self.counts.min()) if len(self.counts) else 0
-        if n == 0:
+        j2 = self._mean_j2()
+        if j2 is None:
             return None
-        j2 = self.sums / self.counts
         n_s = len(SCALES)
         i = n_s + int(np.argmin(j2[n_s:]))
-        j2_one = float(j2[int(np.argmin(np.abs(np.log2(SCALES))))])
+        j2_one = float(j2[ONE])
         # the fewest reversed axes that explain the data: an axis is kept in the verdict only where reversing it too
         # removes at least AXIS_TIE_DEG RMS and AXIS_TIE_SHARE of what the pattern without it leaves (an axis the
         # body hardly turns about, a ship's z, is reversed or not alike: gravity does not move about it, and the
