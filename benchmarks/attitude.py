@@ -37,12 +37,14 @@ def main() -> None:
 
     print(f"measuring {imutool.attitude.__file__} (run with PYTHONPATH=<tree> to measure a given working tree)")
     n = EkfParams().samples_per_update(float(np.median(np.diff(t))))
-    cases = [(f"defaults (updates every {n} samples)", EkfParams(), False),
-             ("updates every sample", EkfParams(update_every=1), False),
-             ("multi-rate (update every 40)", EkfParams(update_every=40), False),
-             ("raw accel (paper), every sample", EkfParams(accel_lp_tau=0.0, accel_noise_gain=0.0), False),
-             ("defaults + RTS pass alone", EkfParams(), "rts"),
-             ("defaults + zero-lag smoother", EkfParams(), "zero-lag")]
+    cases = [
+        (f"defaults (updates every {n} samples)", EkfParams(), False),
+        ("updates every sample", EkfParams(update_every=1), False),
+        ("multi-rate (update every 40)", EkfParams(update_every=40), False),
+        ("raw accel (paper), every sample", EkfParams(accel_lp_tau=0.0, accel_noise_gain=0.0), False),
+        ("defaults + RTS pass alone", EkfParams(), "rts"),
+        ("defaults + zero-lag smoother", EkfParams(), "zero-lag"),
+    ]
     # the best of a few runs: a shared 2-core machine's speed wanders by ±10 % from minute to minute
     for label, prm, smooth in cases:
         best = (np.inf, np.inf)
@@ -55,8 +57,10 @@ def main() -> None:
                 zero_lag_smooth(res, g, acc, mag, prm)
             best = min(best, (time.perf_counter() - t0, time.process_time() - c0))
         dt, dc = best
-        print(f"EKF {label:36s}: {len(t) / dt / 1e6:6.2f} M samples/s wall, {len(t) / dc / 1e6:6.2f} M/s cpu "
-              f"({dt:.2f} s wall, {dc:.2f} s cpu, {len(t)} samples, best of {a.repeat if not smooth else 1})")
+        print(
+            f"EKF {label:36s}: {len(t) / dt / 1e6:6.2f} M samples/s wall, {len(t) / dc / 1e6:6.2f} M/s cpu "
+            f"({dt:.2f} s wall, {dc:.2f} s cpu, {len(t)} samples, best of {a.repeat if not smooth else 1})"
+        )
     vqf_speed(t, g, acc, mag, a.repeat)
     if a.day:
         day(a.dir)
@@ -76,8 +80,10 @@ def vqf_speed(t: np.ndarray, g: np.ndarray, acc: np.ndarray, mag: np.ndarray, re
         t0 = time.perf_counter()
         VQF(ts).updateBatch(*args)
         best = min(best, time.perf_counter() - t0)
-    print(f"VQF 9D (C++, updateBatch)               : {len(t) / best / 1e6:6.2f} M samples/s wall ({best:.2f} s, "
-          f"best of {repeat}; no covariance, no σ, no self-check)")
+    print(
+        f"VQF 9D (C++, updateBatch)               : {len(t) / best / 1e6:6.2f} M samples/s wall ({best:.2f} s, "
+        f"best of {repeat}; no covariance, no σ, no self-check)"
+    )
 
 
 def write_day(path: str) -> None:
@@ -115,8 +121,15 @@ def day(folder: str) -> None:
     path = os.path.join(folder, "att_bench_24h.csv")
     if not os.path.exists(path):
         print("writing the 24 h file ...", flush=True)
-        subprocess.run([sys.executable, "-c", f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); "
-                        f"import attitude; attitude.write_day({path!r})"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); "
+                f"import attitude; attitude.write_day({path!r})",
+            ],
+            check=True,
+        )
     out = os.path.join(folder, "att_bench_24h_est.csv")
     # the output is this benchmark's own file: replaced on a second run
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -131,8 +144,10 @@ def day(folder: str) -> None:
         raise SystemExit(f"imutool filter exited {proc.returncode}")
     ru = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = ru.ru_utime + ru.ru_stime - before.ru_utime - before.ru_stime
-    print(f"imutool filter, 24 h at 200 Hz (17.28 M rows): {wall:.1f} s wall, {cpu:.1f} s cpu, "
-          f"peak RSS {rss_kb / 1024:.0f} MB (VmHWM; load average {os.getloadavg()[0]:.1f})")
+    print(
+        f"imutool filter, 24 h at 200 Hz (17.28 M rows): {wall:.1f} s wall, {cpu:.1f} s cpu, "
+        f"peak RSS {rss_kb / 1024:.0f} MB (VmHWM; load average {os.getloadavg()[0]:.1f})"
+    )
 
 
 if __name__ == "__main__":

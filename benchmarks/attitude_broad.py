@@ -49,8 +49,12 @@ OTHER = ("10", "11", "16", "21", "24", "26", "28", "29", "33", "35")  # translat
 # low-pass's lag of a gyro-bias error, and the weight of the learned accelerometer noise. The noise floor's rise
 # time and the magnetic disturbance hold were on the grid before and won for every other combination (a law, not
 # a choice: docs/attitude.md), so they stay at their defaults here
-GRID = {"accel_lp_tau": (1.5, 2.0, 2.5, 3.0, 4.0), "gyro_scale_noise": (0.0, 0.001, 0.003, 0.01),
-        "accel_lp_lag": (False, True), "accel_noise_gain": (2.0, 2.8, 4.0)}
+GRID = {
+    "accel_lp_tau": (1.5, 2.0, 2.5, 3.0, 4.0),
+    "gyro_scale_noise": (0.0, 0.001, 0.003, 0.01),
+    "accel_lp_lag": (False, True),
+    "accel_noise_gain": (2.0, 2.8, 4.0),
+}
 SHIP_ROLL_LIMIT = 0.4  # deg: the simulator guarantee every default must keep (tests/test_attitude.py)
 
 
@@ -58,8 +62,14 @@ def load_trials() -> dict[str, dict[str, np.ndarray]]:
     trials = {}
     for f in sorted(BROAD.glob("*.csv")):
         rec = read(f)
-        trials[f.stem] = {"t": rec.time, "g": rec.get("gyro", "rad/s"), "a": rec.get("accel", "m/s^2"),
-                          "m": rec["mag"], "q": rec["ref_q"], "mv": rec["movement"] > 0}
+        trials[f.stem] = {
+            "t": rec.time,
+            "g": rec.get("gyro", "rad/s"),
+            "a": rec.get("accel", "m/s^2"),
+            "m": rec["mag"],
+            "q": rec["ref_q"],
+            "mv": rec["movement"] > 0,
+        }
     return trials
 
 
@@ -68,8 +78,9 @@ def score(q: np.ndarray, d: dict) -> tuple[float, float]:
     return m["total"]["rmse"], m["inclination"]["rmse"]
 
 
-def run_ours(d: dict, prm: EkfParams, smooth: bool) -> tuple[tuple[float, float], tuple[float, float],
-                                                             tuple[float, float]]:
+def run_ours(
+    d: dict, prm: EkfParams, smooth: bool
+) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
     """Causal, smoother (the product's: zero-lag) and the RTS pass alone (what the smoother was before)."""
     res, _ = run_ekf(d["t"], d["g"], d["a"], d["m"], prm, keep_cov=smooth)
     c = score(res.q, d)
@@ -84,6 +95,7 @@ def run_vqf(d: dict) -> tuple[tuple[float, float], tuple[float, float]]:
 
     ts = float(np.median(np.diff(d["t"])))
     g, a, m = (np.ascontiguousarray(d[k]) for k in "gam")
+
     def to_ned(q: np.ndarray) -> np.ndarray:
         return quat_multiply(np.broadcast_to(ENU2NED, q.shape), q)
 
@@ -117,8 +129,10 @@ def lower_rates(trials: dict) -> None:
             v, _ = run_vqf(dk)
             ok = c[0] <= limit(v[0]) and c[1] <= limit(v[1])
             rows.append([*c, *o, *v])
-            print(f"| {name} | {c[0]:.2f} / {c[1]:.2f} | {o[0]:.2f} / {o[1]:.2f} | {v[0]:.2f} / {v[1]:.2f} | "
-                  f"{'yes' if ok else 'NO'} |")
+            print(
+                f"| {name} | {c[0]:.2f} / {c[1]:.2f} | {o[0]:.2f} / {o[1]:.2f} | {v[0]:.2f} / {v[1]:.2f} | "
+                f"{'yes' if ok else 'NO'} |"
+            )
         r = np.array(rows)
         for label, row, fmt in (("**mean**", r.mean(axis=0), ".3f"), ("worst", r.max(axis=0), ".2f")):
             print(f"| {label} | " + " | ".join(f"{row[i]:.2f} / {row[i + 1]:{fmt}}" for i in (0, 2, 4)) + " | |")
@@ -147,8 +161,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="defaults only (no lower rates, no generalisation table)")
     ap.add_argument("--rates", action="store_true", help="only the trials averaged down to 95 and 48 Hz")
-    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                    help="processes for the generalisation grid (default: one per core)")
+    ap.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="processes for the generalisation grid (default: one per core)",
+    )
     args = ap.parse_args()
     if not BROAD.is_dir():
         sys.exit(f"BROAD trials not found at {BROAD} (set IMUTOOL_SHARED_DATA)")
@@ -162,16 +180,20 @@ def main() -> None:
     vqf = {name: run_vqf(d) for name, d in trials.items()}
     prm = EkfParams()
     print("\nDefaults (one parameter set for every trial), RMSE total / inclination, deg:")
-    print("| trial | imutool causal | imutool smoother | VQF | offline VQF | within limit | RTS pass alone |\n"
-          f"|{'---|' * 7}")
+    print(
+        "| trial | imutool causal | imutool smoother | VQF | offline VQF | within limit | RTS pass alone |\n"
+        f"|{'---|' * 7}"
+    )
     rows = []
     for name, d in trials.items():
         c, s, rts = run_ours(d, prm, smooth=True)
         (v, vo) = vqf[name]
         ok = c[0] <= limit(v[0]) and c[1] <= limit(v[1])
         rows.append([*c, *s, *v, *vo, *rts])
-        print(f"| {name} | {c[0]:.2f} / {c[1]:.2f} | {s[0]:.2f} / {s[1]:.2f} | {v[0]:.2f} / {v[1]:.2f} | "
-              f"{vo[0]:.2f} / {vo[1]:.2f} | {'yes' if ok else 'NO'} | {rts[0]:.2f} / {rts[1]:.2f} |")
+        print(
+            f"| {name} | {c[0]:.2f} / {c[1]:.2f} | {s[0]:.2f} / {s[1]:.2f} | {v[0]:.2f} / {v[1]:.2f} | "
+            f"{vo[0]:.2f} / {vo[1]:.2f} | {'yes' if ok else 'NO'} | {rts[0]:.2f} / {rts[1]:.2f} |"
+        )
     r = np.array(rows)
     for label, row, fmt in (("**mean**", r.mean(axis=0), ".3f"), ("worst", r.max(axis=0), ".2f")):
         cells = [f"{row[i]:.2f} / {row[i + 1]:{fmt}}" for i in range(0, 10, 2)]
@@ -180,8 +202,10 @@ def main() -> None:
     for group, members in (("rotation", ROTATION), ("translation+disturbance", OTHER)):
         js = [j for j, n in enumerate(names) if n[:2] in members]
         m = r[js].mean(axis=0)
-        print(f"| mean, {group} | {m[0]:.2f} / {m[1]:.3f} | {m[2]:.2f} / {m[3]:.3f} | {m[4]:.2f} / {m[5]:.3f} | "
-              f"{m[6]:.2f} / {m[7]:.3f} | | {m[8]:.2f} / {m[9]:.3f} |")
+        print(
+            f"| mean, {group} | {m[0]:.2f} / {m[1]:.3f} | {m[2]:.2f} / {m[3]:.3f} | {m[4]:.2f} / {m[5]:.3f} | "
+            f"{m[6]:.2f} / {m[7]:.3f} | | {m[8]:.2f} / {m[9]:.3f} |"
+        )
     if not args.quick:
         lower_rates(trials)
         generalisation(trials, vqf, args.jobs)
@@ -216,25 +240,36 @@ def generalisation(trials: dict, vqf: dict, jobs: int) -> None:
     lim = np.stack([[limit(v) for v in vq[:, 0]], [limit(v) for v in vq[:, 1]]], axis=1)
     ship = np.array([ship_rmse for _, ship_rmse in scored])
     keeps = ship <= SHIP_ROLL_LIMIT
-    print("\nEvery candidate on all 16 (worst/limit = the largest ratio of a trial's RMSE to its ceiling "
-          "max(2 × VQF, VQF + 2°); ≤ 1 means no trial above it; ship-roll = the simulator guarantee, ≤ 0.4°):")
+    print(
+        "\nEvery candidate on all 16 (worst/limit = the largest ratio of a trial's RMSE to its ceiling "
+        "max(2 × VQF, VQF + 2°); ≤ 1 means no trial above it; ship-roll = the simulator guarantee, ≤ 0.4°):"
+    )
     print("| candidate | mean total / incl | worst/limit | ship-roll |\n|---|---|---|---|")
     for i, kw in enumerate(cands):
         m = raw[i].mean(axis=0)
         print(f"| {kw} | {m[0]:.2f} / {m[1]:.3f} | {(raw[i] / lim).max():.2f} | {ship[i]:.3f} |")
-    groups = {"rotation": [j for j, n in enumerate(names) if n[:2] in ROTATION],
-              "translation+disturbance": [j for j, n in enumerate(names) if n[:2] in OTHER],
-              "all 16": list(range(len(names)))}
-    print(f"\nGeneralisation: candidates {GRID} (shock gate off in all); chosen = lowest mean of "
-          "(total/VQF + inclination/VQF)/2 on the tuning group among the candidates that keep ship-roll ≤ 0.4°")
+    groups = {
+        "rotation": [j for j, n in enumerate(names) if n[:2] in ROTATION],
+        "translation+disturbance": [j for j, n in enumerate(names) if n[:2] in OTHER],
+        "all 16": list(range(len(names))),
+    }
+    print(
+        f"\nGeneralisation: candidates {GRID} (shock gate off in all); chosen = lowest mean of "
+        "(total/VQF + inclination/VQF)/2 on the tuning group among the candidates that keep ship-roll ≤ 0.4°"
+    )
     print("| tuned on | chosen | scored on | mean total / incl | worst total / incl | VQF mean |\n|" + "---|" * 6)
-    for tune, score_on in (("rotation", "translation+disturbance"), ("translation+disturbance", "rotation"),
-                           ("all 16", "all 16")):
+    for tune, score_on in (
+        ("rotation", "translation+disturbance"),
+        ("translation+disturbance", "rotation"),
+        ("all 16", "all 16"),
+    ):
         i = int(np.argmin(np.where(keeps, rel[:, groups[tune]].mean(axis=1), np.inf)))
         js = groups[score_on]
         m, w = raw[i, js].mean(axis=0), raw[i, js].max(axis=0)
-        print(f"| {tune} | {cands[i]} | {score_on} | {m[0]:.2f} / {m[1]:.2f} | {w[0]:.2f} / {w[1]:.2f} | "
-              f"{vq[js, 0].mean():.2f} / {vq[js, 1].mean():.2f} |")
+        print(
+            f"| {tune} | {cands[i]} | {score_on} | {m[0]:.2f} / {m[1]:.2f} | {w[0]:.2f} / {w[1]:.2f} | "
+            f"{vq[js, 0].mean():.2f} / {vq[js, 1].mean():.2f} |"
+        )
     dp = EkfParams()
     d = next((i for i, c in enumerate(cands) if all(getattr(dp, k) == v for k, v in c.items())), None)
     if d is None:
@@ -242,8 +277,11 @@ def generalisation(trials: dict, vqf: dict, jobs: int) -> None:
         return
     for g, js in groups.items():
         m = raw[d, js].mean(axis=0)
-        print(f"| (defaults) | {cands[d]} | {g} | {m[0]:.2f} / {m[1]:.2f} | {raw[d, js, 0].max():.2f} / "
-              f"{raw[d, js, 1].max():.2f} | {vq[js, 0].mean():.2f} / {vq[js, 1].mean():.2f} |")
+        print(
+            f"| (defaults) | {cands[d]} | {g} | {m[0]:.2f} / {m[1]:.2f} | {raw[d, js, 0].max():.2f} / "
+            f"{raw[d, js, 1].max():.2f} | {vq[js, 0].mean():.2f} / {vq[js, 1].mean():.2f} |"
+        )
+
 
 if __name__ == "__main__":
     main()

@@ -89,10 +89,18 @@ def _score_candidate(kw: dict) -> dict:
     sea = []
     for rec in _DATA["ship-at-sea"]:
         after = rec.time - rec.time[0] >= 60
-        res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], prm, rec["sog"], rec["cog"],
-                         lever_arm=np.array(rec.meta["lever_arm_m"]))
+        res, _ = run_ekf(
+            rec.time,
+            rec["gyro"],
+            rec["accel"],
+            rec["mag"],
+            prm,
+            rec["sog"],
+            rec["cog"],
+            lever_arm=np.array(rec.meta["lever_arm_m"]),
+        )
         err = (euler_deg(res.q)[0] - rec["ref_roll"])[after]
-        sea.append((np.sqrt(np.mean(err ** 2)), np.abs(err).max()))
+        sea.append((np.sqrt(np.mean(err**2)), np.abs(err).max()))
     out["sea"], out["sea_max"] = float(np.mean([s[0] for s in sea])), float(max(s[1] for s in sea))
     return out
 
@@ -106,21 +114,27 @@ def choose(jobs: int) -> None:
     cands = [dict(zip(GRID, v, strict=True)) for v in itertools.product(*GRID.values())]
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
         rows = list(pool.map(_score_candidate, cands))
-    print("\nVQF's mean total / inclination: " + ", ".join(f"{286 / k:.0f} Hz {vqf[k][0]:.3f} / {vqf[k][1]:.4f}"
-                                                             for k in RATES))
-    print("| τ s | gyro_scale_noise | accel_noise_gain | 286 Hz | 95 Hz | 48 Hz | score | ship-roll mean / worst |"
-          " NEES | ship-at-sea roll RMS / max | kept |\n|" + "---|" * 11)
+    print(
+        "\nVQF's mean total / inclination: "
+        + ", ".join(f"{286 / k:.0f} Hz {vqf[k][0]:.3f} / {vqf[k][1]:.4f}" for k in RATES)
+    )
+    print(
+        "| τ s | gyro_scale_noise | accel_noise_gain | 286 Hz | 95 Hz | 48 Hz | score | ship-roll mean / worst |"
+        " NEES | ship-at-sea roll RMS / max | kept |\n|" + "---|" * 11
+    )
     best, best_score = None, np.inf
     for r in rows:
         rel = np.mean([(r[k][0] / vqf[k][0] + r[k][1] / vqf[k][1]) / 2 for k in RATES])
         kept = r["nees"][1] <= 2.0 and r["ship_roll"] <= 0.4
         if kept and rel < best_score:
             best, best_score = r, rel
-        print(f"| {r['accel_lp_tau']} | {r['gyro_scale_noise']} | {r['accel_noise_gain']} | "
-              + " | ".join(f"{r[k][0]:.3f} / {r[k][1]:.4f}" for k in RATES)
-              + f" | {rel:.4f} | {r['ship_roll']:.3f} / {r['ship_roll_worst']:.3f} | "
-                f"{r['nees'][0]:.2f}–{r['nees'][1]:.2f} | {r['sea']:.3f} / {r['sea_max']:.2f} | "
-                f"{'yes' if kept else 'no'} |")
+        print(
+            f"| {r['accel_lp_tau']} | {r['gyro_scale_noise']} | {r['accel_noise_gain']} | "
+            + " | ".join(f"{r[k][0]:.3f} / {r[k][1]:.4f}" for k in RATES)
+            + f" | {rel:.4f} | {r['ship_roll']:.3f} / {r['ship_roll_worst']:.3f} | "
+            f"{r['nees'][0]:.2f}–{r['nees'][1]:.2f} | {r['sea']:.3f} / {r['sea_max']:.2f} | "
+            f"{'yes' if kept else 'no'} |"
+        )
     if best is not None:
         print("chosen: " + ", ".join(f"{k} = {best[k]}" for k in GRID) + f" (score {best_score:.4f})")
 

@@ -45,8 +45,9 @@ def ship_roll_scores(prm: EkfParams, recs: list) -> tuple[list[float], list[floa
         sd = np.degrees(res.std)
         late = slice(len(ro) // 10, None)
         roll.append(rms(ro - rec["ref_roll"]))
-        nees.append(float(((((ro - rec["ref_roll"]) / sd[:, 0]) ** 2
-                            + ((pi - rec["ref_pitch"]) / sd[:, 1]) ** 2)[late]).mean()))
+        nees.append(
+            float(((((ro - rec["ref_roll"]) / sd[:, 0]) ** 2 + ((pi - rec["ref_pitch"]) / sd[:, 1]) ** 2)[late]).mean())
+        )
     return roll, nees
 
 
@@ -58,15 +59,21 @@ def ship_roll() -> None:
         out = []
         for r in (res, sm):
             ro, pi, he = euler_deg(r.q)
-            out.append(f"{rms(ro - rec['ref_roll']):.3f} / {rms(pi - rec['ref_pitch']):.3f} / "
-                       f"{rms(wrap_deg180(he - rec['ref_heading'])):.3f}")
-        print(f"ship-roll seed 1, {name} (N = {res.summary['update_every']}): roll / pitch / heading RMSE "
-              f"causal {out[0]}, smoother {out[1]}")
+            out.append(
+                f"{rms(ro - rec['ref_roll']):.3f} / {rms(pi - rec['ref_pitch']):.3f} / "
+                f"{rms(wrap_deg180(he - rec['ref_heading'])):.3f}"
+            )
+        print(
+            f"ship-roll seed 1, {name} (N = {res.summary['update_every']}): roll / pitch / heading RMSE "
+            f"causal {out[0]}, smoother {out[1]}"
+        )
     recs = [simulate("ship-roll", duration=90, seed=seed) for seed in range(8)]
     for name, prm in CASES.items():
         roll, nees = ship_roll_scores(prm, recs)
-        print(f"ship-roll 90 s seeds 0-7, {name}: roll RMSE mean {np.mean(roll):.3f} worst {max(roll):.3f}; "
-              f"NEES {min(nees):.2f}-{max(nees):.2f}, mean {np.mean(nees):.2f}")
+        print(
+            f"ship-roll 90 s seeds 0-7, {name}: roll RMSE mean {np.mean(roll):.3f} worst {max(roll):.3f}; "
+            f"NEES {min(nees):.2f}-{max(nees):.2f}, mean {np.mean(nees):.2f}"
+        )
 
 
 def gyrocompass(rec) -> np.ndarray:
@@ -88,8 +95,9 @@ def baselines(rec, after: np.ndarray) -> str:
 
         from formats.frames import quat_multiply
 
-        q = offlineVQF(np.ascontiguousarray(rec["gyro"]), np.ascontiguousarray(a), None,
-                       float(np.median(np.diff(rec.time))))["quat6D"]
+        q = offlineVQF(
+            np.ascontiguousarray(rec["gyro"]), np.ascontiguousarray(a), None, float(np.median(np.diff(rec.time)))
+        )["quat6D"]
         enu2ned = np.array([0.0, np.sqrt(0.5), np.sqrt(0.5), 0.0])
         r, p, _ = euler_deg(quat_multiply(np.broadcast_to(enu2ned, q.shape), q))
         rows.append(("offline VQF 6D", r, p))
@@ -109,25 +117,40 @@ def ship_at_sea() -> None:
         after = rec.time - rec.time[0] >= 60
         for name, prm in CASES.items():
             cells = []
-            for label, lever, gnss, smooth, heading in (("lever arm + SOG/COG", True, True, False, False),
-                                                         ("+ smoother", True, True, True, False),
-                                                         ("SOG/COG only", False, True, False, False),
-                                                         ("neither", False, False, False, False),
-                                                         ("gyrocompass, no mag", True, True, False, True)):
+            for label, lever, gnss, smooth, heading in (
+                ("lever arm + SOG/COG", True, True, False, False),
+                ("+ smoother", True, True, True, False),
+                ("SOG/COG only", False, True, False, False),
+                ("neither", False, False, False, False),
+                ("gyrocompass, no mag", True, True, False, True),
+            ):
                 sog, cog = (rec["sog"], rec["cog"]) if gnss else (None, None)
                 mag = None if heading else rec["mag"]
-                res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], mag, prm, sog, cog,
-                                 lever_arm=arm if lever else None, keep_cov=smooth,
-                                 heading_deg=gyrocompass(rec) if heading else None)
+                res, _ = run_ekf(
+                    rec.time,
+                    rec["gyro"],
+                    rec["accel"],
+                    mag,
+                    prm,
+                    sog,
+                    cog,
+                    lever_arm=arm if lever else None,
+                    keep_cov=smooth,
+                    heading_deg=gyrocompass(rec) if heading else None,
+                )
                 if smooth:
                     res = zero_lag_smooth(res, rec["gyro"], rec["accel"], mag, prm, sog, cog, arm)
                 ro, pi, he = euler_deg(res.q)
                 er, ep = (ro - rec["ref_roll"])[after], (pi - rec["ref_pitch"])[after]
                 eh = wrap_deg180(he - rec["ref_heading"])[after]
-                cells.append(f"{label}: {rms(er):.2f} / {rms(ep):.2f} (max {np.abs(er).max():.2f} / "
-                             f"{np.abs(ep).max():.2f})" + (f", heading {rms(eh):.2f}" if heading else ""))
-            print(f"ship-at-sea seed {seed}, {name} (N = {res.summary['update_every']}), roll / pitch RMS: "
-                  + "; ".join(cells))
+                cells.append(
+                    f"{label}: {rms(er):.2f} / {rms(ep):.2f} (max {np.abs(er).max():.2f} / "
+                    f"{np.abs(ep).max():.2f})" + (f", heading {rms(eh):.2f}" if heading else "")
+                )
+            print(
+                f"ship-at-sea seed {seed}, {name} (N = {res.summary['update_every']}), roll / pitch RMS: "
+                + "; ".join(cells)
+            )
         print(f"ship-at-sea seed {seed}, baselines, roll / pitch RMS: " + baselines(rec, after))
     rec = simulate("turn", seed=1)
     for name, prm in CASES.items():
@@ -147,8 +170,10 @@ def broad() -> None:
     for n in (1, 2, 3, 5, 10):
         sc = [attitude_broad.run_ours(d, EkfParams(update_every=n), False)[0] for d in trials.values()]
         tot, inc = np.array(sc).T
-        print(f"BROAD {len(sc)} trials, N = {n}: causal total / inclination mean {tot.mean():.3f} / "
-              f"{inc.mean():.4f}, worst {tot.max():.2f} / {inc.max():.2f}")
+        print(
+            f"BROAD {len(sc)} trials, N = {n}: causal total / inclination mean {tot.mean():.3f} / "
+            f"{inc.mean():.4f}, worst {tot.max():.2f} / {inc.max():.2f}"
+        )
 
 
 def main() -> None:

@@ -39,8 +39,9 @@ def still_after_motion(d: dict) -> np.ndarray:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--param", action="append", default=[],
-                    help="NAME=VALUE, an EkfParams field (as imutool filter --param)")
+    ap.add_argument(
+        "--param", action="append", default=[], help="NAME=VALUE, an EkfParams field (as imutool filter --param)"
+    )
     args = ap.parse_args()
     prm = ekf_params(None, tuple(args.param), None, None)  # parsed and checked as `imutool filter --param`
     kw = {k: v for k, v in vars(prm).items() if v != getattr(EkfParams(), k)}
@@ -62,8 +63,10 @@ def main() -> None:
         ours, theirs = score(res.q[m], sub)[1], score(qv[m], sub)[1]
         berr = np.degrees(res.bias[m][-1] - d["g"][m].mean(0))
         rows.append((ours, theirs))
-        print(f"| {name} | {m.sum() * dt:.0f} | {ours:.2f} | {theirs:.2f} | "
-              f"{' '.join(f'{x:+.3f}' for x in berr)} |", flush=True)
+        print(
+            f"| {name} | {m.sum() * dt:.0f} | {ours:.2f} | {theirs:.2f} | {' '.join(f'{x:+.3f}' for x in berr)} |",
+            flush=True,
+        )
     r = np.array(rows)
     print(f"| **mean** | | **{r[:, 0].mean():.3f}** | **{r[:, 1].mean():.3f}** | |")
     print(f"| worst | | {r[:, 0].max():.2f} | {r[:, 1].max():.2f} | |")

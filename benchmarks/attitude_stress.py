@@ -56,8 +56,12 @@ def gyro_bias(d: dict, rng: np.random.Generator, dps: float) -> dict:
 
 def white_noise(d: dict, rng: np.random.Generator, gyro: float, accel: float, mag: float) -> dict:
     """White noise per sample added: gyro rad/s, accel m/s², mag µT (a consumer IMU: 0.01, 0.08, 1)."""
-    return dict(d, g=d["g"] + rng.normal(0, gyro, d["g"].shape), a=d["a"] + rng.normal(0, accel, d["a"].shape),
-                m=d["m"] + rng.normal(0, mag, d["m"].shape))
+    return dict(
+        d,
+        g=d["g"] + rng.normal(0, gyro, d["g"].shape),
+        a=d["a"] + rng.normal(0, accel, d["a"].shape),
+        m=d["m"] + rng.normal(0, mag, d["m"].shape),
+    )
 
 
 def slow_magnetometer(d: dict, k: int) -> dict:
@@ -137,8 +141,10 @@ def main() -> None:
     t0 = time.perf_counter()
     trials = load_trials()
     print(f"{len(trials)} BROAD trials from {BROAD}; load average {os.getloadavg()[0]:.1f}")
-    print("\nCausal RMSE total / inclination (deg), mean over the 16 trials (worst trial in brackets); 6D: "
-          "inclination only (no heading reference)")
+    print(
+        "\nCausal RMSE total / inclination (deg), mean over the 16 trials (worst trial in brackets); 6D: "
+        "inclination only (no heading reference)"
+    )
     print("| case | imutool defaults | before | VQF | over ceiling (imutool / before) |\n|---|---|---|---|---|")
     for name, change in CASES.items():
         six_d = "6D" in name
@@ -151,13 +157,15 @@ def main() -> None:
             rows.append([*ours, *before, *vqf_causal(dd, six_d)])
         r = np.array(rows)
         lim = np.array([[limit(v) for v in row[4:6]] for row in r])
-        over = [int(np.sum((r[:, j:j + 2] > lim).any(axis=1))) for j in (0, 2)]
+        over = [int(np.sum((r[:, j : j + 2] > lim).any(axis=1))) for j in (0, 2)]
         if six_d:
             cells = [f"– / {r[:, j + 1].mean():.3f} (– / {r[:, j + 1].max():.2f})" for j in (0, 2, 4)]
             over = [int(np.sum(r[:, j + 1] > lim[:, 1])) for j in (0, 2)]
         else:
-            cells = [f"{r[:, j].mean():.2f} / {r[:, j + 1].mean():.3f} ({r[:, j].max():.2f} / {r[:, j + 1].max():.2f})"
-                     for j in (0, 2, 4)]
+            cells = [
+                f"{r[:, j].mean():.2f} / {r[:, j + 1].mean():.3f} ({r[:, j].max():.2f} / {r[:, j + 1].max():.2f})"
+                for j in (0, 2, 4)
+            ]
         print(f"| {name} | {' | '.join(cells)} | {over[0]} / {over[1]} |", flush=True)
     print(f"\n({time.perf_counter() - t0:.0f} s)")
 

@@ -35,8 +35,9 @@ from imutool.sim import simulate  # noqa: E402
 
 
 def _imutool(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", "from imutool.cli import main; main()", *args], env=env,
-                          capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-c", "from imutool.cli import main; main()", *args], env=env, capture_output=True, text=True
+    )
 
 
 def main() -> None:
@@ -60,25 +61,44 @@ def main() -> None:
             formats.write(rec, src / f"voyage{k:03d}.csv")
             rows += len(rec)
         ext = ".json" if a.command.startswith("events") else ".csv"
-        print(f"{a.voyages} voyages x {a.duration:.0f} s at {a.rate:g} Hz ({rows:,} rows, "
-              f"{sum(p.stat().st_size for p in src.iterdir()) / 1e6:.0f} MB CSV); command: imutool {a.command} "
-              f"{a.args}; {os.cpu_count()} CPUs")
+        print(
+            f"{a.voyages} voyages x {a.duration:.0f} s at {a.rate:g} Hz ({rows:,} rows, "
+            f"{sum(p.stat().st_size for p in src.iterdir()) / 1e6:.0f} MB CSV); command: imutool {a.command} "
+            f"{a.args}; {os.cpu_count()} CPUs"
+        )
         one = next(iter(sorted(src.iterdir())))
-        warm = _imutool([*shlex.split(a.command), str(one), "-o", str(Path(d) / f"warm{ext}"), *shlex.split(a.args)],
-                        env)
+        warm = _imutool(
+            [*shlex.split(a.command), str(one), "-o", str(Path(d) / f"warm{ext}"), *shlex.split(a.args)], env
+        )
         if warm.returncode:
             sys.exit(f"warm-up failed: {warm.stderr.strip()}")
         configs = [(f"local {n} worker{'s' if n > 1 else ''}", n, []) for n in map(int, a.workers.split(","))]
         if a.dask:
             configs.append((f"dask LocalCluster {a.dask} workers", a.dask, ["--dask"]))
-        print(f"{'configuration':32s} {'wall s':>7s} {'files/s':>8s} {'k rows/s':>9s} {'k rows/s/worker':>16s} "
-              f"{'ok':>4s} {'job s':>7s}")
+        print(
+            f"{'configuration':32s} {'wall s':>7s} {'files/s':>8s} {'k rows/s':>9s} {'k rows/s/worker':>16s} "
+            f"{'ok':>4s} {'job s':>7s}"
+        )
         base = None
         for label, n, extra in configs:
             out = Path(d) / f"out_{label.replace(' ', '_')}"
             t0 = time.perf_counter()
-            r = _imutool(["batch", a.command, str(src), "-o", str(out / f"{{stem}}{ext}"), "-j", str(n), *extra,
-                          "--args", a.args, "--json"], env)
+            r = _imutool(
+                [
+                    "batch",
+                    a.command,
+                    str(src),
+                    "-o",
+                    str(out / f"{{stem}}{ext}"),
+                    "-j",
+                    str(n),
+                    *extra,
+                    "--args",
+                    a.args,
+                    "--json",
+                ],
+                env,
+            )
             wall = time.perf_counter() - t0
             try:
                 tot = json.loads(r.stdout)["totals"]
@@ -87,8 +107,10 @@ def main() -> None:
                 continue
             rate = rows / wall
             base = base or rate
-            print(f"{label:32s} {wall:7.1f} {a.voyages / wall:8.2f} {rate / 1e3:9.1f} {rate / n / 1e3:16.1f} "
-                  f"{tot['ok']:4d} {tot['job_seconds']:7.1f}   speed-up {rate / base:.2f}")
+            print(
+                f"{label:32s} {wall:7.1f} {a.voyages / wall:8.2f} {rate / 1e3:9.1f} {rate / n / 1e3:16.1f} "
+                f"{tot['ok']:4d} {tot['job_seconds']:7.1f}   speed-up {rate / base:.2f}"
+            )
 
 
 if __name__ == "__main__":

@@ -28,9 +28,11 @@ def bench_allan(hours: float = 24.0, rate_hz: float = 200.0) -> None:
     t0, c0 = time.perf_counter(), time.process_time()
     res = analyse(y, rate_hz, "gyro", "rad/s")
     dt, dc = time.perf_counter() - t0, time.process_time() - c0
-    print(f"Allan deviation, {hours:g} h @ {rate_hz:g} Hz × 3 axes ({n:,} samples/axis, {len(res.taus)} τ values "
-          f"{res.taus[0]:.3g}–{res.taus[-1]:.3g} s) + noise terms: {dt:.2f} s wall, {dc:.2f} s CPU  "
-          f"(target < 10 s; load average now {os.getloadavg()[0]:.1f})")
+    print(
+        f"Allan deviation, {hours:g} h @ {rate_hz:g} Hz × 3 axes ({n:,} samples/axis, {len(res.taus)} τ values "
+        f"{res.taus[0]:.3g}–{res.taus[-1]:.3g} s) + noise terms: {dt:.2f} s wall, {dc:.2f} s CPU  "
+        f"(target < 10 s; load average now {os.getloadavg()[0]:.1f})"
+    )
 
 
 def bench_ellipsoid(n: int = 100_000) -> None:
@@ -47,9 +49,11 @@ def bench_ellipsoid(n: int = 100_000) -> None:
             fit = calibrate_sphere(m, kind, field_ut=50.0)
             best, cpu = min(best, time.perf_counter() - t0), min(cpu, time.process_time() - c0)
         err = np.linalg.norm(fit.A - np.linalg.inv(a_s)) / np.linalg.norm(np.linalg.inv(a_s))
-        print(f"ellipsoid fit ({kind}: Li–Griffiths + least_squares refinement + coverage + covariance), "
-              f"{n:,} samples: {best:.3f} s wall, {cpu:.3f} s CPU, best of 3  (A error {100 * err:.3f} %; "
-              "target < 1 s for 'full')")
+        print(
+            f"ellipsoid fit ({kind}: Li–Griffiths + least_squares refinement + coverage + covariance), "
+            f"{n:,} samples: {best:.3f} s wall, {cpu:.3f} s CPU, best of 3  (A error {100 * err:.3f} %; "
+            "target < 1 s for 'full')"
+        )
 
 
 if __name__ == "__main__":

@@ -29,15 +29,45 @@ def _imutool(*args: str) -> list[str]:
 def measure(protocol: str, rate: float, seconds: float) -> dict:
     work = tempfile.mkdtemp(prefix="imutool-capbench-")
     link = os.path.join(work, "port")
-    server = subprocess.Popen(_imutool("simulate", "--serve", link, "--protocol", protocol, "--rate", str(rate),
-                                       "--duration", str(seconds), "--start-delay", "2", "--quiet"),
-                              stderr=subprocess.DEVNULL)
+    server = subprocess.Popen(
+        _imutool(
+            "simulate",
+            "--serve",
+            link,
+            "--protocol",
+            protocol,
+            "--rate",
+            str(rate),
+            "--duration",
+            str(seconds),
+            "--start-delay",
+            "2",
+            "--quiet",
+        ),
+        stderr=subprocess.DEVNULL,
+    )
     while not os.path.lexists(link):
         time.sleep(0.02)
     out = os.path.join(work, "out.csv")
     t0 = time.monotonic()
-    cap = subprocess.Popen(_imutool("capture", "serial", link, "--protocol", protocol, "-o", out, "--duration",
-                                    str(seconds + 3.5), "--json", "--status", "0"), stdout=subprocess.PIPE, text=True)
+    cap = subprocess.Popen(
+        _imutool(
+            "capture",
+            "serial",
+            link,
+            "--protocol",
+            protocol,
+            "-o",
+            out,
+            "--duration",
+            str(seconds + 3.5),
+            "--json",
+            "--status",
+            "0",
+        ),
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     stdout = cap.stdout.read()
     _, _, usage = os.wait4(cap.pid, 0)  # the capture process alone (the simulator is another child)
     wall = time.monotonic() - t0
@@ -45,10 +75,16 @@ def measure(protocol: str, rate: float, seconds: float) -> dict:
     cpu = usage.ru_utime + usage.ru_stime
     summary = json.loads(stdout)
     frames = summary["frames"]
-    return {"protocol": protocol, "frames": frames, "frames_per_s_streamed": rate,
-            "capture_cpu_s": round(cpu, 2), "streaming_s": seconds,
-            "cpu_share_of_one_core": round(cpu / wall, 3), "errors": summary["errors"],
-            "dropped": summary["dropped"]}
+    return {
+        "protocol": protocol,
+        "frames": frames,
+        "frames_per_s_streamed": rate,
+        "capture_cpu_s": round(cpu, 2),
+        "streaming_s": seconds,
+        "cpu_share_of_one_core": round(cpu / wall, 3),
+        "errors": summary["errors"],
+        "dropped": summary["dropped"],
+    }
 
 
 def sentence_timings(number: int = 2000, repeat: int = 15) -> None:
@@ -57,12 +93,19 @@ def sentence_timings(number: int = 2000, repeat: int = 15) -> None:
 
     from formats import nmea
 
-    lines = {"HDT": nmea.hdt_sentence(123.4), "THS": nmea.ths_sentence(123.4), "XDR (roll + pitch)":
-             nmea.xdr_roll_pitch(3.2, -1.5), "HDG": nmea.hdg_sentence(120.3, 1.2, -3.4), "ROT": nmea.rot_sentence(-3.2),
-             "PASHR": nmea.pashr_sentence(3600.0, 12.0, 1.0, 2.0, 0.3), "HRM": nmea.hrm_sentence(1.5, 8, 3, 4, True)}
+    lines = {
+        "HDT": nmea.hdt_sentence(123.4),
+        "THS": nmea.ths_sentence(123.4),
+        "XDR (roll + pitch)": nmea.xdr_roll_pitch(3.2, -1.5),
+        "HDG": nmea.hdg_sentence(120.3, 1.2, -3.4),
+        "ROT": nmea.rot_sentence(-3.2),
+        "PASHR": nmea.pashr_sentence(3600.0, 12.0, 1.0, 2.0, 0.3),
+        "HRM": nmea.hrm_sentence(1.5, 8, 3, 4, True),
+    }
     print(f"load average {os.getloadavg()[0]:.2f}")
     print("| sentence | `parse_sentence` + `decode` (µs) | `decode_fast` (µs) |\n|---|---:|---:|")
     for name, line in lines.items():
+
         def full_path(line: str = line) -> dict:
             return nmea.decode(nmea.parse_sentence(line))
 
@@ -82,15 +125,21 @@ def main() -> None:
     if args.sentences:
         sentence_timings()
         return
-    print(f"{'protocol':15s} {'frames':>8s} {'rate/s':>8s} {'CPU s':>7s} {'core %':>7s} {'errors':>6s} {'drops':>6s}"
-          f"  load avg (1 min, before → after)", flush=True)
+    print(
+        f"{'protocol':15s} {'frames':>8s} {'rate/s':>8s} {'CPU s':>7s} {'core %':>7s} {'errors':>6s} {'drops':>6s}"
+        f"  load avg (1 min, before → after)",
+        flush=True,
+    )
     for proto in args.protocol or PROTOCOLS:
         for _ in range(args.repeat):
             load0 = os.getloadavg()[0]
             r = measure(proto, args.rate, args.seconds)
-            print(f"{proto:15s} {r['frames']:8d} {r['frames_per_s_streamed']:8.0f} {r['capture_cpu_s']:7.2f} "
-                  f"{100 * r['cpu_share_of_one_core']:6.1f}% {r['errors']:6d} {r['dropped']:6d}"
-                  f"  {load0:.2f} → {os.getloadavg()[0]:.2f}", flush=True)
+            print(
+                f"{proto:15s} {r['frames']:8d} {r['frames_per_s_streamed']:8.0f} {r['capture_cpu_s']:7.2f} "
+                f"{100 * r['cpu_share_of_one_core']:6.1f}% {r['errors']:6d} {r['dropped']:6d}"
+                f"  {load0:.2f} → {os.getloadavg()[0]:.2f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -26,18 +26,45 @@ def _imutool(*args: str) -> list[str]:
     return [sys.executable, "-c", "from imutool.cli import main; main()", *args]
 
 
-def run_soak(duration: float = 60.0, rate: float = 500.0, replugs: int = 5, corrupt: float = 0.002,
-             kill: bool = True, workdir: str | None = None, protocol: str = "bridge") -> dict:
+def run_soak(
+    duration: float = 60.0,
+    rate: float = 500.0,
+    replugs: int = 5,
+    corrupt: float = 0.002,
+    kill: bool = True,
+    workdir: str | None = None,
+    protocol: str = "bridge",
+) -> dict:
     work = Path(workdir or tempfile.mkdtemp(prefix="imutool-soak-"))
     link = str(work / "port")
     out = work / "soak.csv"
     sent_log = work / "sent.json"
     server = subprocess.Popen(
-        _imutool("simulate", "--serve", link, "--protocol", protocol, "--rate", str(rate), "--duration", str(duration),
-                 "--corrupt", str(corrupt), "--replug-every", str(duration / (replugs + 1)), "--serve-log",
-                 str(sent_log), "--start-delay", "0.5", "--start-when", str(out.with_suffix(".events.jsonl")),
-                 "--quiet"),
-        stderr=subprocess.PIPE, text=True)
+        _imutool(
+            "simulate",
+            "--serve",
+            link,
+            "--protocol",
+            protocol,
+            "--rate",
+            str(rate),
+            "--duration",
+            str(duration),
+            "--corrupt",
+            str(corrupt),
+            "--replug-every",
+            str(duration / (replugs + 1)),
+            "--serve-log",
+            str(sent_log),
+            "--start-delay",
+            "0.5",
+            "--start-when",
+            str(out.with_suffix(".events.jsonl")),
+            "--quiet",
+        ),
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     for _ in range(200):
         if os.path.lexists(link):
             break
@@ -57,8 +84,12 @@ def run_soak(duration: float = 60.0, rate: float = 500.0, replugs: int = 5, corr
     capture.send_signal(signal.SIGTERM)
     capture.wait(timeout=30)
     cpu1 = os.times()
-    return verify(out, sent_log, killed_at is not None,
-                  cpu_s=(cpu1.children_user + cpu1.children_system) - (cpu0.children_user + cpu0.children_system))
+    return verify(
+        out,
+        sent_log,
+        killed_at is not None,
+        cpu_s=(cpu1.children_user + cpu1.children_system) - (cpu0.children_user + cpu0.children_system),
+    )
 
 
 def verify(out: Path, sent_log: Path, killed: bool, cpu_s: float = float("nan")) -> dict:
@@ -84,12 +115,20 @@ def verify(out: Path, sent_log: Path, killed: bool, cpu_s: float = float("nan"))
     tail = (last_id - first_id + 1) - (len(seq) + missing_total + before)
     silent = unreported + max(before, 0) + max(tail, 0)
     return {
-        "sent": sent["sent"], "received": int(len(seq)), "missing_reported": missing_total - unreported,
-        "missing_unreported": unreported, "lost_before_first_frame": before, "lost_after_last_frame": tail,
-        "silent_loss": silent, "corrupted_sent": len(sent["corrupted"]), "replugs": sent["reconnects"],
-        "killed_and_restarted": killed, "port_reopen_events": sum(e["event"] == "port_reopened" for e in events),
+        "sent": sent["sent"],
+        "received": int(len(seq)),
+        "missing_reported": missing_total - unreported,
+        "missing_unreported": unreported,
+        "lost_before_first_frame": before,
+        "lost_after_last_frame": tail,
+        "silent_loss": silent,
+        "corrupted_sent": len(sent["corrupted"]),
+        "replugs": sent["reconnects"],
+        "killed_and_restarted": killed,
+        "port_reopen_events": sum(e["event"] == "port_reopened" for e in events),
         "restarts_resumed": sum(e["event"] == "resumed" for e in events),
-        "rows_skipped_by_reader": int(rec.meta.get("skipped_rows", 0)), "capture_cpu_s": round(cpu_s, 2),
+        "rows_skipped_by_reader": int(rec.meta.get("skipped_rows", 0)),
+        "capture_cpu_s": round(cpu_s, 2),
     }
 
 

@@ -43,10 +43,10 @@ def row(name: str, rec: Recording, lever: np.ndarray | None) -> str:
         factor = k if not isinstance(k, str) else np.where(np.arange(3) == "xyz".index(k), -1.0, 1.0)
         _, s = ekf_recording(scaled(rec, factor), lever_arm=lever)
         c = s["gyro_scale_check"]
-        found = (f"{c['reversed_axes']} reversed" if "reversed_axes" in c else
-                 f"{c.get('scale', float('nan')):.2f}")
-        cells.append(f"{found} / {c.get('discrepancy_deg', float('nan')):.1f}°"
-                     + (" **warned**" if c.get("flagged") else ""))
+        found = f"{c['reversed_axes']} reversed" if "reversed_axes" in c else f"{c.get('scale', float('nan')):.2f}"
+        cells.append(
+            f"{found} / {c.get('discrepancy_deg', float('nan')):.1f}°" + (" **warned**" if c.get("flagged") else "")
+        )
     return f"| {name} | " + " | ".join(cells) + " |"
 
 
@@ -54,21 +54,29 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sim-only", action="store_true")
     args = ap.parse_args()
-    print("Scale found ŝ (or the axes found reversed) / RMS discrepancy it removes (the gyro's rates × the factor in "
-          "the header, or one axis reversed):")
-    print("| recording | " + " | ".join([f"gyro × {k:g}" for k in FACTORS] + [f"{a} reversed" for a in REVERSED])
-          + " |")
+    print(
+        "Scale found ŝ (or the axes found reversed) / RMS discrepancy it removes (the gyro's rates × the factor in "
+        "the header, or one axis reversed):"
+    )
+    print(
+        "| recording | " + " | ".join([f"gyro × {k:g}" for k in FACTORS] + [f"{a} reversed" for a in REVERSED]) + " |"
+    )
     print("|---|" + "---|" * (len(FACTORS) + len(REVERSED)))
     if not args.sim_only and BROAD.is_dir():
         for f in sorted(BROAD.glob("*.csv")):
             print(row(f.stem, read(f), None), flush=True)
-    for name, seed, kw, lever in (("ship-roll", 7, {}, False), ("ship-roll", 2, {}, False),
-                                  ("ship-at-sea", 0, {}, True), ("ship-at-sea", 3, {"turn_start": 100}, True),
-                                  ("ship-at-sea", 3, {"turn_start": 100}, False)):
+    for name, seed, kw, lever in (
+        ("ship-roll", 7, {}, False),
+        ("ship-roll", 2, {}, False),
+        ("ship-at-sea", 0, {}, True),
+        ("ship-at-sea", 3, {"turn_start": 100}, True),
+        ("ship-at-sea", 3, {"turn_start": 100}, False),
+    ):
         rec = simulate(name, duration=300, seed=seed, **kw)
         arm = np.array(rec.meta["lever_arm_m"]) if lever else None
-        label = f"{name} seed {seed}" + (", lever arm + SOG/COG" if lever else
-                                         (", SOG/COG, no lever arm given" if "sog" in rec.channels else ""))
+        label = f"{name} seed {seed}" + (
+            ", lever arm + SOG/COG" if lever else (", SOG/COG, no lever arm given" if "sog" in rec.channels else "")
+        )
         print(row(label, rec, arm), flush=True)
     print(row("walk seed 1 (a foot in gait)", simulate("walk", duration=100, seed=1), None), flush=True)
     rec = simulate("ship-roll", duration=600, seed=1)
@@ -79,8 +87,10 @@ def main() -> None:
 
     t0 = time.perf_counter()
     run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"])
-    print(f"\ncost: ekf_recording with the check {with_check:.2f} s, the filter alone {time.perf_counter() - t0:.2f} s "
-          f"({len(rec)} samples)")
+    print(
+        f"\ncost: ekf_recording with the check {with_check:.2f} s, the filter alone {time.perf_counter() - t0:.2f} s "
+        f"({len(rec)} samples)"
+    )
 
 
 if __name__ == "__main__":

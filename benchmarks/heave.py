@@ -24,8 +24,12 @@ TP = (5.0, 7.0, 9.0, 12.0, 15.0)
 DURATION = 600.0 if QUICK else 1200.0
 RATE = 10.0
 # parameter grid of the real-time corrected-integrator bank (order, pole pattern, corner / tracked frequency)
-CONFIGS = [(n, shape, r) for n in (5, 6, 7) for shape in ("butterworth", "binomial")
-           for r in ((0.2, 0.25) if QUICK else (0.15, 0.2, 0.25, 0.3))]
+CONFIGS = [
+    (n, shape, r)
+    for n in (5, 6, 7)
+    for shape in ("butterworth", "binomial")
+    for r in ((0.2, 0.25) if QUICK else (0.15, 0.2, 0.25, 0.3))
+]
 
 
 def grid() -> list[dict]:
@@ -51,8 +55,9 @@ def tuning_table(data: list[dict]) -> None:
     scores = {}
     for cfg in CONFIGS:
         n, shape, r = cfg
-        scores[cfg] = [rms_pct_hs(H.estimate_heave(d["t"], d["a"], order=n, shape=shape, cutoff_ratio=r), d)
-                       for d in data]
+        scores[cfg] = [
+            rms_pct_hs(H.estimate_heave(d["t"], d["a"], order=n, shape=shape, cutoff_ratio=r), d) for d in data
+        ]
     short = [i for i, d in enumerate(data) if d["tp"] <= 9]
     long_ = [i for i, d in enumerate(data) if d["tp"] >= 12]
 
@@ -63,29 +68,43 @@ def tuning_table(data: list[dict]) -> None:
     print("| order | poles | corner / f | worst Tp ≤ 9 s | worst Tp ≥ 12 s | worst all | mean all |")
     print("|---|---|---|---|---|---|---|")
     for cfg in CONFIGS:
-        print(f"| {cfg[0]} | {cfg[1]} | {cfg[2]:g} | {worst(cfg, short):.2f} | {worst(cfg, long_):.2f} | "
-              f"{max(scores[cfg]):.2f} | {np.mean(scores[cfg]):.2f} |")
-    print("\n**Hold-out** (choose the configuration with the smallest worst case on one part, score it on the "
-          "other):\n")
+        print(
+            f"| {cfg[0]} | {cfg[1]} | {cfg[2]:g} | {worst(cfg, short):.2f} | {worst(cfg, long_):.2f} | "
+            f"{max(scores[cfg]):.2f} | {np.mean(scores[cfg]):.2f} |"
+        )
+    print(
+        "\n**Hold-out** (choose the configuration with the smallest worst case on one part, score it on the other):\n"
+    )
     print("| chosen on | chosen | worst on that part | scored on | worst there | mean there |")
     print("|---|---|---|---|---|---|")
-    for name, tr, te, tname in (("Tp ≤ 9 s", short, long_, "Tp ≥ 12 s"), ("Tp ≥ 12 s", long_, short, "Tp ≤ 9 s"),
-                                ("all", list(range(len(data))), list(range(len(data))), "all")):
+    for name, tr, te, tname in (
+        ("Tp ≤ 9 s", short, long_, "Tp ≥ 12 s"),
+        ("Tp ≥ 12 s", long_, short, "Tp ≤ 9 s"),
+        ("all", list(range(len(data))), list(range(len(data))), "all"),
+    ):
         best = min(CONFIGS, key=lambda c, tr=tr: worst(c, tr))
-        print(f"| {name} | {best[0]}, {best[1]}, {best[2]:g} | {worst(best, tr):.2f} % | {tname} | "
-              f"{worst(best, te):.2f} % | {np.mean([scores[best][i] for i in te]):.2f} % |")
+        print(
+            f"| {name} | {best[0]}, {best[1]}, {best[2]:g} | {worst(best, tr):.2f} % | {tname} | "
+            f"{worst(best, te):.2f} % | {np.mean([scores[best][i] for i in te]):.2f} % |"
+        )
     d = (H.RT_ORDER, H.RT_SHAPE, H.RT_RATIO)
     if d in scores:
-        print(f"\nDefault ({d[0]}, {d[1]}, {d[2]:g}): worst {max(scores[d]):.2f} % of Hs, mean "
-              f"{np.mean(scores[d]):.2f} %.")
+        print(
+            f"\nDefault ({d[0]}, {d[1]}, {d[2]:g}): worst {max(scores[d]):.2f} % of Hs, mean "
+            f"{np.mean(scores[d]):.2f} %."
+        )
 
 
 def sea_table(data: list[dict]) -> None:
-    print(f"\n**Sea-state grid** ({DURATION:g} s at {RATE:g} Hz per state; settled samples; readings from "
-          "imutool.metrics.heave_accuracy: S = RMS ≤ max(5 cm, 5 % of significant heave), A = RMS ≤ max(5 cm, "
-          "5 % of significant amplitude), P = |error| ≤ max(5 cm, 5 % of |heave|) on ≥ 95 % of samples):\n")
-    print("| Hs m | Tp s | sig. heave m | settle s | delayed RMS | real-time RMS | % of Hs | S | A | P (within) "
-          "| max |err| | previous real-time |")
+    print(
+        f"\n**Sea-state grid** ({DURATION:g} s at {RATE:g} Hz per state; settled samples; readings from "
+        "imutool.metrics.heave_accuracy: S = RMS ≤ max(5 cm, 5 % of significant heave), A = RMS ≤ max(5 cm, "
+        "5 % of significant amplitude), P = |error| ≤ max(5 cm, 5 % of |heave|) on ≥ 95 % of samples):\n"
+    )
+    print(
+        "| Hs m | Tp s | sig. heave m | settle s | delayed RMS | real-time RMS | % of Hs | S | A | P (within) "
+        "| max |err| | previous real-time |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     pct, settle, dl, prev = [], [], [], []
     passes = {"significant": 0, "amplitude": 0, "per_sample": 0}
@@ -109,16 +128,23 @@ def sea_table(data: list[dict]) -> None:
         def yn(k, acc=acc):
             return "pass" if acc[k]["pass"] else "FAIL"
 
-        print(f"| {d['hs']:g} | {d['tp']:g} | {acc['hs_ref_m']:.2f} | {rt.summary['settle_time_s']:.0f} | "
-              f"{100 * ed:.1f} cm | {100 * acc['rmse_m']:.1f} cm | {p:.2f} % | {yn('significant')} | "
-              f"{yn('amplitude')} | {yn('per_sample')} ({100 * acc['per_sample']['fraction_within']:.1f} %) | "
-              f"{100 * emax:.1f} cm | {po:.2f} % |", flush=True)
+        print(
+            f"| {d['hs']:g} | {d['tp']:g} | {acc['hs_ref_m']:.2f} | {rt.summary['settle_time_s']:.0f} | "
+            f"{100 * ed:.1f} cm | {100 * acc['rmse_m']:.1f} cm | {p:.2f} % | {yn('significant')} | "
+            f"{yn('amplitude')} | {yn('per_sample')} ({100 * acc['per_sample']['fraction_within']:.1f} %) | "
+            f"{100 * emax:.1f} cm | {po:.2f} % |",
+            flush=True,
+        )
     n = len(data)
-    print(f"| **mean** | | | {np.mean(settle):.0f} | {np.mean(dl):.2f} % | | {np.mean(pct):.2f} % | "
-          f"{passes['significant']}/{n} | {passes['amplitude']}/{n} | {passes['per_sample']}/{n} | | "
-          f"{np.mean(prev):.2f} % |")
-    print(f"| **worst** | | | {np.max(settle):.0f} | {np.max(dl):.2f} % | | {np.max(pct):.2f} % | | | | | "
-          f"{np.max(prev):.2f} % |")
+    print(
+        f"| **mean** | | | {np.mean(settle):.0f} | {np.mean(dl):.2f} % | | {np.mean(pct):.2f} % | "
+        f"{passes['significant']}/{n} | {passes['amplitude']}/{n} | {passes['per_sample']}/{n} | | "
+        f"{np.mean(prev):.2f} % |"
+    )
+    print(
+        f"| **worst** | | | {np.max(settle):.0f} | {np.max(dl):.2f} % | | {np.max(pct):.2f} % | | | | | "
+        f"{np.max(prev):.2f} % |"
+    )
 
 
 def platform_table() -> None:
@@ -132,14 +158,18 @@ def platform_table() -> None:
         e, _ = H.heave_recording(rec, method="envelope")
         m = (p["settled"] > 0.5) & (e["settled"] > 0.5) & (r["settled"] > 0.5)
         ep, er, ee = (float(np.sqrt(np.mean((x["heave"] - ref)[m] ** 2))) for x in (p, r, e))
-        print(f"| {amp} | {1000 * ep:.2f} mm | {1000 * er:.2f} mm | {1000 * ee:.2f} mm | "
-              f"{100 * (1 - ep / ee):+.0f} % |", flush=True)
+        print(
+            f"| {amp} | {1000 * ep:.2f} mm | {1000 * er:.2f} mm | {1000 * ee:.2f} mm | {100 * (1 - ep / ee):+.0f} % |",
+            flush=True,
+        )
 
 
 def ntnu_table() -> None:
     root = Path(__file__).resolve().parents[2] / "shared" / "data" / "ntnu_waves"
-    print("\n| file | camera lag s | zero-phase BP2 baseline (same samples) | delayed | real-time (settled) "
-          "| previous real-time (same samples) | BP2 on real-time samples | settled from |")
+    print(
+        "\n| file | camera lag s | zero-phase BP2 baseline (same samples) | delayed | real-time (settled) "
+        "| previous real-time (same samples) | BP2 on real-time samples | settled from |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for fn in ("3012_1.csv", "4061_1.csv"):
         p = root / fn
@@ -164,8 +194,11 @@ def ntnu_table() -> None:
         _, er = err(out["heave"], mr)
         _, ep = err(prev["heave"], mr)
         _, ebr = err(base, mr)
-        print(f"| {fn} | {lag:+.3f} | {1000 * eb:.2f} mm | {1000 * ed:.2f} mm | {1000 * er:.2f} mm | "
-              f"{1000 * ep:.2f} mm | {1000 * ebr:.2f} mm | {summ['settle_time_s']:.1f} s |", flush=True)
+        print(
+            f"| {fn} | {lag:+.3f} | {1000 * eb:.2f} mm | {1000 * ed:.2f} mm | {1000 * er:.2f} mm | "
+            f"{1000 * ep:.2f} mm | {1000 * ebr:.2f} mm | {summ['settle_time_s']:.1f} s |",
+            flush=True,
+        )
 
 
 def speed() -> None:
@@ -177,8 +210,7 @@ def speed() -> None:
     for method in ("bandpass", "realtime", "harmonic", "paper"):
         t0 = time.perf_counter()
         H.estimate_heave(t, a, method=method)
-        print(f"speed: {method}: 24 h at 200 Hz ({len(a):,} samples) in {time.perf_counter() - t0:.1f} s",
-              flush=True)
+        print(f"speed: {method}: 24 h at 200 Hz ({len(a):,} samples) in {time.perf_counter() - t0:.1f} s", flush=True)
 
 
 if __name__ == "__main__":

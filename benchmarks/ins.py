@@ -38,11 +38,16 @@ def main() -> None:
         t0, c0 = time.perf_counter(), time.process_time()
         res = detect_zvi(t, gyro, accel, det)
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
-        print(f"zvi {det:13s}: wall {dt:6.2f} s, cpu {dc:6.2f} s  {n_target / dc / 1e6:6.2f} M samples/s (cpu)  "
-              f"({len(res.intervals)} intervals)")
+        print(
+            f"zvi {det:13s}: wall {dt:6.2f} s, cpu {dc:6.2f} s  {n_target / dc / 1e6:6.2f} M samples/s (cpu)  "
+            f"({len(res.intervals)} intervals)"
+        )
     flags = detect_zvi(t, gyro, accel, "shoe").flags
-    for label, cfg in (("ins zupt", InsConfig()), ("ins zupt+height", InsConfig(height_update=True)),
-                       ("ins no-zupt", InsConfig(zupt=False))):
+    for label, cfg in (
+        ("ins zupt", InsConfig()),
+        ("ins zupt+height", InsConfig(height_update=True)),
+        ("ins no-zupt", InsConfig(zupt=False)),
+    ):
         t0, c0 = time.perf_counter(), time.process_time()
         run_ins(t, gyro, accel, flags, cfg)
         dt, dc = time.perf_counter() - t0, time.process_time() - c0

@@ -66,8 +66,13 @@ def make_recording(rows: int, kind: str = "sensor", seed: int = 0) -> Recording:
 def bench_csv_write(rec: Recording, path: str) -> dict:
     write_csv(rec.select(slice(0, 100)), path)  # warm-up (kernel compile/cache load)
     cpu, wall, _ = _timed(lambda: write_csv(rec, path))
-    return {"rows": len(rec), "cpu_s": cpu, "wall_s": wall, "rows_per_s": len(rec) / cpu,
-            "mb": os.path.getsize(path) / 1e6}
+    return {
+        "rows": len(rec),
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "rows_per_s": len(rec) / cpu,
+        "mb": os.path.getsize(path) / 1e6,
+    }
 
 
 def bench_csv_read(path: str, rows: int) -> dict:
@@ -113,17 +118,25 @@ def bench_stream_convert(rows: int, kind: str, tmpdir: str) -> dict:
     src = os.path.join(tmpdir, "big.csv")
     dst = os.path.join(tmpdir, "big_copy.csv")
     _write_big(src, rows, kind)
-    code = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import resource, time; "
-            f"from benchmarks.io import _convert_child; c = time.process_time(); "
-            f"_convert_child({src!r}, {dst!r}); "
-            f"hwm = [ln.split()[1] for ln in open('/proc/self/status') if ln.startswith('VmHWM')]; "
-            f"print(time.process_time() - c, hwm[0] if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+    code = (
+        f"import sys; sys.path.insert(0, {str(ROOT)!r}); import resource, time; "
+        f"from benchmarks.io import _convert_child; c = time.process_time(); "
+        f"_convert_child({src!r}, {dst!r}); "
+        f"hwm = [ln.split()[1] for ln in open('/proc/self/status') if ln.startswith('VmHWM')]; "
+        f"print(time.process_time() - c, hwm[0] if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
+    )
     w0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     wall = time.perf_counter() - w0
     cpu, rss_kb = float(out[0]), int(out[1])
-    return {"rows": rows, "file_gb": os.path.getsize(src) / 1e9, "cpu_s": cpu, "wall_s": wall,
-            "rows_per_s": rows / cpu, "peak_rss_mb": rss_kb / 1024.0}
+    return {
+        "rows": rows,
+        "file_gb": os.path.getsize(src) / 1e9,
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "rows_per_s": rows / cpu,
+        "peak_rss_mb": rss_kb / 1024.0,
+    }
 
 
 # -- ROS bags ---------------------------------------------------------------------------------------------------
@@ -175,10 +188,15 @@ def bench_bag_read(n_messages: int = 200_000, repeat: int = 3) -> dict[str, dict
                 for typ, raw in raws:
                     r.deserialize(raw, typ)
                 t_des = time.process_time() - c0
-            results[label] = {"messages": n_messages, "write_s": t_write, "read_s": best,
-                              "read_msgs_per_s": n_messages / best, "read_cpu_s": best_cpu,
-                              "read_msgs_per_cpu_s": n_messages / best_cpu,
-                              "rosbags_deserialise_msgs_per_cpu_s": k / t_des}
+            results[label] = {
+                "messages": n_messages,
+                "write_s": t_write,
+                "read_s": best,
+                "read_msgs_per_s": n_messages / best,
+                "read_cpu_s": best_cpu,
+                "read_msgs_per_cpu_s": n_messages / best_cpu,
+                "rosbags_deserialise_msgs_per_cpu_s": k / t_des,
+            }
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return results
@@ -198,21 +216,29 @@ def _small_bag(folder: str) -> str:
 def print_bag(results: dict[str, dict[str, float]]) -> None:
     print("ROS bag read (sensor_msgs/Imu, formats.rosbag.read_bag; best of repeats; CPU = process time, the fair")
     print("figure on a shared machine)")
-    print("| format | messages | read wall s | read CPU s | msgs/s (wall) | msgs/s (CPU) | rosbags deserialise "
-          "msgs/s (CPU) | write s |")
+    print(
+        "| format | messages | read wall s | read CPU s | msgs/s (wall) | msgs/s (CPU) | rosbags deserialise "
+        "msgs/s (CPU) | write s |"
+    )
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for label, r in results.items():
-        print(f"| {label} | {r['messages']:,} | {r['read_s']:.2f} | {r['read_cpu_s']:.2f} | "
-              f"{r['read_msgs_per_s']:,.0f} | {r['read_msgs_per_cpu_s']:,.0f} | "
-              f"{r['rosbags_deserialise_msgs_per_cpu_s']:,.0f} | {r['write_s']:.1f} |")
+        print(
+            f"| {label} | {r['messages']:,} | {r['read_s']:.2f} | {r['read_cpu_s']:.2f} | "
+            f"{r['read_msgs_per_s']:,.0f} | {r['read_msgs_per_cpu_s']:,.0f} | "
+            f"{r['rosbags_deserialise_msgs_per_cpu_s']:,.0f} | {r['write_s']:.1f} |"
+        )
 
 
 def run_csv(rows: int, baseline_rows: int, stream: bool, stream_rows: int) -> None:
     with tempfile.TemporaryDirectory(prefix="imutool-bench-") as tmp:
-        print(f"CSV, {rows} rows x 10 columns; rows/s per wall-clock second and per CPU second (the kernels run in"
-              f" up to {_threads()} threads, so CPU time sums the threads)")
-        print("| data | write rows/s wall | write rows/s CPU | read rows/s wall | read rows/s CPU | file MB | "
-              "numpy.savetxt rows/s CPU | numpy.loadtxt rows/s CPU |")
+        print(
+            f"CSV, {rows} rows x 10 columns; rows/s per wall-clock second and per CPU second (the kernels run in"
+            f" up to {_threads()} threads, so CPU time sums the threads)"
+        )
+        print(
+            "| data | write rows/s wall | write rows/s CPU | read rows/s wall | read rows/s CPU | file MB | "
+            "numpy.savetxt rows/s CPU | numpy.loadtxt rows/s CPU |"
+        )
         print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         for kind in ("sensor", "full"):
             rec = make_recording(rows, kind)
@@ -220,13 +246,17 @@ def run_csv(rows: int, baseline_rows: int, stream: bool, stream_rows: int) -> No
             w = bench_csv_write(rec, path)
             r = bench_csv_read(path, rows)
             b = bench_numpy_baselines(rec, path, min(baseline_rows, rows))
-            print(f"| {kind} | {rows / w['wall_s']:,.0f} | {w['rows_per_s']:,.0f} | {rows / r['wall_s']:,.0f} | "
-                  f"{r['rows_per_s']:,.0f} | {w['mb']:.0f} | {b['savetxt_rows_per_s']:,.0f} | "
-                  f"{b['loadtxt_rows_per_s']:,.0f} |")
+            print(
+                f"| {kind} | {rows / w['wall_s']:,.0f} | {w['rows_per_s']:,.0f} | {rows / r['wall_s']:,.0f} | "
+                f"{r['rows_per_s']:,.0f} | {w['mb']:.0f} | {b['savetxt_rows_per_s']:,.0f} | "
+                f"{b['loadtxt_rows_per_s']:,.0f} |"
+            )
         if stream:
             s = bench_stream_convert(stream_rows, "sensor", tmp)
-            print(f"streamed CSV->CSV conversion, {s['rows']:,} rows ({s['file_gb']:.2f} GB): "
-                  f"{s['rows_per_s']:,.0f} rows/s CPU, wall {s['wall_s']:.0f} s, peak RSS {s['peak_rss_mb']:.0f} MB")
+            print(
+                f"streamed CSV->CSV conversion, {s['rows']:,} rows ({s['file_gb']:.2f} GB): "
+                f"{s['rows_per_s']:,.0f} rows/s CPU, wall {s['wall_s']:.0f} s, peak RSS {s['peak_rss_mb']:.0f} MB"
+            )
 
 
 def main(argv: list[str] | None = None) -> None:

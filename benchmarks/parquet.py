@@ -78,11 +78,13 @@ def compare(rows: int, repeat: int, tmp: Path) -> None:
         res.append((what, op, cpu, wall))
 
     row("imutool write_parquet", "write", lambda: write_parquet(rec, p_imu))
-    row("pyarrow pq.write_table", "write",
-        lambda: pq.write_table(pa.table({k: pa.array(v) for k, v in cols.items()}), p_pa))
+    row(
+        "pyarrow pq.write_table",
+        "write",
+        lambda: pq.write_table(pa.table({k: pa.array(v) for k, v in cols.items()}), p_pa),
+    )
     row("imutool read_parquet", "read", lambda: read_parquet(p_imu))
-    row("pyarrow pq.read_table → numpy", "read",
-        lambda: [c.to_numpy() for c in pq.read_table(p_pa).columns])
+    row("pyarrow pq.read_table → numpy", "read", lambda: [c.to_numpy() for c in pq.read_table(p_pa).columns])
     try:
         import polars as pl
 
@@ -93,8 +95,10 @@ def compare(rows: int, repeat: int, tmp: Path) -> None:
         print("polars not installed (pip install 'imutool[bench]'): skipped")
     row("imutool write_csv (for scale)", "write", lambda: write_csv(rec, str(p_csv)))
     row("imutool read_csv (for scale)", "read", lambda: read_csv(str(p_csv)))
-    print(f"\n{rows:,} rows x 10 float64 columns ({mb:.0f} MB in memory); best of {repeat}; "
-          f"Parquet {p_imu.stat().st_size / 1e6:.0f} MB (snappy), CSV {p_csv.stat().st_size / 1e6:.0f} MB")
+    print(
+        f"\n{rows:,} rows x 10 float64 columns ({mb:.0f} MB in memory); best of {repeat}; "
+        f"Parquet {p_imu.stat().st_size / 1e6:.0f} MB (snappy), CSV {p_csv.stat().st_size / 1e6:.0f} MB"
+    )
     print(f"{'':34s} {'op':5s} {'CPU s':>7s} {'wall s':>7s} {'M rows/s (CPU)':>15s}")
     for what, op, cpu, wall in res:
         print(f"{what:34s} {op:5s} {cpu:7.3f} {wall:7.3f} {rows / max(cpu, 1e-9) / 1e6:15.1f}")
@@ -137,16 +141,28 @@ def stream(rows: int, chunk_rows: int, tmp: Path) -> None:
     src = tmp / "big.parquet"
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-c", _MAKE, str(src), str(rows)], check=True, env=env)
-    print(f"\nstreamed: {rows:,} rows x 10 columns ({rows * 80 / 2**20:.0f} MiB as float64), Parquet "
-          f"{src.stat().st_size / 1e6:.0f} MB written by ParquetWriter in {time.perf_counter() - t0:.1f} s wall; "
-          f"chunks of {chunk_rows:,} rows")
-    for label, dst in (("iter_parquet (read only)", "-"), ("Parquet -> Parquet", str(tmp / "out.parquet")),
-                       ("Parquet -> CSV", str(tmp / "out.csv"))):
-        r = subprocess.run([sys.executable, "-c", _STREAM, str(src), dst, str(chunk_rows)], check=True, env=env,
-                           capture_output=True, text=True)
+    print(
+        f"\nstreamed: {rows:,} rows x 10 columns ({rows * 80 / 2**20:.0f} MiB as float64), Parquet "
+        f"{src.stat().st_size / 1e6:.0f} MB written by ParquetWriter in {time.perf_counter() - t0:.1f} s wall; "
+        f"chunks of {chunk_rows:,} rows"
+    )
+    for label, dst in (
+        ("iter_parquet (read only)", "-"),
+        ("Parquet -> Parquet", str(tmp / "out.parquet")),
+        ("Parquet -> CSV", str(tmp / "out.csv")),
+    ):
+        r = subprocess.run(
+            [sys.executable, "-c", _STREAM, str(src), dst, str(chunk_rows)],
+            check=True,
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         n, wall, cpu, base, peak = r.stdout.split()
-        print(f"  {label:26s} {int(n) / float(cpu) / 1e6:6.2f} M rows/s CPU ({float(wall):6.1f} s wall)  peak RSS "
-              f"{float(peak):6.0f} MiB (after imports {float(base):4.0f} MiB)")
+        print(
+            f"  {label:26s} {int(n) / float(cpu) / 1e6:6.2f} M rows/s CPU ({float(wall):6.1f} s wall)  peak RSS "
+            f"{float(peak):6.0f} MiB (after imports {float(base):4.0f} MiB)"
+        )
         if dst != "-":
             os.unlink(dst)
     print(f"  (this process: peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB)")
@@ -178,20 +194,31 @@ def filter_compare(hours: float, tmp: Path) -> None:
         write(rec, tmp / f"rec{ext}")
     del rec
     mb = {e: (tmp / f"rec{e}").stat().st_size / 1e6 for e in (".csv", ".parquet")}
-    print(f"\n`imutool filter` on {hours:g} h at 200 Hz ({n:,} rows, static scenario, 9-axis + truth columns); "
-          f"CSV {mb['.csv']:.0f} MB, Parquet {mb['.parquet']:.0f} MB")
+    print(
+        f"\n`imutool filter` on {hours:g} h at 200 Hz ({n:,} rows, static scenario, 9-axis + truth columns); "
+        f"CSV {mb['.csv']:.0f} MB, Parquet {mb['.parquet']:.0f} MB"
+    )
     # warm-up (numba cache), then the timed runs
-    subprocess.run([sys.executable, "-c", _FILTER, "filter", str(tmp / "rec.parquet"), "-o", str(tmp / "warm.csv"),
-                    "-q"], env=env, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-c", _FILTER, "filter", str(tmp / "rec.parquet"), "-o", str(tmp / "warm.csv"), "-q"],
+        env=env,
+        capture_output=True,
+    )
     for src, dst in (("rec.csv", "est.csv"), ("rec.parquet", "est.parquet"), ("rec.parquet", "est2.csv")):
-        r = subprocess.run([sys.executable, "-c", _FILTER, "filter", str(tmp / src), "-o", str(tmp / dst), "-q"],
-                           env=env, capture_output=True, text=True)
+        r = subprocess.run(
+            [sys.executable, "-c", _FILTER, "filter", str(tmp / src), "-o", str(tmp / dst), "-q"],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if r.returncode:
             print(f"  {src} -> {dst}: failed: {r.stderr.strip()[-300:]}")
             continue
         m = json.loads(r.stderr.strip().splitlines()[-1])
-        print(f"  {src:12s} -> {dst:12s} {m['wall']:6.1f} s wall  {m['cpu']:6.1f} s CPU  "
-              f"peak RSS {m['peak_mib']:6.0f} MiB")
+        print(
+            f"  {src:12s} -> {dst:12s} {m['wall']:6.1f} s wall  {m['cpu']:6.1f} s CPU  "
+            f"peak RSS {m['peak_mib']:6.0f} MiB"
+        )
 
 
 def build_day(rows: int, folder: Path, env: dict[str, str]) -> tuple[Path, Path]:
@@ -211,13 +238,20 @@ def build_day(rows: int, folder: Path, env: dict[str, str]) -> tuple[Path, Path]
             r.time = r.time + 3600.0 * i
             w.write(formats.Recording(r.time, {c: r[c] for c in ("gyro", "accel", "mag")}))
     t1 = time.perf_counter()
-    r = subprocess.run([sys.executable, "-c", _FILTER, "convert", str(csv), str(pq_path), "-q"], env=env,
-                       capture_output=True, text=True, check=True)
+    r = subprocess.run(
+        [sys.executable, "-c", _FILTER, "convert", str(csv), str(pq_path), "-q"],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     m = json.loads(r.stderr.strip().splitlines()[-1])
-    print(f"\n{rows:,} rows (ship-roll, {rows / 720_000:.2f} h at 200 Hz, gyro/accel/mag): CSV "
-          f"{csv.stat().st_size / 1e9:.2f} GB written in {t1 - t0:.0f} s; `imutool convert` CSV -> Parquet "
-          f"{m['wall']:.1f} s wall, {m['cpu']:.1f} s CPU, peak RSS {m['peak_mib']:.0f} MiB -> "
-          f"{pq_path.stat().st_size / 1e9:.2f} GB Parquet")
+    print(
+        f"\n{rows:,} rows (ship-roll, {rows / 720_000:.2f} h at 200 Hz, gyro/accel/mag): CSV "
+        f"{csv.stat().st_size / 1e9:.2f} GB written in {t1 - t0:.0f} s; `imutool convert` CSV -> Parquet "
+        f"{m['wall']:.1f} s wall, {m['cpu']:.1f} s CPU, peak RSS {m['peak_mib']:.0f} MiB -> "
+        f"{pq_path.stat().st_size / 1e9:.2f} GB Parquet"
+    )
     return csv, pq_path
 
 
@@ -227,12 +261,34 @@ def filter_day(rows: int, tmp: Path, repeat: int = 2) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     csv, pq_path = build_day(rows, tmp, env)
     os.sync()  # the freshly written files' dirty pages would otherwise be flushed during the first timed run
-    print(f"  in-memory size of the input arrays: {rows * 10 * 8 / 2**20:.0f} MiB (time + 9 axes, float64); of "
-          f"the estimate: {rows * 17 * 8 / 2**20:.0f} MiB (17 columns); best of {repeat}")
-    subprocess.run([sys.executable, "-c", _FILTER, "filter", str(pq_path), "-o", str(tmp / "warm.csv"), "-q",
-                    "--chunk-rows", "1000", "--stream-mb", "1e9"], env=env, capture_output=True)  # numba cache
-    cases = ((csv, "est.csv", []), (pq_path, "est.parquet", []), (pq_path, "est2.csv", []),
-             (pq_path, "est3.parquet", ["--chunk-rows", "100000"]))
+    print(
+        f"  in-memory size of the input arrays: {rows * 10 * 8 / 2**20:.0f} MiB (time + 9 axes, float64); of "
+        f"the estimate: {rows * 17 * 8 / 2**20:.0f} MiB (17 columns); best of {repeat}"
+    )
+    subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            _FILTER,
+            "filter",
+            str(pq_path),
+            "-o",
+            str(tmp / "warm.csv"),
+            "-q",
+            "--chunk-rows",
+            "1000",
+            "--stream-mb",
+            "1e9",
+        ],
+        env=env,
+        capture_output=True,
+    )  # numba cache
+    cases = (
+        (csv, "est.csv", []),
+        (pq_path, "est.parquet", []),
+        (pq_path, "est2.csv", []),
+        (pq_path, "est3.parquet", ["--chunk-rows", "100000"]),
+    )
     for src, dst, extra in cases:
         cmd = ["filter", str(src), "-o", str(tmp / dst), "-q", "--force", *extra]
         runs = []
@@ -247,9 +303,11 @@ def filter_day(rows: int, tmp: Path, repeat: int = 2) -> None:
         if not runs:
             continue
         m = min(runs, key=lambda x: x["wall"])
-        print(f"  imutool filter {src.name:11s} -o {dst:12s} {' '.join(extra):20s} {m['wall']:5.1f} s wall "
-              f"{m['cpu']:5.1f} s CPU  peak RSS {m['peak_mib']:5.0f} MiB  (load {m['load']:.1f}; output "
-              f"{(tmp / dst).stat().st_size / 1e9:.2f} GB)")
+        print(
+            f"  imutool filter {src.name:11s} -o {dst:12s} {' '.join(extra):20s} {m['wall']:5.1f} s wall "
+            f"{m['cpu']:5.1f} s CPU  peak RSS {m['peak_mib']:5.0f} MiB  (load {m['load']:.1f}; output "
+            f"{(tmp / dst).stat().st_size / 1e9:.2f} GB)"
+        )
         (tmp / dst).unlink()
 
 
@@ -259,12 +317,26 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--stream", type=int, default=0, metavar="ROWS", help="also stream a file of ROWS rows")
     ap.add_argument("--chunk-rows", type=int, default=500_000)
-    ap.add_argument("--filter-hours", type=float, default=0.0, metavar="H",
-                    help="also time `imutool filter` on H hours at 200 Hz as CSV and as Parquet")
-    ap.add_argument("--24h", dest="day", action="store_true",
-                    help="also time `imutool filter` on 24 h at 200 Hz (17.28 M rows) as CSV and as Parquet")
-    ap.add_argument("--day-rows", type=int, default=0, metavar="ROWS",
-                    help="the same on ROWS rows (e.g. 10000000); --24h is 17280000")
+    ap.add_argument(
+        "--filter-hours",
+        type=float,
+        default=0.0,
+        metavar="H",
+        help="also time `imutool filter` on H hours at 200 Hz as CSV and as Parquet",
+    )
+    ap.add_argument(
+        "--24h",
+        dest="day",
+        action="store_true",
+        help="also time `imutool filter` on 24 h at 200 Hz (17.28 M rows) as CSV and as Parquet",
+    )
+    ap.add_argument(
+        "--day-rows",
+        type=int,
+        default=0,
+        metavar="ROWS",
+        help="the same on ROWS rows (e.g. 10000000); --24h is 17280000",
+    )
     ap.add_argument("--tmp", default=None)
     a = ap.parse_args()
     day_rows = a.day_rows or (17_280_000 if a.day else 0)

@@ -30,8 +30,11 @@ def main() -> None:
             dropped_rows(n, n, {}, rec.meta)
             best["checks"] = min(best.get("checks", 1e9), t1 - t0)
             best["absurd-sample scan"] = min(best.get("absurd-sample scan", 1e9), t2 - t1)
-        print(f"{hours:>4.0f} h at 200 Hz ({n:,} rows): " + ", ".join(f"{k} {v * 1e3:.0f} ms" for k, v in best.items())
-              + f" (best of 3; warnings: {len(rep.warnings)})")
+        print(
+            f"{hours:>4.0f} h at 200 Hz ({n:,} rows): "
+            + ", ".join(f"{k} {v * 1e3:.0f} ms" for k, v in best.items())
+            + f" (best of 3; warnings: {len(rep.warnings)})"
+        )
 
 
 if __name__ == "__main__":

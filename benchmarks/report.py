@@ -1,6 +1,6 @@
 """Roll statistics accuracy/speed and evidence-report timing (prints figures; no assertions).
 
-    python benchmarks/report.py
+python benchmarks/report.py
 """
 
 from __future__ import annotations
@@ -52,8 +52,10 @@ def main() -> None:
             print(f"| {noise} | {fs:g} | {pe[0]:.3f} / {pe[1]:.3f} | {ae[0]:.3f} / {ae[1]:.3f} |")
     print("\nIrregular sea roll (JONSWAP-like, Tp 10 s), two good units at 1 Hz, 0.01° resolution, noise 0.02°/0.03°,")
     print("30 min per seed, seeds 1-4: reference maxima, judged periods, max |period error| of judged ones")
-    print("| roll σ (deg) | maxima | judged | max \\|period error\\| judged (s) "
-          "| max \\|error\\| if all paired cycles were judged (s) |")
+    print(
+        "| roll σ (deg) | maxima | judged | max \\|period error\\| judged (s) "
+        "| max \\|error\\| if all paired cycles were judged (s) |"
+    )
     print("|---|---|---|---|---|")
     from imutool.report.common import tol_period
     from imutool.report.simulate import sea_pair
@@ -85,8 +87,9 @@ def main() -> None:
     t0 = time.perf_counter()
     roll_stats(t, x)
     print(f"\nroll_stats, 1 h at 10 Hz ({t.size} samples): {time.perf_counter() - t0:.3f} s")
-    dut, ref, _ = inclinometer_test(offset_deg=0.2, scale=0.01, lag_s=0.02, noise_deg=0.05, ref_noise_deg=0.01,
-                                    lat_accel_ms2=1.0)
+    dut, ref, _ = inclinometer_test(
+        offset_deg=0.2, scale=0.01, lag_s=0.02, noise_deg=0.05, ref_noise_deg=0.01, lat_accel_ms2=1.0
+    )
     t0 = time.perf_counter()
     ev, plots = inclinometer_evidence(dut, ref)
     t1 = time.perf_counter()

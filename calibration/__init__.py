@@ -8,5 +8,12 @@ from .deviation import DeviationCard, fit_deviation
 from .file import Calibration, load_calibration, update_calibration
 from .magnetometer import MagFit, calibrate_sphere
 
-__all__ = ["Calibration", "DeviationCard", "MagFit", "calibrate_sphere", "fit_deviation", "load_calibration",
-           "update_calibration"]
+__all__ = [
+    "Calibration",
+    "DeviationCard",
+    "MagFit",
+    "calibrate_sphere",
+    "fit_deviation",
+    "load_calibration",
+    "update_calibration",
+]

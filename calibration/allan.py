@@ -50,8 +50,9 @@ def _round_m(m: int) -> int:
 
 
 @njit(cache=True)
-def _adev_axis(y: np.ndarray, dt: float, ms: np.ndarray, out: np.ndarray, theta: np.ndarray,
-               dec: np.ndarray) -> None:  # pragma: no cover - numba
+def _adev_axis(
+    y: np.ndarray, dt: float, ms: np.ndarray, out: np.ndarray, theta: np.ndarray, dec: np.ndarray
+) -> None:  # pragma: no cover - numba
     """Overlapping Allan deviation of one axis y (N,) for increasing cluster sizes ms into out (len ms).
 
     θ_k = dt Σ_{i<k} (y_i − ȳ) (mean removed: σ unchanged, θ stays small). Cluster sizes below 16 are summed
@@ -123,8 +124,9 @@ def tau_grid(n: int, dt: float, per_decade: int = 10) -> np.ndarray:
     return np.array([x for x in r if x <= mmax] or [1], dtype=np.int64)
 
 
-def allan_deviation(y: np.ndarray, rate_hz: float, per_decade: int = 10,
-                    m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def allan_deviation(
+    y: np.ndarray, rate_hz: float, per_decade: int = 10, m: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Overlapping Allan deviation of a rate signal y (N,) or (N,k). Returns (τ s, σ(τ) (len τ, k), n_eff).
 
     n_eff: number of independent clusters ≈ (N − 2m) / m, for the confidence of each point (σ relative
@@ -157,8 +159,9 @@ def allan_deviation(y: np.ndarray, rate_hz: float, per_decade: int = 10,
     return taus, (out[:, 0] if one else out), n_eff
 
 
-def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray,
-                    flicker_share: float = 0.25) -> dict[str, float | bool | str]:
+def fit_noise_terms(
+    taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray, flicker_share: float = 0.25
+) -> dict[str, float | bool | str]:
     """N (τ=1 line), B (min/0.664), K (τ=3 line) for one axis; plus what the minimum is and whether K is seen.
 
     ``B_kind``: ``"bias instability"`` when the fitted flat (flicker) term carries at least ``flicker_share`` of
@@ -169,25 +172,32 @@ def fit_noise_terms(taus: np.ndarray, adev: np.ndarray, n_eff: np.ndarray,
     the bound K ≤ min over τ of σ(τ) √(3/τ) (σ²(τ) ≥ K²τ/3 whatever the other noise), with σ(τ) raised by twice
     its estimation error 1/√(2 n_eff) so that the scatter of few long clusters does not push the bound below K.
     """
-    a2 = adev ** 2
+    a2 = adev**2
     w = np.sqrt(n_eff) / a2  # relative weighting: each point's σ² has relative std ≈ 1/√(n_eff/2)
     x = np.column_stack([1.0 / taus, np.ones_like(taus), taus / 3.0]) * w[:, None]
     coef, _ = nnls(x, a2 * w)
     n_, b0, k_ = np.sqrt(np.clip(coef, 0, None))
     i = int(np.argmin(adev))
     at_end = bool(i >= len(taus) - 2)
-    if b0 ** 2 >= flicker_share * a2[i]:
+    if b0**2 >= flicker_share * a2[i]:
         kind = "bias instability"  # the flat (flicker) term is there, whether or not σ has turned up yet
     elif at_end:
         kind = "upper bound"
     else:
         kind = "crossover"
-    k_resolved = bool(k_ > 0 and not at_end and k_ ** 2 * taus[-1] / 3.0 >= flicker_share * a2[-1])
-    return {"N": float(n_), "B": float(adev[i] / BI_FACTOR), "K": float(k_), "tau_min_s": float(taus[i]),
-            "adev_min": float(adev[i]), "flat_B_fit": float(b0 / BI_FACTOR),
-            "B_upper_bound": kind != "bias instability", "B_kind": kind,
-            "K_resolved": k_resolved,
-            "K_upper": float(np.min(adev * (1.0 + 2.0 / np.sqrt(2.0 * n_eff)) * np.sqrt(3.0 / taus)))}
+    k_resolved = bool(k_ > 0 and not at_end and k_**2 * taus[-1] / 3.0 >= flicker_share * a2[-1])
+    return {
+        "N": float(n_),
+        "B": float(adev[i] / BI_FACTOR),
+        "K": float(k_),
+        "tau_min_s": float(taus[i]),
+        "adev_min": float(adev[i]),
+        "flat_B_fit": float(b0 / BI_FACTOR),
+        "B_upper_bound": kind != "bias instability",
+        "B_kind": kind,
+        "K_resolved": k_resolved,
+        "K_upper": float(np.min(adev * (1.0 + 2.0 / np.sqrt(2.0 * n_eff)) * np.sqrt(3.0 / taus))),
+    }
 
 
 @dataclass
@@ -205,8 +215,10 @@ class AllanResult:
         return float(np.mean([t[key] for t in self.terms]))
 
     def summary(self) -> dict[str, Any]:
-        return {k: [t[k] for t in self.terms] for k in ("N", "B", "K", "tau_min_s", "B_upper_bound", "B_kind",
-                                                          "K_resolved", "K_upper")}
+        return {
+            k: [t[k] for t in self.terms]
+            for k in ("N", "B", "K", "tau_min_s", "B_upper_bound", "B_kind", "K_resolved", "K_upper")
+        }
 
 
 def analyse(y: np.ndarray, rate_hz: float, name: str, unit: str, per_decade: int = 10) -> AllanResult:
@@ -217,8 +229,10 @@ def analyse(y: np.ndarray, rate_hz: float, name: str, unit: str, per_decade: int
     if not np.all(np.isfinite(adev2)):
         raise ImutoolError("Allan deviation is not finite (values too large for double precision?)")
     if np.any(adev2 <= 0):
-        raise ImutoolError(f"{name}: the signal does not change at some cluster times (Allan deviation 0): a "
-                           "constant or stuck channel has no noise terms to fit")
+        raise ImutoolError(
+            f"{name}: the signal does not change at some cluster times (Allan deviation 0): a "
+            "constant or stuck channel has no noise terms to fit"
+        )
     terms = [fit_noise_terms(taus, adev2[:, j], n_eff) for j in range(adev2.shape[1])]
     return AllanResult(name, unit, taus, adev2, n_eff, terms)
 
@@ -239,8 +253,9 @@ def plot_allan(results: list[AllanResult], path: str, title: str = "Allan deviat
             c = f"C{j}"
             bl = "B" if t.get("B_kind", "bias instability") == "bias instability" else f"min/0.664 ({t['B_kind']})"
             kl = f"K={t['K']:.3g}" if t.get("K_resolved", True) else f"K≤{t['K_upper']:.3g} (not resolved)"
-            ax.loglog(r.taus, r.adev[:, j], "-", color=c, lw=1.5,
-                      label=f"{lab}: N={t['N']:.3g}, {bl}={t['B']:.3g}, {kl}")
+            ax.loglog(
+                r.taus, r.adev[:, j], "-", color=c, lw=1.5, label=f"{lab}: N={t['N']:.3g}, {bl}={t['B']:.3g}, {kl}"
+            )
             tt = r.taus
             ax.loglog(tt, t["N"] / np.sqrt(tt), ":", color=c, lw=0.8)
             ax.loglog(tt, t["K"] * np.sqrt(tt / 3.0), "--", color=c, lw=0.8)
@@ -251,8 +266,10 @@ def plot_allan(results: list[AllanResult], path: str, title: str = "Allan deviat
         ax.set_ylim(lo / 3, hi * 3)
         ax.set_xlabel("cluster time τ (s)")
         ax.set_ylabel(f"σ(τ) ({r.unit})")
-        ax.set_title(f"{r.name}: N at τ=1 s (slope −½, dotted), B = min/0.664 (dash-dot), K at τ=3 s "
-                     "(slope +½, dashed)", fontsize=8)
+        ax.set_title(
+            f"{r.name}: N at τ=1 s (slope −½, dotted), B = min/0.664 (dash-dot), K at τ=3 s (slope +½, dashed)",
+            fontsize=8,
+        )
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)

@@ -54,12 +54,19 @@ def _sections(cal: Any) -> dict[str, dict[str, Any]]:
     if mg is None:
         raise ImutoolError("no [mag] section to convert", path=getattr(cal, "path", None))
     b, a = mg
-    out: dict[str, dict[str, Any]] = {"mag": {"A": np.asarray(a, float), "b": np.asarray(b, float),
-                                              "field": float(cal.sections["mag"].get("field_ut", float("nan")))}}
+    out: dict[str, dict[str, Any]] = {
+        "mag": {
+            "A": np.asarray(a, float),
+            "b": np.asarray(b, float),
+            "field": float(cal.sections["mag"].get("field_ut", float("nan"))),
+        }
+    }
     g = cal.sections.get("gyro")
     if g and "bias" in g:
-        out["gyro"] = {"b": np.asarray(g["bias"], float),
-                       "S": np.asarray(g["scale"], float) if g.get("scale") is not None else np.eye(3)}
+        out["gyro"] = {
+            "b": np.asarray(g["bias"], float),
+            "S": np.asarray(g["scale"], float) if g.get("scale") is not None else np.eye(3),
+        }
     acc = cal.sections.get("accel")
     if acc and "bias" in acc:
         out["accel"] = {"b": np.asarray(acc["bias"], float), "T": np.asarray(acc.get("T", np.eye(3)), float)}
@@ -72,31 +79,36 @@ def to_c(cal: Any) -> str:
     m = s["mag"]
 
     def mat(name: str, a: np.ndarray, note: str) -> str:
-        return (f"const FusionMatrix {name} = {{.array = {{{', '.join(_num(v, True) for v in a.ravel())}}}}};"
-                f"  // {note}")
+        return f"const FusionMatrix {name} = {{.array = {{{', '.join(_num(v, True) for v in a.ravel())}}}}};  // {note}"
 
     def vec(name: str, v: np.ndarray, note: str) -> str:
         return f"const FusionVector {name} = {{.array = {{{', '.join(_num(x, True) for x in v)}}}}};  // {note}"
 
-    lines = ["// imutool calibration for x-io Fusion (FusionMath.h types). Row-major matrices.",
-             "// Magnetometer: FusionCalibrationMagnetic(m, softIronMatrix, hardIronOffset)"
-             " = softIronMatrix (m - hardIronOffset)",
-             "// imutool m_true = A (m_meas - b): softIronMatrix = A, hardIronOffset = b (uT).",
-             '#include "Fusion.h"',
-             mat("softIronMatrix", m["A"], "imutool A"),
-             vec("hardIronOffset", m["b"], "imutool b, uT")]
+    lines = [
+        "// imutool calibration for x-io Fusion (FusionMath.h types). Row-major matrices.",
+        "// Magnetometer: FusionCalibrationMagnetic(m, softIronMatrix, hardIronOffset)"
+        " = softIronMatrix (m - hardIronOffset)",
+        "// imutool m_true = A (m_meas - b): softIronMatrix = A, hardIronOffset = b (uT).",
+        '#include "Fusion.h"',
+        mat("softIronMatrix", m["A"], "imutool A"),
+        vec("hardIronOffset", m["b"], "imutool b, uT"),
+    ]
     if "gyro" in s:
-        lines += ["// Gyroscope: FusionCalibrationInertial(g, gyroscopeMisalignment, gyroscopeSensitivity,"
-                  " gyroscopeOffset), deg/s",
-                  mat("gyroscopeMisalignment", s["gyro"]["S"], "imutool S"),
-                  vec("gyroscopeSensitivity", np.ones(3), "scale is inside S"),
-                  vec("gyroscopeOffset", np.degrees(s["gyro"]["b"]), "imutool b in deg/s")]
+        lines += [
+            "// Gyroscope: FusionCalibrationInertial(g, gyroscopeMisalignment, gyroscopeSensitivity,"
+            " gyroscopeOffset), deg/s",
+            mat("gyroscopeMisalignment", s["gyro"]["S"], "imutool S"),
+            vec("gyroscopeSensitivity", np.ones(3), "scale is inside S"),
+            vec("gyroscopeOffset", np.degrees(s["gyro"]["b"]), "imutool b in deg/s"),
+        ]
     if "accel" in s:
-        lines += ["// Accelerometer: FusionCalibrationInertial(a, accelerometerMisalignment,"
-                  " accelerometerSensitivity, accelerometerOffset), g",
-                  mat("accelerometerMisalignment", s["accel"]["T"], "imutool T"),
-                  vec("accelerometerSensitivity", np.ones(3), "scale is inside T"),
-                  vec("accelerometerOffset", s["accel"]["b"] / G0, "imutool b in g (9.80665 m/s^2)")]
+        lines += [
+            "// Accelerometer: FusionCalibrationInertial(a, accelerometerMisalignment,"
+            " accelerometerSensitivity, accelerometerOffset), g",
+            mat("accelerometerMisalignment", s["accel"]["T"], "imutool T"),
+            vec("accelerometerSensitivity", np.ones(3), "scale is inside T"),
+            vec("accelerometerOffset", s["accel"]["b"] / G0, "imutool b in g (9.80665 m/s^2)"),
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -108,20 +120,27 @@ def to_matlab(cal: Any) -> str:
     def row(v: np.ndarray) -> str:
         return " ".join(_num(x) for x in v)
 
-    lines = ["% imutool calibration in the MATLAB magcal convention: C = (D - b) * A  (rows of D are samples)",
-             "% imutool m_true = A (m_meas - b); A is symmetric, so A and b carry over unchanged (uT).",
-             "A = [" + "; ".join(row(r) for r in m["A"]) + "];",
-             "b = [" + row(m["b"]) + "];",
-             ("expmfs = " + _num(m["field"]) + ";  % expected magnetic field strength, uT") if math.isfinite(
-                 m["field"]) else "expmfs = NaN;  % field strength not in the calibration file"]
+    lines = [
+        "% imutool calibration in the MATLAB magcal convention: C = (D - b) * A  (rows of D are samples)",
+        "% imutool m_true = A (m_meas - b); A is symmetric, so A and b carry over unchanged (uT).",
+        "A = [" + "; ".join(row(r) for r in m["A"]) + "];",
+        "b = [" + row(m["b"]) + "];",
+        ("expmfs = " + _num(m["field"]) + ";  % expected magnetic field strength, uT")
+        if math.isfinite(m["field"])
+        else "expmfs = NaN;  % field strength not in the calibration file",
+    ]
     if "gyro" in s:
-        lines += ["% gyroscope w = S (w_meas - b), rad/s: as rows, W = (Wm - gyro_b) * gyro_S'",
-                  "gyro_b = [" + row(s["gyro"]["b"]) + "];",
-                  "gyro_S = [" + "; ".join(row(r) for r in s["gyro"]["S"]) + "];"]
+        lines += [
+            "% gyroscope w = S (w_meas - b), rad/s: as rows, W = (Wm - gyro_b) * gyro_S'",
+            "gyro_b = [" + row(s["gyro"]["b"]) + "];",
+            "gyro_S = [" + "; ".join(row(r) for r in s["gyro"]["S"]) + "];",
+        ]
     if "accel" in s:
-        lines += ["% accelerometer f = T (f_meas - b), m/s^2: as rows, F = (Fm - accel_b) * accel_T'",
-                  "accel_b = [" + row(s["accel"]["b"]) + "];",
-                  "accel_T = [" + "; ".join(row(r) for r in s["accel"]["T"]) + "];"]
+        lines += [
+            "% accelerometer f = T (f_meas - b), m/s^2: as rows, F = (Fm - accel_b) * accel_T'",
+            "accel_b = [" + row(s["accel"]["b"]) + "];",
+            "accel_T = [" + "; ".join(row(r) for r in s["accel"]["T"]) + "];",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -136,30 +155,49 @@ def to_python(cal: Any) -> str:
         return "np.array([" + ", ".join("[" + ", ".join(_num(x) for x in r) + "]" for r in a) + "])"
 
     fld = _num(m["field"]) if math.isfinite(m["field"]) else 'float("nan")'
-    lines = ["# imutool calibration as Python/numpy. Model: m_true = A (m_meas - b); rows of m are samples.",
-             "import numpy as np",
-             "",
-             f"A = {arr(m['A'])}",
-             f"b = {arr(m['b'])}  # uT",
-             f"field_ut = {fld}",
-             "",
-             "",
-             "def correct_mag(m):",
-             '    """Calibrated field (uT) from raw samples (N, 3) in uT."""',
-             "    return (np.asarray(m, dtype=float) - b) @ A.T"]
+    lines = [
+        "# imutool calibration as Python/numpy. Model: m_true = A (m_meas - b); rows of m are samples.",
+        "import numpy as np",
+        "",
+        f"A = {arr(m['A'])}",
+        f"b = {arr(m['b'])}  # uT",
+        f"field_ut = {fld}",
+        "",
+        "",
+        "def correct_mag(m):",
+        '    """Calibrated field (uT) from raw samples (N, 3) in uT."""',
+        "    return (np.asarray(m, dtype=float) - b) @ A.T",
+    ]
     if "gyro" in s:
-        lines += ["", "", f"gyro_b = {arr(s['gyro']['b'])}  # rad/s", f"gyro_S = {arr(s['gyro']['S'])}", "", "",
-                  "def correct_gyro(w):", '    """w = S (w_meas - b), rad/s, rows = samples."""',
-                  "    return (np.asarray(w, dtype=float) - gyro_b) @ gyro_S.T"]
+        lines += [
+            "",
+            "",
+            f"gyro_b = {arr(s['gyro']['b'])}  # rad/s",
+            f"gyro_S = {arr(s['gyro']['S'])}",
+            "",
+            "",
+            "def correct_gyro(w):",
+            '    """w = S (w_meas - b), rad/s, rows = samples."""',
+            "    return (np.asarray(w, dtype=float) - gyro_b) @ gyro_S.T",
+        ]
     if "accel" in s:
-        lines += ["", "", f"accel_b = {arr(s['accel']['b'])}  # m/s^2", f"accel_T = {arr(s['accel']['T'])}", "",
-                  "", "def correct_accel(f):", '    """f = T (f_meas - b), m/s^2, rows = samples."""',
-                  "    return (np.asarray(f, dtype=float) - accel_b) @ accel_T.T"]
+        lines += [
+            "",
+            "",
+            f"accel_b = {arr(s['accel']['b'])}  # m/s^2",
+            f"accel_T = {arr(s['accel']['T'])}",
+            "",
+            "",
+            "def correct_accel(f):",
+            '    """f = T (f_meas - b), m/s^2, rows = samples."""',
+            "    return (np.asarray(f, dtype=float) - accel_b) @ accel_T.T",
+        ]
     return "\n".join(lines) + "\n"
 
 
 def to_json(cal: Any) -> str:
     """Every section of the file as JSON (NaN written as null)."""
+
     def clean(v: Any) -> Any:
         if isinstance(v, dict):
             return {k: clean(x) for k, x in v.items()}

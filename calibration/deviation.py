@@ -86,8 +86,9 @@ class DeviationCard:
     def slope(self, heading_deg: np.ndarray) -> np.ndarray:
         """dδ/dψ (deg per deg) at compass headings ψ (degrees)."""
         p = np.radians(np.asarray(heading_deg, dtype=float))
-        return np.radians(self.B * np.cos(p) - self.C * np.sin(p) + 2 * self.D * np.cos(2 * p)
-                          - 2 * self.E * np.sin(2 * p))
+        return np.radians(
+            self.B * np.cos(p) - self.C * np.sin(p) + 2 * self.D * np.cos(2 * p) - 2 * self.E * np.sin(2 * p)
+        )
 
     def invertible(self) -> bool:
         """True when ψ ↦ ψ + δ(ψ) is one-to-one (1 + dδ/dψ > 0 on every heading)."""
@@ -99,8 +100,10 @@ class DeviationCard:
         Newton's method from ψ₀ = M − δ(M); converges to < 1e-9° in a few steps for any card with
         |dδ/dψ| < 1. Raises ImutoolError for a card that cannot be inverted (an absurd card)."""
         if not self.invertible():
-            raise ImutoolError("the deviation card cannot be inverted (compass heading not unique for some "
-                               "magnetic headings): the card is absurd — check the calibration and mounting")
+            raise ImutoolError(
+                "the deviation card cannot be inverted (compass heading not unique for some "
+                "magnetic headings): the card is absurd — check the calibration and mounting"
+            )
         m = np.asarray(magnetic_deg, dtype=float)
         psi = m - self.deviation_deg(m)
         for _ in range(50):
@@ -157,9 +160,16 @@ class DeviationCard:
         return cls(**vals, std=std, header=header, warnings=[str(w) for w in (s.get("warnings") or [])])
 
 
-def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_span_deg: float = 270.0,
-                  terms: int = 5, limit_deg: float = DEVIATION_LIMIT_DEG, fit_limit_deg: float = FIT_LIMIT_DEG,
-                  max_noise_gain: float = MAX_NOISE_GAIN) -> DeviationCard:
+def fit_deviation(
+    compass_deg: np.ndarray,
+    reference_deg: np.ndarray,
+    *,
+    min_span_deg: float = 270.0,
+    terms: int = 5,
+    limit_deg: float = DEVIATION_LIMIT_DEG,
+    fit_limit_deg: float = FIT_LIMIT_DEG,
+    max_noise_gain: float = MAX_NOISE_GAIN,
+) -> DeviationCard:
     """Least-squares deviation card from compass headings and reference (magnetic) headings, degrees.
 
     δ_i = wrap(ref_i − compass_i); X = [1, sinψ, cosψ, sin2ψ, cos2ψ]; coefficients = argmin |X c − δ|².
@@ -181,7 +191,8 @@ def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_spa
     if covered < min_span_deg:
         raise ImutoolError(
             f"compass headings cover only {covered:.0f}° of the circle (< {min_span_deg:.0f}° needed for the "
-            "A–E harmonics); swing the vessel through a full turn")
+            "A–E harmonics); swing the vessel through a full turn"
+        )
     x = _design(c)[:, :terms]
     gain = np.sqrt(np.clip(np.diag(np.linalg.pinv(x.T @ x)), 0, None) * c.size)
     if not np.all(np.isfinite(gain)) or gain.max() > max_noise_gain:
@@ -189,7 +200,8 @@ def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_spa
         raise ImutoolError(
             f"compass headings cover {covered:.0f}° of the circle: too narrow to separate the A–E harmonics "
             f"(noise gain of {worst} = {np.nanmax(gain):.1f} × the residual, limit {max_noise_gain:g}; a full "
-            "swing gives 1.4). A card from this would be an extrapolation: swing the vessel through a full turn")
+            "swing gives 1.4). A card from this would be an extrapolation: swing the vessel through a full turn"
+        )
     d = wrap_deg180(r - c)
     coef, *_ = np.linalg.lstsq(x, d, rcond=None)
     res = d - x @ coef
@@ -211,7 +223,7 @@ def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_spa
         m = b15 == k
         if m.any():
             per.append([15.0 * k, int(m.sum()), float(np.mean(res[m])), float(np.sqrt(np.mean(res[m] ** 2)))])
-    rms = float(np.sqrt(np.mean(res ** 2)))
+    rms = float(np.sqrt(np.mean(res**2)))
     card.quality = {
         "n": int(c.size),
         "residual_rms_deg": rms,
@@ -226,31 +238,41 @@ def fit_deviation(compass_deg: np.ndarray, reference_deg: np.ndarray, *, min_spa
     return card
 
 
-def card_warnings(card: DeviationCard, limit_deg: float = DEVIATION_LIMIT_DEG,
-                  fit_limit_deg: float = FIT_LIMIT_DEG) -> list[str]:
+def card_warnings(
+    card: DeviationCard, limit_deg: float = DEVIATION_LIMIT_DEG, fit_limit_deg: float = FIT_LIMIT_DEG
+) -> list[str]:
     """Warnings for a card: absurd / beyond the adjusting limit / model misfit (limits: module docstring)."""
     out: list[str] = []
     mx = card.max_abs_deg()
     if mx > ABSURD_DEG or not card.invertible():
-        out.append(f"absurd card: |deviation| reaches {mx:.0f}°" + ("" if card.invertible() else
-                   " and the card cannot be inverted") + " — an uncalibrated magnetometer (calibrate mag --method "
-                   "swing first) or a calibration/mounting that does not belong to this recording; do not issue this "
-                   "card")
+        out.append(
+            f"absurd card: |deviation| reaches {mx:.0f}°"
+            + ("" if card.invertible() else " and the card cannot be inverted")
+            + " — an uncalibrated magnetometer (calibrate mag --method "
+            "swing first) or a calibration/mounting that does not belong to this recording; do not issue this "
+            "card"
+        )
     elif mx > limit_deg:
         dd = card.deviation_deg(np.arange(0.0, 360.0, 0.5))
-        out.append(f"deviation reaches {ew(dd[np.argmax(np.abs(dd))])} (> {limit_deg:g}°): the compass should be "
-                   "adjusted (ISO 25862 as quoted: ≤ 5° in service, "
-                   "≤ 3° after adjusting a new ship — confidence C; Panama Canal: < 7°)")
+        out.append(
+            f"deviation reaches {ew(dd[np.argmax(np.abs(dd))])} (> {limit_deg:g}°): the compass should be "
+            "adjusted (ISO 25862 as quoted: ≤ 5° in service, "
+            "≤ 3° after adjusting a new ship — confidence C; Panama Canal: < 7°)"
+        )
     q = card.quality or {}
     rms = q.get("residual_rms_deg")
     bad = [b for b in q.get("residuals_15deg", []) if abs(b[2]) > fit_limit_deg]
     if rms is not None and rms > fit_limit_deg:
-        out.append(f"residual {rms:.2f}° RMS > {fit_limit_deg:g}°: the reference is noisy or the five-term model "
-                   "does not fit this compass")
+        out.append(
+            f"residual {rms:.2f}° RMS > {fit_limit_deg:g}°: the reference is noisy or the five-term model "
+            "does not fit this compass"
+        )
     if bad:
         hs = ", ".join(f"{b[0]:03.0f}° ({b[2]:+.1f}°)" for b in bad[:6])
-        out.append(f"systematic residual > {fit_limit_deg:g}° at {hs}: the five-term model does not fit there "
-                   "(local disturbance, heeling error or a reference/time-offset problem)")
+        out.append(
+            f"systematic residual > {fit_limit_deg:g}° at {hs}: the five-term model does not fit there "
+            "(local disturbance, heeling error or a reference/time-offset problem)"
+        )
     return out
 
 
@@ -259,9 +281,18 @@ def card_text(card: DeviationCard, header: dict[str, Any] | None = None, step_de
     adjuster's signature line."""
     h = dict(card.header)
     h.update({k: v for k, v in (header or {}).items() if v not in (None, "")})
-    labels = [("vessel", "Vessel"), ("compass", "Compass"), ("place", "Place"), ("date", "Date of swing"),
-              ("latitude", "Latitude"), ("longitude", "Longitude"), ("variation", "Variation"),
-              ("reference", "Reference used"), ("conditions", "Swing conditions"), ("adjuster", "Adjuster")]
+    labels = [
+        ("vessel", "Vessel"),
+        ("compass", "Compass"),
+        ("place", "Place"),
+        ("date", "Date of swing"),
+        ("latitude", "Latitude"),
+        ("longitude", "Longitude"),
+        ("variation", "Variation"),
+        ("reference", "Reference used"),
+        ("conditions", "Swing conditions"),
+        ("adjuster", "Adjuster"),
+    ]
     lines = ["DEVIATION CARD", "=" * 78]
     for key, lab in labels:
         v = h.get(key)
@@ -272,17 +303,22 @@ def card_text(card: DeviationCard, header: dict[str, Any] | None = None, step_de
         if key == "variation" and isinstance(v, (int, float)):
             v = ew(v) + (f" ({h['variation_source']})" if h.get("variation_source") else "")
         lines.append(f"{lab + ':':<18s} {v if v not in (None, '') else '—'}")
-    lines += ["", "δ(ψ) = A + B sin ψ + C cos ψ + D sin 2ψ + E cos 2ψ  (ψ compass heading; magnetic = compass + δ;"
-              " E = add, W = subtract)",
-              "  " + "   ".join(f"{n} = {ew(getattr(card, n), 2)}" for n in NAMES), ""]
+    lines += [
+        "",
+        "δ(ψ) = A + B sin ψ + C cos ψ + D sin 2ψ + E cos 2ψ  (ψ compass heading; magnetic = compass + δ;"
+        " E = add, W = subtract)",
+        "  " + "   ".join(f"{n} = {ew(getattr(card, n), 2)}" for n in NAMES),
+        "",
+    ]
     comp = card.table(step_deg)
     try:
         mag = card.table_magnetic(step_deg)
     except ImutoolError:
         mag = None
     lines.append(f"{'COMPASS → MAGNETIC':<38s}  {'MAGNETIC → COMPASS (course to steer)'}")
-    lines.append(f"{'compass':>8s} {'deviation':>10s} {'magnetic':>9s}      {'magnetic':>8s} {'deviation':>10s} "
-                 f"{'steer':>7s}")
+    lines.append(
+        f"{'compass':>8s} {'deviation':>10s} {'magnetic':>9s}      {'magnetic':>8s} {'deviation':>10s} {'steer':>7s}"
+    )
     for i, (p, d, m) in enumerate(comp):
         left = f"{p:7.0f}° {ew(d):>10s} {m:8.1f}°"
         if mag is not None:
@@ -296,10 +332,12 @@ def card_text(card: DeviationCard, header: dict[str, Any] | None = None, step_de
         lines += ["", "Residuals (observed − card) per 15° compass-heading bin: heading mean / RMS (n)"]
         cells = [f"{b[0]:03.0f}° {b[2]:+.2f}/{b[3]:.2f} ({b[1]})" for b in per]
         for i in range(0, len(cells), 4):
-            lines.append("  " + "   ".join(cells[i:i + 4]))
+            lines.append("  " + "   ".join(cells[i : i + 4]))
         q = card.quality
-        lines.append(f"  overall {q['residual_rms_deg']:.2f}° RMS, max {q['residual_max_deg']:.2f}°, "
-                     f"{q['n']} samples, {q['heading_coverage_deg']:.0f}° of the circle swung")
+        lines.append(
+            f"  overall {q['residual_rms_deg']:.2f}° RMS, max {q['residual_max_deg']:.2f}°, "
+            f"{q['n']} samples, {q['heading_coverage_deg']:.0f}° of the circle swung"
+        )
     ws = card.warnings or card_warnings(card)
     if ws:
         import textwrap
@@ -307,8 +345,11 @@ def card_text(card: DeviationCard, header: dict[str, Any] | None = None, step_de
         lines.append("")
         for w in ws:
             lines += textwrap.wrap(f"WARNING: {w}", width=110, subsequent_indent="         ")
-    lines += ["", "Adjusted / swung by: ______________________________   Signature: ____________________   "
-              "Date: ____________", ""]
+    lines += [
+        "",
+        "Adjusted / swung by: ______________________________   Signature: ____________________   Date: ____________",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -319,9 +360,14 @@ def _covered_deg(c: np.ndarray) -> float:
     return float(360.0 - gaps.max())
 
 
-def plot_card(card: DeviationCard, path: str, compass_deg: np.ndarray | None = None,
-              deviation_obs_deg: np.ndarray | None = None, title: str = "Deviation card",
-              header: dict[str, Any] | None = None) -> None:
+def plot_card(
+    card: DeviationCard,
+    path: str,
+    compass_deg: np.ndarray | None = None,
+    deviation_obs_deg: np.ndarray | None = None,
+    title: str = "Deviation card",
+    header: dict[str, Any] | None = None,
+) -> None:
     """Card as curve + the text card (header, both tables every 15°, residuals, warnings, signature line) to
     PNG, SVG or PDF (format from the extension)."""
     import matplotlib
@@ -336,8 +382,14 @@ def plot_card(card: DeviationCard, path: str, compass_deg: np.ndarray | None = N
     psi = np.linspace(0, 360, 721)
     if compass_deg is not None and deviation_obs_deg is not None:
         step = max(1, len(compass_deg) // 4000)
-        ax.plot(np.asarray(compass_deg)[::step] % 360, np.asarray(deviation_obs_deg)[::step], ".", ms=2,
-                color="0.6", label="observed (reference − compass)")
+        ax.plot(
+            np.asarray(compass_deg)[::step] % 360,
+            np.asarray(deviation_obs_deg)[::step],
+            ".",
+            ms=2,
+            color="0.6",
+            label="observed (reference − compass)",
+        )
     ax.plot(psi, card.deviation_deg(psi), "C0", lw=2, label="fitted δ(ψ)")
     ax.axhline(0, color="k", lw=0.5)
     ax.set_xlim(0, 360)
@@ -346,8 +398,9 @@ def plot_card(card: DeviationCard, path: str, compass_deg: np.ndarray | None = N
     ax.set_ylabel("deviation δ (deg, + = add to compass)")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    coef = ", ".join(f"{n} = {getattr(card, n):+.2f}°" + (f" ± {card.std[n]:.2f}" if n in card.std else "")
-                     for n in NAMES)
+    coef = ", ".join(
+        f"{n} = {getattr(card, n):+.2f}°" + (f" ± {card.std[n]:.2f}" if n in card.std else "") for n in NAMES
+    )
     ax.set_title(f"{title}\nδ = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ\n{coef}", fontsize=9)
     txt = card_text(card, header)
     fig.text(0.05, 0.54, txt, family="monospace", fontsize=5.6, va="top", ha="left")

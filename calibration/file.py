@@ -123,8 +123,13 @@ def sha256_of(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
-def provenance(input_path: str | os.PathLike | None, method: str, sensor: str | None = None,
-               quality: dict[str, Any] | None = None, **extra: Any) -> dict[str, Any]:
+def provenance(
+    input_path: str | os.PathLike | None,
+    method: str,
+    sensor: str | None = None,
+    quality: dict[str, Any] | None = None,
+    **extra: Any,
+) -> dict[str, Any]:
     """The provenance table of a section: input file and hash, UTC date, sensor id, method, fit quality."""
     out: dict[str, Any] = {
         "input": os.fspath(input_path) if input_path else "",
@@ -252,10 +257,12 @@ class Calibration:
 
     # -- write -------------------------------------------------------------------------------------------
     def to_toml(self) -> str:
-        head = {"imutool_calibration": 1,
-                "model": "gyro: w = S (w_meas - b - k (T - T_ref)); accel: f = T (f_meas - b); "
-                         "mag: m_true = A (m_meas - b); deviation: magnetic = compass + A + B sin(psi) + C cos(psi)"
-                         " + D sin(2 psi) + E cos(2 psi), psi = compass heading"}
+        head = {
+            "imutool_calibration": 1,
+            "model": "gyro: w = S (w_meas - b - k (T - T_ref)); accel: f = T (f_meas - b); "
+            "mag: m_true = A (m_meas - b); deviation: magnetic = compass + A + B sin(psi) + C cos(psi)"
+            " + D sin(2 psi) + E cos(2 psi), psi = compass heading",
+        }
         ordered = {k: self.sections[k] for k in SECTIONS if k in self.sections}
         return dumps_toml({**head, **ordered})
 
@@ -299,8 +306,7 @@ def _key(section: str, key: str) -> str:
     return f"[{section}] {key}"
 
 
-def _matrix_checks(a: np.ndarray, where: str, path: str, sv_range: tuple[float, float],
-                   max_condition: float) -> None:
+def _matrix_checks(a: np.ndarray, where: str, path: str, sv_range: tuple[float, float], max_condition: float) -> None:
     sv = np.linalg.svd(a, compute_uv=False)
     rank = int(np.count_nonzero(sv > 1e-9 * max(float(sv[0]), 1e-300)))
     if rank < 3:
@@ -309,11 +315,15 @@ def _matrix_checks(a: np.ndarray, where: str, path: str, sv_range: tuple[float, 
         raise ImutoolError(f"{where} has a negative determinant (a mirror image); recalibrate", path=path)
     cond = float(sv[0] / sv[-1])
     if cond > max_condition:
-        raise ImutoolError(f"{where} is badly conditioned (singular value ratio {cond:.3g} > {max_condition:g}); "
-                           "recalibrate with more orientations", path=path)
+        raise ImutoolError(
+            f"{where} is badly conditioned (singular value ratio {cond:.3g} > {max_condition:g}); "
+            "recalibrate with more orientations",
+            path=path,
+        )
     if sv[-1] < sv_range[0] or sv[0] > sv_range[1]:
-        raise ImutoolError(f"{where} scales by {sv[-1]:.3g}…{sv[0]:.3g}, outside {sv_range[0]:g}…{sv_range[1]:g}",
-                           path=path)
+        raise ImutoolError(
+            f"{where} scales by {sv[-1]:.3g}…{sv[0]:.3g}, outside {sv_range[0]:g}…{sv_range[1]:g}", path=path
+        )
 
 
 def validate_calibration(data: dict[str, Any], path: str) -> None:
@@ -330,8 +340,9 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
 
     for vk in ("imutool_calibration", "version"):
         if vk in data and data[vk] != FILE_VERSION:
-            raise ImutoolError(f"{vk} = {data[vk]!r}: unknown calibration file version (this imutool reads "
-                               f"{FILE_VERSION})", path=path)
+            raise ImutoolError(
+                f"{vk} = {data[vk]!r}: unknown calibration file version (this imutool reads {FILE_VERSION})", path=path
+            )
     unknown = [k for k, v in data.items() if isinstance(v, dict) and k not in SECTIONS]
     if unknown:
         raise ImutoolError(f"unknown section [{unknown[0]}] (known: {', '.join(SECTIONS)})", path=path)
@@ -355,11 +366,14 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
         s = data["gyro"]
         bias = _mat(s.get("bias", [0, 0, 0]), "gyro.bias", path, (3,))
         if np.max(np.abs(bias)) > GYRO_BIAS_MAX:
-            raise ImutoolError(f"{_key('gyro', 'bias')} {bias.tolist()} rad/s exceeds {GYRO_BIAS_MAX} rad/s "
-                               "(deg/s written as rad/s?)", path=path)
+            raise ImutoolError(
+                f"{_key('gyro', 'bias')} {bias.tolist()} rad/s exceeds {GYRO_BIAS_MAX} rad/s (deg/s written as rad/s?)",
+                path=path,
+            )
         if "scale" in s:
-            _matrix_checks(_mat(s["scale"], "gyro.scale", path, (3, 3)), _key("gyro", "scale"), path, SCALE_RANGE,
-                           MAX_CONDITION)
+            _matrix_checks(
+                _mat(s["scale"], "gyro.scale", path, (3, 3)), _key("gyro", "scale"), path, SCALE_RANGE, MAX_CONDITION
+            )
         if "temp_slope" in s:
             _mat(s["temp_slope"], "gyro.temp_slope", path, (3,))
         if "temp_ref" in s:
@@ -368,19 +382,22 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
         s = data["accel"]
         bias = _mat(s.get("bias", [0, 0, 0]), "accel.bias", path, (3,))
         if np.max(np.abs(bias)) > ACCEL_BIAS_MAX:
-            raise ImutoolError(f"{_key('accel', 'bias')} {bias.tolist()} m/s² exceeds {ACCEL_BIAS_MAX:.3g} m/s² "
-                               "(g written as m/s²?)", path=path)
+            raise ImutoolError(
+                f"{_key('accel', 'bias')} {bias.tolist()} m/s² exceeds {ACCEL_BIAS_MAX:.3g} m/s² (g written as m/s²?)",
+                path=path,
+            )
         if "T" in s:
-            _matrix_checks(_mat(s["T"], "accel.T", path, (3, 3)), _key("accel", "T"), path, SCALE_RANGE,
-                           MAX_CONDITION)
+            _matrix_checks(_mat(s["T"], "accel.T", path, (3, 3)), _key("accel", "T"), path, SCALE_RANGE, MAX_CONDITION)
     if "deviation" in data:
         s = data["deviation"]
         for k in ("A", "B", "C", "D", "E"):
             if k in s:
                 v = _number(s[k], _key("deviation", k), path)
                 if abs(v) > DEVIATION_COEFF_MAX_DEG:
-                    raise ImutoolError(f"{_key('deviation', k)} = {v}° is beyond {DEVIATION_COEFF_MAX_DEG:g}°: not "
-                                       "a deviation card", path=path)
+                    raise ImutoolError(
+                        f"{_key('deviation', k)} = {v}° is beyond {DEVIATION_COEFF_MAX_DEG:g}°: not a deviation card",
+                        path=path,
+                    )
         for k in ("std", "header"):
             if k in s and not isinstance(s[k], dict):
                 raise ImutoolError(f"{_key('deviation', k)} must be a table", path=path)
@@ -396,8 +413,11 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
             raise ImutoolError(f"{_key('mounting', 'remap')}: {e}", path=path) from None
         mis = _mat(s.get("misalignment_deg", [0, 0, 0]), "mounting.misalignment_deg", path, (3,))
         if np.max(np.abs(mis)) > MISALIGNMENT_MAX_DEG:
-            raise ImutoolError(f"{_key('mounting', 'misalignment_deg')} {mis.tolist()}: a misalignment is a small "
-                               f"angle (≤ {MISALIGNMENT_MAX_DEG:g}°); put the rotation in remap", path=path)
+            raise ImutoolError(
+                f"{_key('mounting', 'misalignment_deg')} {mis.tolist()}: a misalignment is a small "
+                f"angle (≤ {MISALIGNMENT_MAX_DEG:g}°); put the rotation in remap",
+                path=path,
+            )
 
 
 def _number(v: Any, where: str, path: str) -> float:

@@ -44,9 +44,17 @@ def _moving_std(x: np.ndarray, w: int) -> np.ndarray:
     return np.sqrt(var).max(axis=1)
 
 
-def detect_rest(time: np.ndarray, gyro: np.ndarray | None, accel: np.ndarray | None, *, window_s: float = 1.0,
-                gyro_std: float = np.radians(0.5), accel_std: float = 0.1, min_rest_s: float = 2.0,
-                trim_s: float = 0.25) -> list[tuple[int, int]]:
+def detect_rest(
+    time: np.ndarray,
+    gyro: np.ndarray | None,
+    accel: np.ndarray | None,
+    *,
+    window_s: float = 1.0,
+    gyro_std: float = np.radians(0.5),
+    accel_std: float = 0.1,
+    min_rest_s: float = 2.0,
+    trim_s: float = 0.25,
+) -> list[tuple[int, int]]:
     """Rest intervals [(start, stop) index pairs, stop exclusive]: moving std (window_s) of every gyro axis below
     gyro_std (rad/s) and of every accel axis below accel_std (m/s²), at least min_rest_s long; trim_s cut from
     both ends."""
@@ -86,9 +94,12 @@ class GyroCal:
     quality: dict[str, Any] = field(default_factory=dict)
 
     def to_section(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"model": "w = S (w_meas - b - k (T - T_ref))",
-                               "units": "b: rad/s; k: rad/s/degC; T_ref: degC; S: 1",
-                               "bias": self.bias.tolist(), "bias_deg_s": np.degrees(self.bias).tolist()}
+        out: dict[str, Any] = {
+            "model": "w = S (w_meas - b - k (T - T_ref))",
+            "units": "b: rad/s; k: rad/s/degC; T_ref: degC; S: 1",
+            "bias": self.bias.tolist(),
+            "bias_deg_s": np.degrees(self.bias).tolist(),
+        }
         if self.temp_slope is not None:
             out["temp_slope"] = self.temp_slope.tolist()
             out["temp_ref"] = float(self.temp_ref or 0.0)
@@ -97,9 +108,16 @@ class GyroCal:
         return out
 
 
-def calibrate_gyro(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray | None = None,
-                   temp: np.ndarray | None = None, *, min_temp_range: float = 1.0,
-                   turns_deg: float | None = None, **rest_opts: Any) -> GyroCal:
+def calibrate_gyro(
+    time: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray | None = None,
+    temp: np.ndarray | None = None,
+    *,
+    min_temp_range: float = 1.0,
+    turns_deg: float | None = None,
+    **rest_opts: Any,
+) -> GyroCal:
     """Static gyro bias = mean over the detected rest intervals (rad/s); a temperature slope (least squares
     ω = b + k (T − T_ref)) when ``temp`` spans ≥ min_temp_range °C over the rest samples; with ``turns_deg``,
     every motion between two rests is taken as a turn of that many degrees about one sensor axis and
@@ -109,17 +127,21 @@ def calibrate_gyro(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray | None 
     g = np.asarray(gyro, dtype=float)
     rests = detect_rest(t, g, accel, **rest_opts)
     if not rests:
-        raise ImutoolError("no rest interval found (lower the thresholds, e.g. --gyro-std, or keep the sensor "
-                           "still for a few seconds)")
+        raise ImutoolError(
+            "no rest interval found (lower the thresholds, e.g. --gyro-std, or keep the sensor still for a few seconds)"
+        )
     idx = np.concatenate([np.arange(a, b) for a, b in rests])
     gr = g[idx]
     ok = np.all(np.isfinite(gr), axis=1)
     idx, gr = idx[ok], gr[ok]
     bias = gr.mean(axis=0)
     cal = GyroCal(bias=bias, n_rest=len(rests), rest_s=float(sum(t[b - 1] - t[a] for a, b in rests)))
-    cal.quality = {"rest_intervals": len(rests), "rest_seconds": cal.rest_s,
-                   "rest_std_rad_s": gr.std(axis=0).tolist(),
-                   "bias_std_rad_s": (gr.std(axis=0) / np.sqrt(max(1, len(rests)))).tolist()}
+    cal.quality = {
+        "rest_intervals": len(rests),
+        "rest_seconds": cal.rest_s,
+        "rest_std_rad_s": gr.std(axis=0).tolist(),
+        "bias_std_rad_s": (gr.std(axis=0) / np.sqrt(max(1, len(rests)))).tolist(),
+    }
     if temp is not None:
         tc = np.asarray(temp, dtype=float)[idx]
         good = np.isfinite(tc)
@@ -130,16 +152,19 @@ def calibrate_gyro(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray | None 
             cal.bias, cal.temp_slope, cal.temp_ref = coef[0], coef[1], tref
             cal.quality["temp_range_degC"] = float(np.ptp(tc[good]))
         else:
-            cal.quality["temp_note"] = (f"temperature range {np.ptp(tc[good]) if good.any() else 0:.2f} °C "
-                                        f"< {min_temp_range} °C: no slope fitted")
+            cal.quality["temp_note"] = (
+                f"temperature range {np.ptp(tc[good]) if good.any() else 0:.2f} °C "
+                f"< {min_temp_range} °C: no slope fitted"
+            )
     if turns_deg is not None:
         cal.scale, info = _gyro_scale(t, g - cal.bias, rests, np.radians(turns_deg))
         cal.quality.update(info)
     return cal
 
 
-def _gyro_scale(t: np.ndarray, w: np.ndarray, rests: list[tuple[int, int]], angle: float
-                ) -> tuple[np.ndarray, dict[str, Any]]:
+def _gyro_scale(
+    t: np.ndarray, w: np.ndarray, rests: list[tuple[int, int]], angle: float
+) -> tuple[np.ndarray, dict[str, Any]]:
     us, vs = [], []
     for (_a0, b0), (a1, _b1) in zip(rests[:-1], rests[1:], strict=True):
         seg = slice(b0 - 1, a1 + 1)
@@ -156,12 +181,14 @@ def _gyro_scale(t: np.ndarray, w: np.ndarray, rests: list[tuple[int, int]], angl
     u, v = np.array(us), np.array(vs)
     axes_seen = {int(np.argmax(np.abs(x))) for x in v} if len(v) else set()
     if len(axes_seen) < 3:
-        raise ImutoolError(f"gyro scale needs turns of {np.degrees(angle):.0f}° about all three axes between rests;"
-                           f" found turns about {len(axes_seen)} axis/axes")
+        raise ImutoolError(
+            f"gyro scale needs turns of {np.degrees(angle):.0f}° about all three axes between rests;"
+            f" found turns about {len(axes_seen)} axis/axes"
+        )
     st, *_ = np.linalg.lstsq(u, v, rcond=None)  # u S^T = v
     s = st.T
     res = v - u @ st
-    return s, {"turns": len(u), "turn_residual_deg": float(np.degrees(np.sqrt(np.mean(res ** 2))))}
+    return s, {"turns": len(u), "turn_residual_deg": float(np.degrees(np.sqrt(np.mean(res**2))))}
 
 
 @dataclass
@@ -181,17 +208,30 @@ class AccelCal:
         return (np.asarray(f, dtype=float) - self.bias) @ self.T.T
 
     def to_section(self) -> dict[str, Any]:
-        return {"model": "f = T (f_meas - b)", "units": "b: m/s^2; T: 1", "kind": self.kind,
-                "bias": self.bias.tolist(), "T": self.T.tolist(), "gravity_m_s2": self.gravity,
-                "bias_std": self.bias_std.tolist()}
+        return {
+            "model": "f = T (f_meas - b)",
+            "units": "b: m/s^2; T: 1",
+            "kind": self.kind,
+            "bias": self.bias.tolist(),
+            "T": self.T.tolist(),
+            "gravity_m_s2": self.gravity,
+            "bias_std": self.bias_std.tolist(),
+        }
 
 
 _UT = ((0, 1), (0, 2), (1, 2))
 
 
-def calibrate_accel(time: np.ndarray, accel: np.ndarray, gyro: np.ndarray | None = None, *,
-                    gravity: float = 9.80665, kind: str = "auto", min_poses: int = 6,
-                    **rest_opts: Any) -> AccelCal:
+def calibrate_accel(
+    time: np.ndarray,
+    accel: np.ndarray,
+    gyro: np.ndarray | None = None,
+    *,
+    gravity: float = 9.80665,
+    kind: str = "auto",
+    min_poses: int = 6,
+    **rest_opts: Any,
+) -> AccelCal:
     """Six/many-position accelerometer calibration from automatically detected static poses.
 
     Each rest interval gives one mean specific force f_i; nearly identical poses (< 5° apart) are merged.
@@ -218,8 +258,10 @@ def calibrate_accel(time: np.ndarray, accel: np.ndarray, gyro: np.ndarray | None
             merged.append(p)
     pz = np.array(merged)
     if len(pz) < min_poses:
-        raise ImutoolError(f"found {len(pz)} distinct static poses; at least {min_poses} needed (six-position: "
-                           "each axis up and down, a few seconds still in each)")
+        raise ImutoolError(
+            f"found {len(pz)} distinct static poses; at least {min_poses} needed (six-position: "
+            "each axis up and down, a few seconds still in each)"
+        )
     if kind == "auto":
         kind = "full" if len(pz) >= 9 else "diag"
     if kind not in ("offset", "diag", "full"):
@@ -254,10 +296,22 @@ def calibrate_accel(time: np.ndarray, accel: np.ndarray, gyro: np.ndarray | None
             sd = np.full(npar, np.nan)
     else:
         sd = np.full(npar, np.nan)
-    cal = AccelCal(bias=b, T=tm, gravity=gravity, kind=kind, poses=pz,
-                   residual_rms=float(np.sqrt(np.mean(res ** 2))), bias_std=sd[:3])
-    cal.quality = {"poses": len(pz), "rest_intervals": len(rests), "residual_rms_m_s2": cal.residual_rms,
-                   "dof": dof, "raw_norm_spread_m_s2": float(np.ptp(np.linalg.norm(pz, axis=1)))}
+    cal = AccelCal(
+        bias=b,
+        T=tm,
+        gravity=gravity,
+        kind=kind,
+        poses=pz,
+        residual_rms=float(np.sqrt(np.mean(res**2))),
+        bias_std=sd[:3],
+    )
+    cal.quality = {
+        "poses": len(pz),
+        "rest_intervals": len(rests),
+        "residual_rms_m_s2": cal.residual_rms,
+        "dof": dof,
+        "raw_norm_spread_m_s2": float(np.ptp(np.linalg.norm(pz, axis=1))),
+    }
     if dof <= 0:
         cal.quality["note"] = "as many parameters as poses: exact fit, no uncertainty (add poses)"
     return cal

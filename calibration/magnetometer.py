@@ -127,8 +127,15 @@ def sphere_coverage(directions: np.ndarray, n_bands: int = 8, min_per_cell: int 
     return float(np.count_nonzero(counts >= min_per_cell)) / (nz * nl)
 
 
-def field_direction_coverage(m: np.ndarray, b: np.ndarray, a: np.ndarray, field: float, n_bands: int = 8,
-                             window: int = COVERAGE_WINDOW, tolerance: float = 0.3) -> float:
+def field_direction_coverage(
+    m: np.ndarray,
+    b: np.ndarray,
+    a: np.ndarray,
+    field: float,
+    n_bands: int = 8,
+    window: int = COVERAGE_WINDOW,
+    tolerance: float = 0.3,
+) -> float:
     """Coverage of the calibrated field's directions (see module docstring, item 5).
 
     m: (N,3) samples in time order; b, A, field: a calibration with |A (m − b)| ≈ field. Moving means over
@@ -152,8 +159,9 @@ def field_direction_coverage(m: np.ndarray, b: np.ndarray, a: np.ndarray, field:
     return cov
 
 
-def check_soft_iron(b: np.ndarray, a: np.ndarray, what: str = "fitted", max_condition: float = MAX_CONDITION
-                    ) -> str | None:
+def check_soft_iron(
+    b: np.ndarray, a: np.ndarray, what: str = "fitted", max_condition: float = MAX_CONDITION
+) -> str | None:
     """Why (b, A) is not a usable hard/soft-iron correction, or None: finite, A symmetric positive-definite,
     condition number ≤ max_condition."""
     b = np.asarray(b, dtype=float)
@@ -170,8 +178,10 @@ def check_soft_iron(b: np.ndarray, a: np.ndarray, what: str = "fitted", max_cond
         return f"{what} A is not positive-definite (eigenvalues {np.array2string(ev, precision=3)}, rank {rank})"
     cond = float(ev[-1] / ev[0])
     if cond > max_condition:
-        return (f"{what} A is badly conditioned (eigenvalue ratio {cond:.3g} > {max_condition:g}; real soft iron "
-                "is a few tens of percent)")
+        return (
+            f"{what} A is badly conditioned (eigenvalue ratio {cond:.3g} > {max_condition:g}; real soft iron "
+            "is a few tens of percent)"
+        )
     return None
 
 
@@ -261,8 +271,9 @@ def _pack(b: np.ndarray, a: np.ndarray, kind: str) -> np.ndarray:
 
 
 @njit(cache=True)
-def _res_jac_kernel(m: np.ndarray, b: np.ndarray, a: np.ndarray, field: float, jac: np.ndarray,
-                    want_jac: bool) -> np.ndarray:  # pragma: no cover - numba
+def _res_jac_kernel(
+    m: np.ndarray, b: np.ndarray, a: np.ndarray, field: float, jac: np.ndarray, want_jac: bool
+) -> np.ndarray:  # pragma: no cover - numba
     """r_i = |A (m_i − b)| − field; jac (N,9): ∂r/∂b (3), ∂r/∂A diagonal (3), ∂r/∂A_01, A_02, A_12 (symmetric)."""
     n = m.shape[0]
     res = np.empty(n)
@@ -313,14 +324,20 @@ def _residual_jac(p: np.ndarray, m: np.ndarray, kind: str, field: float) -> tupl
     return res, out
 
 
-def refine(m: np.ndarray, b0: np.ndarray, a0: np.ndarray, kind: str, field: float = 1.0,
-           max_nfev: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def refine(
+    m: np.ndarray, b0: np.ndarray, a0: np.ndarray, kind: str, field: float = 1.0, max_nfev: int = 50
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Levenberg–Marquardt refinement of b, A (kind) for residual |A(m−b)| − field. Returns (b, A, res, cov)."""
     p0 = _pack(b0, a0, kind)
     m = np.ascontiguousarray(m, dtype=np.float64)
-    sol = least_squares(lambda p: _residual(p, m, kind, field), p0,
-                        jac=lambda p: _residual_jac(p, m, kind, field)[1], method="lm", max_nfev=max_nfev,
-                        x_scale="jac")
+    sol = least_squares(
+        lambda p: _residual(p, m, kind, field),
+        p0,
+        jac=lambda p: _residual_jac(p, m, kind, field)[1],
+        method="lm",
+        max_nfev=max_nfev,
+        x_scale="jac",
+    )
     b, a = _unpack(sol.x, kind)
     res, j = _residual_jac(sol.x, m, kind, field)
     dof = max(1, len(m) - len(sol.x))
@@ -346,8 +363,9 @@ def _std_from_cov(cov: np.ndarray, kind: str, scale: float) -> tuple[np.ndarray,
     return b_std, a_std * scale
 
 
-def _initial(m: np.ndarray, kind: str, li: tuple[np.ndarray, np.ndarray] | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
+def _initial(
+    m: np.ndarray, kind: str, li: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     if kind == "offset" or li is None:
         c, r = sphere_fit_linear(m)
         return c, np.eye(3) / r
@@ -357,9 +375,9 @@ def _initial(m: np.ndarray, kind: str, li: tuple[np.ndarray, np.ndarray] | None 
     return c, a
 
 
-def fit_one(m: np.ndarray, kind: str, field_ut: float | None = None,
-            li: tuple[np.ndarray, np.ndarray] | None = None
-            ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
+def fit_one(
+    m: np.ndarray, kind: str, field_ut: float | None = None, li: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray, np.ndarray]:
     """Fit one kind. Returns (b, A, field, residuals µT, b_std, A_std) with the scale convention applied.
 
     ``li``: (centre, A) of the algebraic fit as the starting point (computed here when None).
@@ -386,9 +404,14 @@ def fit_one(m: np.ndarray, kind: str, field_ut: float | None = None,
     return b, a * s, s, res * s, b_std, a_std
 
 
-def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | None = None,
-                     min_coverage: float | None = None, n_bands: int = 8,
-                     max_samples: int | None = None) -> MagFit:
+def calibrate_sphere(
+    mag_ut: np.ndarray,
+    kind: str = "auto",
+    field_ut: float | None = None,
+    min_coverage: float | None = None,
+    n_bands: int = 8,
+    max_samples: int | None = None,
+) -> MagFit:
     """Full-sphere hard/soft-iron calibration of magnetometer samples (N,3) µT (see module docstring).
 
     kind: offset | diag | full | auto. auto fits all three and keeps the simplest whose residual RMS is within
@@ -431,7 +454,8 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
             f"field-direction coverage {100 * cov_frac:.0f}% of the sphere (equal-area grid {n_bands}×"
             f"{2 * n_bands}, noise averaged out), below the {100 * need(k):.0f}% needed for a '{k}' fit; rotate "
             "the sensor through many orientations (tumble it through every side up, or turn it about several axes), "
-            "use --method swing for a sensor that only turns in heading, or lower --min-coverage at your own risk")
+            "use --method swing for a sensor that only turns in heading, or lower --min-coverage at your own risk"
+        )
     results = {}
     refused = {}
     for k in allowed:
@@ -442,13 +466,17 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
         else:
             refused[k] = why
     if not results:
-        raise ImutoolError(f"magnetometer calibration not determined by the data: {'; '.join(refused.values())}; "
-                           "rotate the sensor through more orientations")
+        raise ImutoolError(
+            f"magnetometer calibration not determined by the data: {'; '.join(refused.values())}; "
+            "rotate the sensor through more orientations"
+        )
     allowed = [k for k in allowed if k in results]
     raw_n = np.linalg.norm(m, axis=1)
     raw_rel = float(np.std(raw_n) / np.mean(raw_n))
-    cands = {k: {"residual_rms_ut": float(np.sqrt(np.mean(r[3] ** 2))),
-                 "params": {"offset": 4, "diag": 6, "full": 9}[k]} for k, r in results.items()}
+    cands = {
+        k: {"residual_rms_ut": float(np.sqrt(np.mean(r[3] ** 2))), "params": {"offset": 4, "diag": 6, "full": 9}[k]}
+        for k, r in results.items()
+    }
     if kind == "auto":
         best = min(v["residual_rms_ut"] for v in cands.values())
         chosen = None
@@ -461,10 +489,16 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
         if chosen is None:
             chosen = allowed[-1]
         others = ", ".join(f"{k} {v['residual_rms_ut']:.3g} µT" for k, v in cands.items())
-        reason = (f"auto chose '{chosen}': simplest kind whose residual RMS is within 5% of the best and whose A is "
-                  f"well determined (residuals: {others}; coverage {100 * cov_frac:.0f}%"
-                  + (f"; {'/'.join(k for k in kinds if k not in allowed)} not allowed at this coverage"
-                     if len(allowed) < 3 else "") + ")")
+        reason = (
+            f"auto chose '{chosen}': simplest kind whose residual RMS is within 5% of the best and whose A is "
+            f"well determined (residuals: {others}; coverage {100 * cov_frac:.0f}%"
+            + (
+                f"; {'/'.join(k for k in kinds if k not in allowed)} not allowed at this coverage"
+                if len(allowed) < 3
+                else ""
+            )
+            + ")"
+        )
     else:
         chosen = kind
         reason = f"'{kind}' requested"
@@ -477,7 +511,8 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
         raise ImutoolError(
             f"calibrated field-direction coverage {100 * cov_fit:.0f}% of the sphere, below the "
             f"{100 * need(chosen):.0f}% needed for a '{chosen}' fit; rotate the sensor through many orientations "
-            "(every side up), or use --method swing for a sensor that only turns in heading")
+            "(every side up), or use --method swing for a sensor that only turns in heading"
+        )
     cov_frac = cov_fit
     warns = []
     if refused:
@@ -487,11 +522,23 @@ def calibrate_sphere(mag_ut: np.ndarray, kind: str = "auto", field_ut: float | N
         warns.append(f"fitted field {f_est:.3g} µT is not the Earth's (20–70 µT): check the magnetometer unit")
     if cov_frac < WARN_COVERAGE:
         warns.append(f"coverage only {100 * cov_frac:.0f}% of the sphere: soft-iron terms are weakly determined")
-    fit = MagFit(b=b, A=a, field_ut=float(np.mean(cn)) if field_ut is None else float(field_ut), kind=chosen,
-                 residual_rms_ut=float(np.sqrt(np.mean(res ** 2))), residual_rel=float(np.sqrt(np.mean(res ** 2)) /
-                                                                                     np.mean(cn)),
-                 coverage=cov_frac, n=len(m), b_std=b_std, A_std=a_std, raw_rel_std=raw_rel,
-                 cal_rel_std=float(np.std(cn) / np.mean(cn)), reason=reason, warnings=warns, candidates=cands)
+    fit = MagFit(
+        b=b,
+        A=a,
+        field_ut=float(np.mean(cn)) if field_ut is None else float(field_ut),
+        kind=chosen,
+        residual_rms_ut=float(np.sqrt(np.mean(res**2))),
+        residual_rel=float(np.sqrt(np.mean(res**2)) / np.mean(cn)),
+        coverage=cov_frac,
+        n=len(m),
+        b_std=b_std,
+        A_std=a_std,
+        raw_rel_std=raw_rel,
+        cal_rel_std=float(np.std(cn) / np.mean(cn)),
+        reason=reason,
+        warnings=warns,
+        candidates=cands,
+    )
     return fit
 
 
@@ -507,22 +554,29 @@ def crosswalk(b: np.ndarray, a: np.ndarray, form: str) -> str:
         return "\n".join("  [" + ", ".join(fmt.format(v) for v in row) + "]" for row in x)
 
     if form == "matlab":
-        return ("% MATLAB magcal convention: C = (D - b) * A   (rows of D are samples; A symmetric)\n"
-                "% imutool m_true = A (m_meas - b) as a column vector is the same as a row vector (m - b) * A'.\n"
-                "% A is symmetric, so MATLAB A = imutool A, b = imutool b (same units, uT).\n"
-                f"b = [{', '.join(f'{v:.6f}' for v in b)}];\nA = [\n{mat(a)}\n];\n")
+        return (
+            "% MATLAB magcal convention: C = (D - b) * A   (rows of D are samples; A symmetric)\n"
+            "% imutool m_true = A (m_meas - b) as a column vector is the same as a row vector (m - b) * A'.\n"
+            "% A is symmetric, so MATLAB A = imutool A, b = imutool b (same units, uT).\n"
+            f"b = [{', '.join(f'{v:.6f}' for v in b)}];\nA = [\n{mat(a)}\n];\n"
+        )
     if form == "fusion":
-        return ("// x-io Fusion convention: m_cal = S (m - h)   (FusionCalibrationMagnetic(m, softIronMatrix,"
-                " hardIronOffset))\n// S = imutool A (soft-iron matrix), h = imutool b (hard-iron offset)\n"
-                "const FusionMatrix softIronMatrix = {" + ", ".join(f"{v:.6f}f" for v in a.ravel()) + "};\n"
-                "const FusionVector hardIronOffset = {" + ", ".join(f"{v:.6f}f" for v in b) + "};\n")
+        return (
+            "// x-io Fusion convention: m_cal = S (m - h)   (FusionCalibrationMagnetic(m, softIronMatrix,"
+            " hardIronOffset))\n// S = imutool A (soft-iron matrix), h = imutool b (hard-iron offset)\n"
+            "const FusionMatrix softIronMatrix = {" + ", ".join(f"{v:.6f}f" for v in a.ravel()) + "};\n"
+            "const FusionVector hardIronOffset = {" + ", ".join(f"{v:.6f}f" for v in b) + "};\n"
+        )
     if form == "magneto":
-        return ("Magneto (sailboatinstruments) convention: h_cal = A^-1_magneto (h - b), printed as\n"
-                "'Combined bias (b)' and 'Correction for combined scale factors, misalignments and soft iron "
-                "(A^-1)'.\nThe correction matrix Magneto prints is imutool A; b is imutool b.\n"
-                "Combined bias (b):\n  " + "  ".join(f"{v:.6f}" for v in b) + "\n"
-                "Correction for combined scale factors, misalignments and soft iron (A^-1):\n"
-                + "\n".join("  " + "  ".join(f"{v:.6f}" for v in row) for row in a) + "\n")
+        return (
+            "Magneto (sailboatinstruments) convention: h_cal = A^-1_magneto (h - b), printed as\n"
+            "'Combined bias (b)' and 'Correction for combined scale factors, misalignments and soft iron "
+            "(A^-1)'.\nThe correction matrix Magneto prints is imutool A; b is imutool b.\n"
+            "Combined bias (b):\n  " + "  ".join(f"{v:.6f}" for v in b) + "\n"
+            "Correction for combined scale factors, misalignments and soft iron (A^-1):\n"
+            + "\n".join("  " + "  ".join(f"{v:.6f}" for v in row) for row in a)
+            + "\n"
+        )
     if form == "json":
         return json.dumps({"model": "m_true = A (m_meas - b)", "b_uT": b.tolist(), "A": a.tolist()}, indent=2)
     raise ImutoolError(f"unknown form {form!r} (matlab, fusion, magneto, json)")
@@ -560,8 +614,11 @@ def plot_before_after(m: np.ndarray, fit: MagFit, path: str, title: str = "Magne
     ax.hist(nc, bins=60, color="C0", alpha=0.6, label=f"calibrated: {100 * np.std(nc) / np.mean(nc):.2f}%")
     ax.set_xlabel("|m| (µT)")
     ax.legend(fontsize=8)
-    fig.suptitle(f"{title}: kind {fit.kind}, residual {fit.residual_rms_ut:.3g} µT, coverage "
-                 f"{100 * fit.coverage:.0f}%\nmodel m_true = A (m_meas − b)", fontsize=10)
+    fig.suptitle(
+        f"{title}: kind {fit.kind}, residual {fit.residual_rms_ut:.3g} µT, coverage "
+        f"{100 * fit.coverage:.0f}%\nmodel m_true = A (m_meas − b)",
+        fontsize=10,
+    )
     fig.tight_layout()
     ext = str(path).rsplit(".", 1)[-1].lower()
     with atomic_path(path) as tmp:

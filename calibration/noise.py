@@ -67,8 +67,11 @@ def dumps_flat_yaml(d: dict[str, Any], comments: dict[str, str] | None = None, h
 
 def write_noise(path: str | os.PathLike, values: dict[str, Any]) -> None:
     """Write ``noise.yaml`` atomically (flat keys; units as trailing comments)."""
-    text = dumps_flat_yaml(values, {k: u for k, u in KEY_UNITS.items()},
-                           header="imutool sensor noise (Allan deviation, IEEE Std 952 terms); SI units")
+    text = dumps_flat_yaml(
+        values,
+        {k: u for k, u in KEY_UNITS.items()},
+        header="imutool sensor noise (Allan deviation, IEEE Std 952 terms); SI units",
+    )
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
@@ -76,8 +79,9 @@ def write_noise(path: str | os.PathLike, values: dict[str, Any]) -> None:
 KALIBR_FALLBACKS = ("refuse", "upper-bound")
 
 
-def write_kalibr(path: str | os.PathLike, values: dict[str, Any], topic: str = "/imu0",
-                 fallback: str = "refuse") -> list[str]:
+def write_kalibr(
+    path: str | os.PathLike, values: dict[str, Any], topic: str = "/imu0", fallback: str = "refuse"
+) -> list[str]:
     """kalibr-style ``imu.yaml`` (accelerometer/gyroscope noise density and random walk, update_rate).
 
     A term the recording did not resolve (missing, None, NaN or 0 — a zero random walk makes kalibr treat the
@@ -90,10 +94,18 @@ def write_kalibr(path: str | os.PathLike, values: dict[str, Any], topic: str = "
     def known(v: Any) -> bool:
         return isinstance(v, (int, float)) and math.isfinite(v) and v > 0
 
-    keys = {"accelerometer_noise_density": "accel_noise_density", "accelerometer_random_walk": "accel_random_walk",
-            "gyroscope_noise_density": "gyro_noise_density", "gyroscope_random_walk": "gyro_random_walk"}
-    units = {"accelerometer_noise_density": "m/s^2/sqrt(Hz)", "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
-             "gyroscope_noise_density": "rad/s/sqrt(Hz)", "gyroscope_random_walk": "rad/s^2/sqrt(Hz)"}
+    keys = {
+        "accelerometer_noise_density": "accel_noise_density",
+        "accelerometer_random_walk": "accel_random_walk",
+        "gyroscope_noise_density": "gyro_noise_density",
+        "gyroscope_random_walk": "gyro_random_walk",
+    }
+    units = {
+        "accelerometer_noise_density": "m/s^2/sqrt(Hz)",
+        "accelerometer_random_walk": "m/s^3/sqrt(Hz)",
+        "gyroscope_noise_density": "rad/s/sqrt(Hz)",
+        "gyroscope_random_walk": "rad/s^2/sqrt(Hz)",
+    }
     d: dict[str, Any] = {"rostopic": topic, "update_rate": float(values.get("rate_hz", 0.0))}
     comments = dict(units)
     missing: list[str] = []
@@ -107,21 +119,33 @@ def write_kalibr(path: str | os.PathLike, values: dict[str, Any], topic: str = "
         if kk.endswith("random_walk") and fallback == "upper-bound" and known(bound):
             d[kk] = float(bound)
             comments[kk] = units[kk] + "  UPPER BOUND, not resolved by the recording (record longer)"
-            warnings.append(f"kalibr {kk}: not resolved, written as the upper bound {float(bound):.3g} "
-                            f"{units[kk]} (labelled in the file)")
+            warnings.append(
+                f"kalibr {kk}: not resolved, written as the upper bound {float(bound):.3g} "
+                f"{units[kk]} (labelled in the file)"
+            )
         else:
             missing.append(kk)
     if missing:
-        why = "; a random walk needs the +1/2 slope of the Allan deviation (record longer)" if any(
-            m.endswith("random_walk") for m in missing) else ""
-        hint = (" or write the labelled upper bound with the 'upper-bound' fallback (--kalibr-fallback upper-bound)"
-                if fallback == "refuse" and any(m.endswith("random_walk") for m in missing) else "")
-        raise ImutoolError(f"kalibr file not written: {', '.join(missing)} not resolved by this recording{why}"
-                           f"{hint}", path=os.fspath(path))
-    text = dumps_flat_yaml(d, comments,
-                           header="kalibr IMU noise model (continuous-time), from imutool allan; inflate for "
-                                  "real-world use as kalibr recommends"
-                                  + ("\nWARNING: " + "\nWARNING: ".join(warnings) if warnings else ""))
+        why = (
+            "; a random walk needs the +1/2 slope of the Allan deviation (record longer)"
+            if any(m.endswith("random_walk") for m in missing)
+            else ""
+        )
+        hint = (
+            " or write the labelled upper bound with the 'upper-bound' fallback (--kalibr-fallback upper-bound)"
+            if fallback == "refuse" and any(m.endswith("random_walk") for m in missing)
+            else ""
+        )
+        raise ImutoolError(
+            f"kalibr file not written: {', '.join(missing)} not resolved by this recording{why}{hint}",
+            path=os.fspath(path),
+        )
+    text = dumps_flat_yaml(
+        d,
+        comments,
+        header="kalibr IMU noise model (continuous-time), from imutool allan; inflate for "
+        "real-world use as kalibr recommends" + ("\nWARNING: " + "\nWARNING: ".join(warnings) if warnings else ""),
+    )
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return warnings

@@ -76,8 +76,15 @@ def _ellipse2d(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array([mx, my]) + sc * c, a2
 
 
-def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, horizontal_ut: float | None = None,
-                    bz_prior: float = 0.0, a33_prior: float | None = None, min_turn_deg: float = 300.0) -> MagFit:
+def calibrate_swing(
+    mag_ut: np.ndarray,
+    accel: np.ndarray | None = None,
+    *,
+    horizontal_ut: float | None = None,
+    bz_prior: float = 0.0,
+    a33_prior: float | None = None,
+    min_turn_deg: float = 300.0,
+) -> MagFit:
     """2-D (heading swing) hard/soft-iron fit; see the module docstring. mag (N,3) µT; accel (N,3) m/s² FRD.
 
     a33_prior: vertical scale (default √det A_xy, i.e. the same sensitivity as the horizontal axes).
@@ -112,8 +119,10 @@ def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, hori
     counts = np.bincount(((ang + 180) // 10).astype(int) % 36, minlength=36)
     covered = float(np.count_nonzero(counts >= max(1, int(0.05 * len(u) / 36))) * 10)
     if covered < min_turn_deg:
-        raise ImutoolError(f"the heading swing covers only {covered:.0f}° (< {min_turn_deg:.0f}° needed); "
-                           "turn the vessel through a full circle")
+        raise ImutoolError(
+            f"the heading swing covers only {covered:.0f}° (< {min_turn_deg:.0f}° needed); "
+            "turn the vessel through a full circle"
+        )
     h_target = 1.0
 
     def unpack(p):
@@ -127,8 +136,7 @@ def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, hori
         return np.concatenate([np.hypot(hl[:, 0], hl[:, 1]) - h_target, hl[:, 2] - p[6]])
 
     a33 = float(np.sqrt(np.linalg.det(a2))) if a33_prior is None else float(a33_prior)
-    z0 = float(np.mean(level((m - [c2[0], c2[1], bz_prior]) @ np.diag([a2[0, 0], a2[1, 1], a33]).T,
-                             roll, pitch)[:, 2]))
+    z0 = float(np.mean(level((m - [c2[0], c2[1], bz_prior]) @ np.diag([a2[0, 0], a2[1, 1], a33]).T, roll, pitch)[:, 2]))
     p0 = np.array([c2[0], c2[1], a2[0, 0], a2[0, 1], a2[1, 1], a33, z0])
     # a33 is a prior (held), so optimise the rest: wrap to keep p[5] fixed
     free = [0, 1, 2, 3, 4, 6]
@@ -171,13 +179,23 @@ def calibrate_swing(mag_ut: np.ndarray, accel: np.ndarray | None = None, *, hori
     a_std[0, 0], a_std[0, 1], a_std[1, 0], a_std[1, 1] = sd[2] * s, sd[3] * s, sd[3] * s, sd[4] * s
     raw_h = np.hypot(*level(m, roll, pitch)[:, :2].T)
     tilt = float(np.degrees(np.max(np.hypot(roll, pitch))))
-    fit = MagFit(b=b, A=a, field_ut=float(np.mean(np.linalg.norm(hl, axis=1))), kind="swing-2d",
-                 residual_rms_ut=float(np.sqrt(np.mean(res ** 2))),
-                 residual_rel=float(np.sqrt(np.mean(res ** 2)) / np.mean(hor)), coverage=covered / 360.0, n=n_h,
-                 b_std=b_std, A_std=a_std, raw_rel_std=float(np.std(raw_h) / np.mean(raw_h)),
-                 cal_rel_std=float(np.std(hor) / np.mean(hor)),
-                 reason="heading swing: horizontal hard/soft iron fitted; vertical terms from the prior",
-                 warnings=warns, method="swing")
+    fit = MagFit(
+        b=b,
+        A=a,
+        field_ut=float(np.mean(np.linalg.norm(hl, axis=1))),
+        kind="swing-2d",
+        residual_rms_ut=float(np.sqrt(np.mean(res**2))),
+        residual_rel=float(np.sqrt(np.mean(res**2)) / np.mean(hor)),
+        coverage=covered / 360.0,
+        n=n_h,
+        b_std=b_std,
+        A_std=a_std,
+        raw_rel_std=float(np.std(raw_h) / np.mean(raw_h)),
+        cal_rel_std=float(np.std(hor) / np.mean(hor)),
+        reason="heading swing: horizontal hard/soft iron fitted; vertical terms from the prior",
+        warnings=warns,
+        method="swing",
+    )
     fit.extra = {
         "section": {
             "horizontal_field_ut": float(np.mean(hor)),

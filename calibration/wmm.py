@@ -17,8 +17,11 @@ from datetime import date, datetime, timezone
 
 from formats.errors import ImutoolError
 
-_MODELS = ((2025.0, 2030.0, "WMM_2025.COF", "WMM-2025"), (2020.0, 2025.0, "WMM_2020.COF", "WMM-2020"),
-           (2015.0, 2020.0, "WMM_2015v2.COF", "WMM-2015v2"))
+_MODELS = (
+    (2025.0, 2030.0, "WMM_2025.COF", "WMM-2025"),
+    (2020.0, 2025.0, "WMM_2020.COF", "WMM-2020"),
+    (2015.0, 2020.0, "WMM_2015v2.COF", "WMM-2015v2"),
+)
 
 
 @dataclass
@@ -34,8 +37,9 @@ class Variation:
     warning: str | None = None
 
     def source(self) -> str:
-        return (f"{self.model} at {self.latitude:.3f}, {self.longitude:.3f}, {self.decimal_year:.2f}"
-                + (f", ± {self.std_deg:.2f}° (1σ)" if self.std_deg is not None else ""))
+        return f"{self.model} at {self.latitude:.3f}, {self.longitude:.3f}, {self.decimal_year:.2f}" + (
+            f", ± {self.std_deg:.2f}° (1σ)" if self.std_deg is not None else ""
+        )
 
 
 def decimal_year(when: date | datetime) -> float:
@@ -49,16 +53,19 @@ def decimal_year(when: date | datetime) -> float:
     return d.year + (d - y0).total_seconds() / (y1 - y0).total_seconds()
 
 
-def wmm_variation(latitude: float, longitude: float, when: date | datetime | float,
-                  height_km: float = 0.0) -> Variation:
+def wmm_variation(
+    latitude: float, longitude: float, when: date | datetime | float, height_km: float = 0.0
+) -> Variation:
     """Declination (deg, E +) at a geodetic position (deg; height km above the WGS-84 ellipsoid) and date
     (date/datetime or decimal year). Raises ImutoolError when pygeomag is missing, the date is outside the
     bundled models, or the position is in a blackout zone."""
     try:
         from pygeomag import GeoMag
     except ImportError:
-        raise ImutoolError("the World Magnetic Model needs the optional package pygeomag: "
-                           "pip install 'imutool[wmm]' (or give --variation)") from None
+        raise ImutoolError(
+            "the World Magnetic Model needs the optional package pygeomag: "
+            "pip install 'imutool[wmm]' (or give --variation)"
+        ) from None
     if not (-90.0 <= latitude <= 90.0 and -180.0 <= longitude <= 360.0):
         raise ImutoolError(f"position {latitude}, {longitude} is not a latitude/longitude in degrees")
     y = float(when) if isinstance(when, (int, float)) else decimal_year(when)
@@ -67,11 +74,14 @@ def wmm_variation(latitude: float, longitude: float, when: date | datetime | flo
         raise ImutoolError(f"no World Magnetic Model for {y:.2f} (bundled: 2015.0–2030.0); give --variation")
     _, _, cof, name = pick
     gm = GeoMag(coefficients_file=os.path.join("wmm", cof))
-    r = gm.calculate(glat=float(latitude), glon=float(longitude), alt=float(height_km), time=y,
-                     allow_date_outside_lifespan=False)
+    r = gm.calculate(
+        glat=float(latitude), glon=float(longitude), alt=float(height_km), time=y, allow_date_outside_lifespan=False
+    )
     if r.h < 2000.0:
-        raise ImutoolError(f"{latitude:.2f}, {longitude:.2f} is in the WMM blackout zone (horizontal field "
-                           f"{r.h:.0f} nT < 2000 nT): declination and magnetic compasses are unreliable here")
+        raise ImutoolError(
+            f"{latitude:.2f}, {longitude:.2f} is in the WMM blackout zone (horizontal field "
+            f"{r.h:.0f} nT < 2000 nT): declination and magnetic compasses are unreliable here"
+        )
     warning = None
     if r.h < 6000.0:
         warning = f"WMM caution zone (horizontal field {r.h:.0f} nT < 6000 nT): compass accuracy may be degraded"

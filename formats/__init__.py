@@ -13,8 +13,17 @@ from pathlib import Path
 from .errors import ImutoolError
 from .recording import Recording, TimeReport, merge, parse_mounting
 
-__all__ = ["ImutoolError", "Recording", "TimeReport", "merge", "parse_mounting", "read", "write", "kind_of",
-           "iter_chunks"]
+__all__ = [
+    "ImutoolError",
+    "Recording",
+    "TimeReport",
+    "merge",
+    "parse_mounting",
+    "read",
+    "write",
+    "kind_of",
+    "iter_chunks",
+]
 
 BAG_EXT = {".bag": "ros1", ".db3": "ros2", ".mcap": "ros2"}
 NMEA_EXT = {".nmea", ".log", ".txt", ".nmea0183"}

@@ -78,8 +78,10 @@ def is_imutool_bag_folder(path: str | os.PathLike) -> bool:
         return False
     if "rosbag2_bagfile_information" not in meta or "ros_distro: rosbags" not in meta:
         return False
-    return all(e.is_file() and not e.is_symlink() and (e.name == "metadata.yaml" or e.suffix in (".db3", ".mcap"))
-               for e in entries)
+    return all(
+        e.is_file() and not e.is_symlink() and (e.name == "metadata.yaml" or e.suffix in (".db3", ".mcap"))
+        for e in entries
+    )
 
 
 def _as_input(path: str | os.PathLike) -> tuple[str, str, tuple[int, int] | None]:
@@ -88,8 +90,14 @@ def _as_input(path: str | os.PathLike) -> tuple[str, str, tuple[int, int] | None
     return given, real, _file_id(real)
 
 
-def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike] = (), force: bool = False,
-                 folder: bool = False, exists_ok: bool = False) -> None:
+def check_output(
+    path: str | os.PathLike,
+    *,
+    inputs: Iterable[str | os.PathLike] = (),
+    force: bool = False,
+    folder: bool = False,
+    exists_ok: bool = False,
+) -> None:
     """Refuse (ImutoolError naming ``path``) an output that would destroy something; see the module docstring.
 
     ``folder``: the writer writes a ROS2 bag folder (an imutool bag folder may then be replaced, with ``force``).
@@ -108,11 +116,11 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
         if real == in_real or (in_id is not None and in_id == _file_id(real)):
             raise ImutoolError(f"output is the input {in_given}; choose another output name", path=given)
         if _within(in_real, real):
-            raise ImutoolError(f"output is a folder holding the input {in_given}; choose another output name",
-                               path=given)
+            raise ImutoolError(
+                f"output is a folder holding the input {in_given}; choose another output name", path=given
+            )
         if os.path.isdir(in_real) and _within(real, in_real):
-            raise ImutoolError(f"output is inside the input folder {in_given}; choose another output name",
-                               path=given)
+            raise ImutoolError(f"output is inside the input folder {in_given}; choose another output name", path=given)
     # the first existing ancestor must be a folder (a parent that is a file cannot hold the output)
     parent = Path(real).parent
     while not parent.exists() and parent != parent.parent:
@@ -130,16 +138,24 @@ def check_output(path: str | os.PathLike, *, inputs: Iterable[str | os.PathLike]
             if not force and not exists_ok:
                 raise ImutoolError(f"an imutool ROS2 bag folder exists here; {FORCE_HINT}", path=given)
             return
-        raise ImutoolError("is an existing folder (not an imutool ROS2 bag); outputs never replace a folder: "
-                           "name a new file or folder", path=given)
+        raise ImutoolError(
+            "is an existing folder (not an imutool ROS2 bag); outputs never replace a folder: "
+            "name a new file or folder",
+            path=given,
+        )
     if not stat.S_ISREG(st.st_mode):
         raise ImutoolError("is not a regular file (a device, FIFO or socket); outputs must be files", path=given)
     if not force and not exists_ok:
         raise ImutoolError(f"exists; {FORCE_HINT}", path=given)
 
 
-def check_outputs(outputs: Iterable[str | os.PathLike | None], inputs: Iterable[str | os.PathLike] | None = None,
-                  *, force: bool | None = None, exists_ok: Iterable[str | os.PathLike] = ()) -> None:
+def check_outputs(
+    outputs: Iterable[str | os.PathLike | None],
+    inputs: Iterable[str | os.PathLike] | None = None,
+    *,
+    force: bool | None = None,
+    exists_ok: Iterable[str | os.PathLike] = (),
+) -> None:
     """Check every output of a command against its inputs (see :func:`check_output`) before any work is done.
 
     Inside :func:`output_guard` the guard's inputs and ``force`` are used when not given here, the inputs given

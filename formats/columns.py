@@ -57,8 +57,9 @@ class Mapping:
         return [c.describe() for c in self.columns]
 
     def as_meta(self) -> str:
-        return "; ".join(f"{c.source}->{c.target}[{c.unit or '-'}{'' if c.scale == 1 else f'x{c.scale:g}'}]"
-                         for c in self.columns)
+        return "; ".join(
+            f"{c.source}->{c.target}[{c.unit or '-'}{'' if c.scale == 1 else f'x{c.scale:g}'}]" for c in self.columns
+        )
 
 
 def clean_name(header: str) -> str:
@@ -173,8 +174,13 @@ def resolve_unit(unit: str | None, quantity: str | None) -> str | None:
 
 def _expected_quantity(target: str) -> str | None:
     base = target.split("_")[0]
-    return {"gyro": "angular_rate", "accel": "acceleration", "mag": "magnetic", "time": "time",
-            "temp": "temperature"}.get(base)
+    return {
+        "gyro": "angular_rate",
+        "accel": "acceleration",
+        "mag": "magnetic",
+        "time": "time",
+        "temp": "temperature",
+    }.get(base)
 
 
 def parse_mapping_option(spec: str, headers: list[str]) -> Mapping:
@@ -209,10 +215,10 @@ def parse_mapping_option(spec: str, headers: list[str]) -> Mapping:
 def load_profile(path: str) -> dict:
     """Read a TOML sensor profile::
 
-        name = "x-io NGIMU"
-        [columns]
-        "Gyroscope X (deg/s)" = { to = "gyro_x", unit = "deg/s" }
-        "ax" = { to = "accel_x", unit = "counts", scale = 0.000598 }   # counts × scale → m/s²
+    name = "x-io NGIMU"
+    [columns]
+    "Gyroscope X (deg/s)" = { to = "gyro_x", unit = "deg/s" }
+    "ax" = { to = "accel_x", unit = "counts", scale = 0.000598 }   # counts × scale → m/s²
     """
     try:
         with open(path, "rb") as f:

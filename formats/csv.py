@@ -142,8 +142,7 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
     if any(not n for n in names):
         raise ImutoolError("the header row has an empty column name", path=path, line=lineno)
     if _looks_numeric(names):
-        raise ImutoolError("the first row is numbers, not column names; add a header row", path=path,
-                           line=lineno)
+        raise ImutoolError("the first row is numbers, not column names; add a header row", path=path, line=lineno)
     mapping = None
     if not is_imutool or columns or profile:
         if profile:
@@ -194,8 +193,21 @@ class _BlockParser:
         pos = 0
         row = 0
         while True:
-            res = _eng.parse_block(buf, pos, end, self.ncol, self.sep, self.dec, out, row, self.strict, self.fb,
-                                   self.bad, _eng.T_HI, _eng.T_LO)
+            res = _eng.parse_block(
+                buf,
+                pos,
+                end,
+                self.ncol,
+                self.sep,
+                self.dec,
+                out,
+                row,
+                self.strict,
+                self.fb,
+                self.bad,
+                _eng.T_HI,
+                _eng.T_LO,
+            )
             new_pos, new_row, lines, nbad, nfb, stop = (int(v) for v in res)
             for k in range(nfb):
                 r, c, s0, s1 = (int(v) for v in self.fb[k])
@@ -239,7 +251,7 @@ def _parse_parallel(parser: _BlockParser, buf: np.ndarray, end: int) -> np.ndarr
     cuts = [0]
     for k in range(1, n):
         c = int(end * k // n)
-        nl = np.flatnonzero(buf[c: min(end, c + (1 << 20))] == 10)
+        nl = np.flatnonzero(buf[c : min(end, c + (1 << 20))] == 10)
         if nl.size:
             cuts.append(c + int(nl[0]) + 1)
     cuts.append(end)
@@ -250,9 +262,12 @@ def _parse_parallel(parser: _BlockParser, buf: np.ndarray, end: int) -> np.ndarr
     for p in parsers:
         p.line = 0  # relative line numbers; made absolute below
     with ThreadPoolExecutor(len(pieces)) as pool:
-        arrays = list(pool.map(lambda k: parsers[k].parse(pieces[k], pieces[k].size,
-                                                          _rows_hint(pieces[k], pieces[k].size)),
-                               range(len(pieces))))
+        arrays = list(
+            pool.map(
+                lambda k: parsers[k].parse(pieces[k], pieces[k].size, _rows_hint(pieces[k], pieces[k].size)),
+                range(len(pieces)),
+            )
+        )
     for p, r in zip(parsers, reps, strict=True):
         for msg in r.first_bad:
             if len(parser.rep.first_bad) < 5:
@@ -299,8 +314,7 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) 
                     unit_of[k.strip()] = v.strip()
     if "time" not in names:
         raise ImutoolError(
-            "no time column found (looked for time/timestamp/t headers); name it with --columns "
-            "'YourTime=time:s'",
+            "no time column found (looked for time/timestamp/t headers); name it with --columns 'YourTime=time:s'",
             path=path,
         )
     ti = names.index("time")
@@ -323,8 +337,13 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) 
     if hdr.mapping is not None:
         meta["column_mapping"] = hdr.mapping.as_meta()
         meta["column_mapping_origin"] = hdr.mapping.origin
-        assumed = sorted({cm.target.split("_")[0] for cm in hdr.mapping.columns
-                          if cm.unit_assumed and cm.target.split("_")[0] in ("gyro", "accel", "mag")})
+        assumed = sorted(
+            {
+                cm.target.split("_")[0]
+                for cm in hdr.mapping.columns
+                if cm.unit_assumed and cm.target.split("_")[0] in ("gyro", "accel", "mag")
+            }
+        )
         if assumed:  # no unit in the header: formats.plausibility checks these against their values
             meta["units_assumed"] = ",".join(assumed)
     if rep.bad_rows:
@@ -345,8 +364,15 @@ def _expected_quantity_of(target: str) -> str | None:
     return None
 
 
-def iter_csv(path: str, chunk_rows: int = 500_000, columns: str | None = None, profile: str | None = None,
-             strict: bool = False, block_bytes: int = 16 << 20, prefetch: bool = False) -> Iterator[Recording]:
+def iter_csv(
+    path: str,
+    chunk_rows: int = 500_000,
+    columns: str | None = None,
+    profile: str | None = None,
+    strict: bool = False,
+    block_bytes: int = 16 << 20,
+    prefetch: bool = False,
+) -> Iterator[Recording]:
     """Stream a CSV as successive Recordings of at most ``chunk_rows`` rows (bounded memory).
 
     The file is read in blocks of ``block_bytes`` cut at line ends; memory is O(block + chunk), not O(file).
@@ -395,8 +421,9 @@ def in_background(items: Iterator[Any], depth: int = 1) -> Iterator[Any]:
         quit_.set()
 
 
-def _iter_csv(path: str, chunk_rows: int, columns: str | None, profile: str | None, strict: bool,
-              block_bytes: int) -> Iterator[Recording]:
+def _iter_csv(
+    path: str, chunk_rows: int, columns: str | None, profile: str | None, strict: bool, block_bytes: int
+) -> Iterator[Recording]:
     hdr = read_header(path, columns, profile)
     rep = ReadReport()
     parser = _BlockParser(hdr, path, strict, rep)
@@ -438,8 +465,7 @@ def _iter_csv(path: str, chunk_rows: int, columns: str | None, profile: str | No
                 break
 
 
-def read_csv(path: str, columns: str | None = None, profile: str | None = None,
-             strict: bool = False) -> Recording:
+def read_csv(path: str, columns: str | None = None, profile: str | None = None, strict: bool = False) -> Recording:
     """Read a whole CSV (imutool or foreign) into a Recording (SI units for sensor channels).
 
     Malformed rows are counted and skipped (``meta['skipped_rows']``, first ones with line numbers in
@@ -520,8 +546,7 @@ def _format_block(data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.nda
     fails = np.empty((1, 2), np.int64)
     nbytes, nfail = _eng.format_block(data, data.view(np.uint64), r0, r1, ord(sep), out, fails, decimals)
     if nfail:  # never seen; Python's repr is exact too
-        return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n"
-                       for row in data[r0:r1].tolist()).encode()
+        return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n" for row in data[r0:r1].tolist()).encode()
     return out[:nbytes].tobytes()
 
 
@@ -534,10 +559,12 @@ def column_decimals(rec: Recording) -> np.ndarray | None:
     spec = rec.meta.get(DECIMALS_KEY)
     if not spec:
         return None
-    if not isinstance(spec, dict) or not all(isinstance(v, int) and not isinstance(v, bool)
-                                             and 0 <= v <= _eng.MAX_DECIMALS for v in spec.values()):
-        raise ImutoolError(f"metadata {DECIMALS_KEY} must map channel names to 0…{_eng.MAX_DECIMALS} decimals, "
-                           f"got {spec!r}")
+    if not isinstance(spec, dict) or not all(
+        isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= _eng.MAX_DECIMALS for v in spec.values()
+    ):
+        raise ImutoolError(
+            f"metadata {DECIMALS_KEY} must map channel names to 0…{_eng.MAX_DECIMALS} decimals, got {spec!r}"
+        )
     widths = [1] + [1 if a.ndim == 1 else a.shape[1] for a in rec.channels.values()]
     per = [-1] + [spec.get(name, -1) for name in rec.channels]
     return np.repeat(np.array(per, np.int64), widths)

@@ -76,8 +76,8 @@ def _pow5_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 T_HI, T_LO, T_EXP = _pow5_table()
 POW10 = np.array([10.0**i for i in range(23)])
 POW2 = np.array([math.ldexp(1.0, k) for k in range(-1074, 972)])  # POW2[k + 1074] = 2^k, exact
-P10F = np.array([float(f'1e{k}') for k in range(-307, 310)])  # P10F[k + 307] ≈ 10^k
-DIGIT_PAIRS = np.frombuffer(''.join(f'{i:02d}' for i in range(100)).encode(), np.uint8).copy()
+P10F = np.array([float(f"1e{k}") for k in range(-307, 310)])  # P10F[k + 307] ≈ 10^k
+DIGIT_PAIRS = np.frombuffer("".join(f"{i:02d}" for i in range(100)).encode(), np.uint8).copy()
 POW10_INT = np.array([10**i for i in range(20)], dtype=np.uint64)
 
 _U0 = np.uint64(0)
@@ -244,8 +244,21 @@ def _match_word(buf: np.ndarray, p: int, end: int, word: str) -> int:
 
 
 @njit(cache=True, nogil=True)
-def parse_block(buf: np.ndarray, pos: int, end: int, ncol: int, sep: int, dec: int, out: np.ndarray, row: int,
-                strict: bool, fb: np.ndarray, bad: np.ndarray, t_hi: np.ndarray, t_lo: np.ndarray) -> np.ndarray:
+def parse_block(
+    buf: np.ndarray,
+    pos: int,
+    end: int,
+    ncol: int,
+    sep: int,
+    dec: int,
+    out: np.ndarray,
+    row: int,
+    strict: bool,
+    fb: np.ndarray,
+    bad: np.ndarray,
+    t_hi: np.ndarray,
+    t_lo: np.ndarray,
+) -> np.ndarray:
     """Parse whole lines of ``buf[pos:end]`` into ``out[row:]`` (float64, ncol columns).
 
     Returns int64 [pos, row, lines, nbad, nfb, stop] where ``lines`` counts the lines consumed (for line
@@ -550,8 +563,16 @@ MAX_DECIMALS = 15
 
 
 @njit(cache=True, nogil=True)
-def format_block(data: np.ndarray, bits: np.ndarray, r0: int, r1: int, sep: int, out: np.ndarray, fails: np.ndarray,
-                 decimals: np.ndarray) -> tuple[int, int]:
+def format_block(
+    data: np.ndarray,
+    bits: np.ndarray,
+    r0: int,
+    r1: int,
+    sep: int,
+    out: np.ndarray,
+    fails: np.ndarray,
+    decimals: np.ndarray,
+) -> tuple[int, int]:
     """Format rows data[r0:r1] (``bits`` = data.view(uint64)) as CSV lines into ``out`` (needs
     (r1-r0)·(ncol·MAX_FIELD_BYTES + 1) bytes). Layout as ``repr``: positional for 1e-4 ≤ |x| < 1e16, else
     ``d.ddde±XX``; integers without a trailing ``.0``; NaN = empty field; ±inf as ``inf``/``-inf``.

@@ -77,8 +77,9 @@ class NmeaParseError(ImutoolError):
 
     kind = "malformed"
 
-    def __init__(self, message: str, *, sentence_type: str | None = None, path: str | None = None,
-                 line: int | None = None):
+    def __init__(
+        self, message: str, *, sentence_type: str | None = None, path: str | None = None, line: int | None = None
+    ):
         super().__init__(message, path=path, line=line)
         self.sentence_type = sentence_type
 
@@ -178,15 +179,16 @@ def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
     cs_ok: bool | None
     if star >= 0 and len(s) - star == 3 and _HEX2_RE.fullmatch(s, star + 1):
         body = s[1:star]
-        cs_ok = checksum(body) == s[star + 1:].upper()
+        cs_ok = checksum(body) == s[star + 1 :].upper()
     else:
         body = s[1:]
         cs_ok = None
     addr = body.split(",", 1)[0]
     stype = ("P" + addr[1:] if addr[:1] == "P" else addr[2:]) if _ADDR_RE.match(addr) else None
     if cs_ok is False and checksum_policy != "ignore":
-        raise NmeaChecksumError(f"checksum mismatch (got {s[star + 1:]}, computed {checksum(body)})",
-                                sentence_type=stype)
+        raise NmeaChecksumError(
+            f"checksum mismatch (got {s[star + 1 :]}, computed {checksum(body)})", sentence_type=stype
+        )
     if cs_ok is None:
         if "*" in body:
             raise NmeaParseError("malformed checksum field", sentence_type=stype)
@@ -198,8 +200,9 @@ def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
         raise NmeaParseError("no data fields", sentence_type=stype)
     bad = _BAD_CHAR_RE.search(body)
     if bad:
-        raise NmeaParseError(f"illegal character {bad.group()!r} inside the sentence (spliced line?)",
-                             sentence_type=stype)
+        raise NmeaParseError(
+            f"illegal character {bad.group()!r} inside the sentence (spliced line?)", sentence_type=stype
+        )
     fields = body.split(",")[1:]
     if addr[0] == "P":
         return NmeaSentence("P", addr[1:], fields, cs_ok, s)
@@ -231,8 +234,10 @@ def _normalise_xdr_map(xdr_map: dict[str, Any] | None) -> dict[str, XdrMapping]:
     (the map used is exactly the map given, and is recorded in the Recording's meta)."""
     if xdr_map is None:
         return DEFAULT_XDR_MAP
-    if all(isinstance(v, XdrMapping) and k == k.strip().upper() and v.quantity in XDR_QUANTITIES
-           and v.sign in (1.0, -1.0) for k, v in xdr_map.items()):
+    if all(
+        isinstance(v, XdrMapping) and k == k.strip().upper() and v.quantity in XDR_QUANTITIES and v.sign in (1.0, -1.0)
+        for k, v in xdr_map.items()
+    ):
         return xdr_map  # already normalised (read_nmea normalises once per file)
     out: dict[str, XdrMapping] = {}
     for k, v in xdr_map.items():
@@ -347,9 +352,9 @@ def _dec_xdr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) 
     """
     f = s.fields
     if len(f) % 4 == 0:  # the layout of pynmea2's XDR.get_transducer(i), without building the object
-        groups = [tuple(f[i:i + 4]) for i in range(0, len(f), 4)]
+        groups = [tuple(f[i : i + 4]) for i in range(0, len(f), 4)]
     else:
-        groups = [tuple(f[j - 3:j + 1]) for j in range(3, len(f)) if f[j].strip().upper() in xmap]
+        groups = [tuple(f[j - 3 : j + 1]) for j in range(3, len(f)) if f[j].strip().upper() in xmap]
         problems.append(f"XDR: {len(f)} fields is not a multiple of 4; groups re-aligned on transducer ids")
     out: dict[str, float] = {}
     for ttype, value, unit, tid in groups:
@@ -415,8 +420,17 @@ def _dec_psti(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str])
 def _dec_hrm(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
     """HRM (standards.md §2.2): status V drops the heel/period/amplitude values (peak hold kept)."""
     d = s.fields + [""] * (10 - len(s.fields))
-    vals = {k: _num(d[i], k, "HRM") for i, k in ((0, "heel"), (1, "roll_period"), (2, "amp_port"),
-                                                  (3, "amp_stbd"), (5, "peak_port"), (6, "peak_stbd"))}
+    vals = {
+        k: _num(d[i], k, "HRM")
+        for i, k in (
+            (0, "heel"),
+            (1, "roll_period"),
+            (2, "amp_port"),
+            (3, "amp_stbd"),
+            (5, "peak_port"),
+            (6, "peak_stbd"),
+        )
+    }
     status = d[4].strip().upper()
     if status not in ("A", "V", ""):
         raise NmeaFieldError(f"HRM: status {status[:8]!r} is not A or V", sentence_type="HRM")
@@ -517,13 +531,13 @@ def decode(sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None) 
     """
     values, problems = decode_checked(sentence, xdr_map)
     if problems and not values:
-        raise NmeaFieldError(problems[0], sentence_type=sentence.type if isinstance(sentence, NmeaSentence)
-                             else None)
+        raise NmeaFieldError(problems[0], sentence_type=sentence.type if isinstance(sentence, NmeaSentence) else None)
     return values
 
 
-def decode_checked(sentence: NmeaSentence | str,
-                   xdr_map: dict[str, Any] | None = None) -> tuple[dict[str, float], list[str]]:
+def decode_checked(
+    sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None
+) -> tuple[dict[str, float], list[str]]:
     """Like :func:`decode`, but returns (values, problems) where problems lists what was skipped (XDR)."""
     if isinstance(sentence, str):
         sentence = parse_sentence(sentence)
@@ -569,8 +583,13 @@ def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, f
     if n < 7 or line[0] != "$" or line[-3] != "*":
         return None
     body = line[1:-3]
-    if checksum(body) != line[-2:] or not (body.isascii() and body.isprintable()) \
-            or "$" in body or "!" in body or "*" in body:
+    if (
+        checksum(body) != line[-2:]
+        or not (body.isascii() and body.isprintable())
+        or "$" in body
+        or "!" in body
+        or "*" in body
+    ):
         return None
     f = body.split(",")
     if len(f) < 2:
@@ -617,8 +636,12 @@ def _fmt(v: Any, d: int | None) -> str:
     return s
 
 
-def format_sentence(talker: str, formatter: str, fields: Sequence[str | float | int | None],
-                    decimals: int | Sequence[int | None] | None = None) -> str:
+def format_sentence(
+    talker: str,
+    formatter: str,
+    fields: Sequence[str | float | int | None],
+    decimals: int | Sequence[int | None] | None = None,
+) -> str:
     """``$TTFFF,f1,f2,...*HH`` (no CR/LF). None/NaN → empty field; floats with ``decimals`` places (one int for
     all or one per field; None → up to 6 places, trailing zeros trimmed). Raises ImutoolError if a field holds a
     reserved character or the sentence would exceed 82 characters including CR/LF."""
@@ -654,9 +677,17 @@ def _absnone(v: float | None) -> float | None:
     return None if v is None or not math.isfinite(v) else abs(v)
 
 
-def hrm_sentence(heel_deg: float | None, period_s: float | None, amp_port_deg: float | None,
-                 amp_stbd_deg: float | None, valid: bool, peak_port_deg: float | None = None,
-                 peak_stbd_deg: float | None = None, reset_utc: datetime | None = None, talker: str = "II") -> str:
+def hrm_sentence(
+    heel_deg: float | None,
+    period_s: float | None,
+    amp_port_deg: float | None,
+    amp_stbd_deg: float | None,
+    valid: bool,
+    peak_port_deg: float | None = None,
+    peak_stbd_deg: float | None = None,
+    reset_utc: datetime | None = None,
+    talker: str = "II",
+) -> str:
     """HRM (standards.md §2.2): heel + = starboard (deg), roll period (s), port and starboard amplitudes and
     peak-hold values sent positive (deg; a negative port value is taken by magnitude), status A/V, peak-hold
     reset time UTC as ``hhmmss`` (no fraction), day, month (no year). Naive datetimes are taken as UTC."""
@@ -666,13 +697,24 @@ def hrm_sentence(heel_deg: float | None, period_s: float | None, amp_port_deg: f
         rt, rd, rm = reset_utc.strftime("%H%M%S"), f"{reset_utc.day:02d}", f"{reset_utc.month:02d}"
     else:
         rt = rd = rm = None
-    fields = [heel_deg, period_s, _absnone(amp_port_deg), _absnone(amp_stbd_deg), "A" if valid else "V",
-              _absnone(peak_port_deg), _absnone(peak_stbd_deg), rt, rd, rm]
+    fields = [
+        heel_deg,
+        period_s,
+        _absnone(amp_port_deg),
+        _absnone(amp_stbd_deg),
+        "A" if valid else "V",
+        _absnone(peak_port_deg),
+        _absnone(peak_stbd_deg),
+        rt,
+        rd,
+        rm,
+    ]
     return format_sentence(talker, "HRM", fields, [1, 1, 1, 1, None, 1, 1, None, None, None])
 
 
-def xdr_sentence(measurements: Sequence[tuple[str, float | None, str, str]], talker: str = "YX",
-                 decimals: int = 1) -> str:
+def xdr_sentence(
+    measurements: Sequence[tuple[str, float | None, str, str]], talker: str = "YX", decimals: int = 1
+) -> str:
     """XDR with one group (type, value, unit, id) per measurement, e.g. ('A', -1.2, 'D', 'PTCH')."""
     fields: list[Any] = []
     decs: list[int | None] = []
@@ -684,15 +726,27 @@ def xdr_sentence(measurements: Sequence[tuple[str, float | None, str, str]], tal
     return format_sentence(talker, "XDR", fields, decs)
 
 
-def xdr_roll_pitch(roll_deg: float | None, pitch_deg: float | None, roll_id: str = "ROLL", pitch_id: str = "PTCH",
-                   roll_sign: int = 1, pitch_sign: int = 1, talker: str = "YX", decimals: int = 1) -> str:
+def xdr_roll_pitch(
+    roll_deg: float | None,
+    pitch_deg: float | None,
+    roll_id: str = "ROLL",
+    pitch_id: str = "PTCH",
+    roll_sign: int = 1,
+    pitch_sign: int = 1,
+    talker: str = "YX",
+    decimals: int = 1,
+) -> str:
     """XDR pitch + roll angular groups (Airmar layout: PTCH first, roll + starboard down, pitch + bow up),
     each multiplied by its sign (use −1 for a receiver with the opposite convention)."""
+
     def sg(v: float | None, s: int) -> float | None:
         return None if v is None else s * v
 
-    return xdr_sentence([("A", sg(pitch_deg, pitch_sign), "D", pitch_id), ("A", sg(roll_deg, roll_sign), "D", roll_id)],
-                        talker=talker, decimals=decimals)
+    return xdr_sentence(
+        [("A", sg(pitch_deg, pitch_sign), "D", pitch_id), ("A", sg(roll_deg, roll_sign), "D", roll_id)],
+        talker=talker,
+        decimals=decimals,
+    )
 
 
 def _ew_fields(v: float | None) -> tuple[float | None, str | None]:
@@ -701,8 +755,12 @@ def _ew_fields(v: float | None) -> tuple[float | None, str | None]:
     return abs(v), ("E" if v >= 0 else "W")
 
 
-def hdg_sentence(sensor_heading_deg: float | None, deviation_deg: float | None = None,
-                 variation_deg: float | None = None, talker: str = "HC") -> str:
+def hdg_sentence(
+    sensor_heading_deg: float | None,
+    deviation_deg: float | None = None,
+    variation_deg: float | None = None,
+    talker: str = "HC",
+) -> str:
     """HDG: magnetic sensor heading (deg), deviation and variation with E/W (E positive; null when unknown).
     Magnetic heading = sensor + E deviation; true = magnetic + E variation."""
     dv, dd = _ew_fields(deviation_deg)
@@ -729,10 +787,18 @@ def rot_sentence(rate_deg_per_min: float | None, valid: bool = True, talker: str
     return format_sentence(talker, "ROT", [rate_deg_per_min, "A" if ok else "V"], [1, None])
 
 
-def pashr_sentence(time_utc_s: float | None, heading_deg: float | None, roll_deg: float | None,
-                   pitch_deg: float | None, heave_m: float | None, roll_std_deg: float | None = None,
-                   pitch_std_deg: float | None = None, heading_std_deg: float | None = None,
-                   aiding: int | None = 0, imu_status: int | None = 1) -> str:
+def pashr_sentence(
+    time_utc_s: float | None,
+    heading_deg: float | None,
+    roll_deg: float | None,
+    pitch_deg: float | None,
+    heave_m: float | None,
+    roll_std_deg: float | None = None,
+    pitch_std_deg: float | None = None,
+    heading_std_deg: float | None = None,
+    aiding: int | None = 0,
+    imu_status: int | None = 1,
+) -> str:
     """$PASHR attitude (Applanix POS MV / OxTS layout): UTC time of day (s) as hhmmss.sss (empty when the time
     is not known — never invent one), true heading and 'T' (both empty without a heading), roll (+ starboard
     down), pitch (+ bow up), heave (m, sign as the caller chose; + up is the Applanix convention), 1-σ
@@ -747,8 +813,19 @@ def pashr_sentence(time_utc_s: float | None, heading_deg: float | None, roll_deg
     else:
         ts = None
     h = _wrap360(heading_deg)
-    fields = [ts, h, "T" if h is not None else None, roll_deg, pitch_deg, heave_m, roll_std_deg, pitch_std_deg,
-              heading_std_deg, aiding, imu_status]
+    fields = [
+        ts,
+        h,
+        "T" if h is not None else None,
+        roll_deg,
+        pitch_deg,
+        heave_m,
+        roll_std_deg,
+        pitch_std_deg,
+        heading_std_deg,
+        aiding,
+        imu_status,
+    ]
     return format_sentence("P", "ASHR", fields, [None, 2, None, 2, 2, 2, 3, 3, 3, None, None])
 
 
@@ -765,8 +842,14 @@ def _tss1_signed(v: float, scale: float, what: str) -> str:
     return ("-" if n < 0 else " ") + f"{abs(n):04d}"
 
 
-def tss1_frame(heave_m: float, roll_deg: float, pitch_deg: float, status: str = "U",
-               horizontal_accel_m_s2: float = 0.0, vertical_accel_m_s2: float = 0.0) -> str:
+def tss1_frame(
+    heave_m: float,
+    roll_deg: float,
+    pitch_deg: float,
+    status: str = "U",
+    horizontal_accel_m_s2: float = 0.0,
+    vertical_accel_m_s2: float = 0.0,
+) -> str:
     """TSS1 frame ``:XXAAAA MHHHHQMRRRR MPPPP`` (no CR/LF; 25 characters, 27 with CR/LF).
 
     Layout (NovAtel OEM7 "TSS1" log; Norwegian Subsea and Kongsberg EK80 TSS1 pages): XX horizontal acceleration,
@@ -782,8 +865,14 @@ def tss1_frame(heave_m: float, roll_deg: float, pitch_deg: float, status: str = 
     xx = min(255, max(0, int(round(abs(horizontal_accel_m_s2 or 0.0) / 0.0383))))
     va = int(round((vertical_accel_m_s2 or 0.0) / 0.000625))
     va = min(32767, max(-32768, va)) & 0xFFFF
-    return (f":{xx:02X}{va:04X} " + _tss1_signed(heave_m, 100.0, "heave") + status
-            + _tss1_signed(roll_deg, 100.0, "roll") + " " + _tss1_signed(pitch_deg, 100.0, "pitch"))
+    return (
+        f":{xx:02X}{va:04X} "
+        + _tss1_signed(heave_m, 100.0, "heave")
+        + status
+        + _tss1_signed(roll_deg, 100.0, "roll")
+        + " "
+        + _tss1_signed(pitch_deg, 100.0, "pitch")
+    )
 
 
 def parse_tss1(line: str) -> dict[str, float | str]:
@@ -802,9 +891,15 @@ def parse_tss1(line: str) -> dict[str, float | str]:
     def sg(sign: str, digits: str, scale: float) -> float:
         return (-1.0 if sign == "-" else 1.0) * int(digits) / scale
 
-    return {"horizontal_accel": int(xx, 16) * 0.0383, "vertical_accel": va * 0.000625,
-            "heave": sg(hs, hv, 100.0), "status": q, "settled": 1.0 if q.isupper() else 0.0,
-            "roll": sg(rs, rv, 100.0), "pitch": sg(ps, pv, 100.0)}
+    return {
+        "horizontal_accel": int(xx, 16) * 0.0383,
+        "vertical_accel": va * 0.000625,
+        "heave": sg(hs, hv, 100.0),
+        "status": q,
+        "settled": 1.0 if q.isupper() else 0.0,
+        "roll": sg(rs, rv, 100.0),
+        "pitch": sg(ps, pv, 100.0),
+    }
 
 
 def utc_offset_s(rec: Recording) -> float | None:
@@ -900,8 +995,11 @@ def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
     try:
         if t == "RMC" and len(f) >= 9:
             d = f[8].strip()
-            de = _date_epoch(int(d[:2]), int(d[2:4]), 2000 + int(d[4:6]) if int(d[4:6]) < 80 else 1900 + int(d[4:6])) \
-                if re.fullmatch(r"\d{6}", d) else None
+            de = (
+                _date_epoch(int(d[:2]), int(d[2:4]), 2000 + int(d[4:6]) if int(d[4:6]) < 80 else 1900 + int(d[4:6]))
+                if re.fullmatch(r"\d{6}", d)
+                else None
+            )
             return _tod(f[0]), de
         if t == "ZDA" and len(f) >= 4:
             de = None
@@ -953,8 +1051,14 @@ def _empty_counts() -> dict[str, int]:
     return {"parsed": 0, "partial": 0, "no_data": 0, "bad_checksum": 0, "malformed": 0, "unsupported": 0}
 
 
-def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map: dict[str, Any] | None = None,
-              time_source: str = "auto", nominal_rate_hz: float = 10.0, encoding: str = "latin-1") -> Recording:
+def read_nmea(
+    path: str | os.PathLike,
+    checksum_policy: str = "require",
+    xdr_map: dict[str, Any] | None = None,
+    time_source: str = "auto",
+    nominal_rate_hz: float = 10.0,
+    encoding: str = "latin-1",
+) -> Recording:
     """Read an NMEA 0183 log into a Recording of decoded channels (see :func:`decode`; HRM heel → ``roll``).
 
     Lines: ``#`` comments, blank lines and non-NMEA text (e.g. gpsd JSON) are skipped; a line may carry a
@@ -1052,8 +1156,11 @@ def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map
         except Exception as e:  # a pynmea2 surprise must never abort a whole log
             bad(lineno, stype, "malformed", f"{type(e).__name__}: {e}")
             continue
-        if not vals or set(vals) <= {"ths_mode", "peak_reset_time", "peak_reset_day", "peak_reset_month"} \
-                and "ths_mode" not in vals:
+        if (
+            not vals
+            or set(vals) <= {"ths_mode", "peak_reset_time", "peak_reset_day", "peak_reset_month"}
+            and "ths_mode" not in vals
+        ):
             c["no_data"] += 1
             continue
         c["parsed"] += 1
@@ -1068,8 +1175,9 @@ def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map
     n_pos = pos + 1
     if not rows_vals:
         summary = ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()) if any(v.values())) or "none"
-        raise ImutoolError(f"no usable NMEA sentence with heading/attitude data (sentence counts: {summary})",
-                           path=spath)
+        raise ImutoolError(
+            f"no usable NMEA sentence with heading/attitude data (sentence counts: {summary})", path=spath
+        )
 
     # -- time base
     src = time_source
@@ -1079,13 +1187,13 @@ def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map
     t_meta: dict[str, Any] = {}
     if src == "stamp":
         if not have_stamps:
-            raise ImutoolError("time source 'stamp' asked for, but not every sentence line has a timestamp",
-                               path=spath)
+            raise ImutoolError("time source 'stamp' asked for, but not every sentence line has a timestamp", path=spath)
         t = np.array(rows_stamp, dtype=float)
     elif src == "nmea":
         if not anchors:
-            raise ImutoolError("time source 'nmea' asked for, but the log has no RMC/GGA/GLL/ZDA/PASHR time",
-                               path=spath)
+            raise ImutoolError(
+                "time source 'nmea' asked for, but the log has no RMC/GGA/GLL/ZDA/PASHR time", path=spath
+            )
         t, t_meta = _nmea_times(np.array(rows_pos, dtype=float), anchors, nominal_rate_hz)
     else:
         t = np.array(rows_pos, dtype=float) / nominal_rate_hz
@@ -1109,28 +1217,30 @@ def read_nmea(path: str | os.PathLike, checksum_policy: str = "require", xdr_map
                 data[ch[0]][r] = x
     units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
     rec = Recording(t[grp], data, units)
-    rec.meta.update({
-        "source": spath,
-        "format": "nmea0183",
-        "time_source": src,
-        "time": t_meta,
-        "checksum_policy": checksum_policy,
-        "sentences": {k: counts[k] for k in sorted(counts)},
-        "bad_lines": bad_lines,
-        "lines": {"comment": n_comment, "not_nmea": n_other, "sentences": n_pos,
-                  "unrecognised_prefix": n_prefix},
-        "xdr_map": {k: (("-" if m.sign < 0 else "") + m.quantity) for k, m in xmap.items()},
-        "xdr_ids_seen": dict(xdr_ids),
-        "signs": "roll + starboard down, pitch + bow up, heave + up (m), heading deg true, rot deg/min",
-        "rows": "one per sentence carrying a value; identical timestamps merged",
-    })
+    rec.meta.update(
+        {
+            "source": spath,
+            "format": "nmea0183",
+            "time_source": src,
+            "time": t_meta,
+            "checksum_policy": checksum_policy,
+            "sentences": {k: counts[k] for k in sorted(counts)},
+            "bad_lines": bad_lines,
+            "lines": {"comment": n_comment, "not_nmea": n_other, "sentences": n_pos, "unrecognised_prefix": n_prefix},
+            "xdr_map": {k: (("-" if m.sign < 0 else "") + m.quantity) for k, m in xmap.items()},
+            "xdr_ids_seen": dict(xdr_ids),
+            "signs": "roll + starboard down, pitch + bow up, heave + up (m), heading deg true, rot deg/min",
+            "rows": "one per sentence carrying a value; identical timestamps merged",
+        }
+    )
     if "ths_mode" in data:
         rec.meta["ths_mode_codes"] = {str(float(ord(c))): c for c in THS_MODES}
     return rec
 
 
-def _nmea_times(pos: np.ndarray, anchors: list[tuple[int, float, float | None]],
-                nominal_rate_hz: float) -> tuple[np.ndarray, dict[str, Any]]:
+def _nmea_times(
+    pos: np.ndarray, anchors: list[tuple[int, float, float | None]], nominal_rate_hz: float
+) -> tuple[np.ndarray, dict[str, Any]]:
     """Place sentences in time from the UTC fixes (see read_nmea). Returns (times, meta)."""
     first_date = next((d for _, _, d in anchors if d is not None), None)
     ap: list[float] = []
@@ -1198,8 +1308,13 @@ def _f(a: np.ndarray | None, i: int) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz: float | None = None,
-                   talker: str | None = None, xdr_map: dict[str, Any] | None = None) -> Iterator[tuple[float, str]]:
+def iter_sentences(
+    rec: Recording,
+    sentences: Iterable[str] = ("HDT",),
+    rate_hz: float | None = None,
+    talker: str | None = None,
+    xdr_map: dict[str, Any] | None = None,
+) -> Iterator[tuple[float, str]]:
     """Yield (time s, sentence without CR/LF) from a Recording's channels: heading (true deg), heading_sensor /
     heading_mag / deviation / variation (HDG), rot (deg/min; derived from heading when absent), roll, pitch
     (deg), heave (m), HRM fields (roll, roll_period, amp_port, amp_stbd, peak_port, peak_stbd).
@@ -1280,14 +1395,23 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
             elif s == "XDR":
                 r, p = _f(roll, i), _f(pitch, i)
                 if r is not None or p is not None:
-                    out = xdr_roll_pitch(r, p, roll_id=rid, pitch_id=pid, roll_sign=rsign, pitch_sign=psign,
-                                         talker=tk or "YX")
+                    out = xdr_roll_pitch(
+                        r, p, roll_id=rid, pitch_id=pid, roll_sign=rsign, pitch_sign=psign, talker=tk or "YX"
+                    )
             elif s == "HRM":
                 r = _f(roll, i)
                 if r is not None or period is not None:
                     pr = _f(period, i)
-                    out = hrm_sentence(r, pr, _f(amp_p, i), _f(amp_s, i), valid=r is not None,
-                                       peak_port_deg=_f(peak_p, i), peak_stbd_deg=_f(peak_s, i), talker=tk or "II")
+                    out = hrm_sentence(
+                        r,
+                        pr,
+                        _f(amp_p, i),
+                        _f(amp_s, i),
+                        valid=r is not None,
+                        peak_port_deg=_f(peak_p, i),
+                        peak_stbd_deg=_f(peak_s, i),
+                        talker=tk or "II",
+                    )
             elif s == "PASHR":
                 h, r, p, hv = _f(heading, i), _f(roll, i), _f(pitch, i), _f(heave, i)
                 if any(x is not None for x in (h, r, p, hv)):
@@ -1296,9 +1420,14 @@ def iter_sentences(rec: Recording, sentences: Iterable[str] = ("HDT",), rate_hz:
                 yield ti, out
 
 
-def write_nmea(rec: Recording, path: str | os.PathLike, sentences: Sequence[str] = ("HDT", "XDR"),
-               rate_hz: float | None = None, talker: str | None = None,
-               xdr_map: dict[str, Any] | None = None) -> dict[str, Any]:
+def write_nmea(
+    rec: Recording,
+    path: str | os.PathLike,
+    sentences: Sequence[str] = ("HDT", "XDR"),
+    rate_hz: float | None = None,
+    talker: str | None = None,
+    xdr_map: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Write sentences (CRLF line ends, atomic) from a Recording; returns counts per sentence type.
     See :func:`iter_sentences` for channels, decimation and talker defaults."""
     spath = os.fspath(path)
@@ -1311,6 +1440,9 @@ def write_nmea(rec: Recording, path: str | os.PathLike, sentences: Sequence[str]
                 counts["P" + addr[1:] if addr.startswith("P") else addr[2:]] += 1
         if not counts:  # raised inside the context: no output file is left behind
             have = ", ".join(rec.channels) or "none"
-            raise ImutoolError(f"no sentence could be written: the recording lacks the channels for "
-                               f"{', '.join(sentences)} (has: {have})", path=spath)
+            raise ImutoolError(
+                f"no sentence could be written: the recording lacks the channels for "
+                f"{', '.join(sentences)} (has: {have})",
+                path=spath,
+            )
     return {"path": spath, "sentences": dict(counts), "total": int(sum(counts.values()))}

@@ -73,8 +73,13 @@ def _layout(rec: Recording) -> tuple[list[str], dict[str, str], bytes]:
             for c in rec.columns[name]:
                 col_units[c] = unit
     meta = {k: v for k, v in rec.meta.items() if k != "units"}
-    blob = {"format": FORMAT_NAME, "version": VERSION, "meta": meta, "units": units,
-            "columns": {k: list(v) for k, v in rec.columns.items()}}
+    blob = {
+        "format": FORMAT_NAME,
+        "version": VERSION,
+        "meta": meta,
+        "units": units,
+        "columns": {k: list(v) for k, v in rec.columns.items()},
+    }
     return names, col_units, json.dumps(blob, default=_jsonable, separators=(",", ":")).encode("utf-8")
 
 
@@ -84,8 +89,9 @@ def _schema(rec: Recording) -> Any:
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
         raise ImutoolError(f"Parquet: duplicate column names {', '.join(dup)}")
-    fields = [pa.field(n, pa.float64(), metadata={b"unit": col_units[n].encode()} if n in col_units else None)
-              for n in names]
+    fields = [
+        pa.field(n, pa.float64(), metadata={b"unit": col_units[n].encode()} if n in col_units else None) for n in names
+    ]
     return pa.schema(fields, metadata={META_KEY: blob})
 
 
@@ -115,8 +121,13 @@ class ParquetWriter(AtomicChunkWriter):
     the next one.
     """
 
-    def __init__(self, path: str | os.PathLike, compression: str = "snappy", row_group_rows: int = ROW_GROUP_ROWS,
-                 background: bool = False):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        compression: str = "snappy",
+        row_group_rows: int = ROW_GROUP_ROWS,
+        background: bool = False,
+    ):
         _pa()
         super().__init__(path, background, "imutool-parquet")
         self.compression = compression
@@ -130,13 +141,16 @@ class ParquetWriter(AtomicChunkWriter):
         self._schema = _schema(rec)
         # no dictionary encoding: float sensor data rarely repeats enough to pay for it, and trying it per row
         # group cost 3-5x the write time (benchmarks/parquet.py)
-        self._writer = pq.ParquetWriter(str(self._tmp), self._schema, compression=self.compression,
-                                        use_dictionary=False)
+        self._writer = pq.ParquetWriter(
+            str(self._tmp), self._schema, compression=self.compression, use_dictionary=False
+        )
 
     def _check(self, rec: Recording) -> None:
         if rec.column_names() != self._schema.names:
-            raise ImutoolError(f"Parquet: chunk columns {rec.column_names()} differ from the first chunk's "
-                               f"{self._schema.names}", path=self.path)
+            raise ImutoolError(
+                f"Parquet: chunk columns {rec.column_names()} differ from the first chunk's {self._schema.names}",
+                path=self.path,
+            )
 
     def _write_chunk(self, rec: Recording) -> None:
         self._writer.write_table(_table(rec, self._schema), row_group_size=self.row_group_rows)
@@ -147,8 +161,10 @@ class ParquetWriter(AtomicChunkWriter):
         if self.final_meta:  # the schema's metadata are fixed at the first chunk: these go into the footer
             blob = json.dumps(self.final_meta, default=_jsonable, separators=(",", ":"))
             if not hasattr(self._writer, "add_key_value_metadata"):
-                raise ImutoolError("Parquet: writing metadata at the end of a stream needs pyarrow >= 17 "
-                                   "(pip install -U pyarrow)", path=self.path)
+                raise ImutoolError(
+                    "Parquet: writing metadata at the end of a stream needs pyarrow >= 17 (pip install -U pyarrow)",
+                    path=self.path,
+                )
             self._writer.add_key_value_metadata({FINAL_META_KEY.decode(): blob})
         self._writer.close()
 
@@ -160,8 +176,9 @@ class ParquetWriter(AtomicChunkWriter):
                 pass
 
 
-def write_parquet(rec: Recording, path: str | os.PathLike, compression: str = "snappy",
-                  row_group_rows: int = ROW_GROUP_ROWS) -> None:
+def write_parquet(
+    rec: Recording, path: str | os.PathLike, compression: str = "snappy", row_group_rows: int = ROW_GROUP_ROWS
+) -> None:
     """Write a Recording as imutool Parquet atomically (temporary file renamed at the end)."""
     with ParquetWriter(path, compression=compression, row_group_rows=row_group_rows) as w:
         w.write(rec)
@@ -183,8 +200,11 @@ class _Plan:
                 raise ImutoolError("Parquet: the imutool metadata is not valid JSON", path=path) from None
         self.imutool = info.get("format") == FORMAT_NAME
         if self.imutool and int(info.get("version", 0)) > VERSION:
-            raise ImutoolError(f"Parquet: imutool-parquet version {info.get('version')} is newer than this "
-                               f"reader ({VERSION}); upgrade imutool", path=path)
+            raise ImutoolError(
+                f"Parquet: imutool-parquet version {info.get('version')} is newer than this "
+                f"reader ({VERSION}); upgrade imutool",
+                path=path,
+            )
         self.meta: dict[str, Any] = dict(info.get("meta", {})) if self.imutool else {}
         final = (file_meta or {}).get(FINAL_META_KEY)
         if self.imutool and final is not None:
@@ -208,8 +228,9 @@ class _Plan:
             else:
                 skipped.append(f.name)
         if "time" not in numeric:
-            raise ImutoolError("Parquet: no numeric 'time' column (seconds); has "
-                               f"{', '.join(schema.names) or 'none'}", path=path)
+            raise ImutoolError(
+                f"Parquet: no numeric 'time' column (seconds); has {', '.join(schema.names) or 'none'}", path=path
+            )
         if skipped:
             self.meta["skipped_columns"] = skipped
         self.read_columns = numeric
@@ -264,8 +285,13 @@ def parquet_info(path: str | os.PathLike) -> dict[str, Any]:
     """Rows, row groups, columns and the imutool metadata of a Parquet file, without reading the data."""
     pf = _open(path)
     plan = _Plan(pf.schema_arrow, os.fspath(path), pf.metadata.metadata)
-    return {"rows": pf.metadata.num_rows, "row_groups": pf.metadata.num_row_groups,
-            "columns": pf.schema_arrow.names, "imutool": plan.imutool, "meta": plan.meta}
+    return {
+        "rows": pf.metadata.num_rows,
+        "row_groups": pf.metadata.num_row_groups,
+        "columns": pf.schema_arrow.names,
+        "imutool": plan.imutool,
+        "meta": plan.meta,
+    }
 
 
 def iter_parquet(path: str | os.PathLike, chunk_rows: int = 500_000) -> Iterator[Recording]:

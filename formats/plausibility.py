@@ -65,13 +65,17 @@ class PlausibilityReport:
         out = []
         for name, (nb, n, kept, t0) in self.absurd.items():
             if kept:
-                out.append(f"{int(kept)} of {int(n)} {name} samples ({100 * kept / n:.1f}%) are beyond any sensor's "
-                           f"range (|value| > {lim[name]:g} in SI units or infinite): a unit or scale error, not "
-                           f"corruption — check the {name} unit (not bridged)")
+                out.append(
+                    f"{int(kept)} of {int(n)} {name} samples ({100 * kept / n:.1f}%) are beyond any sensor's "
+                    f"range (|value| > {lim[name]:g} in SI units or infinite): a unit or scale error, not "
+                    f"corruption — check the {name} unit (not bridged)"
+                )
             if nb > kept:
-                out.append(f"{int(nb - kept)} absurd {name} sample(s) (beyond the physical range or infinite; first "
-                           f"at t = {t0:.6g} s): {self.bridged.get(name, 0)} interpolated from their neighbours, "
-                           f"{self.set_nan.get(name, 0)} set to NaN (skipped by the estimators)")
+                out.append(
+                    f"{int(nb - kept)} absurd {name} sample(s) (beyond the physical range or infinite; first "
+                    f"at t = {t0:.6g} s): {self.bridged.get(name, 0)} interpolated from their neighbours, "
+                    f"{self.set_nan.get(name, 0)} set to NaN (skipped by the estimators)"
+                )
         return out
 
     def as_dict(self) -> dict[str, Any]:
@@ -163,8 +167,16 @@ def _declared(rec: Recording, channel: str) -> tuple[str, float]:
     return si, 1.0
 
 
-def _magnitude_check(rec: Recording, rep: PlausibilityReport, channel: str, lo: float, hi: float,
-                     candidates: tuple[str, ...], what: str, expected: str) -> None:
+def _magnitude_check(
+    rec: Recording,
+    rep: PlausibilityReport,
+    channel: str,
+    lo: float,
+    hi: float,
+    candidates: tuple[str, ...],
+    what: str,
+    expected: str,
+) -> None:
     a = _finite_xyz(rec, channel)
     if a is None:
         return
@@ -185,24 +197,33 @@ def _magnitude_check(rec: Recording, rep: PlausibilityReport, channel: str, lo: 
             extra = " (or raw counts)" if cand in ("mgauss", "mg") else ""
             rep.warnings.append(
                 f"UNITS: {what} median magnitude is {med:.4g} {si} (expected {expected}): {note}, but the values "
-                f"look like {cand}{extra} — {_columns_fix(rec, channel, cand)}")
+                f"look like {cand}{extra} — {_columns_fix(rec, channel, cand)}"
+            )
             return
     rep.warnings.append(
         f"UNITS: {what} median magnitude is {med:.4g} {si} (expected {expected}): {note}; raw counts? — "
-        f"{_columns_fix(rec, channel, candidates[0] + '*SCALE')} with the sensor's scale per count")
+        f"{_columns_fix(rec, channel, candidates[0] + '*SCALE')} with the sensor's scale per count"
+    )
 
 
 def check_accel_units(rec: Recording, rep: PlausibilityReport) -> None:
     """Median |accel| ≈ g (a walk, a ship or a rotation keep the median near g)."""
     g = STANDARD_GRAVITY
-    _magnitude_check(rec, rep, "accel", 0.6 * g, 1.6 * g, ("g", "m/s^2", "mg"), "accelerometer",
-                     "≈ 9.81 m/s² at rest")
+    _magnitude_check(rec, rep, "accel", 0.6 * g, 1.6 * g, ("g", "m/s^2", "mg"), "accelerometer", "≈ 9.81 m/s² at rest")
 
 
 def check_mag_units(rec: Recording, rep: PlausibilityReport) -> None:
     """Median |mag| within 10–150 µT (Earth 20–70 µT; a ship's own field and hard iron widen it)."""
-    _magnitude_check(rec, rep, "mag", 10.0, 150.0, ("gauss", "uT", "mgauss", "nT", "T"), "magnetometer",
-                     "the Earth's field, 20–70 µT")
+    _magnitude_check(
+        rec,
+        rep,
+        "mag",
+        10.0,
+        150.0,
+        ("gauss", "uT", "mgauss", "nT", "T"),
+        "magnetometer",
+        "the Earth's field, 20–70 µT",
+    )
 
 
 def gyro_tilt_ratio(rec: Recording, steps_s: tuple[float, ...] = (0.1, 0.2, 0.5)) -> dict[str, float] | None:
@@ -262,10 +283,14 @@ def _tilt_ratio_one(rec: Recording, step_s: float) -> dict[str, float] | None:
     spo = float(np.sum(d_pred * d_obs))
     k = spo / spp if spp > 0 else float("nan")
     corr = spo / math.sqrt(spp * soo) if spp > 0 and soo > 0 else 0.0
-    return {"k": k, "correlation": corr, "step_s": n * dt,
-            "predicted_tilt_rad": float(np.sum(np.linalg.norm(d_pred, axis=1))),
-            "observed_tilt_rad": float(np.sum(np.linalg.norm(d_obs, axis=1))),
-            "horizontal_rate_rad_s": float(np.nanmedian(horiz)) if np.any(np.isfinite(horiz)) else float("nan")}
+    return {
+        "k": k,
+        "correlation": corr,
+        "step_s": n * dt,
+        "predicted_tilt_rad": float(np.sum(np.linalg.norm(d_pred, axis=1))),
+        "observed_tilt_rad": float(np.sum(np.linalg.norm(d_obs, axis=1))),
+        "horizontal_rate_rad_s": float(np.nanmedian(horiz)) if np.any(np.isfinite(horiz)) else float("nan"),
+    }
 
 
 def check_gyro_units(rec: Recording, rep: PlausibilityReport) -> None:
@@ -292,24 +317,32 @@ def check_gyro_units(rec: Recording, rep: PlausibilityReport) -> None:
             if 1 / 7.5 <= true_factor / f <= 7.5:
                 rep.warnings.append(
                     f"UNITS: gyro rates are {1 / k:.3g}× the tilting the accelerometer shows: {note}, but the "
-                    f"values look like {cand} — {_columns_fix(rec, 'gyro', cand)}")
+                    f"values look like {cand} — {_columns_fix(rec, 'gyro', cand)}"
+                )
                 return
         rep.warnings.append(
             f"UNITS: gyro rates disagree with the tilting the accelerometer shows by a factor {1 / k:.3g} "
-            f"(expected 1): {note}; wrong unit or scale? — {_columns_fix(rec, 'gyro', 'UNIT*SCALE')}")
+            f"(expected 1): {note}; wrong unit or scale? — {_columns_fix(rec, 'gyro', 'UNIT*SCALE')}"
+        )
         return
     if p99 > PHYSICAL_LIMITS["gyro"] / 2 and not math.isclose(factor, _DEG, rel_tol=1e-6):
         rep.warnings.append(
             f"UNITS: gyro reads up to {p99:.3g} rad/s ({p99 / _DEG:.3g} °/s), beyond any gyro's range: {note}, "
-            f"but the values look like deg/s — {_columns_fix(rec, 'gyro', 'deg/s')}")
+            f"but the values look like deg/s — {_columns_fix(rec, 'gyro', 'deg/s')}"
+        )
         return
-    if (r is not None and r["horizontal_rate_rad_s"] > 0.3 and r["observed_tilt_rad"] < 0.05 * r["predicted_tilt_rad"]
-            and not math.isclose(factor, _DEG, rel_tol=1e-6)):
+    if (
+        r is not None
+        and r["horizontal_rate_rad_s"] > 0.3
+        and r["observed_tilt_rad"] < 0.05 * r["predicted_tilt_rad"]
+        and not math.isclose(factor, _DEG, rel_tol=1e-6)
+    ):
         h = r["horizontal_rate_rad_s"]
         rep.warnings.append(
             f"UNITS: gyro reads a median {h:.3g} rad/s about horizontal axes while the accelerometer shows no "
             f"tilting: {note}, but the values look like deg/s (or carry a huge bias) — "
-            f"{_columns_fix(rec, 'gyro', 'deg/s')}")
+            f"{_columns_fix(rec, 'gyro', 'deg/s')}"
+        )
 
 
 # -- gravity direction ---------------------------------------------------------------------------------------
@@ -363,13 +396,17 @@ def check_gravity_direction(rec: Recording, rep: PlausibilityReport, mounting: s
     axis = int(np.argmax(np.abs(d)))
     sign = float(np.sign(d[axis]))
     fix = _remap_for_up_axis(axis, sign)
-    what = ("+z: the sensor's z axis points up (FLU/ENU-style sensor, e.g. x-io, ROS REP-103)" if axis == 2
-            and sign > 0 else f"{'+' if sign > 0 else '-'}{_AX[axis]}: that sensor axis points up")
+    what = (
+        "+z: the sensor's z axis points up (FLU/ENU-style sensor, e.g. x-io, ROS REP-103)"
+        if axis == 2 and sign > 0
+        else f"{'+' if sign > 0 else '-'}{_AX[axis]}: that sensor axis points up"
+    )
     given = f" even after --mounting {mounting!r}" if mounting else ""
     rep.warnings.append(
         f"AXES: the mean specific force points along {what}{given}; imutool's body frame is FRD (z down, so "
         f"an accelerometer at rest reads −9.81 m/s² on z) — give the sensor mounting, e.g. --mounting {fix} "
-        f"(otherwise roll/pitch come out about {tilt:.0f}° off)")
+        f"(otherwise roll/pitch come out about {tilt:.0f}° off)"
+    )
 
 
 def sample_rows(rec: Recording, max_rows: int = 60_000, pieces: int = 6) -> Recording:
@@ -382,9 +419,13 @@ def sample_rows(rec: Recording, max_rows: int = 60_000, pieces: int = 6) -> Reco
     k = max_rows // pieces
     starts = np.linspace(0, n - k, pieces).astype(np.int64)
     idx = (starts[:, None] + np.arange(k)[None, :]).ravel()
-    return Recording(rec.time[idx], {c: rec.channels[c][idx] for c in _SENSORS if c in rec.channels},
-                     {c: u for c, u in rec.units.items() if c in _SENSORS}, dict(rec.meta),
-                     {c: list(v) for c, v in rec.columns.items() if c in _SENSORS})
+    return Recording(
+        rec.time[idx],
+        {c: rec.channels[c][idx] for c in _SENSORS if c in rec.channels},
+        {c: u for c, u in rec.units.items() if c in _SENSORS},
+        dict(rec.meta),
+        {c: list(v) for c, v in rec.columns.items() if c in _SENSORS},
+    )
 
 
 def check_recording(rec: Recording, mounting: str | None = None) -> PlausibilityReport:
@@ -401,9 +442,14 @@ def check_recording(rec: Recording, mounting: str | None = None) -> Plausibility
 
 
 # -- absurd samples ------------------------------------------------------------------------------------------
-def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_run_s: float = 0.5,
-                  max_fraction: float = 0.01, rep: PlausibilityReport | None = None, out_of: int = 0
-                  ) -> tuple[Recording, PlausibilityReport]:
+def bridge_absurd(
+    rec: Recording,
+    limits: dict[str, float] | None = None,
+    max_run_s: float = 0.5,
+    max_fraction: float = 0.01,
+    rep: PlausibilityReport | None = None,
+    out_of: int = 0,
+) -> tuple[Recording, PlausibilityReport]:
     """Bridge samples beyond the physical range (or ±inf) in the gyro/accel/mag channels.
 
     A sample is absurd when any axis is ±inf or beyond ``limits[channel]`` (working units; default
@@ -448,8 +494,8 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
         for s, e in zip(starts, ends, strict=True):
             run = e - s + 1
             if s > 0 and e < len(b) - 1 and valid[s - 1] and valid[e + 1] and t[e + 1] - t[s - 1] <= max_run_s:
-                f = (t[s:e + 1] - t[s - 1]) / (t[e + 1] - t[s - 1])
-                b[s:e + 1] = b[s - 1] + f[:, None] * (b[e + 1] - b[s - 1])
+                f = (t[s : e + 1] - t[s - 1]) / (t[e + 1] - t[s - 1])
+                b[s : e + 1] = b[s - 1] + f[:, None] * (b[e + 1] - b[s - 1])
                 n_interp += run
             else:
                 n_nan += run
@@ -464,8 +510,14 @@ def bridge_absurd(rec: Recording, limits: dict[str, float] | None = None, max_ru
 
 
 # -- what validation did -------------------------------------------------------------------------------------
-def dropped_rows(n_in: int, n_out: int, validation: dict[str, Any], meta: dict[str, Any],
-                 duplicates: str = "drop", warn_fraction: float = 0.01) -> tuple[dict[str, Any], list[str]]:
+def dropped_rows(
+    n_in: int,
+    n_out: int,
+    validation: dict[str, Any],
+    meta: dict[str, Any],
+    duplicates: str = "drop",
+    warn_fraction: float = 0.01,
+) -> tuple[dict[str, Any], list[str]]:
     """Account for every row the reader and the time validation did not keep.
 
     n_in: rows the reader returned; n_out: rows after :meth:`Recording.validated`; validation: its report
@@ -487,32 +539,41 @@ def dropped_rows(n_in: int, n_out: int, validation: dict[str, Any], meta: dict[s
     nd = int(validation.get("duplicate_timestamps", 0) or 0)
     lost = n_in - n_out
     if nd and lost > 0:
-        what = ("merged into the row before (--duplicates mean)" if duplicates == "mean"
-                else "repeated timestamp (first row of each kept)")
+        what = (
+            "merged into the row before (--duplicates mean)"
+            if duplicates == "mean"
+            else "repeated timestamp (first row of each kept)"
+        )
         reasons[what] = min(nd, lost)
         lost -= min(nd, lost)
     if lost > 0:
         reasons["time earlier than the row before (--backwards drop)"] = lost
     total_read = n_in + skipped
     dropped = sum(reasons.values())
-    info: dict[str, Any] = {"rows_read": total_read, "rows_kept": n_out, "rows_dropped": dropped,
-                            "dropped": reasons}
+    info: dict[str, Any] = {"rows_read": total_read, "rows_kept": n_out, "rows_dropped": dropped, "dropped": reasons}
     warns: list[str] = []
     if total_read and dropped > warn_fraction * total_read:
         why = ", ".join(f"{n} {r}" for r, n in reasons.items())
         fix = ""
         if nd:
-            fix = (" — the timestamps repeat (a logger stamping on arrival?): fix the time column, or use "
-                   "--duplicates mean to average rows that share a time")
+            fix = (
+                " — the timestamps repeat (a logger stamping on arrival?): fix the time column, or use "
+                "--duplicates mean to average rows that share a time"
+            )
         elif skipped:
             fix = " — check the file's format (`imutool info` lists the first malformed lines)"
-        warns.append(f"DROPPED: validation dropped {dropped} of {total_read} rows ({100 * dropped / total_read:.1f}%): "
-                     f"{why}{fix}")
+        warns.append(
+            f"DROPPED: validation dropped {dropped} of {total_read} rows ({100 * dropped / total_read:.1f}%): "
+            f"{why}{fix}"
+        )
     if isinstance(bag, dict):
         if bag.get("partial_read"):
             warns.append(f"DROPPED: {bag['partial_read']}")
         lost = [n for n in bag.get("notes") or [] if "skipped" in str(n) or "could not" in str(n)]
         if lost:
-            warns.append("DROPPED: " + "; ".join(str(n) for n in lost[:3])
-                         + (f" (and {len(lost) - 3} more)" if len(lost) > 3 else ""))
+            warns.append(
+                "DROPPED: "
+                + "; ".join(str(n) for n in lost[:3])
+                + (f" (and {len(lost) - 3} more)" if len(lost) > 3 else "")
+            )
     return info, warns

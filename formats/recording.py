@@ -166,8 +166,7 @@ class Recording:
         a = np.ascontiguousarray(a, dtype=np.float64) if a.dtype.kind == "f" or a.dtype.kind in "iub" else a
         if a.ndim not in (1, 2) or a.shape[0] != self.time.shape[0]:
             raise ImutoolError(
-                f"channel {name!r} has shape {a.shape}; expected ({self.time.shape[0]},) or "
-                f"({self.time.shape[0]}, k)"
+                f"channel {name!r} has shape {a.shape}; expected ({self.time.shape[0]},) or ({self.time.shape[0]}, k)"
             )
         return a
 
@@ -288,8 +287,11 @@ class Recording:
             raise ImutoolError(f"time is not finite at row {bad + 1}", path=src)
         if len(t) and float(np.max(np.abs(t))) > MAX_TIME_S:  # 1e300 would make every window loop endless
             bad = int(np.flatnonzero(np.abs(t) > MAX_TIME_S)[0])
-            raise ImutoolError(f"time {t[bad]:.6g} s at row {bad + 1} is beyond ±{MAX_TIME_S:.0e} s (3 000 years): "
-                               "not seconds? give the time column's unit (--columns 'stamp=time:ms')", path=src)
+            raise ImutoolError(
+                f"time {t[bad]:.6g} s at row {bad + 1} is beyond ±{MAX_TIME_S:.0e} s (3 000 years): "
+                "not seconds? give the time column's unit (--columns 'stamp=time:ms')",
+                path=src,
+            )
         if len(rec) >= 2:
             d = np.diff(t)
             nb = int(np.count_nonzero(d < 0))
@@ -347,8 +349,13 @@ class Recording:
                         s = np.stack([np.bincount(group, a2[:, j]) for j in range(a2.shape[1])], axis=1)
                         s /= counts[:, None]
                         chans[k] = s.reshape((-1,) + a.shape[1:])
-                    rec = Recording(rec.time[first], chans, dict(rec.units), copy.deepcopy(rec.meta),
-                                    {k: list(v) for k, v in rec.columns.items()})
+                    rec = Recording(
+                        rec.time[first],
+                        chans,
+                        dict(rec.units),
+                        copy.deepcopy(rec.meta),
+                        {k: list(v) for k, v in rec.columns.items()},
+                    )
                     rep.actions.append(f"averaged {nd} rows sharing a timestamp with their first row")
                 else:
                     raise ImutoolError(f"unknown duplicates policy {duplicates!r} (drop, mean, error)")

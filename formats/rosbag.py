@@ -207,9 +207,10 @@ def _take(buf: np.ndarray, starts: np.ndarray, dtype: str, ncols: int) -> np.nda
             out = np.empty((n, ncols), dtype)
             bounds = np.concatenate([[0], cp, [n - 1]])
             for p, q in zip(bounds[:-1], bounds[1:], strict=True):
-                view = np.ndarray((q - p + 1, ncols), dtype, buffer=buf, offset=int(starts[p]),
-                                  strides=(int(d[p]), item))
-                out[p: q + 1] = view
+                view = np.ndarray(
+                    (q - p + 1, ncols), dtype, buffer=buf, offset=int(starts[p]), strides=(int(d[p]), item)
+                )
+                out[p : q + 1] = view
             return out
     return _gather(buf, starts, item * ncols).view(dtype).reshape(n, ncols)
 
@@ -221,7 +222,7 @@ def _fields(block: bytes | memoryview) -> dict[str, bytes]:
     n = len(block)
     while p + 4 <= n:
         (fl,) = struct.unpack_from("<I", block, p)
-        f = bytes(block[p + 4: p + 4 + fl])
+        f = bytes(block[p + 4 : p + 4 + fl])
         name, _, value = f.partition(b"=")
         out[name.decode("ascii", "replace")] = value
         p += 4 + fl
@@ -264,7 +265,7 @@ class _Ros1Bag:
                     self.truncated = True
                     break
                 try:
-                    hdr = _fields(mv[p + 4: p + 4 + hl])
+                    hdr = _fields(mv[p + 4 : p + 4 + hl])
                 except (struct.error, ValueError):
                     hdr = {}
                 (dl,) = struct.unpack_from("<I", mv, p + 4 + hl)
@@ -283,11 +284,11 @@ class _Ros1Bag:
                     if comp not in decompressors:
                         raise ImutoolError(f"unsupported chunk compression {comp!r}", path=self.path)
                     try:
-                        chunks.append(decompressors[comp](bytes(mv[d0: d0 + dl])))
+                        chunks.append(decompressors[comp](bytes(mv[d0 : d0 + dl])))
                     except Exception as exc:  # corrupt chunk: count and go on
                         self.notes.append(f"chunk at byte {p} could not be decompressed ({exc}); skipped")
                 elif op == b"\x07":
-                    self._add_conn(hdr, mv[d0: d0 + dl])
+                    self._add_conn(hdr, mv[d0 : d0 + dl])
                 p = d0 + dl
             del mv
         finally:
@@ -313,14 +314,16 @@ class _Ros1Bag:
         cpos = np.empty(c, np.int64)
         _scan_ros1(buf, bounds, out, cpos, bad, True)
         if bad.any():
-            self.notes.append(f"{int(bad.sum())} chunk(s) end in an unreadable record (damaged); "
-                              "the records before the damage were kept")
+            self.notes.append(
+                f"{int(bad.sum())} chunk(s) end in an unreadable record (damaged); "
+                "the records before the damage were kept"
+            )
         for cp in cpos:
             hl = int(buf[cp]) | int(buf[cp + 1]) << 8 | int(buf[cp + 2]) << 16 | int(buf[cp + 3]) << 24
-            hdr = _fields(buf[cp + 4: cp + 4 + hl].tobytes())
+            hdr = _fields(buf[cp + 4 : cp + 4 + hl].tobytes())
             d = cp + 4 + hl
             dl = int(buf[d]) | int(buf[d + 1]) << 8 | int(buf[d + 2]) << 16 | int(buf[d + 3]) << 24
-            self._add_conn(hdr, buf[d + 4: d + 4 + dl].tobytes())
+            self._add_conn(hdr, buf[d + 4 : d + 4 + dl].tobytes())
         self.buf = buf
         self.recs = out
 
@@ -408,7 +411,7 @@ class _McapUnsupported(Exception):
 
 def _mcap_str(b: bytes | memoryview, p: int) -> tuple[str, int]:
     (n,) = struct.unpack_from("<I", b, p)
-    return bytes(b[p + 4: p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
+    return bytes(b[p + 4 : p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
 
 
 class _McapScan:
@@ -440,7 +443,7 @@ class _McapScan:
                 self.truncated = True
             raw = memoryview(data)
             for op, c, ln, _ in other.tolist():
-                rec = raw[c: c + ln]
+                rec = raw[c : c + ln]
                 if op == 6:
                     usize = struct.unpack_from("<Q", rec, 16)[0]
                     comp, q = _mcap_str(rec, 28)
@@ -448,7 +451,7 @@ class _McapScan:
                     if comp not in DECOMPRESSORS:
                         raise _McapUnsupported(f"chunk compression {comp!r}")
                     try:
-                        body = DECOMPRESSORS[comp](rec[q + 8: q + 8 + clen], usize)
+                        body = DECOMPRESSORS[comp](rec[q + 8 : q + 8 + clen], usize)
                     except Exception as exc:
                         self.notes.append(f"{f.name}: a chunk could not be decompressed ({exc}); skipped")
                         continue
@@ -473,7 +476,7 @@ class _McapScan:
             self.notes.append(f"{int(bad.sum())} MCAP chunk(s) damaged; records before the damage kept")
         for op, c, ln, si in other.tolist():
             if op in (3, 4):
-                self._meta_record(chunk_file[si], op, buf[c: c + ln].tobytes())
+                self._meta_record(chunk_file[si], op, buf[c : c + ln].tobytes())
         cf = np.array(chunk_file, np.int64)
         out[:, 0] += cf[out[:, 4]] << 16  # channel key = file index << 16 | channel id
         self.buf = buf
@@ -707,8 +710,12 @@ class _Ros2Bag:
                 except (_McapUnsupported, struct.error, ValueError, IndexError):
                     self.mcap = None  # rosbags reads it (or explains what is wrong)
                     self._direct_topics = None
-        self.direct = (self.storage == "sqlite3" and not compressed and bool(self.db_files)
-                       and all(f.is_file() for f in self.db_files))
+        self.direct = (
+            self.storage == "sqlite3"
+            and not compressed
+            and bool(self.db_files)
+            and all(f.is_file() for f in self.db_files)
+        )
         if self.direct:
             try:
                 self._direct_topics = self._db_topics(counts)
@@ -778,8 +785,10 @@ class _Ros2Bag:
                     try:
                         ids = [r[0] for r in con.execute("SELECT id FROM topics WHERE name = ?", (topic.name,))]
                         if ids:
-                            q = ("SELECT timestamp, data FROM messages WHERE topic_id IN "
-                                 f"({','.join('?' * len(ids))}) ORDER BY timestamp")
+                            q = (
+                                "SELECT timestamp, data FROM messages WHERE topic_id IN "
+                                f"({','.join('?' * len(ids))}) ORDER BY timestamp"
+                            )
                             rows.extend(con.execute(q, ids).fetchall())
                     finally:
                         con.close()
@@ -859,11 +868,14 @@ class _Decoded:
 def _floats_of_msg(m: Any, kind: str) -> list[float]:
     if kind == "imu":
         o = m.orientation
-        return ([o.x, o.y, o.z, o.w] + list(m.orientation_covariance)
-                + [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
-                + list(m.angular_velocity_covariance)
-                + [m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z]
-                + list(m.linear_acceleration_covariance))
+        return (
+            [o.x, o.y, o.z, o.w]
+            + list(m.orientation_covariance)
+            + [m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z]
+            + list(m.angular_velocity_covariance)
+            + [m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z]
+            + list(m.linear_acceleration_covariance)
+        )
     if kind == "mag":
         v = m.magnetic_field
         return [v.x, v.y, v.z] + list(m.magnetic_field_covariance)
@@ -920,7 +932,7 @@ def _decode(raw: _Raw, kind: str, msgtype: str) -> _Decoded:
     if badidx.size:
         ts = _typestore(raw.fmt)
         for i in badidx:
-            data = buf[offs[i]: offs[i] + lens[i]].tobytes()
+            data = buf[offs[i] : offs[i] + lens[i]].tobytes()
             try:
                 m = ts.deserialize_ros1(data, msgtype) if raw.fmt == "ros1" else ts.deserialize_cdr(data, msgtype)
                 floats[i] = _floats_of_msg(m, kind)
@@ -951,8 +963,9 @@ def _decode_slow(bag_path: str, topic: str, kind: str) -> _Decoded:
                 fr.add(m.header.frame_id)
     except Exception as exc:
         raise ImutoolError(f"cannot read {topic}: {exc}", path=bag_path) from None
-    return _Decoded(np.array(st, np.int64), np.array(rt, np.int64),
-                    np.array(fl, float).reshape(-1, _NFLOAT[kind]), sorted(fr))
+    return _Decoded(
+        np.array(st, np.int64), np.array(rt, np.int64), np.array(fl, float).reshape(-1, _NFLOAT[kind]), sorted(fr)
+    )
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -1019,7 +1032,9 @@ def _to_recording(dec: _Decoded, kind: str, stamp: str, topic: str, path: str, m
         if zero.sum() > 1 or (zero.any() and len(zero) == 1) or (zero.any() and not zero[0]):
             raise ImutoolError(
                 f"{int(zero.sum())} of {len(zero)} messages on {topic} have a zero header stamp; "
-                "use --stamp record (the bag's record time) instead", path=path)
+                "use --stamp record (the bag's record time) instead",
+                path=path,
+            )
         ns = dec.stamp_ns
     elif stamp == "record":
         ns = dec.rec_ns
@@ -1059,8 +1074,7 @@ def _to_recording(dec: _Decoded, kind: str, stamp: str, topic: str, path: str, m
         m = f[:, 0:3] * _FLIP * mag_unit_scale
         m[absent] = np.nan
         rec.add("mag", m)
-        conv.append(f"{'magnetic_field' if kind == 'mag' else 'vector'} FLU → FRD (x,-y,-z), "
-                    f"×{mag_unit_scale:g} → µT")
+        conv.append(f"{'magnetic_field' if kind == 'mag' else 'vector'} FLU → FRD (x,-y,-z), ×{mag_unit_scale:g} → µT")
         if kind == "mag":
             _cov_channels(rec, f[:, 3:12], absent, "mag", mag_unit_scale**2)
     rec.meta["_conv"] = conv
@@ -1084,8 +1098,11 @@ def _select(topics: dict[str, _Topic], topic: str | None, path: str) -> tuple[_T
         t = topics[w]
         kind = _KIND.get(t.msgtype)
         if kind is None:
-            raise ImutoolError(f"topic {w} has type {t.msgtype}; imutool reads sensor_msgs/Imu, "
-                               "sensor_msgs/MagneticField and geometry_msgs/Vector3Stamped", path=path)
+            raise ImutoolError(
+                f"topic {w} has type {t.msgtype}; imutool reads sensor_msgs/Imu, "
+                "sensor_msgs/MagneticField and geometry_msgs/Vector3Stamped",
+                path=path,
+            )
         if kind == "imu":
             if imu_t is not None:
                 raise ImutoolError(f"two Imu topics named ({imu_t.name}, {w}); name one", path=path)
@@ -1095,15 +1112,19 @@ def _select(topics: dict[str, _Topic], topic: str | None, path: str) -> tuple[_T
                 raise ImutoolError(f"two magnetometer topics named ({mag_t.name}, {w}); name one", path=path)
             mag_t = t
     imus = [t for t in topics.values() if t.msgtype == IMU and t.count > 0]
-    mags = [t for t in topics.values() if t.count > 0 and (
-        t.msgtype == MAG or (t.msgtype == VEC3 and "mag" in t.name.lower()))]
+    mags = [
+        t
+        for t in topics.values()
+        if t.count > 0 and (t.msgtype == MAG or (t.msgtype == VEC3 and "mag" in t.name.lower()))
+    ]
     for kind_name, cands, chosen in (("Imu", imus, imu_t), ("magnetometer", mags, mag_t)):
         if chosen is not None:
             continue
         if len(cands) > 1:
             if not wanted:
-                raise ImutoolError(f"{len(cands)} {kind_name} topics; choose with --topic IMU[,MAG]. "
-                                   f"Topics: {listing()}", path=path)
+                raise ImutoolError(
+                    f"{len(cands)} {kind_name} topics; choose with --topic IMU[,MAG]. Topics: {listing()}", path=path
+                )
             notes.append(f"{kind_name} topic not chosen among " + ", ".join(t.name for t in cands) + "; not read")
         elif len(cands) == 1:
             if kind_name == "Imu":
@@ -1111,13 +1132,21 @@ def _select(topics: dict[str, _Topic], topic: str | None, path: str) -> tuple[_T
             else:
                 mag_t = cands[0]
     if imu_t is None and mag_t is None:
-        raise ImutoolError("no sensor_msgs/Imu, sensor_msgs/MagneticField or magnetometer Vector3Stamped "
-                           f"topic with messages; topics: {listing()}", path=path)
+        raise ImutoolError(
+            "no sensor_msgs/Imu, sensor_msgs/MagneticField or magnetometer Vector3Stamped "
+            f"topic with messages; topics: {listing()}",
+            path=path,
+        )
     return imu_t, mag_t, notes
 
 
-def read_bag(path: str | os.PathLike, topic: str | None = None, stamp: str = "header",
-             vector3_mag_unit: str = "T", fast: bool = True) -> Recording:
+def read_bag(
+    path: str | os.PathLike,
+    topic: str | None = None,
+    stamp: str = "header",
+    vector3_mag_unit: str = "T",
+    fast: bool = True,
+) -> Recording:
     """Read IMU (+ magnetometer) messages from a ROS1 .bag or a ROS2 bag (folder, .db3 or .mcap).
 
     topic: None (auto: the only Imu topic and the only magnetometer topic; several → ImutoolError listing
@@ -1161,9 +1190,12 @@ def read_bag(path: str | os.PathLike, topic: str | None = None, stamp: str = "he
                 raise ImutoolError(f"topic {t.name} has no readable messages", path=path)
             r = _to_recording(dec, kind, stamp, t.name, path, vscale if kind == "vec3" else 1e6)
             info[kind if kind == "imu" else "mag"] = {
-                "topic": t.name, "type": t.msgtype, "messages": int(len(dec.stamp_ns)),
+                "topic": t.name,
+                "type": t.msgtype,
+                "messages": int(len(dec.stamp_ns)),
                 "frame_id": dec.frame_ids[0] if len(dec.frame_ids) == 1 else dec.frame_ids,
-                "undecodable_skipped": dec.bad, "decoded_by_rosbags": dec.fallback,
+                "undecodable_skipped": dec.bad,
+                "decoded_by_rosbags": dec.fallback,
             }
             frame_ids += dec.frame_ids
             recs.append(r)
@@ -1181,7 +1213,9 @@ def read_bag(path: str | os.PathLike, topic: str | None = None, stamp: str = "he
             "sensor": "ROS bag",
             "frame": "body FRD / world NED (converted from ROS REP-103 FLU/ENU)",
             "bag": {
-                "format": fmt_name, "stamp": stamp, "topics": info,
+                "format": fmt_name,
+                "stamp": stamp,
+                "topics": info,
                 "frame_id": sorted(set(frame_ids)),
                 "conversions": conv,
                 "truncated": bool(getattr(bag, "truncated", False)),
@@ -1189,8 +1223,9 @@ def read_bag(path: str | os.PathLike, topic: str | None = None, stamp: str = "he
             },
         }
         if getattr(bag, "truncated", False):
-            rec.meta["bag"]["partial_read"] = (f"truncated bag: {sum(v['messages'] for v in info.values())} "
-                                               "messages recovered from complete chunks")
+            rec.meta["bag"]["partial_read"] = (
+                f"truncated bag: {sum(v['messages'] for v in info.values())} messages recovered from complete chunks"
+            )
         return rec
     finally:
         if isinstance(bag, _Ros2Bag):
@@ -1258,11 +1293,11 @@ def _imu_payloads(rec: Recording, fmt: str, frame_id: str) -> tuple[np.ndarray, 
         if name in rec and rec[name].shape[1:] == (3,):
             unit = "rad/s" if name == "gyro" else "m/s^2"
             v = rec.in_unit(name, unit)
-            floats[:, vs: vs + 3] = v * _FLIP
+            floats[:, vs : vs + 3] = v * _FLIP
             used.append(name)
             c = _cov_from(rec, name, 1.0)
             if c is not None:
-                floats[:, cs: cs + 9] = c * _COV_SIGN
+                floats[:, cs : cs + 9] = c * _COV_SIGN
                 used += _cov_names(rec, name)
         else:
             floats[:, cs] = -1.0
@@ -1308,7 +1343,7 @@ def _serialise(t: np.ndarray, floats: np.ndarray, fmt: str, frame_id: str) -> np
     out[:, 8:12] = nsec.astype("<u4").view(np.uint8).reshape(n, 4)
     out[:, 12:16] = np.frombuffer(struct.pack("<I", L), np.uint8)
     if fid:
-        out[:, 16: 16 + len(fid)] = np.frombuffer(fid, np.uint8)
+        out[:, 16 : 16 + len(fid)] = np.frombuffer(fid, np.uint8)
     out[:, fstart:] = np.ascontiguousarray(floats, dtype="<f8").view(np.uint8).reshape(n, 8 * nf)
     return out
 
@@ -1318,9 +1353,15 @@ def _stamps_ns(t: np.ndarray) -> np.ndarray:
     return sec * 1_000_000_000 + nsec
 
 
-def write_bag(rec: Recording, path: str | os.PathLike, topic: str = "/imu/data", mag_topic: str = "/imu/mag",
-              frame_id: str | None = None, storage: str | None = None, compression: str | None = None
-              ) -> dict[str, Any]:
+def write_bag(
+    rec: Recording,
+    path: str | os.PathLike,
+    topic: str = "/imu/data",
+    mag_topic: str = "/imu/mag",
+    frame_id: str | None = None,
+    storage: str | None = None,
+    compression: str | None = None,
+) -> dict[str, Any]:
     """Write a Recording as sensor_msgs/Imu (+ MagneticField) to a ROS1 .bag or a ROS2 bag.
 
     path: ``*.bag`` ROS1; ``*.db3`` / ``*.mcap`` a single ROS2 storage file; any other name a ROS2 bag folder
@@ -1342,8 +1383,11 @@ def write_bag(rec: Recording, path: str | os.PathLike, topic: str = "/imu/data",
     has_imu = any(k in rec for k in ("gyro", "accel", "q")) or all(k in rec for k in ("roll", "pitch", "heading"))
     has_mag = "mag" in rec and rec["mag"].shape[1:] == (3,)
     if not has_imu and not has_mag:
-        raise ImutoolError("nothing to write as Imu/MagneticField: needs gyro, accel, q/roll,pitch,heading or mag; "
-                           f"has {', '.join(rec.channels) or 'none'}", path=path)
+        raise ImutoolError(
+            "nothing to write as Imu/MagneticField: needs gyro, accel, q/roll,pitch,heading or mag; "
+            f"has {', '.join(rec.channels) or 'none'}",
+            path=path,
+        )
     if len(rec) > 1 and np.any(np.diff(rec.time) < 0):
         raise ImutoolError("time goes backwards; validate the recording first (--backwards sort)", path=path)
     fid = frame_id or _meta_frame_id(rec) or "imu_link"
@@ -1456,5 +1500,4 @@ def _write_all(w: Any, msgs: list[tuple[str, str, np.ndarray, np.ndarray]], ts: 
         size = pay.shape[1]
         write = w.write
         for i, t in enumerate(stamps.tolist()):
-            write(conn, t, flat[i * size: (i + 1) * size])
-
+            write(conn, t, flat[i * size : (i + 1) * size])

@@ -62,8 +62,13 @@ SI_UNIT = {
 }
 
 # what each canonical sensor channel measures
-CHANNEL_QUANTITY = {"time": "time", "gyro": "angular_rate", "accel": "acceleration", "mag": "magnetic",
-                    "temp": "temperature"}
+CHANNEL_QUANTITY = {
+    "time": "time",
+    "gyro": "angular_rate",
+    "accel": "acceleration",
+    "mag": "magnetic",
+    "temp": "temperature",
+}
 
 
 def normalize_unit_name(unit: str) -> str:

@@ -149,99 +149,193 @@ HEADING_GATE_SIGMA, HEADING_REJECT_MAX_S = 4.0, 5.0
 # they were chosen on all 16 shared BROAD trials and the simulator, never on one file (docs/attitude.md).
 PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "gyro_noise": ("rad/s/√Hz", (1e-7, 1.0), "gyro white-noise density: process noise of the attitude"),
-    "gyro_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise of the tilt (across the world "
-                                          "vertical): the attitude uncertainty that gyro scale-factor and "
-                                          "misalignment errors add while the body turns (0: off)"),
-    "heading_scale_noise": ("1", (0.0, 1.0), "rate-proportional process noise about the world vertical only: "
-                                             "the heading uncertainty that gyro scale-factor errors add while "
-                                             "the body turns (gravity corrects the tilt part; 0: off)"),
+    "gyro_scale_noise": (
+        "1",
+        (0.0, 1.0),
+        "rate-proportional process noise of the tilt (across the world "
+        "vertical): the attitude uncertainty that gyro scale-factor and "
+        "misalignment errors add while the body turns (0: off)",
+    ),
+    "heading_scale_noise": (
+        "1",
+        (0.0, 1.0),
+        "rate-proportional process noise about the world vertical only: "
+        "the heading uncertainty that gyro scale-factor errors add while "
+        "the body turns (gravity corrects the tilt part; 0: off)",
+    ),
     "bias_rw": ("rad/s/√s", (0.0, 1.0), "gyro bias random walk: process noise of the bias"),
-    "accel_noise": ("rad", (1e-5, 3.0), "σ floor of the normalised accelerometer direction, per sample "
-                                        "(an update of n samples uses σ²/n)"),
+    "accel_noise": (
+        "rad",
+        (1e-5, 3.0),
+        "σ floor of the normalised accelerometer direction, per sample (an update of n samples uses σ²/n)",
+    ),
     "accel_noise_gain": ("1", (0.0, 100.0), "σ² += (gain × learned accelerometer white-noise σ / g)²"),
-    "accel_noise_rise_time": ("s", (0.0, 1e6), "the learned accelerometer white noise is a sensor property: its "
-                                               "floor follows the 10-s mean down at once and up with this time "
-                                               "constant, so the jerk of a spell of fast motion is not taken for "
-                                               "sensor noise (0: the 10-s mean itself)"),
-    "accel_lp_tau": ("s", (0.0, 100.0), "delay of the specific force's low-pass in the quasi-inertial frame "
-                                         "(second-order Butterworth, cut-off √2/τ rad/s; 0: raw accelerometer, as "
-                                         "in the paper)"),
-    "smoother_lp_tau": ("s", (0.0, 100.0), "delay of the smoother's low-pass of the specific force, run forwards "
-                                            "and backwards (no lag: a longer τ costs it no delay; offline VQF's "
-                                            "3 s) (0: accel_lp_tau)"),
-    "accel_lp_lag": ("bool", (0, 1), "the low-passed measurement lags a gyro-bias error by the low-pass's delay: "
-                                     "H holds that term (false: H sees the tilt only)"),
-    "accel_gate": ("m/s^2", (0.0, 1e3), "shock gate: accelerometer samples with | |a| − g | above this are "
-                                         "skipped for at most shock_max s (0: off)"),
+    "accel_noise_rise_time": (
+        "s",
+        (0.0, 1e6),
+        "the learned accelerometer white noise is a sensor property: its "
+        "floor follows the 10-s mean down at once and up with this time "
+        "constant, so the jerk of a spell of fast motion is not taken for "
+        "sensor noise (0: the 10-s mean itself)",
+    ),
+    "accel_lp_tau": (
+        "s",
+        (0.0, 100.0),
+        "delay of the specific force's low-pass in the quasi-inertial frame "
+        "(second-order Butterworth, cut-off √2/τ rad/s; 0: raw accelerometer, as "
+        "in the paper)",
+    ),
+    "smoother_lp_tau": (
+        "s",
+        (0.0, 100.0),
+        "delay of the smoother's low-pass of the specific force, run forwards "
+        "and backwards (no lag: a longer τ costs it no delay; offline VQF's "
+        "3 s) (0: accel_lp_tau)",
+    ),
+    "accel_lp_lag": (
+        "bool",
+        (0, 1),
+        "the low-passed measurement lags a gyro-bias error by the low-pass's delay: "
+        "H holds that term (false: H sees the tilt only)",
+    ),
+    "accel_gate": (
+        "m/s^2",
+        (0.0, 1e3),
+        "shock gate: accelerometer samples with | |a| − g | above this are skipped for at most shock_max s (0: off)",
+    ),
     "accel_nis_gate": ("1", (0.0, 1e6), "skip accelerometer updates whose NIS exceeds this (0: off)"),
     "accel_nis_soft": ("bool", (0, 1), "above accel_nis_gate inflate R by NIS/gate instead of skipping"),
     "accel_adapt": ("m/s^2", (0.0, 1e3), "accelerometer σ × √(1 + (| |a| − g | / this)²) (0: off)"),
-    "shock_max": ("s", (0.0, 1e3), "a shock is at most this long: beyond accel_gate for longer, the acceleration "
-                                   "is sustained and the accelerometer is used again (low-passed), never coasted "
-                                   "on; the gyro bias does not learn from it either way (bias_hold)"),
+    "shock_max": (
+        "s",
+        (0.0, 1e3),
+        "a shock is at most this long: beyond accel_gate for longer, the acceleration "
+        "is sustained and the accelerometer is used again (low-passed), never coasted "
+        "on; the gyro bias does not learn from it either way (bias_hold)",
+    ),
     "reject_timeout": ("s", (0.01, 1e4), "a rejected accelerometer is forced back in after this long"),
-    "accel_bias_dev": ("m/s^2", (0.0, 1e3), "no gyro-bias learning from the accelerometer while | |a| − g | "
-                                            "exceeds this, and for bias_hold s after (0: always learn)"),
+    "accel_bias_dev": (
+        "m/s^2",
+        (0.0, 1e3),
+        "no gyro-bias learning from the accelerometer while | |a| − g | "
+        "exceeds this, and for bias_hold s after (0: always learn)",
+    ),
     "bias_hold": ("s", (0.0, 1e3), "hold-off after a large | |a| − g | before the bias learns again"),
     "bias_max": ("rad/s", (0.0, 10.0), "bound on each gyro-bias component (0: none)"),
-    "accel_heading": ("bool", (0, 1), "accelerometer updates may move heading through cross-covariances (false: "
-                                      "they correct inclination only, as gravity observes no heading)"),
-    "accel_vertical_bias": ("bool", (0, 1), "accelerometer updates may correct the gyro-bias component about the "
-                                            "world vertical (which gravity does not observe; false: only the "
-                                            "heading and rest detection learn it)"),
-    "heading_input_noise_deg": ("deg", (1e-3, 180.0), "σ of an external true heading per update (gyrocompass HDT/THS, "
-                                                      "channel heading_true); with one, the magnetometer is not used"),
-    "heading_input_interval": ("s", (0.0, 3600.0), "the external heading is used at most once per this interval: "
-                                                   "a gyrocompass's errors are correlated over seconds, and an "
-                                                   "interpolated or held column must not count each IMU sample "
-                                                   "as an independent fix (0: every sample)"),
-    "heading_input_latency": ("s", (0.0, 10.0), "delay of the external heading: a fix stamped t is the heading at "
-                                               "t − latency (a gyrocompass's HDT is often 0.1–1 s late; at 3 °/s "
-                                               "0.5 s is 1.5° of heading); the heading is read that much later"),
-    "mag_heading_density": ("deg*sqrt(s)", (0.01, 100.0), "σ of the magnetic heading as a noise density: σ per "
-                                                         "sample = this / √dt, so the heading's time constant "
-                                                         "(≈ radians(this) / gyro_noise ≈ 21 s) is the same at "
-                                                         "any rate ('full' mode: of m̂, rad; an update of n "
-                                                         "samples uses σ²/n)"),
-    "mag_heading_floor_deg": ("deg", (0.0, 180.0), "... and at least this per sample: one sample's own white noise "
-                                                   "(≈ 1.5 µT on a 17 µT horizontal field), which a slow "
-                                                   "magnetometer's density alone would under-state"),
-    "mag_noise_deg": ("deg", (0.0, 180.0), "σ of the magnetic heading per sample, pinned whatever the rate (0: "
-                                           "from mag_heading_density; files saved before it existed pin 20; "
-                                           "else at least 0.01)"),
+    "accel_heading": (
+        "bool",
+        (0, 1),
+        "accelerometer updates may move heading through cross-covariances (false: "
+        "they correct inclination only, as gravity observes no heading)",
+    ),
+    "accel_vertical_bias": (
+        "bool",
+        (0, 1),
+        "accelerometer updates may correct the gyro-bias component about the "
+        "world vertical (which gravity does not observe; false: only the "
+        "heading and rest detection learn it)",
+    ),
+    "heading_input_noise_deg": (
+        "deg",
+        (1e-3, 180.0),
+        "σ of an external true heading per update (gyrocompass HDT/THS, "
+        "channel heading_true); with one, the magnetometer is not used",
+    ),
+    "heading_input_interval": (
+        "s",
+        (0.0, 3600.0),
+        "the external heading is used at most once per this interval: "
+        "a gyrocompass's errors are correlated over seconds, and an "
+        "interpolated or held column must not count each IMU sample "
+        "as an independent fix (0: every sample)",
+    ),
+    "heading_input_latency": (
+        "s",
+        (0.0, 10.0),
+        "delay of the external heading: a fix stamped t is the heading at "
+        "t − latency (a gyrocompass's HDT is often 0.1–1 s late; at 3 °/s "
+        "0.5 s is 1.5° of heading); the heading is read that much later",
+    ),
+    "mag_heading_density": (
+        "deg*sqrt(s)",
+        (0.01, 100.0),
+        "σ of the magnetic heading as a noise density: σ per "
+        "sample = this / √dt, so the heading's time constant "
+        "(≈ radians(this) / gyro_noise ≈ 21 s) is the same at "
+        "any rate ('full' mode: of m̂, rad; an update of n "
+        "samples uses σ²/n)",
+    ),
+    "mag_heading_floor_deg": (
+        "deg",
+        (0.0, 180.0),
+        "... and at least this per sample: one sample's own white noise "
+        "(≈ 1.5 µT on a 17 µT horizontal field), which a slow "
+        "magnetometer's density alone would under-state",
+    ),
+    "mag_noise_deg": (
+        "deg",
+        (0.0, 180.0),
+        "σ of the magnetic heading per sample, pinned whatever the rate (0: "
+        "from mag_heading_density; files saved before it existed pin 20; "
+        "else at least 0.01)",
+    ),
     "mag_norm_gate": ("1", (0.0, 10.0), "skip mag when | |m|/m_ref − 1 | exceeds this fraction (0: off)"),
     "mag_dip_gate_deg": ("deg", (0.0, 90.0), "skip mag when its dip departs from the reference by more (0: off)"),
     "mag_norm_soft": ("1", (0.0, 10.0), "mag σ² × (1 + (norm deviation / this)²): de-weighting (0: off)"),
     "mag_dip_soft_deg": ("deg", (0.0, 90.0), "mag σ² × (1 + (dip deviation / this)²): de-weighting (0: off)"),
-    "mag_disturbance_hold": ("s", (0.0, 1e3), "the magnetic de-weighting follows the largest recent deviation "
-                                              "(norm, dip, a gate rejection), decaying with this time constant, "
-                                              "so samples that pass by chance inside a disturbance stay "
-                                              "de-weighted (0: per sample)"),
-    "mag_reference_tau": ("s", (0.0, 1e6), "the reference norm and dip the magnetometer's gates compare with: the "
-                                           "mean of the accepted field, a running mean over the first this-many "
-                                           "seconds, then forgetting with this time constant (the earth's field "
-                                           "changes only as the vessel moves over it; 0: the first sample, for the "
-                                           "whole run)"),
-    "mag_new_time": ("s", (0.0, 1e6), "no lock-out of the magnetometer: a field its gates reject, but which stays "
-                                      "within those gates of itself (homogeneous) for this long while the body "
-                                      "turns, becomes the new reference (the sensor moved, or the field at the "
-                                      "start was the disturbed one; VQF's magNewTime; 0: never)"),
-    "mag_new_first_time": ("s", (0.0, 1e6), "... this long instead while the reference is not yet confirmed (its "
-                                            "own field has not yet held this long while the body turned: the field "
-                                            "where a recording starts may be the disturbed one; VQF's "
-                                            "magNewFirstTime; 0: the start's field counts as confirmed)"),
-    "mag_new_min_rate": ("deg/s", (0.0, 1e4), "... only time while the body turns faster than this counts: a "
-                                              "magnet riding with the sensor changes the field's norm and dip as "
-                                              "the body turns, a new homogeneous field does not (VQF's "
-                                              "magNewMinGyr; 0: any time counts, a still sensor's too, so a magnet "
-                                              "held beside it becomes the reference)"),
+    "mag_disturbance_hold": (
+        "s",
+        (0.0, 1e3),
+        "the magnetic de-weighting follows the largest recent deviation "
+        "(norm, dip, a gate rejection), decaying with this time constant, "
+        "so samples that pass by chance inside a disturbance stay "
+        "de-weighted (0: per sample)",
+    ),
+    "mag_reference_tau": (
+        "s",
+        (0.0, 1e6),
+        "the reference norm and dip the magnetometer's gates compare with: the "
+        "mean of the accepted field, a running mean over the first this-many "
+        "seconds, then forgetting with this time constant (the earth's field "
+        "changes only as the vessel moves over it; 0: the first sample, for the "
+        "whole run)",
+    ),
+    "mag_new_time": (
+        "s",
+        (0.0, 1e6),
+        "no lock-out of the magnetometer: a field its gates reject, but which stays "
+        "within those gates of itself (homogeneous) for this long while the body "
+        "turns, becomes the new reference (the sensor moved, or the field at the "
+        "start was the disturbed one; VQF's magNewTime; 0: never)",
+    ),
+    "mag_new_first_time": (
+        "s",
+        (0.0, 1e6),
+        "... this long instead while the reference is not yet confirmed (its "
+        "own field has not yet held this long while the body turned: the field "
+        "where a recording starts may be the disturbed one; VQF's "
+        "magNewFirstTime; 0: the start's field counts as confirmed)",
+    ),
+    "mag_new_min_rate": (
+        "deg/s",
+        (0.0, 1e4),
+        "... only time while the body turns faster than this counts: a "
+        "magnet riding with the sensor changes the field's norm and dip as "
+        "the body turns, a new homogeneous field does not (VQF's "
+        "magNewMinGyr; 0: any time counts, a still sensor's too, so a magnet "
+        "held beside it becomes the reference)",
+    ),
     "mag_bias": ("bool", (0, 1), "magnetic heading updates may correct the gyro bias"),
-    "mag_bias_gate": ("1", (0.0, 1e6), "... only from heading innovations within this many σ (σ² = the heading's "
-                                       "variance + the magnetometer's undisturbed σ² per update): a heading off "
-                                       "by more (a wrong start, a field the gates pass) is an error of the "
-                                       "heading, not of the gyro, so the bias is left as it is (a Schmidt update; "
-                                       "0: always; mag_mode heading only, the 'full' vector "
-                                       "update is not gated)"),
+    "mag_bias_gate": (
+        "1",
+        (0.0, 1e6),
+        "... only from heading innovations within this many σ (σ² = the heading's "
+        "variance + the magnetometer's undisturbed σ² per update): a heading off "
+        "by more (a wrong start, a field the gates pass) is an error of the "
+        "heading, not of the gyro, so the bias is left as it is (a Schmidt update; "
+        "0: always; mag_mode heading only, the 'full' vector "
+        "update is not gated)",
+    ),
     "gravity": ("m/s^2", (9.7, 9.9), "local gravity"),
     "rest_gyro": ("rad/s", (0.0, 10.0), "rest: |ω − b| below this on every axis ..."),
     "rest_accel": ("m/s^2", (0.0, 100.0), "... and | |a| − g | below this ..."),
@@ -250,29 +344,58 @@ PARAM_DOC: dict[str, tuple[str, tuple[float, float], str]] = {
     "gap_factor": ("1", (1.0, 1e6), "a time step longer than this × the median step is a gap"),
     "gap_rate_sigma": ("rad/s", (0.0, 100.0), "attitude variance growth over a gap: (σ · gap)²"),
     "gyro_integration": ("rectangular|trapezoid", (0, 0), "rate over a step: ω_k or ½(ω_{k−1} + ω_k)"),
-    "update_every": ("samples", (0, 1e6), "covariance propagation + measurement updates every N samples (paper: "
-                                          "40); 0: N from update_rate_hz. The measurement σ stay per sample (an "
-                                          "update stands for the n usable samples since that sensor's last one: "
-                                          "R = σ²/n), so N changes the speed, not the filter"),
-    "update_rate_hz": ("Hz", (0.0, 1e6), "with update_every 0: updates at least this often, every N = ⌊sample "
-                                         "rate / this⌋ samples (1 with the raw accelerometer, accel_lp_tau 0; "
-                                         "0: every sample)"),
-    "mag_mode": ("heading|full|off", (0, 0), "magnetometer use: heading only (never touches roll/pitch), "
-                                             "the paper's full 3-D vector, or none"),
-    "nis_window": ("s", (0.0, 1e4), "self-check window: mean normalised innovation squared per degree of "
-                                     "freedom over about this long (0: off)"),
-    "nis_limit": ("1", (0.0, 1e6), "self-check: samples whose windowed NIS exceeds this are flagged "
-                                   "inconsistent (0: off)"),
-    "tilt_check_window": ("s", (0.0, 1e4), "self-check of the vertical: the specific force in the world frame, "
-                                           "low-passed over about this long (two stages of half of it), must "
-                                           "point straight up, as a bounded velocity keeps its mean vertical "
-                                           "(0: off)"),
-    "tilt_check_deg": ("deg", (0.0, 90.0), "... samples where it tilts from the estimate's vertical by more than "
-                                           "√(this² + (3 σ)²), σ² = the estimate's roll + pitch variance, are "
-                                           "flagged inconsistent: a gyro in the wrong unit or scale, a reversed "
-                                           "axis, an acceleration the filter was not told of"),
-    "mag_check_time": ("s", (0.0, 1e6), "self-check of the heading: warn where the magnetometer was rejected "
-                                        "for longer than this (the heading there is the gyro's alone; 0: off)"),
+    "update_every": (
+        "samples",
+        (0, 1e6),
+        "covariance propagation + measurement updates every N samples (paper: "
+        "40); 0: N from update_rate_hz. The measurement σ stay per sample (an "
+        "update stands for the n usable samples since that sensor's last one: "
+        "R = σ²/n), so N changes the speed, not the filter",
+    ),
+    "update_rate_hz": (
+        "Hz",
+        (0.0, 1e6),
+        "with update_every 0: updates at least this often, every N = ⌊sample "
+        "rate / this⌋ samples (1 with the raw accelerometer, accel_lp_tau 0; "
+        "0: every sample)",
+    ),
+    "mag_mode": (
+        "heading|full|off",
+        (0, 0),
+        "magnetometer use: heading only (never touches roll/pitch), the paper's full 3-D vector, or none",
+    ),
+    "nis_window": (
+        "s",
+        (0.0, 1e4),
+        "self-check window: mean normalised innovation squared per degree of freedom over about this long (0: off)",
+    ),
+    "nis_limit": (
+        "1",
+        (0.0, 1e6),
+        "self-check: samples whose windowed NIS exceeds this are flagged inconsistent (0: off)",
+    ),
+    "tilt_check_window": (
+        "s",
+        (0.0, 1e4),
+        "self-check of the vertical: the specific force in the world frame, "
+        "low-passed over about this long (two stages of half of it), must "
+        "point straight up, as a bounded velocity keeps its mean vertical "
+        "(0: off)",
+    ),
+    "tilt_check_deg": (
+        "deg",
+        (0.0, 90.0),
+        "... samples where it tilts from the estimate's vertical by more than "
+        "√(this² + (3 σ)²), σ² = the estimate's roll + pitch variance, are "
+        "flagged inconsistent: a gyro in the wrong unit or scale, a reversed "
+        "axis, an acceleration the filter was not told of",
+    ),
+    "mag_check_time": (
+        "s",
+        (0.0, 1e6),
+        "self-check of the heading: warn where the magnetometer was rejected "
+        "for longer than this (the heading there is the gyro's alone; 0: off)",
+    ),
     "lever_arm_lp_tau": ("s", (0.0, 10.0), "low-pass of the body rate before differentiating it (lever arm)"),
     "init_roll_pitch_sigma_deg": ("deg", (0.0, 180.0), "initial σ of roll and pitch"),
     "init_heading_sigma_deg": ("deg", (0.0, 180.0), "initial σ of heading"),
@@ -392,16 +515,18 @@ class EkfParams:
             if not (np.all(np.isfinite(arr)) and np.all(arr >= lo) and np.all(arr <= hi)):
                 raise ImutoolError(f"EKF parameter {name} = {v!r} is outside [{lo:g}, {hi:g}] {unit}")
             if name == "mag_noise_deg" and 0 < v < 0.01:
-                raise ImutoolError(f"EKF parameter mag_noise_deg = {v!r}: 0 (from mag_heading_density) or at least "
-                                   "0.01 deg")
+                raise ImutoolError(
+                    f"EKF parameter mag_noise_deg = {v!r}: 0 (from mag_heading_density) or at least 0.01 deg"
+                )
 
     @classmethod
     def from_dict(cls, values: dict, source: str = "parameters") -> EkfParams:
         """Parameters from a mapping (TOML table); unknown names are refused with the list of known ones."""
         unknown = sorted(set(values) - set(PARAM_DOC))
         if unknown:
-            raise ImutoolError(f"{source}: unknown EKF parameter(s) {', '.join(unknown)}; known: "
-                               f"{', '.join(PARAM_DOC)}")
+            raise ImutoolError(
+                f"{source}: unknown EKF parameter(s) {', '.join(unknown)}; known: {', '.join(PARAM_DOC)}"
+            )
         kw = dict(values)
         if "init_bias" in kw and isinstance(kw["init_bias"], list):
             kw["init_bias"] = tuple(kw["init_bias"])
@@ -538,8 +663,9 @@ class EkfParams:
         try:
             return {"trapezoid": 0.5, "rectangular": 0.0}[self.gyro_integration]
         except KeyError:
-            raise ImutoolError(f"gyro integration {self.gyro_integration!r}: expected trapezoid or rectangular") \
-                from None
+            raise ImutoolError(
+                f"gyro integration {self.gyro_integration!r}: expected trapezoid or rectangular"
+            ) from None
 
     def mag_mode_code(self) -> int:
         try:
@@ -553,12 +679,15 @@ class EkfParams:
 # reassociation, reciprocal division, no signed zeros.
 _FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 
+
 @njit(cache=True, inline="always")
 def _qmul(a0, a1, a2, a3, b0, b1, b2, b3):
-    return (a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
-            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
-            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0)
+    return (
+        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+    )
 
 
 @njit(cache=True, inline="always")
@@ -593,8 +722,22 @@ def _vertical_in_body(q0, q1, q2, q3):
 def _atan_series(t):
     """atan(t) for |t| ≤ 0.1: odd Taylor series to t¹⁷ (truncation < |t|¹⁹/19 ≈ 5e-21, below 1 ulp)."""
     u = t * t
-    return t * (1.0 - u * (1.0 / 3.0 - u * (1.0 / 5.0 - u * (1.0 / 7.0 - u * (1.0 / 9.0 - u * (1.0 / 11.0 - u * (
-        1.0 / 13.0 - u * (1.0 / 15.0 - u * (1.0 / 17.0)))))))))
+    return t * (
+        1.0
+        - u
+        * (
+            1.0 / 3.0
+            - u
+            * (
+                1.0 / 5.0
+                - u
+                * (
+                    1.0 / 7.0
+                    - u * (1.0 / 9.0 - u * (1.0 / 11.0 - u * (1.0 / 13.0 - u * (1.0 / 15.0 - u * (1.0 / 17.0)))))
+                )
+            )
+        )
+    )
 
 
 @njit(cache=True, inline="always")
@@ -829,8 +972,11 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     an, dn, fn = a + nis_extra, d + nis_extra, f + nis_extra  # S + nis_extra·I, its inverse by cofactors
     An, Bn, Cn = dn * fn - e * e, c * e - b * fn, b * e - c * dn
     detn = an * An + b * Bn + c * Cn
-    nis = (y0 * (An * y0 + Bn * y1 + Cn * y2) + y1 * (Bn * y0 + (an * fn - c * c) * y1 + (b * c - an * e) * y2)
-           + y2 * (Cn * y0 + (b * c - an * e) * y1 + (an * dn - b * b) * y2)) / detn
+    nis = (
+        y0 * (An * y0 + Bn * y1 + Cn * y2)
+        + y1 * (Bn * y0 + (an * fn - c * c) * y1 + (b * c - an * e) * y2)
+        + y2 * (Cn * y0 + (b * c - an * e) * y1 + (an * dn - b * b) * y2)
+    ) / detn
     accepted = not (nis_gate > 0 and nis > nis_gate and not force)
     # straight-line code, no early return (either costs an array refcount per call in the compiled loop): a
     # rejected update runs with a zero gain (P and dx unchanged), a consider (Schmidt) update with a zero bias gain
@@ -1002,12 +1148,23 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0
 @njit(cache=True, inline="always")
 def _vertical_forms(P, r0, r1, r2):
     """rᵀ P_θθ r, rᵀ P_θb r, rᵀ P_bb r for a unit vector r (body axes)."""
-    a = (r0 * r0 * P[0, 0] + r1 * r1 * P[1, 1] + r2 * r2 * P[2, 2]
-         + 2 * (r0 * r1 * P[0, 1] + r0 * r2 * P[0, 2] + r1 * r2 * P[1, 2]))
-    x = (r0 * (r0 * P[0, 3] + r1 * P[0, 4] + r2 * P[0, 5]) + r1 * (r0 * P[1, 3] + r1 * P[1, 4] + r2 * P[1, 5])
-         + r2 * (r0 * P[2, 3] + r1 * P[2, 4] + r2 * P[2, 5]))
-    b = (r0 * r0 * P[3, 3] + r1 * r1 * P[4, 4] + r2 * r2 * P[5, 5]
-         + 2 * (r0 * r1 * P[3, 4] + r0 * r2 * P[3, 5] + r1 * r2 * P[4, 5]))
+    a = (
+        r0 * r0 * P[0, 0]
+        + r1 * r1 * P[1, 1]
+        + r2 * r2 * P[2, 2]
+        + 2 * (r0 * r1 * P[0, 1] + r0 * r2 * P[0, 2] + r1 * r2 * P[1, 2])
+    )
+    x = (
+        r0 * (r0 * P[0, 3] + r1 * P[0, 4] + r2 * P[0, 5])
+        + r1 * (r0 * P[1, 3] + r1 * P[1, 4] + r2 * P[1, 5])
+        + r2 * (r0 * P[2, 3] + r1 * P[2, 4] + r2 * P[2, 5])
+    )
+    b = (
+        r0 * r0 * P[3, 3]
+        + r1 * r1 * P[4, 4]
+        + r2 * r2 * P[5, 5]
+        + 2 * (r0 * r1 * P[3, 4] + r0 * r2 * P[3, 5] + r1 * r2 * P[4, 5])
+    )
     return a, x, b
 
 
@@ -1211,8 +1368,14 @@ def _shear_cov(P, M, s, X):
             X[i, j] = P[i, 3 + j] + s * (M[i, 0] * P[3, 3 + j] + M[i, 1] * P[4, 3 + j] + M[i, 2] * P[5, 3 + j])
     for i in range(3):
         for j in range(i, 3):
-            v = P[i, j] + s * (P[i, 3] * M[j, 0] + P[i, 4] * M[j, 1] + P[i, 5] * M[j, 2]
-                               + M[i, 0] * X[j, 0] + M[i, 1] * X[j, 1] + M[i, 2] * X[j, 2])
+            v = P[i, j] + s * (
+                P[i, 3] * M[j, 0]
+                + P[i, 4] * M[j, 1]
+                + P[i, 5] * M[j, 2]
+                + M[i, 0] * X[j, 0]
+                + M[i, 1] * X[j, 1]
+                + M[i, 2] * X[j, 2]
+            )
             P[i, j] = v
             P[j, i] = v
     for i in range(3):
@@ -1257,8 +1420,30 @@ def _apply_correction(st, dx):
 
 
 @njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
-def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode, cov_every_sample, use_gnss,
-               lever, st, q_out, b_out, std_out, flags_out, p_store, acc_meas, f_out, hdg):
+def ekf_kernel(
+    t,
+    gyro,
+    acc,
+    mag,
+    sog,
+    cog,
+    sogdot,
+    prm,
+    update_every,
+    mag_mode,
+    cov_every_sample,
+    use_gnss,
+    lever,
+    st,
+    q_out,
+    b_out,
+    std_out,
+    flags_out,
+    p_store,
+    acc_meas,
+    f_out,
+    hdg,
+):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
 
     t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
@@ -1274,7 +1459,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
     n = t.shape[0]
     ext_meas = acc_meas.shape[0] == n
     keep_f = f_out.shape[0] == n
-    P = st[S_P:S_P + 36].reshape((6, 6))
+    P = st[S_P : S_P + 36].reshape((6, 6))
     R = np.empty((3, 3))
     dx = np.zeros(6)
     g = prm[P_GRAVITY]
@@ -1370,9 +1555,12 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             st[S_APREV], st[S_APREV + 1], st[S_APREV + 2] = ax, ay, az
         # ---------------- rest detection → zero-rate bias pseudo-measurement ----------------
         if prm[P_REST_TIME] > 0 and acc_ok:
-            still = (abs(gk0 - st[4]) < prm[P_REST_GYRO] and abs(gk1 - st[5]) < prm[P_REST_GYRO]
-                     and abs(gk2 - st[6]) < prm[P_REST_GYRO]
-                     and abs(np.sqrt(ax * ax + ay * ay + az * az) - g) < prm[P_REST_ACC])
+            still = (
+                abs(gk0 - st[4]) < prm[P_REST_GYRO]
+                and abs(gk1 - st[5]) < prm[P_REST_GYRO]
+                and abs(gk2 - st[6]) < prm[P_REST_GYRO]
+                and abs(np.sqrt(ax * ax + ay * ay + az * az) - g) < prm[P_REST_ACC]
+            )
             st[S_REST_T] = st[S_REST_T] + dt if still else 0.0
             if st[S_REST_T] >= prm[P_REST_TIME]:
                 flag |= F_REST
@@ -1497,10 +1685,10 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                     dtp = max(dt, 0.0)
                     for m in range(9):
                         st[S_WY + m] += RI[m // 3, m % 3] * dtp
-                        st[S_WV + m], st[S_WY + m] = _butterworth_step(st[S_WV + m], st[S_WY + m], 0.0, lm, la,
-                                                                       le, dt)
-        if (not fed and prm[P_ACC_LAG] > 0 and use_lp and not ext_meas and st[S_LPINIT] > 0 and dt > 0
-                and not gap):  # a row the low-pass skips (NaN, shock) still ages its content: α = 0
+                        st[S_WV + m], st[S_WY + m] = _butterworth_step(st[S_WV + m], st[S_WY + m], 0.0, lm, la, le, dt)
+        if (
+            not fed and prm[P_ACC_LAG] > 0 and use_lp and not ext_meas and st[S_LPINIT] > 0 and dt > 0 and not gap
+        ):  # a row the low-pass skips (NaN, shock) still ages its content: α = 0
             _rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
             ri_now = True
             for m in range(9):
@@ -1555,13 +1743,13 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             if lagh:  # M = R_Iᵀ W: the low-pass output's tilt error per unit bias error (body, s)
                 for a_ in range(3):
                     for b_ in range(3):
-                        MLAG[a_, b_] = (RI[0, a_] * st[S_WY + b_] + RI[1, a_] * st[S_WY + 3 + b_]
-                                        + RI[2, a_] * st[S_WY + 6 + b_])
+                        MLAG[a_, b_] = (
+                            RI[0, a_] * st[S_WY + b_] + RI[1, a_] * st[S_WY + 3 + b_] + RI[2, a_] * st[S_WY + 6 + b_]
+                        )
             fa, fx, fb = _vertical_forms(P, -h0, -h1, -h2)  # before the update, error coordinates δθ
             if lagh:  # H = [[h×], [h×]M] is [[h×], 0] in δθ' = δθ + M δb: update there, shear back
                 _shear_cov(P, MLAG, 1.0, X33)
-            ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons,
-                                  sig2_nis - sig2)
+            ok, nis = _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, prm[P_ACC_NIS], force, dx, cons, sig2_nis - sig2)
             soft = not ok and prm[P_ACC_SOFT] > 0  # de-weight instead of skipping (flagged as rejected)
             if soft:
                 _vec_update(P, h0, h1, h2, y0, y1, y2, sig2 * nis / prm[P_ACC_NIS], 0.0, True, dx, cons)
@@ -1619,9 +1807,22 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             dtm = st[S_MDT]  # since the previous magnetometer sample (a slower magnetometer: several rows)
             st[S_MDT] = 0.0
             if rej and prm[P_MAG_NEW_TIME] > 0 and nm > 0 and have_ref:  # no lock-out: a new homogeneous field
-                if _new_field(st, P, prm, nm, mw2 / nm, mw0 / nm, mw1 / nm, dtm,
-                              w0 * w0 + w1 * w1 + w2 * w2 >= prm[P_MAG_NEW_RATE] ** 2, R[2, 0], R[2, 1], R[2, 2],
-                              cos_gate, sin_gate):
+                if _new_field(
+                    st,
+                    P,
+                    prm,
+                    nm,
+                    mw2 / nm,
+                    mw0 / nm,
+                    mw1 / nm,
+                    dtm,
+                    w0 * w0 + w1 * w1 + w2 * w2 >= prm[P_MAG_NEW_RATE] ** 2,
+                    R[2, 0],
+                    R[2, 1],
+                    R[2, 2],
+                    cos_gate,
+                    sin_gate,
+                ):
                     dip_ref, dip_lo, dip_hi = _dip_gate(st[S_MREF + 2], cos_gate, sin_gate)
                     flag |= F_MAG_NEW
             if rej:
@@ -1666,9 +1867,19 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
                 sm2 = prm[P_MAG_NOISE] ** 2 * (1.0 + dev_m)
                 # a heading off by more than mag_bias_gate σ (against the undisturbed σ: the de-weighting must not
                 # hide it) is the heading's error, not the gyro's: the bias does not learn from it
-                nis_m = _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, sm2 / n_use, dx, prm[P_MAG_BIAS] == 0.0,
-                                        sm2 - sm2 / n_use, prm[P_MAG_BIAS_GATE] ** 2,
-                                        prm[P_MAG_NOISE] ** 2 / n_use)
+                nis_m = _heading_update(
+                    P,
+                    R[2, 0],
+                    R[2, 1],
+                    R[2, 2],
+                    yh,
+                    sm2 / n_use,
+                    dx,
+                    prm[P_MAG_BIAS] == 0.0,
+                    sm2 - sm2 / n_use,
+                    prm[P_MAG_BIAS_GATE] ** 2,
+                    prm[P_MAG_NOISE] ** 2 / n_use,
+                )
                 if prm[P_NIS_TAU] > 0 and dt > 0:
                     st[S_NIS_M] += min(1.0, t_since / prm[P_NIS_TAU]) * (min(nis_m, 1e6) - st[S_NIS_M])
                 _apply_correction(st, dx)  # dx along r: its reset is G = I
@@ -1697,7 +1908,7 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
             # a glitched fix is skipped, for a bounded time: a heading that stays away that long is the
             # gyrocompass's, and the filter's own is the one to give way
             vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
-            glitch = yh * yh > HEADING_GATE_SIGMA ** 2 * (vh + s2h)
+            glitch = yh * yh > HEADING_GATE_SIGMA**2 * (vh + s2h)
             if glitch and st[S_HREJ_T] < HEADING_REJECT_MAX_S:
                 st[S_HREJ_T] += dth
                 st[S_NHREJ] += 1
@@ -1730,8 +1941,11 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
         e00, e01, e02 = 1.0, sr * tp, cr * tp
         e11, e12 = cr, -sr
         e21, e22 = sr / cp, cr / cp
-        v0 = (e00 * (e00 * P[0, 0] + e01 * P[1, 0] + e02 * P[2, 0]) + e01 * (e00 * P[0, 1] + e01 * P[1, 1]
-              + e02 * P[2, 1]) + e02 * (e00 * P[0, 2] + e01 * P[1, 2] + e02 * P[2, 2]))
+        v0 = (
+            e00 * (e00 * P[0, 0] + e01 * P[1, 0] + e02 * P[2, 0])
+            + e01 * (e00 * P[0, 1] + e01 * P[1, 1] + e02 * P[2, 1])
+            + e02 * (e00 * P[0, 2] + e01 * P[1, 2] + e02 * P[2, 2])
+        )
         v1 = e11 * e11 * P[1, 1] + 2 * e11 * e12 * P[1, 2] + e12 * e12 * P[2, 2]
         v2 = e21 * e21 * P[1, 1] + 2 * e21 * e22 * P[1, 2] + e22 * e22 * P[2, 2]
         std_out[k, 0] = np.sqrt(max(v0, 0.0))
@@ -1762,8 +1976,9 @@ def ekf_kernel(t, gyro, acc, mag, sog, cog, sogdot, prm, update_every, mag_mode,
 
 
 @njit(cache=True, fastmath=_FASTMATH)
-def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_rw, gap_dt, gap_rate, gyro_prev_w,
-               q_s, b_s, p_s):
+def rts_kernel(
+    t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_rw, gap_dt, gap_rate, gyro_prev_w, q_s, b_s, p_s
+):
     """Error-state Rauch–Tung–Striebel backward pass over a full-rate-covariance EKF run.
 
     With the filtered posterior (q_k, b_k, P_k) the prior at k+1 is recomputed (same prediction as the
@@ -1807,7 +2022,7 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
                 Pp[i, j] = p_f[k, i, j]
         T = dt if dt > 0 else 0.0
         wn2 = w0 * w0 + w1 * w1 + w2 * w2 if not gap else 0.0
-        _propagate_cov(Pp, phi, T, (gyro_noise ** 2 + gyro_scale ** 2 * wn2) * T, bias_rw ** 2 * T, F, tmp6)
+        _propagate_cov(Pp, phi, T, (gyro_noise**2 + gyro_scale**2 * wn2) * T, bias_rw**2 * T, F, tmp6)
         if (head_scale > 0 or gyro_scale > 0) and T > 0:  # the filter's scale-factor noise: tilt across the
             z0, z1, z2 = _vertical_in_body(qp0, qp1, qp2, qp3)  # world vertical, heading along it
             _add_rrt(Pp, 0, 0, (head_scale * head_scale - gyro_scale * gyro_scale) * wn2 * T, z0, z1, z2)
@@ -1854,8 +2069,9 @@ def rts_kernel(t, gyro, q_f, b_f, p_f, gyro_noise, gyro_scale, head_scale, bias_
             for m in range(6):
                 s += GT[m, i] * d[m]
             dxs[i] = s
-        a0, a1, a2, a3 = _qmul(q_f[k, 0], q_f[k, 1], q_f[k, 2], q_f[k, 3], 1.0, 0.5 * dxs[0], 0.5 * dxs[1],
-                               0.5 * dxs[2])
+        a0, a1, a2, a3 = _qmul(
+            q_f[k, 0], q_f[k, 1], q_f[k, 2], q_f[k, 3], 1.0, 0.5 * dxs[0], 0.5 * dxs[1], 0.5 * dxs[2]
+        )
         nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
         q_s[k, 0], q_s[k, 1], q_s[k, 2], q_s[k, 3] = a0 / nq, a1 / nq, a2 / nq, a3 / nq
         for i in range(3):
@@ -1938,6 +2154,7 @@ def zero_phase_lp_kernel(t, gyro, bias, f, tau, gyro_prev_w, gap_dt, out):
 
 # ================================================ Python API ================================================
 
+
 @dataclass
 class AttitudeResult:
     """Per-sample EKF output (SI: q body→NED, bias rad/s, σ rad) and the run summary."""
@@ -2006,8 +2223,9 @@ def mag_interval(t: np.ndarray, mag: np.ndarray | None) -> float | None:
     return None
 
 
-def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
-                  heading: float | None = None) -> np.ndarray:
+def initial_state(
+    accel: np.ndarray, mag: np.ndarray | None, params: EkfParams, heading: float | None = None
+) -> np.ndarray:
     """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples; an
     external true ``heading`` (rad) instead of the magnetometer's (σ ``init_heading_sigma_deg`` either way)."""
     st = np.zeros(STATE_SIZE)
@@ -2015,7 +2233,7 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
     if i_acc < 0:
         raise ImutoolError("no valid accelerometer sample to initialise the attitude")
     a = accel[i_acc]
-    if not np.any(np.linalg.norm(accel[i_acc:i_acc + 100_000], axis=1) > 0):
+    if not np.any(np.linalg.norm(accel[i_acc : i_acc + 100_000], axis=1) > 0):
         raise ImutoolError("the accelerometer reads exactly zero: no specific force to level the attitude with")
     roll = np.arctan2(-a[1], -a[2])
     pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
@@ -2041,8 +2259,8 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
                 heading_mag, mnorm = 0.0, 0.0
     from formats.frames import euler_to_quat
 
-    st[S_Q:S_Q + 4] = euler_to_quat(roll, pitch, heading_mag if heading is None else float(heading))
-    st[S_B:S_B + 3] = params.init_bias
+    st[S_Q : S_Q + 4] = euler_to_quat(roll, pitch, heading_mag if heading is None else float(heading))
+    st[S_B : S_B + 3] = params.init_bias
     P = np.zeros((6, 6))
     rp = np.radians(params.init_roll_pitch_sigma_deg) ** 2
     P[0, 0] = P[1, 1] = rp
@@ -2050,11 +2268,11 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
     # express the NED-axis σ in body axes (heading σ is about the world vertical)
     from formats.frames import quat_to_matrix
 
-    Rm = quat_to_matrix(st[S_Q:S_Q + 4])
+    Rm = quat_to_matrix(st[S_Q : S_Q + 4])
     P[:3, :3] = Rm.T @ P[:3, :3] @ Rm
-    P[3:, 3:] = np.eye(3) * params.init_bias_sigma ** 2
-    st[S_P:S_P + 36] = P.ravel()
-    st[S_MREF:S_MREF + 3] = mref
+    P[3:, 3:] = np.eye(3) * params.init_bias_sigma**2
+    st[S_P : S_P + 36] = P.ravel()
+    st[S_MREF : S_MREF + 3] = mref
     st[S_MNORM] = mnorm
     st[S_MREF_N] = 1.0 if mnorm > 0 else 0.0
     st[S_DQ] = 1.0
@@ -2063,8 +2281,9 @@ def initial_state(accel: np.ndarray, mag: np.ndarray | None, params: EkfParams,
     return st
 
 
-def _gnss_arrays(time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray | None,
-                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+def _gnss_arrays(
+    time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray | None, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     if sog is None or cog_deg is None:
         z = np.full(n, np.nan)
         return z, z, z, False
@@ -2082,13 +2301,25 @@ def _gnss_arrays(time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray |
     return sog, cog, sogdot, True
 
 
-def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None,
-            params: EkfParams | None = None, sog: np.ndarray | None = None, cog_deg: np.ndarray | None = None,
-            state: np.ndarray | None = None, keep_cov: bool = False, dt_nominal: float | None = None,
-            cov_every_sample: bool | None = None, lever_arm: np.ndarray | None = None,
-            progress: Progress | None = None, accel_measurement: np.ndarray | None = None,
-            keep_force: bool = False, heading_deg: np.ndarray | None = None,
-            dt_mag: float | None = None) -> tuple[AttitudeResult, np.ndarray]:
+def run_ekf(
+    time: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    mag: np.ndarray | None = None,
+    params: EkfParams | None = None,
+    sog: np.ndarray | None = None,
+    cog_deg: np.ndarray | None = None,
+    state: np.ndarray | None = None,
+    keep_cov: bool = False,
+    dt_nominal: float | None = None,
+    cov_every_sample: bool | None = None,
+    lever_arm: np.ndarray | None = None,
+    progress: Progress | None = None,
+    accel_measurement: np.ndarray | None = None,
+    keep_force: bool = False,
+    heading_deg: np.ndarray | None = None,
+    dt_mag: float | None = None,
+) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
@@ -2121,7 +2352,7 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     if state is None:  # the initial heading: a fix within 100 samples of the first valid accelerometer row (the
         # same in memory and streamed); later fixes pull the heading in through the filter's updates
         i_acc = _first_finite_row(a)
-        near = hdg[max(i_acc, 0):max(i_acc, 0) + 100] if len(hdg) else hdg
+        near = hdg[max(i_acc, 0) : max(i_acc, 0) + 100] if len(hdg) else hdg
         first = np.flatnonzero(np.isfinite(near))
         state = initial_state(a, m if use_mag else None, params, float(near[first[0]]) if len(first) else None)
     st = np.array(state, dtype=np.float64)
@@ -2152,28 +2383,56 @@ def run_ekf(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarr
     cov_each = keep_cov if cov_every_sample is None else cov_every_sample
     mode, cov_flag = params.mag_mode_code() if use_mag else 0, bool(cov_each or every == 1)
     # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
-    for i0, i1 in ([(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress)):
-        ekf_kernel(t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1], prm, every, mode,
-                   cov_flag, use_gnss, lever, st, q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1],
-                   p_store[i0:i1] if keep_cov else p_store, meas[i0:i1] if len(meas) else meas,
-                   f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else hdg)
+    for i0, i1 in [(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress):
+        ekf_kernel(
+            t[i0:i1],
+            g[i0:i1],
+            a[i0:i1],
+            m[i0:i1],
+            sg[i0:i1],
+            cg[i0:i1],
+            sd[i0:i1],
+            prm,
+            every,
+            mode,
+            cov_flag,
+            use_gnss,
+            lever,
+            st,
+            q_out[i0:i1],
+            b_out[i0:i1],
+            std_out[i0:i1],
+            flags[i0:i1],
+            p_store[i0:i1] if keep_cov else p_store,
+            meas[i0:i1] if len(meas) else meas,
+            f_out[i0:i1] if keep_f else f_out,
+            hdg[i0:i1] if len(hdg) else hdg,
+        )
     summary = {
-        "samples": n, "updates": int(st[S_NUPD]), "update_every": every, "accel_rejected": int(st[S_NAREJ]),
-        "mag_rejected": int(st[S_NMREJ]), "mag_new_field": int(st[S_NMNEW]), "rest_samples": int(st[S_NREST]),
+        "samples": n,
+        "updates": int(st[S_NUPD]),
+        "update_every": every,
+        "accel_rejected": int(st[S_NAREJ]),
+        "mag_rejected": int(st[S_NMREJ]),
+        "mag_new_field": int(st[S_NMNEW]),
+        "rest_samples": int(st[S_NREST]),
         "gaps": int(st[S_NGAPS]),
-        "gyro_nan_samples": int(st[S_NGNAN]), "gnss_compensation": bool(use_gnss),
+        "gyro_nan_samples": int(st[S_NGNAN]),
+        "gnss_compensation": bool(use_gnss),
         "inconsistent_samples": int(st[S_NINC]),
         "tilt_check_samples": int(st[S_NTILT]),
         "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
     }
     if len(hdg):
         summary["heading_input_rejected"] = int(st[S_NHREJ])
-    return AttitudeResult(t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None,
-                          f_out if keep_f else None), st
+    return AttitudeResult(
+        t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None, f_out if keep_f else None
+    ), st
 
 
-def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None = None,
-               dt_nominal: float | None = None) -> AttitudeResult:
+def rts_smooth(
+    res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None = None, dt_nominal: float | None = None
+) -> AttitudeResult:
     """Backward RTS pass over a filter run made with ``keep_cov=True`` (zero-lag estimates)."""
     params = params or EkfParams()
     if res.cov is None:
@@ -2186,10 +2445,23 @@ def rts_smooth(res: AttitudeResult, gyro: np.ndarray, params: EkfParams | None =
     q_s = np.empty((n, 4))
     b_s = np.empty((n, 3))
     p_s = np.empty((n, 6, 6))
-    rts_kernel(t, g, res.q, res.bias, res.cov, params.gyro_noise, params.gyro_scale_noise,
-               params.heading_scale_noise, params.bias_rw,
-               params.gap_factor * dt_nominal,
-               params.gap_rate_sigma, params.gyro_prev_weight(), q_s, b_s, p_s)
+    rts_kernel(
+        t,
+        g,
+        res.q,
+        res.bias,
+        res.cov,
+        params.gyro_noise,
+        params.gyro_scale_noise,
+        params.heading_scale_noise,
+        params.bias_rw,
+        params.gap_factor * dt_nominal,
+        params.gap_rate_sigma,
+        params.gyro_prev_weight(),
+        q_s,
+        b_s,
+        p_s,
+    )
     std = euler_std(q_s, p_s)
     out = AttitudeResult(t, q_s, b_s, std, res.flags.copy(), dict(res.summary), None)
     out.summary["smoothed"] = True
@@ -2207,10 +2479,18 @@ def _held_gyro(gyro: np.ndarray) -> np.ndarray:
     return g
 
 
-def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, mag: np.ndarray | None = None,
-                    params: EkfParams | None = None, sog: np.ndarray | None = None,
-                    cog_deg: np.ndarray | None = None, lever_arm: np.ndarray | None = None,
-                    dt_nominal: float | None = None, heading_deg: np.ndarray | None = None) -> AttitudeResult:
+def zero_lag_smooth(
+    res: AttitudeResult,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    mag: np.ndarray | None = None,
+    params: EkfParams | None = None,
+    sog: np.ndarray | None = None,
+    cog_deg: np.ndarray | None = None,
+    lever_arm: np.ndarray | None = None,
+    dt_nominal: float | None = None,
+    heading_deg: np.ndarray | None = None,
+) -> AttitudeResult:
     """The smoother for the low-passed accelerometer: the RTS pass on a filter run whose low-pass has no lag.
 
     The RTS pass (:func:`rts_smooth`) assumes white measurement errors; the causal low-pass of the specific force
@@ -2235,10 +2515,30 @@ def zero_lag_smooth(res: AttitudeResult, gyro: np.ndarray, accel: np.ndarray, ma
     g = _held_gyro(gyro)
     first = rts_smooth(res, g, params, dt_nominal)
     meas = np.empty_like(res.force)
-    zero_phase_lp_kernel(res.time, g, first.bias, res.force, params.smoother_lp_tau or params.accel_lp_tau,
-                         params.gyro_prev_weight(), params.gap_factor * dt_nominal, meas)
-    again, _ = run_ekf(res.time, gyro, accel, mag, params, sog, cog_deg, keep_cov=True, dt_nominal=dt_nominal,
-                       lever_arm=lever_arm, accel_measurement=meas, heading_deg=heading_deg)
+    zero_phase_lp_kernel(
+        res.time,
+        g,
+        first.bias,
+        res.force,
+        params.smoother_lp_tau or params.accel_lp_tau,
+        params.gyro_prev_weight(),
+        params.gap_factor * dt_nominal,
+        meas,
+    )
+    again, _ = run_ekf(
+        res.time,
+        gyro,
+        accel,
+        mag,
+        params,
+        sog,
+        cog_deg,
+        keep_cov=True,
+        dt_nominal=dt_nominal,
+        lever_arm=lever_arm,
+        accel_measurement=meas,
+        heading_deg=heading_deg,
+    )
     out = rts_smooth(again, g, params, dt_nominal)
     del again, meas
     # gravity observes no heading: keep the new inclination (the swing of the change, about a horizontal axis)
@@ -2272,8 +2572,9 @@ def euler_std(q: np.ndarray, P: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2]], axis=1), 0.0))
 
 
-def self_check(time: np.ndarray, flags: np.ndarray, max_spans: int = 20,
-               n_total: int | None = None) -> tuple[dict, list[str]]:
+def self_check(
+    time: np.ndarray, flags: np.ndarray, max_spans: int = 20, n_total: int | None = None
+) -> tuple[dict, list[str]]:
     """Summary of the innovation-consistency monitor: flagged share, time spans (s) and warnings to show.
 
     ``n_total``: number of samples the share refers to (default: len(flags)); a flag-0 row separates spans."""
@@ -2297,10 +2598,12 @@ def inconsistency_report(spans: list, n_flagged: int, n_total: int, max_spans: i
         return info, []
     info["inconsistent_spans_s"] = [[round(a, 3), round(b, 3)] for a, b in spans[:max_spans]]
     shown = _spans_text(spans)
-    warn = (f"the attitude filter's self-check failed on {100 * share:.1f} % of samples ({shown}): its "
-            "accelerometer/magnetometer innovations are far larger than its covariance allows, so the estimate "
-            "is not trustworthy there (column 'inconsistent' = 1); sustained acceleration, a wrong mounting or "
-            "units, or a diverging filter")
+    warn = (
+        f"the attitude filter's self-check failed on {100 * share:.1f} % of samples ({shown}): its "
+        "accelerometer/magnetometer innovations are far larger than its covariance allows, so the estimate "
+        "is not trustworthy there (column 'inconsistent' = 1); sustained acceleration, a wrong mounting or "
+        "units, or a diverging filter"
+    )
     return info, [warn]
 
 
@@ -2331,8 +2634,7 @@ class FlagSpans:
         return [(a, b) for a, b in self.spans if b - a >= self.min_s]
 
 
-def heading_check(spans: FlagSpans, max_spans: int = 20,
-                  params: EkfParams | None = None) -> tuple[dict, list[str]]:
+def heading_check(spans: FlagSpans, max_spans: int = 20, params: EkfParams | None = None) -> tuple[dict, list[str]]:
     """Where the magnetometer was rejected for longer than ``spans.min_s`` (``mag_check_time``): summary and
     warning. The rejection keeps a disturbed field out of the heading, but there the heading is the gyro's
     alone and drifts with its bias and scale errors; the filter's σ does not show that drift in full."""
@@ -2342,15 +2644,19 @@ def heading_check(spans: FlagSpans, max_spans: int = 20,
     total = sum(b - a for a, b in long)
     info = {"mag_rejected_spans_s": [[round(a, 3), round(b, 3)] for a, b in long[:max_spans]]}
     shown = _spans_text(long)
-    warn = (f"the magnetometer was rejected for {total:.0f} s in {len(long)} span(s) of more than "
-            f"{spans.min_s:g} s ({shown}): the field there differs from the one at the start (a magnet or steel "
-            "nearby, a new mounting or calibration?), so the heading is the gyro's alone and drifts with its "
-            "bias (column 'mag_rejected' = 1)")
+    warn = (
+        f"the magnetometer was rejected for {total:.0f} s in {len(long)} span(s) of more than "
+        f"{spans.min_s:g} s ({shown}): the field there differs from the one at the start (a magnet or steel "
+        "nearby, a new mounting or calibration?), so the heading is the gyro's alone and drifts with its "
+        "bias (column 'mag_rejected' = 1)"
+    )
     if params is not None and params.mag_new_time > 0:
-        warn += (f"; a steady new field is taken as the reference only after it has held for "
-                 f"{params.mag_new_time:g} s while the sensor turned faster than {params.mag_new_min_rate:g} °/s, "
-                 "which a ship rolling at sea never does: on board the magnetometer stays rejected until the "
-                 "field it started with returns")
+        warn += (
+            f"; a steady new field is taken as the reference only after it has held for "
+            f"{params.mag_new_time:g} s while the sensor turned faster than {params.mag_new_min_rate:g} °/s, "
+            "which a ship rolling at sea never does: on board the magnetometer stays rejected until the "
+            "field it started with returns"
+        )
     return info, [warn]
 
 
@@ -2364,13 +2670,15 @@ def new_field_check(times: list[float], params: EkfParams, max_times: int = 20) 
         return {}, []
     shown = ", ".join(f"{t:.1f}" for t in times[:max_times]) + (" …" if len(times) > max_times else "")
     info = {"mag_new_field_s": [round(float(t), 3) for t in times[:max_times]]}
-    warn = (f"the magnetometer's reference field was replaced {len(times)} time(s), at t = {shown} s: a field its "
-            f"gates rejected held steady for {params.mag_new_first_time:g} s ({params.mag_new_time:g} s once a "
-            f"reference had held) while the sensor turned faster than {params.mag_new_min_rate:g} °/s, so the "
-            "sensor moved to another field or the field at the start was disturbed; the heading follows the new "
-            "field from there. If a magnet or steel moved with the sensor then, or the magnetometer is not "
-            "calibrated (imutool calibrate mag), the heading after that time is wrong (--param mag_new_time=0 "
-            "keeps the first field)")
+    warn = (
+        f"the magnetometer's reference field was replaced {len(times)} time(s), at t = {shown} s: a field its "
+        f"gates rejected held steady for {params.mag_new_first_time:g} s ({params.mag_new_time:g} s once a "
+        f"reference had held) while the sensor turned faster than {params.mag_new_min_rate:g} °/s, so the "
+        "sensor moved to another field or the field at the start was disturbed; the heading follows the new "
+        "field from there. If a magnet or steel moved with the sensor then, or the magnetometer is not "
+        "calibrated (imutool calibrate mag), the heading after that time is wrong (--param mag_new_time=0 "
+        "keeps the first field)"
+    )
     return info, [warn]
 
 
@@ -2389,11 +2697,13 @@ def tilt_check(summary: dict, params: EkfParams) -> list[str]:
     n = int(summary.get("tilt_check_samples", 0) or 0)
     if not n:
         return []
-    return [f"the estimate's vertical disagrees with gravity on {n} samples: the specific force in the world frame, "
-            f"low-passed over {params.tilt_check_window:g} s (its mean is vertical when the velocity is bounded), "
-            f"tilts up to {summary.get('tilt_check_max_deg', 0.0):.1f}° from it (limit √({params.tilt_check_deg:g}²"
-            " + (3 σ)²), σ of the estimate's tilt); a gyro in the wrong unit or scale, a reversed or swapped axis, "
-            "or an acceleration the filter was not told of (a turn without SOG/COG, a lever arm not given)"]
+    return [
+        f"the estimate's vertical disagrees with gravity on {n} samples: the specific force in the world frame, "
+        f"low-passed over {params.tilt_check_window:g} s (its mean is vertical when the velocity is bounded), "
+        f"tilts up to {summary.get('tilt_check_max_deg', 0.0):.1f}° from it (limit √({params.tilt_check_deg:g}²"
+        " + (3 σ)²), σ of the estimate's tilt); a gyro in the wrong unit or scale, a reversed or swapped axis, "
+        "or an acceleration the filter was not told of (a turn without SOG/COG, a lever arm not given)"
+    ]
 
 
 def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
@@ -2406,11 +2716,13 @@ def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
     update taken in the run (a `mag` column that is all NaN, or ``mag_mode = "off"``, holds no heading either)."""
     if not used_gnss or mag_used:
         return []
-    return ["SOG/COG turn compensation without a magnetometer heading: the course is turned into body axes with a "
-            "heading nothing holds (starts at 0°, drifts with the gyro bias), so the compensation can add roll "
-            "error instead of removing it (simulated bridge sensor: 0.2–1.8° roll RMS, max 4.9°, against 0.19° "
-            "with a magnetometer); give the magnetometer or a gyrocompass heading (--heading, channel heading_true), "
-            "or drop SOG/COG (--no-gnss)"]
+    return [
+        "SOG/COG turn compensation without a magnetometer heading: the course is turned into body axes with a "
+        "heading nothing holds (starts at 0°, drifts with the gyro bias), so the compensation can add roll "
+        "error instead of removing it (simulated bridge sensor: 0.2–1.8° roll RMS, max 4.9°, against 0.19° "
+        "with a magnetometer); give the magnetometer or a gyrocompass heading (--heading, channel heading_true), "
+        "or drop SOG/COG (--no-gnss)"
+    ]
 
 
 SMOOTHER_BYTES_PER_SAMPLE = 1500  # measured: 1.42 kB/sample at peak (1 M samples, three N×6×6 arrays + outputs)
@@ -2432,11 +2744,14 @@ def check_smoother_memory(n: int) -> None:
     """Refuse (ImutoolError) a smoother run that cannot fit in the memory available, before allocating any of it."""
     need, have = n * SMOOTHER_BYTES_PER_SAMPLE, available_memory()
     if have is not None and need > have:
+
         def size(b: float) -> str:
             return f"{b / 1e9:.1f} GB" if b >= 1e9 else f"{b / 1e6:.1f} MB"
 
-        raise ImutoolError(f"the smoother keeps every sample's covariance: {n} samples need about {size(need)} "
-                           f"and {size(have)} is available; smooth a shorter span or filter without --smooth")
+        raise ImutoolError(
+            f"the smoother keeps every sample's covariance: {n} samples need about {size(need)} "
+            f"and {size(have)} is available; smooth a shorter span or filter without --smooth"
+        )
 
 
 def _heading_channel(rec: Recording) -> np.ndarray | None:
@@ -2461,32 +2776,44 @@ def _read_later(t: np.ndarray, h: np.ndarray, latency_s: float) -> np.ndarray:
     return np.where(both, val, np.nan)
 
 
-def heading_source_report(heading_given: bool, mag_given: bool, heading_updates: int,
-                          params: EkfParams, duration_s: float = 0.0) -> tuple[dict, list[str]]:
+def heading_source_report(
+    heading_given: bool, mag_given: bool, heading_updates: int, params: EkfParams, duration_s: float = 0.0
+) -> tuple[dict, list[str]]:
     """Where the heading came from (summary ``heading_source``, ``heading_input_updates``), and one warning
     where an external heading was given (a ``heading_true`` channel or --heading) but held no usable value, or
     covered less than half of the run's ``duration_s`` (s): the magnetometer is then not used either, so the
     heading is the gyro's alone there."""
     if heading_given:
-        out = {"heading_source": "heading_true (external; magnetometer not used)",
-               "heading_input_updates": int(heading_updates)}
+        out = {
+            "heading_source": "heading_true (external; magnetometer not used)",
+            "heading_input_updates": int(heading_updates),
+        }
         if heading_updates and duration_s > 0 and params.heading_input_interval > 0:
             share = heading_updates * params.heading_input_interval / duration_s
             if share < 0.5:
-                return out, [f"the external heading (heading_true) was used {heading_updates} times over "
-                             f"{duration_s:.0f} s: it covers about {100 * min(share, 1):.0f} % of the run; in between "
-                             "the heading is the gyro's alone (the magnetometer is not used when one is given)"]
+                return out, [
+                    f"the external heading (heading_true) was used {heading_updates} times over "
+                    f"{duration_s:.0f} s: it covers about {100 * min(share, 1):.0f} % of the run; in between "
+                    "the heading is the gyro's alone (the magnetometer is not used when one is given)"
+                ]
         if heading_updates == 0:
-            return out, ["heading_true (external heading) holds no valid value in the run: the magnetometer is not "
-                         "used when one is given, so the heading is the gyro's alone (drop the column or fix the "
-                         "heading feed)"]
+            return out, [
+                "heading_true (external heading) holds no valid value in the run: the magnetometer is not "
+                "used when one is given, so the heading is the gyro's alone (drop the column or fix the "
+                "heading feed)"
+            ]
         return out, []
     return {"heading_source": "magnetometer" if mag_given and params.mag_mode != "off" else "none (gyro)"}, []
 
 
-def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool = False,
-                  use_gnss: bool = True, lever_arm: np.ndarray | None = None,
-                  progress: Progress | None = None) -> tuple[Recording, dict]:
+def ekf_recording(
+    rec: Recording,
+    params: EkfParams | None = None,
+    smooth: bool = False,
+    use_gnss: bool = True,
+    lever_arm: np.ndarray | None = None,
+    progress: Progress | None = None,
+) -> tuple[Recording, dict]:
     """Run the EKF (and optionally the smoother) on a recording; returns (estimate recording, summary).
 
     Needs ``gyro`` and ``accel``; uses ``mag`` when present, ``sog``/``cog`` when present and use_gnss.
@@ -2508,18 +2835,35 @@ def ekf_recording(rec: Recording, params: EkfParams | None = None, smooth: bool 
         cog = rec.in_unit("cog", "deg")
     if smooth:
         check_smoother_memory(len(rec))
-    res, _ = run_ekf(rec.time, gyro, accel, mag, params, sog, cog, keep_cov=smooth, lever_arm=lever_arm,
-                     progress=progress, keep_force=True, heading_deg=heading)
+    res, _ = run_ekf(
+        rec.time,
+        gyro,
+        accel,
+        mag,
+        params,
+        sog,
+        cog,
+        keep_cov=smooth,
+        lever_arm=lever_arm,
+        progress=progress,
+        keep_force=True,
+        heading_deg=heading,
+    )
     summary = dict(res.summary)
     check, warnings = self_check(res.time, res.flags)
-    source, more = heading_source_report(heading is not None, mag is not None,
-                                         int(np.count_nonzero(res.flags & F_HDG_USED)), params,
-                                         float(res.time[-1] - res.time[0]) if len(res.time) else 0.0)
+    source, more = heading_source_report(
+        heading is not None,
+        mag is not None,
+        int(np.count_nonzero(res.flags & F_HDG_USED)),
+        params,
+        float(res.time[-1] - res.time[0]) if len(res.time) else 0.0,
+    )
     summary.update(source)
     warnings += more
     if heading is not None:  # how late the feed is against the gyro, measured on the feed as it came
-        lag, more = heading_lag_check(measure_heading_lag(rec.time, heading_raw, res.q, gyro, res.bias),
-                                      params.heading_input_latency)
+        lag, more = heading_lag_check(
+            measure_heading_lag(rec.time, heading_raw, res.q, gyro, res.bias), params.heading_input_latency
+        )
         summary.update(lag)
         warnings += more
     summary.update(check)
@@ -2585,8 +2929,20 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
 # Printed resolution of the estimate columns in CSV outputs (stated in the file header): 1e-6° for angles and
 # their σ, 1e-9 for quaternion components (≈ 1e-7°) and bias (rad/s ≈ 2e-4 °/h) — far below any sensor's noise,
 # and ~40 % fewer bytes and much faster to write than 17 significant digits. Time stays exact.
-OUTPUT_DECIMALS = {"roll": 6, "pitch": 6, "heading": 6, "q": 9, "gyro_bias": 9, "roll_std": 6, "pitch_std": 6,
-                   "heading_std": 6, "accel_rejected": 0, "mag_rejected": 0, "rest": 0, "inconsistent": 0}
+OUTPUT_DECIMALS = {
+    "roll": 6,
+    "pitch": 6,
+    "heading": 6,
+    "q": 9,
+    "gyro_bias": 9,
+    "roll_std": 6,
+    "pitch_std": 6,
+    "heading_std": 6,
+    "accel_rejected": 0,
+    "mag_rejected": 0,
+    "rest": 0,
+    "inconsistent": 0,
+}
 
 
 LABEL_CHANNELS = ("movement", "zvi")
@@ -2607,5 +2963,5 @@ def quat_error_metrics(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray
     dw, dz = np.abs(d[..., 0]), d[..., 3]
     total = 2 * np.arccos(np.clip(dw, 0, 1))
     heading = 2 * np.arctan(np.abs(dz) / np.maximum(dw, 1e-12))
-    incl = 2 * np.arccos(np.clip(np.sqrt(d[..., 0] ** 2 + dz ** 2), 0, 1))
+    incl = 2 * np.arccos(np.clip(np.sqrt(d[..., 0] ** 2 + dz**2), 0, 1))
     return total, heading, incl

@@ -128,8 +128,9 @@ def read_manifest(path: str | os.PathLike) -> list[dict[str, str]]:
             raise ImutoolError(f"manifest is not valid TOML: {e}", path=os.fspath(p)) from None
         jobs = doc.get("job", doc.get("jobs"))
         if not isinstance(jobs, list):
-            raise ImutoolError("TOML manifest needs [[job]] tables (input = '...', other fields optional)",
-                               path=os.fspath(p))
+            raise ImutoolError(
+                "TOML manifest needs [[job]] tables (input = '...', other fields optional)", path=os.fspath(p)
+            )
         rows = [{str(k): str(v) for k, v in j.items()} for j in jobs]
     else:
         with open(p, newline="", encoding="utf-8-sig") as f:
@@ -175,8 +176,15 @@ def expand_inputs(sources: Iterable[str], patterns: Iterable[str] = DATA_PATTERN
 def template_fields(path: str, rel: str = "", index: int = 0, extra: dict[str, str] | None = None) -> dict[str, str]:
     """Fields for the output template: input, stem, name, ext, parent, rel (folder under the walked root), index."""
     p = Path(path)
-    f = {"input": path, "stem": p.stem, "name": p.name, "ext": p.suffix.lstrip("."), "parent": p.parent.name,
-         "rel": rel, "index": str(index)}
+    f = {
+        "input": path,
+        "stem": p.stem,
+        "name": p.name,
+        "ext": p.suffix.lstrip("."),
+        "parent": p.parent.name,
+        "rel": rel,
+        "index": str(index),
+    }
     f.update(extra or {})
     return f
 
@@ -189,13 +197,19 @@ def render(template: str, fields: dict[str, str]) -> str:
         raise ImutoolError(f"output template {template!r}: {e}") from None
     missing = [n for n in names if n not in fields]
     if missing:
-        raise ImutoolError(f"output template {template!r}: unknown field {{{missing[0]}}}; known: "
-                           + ", ".join("{" + k + "}" for k in fields))
+        raise ImutoolError(
+            f"output template {template!r}: unknown field {{{missing[0]}}}; known: "
+            + ", ".join("{" + k + "}" for k in fields)
+        )
     return os.path.normpath(template.format(**fields))
 
 
-def make_jobs(sources: Iterable[str] = (), template: str | None = None, manifest: str | None = None,
-              patterns: Iterable[str] = DATA_PATTERNS) -> list[Job]:
+def make_jobs(
+    sources: Iterable[str] = (),
+    template: str | None = None,
+    manifest: str | None = None,
+    patterns: Iterable[str] = DATA_PATTERNS,
+) -> list[Job]:
     """Jobs from inputs (files, folders, globs) and/or a manifest, outputs from the naming template.
 
     Refused before anything runs: two jobs writing the same output, an output equal to an input.
@@ -221,8 +235,10 @@ def make_jobs(sources: Iterable[str] = (), template: str | None = None, manifest
         if k in ins:
             raise ImutoolError(f"output {j.output!r} would overwrite an input (check the -o template)")
         if k in seen:
-            raise ImutoolError(f"inputs {seen[k]!r} and {j.input!r} both map to output {j.output!r}; make the "
-                               "template unique (e.g. add {rel} or {parent})")
+            raise ImutoolError(
+                f"inputs {seen[k]!r} and {j.input!r} both map to output {j.output!r}; make the "
+                "template unique (e.g. add {rel} or {parent})"
+            )
         seen[k] = j.input
     return jobs
 
@@ -277,8 +293,15 @@ def remove_stale_temporaries(output: str) -> list[str]:
 
 
 def _write_marker(job: Job, result: JobResult, signature: str | None) -> None:
-    rec = {"input": job.input, "output": job.output, "signature": signature, "input_stamp": _stamp(job.input),
-           "output_stamp": _stamp(job.output), "result": result.as_dict(), "finished": time.time()}
+    rec = {
+        "input": job.input,
+        "output": job.output,
+        "signature": signature,
+        "input_stamp": _stamp(job.input),
+        "output_stamp": _stamp(job.output),
+        "result": result.as_dict(),
+        "finished": time.time(),
+    }
     with atomic_path(marker_path(job.output)) as tmp:  # type: ignore[arg-type]
         tmp.write_text(json.dumps(rec, default=str), encoding="utf-8")
 
@@ -330,8 +353,12 @@ def key_figures(summary: dict[str, Any], keys: Iterable[str] | None = None, limi
     return out
 
 
-def execute(runner: Callable[[Job], dict[str, Any]], job: Job, figures: tuple[str, ...] | None = None,
-            signature: str | None = None) -> JobResult:
+def execute(
+    runner: Callable[[Job], dict[str, Any]],
+    job: Job,
+    figures: tuple[str, ...] | None = None,
+    signature: str | None = None,
+) -> JobResult:
     """Run one job in the current process: time it, turn any exception into a one-line error, write the marker."""
     t0 = time.perf_counter()
     worker = f"{socket.gethostname()}:{os.getpid()}"
@@ -342,14 +369,31 @@ def execute(runner: Callable[[Job], dict[str, Any]], job: Job, figures: tuple[st
             marker_path(job.output).unlink(missing_ok=True)  # being redone: not complete until it succeeds
         summary = runner(job) or {}
         rows = summary.get("rows", summary.get("rows_out"))
-        res = JobResult(job.input, job.output, "ok", None, int(rows) if isinstance(rows, (int, float)) else None,
-                        time.perf_counter() - t0, key_figures(summary, figures), summary, dict(job.fields), worker)
+        res = JobResult(
+            job.input,
+            job.output,
+            "ok",
+            None,
+            int(rows) if isinstance(rows, (int, float)) else None,
+            time.perf_counter() - t0,
+            key_figures(summary, figures),
+            summary,
+            dict(job.fields),
+            worker,
+        )
     except Exception as e:  # one job's failure never stops the batch
         msg = str(e) if isinstance(e, ImutoolError) else f"{type(e).__name__}: {e}"
         if not isinstance(e, ImutoolError) and os.environ.get("IMUTOOL_BATCH_DEBUG"):
             msg += " | " + _one_line(traceback.format_exc())
-        return JobResult(job.input, job.output, "failed", _one_line(msg) or type(e).__name__,
-                         duration_s=time.perf_counter() - t0, fields=dict(job.fields), worker=worker)
+        return JobResult(
+            job.input,
+            job.output,
+            "failed",
+            _one_line(msg) or type(e).__name__,
+            duration_s=time.perf_counter() - t0,
+            fields=dict(job.fields),
+            worker=worker,
+        )
     if job.output:
         if not os.path.exists(job.output):
             res.status, res.error = "failed", f"finished but wrote no output {job.output!r}"
@@ -365,10 +409,18 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def run_batch(jobs: list[Job], runner: Callable[[Job], dict[str, Any]], *, workers: int | None = None,
-              scheduler: str | None = None, resume: bool = False, figures: tuple[str, ...] | None = None,
-              on_result: Callable[[JobResult], None] | None = None,
-              dask_threads_per_worker: int = 1, signature: str | None = None) -> list[JobResult]:
+def run_batch(
+    jobs: list[Job],
+    runner: Callable[[Job], dict[str, Any]],
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    figures: tuple[str, ...] | None = None,
+    on_result: Callable[[JobResult], None] | None = None,
+    dask_threads_per_worker: int = 1,
+    signature: str | None = None,
+) -> list[JobResult]:
     """Run every job; returns results in job order (``on_result`` is called as each one finishes).
 
     workers: local processes (default all usable cores; 1 runs in this process, no pool). scheduler: None
@@ -383,8 +435,18 @@ def run_batch(jobs: list[Job], runner: Callable[[Job], dict[str, Any]], *, worke
         done = is_complete(job, signature) if resume else None
         if done is not None:
             prev = done.get("result", {})
-            r = JobResult(job.input, job.output, "skipped", None, prev.get("rows"), 0.0, prev.get("figures", {}),
-                          prev.get("summary", {}), dict(job.fields), prev.get("worker", ""))
+            r = JobResult(
+                job.input,
+                job.output,
+                "skipped",
+                None,
+                prev.get("rows"),
+                0.0,
+                prev.get("figures", {}),
+                prev.get("summary", {}),
+                dict(job.fields),
+                prev.get("worker", ""),
+            )
             results[i] = r
             if on_result:
                 on_result(r)
@@ -398,8 +460,14 @@ def run_batch(jobs: list[Job], runner: Callable[[Job], dict[str, Any]], *, worke
     return [r for r in results if r is not None]
 
 
-def _dispatch(fn: Callable[[Job], JobResult], jobs: list[Job], index: list[int], workers: int | None,
-              scheduler: str | None, threads: int) -> Iterator[tuple[int, JobResult]]:
+def _dispatch(
+    fn: Callable[[Job], JobResult],
+    jobs: list[Job],
+    index: list[int],
+    workers: int | None,
+    scheduler: str | None,
+    threads: int,
+) -> Iterator[tuple[int, JobResult]]:
     if not jobs:
         return
     n = workers or usable_cores()
@@ -421,8 +489,12 @@ def _dispatch(fn: Callable[[Job], JobResult], jobs: list[Job], index: list[int],
                         yield i, fut.result()
                     except Exception as e:  # the worker process died (killed, out of memory...)
                         job = jobs[index.index(i)]
-                        yield i, JobResult(job.input, job.output, "failed", _one_line(f"worker lost: {e}"),
-                                           fields=dict(job.fields))
+                        yield (
+                            i,
+                            JobResult(
+                                job.input, job.output, "failed", _one_line(f"worker lost: {e}"), fields=dict(job.fields)
+                            ),
+                        )
         finally:
             for fut in pending:
                 fut.cancel()
@@ -442,14 +514,14 @@ def _dask_client(scheduler: str, n: int, threads: int) -> tuple[Any, Any]:
         raise ImutoolError(f"cannot reach the Dask scheduler {scheduler!r}: {_one_line(str(e))}") from None
 
 
-def _dispatch_dask(fn: Callable[[Job], JobResult], jobs: list[Job], index: list[int], n: int, scheduler: str,
-                   threads: int) -> Iterator[tuple[int, JobResult]]:
+def _dispatch_dask(
+    fn: Callable[[Job], JobResult], jobs: list[Job], index: list[int], n: int, scheduler: str, threads: int
+) -> Iterator[tuple[int, JobResult]]:
     from dask.distributed import as_completed
 
     client, cluster = _dask_client(scheduler, n, threads)
     try:
-        futs = client.map(fn, jobs, pure=False, key=[f"imutool-job-{i}-{os.getpid()}-{time.time_ns()}"
-                                                     for i in index])
+        futs = client.map(fn, jobs, pure=False, key=[f"imutool-job-{i}-{os.getpid()}-{time.time_ns()}" for i in index])
         where = {f.key: i for f, i in zip(futs, index, strict=True)}
         for fut in as_completed(futs):
             i = where[fut.key]
@@ -457,8 +529,16 @@ def _dispatch_dask(fn: Callable[[Job], JobResult], jobs: list[Job], index: list[
                 yield i, fut.result()
             except Exception as e:  # lost worker, unpicklable result...
                 job = jobs[index.index(i)]
-                yield i, JobResult(job.input, job.output, "failed", _one_line(f"dask: {type(e).__name__}: {e}"),
-                                   fields=dict(job.fields))
+                yield (
+                    i,
+                    JobResult(
+                        job.input,
+                        job.output,
+                        "failed",
+                        _one_line(f"dask: {type(e).__name__}: {e}"),
+                        fields=dict(job.fields),
+                    ),
+                )
     finally:
         client.close()
         if cluster is not None:
@@ -483,8 +563,15 @@ def summary_rows(results: list[JobResult]) -> tuple[list[str], list[dict[str, An
     cols = list(SUMMARY_COLUMNS) + field_cols + fig_cols
     rows = []
     for r in results:
-        d: dict[str, Any] = {"input": r.input, "output": r.output or "", "status": r.status, "rows": r.rows,
-                             "duration_s": round(r.duration_s, 3), "error": r.error or "", "worker": r.worker}
+        d: dict[str, Any] = {
+            "input": r.input,
+            "output": r.output or "",
+            "status": r.status,
+            "rows": r.rows,
+            "duration_s": round(r.duration_s, 3),
+            "error": r.error or "",
+            "worker": r.worker,
+        }
         for k in field_cols:
             d[k] = r.fields.get(k, "")
         for k in fig_cols:
@@ -531,7 +618,7 @@ def format_table(results: list[JobResult], max_width: int = 48) -> list[str]:
         if isinstance(v, float):
             return f"{v:.4g}"
         s = str(v)
-        return s if len(s) <= max_width else "…" + s[-(max_width - 1):]
+        return s if len(s) <= max_width else "…" + s[-(max_width - 1) :]
 
     table = [[cell(r.get(c)) for c in show] for r in rows]
     widths = [max([len(c)] + [len(t[j]) for t in table]) for j, c in enumerate(show)]
@@ -547,5 +634,10 @@ def totals(results: list[JobResult], wall_s: float) -> dict[str, Any]:
     """Counts per status, rows, job time and wall time."""
     c = {s: sum(r.status == s for r in results) for s in ("ok", "failed", "skipped")}
     ran = [r for r in results if r.status != "skipped"]
-    return {"jobs": len(results), **c, "rows": sum(r.rows or 0 for r in results if r.status == "ok"),
-            "job_seconds": round(sum(r.duration_s for r in ran), 3), "wall_seconds": round(wall_s, 3)}
+    return {
+        "jobs": len(results),
+        **c,
+        "rows": sum(r.rows or 0 for r in results if r.status == "ok"),
+        "job_seconds": round(sum(r.duration_s for r in ran), 3),
+        "wall_seconds": round(wall_s, 3),
+    }

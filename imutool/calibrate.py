@@ -59,9 +59,13 @@ def check_toml_output(output: str | os.PathLike, append: bool = False) -> None:
         load_calibration(output)
 
 
-def load_for_fit(source: str | os.PathLike | Recording, load_options: dict[str, Any] | None = None,
-                 with_files: tuple[str, ...] | list[str] = (), fitting: str | None = None,
-                 on_input: OnInput | None = None) -> Recording:
+def load_for_fit(
+    source: str | os.PathLike | Recording,
+    load_options: dict[str, Any] | None = None,
+    with_files: tuple[str, ...] | list[str] = (),
+    fitting: str | None = None,
+    on_input: OnInput | None = None,
+) -> Recording:
     """Read ``source`` (and ``with_files`` merged onto its clock; each read with the same options except the
     foreign-CSV ``columns``). ``on_input(path, report)`` is called after each file is loaded.
 
@@ -72,14 +76,19 @@ def load_for_fit(source: str | os.PathLike | Recording, load_options: dict[str, 
     opts = {k: v for k, v in (load_options or {}).items() if v is not None}
     _check_load_options(opts)
     if fitting and opts.get("mounting"):
-        raise ImutoolError(f"{fitting} calibration parameters are in sensor axes: calibrate without --mounting "
-                           "(store the mounting separately; it is applied after the calibration)")
+        raise ImutoolError(
+            f"{fitting} calibration parameters are in sensor axes: calibrate without --mounting "
+            "(store the mounting separately; it is applied after the calibration)"
+        )
     if fitting and opts.get("calibration_file"):
         from calibration.file import load_calibration
 
         if fitting in load_calibration(opts["calibration_file"]):
-            raise ImutoolError(f"--calibration {opts['calibration_file']} already has a [{fitting}] section: "
-                               f"the {fitting} fit needs raw data", path=opts["calibration_file"])
+            raise ImutoolError(
+                f"--calibration {opts['calibration_file']} already has a [{fitting}] section: "
+                f"the {fitting} fit needs raw data",
+                path=opts["calibration_file"],
+            )
 
     def load(p: str, o: dict[str, Any]) -> Recording:
         r, report = load_recording(p, **o)
@@ -104,9 +113,14 @@ def _source_name(source: str | os.PathLike | Recording) -> str:
     return str(source.meta.get("source", "")) if isinstance(source, Recording) else os.fspath(source)
 
 
-def _read_for_fit(source: str | os.PathLike | Recording, kind: str, load_options: dict[str, Any] | None,
-                  with_files: tuple[str, ...] | list[str], on_input: OnInput | None,
-                  stage: Stage | None) -> Recording:
+def _read_for_fit(
+    source: str | os.PathLike | Recording,
+    kind: str,
+    load_options: dict[str, Any] | None,
+    with_files: tuple[str, ...] | list[str],
+    on_input: OnInput | None,
+    stage: Stage | None,
+) -> Recording:
     """The reading stage of a calibration run: load (with the --with files), then require the ``kind`` channel."""
     _stage(stage, "reading")
     rec = load_for_fit(source, load_options, with_files, fitting=kind, on_input=on_input)
@@ -121,12 +135,26 @@ def _stage(stage: Stage | None, name: str) -> None:
 
 
 # -- magnetometer ------------------------------------------------------------------------------------------------
-def calibrate_mag(source: str | os.PathLike | Recording, output: str | os.PathLike, *, method: str = "sphere",
-                  kind: str = "auto", field_ut: float | None = None, min_coverage: float | None = None,
-                  grid_bands: int = 8, horizontal_field: float | None = None, bz_prior: float = 0.0,
-                  a33_prior: float | None = None, plot: str | os.PathLike | None = None, append: bool = False,
-                  sensor: str | None = None, with_files: tuple[str, ...] = (), on_input: OnInput | None = None,
-                  stage: Stage | None = None, **load_options: Any) -> CalibrationRun:
+def calibrate_mag(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike,
+    *,
+    method: str = "sphere",
+    kind: str = "auto",
+    field_ut: float | None = None,
+    min_coverage: float | None = None,
+    grid_bands: int = 8,
+    horizontal_field: float | None = None,
+    bz_prior: float = 0.0,
+    a33_prior: float | None = None,
+    plot: str | os.PathLike | None = None,
+    append: bool = False,
+    sensor: str | None = None,
+    with_files: tuple[str, ...] = (),
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> CalibrationRun:
     """Hard/soft-iron fit ``m_true = A (m_meas − b)`` (b µT) of the magnetometer: ``sphere`` (full 3-D rotations;
     ``kind`` offset/diag/full/auto, ``field_ut`` scales A, ``min_coverage``, ``grid_bands``) or ``swing`` (the
     vessel turns in heading only: ``horizontal_field`` µT, ``bz_prior`` µT, ``a33_prior``). Writes section
@@ -149,43 +177,68 @@ def calibrate_mag(source: str | os.PathLike | Recording, output: str | os.PathLi
     else:
         raise ImutoolError(f"mag calibration method {method!r}: expected sphere or swing")
     section = fit.to_section()
-    section["provenance"] = provenance(input_path, f"mag {method} ({fit.kind})",
-                                       sensor or str(rec.meta.get("sensor", "")), fit.quality(),
-                                       with_files=list(with_files) or None)
+    section["provenance"] = provenance(
+        input_path,
+        f"mag {method} ({fit.kind})",
+        sensor or str(rec.meta.get("sensor", "")),
+        fit.quality(),
+        with_files=list(with_files) or None,
+    )
     update_calibration(output, "mag", section, append)
     if plot:
         from calibration.magnetometer import plot_before_after
 
         plot_before_after(m, fit, plot, title=f"{os.path.basename(input_path)} ({method})")
-    summary = {"output": os.fspath(output), "method": method, "kind": fit.kind, "reason": fit.reason,
-               "model": "m_true = A (m_meas - b)", "b_uT": np.round(fit.b, 4).tolist(),
-               "b_std_uT": [None if not np.isfinite(v) else round(float(v), 4) for v in fit.b_std],
-               "A": np.round(fit.A, 5).tolist(),
-               "field_uT": round(fit.field_ut, 3), "residual_rms_uT": round(fit.residual_rms_ut, 4),
-               "coverage": round(fit.coverage, 3), "raw_field_rel_std_pct": round(100 * fit.raw_rel_std, 3),
-               "calibrated_field_rel_std_pct": round(100 * fit.cal_rel_std, 3), "samples": fit.n,
-               "warnings": fit.warnings}
+    summary = {
+        "output": os.fspath(output),
+        "method": method,
+        "kind": fit.kind,
+        "reason": fit.reason,
+        "model": "m_true = A (m_meas - b)",
+        "b_uT": np.round(fit.b, 4).tolist(),
+        "b_std_uT": [None if not np.isfinite(v) else round(float(v), 4) for v in fit.b_std],
+        "A": np.round(fit.A, 5).tolist(),
+        "field_uT": round(fit.field_ut, 3),
+        "residual_rms_uT": round(fit.residual_rms_ut, 4),
+        "coverage": round(fit.coverage, 3),
+        "raw_field_rel_std_pct": round(100 * fit.raw_rel_std, 3),
+        "calibrated_field_rel_std_pct": round(100 * fit.cal_rel_std, 3),
+        "samples": fit.n,
+        "warnings": fit.warnings,
+    }
     if method == "swing":
         summary["unobservable"] = fit.extra["section"]["unobservable"]
     return CalibrationRun(fit, summary, rec)
 
 
-
-
 # -- gyro and accelerometer ----------------------------------------------------------------------------------------
-def rest_options(window_s: float = 1.0, gyro_std_deg: float = 0.5, accel_std: float = 0.1,
-                 min_rest_s: float = 2.0) -> dict[str, float]:
+def rest_options(
+    window_s: float = 1.0, gyro_std_deg: float = 0.5, accel_std: float = 0.1, min_rest_s: float = 2.0
+) -> dict[str, float]:
     """Rest-detection keywords of :mod:`calibration.inertial` from the user-facing units: moving-std window (s),
     gyro std (deg/s → rad/s), accel std (m/s²), shortest rest interval (s)."""
-    return {"window_s": window_s, "gyro_std": float(np.radians(gyro_std_deg)), "accel_std": accel_std,
-            "min_rest_s": min_rest_s}
+    return {
+        "window_s": window_s,
+        "gyro_std": float(np.radians(gyro_std_deg)),
+        "accel_std": accel_std,
+        "min_rest_s": min_rest_s,
+    }
 
 
-def calibrate_gyro(source: str | os.PathLike | Recording, output: str | os.PathLike, *,
-                   turns_deg: float | None = None, min_temp_range: float = 1.0, rest: dict[str, float] | None = None,
-                   append: bool = False, sensor: str | None = None, with_files: tuple[str, ...] = (),
-                   on_input: OnInput | None = None, stage: Stage | None = None,
-                   **load_options: Any) -> CalibrationRun:
+def calibrate_gyro(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike,
+    *,
+    turns_deg: float | None = None,
+    min_temp_range: float = 1.0,
+    rest: dict[str, float] | None = None,
+    append: bool = False,
+    sensor: str | None = None,
+    with_files: tuple[str, ...] = (),
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> CalibrationRun:
     """Gyro bias (rad/s) over automatically detected rest intervals (``rest``: :func:`rest_options`), a
     temperature slope when the rests span ``min_temp_range`` °C, scale/misalignment from turns of ``turns_deg``.
     Writes section ``[gyro]`` of ``output``."""
@@ -197,26 +250,53 @@ def calibrate_gyro(source: str | os.PathLike | Recording, output: str | os.PathL
     rec = _read_for_fit(source, "gyro", load_options, with_files, on_input, stage)
     acc = rec.get("accel", "m/s^2") if "accel" in rec.channels else None
     temp = rec["temp"] if "temp" in rec.channels else None
-    cal = fit_gyro(rec.time, rec.get("gyro", "rad/s"), acc, temp, min_temp_range=min_temp_range,
-                   turns_deg=turns_deg, **(rest if rest is not None else rest_options()))
+    cal = fit_gyro(
+        rec.time,
+        rec.get("gyro", "rad/s"),
+        acc,
+        temp,
+        min_temp_range=min_temp_range,
+        turns_deg=turns_deg,
+        **(rest if rest is not None else rest_options()),
+    )
     section = cal.to_section()
-    section["provenance"] = provenance(input_path, "gyro static bias over rest intervals"
-                                       + (" + temperature slope" if cal.temp_slope is not None else "")
-                                       + (" + scale from turns" if cal.scale is not None else ""),
-                                       sensor or str(rec.meta.get("sensor", "")), cal.quality)
+    section["provenance"] = provenance(
+        input_path,
+        "gyro static bias over rest intervals"
+        + (" + temperature slope" if cal.temp_slope is not None else "")
+        + (" + scale from turns" if cal.scale is not None else ""),
+        sensor or str(rec.meta.get("sensor", "")),
+        cal.quality,
+    )
     update_calibration(output, "gyro", section, append)
-    summary = {"output": os.fspath(output), "bias_rad_s": cal.bias.tolist(),
-               "bias_deg_s": np.degrees(cal.bias).tolist(),
-               "temp_slope_deg_s_per_degC": None if cal.temp_slope is None else np.degrees(cal.temp_slope).tolist(),
-               "scale": None if cal.scale is None else cal.scale.tolist(), **cal.quality}
+    summary = {
+        "output": os.fspath(output),
+        "bias_rad_s": cal.bias.tolist(),
+        "bias_deg_s": np.degrees(cal.bias).tolist(),
+        "temp_slope_deg_s_per_degC": None if cal.temp_slope is None else np.degrees(cal.temp_slope).tolist(),
+        "scale": None if cal.scale is None else cal.scale.tolist(),
+        **cal.quality,
+    }
     return CalibrationRun(cal, summary, rec)
 
 
-def calibrate_accel(source: str | os.PathLike | Recording, output: str | os.PathLike, *, kind: str = "auto",
-                    gravity: float | None = None, latitude: float | None = None, height: float = 0.0,
-                    min_poses: int = 6, rest: dict[str, float] | None = None, append: bool = False,
-                    sensor: str | None = None, with_files: tuple[str, ...] = (), on_input: OnInput | None = None,
-                    stage: Stage | None = None, **load_options: Any) -> CalibrationRun:
+def calibrate_accel(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike,
+    *,
+    kind: str = "auto",
+    gravity: float | None = None,
+    latitude: float | None = None,
+    height: float = 0.0,
+    min_poses: int = 6,
+    rest: dict[str, float] | None = None,
+    append: bool = False,
+    sensor: str | None = None,
+    with_files: tuple[str, ...] = (),
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> CalibrationRun:
     """Accelerometer ``f = T (f_meas − b)`` (b m/s²) from six or more static poses detected automatically;
     gravity (m/s²) given, else WGS-84 normal gravity at ``latitude`` (deg) and ``height`` (m), else 9.80665.
     Writes section ``[accel]`` of ``output``; the summary's ``gravity_m_s2`` is the value used."""
@@ -230,22 +310,48 @@ def calibrate_accel(source: str | os.PathLike | Recording, output: str | os.Path
     if gravity is None:
         gravity = normal_gravity(latitude, height) if latitude is not None else 9.80665
     gyro = rec.get("gyro", "rad/s") if "gyro" in rec.channels else None
-    cal = fit_accel(rec.time, rec.get("accel", "m/s^2"), gyro, gravity=gravity, kind=kind, min_poses=min_poses,
-                    **(rest if rest is not None else rest_options()))
+    cal = fit_accel(
+        rec.time,
+        rec.get("accel", "m/s^2"),
+        gyro,
+        gravity=gravity,
+        kind=kind,
+        min_poses=min_poses,
+        **(rest if rest is not None else rest_options()),
+    )
     section = cal.to_section()
-    section["provenance"] = provenance(input_path, f"accel many-position |g| fit ({cal.kind})",
-                                       sensor or str(rec.meta.get("sensor", "")), cal.quality,
-                                       latitude_deg=latitude)
+    section["provenance"] = provenance(
+        input_path,
+        f"accel many-position |g| fit ({cal.kind})",
+        sensor or str(rec.meta.get("sensor", "")),
+        cal.quality,
+        latitude_deg=latitude,
+    )
     update_calibration(output, "accel", section, append)
-    summary = {"output": os.fspath(output), "kind": cal.kind, "gravity_m_s2": gravity,
-               "bias_m_s2": cal.bias.tolist(), "bias_std_m_s2": cal.bias_std.tolist(), "T": cal.T.tolist(),
-               **cal.quality}
+    summary = {
+        "output": os.fspath(output),
+        "kind": cal.kind,
+        "gravity_m_s2": gravity,
+        "bias_m_s2": cal.bias.tolist(),
+        "bias_std_m_s2": cal.bias_std.tolist(),
+        "T": cal.T.tolist(),
+        **cal.quality,
+    }
     return CalibrationRun(cal, summary, rec)
 
 
 # -- deviation card --------------------------------------------------------------------------------------------
-REF_NAMES = ("heading_mag", "ref_heading_mag", "heading", "ref_heading", "cog", "course", "bearing", "true_heading",
-             "heading_true")
+REF_NAMES = (
+    "heading_mag",
+    "ref_heading_mag",
+    "heading",
+    "ref_heading",
+    "cog",
+    "course",
+    "bearing",
+    "true_heading",
+    "heading_true",
+)
 MAG_REFS = ("heading_mag", "ref_heading_mag")
 CARD_KEYS = ("vessel", "compass", "place", "date", "latitude", "longitude", "conditions", "adjuster")
 CARD_OUTPUTS = (".pdf", ".png", ".svg", ".toml", ".txt")
@@ -275,8 +381,7 @@ def card_info(path: str | os.PathLike | None) -> dict[str, Any]:
     d = d.get("card", d)
     unknown = sorted(set(d) - set(CARD_KEYS))
     if unknown:
-        raise ImutoolError(f"--card-info: unknown keys {', '.join(unknown)} (known: {', '.join(CARD_KEYS)})",
-                           path=path)
+        raise ImutoolError(f"--card-info: unknown keys {', '.join(unknown)} (known: {', '.join(CARD_KEYS)})", path=path)
     return {k: (v.isoformat() if hasattr(v, "isoformat") else v) for k, v in d.items()}
 
 
@@ -301,16 +406,34 @@ def swing_date(date_opt: str | None, *recs: Any) -> Any:
     return None
 
 
-def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.PathLike | tuple[str, ...] | list[str], *,
-                   reference: str | os.PathLike | None = None, reference_column: str | None = None,
-                   reference_kind: str = "auto", variation: float | None = None, position: str | None = None,
-                   date: str | None = None, vessel: str | None = None, compass: str | None = None,
-                   place: str | None = None, conditions: str | None = None, adjuster: str | None = None,
-                   info: str | os.PathLike | dict[str, Any] | None = None, max_deviation: float = 5.0,
-                   time_offset: float = 0.0, heading_column: str | None = None, min_speed: float = 2.0,
-                   min_span: float = 270.0, append: bool = True, sensor: str | None = None,
-                   with_files: tuple[str, ...] = (), on_input: OnInput | None = None, stage: Stage | None = None,
-                   **load_options: Any) -> CalibrationRun:
+def deviation_card(
+    source: str | os.PathLike | Recording,
+    outputs: str | os.PathLike | tuple[str, ...] | list[str],
+    *,
+    reference: str | os.PathLike | None = None,
+    reference_column: str | None = None,
+    reference_kind: str = "auto",
+    variation: float | None = None,
+    position: str | None = None,
+    date: str | None = None,
+    vessel: str | None = None,
+    compass: str | None = None,
+    place: str | None = None,
+    conditions: str | None = None,
+    adjuster: str | None = None,
+    info: str | os.PathLike | dict[str, Any] | None = None,
+    max_deviation: float = 5.0,
+    time_offset: float = 0.0,
+    heading_column: str | None = None,
+    min_speed: float = 2.0,
+    min_span: float = 270.0,
+    append: bool = True,
+    sensor: str | None = None,
+    with_files: tuple[str, ...] = (),
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> CalibrationRun:
     """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ (deg; magnetic = compass + δ) from the
     compass heading of ``source`` (``heading_column``, else 'heading', else the tilt-compensated magnetometer)
     against reference headings (``reference`` file: NMEA HDT/THS/HDM..., or a CSV column; default a reference
@@ -337,8 +460,9 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.Path
     outputs = [os.fspath(outputs)] if isinstance(outputs, (str, os.PathLike)) else [os.fspath(o) for o in outputs]
     for o in outputs:
         if not o.lower().endswith(CARD_OUTPUTS):
-            raise ImutoolError(f"output {o!r}: use .pdf/.png/.svg (card plot), .txt (text card) or .toml "
-                               "(calibration file)")
+            raise ImutoolError(
+                f"output {o!r}: use .pdf/.png/.svg (card plot), .txt (text card) or .toml (calibration file)"
+            )
     info = dict(info) if isinstance(info, dict) else card_info(info)
     _stage(stage, "reading")
     rec = load_for_fit(source, load_options, with_files, on_input=on_input)  # mounting and a mag calibration ok
@@ -371,8 +495,11 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.Path
         own = heading_column or "heading"  # the compass column itself is no reference
         names = [n for n in REF_NAMES if n in ref_rec.channels and (reference or n != own)]
     if not names:
-        raise ImutoolError(f"no reference heading column (looked for {reference_column or ', '.join(REF_NAMES)}; "
-                           f"has {', '.join(ref_rec.channels)})", path=rsrc)
+        raise ImutoolError(
+            f"no reference heading column (looked for {reference_column or ', '.join(REF_NAMES)}; "
+            f"has {', '.join(ref_rec.channels)})",
+            path=rsrc,
+        )
     rname = names[0]
     rvals = np.asarray(ref_rec[rname], dtype=float)
     rt = ref_rec.time + time_offset
@@ -390,8 +517,11 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.Path
         pos_src = "--card-info"
     log_day = None
     for cand in ([reference] if reference else []) + [input_path]:
-        if cand and not cand.lower().endswith((".csv", ".parquet", ".bag", ".db3", ".mcap", ".toml")) \
-                and os.path.exists(cand):
+        if (
+            cand
+            and not cand.lower().endswith((".csv", ".parquet", ".bag", ".db3", ".mcap", ".toml"))
+            and os.path.exists(cand)
+        ):
             plat, plon, log_day = position_from_nmea(cand)
             if lat is None and plat is not None:
                 lat, lon, pos_src = plat, plon, f"first fix in {os.path.basename(cand)}"
@@ -401,11 +531,19 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.Path
     notes: list[str] = []
     if kind == "true" and variation is None:
         if lat is None or when is None:
-            miss = " and ".join(x for x, v in (("a position (--position LAT,LON or RMC/GGA in the reference "
-                                                "log)", lat), ("a date (--date)", when)) if v is None)
-            raise ImutoolError(f"the reference {os.path.basename(rsrc)}:{rname} is TRUE heading: give --variation "
-                               f"(deg, E +), or {miss} for the World Magnetic Model — without it the card would "
-                               "carry the variation as deviation")
+            miss = " and ".join(
+                x
+                for x, v in (
+                    ("a position (--position LAT,LON or RMC/GGA in the reference log)", lat),
+                    ("a date (--date)", when),
+                )
+                if v is None
+            )
+            raise ImutoolError(
+                f"the reference {os.path.basename(rsrc)}:{rname} is TRUE heading: give --variation "
+                f"(deg, E +), or {miss} for the World Magnetic Model — without it the card would "
+                "carry the variation as deviation"
+            )
         v = wmm_variation(lat, lon, when)
         variation = v.deg
         var_src = v.source()
@@ -425,40 +563,71 @@ def deviation_card(source: str | os.PathLike | Recording, outputs: str | os.Path
         ref_at = ref_at - variation
     card = fit_deviation(comp_at, ref_at, min_span_deg=min_span, limit_deg=max_deviation)
     card.warnings = notes + card_warnings(card, max_deviation)
-    header = {**info, "vessel": vessel or info.get("vessel"), "compass": compass or info.get("compass"),
-              "place": place or info.get("place"), "conditions": conditions or info.get("conditions"),
-              "adjuster": adjuster or info.get("adjuster"),
-              "date": (when.isoformat()[:10] if hasattr(when, "isoformat") else None),
-              "latitude": lat, "longitude": lon, "position_source": pos_src,
-              "variation": variation, "variation_source": var_src,
-              "reference": f"{os.path.basename(rsrc)}:{rname} ({kind}; magnetic = {comp_ref}); compass from {src}"}
+    header = {
+        **info,
+        "vessel": vessel or info.get("vessel"),
+        "compass": compass or info.get("compass"),
+        "place": place or info.get("place"),
+        "conditions": conditions or info.get("conditions"),
+        "adjuster": adjuster or info.get("adjuster"),
+        "date": (when.isoformat()[:10] if hasattr(when, "isoformat") else None),
+        "latitude": lat,
+        "longitude": lon,
+        "position_source": pos_src,
+        "variation": variation,
+        "variation_source": var_src,
+        "reference": f"{os.path.basename(rsrc)}:{rname} ({kind}; magnetic = {comp_ref}); compass from {src}",
+    }
     card.header = {k: v for k, v in header.items() if v not in (None, "")}
-    summary: dict[str, Any] = {"compass_heading": src, "reference": f"{rsrc}:{rname} ({kind})",
-                               "variation_deg": variation, "variation_source": var_src,
-                               "coefficients_deg": {n: round(float(getattr(card, n)), 4) for n in "ABCDE"},
-                               "std_deg": {k: round(v, 4) for k, v in card.std.items()},
-                               "residual_rms_deg": round(card.quality["residual_rms_deg"], 4),
-                               "max_abs_deviation_deg": round(card.max_abs_deg(), 3),
-                               "samples": card.quality["n"], "outputs": list(outputs), "header": card.header,
-                               "warnings": card.warnings,
-                               "card_15deg": [[p, round(d, 2)] for p, d, _ in card.table(15.0)]}
+    summary: dict[str, Any] = {
+        "compass_heading": src,
+        "reference": f"{rsrc}:{rname} ({kind})",
+        "variation_deg": variation,
+        "variation_source": var_src,
+        "coefficients_deg": {n: round(float(getattr(card, n)), 4) for n in "ABCDE"},
+        "std_deg": {k: round(v, 4) for k, v in card.std.items()},
+        "residual_rms_deg": round(card.quality["residual_rms_deg"], 4),
+        "max_abs_deviation_deg": round(card.max_abs_deg(), 3),
+        "samples": card.quality["n"],
+        "outputs": list(outputs),
+        "header": card.header,
+        "warnings": card.warnings,
+        "card_15deg": [[p, round(d, 2)] for p, d, _ in card.table(15.0)],
+    }
     if card.invertible():
         summary["magnetic_to_compass_15deg"] = [[m, round(p, 2)] for m, _, p in card.table_magnetic(15.0)]
     for o in outputs:
         if o.lower().endswith(".toml"):
             section = card.to_section()
-            section["provenance"] = provenance(input_path, "deviation least squares", sensor or
-                                               str(rec.meta.get("sensor", "")), card.quality,
-                                               reference=f"{rsrc}:{rname} ({kind})", variation_deg=variation,
-                                               variation_source=var_src, compass_heading=src)
+            section["provenance"] = provenance(
+                input_path,
+                "deviation least squares",
+                sensor or str(rec.meta.get("sensor", "")),
+                card.quality,
+                reference=f"{rsrc}:{rname} ({kind})",
+                variation_deg=variation,
+                variation_source=var_src,
+                compass_heading=src,
+            )
             update_calibration(o, "deviation", section, append)
         elif o.lower().endswith(".txt"):
             with atomic_path(o) as tmp:
                 tmp.write_text(card_text(card), encoding="utf-8")
         else:
             ok = np.isfinite(comp_at) & np.isfinite(ref_at)
-            plot_card(card, o, comp_at[ok], wrap_deg180(ref_at[ok] - comp_at[ok]),
-                      title=f"Deviation card — {card.header.get('vessel') or os.path.basename(input_path)}")
-    details = {"compass_source": src, "reference_source": rsrc, "reference_column": rname, "reference_kind": kind,
-               "variation": variation, "variation_source": var_src}
+            plot_card(
+                card,
+                o,
+                comp_at[ok],
+                wrap_deg180(ref_at[ok] - comp_at[ok]),
+                title=f"Deviation card — {card.header.get('vessel') or os.path.basename(input_path)}",
+            )
+    details = {
+        "compass_source": src,
+        "reference_source": rsrc,
+        "reference_column": rname,
+        "reference_kind": kind,
+        "variation": variation,
+        "variation_source": var_src,
+    }
     return CalibrationRun(card, summary, rec, details)

@@ -87,8 +87,12 @@ def compass_kernel(t, z, rate, q, r, q_rate, q_bias, use_rate, paper_init, out, 
         out_bias[k] = b
 
 
-def wrapped_kf(z_deg: np.ndarray, time: np.ndarray | None = None, rate_deg_s: np.ndarray | None = None,
-               params: CompassParams | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def wrapped_kf(
+    z_deg: np.ndarray,
+    time: np.ndarray | None = None,
+    rate_deg_s: np.ndarray | None = None,
+    params: CompassParams | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Filter a heading series (deg). Returns (heading deg [0,360), σ deg, rate bias deg/s)."""
     p = params or CompassParams()
     z = np.ascontiguousarray(z_deg, dtype=float)
@@ -97,7 +101,7 @@ def wrapped_kf(z_deg: np.ndarray, time: np.ndarray | None = None, rate_deg_s: np
     use_rate = rate_deg_s is not None
     rr = np.ascontiguousarray(rate_deg_s, dtype=float) if use_rate else np.zeros(n)
     out, sd, bias = np.empty(n), np.empty(n), np.empty(n)
-    compass_kernel(t, z, rr, p.q, p.r, p.rate_noise ** 2, p.bias_rw ** 2, use_rate, p.paper_init, out, sd, bias)
+    compass_kernel(t, z, rr, p.q, p.r, p.rate_noise**2, p.bias_rw**2, use_rate, p.paper_init, out, sd, bias)
     return out, sd, bias
 
 
@@ -124,9 +128,11 @@ def raw_heading(rec: Recording, deviation=None) -> tuple[np.ndarray, str]:
     elif "heading" in rec.channels:
         h, src = np.asarray(rec["heading"], float), "heading channel"
     else:
-        raise ImutoolError("the compass filter needs 'mag' (with 'accel' for tilt compensation) or a heading "
-                           f"channel (heading_mag, heading_sensor, heading); the recording has "
-                           f"{', '.join(rec.channels)}")
+        raise ImutoolError(
+            "the compass filter needs 'mag' (with 'accel' for tilt compensation) or a heading "
+            f"channel (heading_mag, heading_sensor, heading); the recording has "
+            f"{', '.join(rec.channels)}"
+        )
     if deviation is not None:
         h = (h + deviation.deviation_deg(h)) % 360.0
         src += " + deviation card"
@@ -174,9 +180,14 @@ def compass_recording(rec: Recording, params: CompassParams | None = None, devia
 
     carry_labels(rec, out)
     out.meta["filter"] = {"method": f"compass KF ({model})", "q": p.q, "r": p.r, "variation_deg": p.variation_deg}
-    summary = {"method": f"compass-{model}", "source": src, "samples": len(rec),
-               "measurements": int(np.isfinite(z).sum()), "variation_deg": p.variation_deg,
-               "deviation_card": deviation is not None}
+    summary = {
+        "method": f"compass-{model}",
+        "source": src,
+        "samples": len(rec),
+        "measurements": int(np.isfinite(z).sum()),
+        "variation_deg": p.variation_deg,
+        "deviation_card": deviation is not None,
+    }
     if model == "gyro":
         summary["rate_bias_deg_s_final"] = round(float(bias[-1]), 4)
     return out, summary

@@ -42,14 +42,25 @@ def chunk_writer(path: str | os.PathLike, background: bool = False, reserve_meta
         from formats.parquet import ParquetWriter
 
         return ParquetWriter(os.fspath(path), background=background)
-    raise ImutoolError(f"streamed output must be .csv or .parquet (got {formats.kind_of(path, True)})",
-                       path=os.fspath(path))
+    raise ImutoolError(
+        f"streamed output must be .csv or .parquet (got {formats.kind_of(path, True)})", path=os.fspath(path)
+    )
 
 
-def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: str | None = None,
-                   profile: str | None = None, duplicates: str = "drop", backwards: str = "error",
-                   mounting: str | None = None, calibration_file: str | None = None, strict: bool = False,
-                   progress: Progress | None = None) -> dict[str, Any]:
+def stream_convert(
+    src: str,
+    dst: str,
+    *,
+    chunk_rows: int = 500_000,
+    columns: str | None = None,
+    profile: str | None = None,
+    duplicates: str = "drop",
+    backwards: str = "error",
+    mounting: str | None = None,
+    calibration_file: str | None = None,
+    strict: bool = False,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
     """Convert ``src`` to ``dst`` (CSV or Parquet each) chunk by chunk; returns the summary dict.
 
     Validation is per chunk plus a check across chunk boundaries (a time not after the previous chunk's last
@@ -80,8 +91,11 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
                 early = chunk.time <= last_t
                 back = chunk.time < last_t
                 if back.any() and backwards != "drop":
-                    raise ImutoolError(f"time goes backwards across a chunk boundary (row ≈ {rows_in - len(chunk) + 1}"
-                                       f"); streaming cannot sort: use --backwards drop or --no-stream", path=src)
+                    raise ImutoolError(
+                        f"time goes backwards across a chunk boundary (row ≈ {rows_in - len(chunk) + 1}"
+                        f"); streaming cannot sort: use --backwards drop or --no-stream",
+                        path=src,
+                    )
                 if (early & ~back).any() and duplicates == "error":
                     raise ImutoolError("duplicate timestamp across a chunk boundary", path=src)
                 dropped_boundary += int(early.sum())
@@ -90,8 +104,9 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
             skipped = int(chunk.meta.get("skipped_rows", skipped) or 0)  # the reader's running total
             if len(chunk) == 0:
                 continue
-            chunk, rep = chunk.validated(duplicates=duplicates, backwards="error" if backwards == "sort"
-                                         else backwards, source=src)
+            chunk, rep = chunk.validated(
+                duplicates=duplicates, backwards="error" if backwards == "sort" else backwards, source=src
+            )
             actions += rep.actions
             duplicates_dropped += int(rep.duplicates)
             chunk = checks.prepare(chunk)
@@ -107,8 +122,14 @@ def stream_convert(src: str, dst: str, *, chunk_rows: int = 500_000, columns: st
     if dropped_boundary:
         actions.append(f"dropped {dropped_boundary} rows at chunk boundaries (time not after the previous chunk)")
     validation["warnings"] = warnings
-    return {"rows_in": rows_in, "rows_out": rows_out, "channels": channels, "streamed": True,
-            "validation_actions": actions, "validation": validation}
+    return {
+        "rows_in": rows_in,
+        "rows_out": rows_out,
+        "channels": channels,
+        "streamed": True,
+        "validation_actions": actions,
+        "validation": validation,
+    }
 
 
 def expected_rows(path: str | os.PathLike) -> int | None:
@@ -129,21 +150,46 @@ def expected_rows(path: str | os.PathLike) -> int | None:
     return None
 
 
-def streams(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = True, duplicates: str = "drop",
-            backwards: str = "error") -> bool:
+def streams(
+    src: str | os.PathLike,
+    dst: str | os.PathLike,
+    *,
+    stream: bool = True,
+    duplicates: str = "drop",
+    backwards: str = "error",
+) -> bool:
     """Whether :func:`convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
     whole file (``backwards='sort'``, ``duplicates='mean'``)."""
-    return (stream and formats.kind_of(src) in STREAMABLE and formats.kind_of(dst, for_output=True) in STREAMABLE
-            and backwards != "sort" and duplicates != "mean")
+    return (
+        stream
+        and formats.kind_of(src) in STREAMABLE
+        and formats.kind_of(dst, for_output=True) in STREAMABLE
+        and backwards != "sort"
+        and duplicates != "mean"
+    )
 
 
-def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = True, chunk_rows: int = 500_000,
-            sentences: str | tuple[str, ...] = ("HDT", "XDR"), nmea_rate: float | None = None,
-            talker: str | None = None, imu_topic: str = "/imu/data", mag_topic: str = "/imu/mag",
-            frame_id: str | None = None, storage: str | None = None, compression: str = "none",
-            vector3_mag_unit: str = "T", strict: bool = False, progress: Progress | None = None,
-            stage: Callable[[str], None] | None = None,
-            on_input: Callable[[str, dict[str, Any]], None] | None = None, **load_options: Any) -> dict[str, Any]:
+def convert(
+    src: str | os.PathLike,
+    dst: str | os.PathLike,
+    *,
+    stream: bool = True,
+    chunk_rows: int = 500_000,
+    sentences: str | tuple[str, ...] = ("HDT", "XDR"),
+    nmea_rate: float | None = None,
+    talker: str | None = None,
+    imu_topic: str = "/imu/data",
+    mag_topic: str = "/imu/mag",
+    frame_id: str | None = None,
+    storage: str | None = None,
+    compression: str = "none",
+    vector3_mag_unit: str = "T",
+    strict: bool = False,
+    progress: Progress | None = None,
+    stage: Callable[[str], None] | None = None,
+    on_input: Callable[[str, dict[str, Any]], None] | None = None,
+    **load_options: Any,
+) -> dict[str, Any]:
     """Convert ``src`` to ``dst`` (format from each name's extension: .csv, .parquet, .bag, .db3/.mcap or a folder,
     .nmea/.log); returns the summary.
 
@@ -170,9 +216,21 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
     summary: dict[str, Any] = {"input": src, "output": dst, "from": kin, "to": kout}
     conversions: list[str] = []
     if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards):
-        summary.update(stream_convert(src, dst, chunk_rows=chunk_rows, columns=opt["columns"], profile=opt["profile"],
-                                      duplicates=duplicates, backwards=backwards, mounting=mounting,
-                                      calibration_file=calibration_file, strict=strict, progress=progress))
+        summary.update(
+            stream_convert(
+                src,
+                dst,
+                chunk_rows=chunk_rows,
+                columns=opt["columns"],
+                profile=opt["profile"],
+                duplicates=duplicates,
+                backwards=backwards,
+                mounting=mounting,
+                calibration_file=calibration_file,
+                strict=strict,
+                progress=progress,
+            )
+        )
         summary["conversions"] = ["none (same frames and units)"]
         validation = summary.pop("validation")
         if on_input is not None:
@@ -181,14 +239,16 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
-        rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header",
-                           vector3_mag_unit=vector3_mag_unit)
+        rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header", vector3_mag_unit=vector3_mag_unit)
         rows_in = len(rec)
         bag = rec.meta.get("bag", {})
         conversions += [f"in: {c}" for c in bag.get("conversions", [])]
-        summary["bag_in"] = {"format": bag.get("format"), "stamp": bag.get("stamp"),
-                             "topics": {k: v.get("topic") for k, v in bag.get("topics", {}).items()},
-                             "frame_id": bag.get("frame_id")}
+        summary["bag_in"] = {
+            "format": bag.get("format"),
+            "stamp": bag.get("stamp"),
+            "topics": {k: v.get("topic") for k, v in bag.get("topics", {}).items()},
+            "frame_id": bag.get("frame_id"),
+        }
         if bag.get("partial_read"):
             summary["warning"] = bag["partial_read"]
         if bag.get("notes"):
@@ -230,8 +290,11 @@ def convert(src: str | os.PathLike, dst: str | os.PathLike, *, stream: bool = Tr
                 rec.add(name, np.degrees(v), "deg")
             conversions.append("roll/pitch/heading (deg, ZYX) derived from q (body FRD → NED) for NMEA")
         names = sentences.split(",") if isinstance(sentences, str) else sentences
-        opts = {"sentences": tuple(s.strip().upper() for s in names if s.strip()), "rate_hz": nmea_rate,
-                "talker": talker}
+        opts = {
+            "sentences": tuple(s.strip().upper() for s in names if s.strip()),
+            "rate_hz": nmea_rate,
+            "talker": talker,
+        }
     if stage is not None:
         stage("writing")
     res = formats.write(rec, dst, **opts)

@@ -30,9 +30,14 @@ def load_for_evaluation(path: str | os.PathLike) -> Recording:
     return rec
 
 
-def evaluate(estimate: str | os.PathLike | Recording, reference: str | os.PathLike | Recording | None = None, *,
-             channel: str | None = None, max_lag_s: float = 0.0,
-             plot: str | os.PathLike | None = None) -> dict[str, Any]:
+def evaluate(
+    estimate: str | os.PathLike | Recording,
+    reference: str | os.PathLike | Recording | None = None,
+    *,
+    channel: str | None = None,
+    max_lag_s: float = 0.0,
+    plot: str | os.PathLike | None = None,
+) -> dict[str, Any]:
     """Compare ``estimate`` with ``reference`` (paths or Recordings; default: the estimate's own ``ref_*``).
 
     channel: ``angles`` (roll/pitch/heading vs ref_roll/ref_pitch/ref_heading, deg), ``quaternion`` (q vs
@@ -50,14 +55,17 @@ def evaluate(estimate: str | os.PathLike | Recording, reference: str | os.PathLi
         ref_path = _name(reference)
     summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
     if channel == "heave":
-        signs = {"estimate": str(est.meta.get("heave_positive", "up")),
-                 "reference": str(ref.meta.get("heave_positive", "up"))}
+        signs = {
+            "estimate": str(est.meta.get("heave_positive", "up")),
+            "reference": str(ref.meta.get("heave_positive", "up")),
+        }
         same = ref is est
         est = heave_up(est)
         ref = est if same else heave_up(ref)
         summary["heave"] = _external("imutool.heave", "evaluate_heave", "heave")(est, ref, max_lag_s)
-        summary["heave"]["compared"] = (f"positive up (files: estimate {signs['estimate']}, "
-                                        f"reference {signs['reference']})")
+        summary["heave"]["compared"] = (
+            f"positive up (files: estimate {signs['estimate']}, reference {signs['reference']})"
+        )
         heave_readings(est, ref, summary["heave"])
     elif channel == "position":
         summary["position"] = _external("imutool.ins", "evaluate_position", "position")(est, ref)
@@ -67,8 +75,10 @@ def evaluate(estimate: str | os.PathLike | Recording, reference: str | os.PathLi
             if ang:
                 summary["angles"] = ang
             elif channel == "angles":
-                raise ImutoolError("no angle to compare: need roll/pitch/heading in EST and ref_roll/ref_pitch/"
-                                   "ref_heading in the reference")
+                raise ImutoolError(
+                    "no angle to compare: need roll/pitch/heading in EST and ref_roll/ref_pitch/"
+                    "ref_heading in the reference"
+                )
         if channel == "quaternion" or (channel is None and "q" in est.channels and "ref_q" in ref.channels):
             summary["quaternion"] = evaluate_quaternion_rec(est, ref)
         if len(summary) == 2:
@@ -96,8 +106,9 @@ def evaluate_angles(est: Recording, ref: Recording, max_lag_s: float) -> dict[st
         r = raw.get(name)
         if r is not None:
             r = interp_to(est.time, ref.time, r) if name != "heading" else _interp_wrapped(est.time, ref.time, r)
-        st = evaluate_angle(est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading",
-                            max_lag_s=max_lag_s, raw=r)
+        st = evaluate_angle(
+            est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading", max_lag_s=max_lag_s, raw=r
+        )
         out[name] = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in st.items()}
     return out
 
@@ -172,15 +183,17 @@ def heave_readings(est: Recording, ref: Recording, out: dict[str, Any]) -> None:
     """Add the three "5 cm or 5 %" readings (imutool.metrics.heave_accuracy) to each evaluated heave channel."""
     from imutool.metrics import heave_accuracy
 
-    rname = next((n for n in ("ref_heave", "heave") if n in ref.channels and (ref is not est or n == "ref_heave")),
-                 None)
+    rname = next(
+        (n for n in ("ref_heave", "heave") if n in ref.channels and (ref is not est or n == "ref_heave")), None
+    )
     if rname is None:
         return
     for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
         if isinstance(out.get(ch), dict) and ch in est.channels:
             mask = np.asarray(est[flag]) > 0.5 if flag in est.channels else None
-            out[ch]["readings"] = heave_accuracy(est.time, est[ch], ref.time, ref[rname],
-                                                 lag_s=float(out[ch].get("lag_s", 0.0)), mask=mask)
+            out[ch]["readings"] = heave_accuracy(
+                est.time, est[ch], ref.time, ref[rname], lag_s=float(out[ch].get("lag_s", 0.0)), mask=mask
+            )
 
 
 def plot_errors(est: Recording, ref: Recording, path: str) -> None:

@@ -53,9 +53,17 @@ from formats.errors import ImutoolError
 from imutool.roll import heel_of, roll_cycles
 
 DEFAULTS: dict[str, Any] = {
-    "threshold_deg": 20.0, "merge_gap_s": 60.0, "hysteresis_deg": 0.5, "hour_s": 3600.0,
-    "tuning_tol": 0.15, "min_cycles": 6, "min_growth": 2.0, "min_amplitude_deg": 5.0, "slack": 0.15,
-    "min_lock": 0.7, "window_s": 120.0,
+    "threshold_deg": 20.0,
+    "merge_gap_s": 60.0,
+    "hysteresis_deg": 0.5,
+    "hour_s": 3600.0,
+    "tuning_tol": 0.15,
+    "min_cycles": 6,
+    "min_growth": 2.0,
+    "min_amplitude_deg": 5.0,
+    "slack": 0.15,
+    "min_lock": 0.7,
+    "window_s": 120.0,
 }
 _FS = 4.0  # Hz, resampling rate for wave-period analysis (wave motions are below 0.5 Hz)
 
@@ -108,8 +116,9 @@ def dominant_period(x: np.ndarray, fs: float, min_s: float = 3.0, max_s: float =
     return float(1.0 / f[band][np.argmax(p[band])])
 
 
-def _phase_lock(tu: np.ndarray, roll: np.ndarray, pitch: np.ndarray, t0: float, t1: float, t_roll: float,
-                t_enc: float) -> float:
+def _phase_lock(
+    tu: np.ndarray, roll: np.ndarray, pitch: np.ndarray, t0: float, t1: float, t_roll: float, t_enc: float
+) -> float:
     """|mean exp(i(2·phase(roll) − phase(pitch)))| over [t0, t1], each band-passed ±30 % around its period."""
     from scipy.signal import butter, hilbert, sosfiltfilt
 
@@ -130,8 +139,14 @@ def _phase_lock(tu: np.ndarray, roll: np.ndarray, pitch: np.ndarray, t0: float, 
 
 
 # -- heavy roll -----------------------------------------------------------------------------------------------
-def heavy_roll_events(t: np.ndarray, heel: np.ndarray, cycles: Any, threshold_deg: float = 20.0,
-                      merge_gap_s: float = 60.0, start: datetime | None = None) -> list[dict[str, Any]]:
+def heavy_roll_events(
+    t: np.ndarray,
+    heel: np.ndarray,
+    cycles: Any,
+    threshold_deg: float = 20.0,
+    merge_gap_s: float = 60.0,
+    start: datetime | None = None,
+) -> list[dict[str, Any]]:
     """Episodes of |heel| ≥ threshold_deg (crossings < merge_gap_s apart merged), in time order."""
     t = np.asarray(t, float)
     x = np.asarray(heel, float)
@@ -149,22 +164,39 @@ def heavy_roll_events(t: np.ndarray, heel: np.ndarray, cycles: Any, threshold_de
     out = []
     for g in groups:
         i0, i1 = int(starts[g[0]]), int(ends[g[-1]])
-        seg = x[i0:i1 + 1]
+        seg = x[i0 : i1 + 1]
         ip = i0 + int(np.nanargmax(np.abs(seg)))
         t0, t1 = float(t[i0]), float(t[i1])
         m = (cycles.t_peak >= t0 - merge_gap_s / 2) & (cycles.t_peak <= t1 + merge_gap_s / 2)
         per = cycles.period_s[m]
         per = per[np.isfinite(per)]
-        out.append({"type": "heavy_roll", "t_start": t0, "t_end": t1, "duration_s": t1 - t0,
-                    "t_peak": float(t[ip]), "peak_deg": float(x[ip]), "side": "starboard" if x[ip] > 0 else "port",
-                    "crossings": len(g), "period_s": float(np.median(per)) if per.size else None,
-                    "utc_start": utc(t0, start), "threshold_deg": threshold_deg})
+        out.append(
+            {
+                "type": "heavy_roll",
+                "t_start": t0,
+                "t_end": t1,
+                "duration_s": t1 - t0,
+                "t_peak": float(t[ip]),
+                "peak_deg": float(x[ip]),
+                "side": "starboard" if x[ip] > 0 else "port",
+                "crossings": len(g),
+                "period_s": float(np.median(per)) if per.size else None,
+                "utc_start": utc(t0, start),
+                "threshold_deg": threshold_deg,
+            }
+        )
     return out
 
 
 # -- hourly statistics ------------------------------------------------------------------------------------------
-def hourly_statistics(t: np.ndarray, heel: np.ndarray, cycles: Any, events: list[dict[str, Any]],
-                      hour_s: float = 3600.0, start: datetime | None = None) -> list[dict[str, Any]]:
+def hourly_statistics(
+    t: np.ndarray,
+    heel: np.ndarray,
+    cycles: Any,
+    events: list[dict[str, Any]],
+    hour_s: float = 3600.0,
+    start: datetime | None = None,
+) -> list[dict[str, Any]]:
     """Per ``hour_s`` bin (aligned to the UTC hour when absolute time is known): MSC.363(92) §3 roll period and
     amplitude per side (mean, max), max heel per side, RMS heel, cycles, heavy-roll events begun in the bin."""
     t = np.asarray(t, float)
@@ -190,11 +222,14 @@ def hourly_statistics(t: np.ndarray, heel: np.ndarray, cycles: Any, events: list
             continue
         xs = x[a:z]
         fin = xs[np.isfinite(xs)]
-        row: dict[str, Any] = {"t_start": float(base + b * hour_s), "utc_start": utc(base + b * hour_s, start),
-                               "samples": int(z - a),
-                               "max_heel_stbd_deg": float(max(fin.max(), 0.0)) if fin.size else None,
-                               "max_heel_port_deg": float(max(-fin.min(), 0.0)) if fin.size else None,
-                               "rms_heel_deg": float(np.sqrt(np.mean(fin**2))) if fin.size else None}
+        row: dict[str, Any] = {
+            "t_start": float(base + b * hour_s),
+            "utc_start": utc(base + b * hour_s, start),
+            "samples": int(z - a),
+            "max_heel_stbd_deg": float(max(fin.max(), 0.0)) if fin.size else None,
+            "max_heel_port_deg": float(max(-fin.min(), 0.0)) if fin.size else None,
+            "rms_heel_deg": float(np.sqrt(np.mean(fin**2))) if fin.size else None,
+        }
         sel = cbin == b
         row["cycles"] = int(sel.sum())
         for name, s in (("port", -1), ("stbd", 1)):
@@ -212,8 +247,14 @@ def hourly_statistics(t: np.ndarray, heel: np.ndarray, cycles: Any, events: list
 
 
 # -- parametric roll ---------------------------------------------------------------------------------------------
-def parametric_roll(t: np.ndarray, heel: np.ndarray, wave: np.ndarray, cycles: Any,
-                    settings: dict[str, Any] | None = None, start: datetime | None = None) -> list[dict[str, Any]]:
+def parametric_roll(
+    t: np.ndarray,
+    heel: np.ndarray,
+    wave: np.ndarray,
+    cycles: Any,
+    settings: dict[str, Any] | None = None,
+    start: datetime | None = None,
+) -> list[dict[str, Any]]:
     """Parametric-roll episodes (module docstring: frequency condition, growth, phase lock; onset by fit).
 
     t s; heel deg (+ starboard); wave: pitch (deg) or heave (m) at the encounter period; cycles from
@@ -234,7 +275,7 @@ def parametric_roll(t: np.ndarray, heel: np.ndarray, wave: np.ndarray, cycles: A
     per = cycles.period_s
     troll = np.full(n, np.nan)
     for k in range(n):
-        p = per[max(0, k - 3):k + 1]
+        p = per[max(0, k - 3) : k + 1]
         p = p[np.isfinite(p)]
         if p.size:
             troll[k] = np.median(p)
@@ -258,9 +299,9 @@ def parametric_roll(t: np.ndarray, heel: np.ndarray, wave: np.ndarray, cycles: A
         while j + 1 < n and grow[j + 1]:
             j += 1
         k = j
-        top = float(amp[i:j + 1].max())
-        m_ = i + int(np.flatnonzero(amp[i:j + 1] >= 0.95 * top)[0])  # growth ends on reaching the plateau
-        i = i + int(np.argmin(amp[i:m_ + 1]))  # and begins at the smallest half-cycle before it
+        top = float(amp[i : j + 1].max())
+        m_ = i + int(np.flatnonzero(amp[i : j + 1] >= 0.95 * top)[0])  # growth ends on reaching the plateau
+        i = i + int(np.argmin(amp[i : m_ + 1]))  # and begins at the smallest half-cycle before it
         if m_ - i + 1 < s["min_cycles"] or amp[m_] < s["min_amplitude_deg"] or amp[m_] < s["min_growth"] * amp[i]:
             continue
         lo, hi = max(1.5 * amp[i], 0.1 * top), 0.5 * top  # below half the plateau: saturation barely slows it
@@ -268,10 +309,10 @@ def parametric_roll(t: np.ndarray, heel: np.ndarray, wave: np.ndarray, cycles: A
         if len(fit) < 3:
             fit = list(range(i, m_ + 1))
         f0 = fit[0]
-        if np.mean(tuned[f0:m_ + 1]) < 0.75:
+        if np.mean(tuned[f0 : m_ + 1]) < 0.75:
             continue
-        t_roll = float(np.nanmedian(troll[f0:m_ + 1]))
-        t_enc = float(np.nanmedian(te[f0:m_ + 1]))
+        t_roll = float(np.nanmedian(troll[f0 : m_ + 1]))
+        t_enc = float(np.nanmedian(te[f0 : m_ + 1]))
         lock = _phase_lock(tu, ru, wu, float(tp[f0]), float(tp[m_]), t_roll, t_enc)
         if not (lock >= s["min_lock"]):
             continue
@@ -282,14 +323,27 @@ def parametric_roll(t: np.ndarray, heel: np.ndarray, wave: np.ndarray, cycles: A
         e = m_
         while e + 1 < n and amp[e + 1] >= 0.5 * amp[m_]:
             e += 1
-        pk = int(np.argmax(amp[i:e + 1])) + i
-        episodes.append({"type": "parametric_roll", "t_onset": onset, "t_start": onset,
-                         "t_end": float(cycles.t_end[e]), "duration_s": float(cycles.t_end[e] - onset),
-                         "t_peak": float(tp[pk]), "peak_deg": float(cycles.peak_deg[pk]),
-                         "side": "starboard" if cycles.peak_deg[pk] > 0 else "port",
-                         "period_s": t_roll, "encounter_period_s": t_enc, "period_ratio": t_roll / t_enc,
-                         "growth_rate_per_s": float(slope), "background_deg": bg, "phase_lock": lock,
-                         "cycles": int(e - i + 1), "utc_start": utc(onset, start)})
+        pk = int(np.argmax(amp[i : e + 1])) + i
+        episodes.append(
+            {
+                "type": "parametric_roll",
+                "t_onset": onset,
+                "t_start": onset,
+                "t_end": float(cycles.t_end[e]),
+                "duration_s": float(cycles.t_end[e] - onset),
+                "t_peak": float(tp[pk]),
+                "peak_deg": float(cycles.peak_deg[pk]),
+                "side": "starboard" if cycles.peak_deg[pk] > 0 else "port",
+                "period_s": t_roll,
+                "encounter_period_s": t_enc,
+                "period_ratio": t_roll / t_enc,
+                "growth_rate_per_s": float(slope),
+                "background_deg": bg,
+                "phase_lock": lock,
+                "cycles": int(e - i + 1),
+                "utc_start": utc(onset, start),
+            }
+        )
     return episodes
 
 
@@ -298,8 +352,9 @@ def _channel(rec: Recording, name: str, unit: str) -> np.ndarray:
     return np.asarray(rec.in_unit(name, unit), float)
 
 
-def identify(rec: Recording, path: str | None, ship: str | None = None, voyage: str | None = None,
-             path_regex: str | None = None) -> tuple[str, str]:
+def identify(
+    rec: Recording, path: str | None, ship: str | None = None, voyage: str | None = None, path_regex: str | None = None
+) -> tuple[str, str]:
     """(ship, voyage): options, else metadata (ship/vessel/ship_name, voyage), else ``path_regex`` named groups
     ``ship``/``voyage`` on the path, else the parent folder's name and the file's stem."""
     groups: dict[str, str] = {}
@@ -309,17 +364,34 @@ def identify(rec: Recording, path: str | None, ship: str | None = None, voyage: 
             groups = {k: v for k, v in m.groupdict().items() if v}
     meta = rec.meta
     p = Path(path) if path else None
-    ship = ship or next((str(meta[k]) for k in ("ship", "vessel", "ship_name") if meta.get(k)), None) \
-        or groups.get("ship") or (p.parent.name if p is not None and p.parent.name else "unknown")
-    voyage = voyage or (str(meta["voyage"]) if meta.get("voyage") else None) or groups.get("voyage") \
+    ship = (
+        ship
+        or next((str(meta[k]) for k in ("ship", "vessel", "ship_name") if meta.get(k)), None)
+        or groups.get("ship")
+        or (p.parent.name if p is not None and p.parent.name else "unknown")
+    )
+    voyage = (
+        voyage
+        or (str(meta["voyage"]) if meta.get("voyage") else None)
+        or groups.get("voyage")
         or (p.stem if p is not None else "unknown")
+    )
     return ship, voyage
 
 
-def analyse(rec: Recording, *, path: str | None = None, roll_channel: str | None = None,
-            pitch_channel: str | None = None, heave_channel: str | None = None, utc_start: str | None = None,
-            ship: str | None = None, voyage: str | None = None, path_regex: str | None = None,
-            **settings: Any) -> dict[str, Any]:
+def analyse(
+    rec: Recording,
+    *,
+    path: str | None = None,
+    roll_channel: str | None = None,
+    pitch_channel: str | None = None,
+    heave_channel: str | None = None,
+    utc_start: str | None = None,
+    ship: str | None = None,
+    voyage: str | None = None,
+    path_regex: str | None = None,
+    **settings: Any,
+) -> dict[str, Any]:
     """Events, hourly statistics and parametric-roll episodes of one recording (a JSON-ready dict).
 
     roll_channel: heel/roll (deg) — default ``heel`` or ``roll``; pitch_channel (deg) default ``pitch``,
@@ -352,16 +424,33 @@ def analyse(rec: Recording, *, path: str | None = None, roll_channel: str | None
         para = parametric_roll(rec.time, heel, wave, cyc, s, start)
     ship_, voyage_ = identify(rec, path, ship, voyage, path_regex)
     ip = int(np.nanargmax(np.abs(heel))) if np.isfinite(heel).any() else None
-    summary = {"rows": len(rec), "duration_s": rec.duration, "cycles": len(cyc),
-               "max_heel_deg": float(heel[ip]) if ip is not None else None,
-               "max_heel_t": float(rec.time[ip]) if ip is not None else None,
-               "max_heel_utc": utc(float(rec.time[ip]), start) if ip is not None else None,
-               "heavy_roll_events": len(events), "parametric_roll_episodes": len(para),
-               "first_parametric_onset_s": para[0]["t_onset"] if para else None}
-    return {"format": "imutool-events", "version": 1, "source": src, "ship": ship_, "voyage": voyage_,
-            "utc_start": utc(float(rec.time[0]), start) if len(rec) else None, "t_start": float(rec.time[0]),
-            "roll_channel": roll_channel or ("heel" if "heel" in rec.channels else "roll"), "wave_channel": wave_name,
-            "settings": s, "summary": summary, "events": events + para, "hourly": hourly, "notes": notes}
+    summary = {
+        "rows": len(rec),
+        "duration_s": rec.duration,
+        "cycles": len(cyc),
+        "max_heel_deg": float(heel[ip]) if ip is not None else None,
+        "max_heel_t": float(rec.time[ip]) if ip is not None else None,
+        "max_heel_utc": utc(float(rec.time[ip]), start) if ip is not None else None,
+        "heavy_roll_events": len(events),
+        "parametric_roll_episodes": len(para),
+        "first_parametric_onset_s": para[0]["t_onset"] if para else None,
+    }
+    return {
+        "format": "imutool-events",
+        "version": 1,
+        "source": src,
+        "ship": ship_,
+        "voyage": voyage_,
+        "utc_start": utc(float(rec.time[0]), start) if len(rec) else None,
+        "t_start": float(rec.time[0]),
+        "roll_channel": roll_channel or ("heel" if "heel" in rec.channels else "roll"),
+        "wave_channel": wave_name,
+        "settings": s,
+        "summary": summary,
+        "events": events + para,
+        "hourly": hourly,
+        "notes": notes,
+    }
 
 
 def write_table(rows: list[dict[str, Any]], path: str) -> None:
@@ -378,8 +467,14 @@ def write_table(rows: list[dict[str, Any]], path: str) -> None:
             w.writerow({k: ("" if v is None else v) for k, v in r.items()})
 
 
-def run(path: str, output: str | None = None, *, events_csv: str | None = None, hourly_csv: str | None = None,
-        **options: Any) -> dict[str, Any]:
+def run(
+    path: str,
+    output: str | None = None,
+    *,
+    events_csv: str | None = None,
+    hourly_csv: str | None = None,
+    **options: Any,
+) -> dict[str, Any]:
     """Read ``path``, :func:`analyse` it and write the JSON result to ``output`` (and the tables as CSV);
     returns the result. The same route for the CLI, ``imutool batch`` and Python users."""
     for out in (output, events_csv, hourly_csv):
@@ -424,9 +519,20 @@ def fleet_table(results: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], li
     voyages: dict[tuple[str, str], dict[str, Any]] = {}
     for r in results:
         key = (r["ship"], r["voyage"])
-        v = voyages.setdefault(key, {"ship": r["ship"], "voyage": r["voyage"], "recordings": 0, "hours": 0.0,
-                                     "worst_roll_deg": None, "worst_roll_utc": None, "heavy_roll_events": 0,
-                                     "parametric_roll_episodes": 0, "first_utc": r.get("utc_start")})
+        v = voyages.setdefault(
+            key,
+            {
+                "ship": r["ship"],
+                "voyage": r["voyage"],
+                "recordings": 0,
+                "hours": 0.0,
+                "worst_roll_deg": None,
+                "worst_roll_utc": None,
+                "heavy_roll_events": 0,
+                "parametric_roll_episodes": 0,
+                "first_utc": r.get("utc_start"),
+            },
+        )
         v["recordings"] += 1
         v["hours"] += (r["summary"].get("duration_s") or 0.0) / 3600.0
         mx = r["summary"].get("max_heel_deg")
@@ -436,11 +542,23 @@ def fleet_table(results: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], li
         for e in r["events"]:
             v["heavy_roll_events" if e["type"] == "heavy_roll" else "parametric_roll_episodes"] += 1
             month = (e.get("utc_start") or r.get("utc_start") or "")[:7] or "unknown"
-            rows.append({"ship": r["ship"], "voyage": r["voyage"], "source": r["source"], "month": month,
-                         "type": e["type"], "utc_start": e.get("utc_start"), "t_start": e["t_start"],
-                         "duration_s": e["duration_s"], "peak_deg": e["peak_deg"], "side": e["side"],
-                         "period_s": e.get("period_s"), "encounter_period_s": e.get("encounter_period_s"),
-                         "growth_rate_per_s": e.get("growth_rate_per_s")})
+            rows.append(
+                {
+                    "ship": r["ship"],
+                    "voyage": r["voyage"],
+                    "source": r["source"],
+                    "month": month,
+                    "type": e["type"],
+                    "utc_start": e.get("utc_start"),
+                    "t_start": e["t_start"],
+                    "duration_s": e["duration_s"],
+                    "peak_deg": e["peak_deg"],
+                    "side": e["side"],
+                    "period_s": e.get("period_s"),
+                    "encounter_period_s": e.get("encounter_period_s"),
+                    "growth_rate_per_s": e.get("growth_rate_per_s"),
+                }
+            )
     rows.sort(key=lambda x: (x["ship"], x["voyage"], x["t_start"]))
     vs = sorted(voyages.values(), key=lambda x: (x["ship"], x["voyage"]))
     for v in vs:
@@ -463,11 +581,25 @@ def fleet_plot(rows: list[dict[str, Any]], voyages: list[dict[str, Any]], path: 
     for k, ship in enumerate(ships):
         for typ, hatch in (("heavy_roll", None), ("parametric_roll", "//")):
             cnt = [sum(1 for r in rows if r["ship"] == ship and r["month"] == m and r["type"] == typ) for m in months]
-            bottom = None if typ == "heavy_roll" else [sum(1 for r in rows if r["ship"] == ship and r["month"] == m
-                                                           and r["type"] == "heavy_roll") for m in months]
-            a1.bar(x + k * width, cnt, width, bottom=bottom, color=f"C{k}", hatch=hatch,
-                   edgecolor="black" if hatch else None, linewidth=0.5,
-                   label=f"{ship}" + (" (parametric roll)" if hatch else ""))
+            bottom = (
+                None
+                if typ == "heavy_roll"
+                else [
+                    sum(1 for r in rows if r["ship"] == ship and r["month"] == m and r["type"] == "heavy_roll")
+                    for m in months
+                ]
+            )
+            a1.bar(
+                x + k * width,
+                cnt,
+                width,
+                bottom=bottom,
+                color=f"C{k}",
+                hatch=hatch,
+                edgecolor="black" if hatch else None,
+                linewidth=0.5,
+                label=f"{ship}" + (" (parametric roll)" if hatch else ""),
+            )
     a1.set_xticks(x + width * (len(ships) - 1) / 2, months)
     a1.set_ylabel("events")
     a1.set_title("Heavy-roll events and parametric-roll episodes per ship per month (UTC)")
@@ -495,7 +627,6 @@ def write_fleet(rows: list[dict[str, Any]], path: str) -> None:
         for r in rows:
             cols += [k for k in r if k not in cols]
         with atomic_path(path) as tmp:
-            pq.write_table(pa.Table.from_pylist(rows) if rows else pa.table({"ship": pa.array([], pa.string())}),
-                           tmp)
+            pq.write_table(pa.Table.from_pylist(rows) if rows else pa.table({"ship": pa.array([], pa.string())}), tmp)
         return
     write_table(rows, path)

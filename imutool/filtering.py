@@ -51,15 +51,28 @@ class FilterResult:
         return list(self.summary.get("warnings") or [])
 
 
-def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
-            method: str = "ekf", smooth: bool = False, gnss: str | os.PathLike | None = None,
-            stream_mb: float = 300.0, heading: str | os.PathLike | None = None) -> bool:
+def streams(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike | None = None,
+    *,
+    method: str = "ekf",
+    smooth: bool = False,
+    gnss: str | os.PathLike | None = None,
+    stream_mb: float = 300.0,
+    heading: str | os.PathLike | None = None,
+) -> bool:
     """Whether :func:`run_filter` streams: causal EKF, no GNSS or heading file (those are attached in memory), an
     output file to stream into, and a CSV input larger than ``stream_mb`` MB, or a Parquet input whose data take
     more than that in memory (rows × columns × 8 bytes from its footer: Parquet compresses, a 0.3 GB file can hold
     2 GB of float64)."""
-    if (isinstance(source, Recording) or output is None or method != "ekf" or smooth or gnss is not None
-            or heading is not None):
+    if (
+        isinstance(source, Recording)
+        or output is None
+        or method != "ekf"
+        or smooth
+        or gnss is not None
+        or heading is not None
+    ):
         return False
     kind = formats.kind_of(source)
     if kind not in STREAMABLE:
@@ -76,15 +89,28 @@ def streams(source: str | os.PathLike | Recording, output: str | os.PathLike | N
     return size > stream_mb * 1e6
 
 
-def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike | None = None, *,
-               method: str = "ekf", params: Any = None, smooth: bool = False,
-               lever_arm: Any = None, gnss: str | os.PathLike | None = None, use_gnss: bool = True,
-               heading: str | os.PathLike | None = None, cutoff_hz: float = 0.5, order: int = 2,
-               compass: Any = None, params_file: str | None = None,
-               chunk_rows: int = 1_000_000, stream_mb: float = 300.0, strict: bool = False,
-               progress: Progress | None = None,
-               on_input: Callable[[str, dict[str, Any]], None] | None = None,
-               **load_options: Any) -> FilterResult:
+def run_filter(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike | None = None,
+    *,
+    method: str = "ekf",
+    params: Any = None,
+    smooth: bool = False,
+    lever_arm: Any = None,
+    gnss: str | os.PathLike | None = None,
+    use_gnss: bool = True,
+    heading: str | os.PathLike | None = None,
+    cutoff_hz: float = 0.5,
+    order: int = 2,
+    compass: Any = None,
+    params_file: str | None = None,
+    chunk_rows: int = 1_000_000,
+    stream_mb: float = 300.0,
+    strict: bool = False,
+    progress: Progress | None = None,
+    on_input: Callable[[str, dict[str, Any]], None] | None = None,
+    **load_options: Any,
+) -> FilterResult:
     """Estimate roll, pitch, heading (deg) from ``source``; write them to ``output`` when given.
 
     method: ``ekf`` (quaternion EKF with gyro-bias states; ``params`` an :class:`imutool.attitude.EkfParams`,
@@ -113,12 +139,20 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
         from imutool.attitude import EkfParams
 
         params = params if params is not None else EkfParams()
-    if not isinstance(source, Recording) and streams(source, output, method=method, smooth=smooth, gnss=gnss,
-                                                     stream_mb=stream_mb, heading=heading):
-        summary = stream_ekf(source, output, params, chunk_rows=chunk_rows,  # type: ignore[arg-type]
-                             use_gnss=use_gnss, lever_arm=lever, strict=strict, progress=progress,
-                             **{k: load_options.get(k) for k in ("columns", "profile", "mounting",
-                                                                 "calibration_file")})
+    if not isinstance(source, Recording) and streams(
+        source, output, method=method, smooth=smooth, gnss=gnss, stream_mb=stream_mb, heading=heading
+    ):
+        summary = stream_ekf(
+            source,
+            output,
+            params,
+            chunk_rows=chunk_rows,  # type: ignore[arg-type]
+            use_gnss=use_gnss,
+            lever_arm=lever,
+            strict=strict,
+            progress=progress,
+            **{k: load_options.get(k) for k in ("columns", "profile", "mounting", "calibration_file")},
+        )
         validation = summary.pop("validation")
         if on_input is not None:
             on_input(os.fspath(source), validation)
@@ -134,8 +168,7 @@ def run_filter(source: str | os.PathLike | Recording, output: str | os.PathLike 
         rec, validation = load_recording(name, strict=strict, **load_options)
         if on_input is not None and len(rec):
             on_input(name, validation)
-    summary: dict[str, Any] = {"input": name, "output": None if output is None else os.fspath(output),
-                               "rows": len(rec)}
+    summary: dict[str, Any] = {"input": name, "output": None if output is None else os.fspath(output), "rows": len(rec)}
     if method == "ekf":
         from imutool.attitude import ekf_recording
 
@@ -182,8 +215,9 @@ def _lever_arm(lever_arm: Any) -> np.ndarray | None:
     return v
 
 
-def smoother_gain(rec: Recording, smoothed: Recording, params: Any, *, use_gnss: bool = True,
-                  lever_arm: np.ndarray | None = None) -> dict[str, Any] | None:
+def smoother_gain(
+    rec: Recording, smoothed: Recording, params: Any, *, use_gnss: bool = True, lever_arm: np.ndarray | None = None
+) -> dict[str, Any] | None:
     """Causal vs smoothed attitude RMSE (deg) against the truth in ``rec`` (``ref_q`` or ``ref_roll``...); None
     without truth. Runs the causal EKF once more."""
     if "ref_q" not in rec.channels and "ref_roll" not in rec.channels:
@@ -210,8 +244,11 @@ def _fixes_in_time_order(src: Recording, path: str, what: str, *values: np.ndarr
     taken for seconds) and
     one with fewer than two such fixes. Returns (times s, *values)."""
     if src.meta.get("time_source") == "index":
-        raise ImutoolError(f"the {what} file has no clock (no line time stamps, no sentence with a time of day): its "
-                           "fixes cannot be placed on the IMU's time", path=path)
+        raise ImutoolError(
+            f"the {what} file has no clock (no line time stamps, no sentence with a time of day): its "
+            "fixes cannot be placed on the IMU's time",
+            path=path,
+        )
     ok = np.isfinite(src.time)
     for v in values:
         ok &= np.isfinite(v)
@@ -242,14 +279,18 @@ def attach_gnss(rec: Recording, path: str | os.PathLike, max_gap_s: float = np.i
     path = os.fspath(path)
     g = formats.read(path)
     if "sog" not in g.channels or "cog" not in g.channels:
-        raise ImutoolError(f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns "
-                           "sog (m/s), cog (deg)", path=path)
+        raise ImutoolError(
+            f"no sog/cog channels (have {', '.join(g.channels)}); need RMC/VTG or CSV columns sog (m/s), cog (deg)",
+            path=path,
+        )
     # the empty fixes are dropped before the course is unwrapped: one empty course must not void those after it
-    tf, sog, cog = _fixes_in_time_order(g, path, "sog/cog", g.in_unit("sog", "m/s"),
-                                        np.asarray(g.in_unit("cog", "deg"), float))
+    tf, sog, cog = _fixes_in_time_order(
+        g, path, "sog/cog", g.in_unit("sog", "m/s"), np.asarray(g.in_unit("cog", "deg"), float)
+    )
     out = rec.copy()
-    out.add("sog", _blank_long_gaps(rec.time, tf, np.interp(rec.time, tf, sog, left=np.nan, right=np.nan),
-                                    max_gap_s), "m/s")
+    out.add(
+        "sog", _blank_long_gaps(rec.time, tf, np.interp(rec.time, tf, sog, left=np.nan, right=np.nan), max_gap_s), "m/s"
+    )
     out.add("cog", _blank_long_gaps(rec.time, tf, _interp_angle_deg(rec.time, tf, cog), max_gap_s), "deg")
     return out
 
@@ -267,8 +308,11 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     # "heading" may be an estimate (imutool's own output has one), so a CSV must say heading_true
     ch = "heading_true" if "heading_true" in h.channels else "heading" if formats.kind_of(path) == "nmea" else None
     if ch is None or ch not in h.channels:
-        raise ImutoolError(f"no true heading (have {', '.join(h.channels)}); need HDT/THS sentences or a CSV "
-                           "column heading_true (deg)", path=path)
+        raise ImutoolError(
+            f"no true heading (have {', '.join(h.channels)}); need HDT/THS sentences or a CSV "
+            "column heading_true (deg)",
+            path=path,
+        )
     hd = np.asarray(h.in_unit(ch, "deg"), float)
     if "ths_mode" in h.channels:  # THS: only autonomous (A) and estimated (E) headings are a ship's heading
         mode = np.asarray(h["ths_mode"], float)
@@ -279,10 +323,21 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     return out
 
 
-def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, *, chunk_rows: int = 1_000_000,
-               use_gnss: bool = True, lever_arm: np.ndarray | None = None, columns: str | None = None,
-               profile: str | None = None, mounting: str | None = None, calibration_file: str | None = None,
-               strict: bool = False, progress: Progress | None = None) -> dict[str, Any]:
+def stream_ekf(
+    path: str | os.PathLike,
+    output: str | os.PathLike,
+    params: Any,
+    *,
+    chunk_rows: int = 1_000_000,
+    use_gnss: bool = True,
+    lever_arm: np.ndarray | None = None,
+    columns: str | None = None,
+    profile: str | None = None,
+    mounting: str | None = None,
+    calibration_file: str | None = None,
+    strict: bool = False,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
     """Bounded-memory causal EKF over a large CSV/Parquet file: chunks streamed (Parquet by row groups), the
     filter state carried from chunk to chunk, rows appended to a .csv or .parquet output; returns the summary.
 
@@ -326,8 +381,13 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     state = None
     dt_nom = dt_mag = None  # the IMU's and the magnetometer's nominal intervals (s), from the first chunk with them
     t_last = -np.inf
-    summary: dict[str, Any] = {"input": path, "output": output, "rows": 0, "method": "ekf (streamed)",
-                               "dropped_non_increasing_rows": 0}
+    summary: dict[str, Any] = {
+        "input": path,
+        "output": output,
+        "rows": 0,
+        "method": "ekf (streamed)",
+        "dropped_non_increasing_rows": 0,
+    }
     totals: dict[str, float] = {}
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
@@ -379,15 +439,30 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                 cog = chunk.in_unit("cog", "deg")
                 gnss_used = True
             if "heading_true" in chunk.channels and getattr(params, "heading_input_latency", 0.0) > 0:
-                raise ImutoolError("heading_input_latency reads the heading_true column later, past a chunk's end: "
-                                   "a streamed run cannot apply it (run in memory: --stream-mb above the file's size, "
-                                   "or give the heading as a file with --heading)", path=path)
+                raise ImutoolError(
+                    "heading_input_latency reads the heading_true column later, past a chunk's end: "
+                    "a streamed run cannot apply it (run in memory: --stream-mb above the file's size, "
+                    "or give the heading as a file with --heading)",
+                    path=path,
+                )
             heading = _heading_channel(chunk)  # deg, or None
             if dt_mag is None:
                 dt_mag = mag_interval(chunk.time, chunk.channels.get("mag"))
-            res, state = run_ekf(chunk.time, chunk["gyro"], chunk["accel"], chunk.channels.get("mag"), params,
-                                 sog, cog, state=state, dt_nominal=dt_nom, lever_arm=lever_arm, keep_force=True,
-                                 heading_deg=heading, dt_mag=dt_mag)
+            res, state = run_ekf(
+                chunk.time,
+                chunk["gyro"],
+                chunk["accel"],
+                chunk.channels.get("mag"),
+                params,
+                sog,
+                cog,
+                state=state,
+                dt_nominal=dt_nom,
+                lever_arm=lever_arm,
+                keep_force=True,
+                heading_deg=heading,
+                dt_mag=dt_mag,
+            )
             if scale_check is None:
                 scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
             scale_check.add(res.time, chunk["gyro"], res.bias, res.force)
@@ -408,16 +483,18 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
                     # the state carries cumulative counters (and the tilt check's running maximum)
                     totals[k] = v.item() if isinstance(v, np.generic) else v
             est = result_recording(chunk, res, params)
-            est.meta["heading_source"] = heading_source_report(heading_given, mag_given, heading_updates,
-                                                               params)[0]["heading_source"]  # final at the end
+            est.meta["heading_source"] = heading_source_report(heading_given, mag_given, heading_updates, params)[0][
+                "heading_source"
+            ]  # final at the end
             if lever_arm is not None:
                 est.meta["lever_arm_m"] = [float(x) for x in lever_arm]
             w.write(est)
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
             report(progress, summary["rows"], total)
-        validation, input_warnings = checks.finish(rows_read, summary["rows"], duplicates=duplicates,
-                                                   skipped=int(summary.get("skipped_rows", 0) or 0))
+        validation, input_warnings = checks.finish(
+            rows_read, summary["rows"], duplicates=duplicates, skipped=int(summary.get("skipped_rows", 0) or 0)
+        )
         validation["warnings"] = input_warnings
         warnings: list[str] = []
         if n_flagged:
@@ -433,8 +510,9 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         warnings += more
         warnings += tilt_check(totals, params)
         warnings += gnss_heading_check(gnss_used, mag_used)
-        check, more = heading_source_report(heading_given, mag_given, heading_updates, params,
-                                            t_last - t_first if np.isfinite(t_first) else 0.0)
+        check, more = heading_source_report(
+            heading_given, mag_given, heading_updates, params, t_last - t_first if np.isfinite(t_first) else 0.0
+        )
         summary.update(check)
         warnings += more
         if heading_given:
@@ -448,10 +526,14 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
         if summary["rows"] == 0:
             raise ImutoolError("no data rows", path=path)
         everything = checks.meta_warnings(input_warnings, warnings)
-        w.set_final_meta({"validation": {k: v for k, v in validation.items() if k != "warnings"},
-                          "heading_source": summary["heading_source"],
-                          **({"heading_input_lag_s": summary["heading_input_lag_s"]} if heading_given else {}),
-                          **({"warnings": everything} if everything else {})})
+        w.set_final_meta(
+            {
+                "validation": {k: v for k, v in validation.items() if k != "warnings"},
+                "heading_source": summary["heading_source"],
+                **({"heading_input_lag_s": summary["heading_input_lag_s"]} if heading_given else {}),
+                **({"warnings": everything} if everything else {}),
+            }
+        )
     summary.update(totals)
     summary["samples"] = summary["rows"]
     summary["validation"] = validation
@@ -460,4 +542,3 @@ def stream_ekf(path: str | os.PathLike, output: str | os.PathLike, params: Any, 
     if lever_arm is not None:
         summary["lever_arm_m"] = [float(x) for x in lever_arm]
     return summary
-

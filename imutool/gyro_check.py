@@ -59,8 +59,9 @@ WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that f
 # out to 1/128 and 128 (a rate in deg/s read as rad/s is 57× off)
 SCALES = 2.0 ** np.concatenate([[-7, -6, -5, -4, -3], np.arange(-8, 9) / 4.0, [3, 4, 5, 6, 7]])
 # the sign patterns of the three axes other than (+, +, +): a reversed axis, two, all three
-AXIS_SIGNS = np.array([[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, -1]],
-                      dtype=np.float64)
+AXIS_SIGNS = np.array(
+    [[-1, 1, 1], [1, -1, 1], [1, 1, -1], [-1, -1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, -1]], dtype=np.float64
+)
 # a reversal must remove this share of the mean-square discrepancy that the gyro as it is or no rotation leave:
 # a reversed axis removes 0.26–0.33 at sea for y, 0.60–0.65 for x (waves change the velocity within a window), 0.47
 # or more on BROAD's trials that turn (0.19–0.20 on trial 10, which hardly does: no axis named, the scale check
@@ -167,8 +168,9 @@ class GyroScaleCheck:
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (time, gyro, bias, force)]
         self.seen += len(arrays[0])
         budget = int(max(FULL_CHECK_SAMPLES, CHECKED_SHARE * self.seen)) - self.checked
-        self.checked += pair_discrepancy_kernel(*arrays, self.window, self.gap_dt, CANDIDATES, self.gravity, budget,
-                                                self.sums, self.counts)
+        self.checked += pair_discrepancy_kernel(
+            *arrays, self.window, self.gap_dt, CANDIDATES, self.gravity, budget, self.sums, self.counts
+        )
 
     def _mean_j2(self) -> np.ndarray | None:
         """J² (rad²) of every candidate, the mean over the pairs seen; None without a pair."""
@@ -182,7 +184,7 @@ class GyroScaleCheck:
         j2_all = self._mean_j2()
         if j2_all is None:
             return None
-        j2 = j2_all[:len(SCALES)]
+        j2 = j2_all[: len(SCALES)]
         i = int(np.argmin(j2))
         x = np.log2(SCALES)
         best_x, best_j2 = x[i], j2[i]
@@ -192,7 +194,7 @@ class GyroScaleCheck:
                 off = 0.5 * (j2[i - 1] - j2[i + 1]) / den
                 best_x = x[i] + off * (x[i + 1] - x[i])
                 best_j2 = max(j2[i] - 0.25 * (j2[i - 1] - j2[i + 1]) * off, 0.0)
-        return float(2.0 ** best_x), float(np.sqrt(max(float(j2[ONE]) - best_j2, 0.0))), int(self.counts.min())
+        return float(2.0**best_x), float(np.sqrt(max(float(j2[ONE]) - best_j2, 0.0))), int(self.counts.min())
 
     def reversed_axes(self) -> tuple[str, float, bool] | None:
         """The sign pattern that best agrees with gravity: (axes reversed, e.g. "x" or "x, z"; the RMS discrepancy
@@ -236,8 +238,13 @@ class GyroScaleCheck:
             return {"gyro_scale_check": {"pairs": 0, "window_s": self.window}}, []
         axes, axis_disc, axis_best = self.reversed_axes()
         if axis_best and np.degrees(axis_disc) >= MIN_DISCREPANCY_DEG:
-            entry = {"reversed_axes": axes, "discrepancy_deg": round(float(np.degrees(axis_disc)), 2),
-                     "pairs": est[2], "window_s": self.window, "flagged": True}
+            entry = {
+                "reversed_axes": axes,
+                "discrepancy_deg": round(float(np.degrees(axis_disc)), 2),
+                "pairs": est[2],
+                "window_s": self.window,
+                "flagged": True,
+            }
             one = len(axes) == 1
             cols = " and ".join(f"'COLUMN=gyro_{a}:UNIT*-1'" for a in axes.split(", "))
             return {"gyro_scale_check": entry}, [
@@ -246,11 +253,16 @@ class GyroScaleCheck:
                 f"{np.degrees(axis_disc):.1f}° RMS of tilt discrepancy between {self.window:g}-s windows): the "
                 f"attitude is wrong while the sensor turns about {'that axis' if one else 'those axes'}; fix the "
                 f"gyro's axis map (the device's configuration, or a column scale of −1: --columns {cols}) and run "
-                "again"]
+                "again"
+            ]
         scale, disc, pairs = est
         at_edge = not SCALES[0] * 1.01 < scale < SCALES[-1] / 1.01  # beyond the grid: "at least"
-        entry = {"scale": round(scale, 3), "discrepancy_deg": round(float(np.degrees(disc)), 2), "pairs": pairs,
-                 "window_s": self.window}
+        entry = {
+            "scale": round(scale, 3),
+            "discrepancy_deg": round(float(np.degrees(disc)), 2),
+            "pairs": pairs,
+            "window_s": self.window,
+        }
         off = scale > SCALE_TOLERANCE or scale < 1.0 / SCALE_TOLERANCE
         if not (off and np.degrees(disc) >= MIN_DISCREPANCY_DEG):
             return {"gyro_scale_check": entry}, []
@@ -261,4 +273,5 @@ class GyroScaleCheck:
             f"gyro scale check: the gyro and gravity disagree on how far the sensor turns — its rates look "
             f"{how} (scaling them by {scale:.3g} removes {np.degrees(disc):.1f}° "
             f"RMS of tilt discrepancy between {self.window:g}-s windows); a gyro in the wrong range or unit, or an "
-            "acceleration the filter was not told of (a lever arm not given, an uncompensated turn)"]
+            "acceleration the filter was not told of (a lever arm not given, an uncompensated turn)"
+        ]

@@ -37,10 +37,15 @@ from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import input_notes
 
-UNKNOWNS = ["f_O_x", "f_O_y", "f_O_z", "wdot_x", "wdot_y", "wdot_z",
-            "wx2", "wy2", "wz2", "wxwy", "wxwz", "wywz"]
-_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
-         "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0)}
+UNKNOWNS = ["f_O_x", "f_O_y", "f_O_z", "wdot_x", "wdot_y", "wdot_z", "wx2", "wy2", "wz2", "wxwy", "wxwz", "wywz"]
+_AXES = {
+    "x": (1.0, 0.0, 0.0),
+    "y": (0.0, 1.0, 0.0),
+    "z": (0.0, 0.0, 1.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "-z": (0.0, 0.0, -1.0),
+}
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -77,8 +82,16 @@ class Layout:
         return np.array(pos, float), np.array(dirs, float), cols, units
 
     def describe(self) -> list[dict[str, Any]]:
-        return [{"name": s.name, "position_m": [float(v) for v in s.position], "axes": s.axes.tolist(),
-                 "columns": s.columns, "unit": s.unit} for s in self.sensors]
+        return [
+            {
+                "name": s.name,
+                "position_m": [float(v) for v in s.position],
+                "axes": s.axes.tolist(),
+                "columns": s.columns,
+                "unit": s.unit,
+            }
+            for s in self.sensors
+        ]
 
 
 def paper_layout(r: float = 0.1, prefix: str = "a") -> Layout:
@@ -86,8 +99,10 @@ def paper_layout(r: float = 0.1, prefix: str = "a") -> Layout:
     if r <= 0:
         raise ImutoolError(f"paper layout distance r must be > 0, got {r}")
     pts = [(0, 0, 0), (-r, 0, 0), (0, r, 0), (0, 0, r)]
-    sensors = [Sensor(f"A{i + 1}", np.array(p, float), np.eye(3), [f"{prefix}{i + 1}_{c}" for c in "xyz"])
-               for i, p in enumerate(pts)]
+    sensors = [
+        Sensor(f"A{i + 1}", np.array(p, float), np.eye(3), [f"{prefix}{i + 1}_{c}" for c in "xyz"])
+        for i, p in enumerate(pts)
+    ]
     return Layout(sensors, name=f"paper (r = {r} m)", meta={"r_m": r})
 
 
@@ -123,7 +138,7 @@ def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
     default_unit = str(doc.get("unit", "m/s^2"))
     items = doc.get("sensor")
     if not isinstance(items, list) or not items:
-        raise ImutoolError(f"{source}: needs [[sensor]] tables (or preset = \"paper\")")
+        raise ImutoolError(f'{source}: needs [[sensor]] tables (or preset = "paper")')
     sensors = []
     for i, it in enumerate(items):
         where = f"{source}: sensor {i + 1} ({it.get('name', '?')})"
@@ -138,22 +153,25 @@ def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
         if "direction" in it:  # single-axis
             col = it.get("column")
             if not isinstance(col, str):
-                raise ImutoolError(f"{where}: a single-axis sensor needs column = \"NAME\"")
+                raise ImutoolError(f'{where}: a single-axis sensor needs column = "NAME"')
             axes = _parse_axis(it["direction"], where)[None, :]
             cols = [col]
         else:
             spec = it.get("axes", "xyz")
             if isinstance(spec, str):
                 if spec not in ("xyz",):
-                    raise ImutoolError(f"{where}: axes must be \"xyz\" or a list of 3-vectors / axis names")
+                    raise ImutoolError(f'{where}: axes must be "xyz" or a list of 3-vectors / axis names')
                 axes = np.eye(3)
             else:
                 axes = np.array([_parse_axis(a, where) for a in spec])
             cols = it.get("columns")
             if not isinstance(cols, list) or len(cols) != len(axes):
                 raise ImutoolError(f"{where}: columns must list {len(axes)} CSV column names")
-        sensors.append(Sensor(str(it.get("name", f"S{i + 1}")), pos, axes, [str(c) for c in cols],
-                              str(it.get("unit", default_unit))))
+        sensors.append(
+            Sensor(
+                str(it.get("name", f"S{i + 1}")), pos, axes, [str(c) for c in cols], str(it.get("unit", default_unit))
+            )
+        )
     return Layout(sensors, name=str(doc.get("name", source)), noise_density=_noise_density(doc, source))
 
 
@@ -197,18 +215,24 @@ def _geometry_diagnosis(pos: np.ndarray, dirs: np.ndarray) -> list[str]:
     why = []
     pts = np.unique(np.round(pos, 9), axis=0)
     if len(pts) < 4:
-        why.append(f"only {len(pts)} distinct sensor position(s): sensors at duplicated positions add no "
-                   "lever arm (at least 4 non-coplanar positions are needed for triads)")
+        why.append(
+            f"only {len(pts)} distinct sensor position(s): sensors at duplicated positions add no "
+            "lever arm (at least 4 non-coplanar positions are needed for triads)"
+        )
     c = pts - pts.mean(axis=0)
     sv = np.linalg.svd(c, compute_uv=False) if len(pts) > 1 else np.zeros(3)
     scale = max(float(sv[0]) if len(sv) else 0.0, 1e-12)
     rank = int(np.sum(sv > 1e-6 * scale)) if len(pts) > 1 else 0
     if len(pts) > 1 and rank <= 1:
-        why.append("all sensor positions are collinear: rotation about that line and the centripetal terms "
-                   "along it are not observable")
+        why.append(
+            "all sensor positions are collinear: rotation about that line and the centripetal terms "
+            "along it are not observable"
+        )
     elif len(pts) > 2 and rank == 2:
-        why.append("all sensor positions are coplanar: the angular acceleration and quadratic terms that act "
-                   "normal to the plane are not separable")
+        why.append(
+            "all sensor positions are coplanar: the angular acceleration and quadratic terms that act "
+            "normal to the plane are not separable"
+        )
     if len(dirs) < 12:
         why.append(f"only {len(dirs)} measured axes for 12 unknowns (f_O, ω̇, six ω-products)")
     dset = np.unique(np.round(dirs, 9), axis=0)
@@ -234,8 +258,13 @@ def check_layout(layout: Layout, noise: float = 0.01, refuse: bool = True) -> di
     an = a * (1.0 / sc)
     sv = np.linalg.svd(an, compute_uv=False)
     rank = int(np.sum(sv > 1e-9 * sv[0])) if len(sv) else 0
-    out: dict[str, Any] = {"layout": layout.name, "measured_axes": int(len(dirs)), "rank": rank,
-                           "unknowns": 12, "array_size_m": round(size, 4)}
+    out: dict[str, Any] = {
+        "layout": layout.name,
+        "measured_axes": int(len(dirs)),
+        "rank": rank,
+        "unknowns": 12,
+        "array_size_m": round(size, 4),
+    }
     if rank < 12:
         _, _, vt = np.linalg.svd(an)
         null = vt[rank:]
@@ -250,18 +279,24 @@ def check_layout(layout: Layout, noise: float = 0.01, refuse: bool = True) -> di
         out["reasons"] = why
         out["unobservable"] = terms
         if refuse:
-            raise ImutoolError(f"layout {layout.name} is degenerate (rank {rank} < 12): {'; '.join(why)}; "
-                               f"unobservable: {' | '.join(terms)}")
+            raise ImutoolError(
+                f"layout {layout.name} is degenerate (rank {rank} < 12): {'; '.join(why)}; "
+                f"unobservable: {' | '.join(terms)}"
+            )
         return out
     cov = np.linalg.inv(a.T @ a)
     sd = np.sqrt(np.diag(cov))
     out["observable"] = True
     out["condition_number"] = float(sv[0] / sv[-1])
-    out["noise_gain"] = {"f_O (m/s² per m/s²)": [round(float(v), 4) for v in sd[0:3]],
-                         "wdot (rad/s² per m/s²)": [round(float(v), 3) for v in sd[3:6]],
-                         "omega products (rad²/s² per m/s²)": [round(float(v), 3) for v in sd[6:12]]}
-    out["per_noise_sigma"] = {"accel_noise_mps2": noise,
-                              "wdot_sigma_rad_s2": [round(float(v * noise), 4) for v in sd[3:6]]}
+    out["noise_gain"] = {
+        "f_O (m/s² per m/s²)": [round(float(v), 4) for v in sd[0:3]],
+        "wdot (rad/s² per m/s²)": [round(float(v), 3) for v in sd[3:6]],
+        "omega products (rad²/s² per m/s²)": [round(float(v), 3) for v in sd[6:12]],
+    }
+    out["per_noise_sigma"] = {
+        "accel_noise_mps2": noise,
+        "wdot_sigma_rad_s2": [round(float(v * noise), 4) for v in sd[3:6]],
+    }
     return out
 
 
@@ -358,9 +393,17 @@ def estimate_noise(y: np.ndarray, fs: float) -> float:
     return float(np.median(mad) / np.sqrt(6.0))
 
 
-def ekf_rates(t: np.ndarray, wdot: np.ndarray, quad: np.ndarray, cov_unit: np.ndarray, sigma: float,
-              w0: np.ndarray | None = None, sign: float = 1.0, rate_rw: float = 1e-4,
-              init_samples: int = 20) -> tuple[np.ndarray, np.ndarray]:
+def ekf_rates(
+    t: np.ndarray,
+    wdot: np.ndarray,
+    quad: np.ndarray,
+    cov_unit: np.ndarray,
+    sigma: float,
+    w0: np.ndarray | None = None,
+    sign: float = 1.0,
+    rate_rw: float = 1e-4,
+    init_samples: int = 20,
+) -> tuple[np.ndarray, np.ndarray]:
     """ω (N,3) rad/s and its one-sigma (N,3) from the EKF; Q, R from σ² (AᵀA)⁻¹ (σ m/s² per sample)."""
     t = np.asarray(t, float)
     dt = np.diff(t, prepend=t[0])
@@ -369,15 +412,31 @@ def ekf_rates(t: np.ndarray, wdot: np.ndarray, quad: np.ndarray, cov_unit: np.nd
     if w0 is None:
         w0 = initial_rate(np.mean(quad[: max(1, init_samples)], axis=0), sign)
     p0 = np.eye(3) * max(1e-4, float(np.sqrt(np.mean(np.diag(rq)))))
-    return _ekf_kernel(dt, np.ascontiguousarray(wdot), np.ascontiguousarray(quad), qa, rq,
-                       np.asarray(w0, float), p0, float(rate_rw) ** 2)
+    return _ekf_kernel(
+        dt,
+        np.ascontiguousarray(wdot),
+        np.ascontiguousarray(quad),
+        qa,
+        rq,
+        np.asarray(w0, float),
+        p0,
+        float(rate_rw) ** 2,
+    )
 
 
 # ------------------------------------------------------------------------------------------------------------------
 # Planar (two-accelerometer) roll
 # ------------------------------------------------------------------------------------------------------------------
-def planar_roll(t: np.ndarray, a1: np.ndarray, a2: np.ndarray, p1: np.ndarray, p2: np.ndarray, d: np.ndarray,
-                cutoff: float | None = None, causal: bool = False) -> dict[str, np.ndarray | float]:
+def planar_roll(
+    t: np.ndarray,
+    a1: np.ndarray,
+    a2: np.ndarray,
+    p1: np.ndarray,
+    p2: np.ndarray,
+    d: np.ndarray,
+    cutoff: float | None = None,
+    causal: bool = False,
+) -> dict[str, np.ndarray | float]:
     """Roll acceleration/rate/angle from two parallel single-axis accelerometers (m/s²) at p1, p2 (m, FRD) with
     the common sensitive axis d. a2 − a1 = ((p2 − p1) × d)·ω̇ (+ quadratic terms, neglected: second order for a
     rolling section); the component along the x axis gives ω̇x. Rate and angle by band-pass integration:
@@ -389,8 +448,10 @@ def planar_roll(t: np.ndarray, a1: np.ndarray, a2: np.ndarray, p1: np.ndarray, p
 
     lever = np.cross(np.asarray(p2, float) - np.asarray(p1, float), np.asarray(d, float))
     if abs(lever[0]) < 1e-6:
-        raise ImutoolError("planar mode: the two accelerometers do not sense roll (need a separation across "
-                           "the x axis and a sensitive axis perpendicular to it)")
+        raise ImutoolError(
+            "planar mode: the two accelerometers do not sense roll (need a separation across "
+            "the x axis and a sensitive axis perpendicular to it)"
+        )
     t = np.asarray(t, float)
     fs = 1.0 / float(np.median(np.diff(t)))
     alpha = (np.asarray(a2, float) - np.asarray(a1, float)) / lever[0]
@@ -435,9 +496,15 @@ def measurements(rec: Recording, layout: Layout) -> np.ndarray:
     return out
 
 
-def gyrofree_recording(rec: Recording, layout: Layout, noise: float | None = None, sign: float = 1.0,
-                       w0: np.ndarray | None = None, tilt_gain: float = 0.0, rate_rw: float = 1e-4
-                       ) -> tuple[Recording, dict[str, Any]]:
+def gyrofree_recording(
+    rec: Recording,
+    layout: Layout,
+    noise: float | None = None,
+    sign: float = 1.0,
+    w0: np.ndarray | None = None,
+    tilt_gain: float = 0.0,
+    rate_rw: float = 1e-4,
+) -> tuple[Recording, dict[str, Any]]:
     """Full gyro-free solution: gyro (ω, rad/s), angular_accel (rad/s²), accel (f_O, m/s²), ω one-sigma, q and
     roll/pitch/heading (deg) from quaternion integration (tilt-corrected with gain ``tilt_gain`` 1/s, 0 = off)."""
     from formats.frames import quat_to_euler  # noqa: PLC0415
@@ -445,12 +512,17 @@ def gyrofree_recording(rec: Recording, layout: Layout, noise: float | None = Non
 
     y = measurements(rec, layout)
     if not np.all(np.isfinite(y)):
-        raise ImutoolError(f"{int((~np.isfinite(y)).sum())} missing accelerometer values; gyro-free needs every "
-                           "axis at every sample (fill or trim the gaps first)")
+        raise ImutoolError(
+            f"{int((~np.isfinite(y)).sum())} missing accelerometer values; gyro-free needs every "
+            "axis at every sample (fill or trim the gaps first)"
+        )
     f0, wdot, quad, cov = solve_kinematics(y, layout)
     fs = rec.rate_hz
-    sigma = float(noise) if noise else (layout.noise_density * np.sqrt(fs) if layout.noise_density
-                                        else estimate_noise(y, fs))
+    sigma = (
+        float(noise)
+        if noise
+        else (layout.noise_density * np.sqrt(fs) if layout.noise_density else estimate_noise(y, fs))
+    )
     w, sd = ekf_rates(rec.time, wdot, quad, cov, max(sigma, 1e-6), w0, sign, rate_rw)
     q = complementary_attitude(rec.time, w, f0, tilt_gain)
     roll, pitch, heading = quat_to_euler(q)
@@ -466,9 +538,13 @@ def gyrofree_recording(rec: Recording, layout: Layout, noise: float | None = Non
     for name in ("ref_gyro", "ref_q", "ref_roll", "ref_pitch", "ref_heading"):
         if name in rec:
             out.add(name, rec[name], rec.units.get(name))
-    summary = {"layout": layout.name, "measured_axes": int(y.shape[1]), "noise_sigma_mps2": round(sigma, 6),
-               "initial_rate_rad_s": [round(float(v), 5) for v in w[0]],
-               "attitude": f"quaternion integration of ω, tilt gain {tilt_gain} 1/s"}
+    summary = {
+        "layout": layout.name,
+        "measured_axes": int(y.shape[1]),
+        "noise_sigma_mps2": round(sigma, 6),
+        "initial_rate_rad_s": [round(float(v), 5) for v in w[0]],
+        "attitude": f"quaternion integration of ω, tilt gain {tilt_gain} 1/s",
+    }
     out.meta.update({"gyrofree_layout": layout.name, "frame": "body FRD; q body->NED"})
     return out, summary
 
@@ -480,12 +556,15 @@ def degenerate_examples() -> dict[str, Layout]:
     def tri(name, p, i):
         return Sensor(name, np.array(p, float), eye, [f"s{i}_{c}" for c in "xyz"])
 
-    collinear = Layout([tri("A", (0, 0, 0), 1), tri("B", (0.1, 0, 0), 2), tri("C", (0.2, 0, 0), 3),
-                        tri("D", (-0.1, 0, 0), 4)], name="collinear")
-    dup = Layout([tri("A", (0, 0, 0), 1), tri("B", (0.1, 0, 0), 2), tri("C", (0.1, 0, 0), 3),
-                  tri("D", (0, 0.1, 0), 4)], name="duplicated")
+    collinear = Layout(
+        [tri("A", (0, 0, 0), 1), tri("B", (0.1, 0, 0), 2), tri("C", (0.2, 0, 0), 3), tri("D", (-0.1, 0, 0), 4)],
+        name="collinear",
+    )
+    dup = Layout(
+        [tri("A", (0, 0, 0), 1), tri("B", (0.1, 0, 0), 2), tri("C", (0.1, 0, 0), 3), tri("D", (0, 0.1, 0), 4)],
+        name="duplicated",
+    )
     return {"collinear": collinear, "duplicated": dup}
-
 
 
 def plot_rates(out: Recording, path: str, title: str = "gyro-free angular rate vs truth") -> None:

@@ -51,8 +51,7 @@ class HeadingLagTrack:
         self.feed: list[np.ndarray] = []
         self.tail: tuple[float, float, float] | None = None  # (time, ψ_g, feed) of the last sample seen
 
-    def add(self, time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray,
-            bias: np.ndarray) -> None:
+    def add(self, time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray, bias: np.ndarray) -> None:
         """One chunk, in time order after the previous: time (N,) s, heading_deg (N,) the feed on the IMU time,
         q (N,4) the filter's attitude, gyro and bias (N,3) rad/s body."""
         for i0 in range(0, len(time), self.block):
@@ -90,8 +89,9 @@ class HeadingLagTrack:
         return _measure(t, psi_g, h)
 
 
-def measure_heading_lag(time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray,
-                        bias: np.ndarray) -> dict | None:
+def measure_heading_lag(
+    time: np.ndarray, heading_deg: np.ndarray, q: np.ndarray, gyro: np.ndarray, bias: np.ndarray
+) -> dict | None:
     """The external heading's lag behind the gyro (s; positive: the feed is late), or None where the run cannot
     tell (under a minute of feed). time (N,) s; heading_deg (N,) the feed on the IMU time (deg, NaN: none);
     q (N,4) the filter's attitude body→NED; gyro, bias (N,3) rad/s body.
@@ -135,8 +135,13 @@ def _measure(t: np.ndarray, psi_g: np.ndarray, h: np.ndarray) -> dict | None:
         den = c0 - 2 * c1 + c2
         if den > 0:
             lag += 0.5 * step * (c0 - c2) / den
-    return {"lag_s": round(float(lag), 2), "cost_deg2": float(costs[i]), "resolved": resolved,
-            "at_edge": at_edge, "cost_at": cost_at}
+    return {
+        "lag_s": round(float(lag), 2),
+        "cost_deg2": float(costs[i]),
+        "resolved": resolved,
+        "at_edge": at_edge,
+        "cost_at": cost_at,
+    }
 
 
 def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, list[str]]:
@@ -146,12 +151,16 @@ def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, li
     if measured is None:
         return {"heading_input_lag_s": None}, []  # under a minute of feed
     if not measured.get("resolved", True):  # the heading never moved enough, or the lag is off the grid
-        if (measured.get("at_edge") and abs(measured["lag_s"] - latency_s) >= WARN_LAG_S
-                and measured["cost_at"](latency_s) >= WARN_COST_RATIO * measured["cost_deg2"]):
+        if (
+            measured.get("at_edge")
+            and abs(measured["lag_s"] - latency_s) >= WARN_LAG_S
+            and measured["cost_at"](latency_s) >= WARN_COST_RATIO * measured["cost_deg2"]
+        ):
             return {"heading_input_lag_s": None}, [
                 f"the external heading (heading_true) is off from the gyro by {measured['lag_s']:+.2f} s or more "
                 f"(the end of the lags tried, {LAG_GRID_S[0]:g}…{LAG_GRID_S[-1]:g} s; heading_input_latency is "
-                f"{latency_s:g} s): check the heading feed's clock against the IMU's"]
+                f"{latency_s:g} s): check the heading feed's clock against the IMU's"
+            ]
         return {"heading_input_lag_s": None}, []
     out = {"heading_input_lag_s": measured["lag_s"]}
     lag = measured["lag_s"]
@@ -160,10 +169,14 @@ def heading_lag_check(measured: dict | None, latency_s: float) -> tuple[dict, li
     if measured["cost_at"](latency_s) < WARN_COST_RATIO * measured["cost_deg2"]:
         return out, []  # the run's heading hardly moved: it cannot tell the two apart
     if lag < 0:  # a feed ahead of the gyro is a clock offset, not a latency the parameter can take
-        return out, [f"the external heading (heading_true) leads the gyro by about {-lag:.2f} s, measured in this "
-                     f"run (heading_input_latency is {latency_s:g} s): its time stamps are early against the IMU's "
-                     "(a clock offset); align the clocks, heading_input_latency cannot be negative"]
-    return out, [f"the external heading (heading_true) lags the gyro by about {lag:.2f} s, measured in this run "
-                 f"(heading_input_latency is {latency_s:g} s): through a turn that is a heading error of "
-                 f"{abs(lag - latency_s):.2f} s × the turn rate; set --param heading_input_latency={lag:.2f} "
-                 "if the gyrocompass's delay is that"]
+        return out, [
+            f"the external heading (heading_true) leads the gyro by about {-lag:.2f} s, measured in this "
+            f"run (heading_input_latency is {latency_s:g} s): its time stamps are early against the IMU's "
+            "(a clock offset); align the clocks, heading_input_latency cannot be negative"
+        ]
+    return out, [
+        f"the external heading (heading_true) lags the gyro by about {lag:.2f} s, measured in this run "
+        f"(heading_input_latency is {latency_s:g} s): through a turn that is a heading error of "
+        f"{abs(lag - latency_s):.2f} s × the turn rate; set --param heading_input_latency={lag:.2f} "
+        "if the gyrocompass's delay is that"
+    ]

@@ -113,16 +113,18 @@ def _complementary_kernel(dt, gyro, accel, gain, bias_gain):  # pragma: no cover
     return q
 
 
-def complementary_attitude(t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gain: float = TILT_GAIN,
-                           bias_gain: float | None = None) -> np.ndarray:
+def complementary_attitude(
+    t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gain: float = TILT_GAIN, bias_gain: float | None = None
+) -> np.ndarray:
     """Simple tilt estimate q (N,4) body→NED: gyro (rad/s, FRD) integration + gravity correction (gain 1/s)
     with an integral gyro-bias term (``bias_gain`` 1/s²; default gain²/4, a critically damped loop; 0 =
     proportional only)."""
     if bias_gain is None:
         bias_gain = gain * gain / 4.0
     dt = np.diff(t, prepend=t[0])
-    return _complementary_kernel(dt, np.ascontiguousarray(gyro, float), np.ascontiguousarray(accel, float),
-                                 float(gain), float(bias_gain))
+    return _complementary_kernel(
+        dt, np.ascontiguousarray(gyro, float), np.ascontiguousarray(accel, float), float(gain), float(bias_gain)
+    )
 
 
 def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.ndarray, str]:
@@ -147,13 +149,19 @@ def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.n
         except (ImportError, ImutoolError, KeyError) as e:
             if attitude == "ekf":
                 raise ImutoolError(f"attitude EKF not usable here: {e}") from None
-    return complementary_attitude(rec.time, rec["gyro"], rec["accel"], tilt_gain), \
-        f"complementary PI tilt filter (gain {tilt_gain} 1/s, bias gain {tilt_gain ** 2 / 4:.3g} 1/s²)"
+    return complementary_attitude(
+        rec.time, rec["gyro"], rec["accel"], tilt_gain
+    ), f"complementary PI tilt filter (gain {tilt_gain} 1/s, bias gain {tilt_gain**2 / 4:.3g} 1/s²)"
 
 
-def vertical_acceleration(rec: Recording, columns: list[str] | None = None, sign: str = "up",
-                          attitude: str = "auto", lever_arm: np.ndarray | None = None,
-                          tilt_gain: float = TILT_GAIN) -> tuple[np.ndarray, dict[str, Any]]:
+def vertical_acceleration(
+    rec: Recording,
+    columns: list[str] | None = None,
+    sign: str = "up",
+    attitude: str = "auto",
+    lever_arm: np.ndarray | None = None,
+    tilt_gain: float = TILT_GAIN,
+) -> tuple[np.ndarray, dict[str, Any]]:
     """Vertical acceleration (m/s², positive up; constant part still included) and a description.
 
     ``columns``: channel names of single vertical accelerometers (averaged; ``sign`` 'up' or 'down' says where
@@ -203,8 +211,9 @@ def vertical_acceleration(rec: Recording, columns: list[str] | None = None, sign
 # ------------------------------------------------------------------------------------------------------------------
 # Spectra and frequency tracking
 # ------------------------------------------------------------------------------------------------------------------
-def displacement_spectrum(a: np.ndarray, fs: float, fmin: float, fmax: float,
-                          pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def displacement_spectrum(
+    a: np.ndarray, fs: float, fmin: float, fmax: float, pad: int = 4
+) -> tuple[np.ndarray, np.ndarray]:
     """One Hann-windowed, zero-padded periodogram of the displacement implied by acceleration a (m/s²):
     S_h(f) = S_a(f)/(2πf)⁴ for fmin ≤ f ≤ fmax (arbitrary scale). Returns (f Hz, S)."""
     x = np.asarray(a, float)
@@ -295,10 +304,19 @@ class Tracking:
     spread: np.ndarray = field(default_factory=lambda: np.array([]))  # ν = √(m₀m₂/m₁² − 1) of the heave band
 
 
-def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 120.0, hop_s: float = 10.0,
-                      min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0,
-                      mode: str = "peaks", min_periods: float = 8.0,
-                      min_concentration: float = 0.4) -> Tracking:
+def track_frequencies(
+    t: np.ndarray,
+    a: np.ndarray,
+    n: int,
+    window_s: float = 120.0,
+    hop_s: float = 10.0,
+    min_window_s: float = 10.0,
+    fmin: float = 0.03,
+    fmax: float = 2.0,
+    mode: str = "peaks",
+    min_periods: float = 8.0,
+    min_concentration: float = 0.4,
+) -> Tracking:
     """Causal sliding-window tracking of the n dominant heave frequencies.
 
     At t_k = min_window_s + k·hop_s the spectrum of a(t) over [t_k − window_s, t_k] (growing window at the start)
@@ -350,10 +368,10 @@ def track_frequencies(t: np.ndarray, a: np.ndarray, n: int, window_s: float = 12
                 spr.append(float(np.sqrt(max(0.0, m0 * m2 / max(m1 * m1, 1e-300) - 1.0))))
         tk += hop_s
     if not starts:
-        raise ImutoolError(f"recording too short for frequency tracking: {t[-1] - t[0]:.1f} s < "
-                           f"--min-window {min_window_s:g} s")
-    return Tracking(np.array(starts), np.array(freqs), np.array(dom), np.array(wins), np.array(med),
-                    np.array(spr))
+        raise ImutoolError(
+            f"recording too short for frequency tracking: {t[-1] - t[0]:.1f} s < --min-window {min_window_s:g} s"
+        )
+    return Tracking(np.array(starts), np.array(freqs), np.array(dom), np.array(wins), np.array(med), np.array(spr))
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -394,8 +412,9 @@ def _hp_weight(f: np.ndarray, cutoff: float, order: int) -> np.ndarray:
     return r / (1.0 + r)
 
 
-def heave_delayed(a: np.ndarray, fs: float, cutoff: float, order: int = 4,
-                  lowpass: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def heave_delayed(
+    a: np.ndarray, fs: float, cutoff: float, order: int = 4, lowpass: float | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Zero-phase heave and heave rate: X(f) = −A(f)·W(f)/(2πf)², V(f) = A(f)·W(f)/(j2πf), with
     W(f) = 1/(1 + (f_c/f)^{2n}) (a squared-magnitude Butterworth high-pass; optional low-pass too).
     Zero-padded to 2N (no wrap-around). Returns (heave, rate, latency s), latency = the half-width containing
@@ -420,7 +439,7 @@ def heave_delayed(a: np.ndarray, fs: float, cutoff: float, order: int = 4,
     omi = 2 * np.pi * fi
     omi[0] = 1.0
     ir = np.abs(np.fft.fftshift(np.fft.irfft(-wi / omi**2, m)))
-    c = np.cumsum(ir[m // 2:] + ir[m // 2 - 1::-1][: m - m // 2]) if m > 1 else np.array([1.0])
+    c = np.cumsum(ir[m // 2 :] + ir[m // 2 - 1 :: -1][: m - m // 2]) if m > 1 else np.array([1.0])
     c = c / c[-1]
     latency = float(np.searchsorted(c, 0.99) / fs)
     return h, v, latency
@@ -573,8 +592,7 @@ class HeaveResult:
     summary: dict[str, Any]
 
 
-def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual,
-                   q=1):
+def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual, q=1):
     """Φ, Q_d (update interval q·dt), H and the output rows (heave, rate) for each of the q samples up to the
     next update (the rows composed with e^{F·j·dt}) of one set of oscillator frequencies."""
     nmax = len(fr)
@@ -589,7 +607,7 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
     qc[-1, -1] = (residual_noise * sig) ** 2
     phi, qd = discretise(fmat, qc, dt * q)
     h = np.zeros(s)
-    h[0:2 * nmax:2] = good.astype(float)
+    h[0 : 2 * nmax : 2] = good.astype(float)
     h[-1] = 1.0
     if per_harmonic:
         g = integrator_response(sos, fs, np.where(good, fr, 1.0))
@@ -599,9 +617,9 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
             if not good[i]:
                 continue
             lead_i = float(np.angle(g[i]))
-            rot = expm(oscillator_matrix(om[i:i + 1], residual=False) * (-lead_i / om[i])) / abs(g[i])
-            out_h[2 * i:2 * i + 2] = rot[0]
-            out_v[2 * i:2 * i + 2] = rot[1]
+            rot = expm(oscillator_matrix(om[i : i + 1], residual=False) * (-lead_i / om[i])) / abs(g[i])
+            out_h[2 * i : 2 * i + 2] = rot[0]
+            out_v[2 * i : 2 * i + 2] = rot[1]
         lead = float(np.angle(integrator_response(sos, fs, [fd if fd > 0 else fr[good][0]])[0]))
         if output_residual:
             out_h[-1] = 1.0
@@ -612,7 +630,7 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
         fm = expm(fmat * (round(m) * dt))
         out_h = h @ fm
         out_v = np.zeros(s)
-        out_v[1:2 * nmax:2] = good.astype(float)
+        out_v[1 : 2 * nmax : 2] = good.astype(float)
         out_v = out_v @ fm
     outs = np.empty((q, 2, s))
     step = expm(fmat * dt)
@@ -623,9 +641,17 @@ def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, pe
     return phi, qd, h, outs, lead
 
 
-def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarray, per_harmonic: bool,
-                     bandwidth: float = 0.03, meas_noise: float = 0.002, residual_noise: float = 0.02,
-                     output_residual: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+def kalman_multistep(
+    d: np.ndarray,
+    fs: float,
+    tracking: Tracking,
+    sos: np.ndarray,
+    per_harmonic: bool,
+    bandwidth: float = 0.03,
+    meas_noise: float = 0.002,
+    residual_noise: float = 0.02,
+    output_residual: bool = False,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Run the harmonic-oscillator KF on the band-passed displacement d (m) and apply the multi-step
     observation. Returns (heave, heave rate, info).
 
@@ -660,8 +686,9 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
         fd = float(np.exp(np.round(np.log(tracking.dominant[k]) / 0.0025) * 0.0025))
         key = (tuple(np.nan_to_num(fq, nan=-1.0)), fd if not per_harmonic else 0.0)
         if key not in cache:
-            cache[key] = _segment_model(fq, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic,
-                                        output_residual, q)
+            cache[key] = _segment_model(
+                fq, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual, q
+            )
         phis[k], qds[k], hs[k], outs[k], lead = cache[key]
         leads.append(lead)
     seg = np.zeros(len(d), dtype=np.int64)
@@ -670,11 +697,13 @@ def kalman_multistep(d: np.ndarray, fs: float, tracking: Tracking, sos: np.ndarr
     seg[seg < 0] = 0
     x0 = np.zeros(s)
     p0 = np.eye(s) * sig**2
-    p0[1:2 * nmax:2, 1:2 * nmax:2] *= (2 * np.pi * np.nanmax(tracking.freqs[0])) ** 2
+    p0[1 : 2 * nmax : 2, 1 : 2 * nmax : 2] *= (2 * np.pi * np.nanmax(tracking.freqs[0])) ** 2
     r = (meas_noise * sig + 1e-3) ** 2
     y = _kf_kernel(np.ascontiguousarray(d, float), seg, phis, qds, hs, float(r), outs, x0, p0, q)
-    info = {"phase_lead_deg_median": float(np.degrees(np.median(leads))) if leads else float("nan"),
-            "kf_update_hz": round(fs / q, 3)}
+    info = {
+        "phase_lead_deg_median": float(np.degrees(np.median(leads))) if leads else float("nan"),
+        "kf_update_hz": round(fs / q, 3),
+    }
     return y[:, 0], y[:, 1], info
 
 
@@ -691,8 +720,9 @@ def _denominator(n: int, shape: str) -> np.ndarray:
     raise ImutoolError(f"unknown filter shape {shape!r} (binomial or butterworth)")
 
 
-def corrected_integrator(n: int, wc: float, shape: str = "binomial") -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                              np.ndarray]:
+def corrected_integrator(
+    n: int, wc: float, shape: str = "binomial"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Continuous state-space (A, B, C heave, C rate) of the phase-corrected double integrator of order n ≥ 4 at
     corner ωc (rad/s), input vertical acceleration (m/s², up), output heave (m, up) and heave rate (m/s).
 
@@ -783,7 +813,7 @@ def wave_onset(t: np.ndarray, a: np.ndarray, i_first: int, f: float, level: floa
     x = np.asarray(a[: i_first + 1], float)
     if len(x) <= w:
         return float(t[0])
-    x = x - np.mean(x[-min(len(x), 8 * w):])
+    x = x - np.mean(x[-min(len(x), 8 * w) :])
     c = np.concatenate([[0.0], np.cumsum(x * x)])
     rms = np.sqrt((c[w:] - c[:-w]) / w)  # rms[j]: samples j .. j + w − 1
     above = np.nonzero(rms >= level * rms[-1])[0]
@@ -809,10 +839,18 @@ def spread_weight(t: np.ndarray, tracking: Tracking, smooth_periods: float = RT_
     return w
 
 
-def heave_realtime(t: np.ndarray, a: np.ndarray, tracking: Tracking, ratio: float = RT_RATIO,
-                   order: int = RT_ORDER, shape: str = RT_SHAPE, default_hz: float = 0.1,
-                   smooth_periods: float = RT_SMOOTH_PERIODS, step: float = 2 ** 0.25,
-                   basis: str = "median") -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+def heave_realtime(
+    t: np.ndarray,
+    a: np.ndarray,
+    tracking: Tracking,
+    ratio: float = RT_RATIO,
+    order: int = RT_ORDER,
+    shape: str = RT_SHAPE,
+    default_hz: float = 0.1,
+    smooth_periods: float = RT_SMOOTH_PERIODS,
+    step: float = 2**0.25,
+    basis: str = "median",
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Causal heave (m, up) and rate (m/s) from vertical acceleration a (m/s², up): a bank of corrected
     integrators (:func:`corrected_integrator`) with corners ``step`` apart, all run from the start, blended at
     each sample by the corner ``ratio`` × the tracked heave frequency (``basis`` 'median': half the tracked
@@ -862,23 +900,40 @@ def heave_realtime(t: np.ndarray, a: np.ndarray, tracking: Tracking, ratio: floa
     frac = pos - idx
     a0 = np.ascontiguousarray(np.asarray(a, float) - a[0])
     y, v = _bank_kernel(a0, ads, bds, cs, cvs, idx, np.ascontiguousarray(frac))
-    info = {"realtime_filter": f"corrected double integrator, order {order} ({shape}), corner {ratio:g} × dominant",
-            "realtime_corners_hz": [round(float(c), 5) for c in corners],
-            "corner_hz": np.exp(lsm)}
+    info = {
+        "realtime_filter": f"corrected double integrator, order {order} ({shape}), corner {ratio:g} × dominant",
+        "realtime_corners_hz": [round(float(c), 5) for c in corners],
+        "corner_hz": np.exp(lsm),
+    }
     return y, v, info
 
 
 # ------------------------------------------------------------------------------------------------------------------
 # Driver
 # ------------------------------------------------------------------------------------------------------------------
-def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", harmonics: int | None = None,
-                   cutoff: float | None = None, order: int | None = None, window_s: float | None = None,
-                   hop_s: float = 10.0, min_window_s: float = 10.0, fmin: float = 0.03, fmax: float = 2.0,
-                   bandwidth: float = 0.03,
-                   meas_noise: float = 0.002, residual_noise: float = 0.02, delayed_cutoff: float | None = None,
-                   lowpass: float | None = None, settle_periods: float = 4.0,
-                   cutoff_ratio: float | None = None, lowpass_ratio: float = 4.0,
-                   shape: str | None = None, smooth_periods: float | None = None) -> HeaveResult:
+def estimate_heave(
+    t: np.ndarray,
+    a_up: np.ndarray,
+    method: str = "realtime",
+    harmonics: int | None = None,
+    cutoff: float | None = None,
+    order: int | None = None,
+    window_s: float | None = None,
+    hop_s: float = 10.0,
+    min_window_s: float = 10.0,
+    fmin: float = 0.03,
+    fmax: float = 2.0,
+    bandwidth: float = 0.03,
+    meas_noise: float = 0.002,
+    residual_noise: float = 0.02,
+    delayed_cutoff: float | None = None,
+    lowpass: float | None = None,
+    settle_periods: float = 4.0,
+    cutoff_ratio: float | None = None,
+    lowpass_ratio: float = 4.0,
+    shape: str | None = None,
+    smooth_periods: float | None = None,
+) -> HeaveResult:
     """Heave (m, positive up) from vertical acceleration a_up (m/s², positive up) sampled at times t (s).
 
     ``harmonics``: oscillators in the model (default 3 for ``paper``, 5 for ``harmonic``/``realtime``).
@@ -920,8 +975,10 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         raise ImutoolError(f"sample rate {fs:.3g} Hz is too low for heave (needs ≥ 0.5 Hz; check the time column)")
     span = float(t[-1] - t[0])
     if not np.isfinite(span) or span / hop_s > 5e6:
-        raise ImutoolError(f"the time column spans {span:.3g} s (a gap or a wrong time unit?); heave tracks "
-                           f"the sea every {hop_s:g} s and refuses more than 5e6 updates")
+        raise ImutoolError(
+            f"the time column spans {span:.3g} s (a gap or a wrong time unit?); heave tracks "
+            f"the sea every {hop_s:g} s and refuses more than 5e6 updates"
+        )
     mode = "peaks" if method == "paper" else "centroids"
     tr = track_frequencies(t, a, harmonics, window_s, hop_s, min_window_s, fmin, fmax, mode)
     f_first = float(tr.dominant[0])
@@ -957,22 +1014,20 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         # a quick look (RT_SHORT_WINDOW_S) beside the steady long window: a longer period showing up (a new
         # swell, a turn that lowers the encounter frequency) lowers the corner at once — a corner too low costs
         # only noise, one too high costs phase and gain — and a disagreement of the two marks a change of sea
-        trs = track_frequencies(t, a, 1, RT_SHORT_WINDOW_S, hop_s, min_window_s, fmin, fmax, "centroids",
-                                min_periods=4.0)
+        trs = track_frequencies(
+            t, a, 1, RT_SHORT_WINDOW_S, hop_s, min_window_s, fmin, fmax, "centroids", min_periods=4.0
+        )
         j = np.searchsorted(trs.start, tr.start, side="right") - 1
         f_short = np.where(j >= 0, trs.median[np.maximum(j, 0)], tr.median)
         off = np.abs(f_short / tr.median - 1.0) > RT_CHANGE
         change = off & np.concatenate([[False], off[:-1]])  # two updates in a row: not one noisy short look
-        tr_bank = Tracking(tr.start, tr.freqs, tr.dominant, tr.window_s, np.minimum(tr.median, f_short),
-                           tr.spread)
-        h, v, info = heave_realtime(t, a, tr_bank, ratio=cutoff_ratio, order=order, shape=shape,
-                                    smooth_periods=sp)
+        tr_bank = Tracking(tr.start, tr.freqs, tr.dominant, tr.window_s, np.minimum(tr.median, f_short), tr.spread)
+        h, v, info = heave_realtime(t, a, tr_bank, ratio=cutoff_ratio, order=order, shape=shape, smooth_periods=sp)
         corner = info.pop("corner_hz")
         fc = float(corner[tr.start[0]])
         # start-up of the bank: its transient after the motion began (the first sample, or a later onset of
         # waves found causally in the data before the first frequency estimate) must have died out
-        bank_settle = (wave_onset(t, a, int(tr.start[0]), f_first)
-                       + filter_settle_time(order, 2 * np.pi * fc, shape))
+        bank_settle = wave_onset(t, a, int(tr.start[0]), f_first) + filter_settle_time(order, 2 * np.pi * fc, shape)
         # a line spectrum (regular waves, swell: spread ν ≤ RT_SPREAD[0]) is followed by the harmonic KF with
         # exact per-line phase correction instead (faster to settle, rejects the off-line noise), blended
         # linearly up to ν = RT_SPREAD[1]; weights smoothed like the corner
@@ -981,12 +1036,20 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
             fc_h = 0.2 * f_first
             sos = bandpass_integrator(fs, fc_h, 3)
             d = signal.sosfilt(sos, a - a[0])
-            hk, vk, kinfo = kalman_multistep(d, fs, tr, sos, per_harmonic=True, bandwidth=bandwidth,
-                                             meas_noise=meas_noise, residual_noise=residual_noise)
+            hk, vk, kinfo = kalman_multistep(
+                d,
+                fs,
+                tr,
+                sos,
+                per_harmonic=True,
+                bandwidth=bandwidth,
+                meas_noise=meas_noise,
+                residual_noise=residual_noise,
+            )
             h = w_bank * h + (1.0 - w_bank) * hk
             v = w_bank * v + (1.0 - w_bank) * vk
             info.update(kinfo)
-        info["realtime_bank_share"] = round(float(np.mean(w_bank[tr.start[0]:])), 3)
+        info["realtime_bank_share"] = round(float(np.mean(w_bank[tr.start[0] :])), 3)
         latency = "0 s (causal; phase-corrected double integrator bank, or the harmonic KF on line spectra)"
     elif method == "bandpass":
         h = d
@@ -997,8 +1060,16 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
         v = np.gradient(h) * fs
         latency = "offline (whole record)"
     else:
-        h, v, info = kalman_multistep(d, fs, tr, sos, per_harmonic=(method == "harmonic"), bandwidth=bandwidth,
-                                      meas_noise=meas_noise, residual_noise=residual_noise)
+        h, v, info = kalman_multistep(
+            d,
+            fs,
+            tr,
+            sos,
+            per_harmonic=(method == "harmonic"),
+            bandwidth=bandwidth,
+            meas_noise=meas_noise,
+            residual_noise=residual_noise,
+        )
         latency = "0 s (causal; phase lead cancelled by multi-step prediction)"
     # settled: after the first frequency estimate + settle_periods, outside the start-up of the band-pass
     settled = np.zeros(len(t), dtype=float)
@@ -1044,15 +1115,24 @@ def estimate_heave(t: np.ndarray, a_up: np.ndarray, method: str = "realtime", ha
     return HeaveResult(h, v, period, settled, hd, vd, settled_d, summary)
 
 
-def heave_recording(rec: Recording, method: str = "realtime", vertical: list[str] | None = None,
-                    vertical_sign: str = "up", attitude: str = "auto", lever_arm: np.ndarray | None = None,
-                    tilt_gain: float = TILT_GAIN, **options: Any) -> tuple[Recording, dict[str, Any]]:
+def heave_recording(
+    rec: Recording,
+    method: str = "realtime",
+    vertical: list[str] | None = None,
+    vertical_sign: str = "up",
+    attitude: str = "auto",
+    lever_arm: np.ndarray | None = None,
+    tilt_gain: float = TILT_GAIN,
+    **options: Any,
+) -> tuple[Recording, dict[str, Any]]:
     """Heave of a recording: columns time, heave, heave_rate, heave_delayed, heave_rate_delayed, period,
     settled (+ ref_heave / ref_heave_rate copied when present). Returns (recording, summary)."""
     a, vinfo = vertical_acceleration(rec, vertical, vertical_sign, attitude, lever_arm, tilt_gain)
     if not np.isfinite(a).any():
-        raise ImutoolError("no finite vertical acceleration sample (all accelerometer values missing)",
-                           path=str(rec.meta.get("source") or "") or None)
+        raise ImutoolError(
+            "no finite vertical acceleration sample (all accelerometer values missing)",
+            path=str(rec.meta.get("source") or "") or None,
+        )
     res = estimate_heave(rec.time, a, method=method, **options)
     out = Recording(rec.time.copy())
     out.add("heave", res.heave, "m")
@@ -1066,10 +1146,15 @@ def heave_recording(rec: Recording, method: str = "realtime", vertical: list[str
         if name in rec:
             out.add(name, rec[name], rec.units.get(name))
     summary = {**res.summary, **vinfo}
-    out.meta.update({"heave": "m, positive UP (heave_delayed: zero-phase, latency "
-                              f"{res.summary['delayed_latency_s']} s)",
-                     "heave_method": method, "heave_latency": res.summary["latency"],
-                     "source": rec.meta.get("source", ""), **input_notes(rec.meta)})
+    out.meta.update(
+        {
+            "heave": f"m, positive UP (heave_delayed: zero-phase, latency {res.summary['delayed_latency_s']} s)",
+            "heave_method": method,
+            "heave_latency": res.summary["latency"],
+            "source": rec.meta.get("source", ""),
+            **input_notes(rec.meta),
+        }
+    )
     return out, summary
 
 

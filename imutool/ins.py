@@ -187,8 +187,15 @@ def _spd_inverse(s: np.ndarray, out: np.ndarray, m: int) -> None:
 def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout, pdiag, hvar, bias):
     """The strapdown + error-state EKF loop from sample k0 (see module doc). prm/opt: see _pack()."""
     n = t.shape[0]
-    g, sg2, sa2, sbg2, sba2, rz, rh = prm[0], prm[1] ** 2, prm[2] ** 2, prm[3] ** 2, prm[4] ** 2, prm[5] ** 2, \
-        prm[6] ** 2
+    g, sg2, sa2, sbg2, sba2, rz, rh = (
+        prm[0],
+        prm[1] ** 2,
+        prm[2] ** 2,
+        prm[3] ** 2,
+        prm[4] ** 2,
+        prm[5] ** 2,
+        prm[6] ** 2,
+    )
     order, use_zupt, use_h, use_zaru = opt[0], opt[1], opt[2], opt[3]
     rw = prm[12] ** 2
     q = q0.copy()
@@ -399,12 +406,15 @@ def alignment_interval(time: np.ndarray, zvi: np.ndarray, min_s: float) -> tuple
     for a, b in interval_indices(zvi):
         if time[b - 1] - time[a] >= min_s:
             return int(a), int(b)
-    raise ImutoolError(f"INS alignment needs a rest interval of at least {min_s} s; none detected "
-                       f"(check the ZVI detector or its thresholds)")
+    raise ImutoolError(
+        f"INS alignment needs a rest interval of at least {min_s} s; none detected "
+        f"(check the ZVI detector or its thresholds)"
+    )
 
 
-def alignment_window(time: np.ndarray, i0: int, i1: int, window_s: float, guard_s: float,
-                     min_s: float) -> tuple[int, int]:
+def alignment_window(
+    time: np.ndarray, i0: int, i1: int, window_s: float, guard_s: float, min_s: float
+) -> tuple[int, int]:
     """[start, stop) of the alignment window: the last ``window_s`` seconds of the rest interval [i0, i1) ending
     ``guard_s`` before its end (the foot starts moving before a detector notices). The whole interval when it
     is too short for that (window shorter than ``min_s``)."""
@@ -417,8 +427,9 @@ def alignment_window(time: np.ndarray, i0: int, i1: int, window_s: float, guard_
     return max(a, i0), min(b, i1)
 
 
-def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarray,
-            config: InsConfig | None = None) -> InsResult:
+def run_ins(
+    time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarray, config: InsConfig | None = None
+) -> InsResult:
     """Run the INS. time (N,) s strictly increasing, gyro (N,3) rad/s, accel (N,3) m/s² (specific force, any
     right-handed body frame), zvi (N,) bool. Returns :class:`InsResult` (NaN before the alignment sample)."""
     from scipy.stats import trim_mean
@@ -430,8 +441,9 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
     z_ = np.ascontiguousarray(np.asarray(zvi) > 0.5)
     n = len(t)
     if g_.shape != (n, 3) or a_.shape != (n, 3) or z_.shape != (n,):
-        raise ImutoolError(f"INS needs time (N,), gyro/accel (N,3), zvi (N,); got {t.shape}, {g_.shape}, "
-                           f"{a_.shape}, {z_.shape}")
+        raise ImutoolError(
+            f"INS needs time (N,), gyro/accel (N,3), zvi (N,); got {t.shape}, {g_.shape}, {a_.shape}, {z_.shape}"
+        )
     if n < 3 or np.any(np.diff(t) <= 0):
         raise ImutoolError("INS needs at least 3 samples with strictly increasing time (validate duplicates first)")
     if not (np.all(np.isfinite(g_)) and np.all(np.isfinite(a_))):
@@ -448,10 +460,24 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
     ba0 = np.zeros(3)
     bg_sigma = c.init_gyro_bias_sigma if c.gyro_bias_states else 0.0
     ba_sigma = c.init_accel_bias_sigma if c.accel_bias_states else 0.0
-    prm = np.array([gravity, c.gyro_noise, c.accel_noise, c.gyro_bias_rw if c.gyro_bias_states else 0.0,
-                    c.accel_bias_rw if c.accel_bias_states else 0.0, c.zupt_sigma, c.height_sigma,
-                    c.init_tilt_sigma, c.init_heading_sigma, c.init_vel_sigma, ba_sigma, bg_sigma, c.zaru_sigma],
-                   dtype=np.float64)
+    prm = np.array(
+        [
+            gravity,
+            c.gyro_noise,
+            c.accel_noise,
+            c.gyro_bias_rw if c.gyro_bias_states else 0.0,
+            c.accel_bias_rw if c.accel_bias_states else 0.0,
+            c.zupt_sigma,
+            c.height_sigma,
+            c.init_tilt_sigma,
+            c.init_heading_sigma,
+            c.init_vel_sigma,
+            ba_sigma,
+            bg_sigma,
+            c.zaru_sigma,
+        ],
+        dtype=np.float64,
+    )
     opt = np.array([c.order, int(c.zupt), int(c.height_update), int(c.zaru and c.gyro_bias_states)], dtype=np.int64)
     pos = np.full((n, 3), np.nan)
     vel = np.full((n, 3), np.nan)
@@ -468,15 +494,24 @@ def run_ins(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, zvi: np.ndarr
     hvar[i0:a0] = hvar[a0]
     bias[i0:a0] = bias[a0]
     a0 = i0
-    info = {"alignment_start_s": float(t[a0]), "alignment_end_s": float(t[a1 - 1]), "gravity_m_s2": gravity,
-            "initial_gyro_bias_deg_s": np.degrees(bg0).round(4).tolist()}
-    return InsResult(t, pos, vel, q, pdiag, hvar, bias[:, :3], bias[:, 3:], z_ & (np.arange(n) >= a0), a0, gravity,
-                     p_final, info)
+    info = {
+        "alignment_start_s": float(t[a0]),
+        "alignment_end_s": float(t[a1 - 1]),
+        "gravity_m_s2": gravity,
+        "initial_gyro_bias_deg_s": np.degrees(bg0).round(4).tolist(),
+    }
+    return InsResult(
+        t, pos, vel, q, pdiag, hvar, bias[:, :3], bias[:, 3:], z_ & (np.arange(n) >= a0), a0, gravity, p_final, info
+    )
 
 
-def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
-        detector_params: dict[str, float] | None = None,
-        config: InsConfig | None = None) -> tuple[Recording, InsResult]:
+def ins(
+    rec: Recording,
+    zvi: np.ndarray | None = None,
+    detector: str = "shoe",
+    detector_params: dict[str, float] | None = None,
+    config: InsConfig | None = None,
+) -> tuple[Recording, InsResult]:
     """Run the INS over a recording (``gyro`` rad/s, ``accel`` m/s²). ZVI flags: given, or detected with
     ``detector``. Returns the output recording (pos, vel m/s, roll/pitch/heading deg, q, *_std, zvi, biases;
     ``ref_*`` columns of the input are carried over) and the raw :class:`InsResult`."""
@@ -490,8 +525,10 @@ def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
     if zvi is None:
         zvi = detect(rec, detector, **(detector_params or {})).flags
     res = run_ins(rec.time, gyro, accel, zvi, config)
-    out = Recording(rec.time.copy(), meta={**{k: v for k, v in rec.meta.items() if k in ("source", "sensor", "frame")},
-                                           **input_notes(rec.meta)})
+    out = Recording(
+        rec.time.copy(),
+        meta={**{k: v for k, v in rec.meta.items() if k in ("source", "sensor", "frame")}, **input_notes(rec.meta)},
+    )
     out.add("pos", res.pos, "m")
     out.add("vel", res.vel, "m/s")
     roll, pitch, heading = res.euler_deg()
@@ -519,8 +556,9 @@ def ins(rec: Recording, zvi: np.ndarray | None = None, detector: str = "shoe",
 # strides and evaluation
 
 
-def strides(time: np.ndarray, pos: np.ndarray, zvi: np.ndarray, min_swing_s: float = 0.2,
-            max_stance_s: float = 1.5) -> dict[str, Any]:
+def strides(
+    time: np.ndarray, pos: np.ndarray, zvi: np.ndarray, min_swing_s: float = 0.2, max_stance_s: float = 1.5
+) -> dict[str, Any]:
     """Stride segmentation from ZVIs: one stride per swing between two stance intervals.
 
     Motion gaps shorter than ``min_swing_s`` (s) do not count as swings (a stance split by a foot roll).
@@ -549,17 +587,26 @@ def strides(time: np.ndarray, pos: np.ndarray, zvi: np.ndarray, min_swing_s: flo
             continue
         p0 = pos[a0:b0][m0].mean(axis=0)
         p1 = pos[a1:b1][m1].mean(axis=0)
-        rows.append({"start_s": float(time[b0 - 1]), "end_s": float(time[a1]),
-                     "length_m": float(np.hypot(*(p1 - p0)[:2])), "height_change_m": float(-(p1 - p0)[2]),
-                     "swing_s": float(time[a1] - time[b0 - 1]),
-                     "duration_s": float(time[a1] - time[a0]) if time[b0 - 1] - time[a0] <= max_stance_s
-                     else float("nan")})
+        rows.append(
+            {
+                "start_s": float(time[b0 - 1]),
+                "end_s": float(time[a1]),
+                "length_m": float(np.hypot(*(p1 - p0)[:2])),
+                "height_change_m": float(-(p1 - p0)[2]),
+                "swing_s": float(time[a1] - time[b0 - 1]),
+                "duration_s": float(time[a1] - time[a0]) if time[b0 - 1] - time[a0] <= max_stance_s else float("nan"),
+            }
+        )
     lengths = np.array([r["length_m"] for r in rows])
     durs = np.array([r["duration_s"] for r in rows])
     durs = durs[np.isfinite(durs)]
-    return {"count": len(rows), "total_length_m": float(lengths.sum()) if rows else 0.0,
-            "mean_length_m": float(lengths.mean()) if rows else None,
-            "mean_duration_s": float(durs.mean()) if len(durs) else None, "table": rows}
+    return {
+        "count": len(rows),
+        "total_length_m": float(lengths.sum()) if rows else 0.0,
+        "mean_length_m": float(lengths.mean()) if rows else None,
+        "mean_duration_s": float(durs.mean()) if len(durs) else None,
+        "table": rows,
+    }
 
 
 def path_length(time: np.ndarray, pos: np.ndarray, step_s: float = 0.1) -> float:
@@ -607,10 +654,14 @@ def evaluate_position(est: Recording, ref: Recording | None = None) -> dict[str,
     if rp is None:
         pv = p[ok]
         e = pv[-1] - pv[0]
-        return {"mode": "closed-loop", "final_error_m": float(np.linalg.norm(e)),
-                "final_error_horizontal_m": float(np.hypot(e[0], e[1])), "final_error_ned_m": e.tolist(),
-                "distance_m": dist_est,
-                "final_error_percent_of_distance": 100 * float(np.linalg.norm(e)) / dist_est if dist_est > 0 else None}
+        return {
+            "mode": "closed-loop",
+            "final_error_m": float(np.linalg.norm(e)),
+            "final_error_horizontal_m": float(np.hypot(e[0], e[1])),
+            "final_error_ned_m": e.tolist(),
+            "distance_m": dist_est,
+            "final_error_percent_of_distance": 100 * float(np.linalg.norm(e)) / dist_est if dist_est > 0 else None,
+        }
     r = interp_to(t, ref.time, rp)
     both = ok & np.all(np.isfinite(r), axis=1)
     if both.sum() < 2:

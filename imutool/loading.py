@@ -18,10 +18,20 @@ from formats import Recording
 from formats.errors import ImutoolError
 
 
-def load_recording(path: str | os.PathLike, *, columns: str | None = None, profile: str | None = None,
-                   topic: str | None = None, stamp: str = "header", duplicates: str = "drop",
-                   backwards: str = "error", mounting: str | None = None, calibration_file: str | None = None,
-                   validate: bool = True, strict: bool = False) -> tuple[Recording, dict[str, Any]]:
+def load_recording(
+    path: str | os.PathLike,
+    *,
+    columns: str | None = None,
+    profile: str | None = None,
+    topic: str | None = None,
+    stamp: str = "header",
+    duplicates: str = "drop",
+    backwards: str = "error",
+    mounting: str | None = None,
+    calibration_file: str | None = None,
+    validate: bool = True,
+    strict: bool = False,
+) -> tuple[Recording, dict[str, Any]]:
     """Read ``path`` (any format imutool reads) → (recording, validation report dict).
 
     columns/profile: foreign CSV column mapping; topic/stamp: bag topic and time source; duplicates/backwards:
@@ -68,8 +78,7 @@ def load_recording(path: str | os.PathLike, *, columns: str | None = None, profi
         report.update({k: v for k, v in checks.as_dict().items() if k != "figures"})
         report["plausibility_figures"] = checks.figures
         if validate:
-            rec.meta["validation"] = {k: v for k, v in report.items()
-                                      if k not in ("plausibility_figures", "warnings")}
+            rec.meta["validation"] = {k: v for k, v in report.items() if k not in ("plausibility_figures", "warnings")}
         else:
             report["validated"] = False
         if checks.warnings:
@@ -98,8 +107,7 @@ def require_channels(rec: Recording, names: list[str] | tuple[str, ...], path: s
     """Refuse (ImutoolError naming ``path``) a recording that lacks any of the channels ``names``."""
     missing = [n for n in names if n not in rec.channels]
     if missing:
-        raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}",
-                           path=path)
+        raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}", path=path)
 
 
 class ChunkChecks:
@@ -115,8 +123,9 @@ class ChunkChecks:
     output's metadata. ``strict``: a warning raises an ImutoolError (inside a streamed writer: no output).
     """
 
-    def __init__(self, path: str, *, mounting: str | None = None, calibration_file: str | None = None,
-                 strict: bool = False):
+    def __init__(
+        self, path: str, *, mounting: str | None = None, calibration_file: str | None = None, strict: bool = False
+    ):
         from formats import plausibility
 
         self.path = path
@@ -152,16 +161,26 @@ class ChunkChecks:
             self._refuse(found.warnings)
         return chunk
 
-    def finish(self, rows_read: int, rows_kept: int, *, duplicates: int = 0, skipped: int = 0,
-               reader_meta: dict[str, Any] | None = None) -> tuple[dict[str, Any], list[str]]:
+    def finish(
+        self,
+        rows_read: int,
+        rows_kept: int,
+        *,
+        duplicates: int = 0,
+        skipped: int = 0,
+        reader_meta: dict[str, Any] | None = None,
+    ) -> tuple[dict[str, Any], list[str]]:
         """(validation report, every warning of the run). rows_read: rows the reader returned; rows_kept: rows
         used; duplicates: of the rows dropped, those whose time repeated the row before; skipped: malformed
         rows the reader skipped (or ``reader_meta``: the reader's metadata, e.g. a bag's, which hold them)."""
         from formats import plausibility
 
-        report, dropped = plausibility.dropped_rows(rows_read, rows_kept, {"duplicate_timestamps": duplicates},
-                                                    reader_meta if reader_meta is not None
-                                                    else {"skipped_rows": skipped})
+        report, dropped = plausibility.dropped_rows(
+            rows_read,
+            rows_kept,
+            {"duplicate_timestamps": duplicates},
+            reader_meta if reader_meta is not None else {"skipped_rows": skipped},
+        )
         for counts in self._absurd.absurd.values():
             counts[1] = rows_read  # the share of a unit error is over the whole run
         absurd = self._absurd.absurd_warnings()

@@ -35,13 +35,21 @@ def interp_to(t_target: np.ndarray, t_src: np.ndarray, values: np.ndarray) -> np
     """Linear interpolation of (N,) or (N,k) values onto t_target; NaN outside the source span."""
     v = np.asarray(values, dtype=float)
     v2 = v.reshape(len(v), -1)
-    out = np.stack([np.interp(t_target, t_src, v2[:, j], left=np.nan, right=np.nan) for j in range(v2.shape[1])],
-                   axis=1)
+    out = np.stack(
+        [np.interp(t_target, t_src, v2[:, j], left=np.nan, right=np.nan) for j in range(v2.shape[1])], axis=1
+    )
     return out[:, 0] if v.ndim == 1 else out
 
 
-def best_lag(t: np.ndarray, x: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, max_lag_s: float,
-             step_s: float | None = None, wrap_deg: bool = False) -> tuple[float, float]:
+def best_lag(
+    t: np.ndarray,
+    x: np.ndarray,
+    t_ref: np.ndarray,
+    ref: np.ndarray,
+    max_lag_s: float,
+    step_s: float | None = None,
+    wrap_deg: bool = False,
+) -> tuple[float, float]:
     """The constant lag L (s) in [−max, +max] minimising RMS of x(t) − ref(t − L), and that RMS.
 
     Positive L means x lags the reference (x at time t equals the reference at t − L).
@@ -62,7 +70,7 @@ def best_lag(t: np.ndarray, x: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, m
         costs[i] = np.sqrt(np.mean(d[ok] ** 2)) if ok.sum() > 10 else np.inf
     k = int(np.argmin(costs))
     lag = float(lags[k])
-    if 0 < k < len(lags) - 1 and np.all(np.isfinite(costs[k - 1:k + 2])):
+    if 0 < k < len(lags) - 1 and np.all(np.isfinite(costs[k - 1 : k + 2])):
         c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
         den = c0 - 2 * c1 + c2
         if den > 0:
@@ -71,6 +79,7 @@ def best_lag(t: np.ndarray, x: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, m
 
 
 # ---- attitude evaluation (added by the attitude area; the functions above are unchanged) ------------------
+
 
 def snr_db(filtered: np.ndarray, raw: np.ndarray) -> float:
     """Roll paper eq. 20: SNR_dB = 10·log10(Σ s² / Σ (s − ŝ)²), s = filtered signal, ŝ = raw measured signal."""
@@ -116,8 +125,16 @@ def unwrap_deg(a: np.ndarray) -> np.ndarray:
     return out
 
 
-def evaluate_angle(t: np.ndarray, est: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, *, wrap: bool = False,
-                   max_lag_s: float = 0.0, raw: np.ndarray | None = None) -> dict:
+def evaluate_angle(
+    t: np.ndarray,
+    est: np.ndarray,
+    t_ref: np.ndarray,
+    ref: np.ndarray,
+    *,
+    wrap: bool = False,
+    max_lag_s: float = 0.0,
+    raw: np.ndarray | None = None,
+) -> dict:
     """Error statistics (deg) of one angle against a reference interpolated onto the estimate's time.
 
     wrap: heading (errors wrapped to ±180°, reference unwrapped before interpolation). max_lag_s > 0 adds the
@@ -131,8 +148,14 @@ def evaluate_angle(t: np.ndarray, est: np.ndarray, t_ref: np.ndarray, ref: np.nd
         e = wrap_deg180(e)
     out = error_stats(e)
     if max_lag_s > 0:
-        lag, rms = best_lag(t, np.asarray(est, float) if not wrap else unwrap_deg(est), t_ref,
-                            unwrap_deg(ref) if wrap else ref, max_lag_s, wrap_deg=wrap)
+        lag, rms = best_lag(
+            t,
+            np.asarray(est, float) if not wrap else unwrap_deg(est),
+            t_ref,
+            unwrap_deg(ref) if wrap else ref,
+            max_lag_s,
+            wrap_deg=wrap,
+        )
         out["lag_s"] = lag
         out["rmse_lag_removed"] = rms
     if raw is not None:
@@ -162,9 +185,18 @@ def attitude_rmse(est, ref) -> dict:
     return out
 
 
-def heave_accuracy(t_est: np.ndarray, heave_est: np.ndarray, t_ref: np.ndarray, heave_ref: np.ndarray, *,
-                   lag_s: float = 0.0, mask: np.ndarray | None = None, floor_m: float = 0.05, pct: float = 5.0,
-                   sample_fraction: float = 0.95) -> dict:
+def heave_accuracy(
+    t_est: np.ndarray,
+    heave_est: np.ndarray,
+    t_ref: np.ndarray,
+    heave_ref: np.ndarray,
+    *,
+    lag_s: float = 0.0,
+    mask: np.ndarray | None = None,
+    floor_m: float = 0.05,
+    pct: float = 5.0,
+    sample_fraction: float = 0.95,
+) -> dict:
     """A heave error under the three readings of "5 cm or 5 %" (heave m, any one sign convention for both).
 
     The estimate at t is compared with the reference at t − lag_s (``mask``: samples to use, e.g. settled).
@@ -195,13 +227,26 @@ def heave_accuracy(t_est: np.ndarray, heave_est: np.ndarray, t_ref: np.ndarray, 
     within = np.abs(e) <= np.maximum(floor_m, f * np.abs(r[ok]))
     frac = float(np.mean(within))
     return {
-        "n": n, "hs_ref_m": hs, "rmse_m": rmse, "floor_m": floor_m, "pct": pct,
-        "significant": {"definition": f"RMS error <= max({floor_m:g} m, {pct:g} % of Hs = 4 sigma of the reference)",
-                        "tolerance_m": tol_s, "pass": bool(rmse <= tol_s)},
-        "amplitude": {"definition": f"RMS error <= max({floor_m:g} m, {pct:g} % of the significant amplitude Hs/2)",
-                      "tolerance_m": tol_a, "pass": bool(rmse <= tol_a)},
-        "per_sample": {"definition": f"|error| <= max({floor_m:g} m, {pct:g} % of |reference|) at >= "
-                                     f"{100 * sample_fraction:g} % of samples",
-                       "fraction_within": frac, "p95_abs_m": float(np.percentile(np.abs(e), 95)),
-                       "pass": bool(frac >= sample_fraction)},
+        "n": n,
+        "hs_ref_m": hs,
+        "rmse_m": rmse,
+        "floor_m": floor_m,
+        "pct": pct,
+        "significant": {
+            "definition": f"RMS error <= max({floor_m:g} m, {pct:g} % of Hs = 4 sigma of the reference)",
+            "tolerance_m": tol_s,
+            "pass": bool(rmse <= tol_s),
+        },
+        "amplitude": {
+            "definition": f"RMS error <= max({floor_m:g} m, {pct:g} % of the significant amplitude Hs/2)",
+            "tolerance_m": tol_a,
+            "pass": bool(rmse <= tol_a),
+        },
+        "per_sample": {
+            "definition": f"|error| <= max({floor_m:g} m, {pct:g} % of |reference|) at >= "
+            f"{100 * sample_fraction:g} % of samples",
+            "fraction_within": frac,
+            "p95_abs_m": float(np.percentile(np.abs(e), 95)),
+            "pass": bool(frac >= sample_fraction),
+        },
     }

@@ -101,8 +101,13 @@ class Headings:
     notes: list[str] = field(default_factory=list)
 
 
-def resolve_headings(h: np.ndarray, heading_ref: str, card: Any = None, deviation_deg: float | None = None,
-                     variation_deg: float | None = None) -> Headings:
+def resolve_headings(
+    h: np.ndarray,
+    heading_ref: str,
+    card: Any = None,
+    deviation_deg: float | None = None,
+    variation_deg: float | None = None,
+) -> Headings:
     """Sensor / deviation / magnetic / true heading arrays from one heading channel (deg).
 
     ``card``: a deviation card (``deviation_deg(compass)``, ``compass_from_magnetic(magnetic)``); ``deviation_deg``
@@ -156,8 +161,10 @@ class RatePlan:
 
     def describe(self) -> str:
         how = "picked to fit" if self.chosen else "as asked"
-        return (f"{self.rate_hz:g} Hz ({how}): ≈{self.bytes_per_s:.0f} bytes/s of {self.capacity_bytes_per_s:.0f} "
-                f"at {self.baud} Bd 8N1 ({100 * self.bytes_per_s / self.capacity_bytes_per_s:.0f} %)")
+        return (
+            f"{self.rate_hz:g} Hz ({how}): ≈{self.bytes_per_s:.0f} bytes/s of {self.capacity_bytes_per_s:.0f} "
+            f"at {self.baud} Bd 8N1 ({100 * self.bytes_per_s / self.capacity_bytes_per_s:.0f} %)"
+        )
 
 
 def input_rate(rec: Recording) -> float:
@@ -168,8 +175,7 @@ def input_rate(rec: Recording) -> float:
     return 1.0 / dt if dt > 0 else 1.0
 
 
-def plan_rate(row_bytes: int, baud: int, rate_hz: float | None, input_hz: float,
-              fill: float = 0.9) -> RatePlan:
+def plan_rate(row_bytes: int, baud: int, rate_hz: float | None, input_hz: float, fill: float = 0.9) -> RatePlan:
     """Check (``rate_hz`` given) or choose (None) the output rate for ``row_bytes`` bytes per output instant.
 
     Capacity = baud / 10 bytes/s (8N1); at most ``fill`` of it is used. A given rate that needs more is refused
@@ -186,20 +192,31 @@ def plan_rate(row_bytes: int, baud: int, rate_hz: float | None, input_hz: float,
         need = row_bytes * rate_hz
         if need > usable:
             fit = [r for r in STANDARD_RATES if r <= max_rate]
-            need_baud = next((b for b in (4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800)
-                              if b * fill / BITS_PER_CHAR >= need), None)
+            need_baud = next(
+                (
+                    b
+                    for b in (4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800)
+                    if b * fill / BITS_PER_CHAR >= need
+                ),
+                None,
+            )
             raise ImutoolError(
                 f"--rate {rate_hz:g} Hz does not fit the line: {row_bytes} bytes per output × {rate_hz:g} Hz = "
                 f"{need:.0f} bytes/s, but {baud} Bd (8N1) carries {cap:.0f} bytes/s ({100 * fill:.0f} % usable = "
-                f"{usable:.0f}); use " + (f"--rate {fit[0]:g} or less, " if fit else "") + "fewer sentences"
-                + (f", or --baud {need_baud}" if need_baud else ""))
+                f"{usable:.0f}); use "
+                + (f"--rate {fit[0]:g} or less, " if fit else "")
+                + "fewer sentences"
+                + (f", or --baud {need_baud}" if need_baud else "")
+            )
         return RatePlan(float(rate_hz), row_bytes, need, cap, baud, False)
     cands = [r for r in STANDARD_RATES if r <= max_rate and r <= input_hz * 1.0001]
     if input_hz <= max_rate and (not cands or input_hz < cands[0]):
         cands.insert(0, input_hz)
     if not cands:
-        raise ImutoolError(f"the sentences need {row_bytes} bytes per output: even 0.1 Hz does not fit "
-                           f"{baud} Bd; choose fewer sentences or a higher --baud")
+        raise ImutoolError(
+            f"the sentences need {row_bytes} bytes per output: even 0.1 Hz does not fit "
+            f"{baud} Bd; choose fewer sentences or a higher --baud"
+        )
     r = cands[0]
     return RatePlan(float(r), row_bytes, row_bytes * r, cap, baud, True)
 
@@ -231,13 +248,27 @@ def output_rows(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     return np.unique(np.clip(np.searchsorted(t, grid - 1e-9, side="left"), 0, n - 1))
 
 
-def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: float | None = None, *,
-               heading_ref: str = "magnetic", heading_source: str = "auto", deviation_deg: float | None = None,
-               card: Any = None, variation_deg: float | None = None, ths_mode: str = "auto",
-               heave_positive: str = "up", xdr_roll_id: str = "ROLL", xdr_pitch_id: str = "PTCH",
-               xdr_roll_sign: int = 1, xdr_pitch_sign: int = 1, talkers: dict[str, str] | None = None,
-               roll_kw: dict | None = None, utc_start: datetime | None = None,
-               rot_window_s: float = 1.0) -> Iterator[tuple[float, str]]:
+def nmea_lines(
+    rec: Recording,
+    sentences: list[str] | tuple[str, ...],
+    rate_hz: float | None = None,
+    *,
+    heading_ref: str = "magnetic",
+    heading_source: str = "auto",
+    deviation_deg: float | None = None,
+    card: Any = None,
+    variation_deg: float | None = None,
+    ths_mode: str = "auto",
+    heave_positive: str = "up",
+    xdr_roll_id: str = "ROLL",
+    xdr_pitch_id: str = "PTCH",
+    xdr_roll_sign: int = 1,
+    xdr_pitch_sign: int = 1,
+    talkers: dict[str, str] | None = None,
+    roll_kw: dict | None = None,
+    utc_start: datetime | None = None,
+    rot_window_s: float = 1.0,
+) -> Iterator[tuple[float, str]]:
     """(time s, sentence or TSS1 frame without CR/LF) for each output row; see the module docstring.
 
     Channels: ``roll``/``heel`` and ``pitch`` (deg), a heading (``heading`` as ``heading_ref``;
@@ -260,29 +291,41 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
     if n == 0:
         return
     t = rec.time
-    tk = {"HRM": "II", "XDR": "YX", "HDG": "HC", "HDT": TRUE_TALKER[heading_source],
-          "THS": TRUE_TALKER[heading_source], "ROT": TRUE_TALKER[heading_source], **(talkers or {})}
+    tk = {
+        "HRM": "II",
+        "XDR": "YX",
+        "HDG": "HC",
+        "HDT": TRUE_TALKER[heading_source],
+        "THS": TRUE_TALKER[heading_source],
+        "ROT": TRUE_TALKER[heading_source],
+        **(talkers or {}),
+    }
     heel, _ = _ch(rec, ("heel", "roll"), "deg")
     pitch, _ = _ch(rec, ("pitch",), "deg")
     hdg, hname = _ch(rec, ("heading", "heading_true", "heading_mag", "heading_sensor"), "deg")
-    ref = {"heading_true": "true", "heading_mag": "magnetic", "heading_sensor": "compass"}.get(hname or "",
-                                                                                           heading_ref)
+    ref = {"heading_true": "true", "heading_mag": "magnetic", "heading_sensor": "compass"}.get(hname or "", heading_ref)
     need_heading = [s for s in sents if s in ("HDG", "HDT", "THS")]
     if ("HRM" in sents or "XDR" in sents) and heel is None:
         raise ImutoolError(f"HRM/XDR need a 'roll' or 'heel' channel (deg); has {', '.join(rec.channels)}")
     if "TSS1" in sents and (heel is None or pitch is None):
-        raise ImutoolError("TSS1 needs roll and pitch (deg) as well as heave: the recording has "
-                           f"{', '.join(rec.channels)} (run imutool filter and pass its roll/pitch along)")
+        raise ImutoolError(
+            "TSS1 needs roll and pitch (deg) as well as heave: the recording has "
+            f"{', '.join(rec.channels)} (run imutool filter and pass its roll/pitch along)"
+        )
     hs = None
     if need_heading:
         if hdg is None:
             raise ImutoolError(f"{'/'.join(need_heading)} need a heading channel (deg); has {', '.join(rec.channels)}")
         hs = resolve_headings(hdg, ref, card, deviation_deg, variation_deg)
         if ("THS" in sents or "HDT" in sents) and hs.true is None:
-            what = ("the deviation (--calibration with a [deviation] card, or --deviation) and " if ref == "compass"
-                    and hs.magnetic is None else "")
-            raise ImutoolError(f"THS/HDT carry TRUE heading: the {ref} heading needs {what}the variation "
-                               "(--variation, deg, E +)")
+            what = (
+                "the deviation (--calibration with a [deviation] card, or --deviation) and "
+                if ref == "compass" and hs.magnetic is None
+                else ""
+            )
+            raise ImutoolError(
+                f"THS/HDT carry TRUE heading: the {ref} heading needs {what}the variation (--variation, deg, E +)"
+            )
         if "HDG" in sents and hs.sensor is None:
             raise ImutoolError("HDG from a true heading needs --variation (deg, E +) to recover the magnetic heading")
     heave, _ = _ch(rec, ("heave",), "m")
@@ -320,8 +363,11 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
     if "TSS1" in sents:
         hr, _ = _ch(rec, ("heave_rate",), "m/s")
         if n >= 3:
-            vacc = (np.gradient(hr * heave_sign(rec, heave_positive), t) if hr is not None
-                    else np.gradient(np.gradient(heave, t), t))
+            vacc = (
+                np.gradient(hr * heave_sign(rec, heave_positive), t)
+                if hr is not None
+                else np.gradient(np.gradient(heave, t), t)
+            )
         if "accel" in rec.channels and rec["accel"].ndim == 2:
             a = np.asarray(rec.get("accel", "m/s^2") if rec.units.get("accel") else rec["accel"], float)
             hacc = np.hypot(a[:, 0], a[:, 1])
@@ -346,15 +392,35 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
                 h = _v(heel, i)
                 k = resets.index(float(rs.reset_time[i]))
                 fresh = bool(rs.valid[i])
-                yield ti, hrm_sentence(h, _v(rs.roll_period, i) if fresh else None,
-                                       _v(rs.amp_port, i) if fresh else None, _v(rs.amp_stbd, i) if fresh else None,
-                                       valid=h is not None, peak_port_deg=_v(rs.peak_port, i),
-                                       peak_stbd_deg=_v(rs.peak_stbd, i), reset_utc=reset_dt[k], talker=tk["HRM"])
+                yield (
+                    ti,
+                    hrm_sentence(
+                        h,
+                        _v(rs.roll_period, i) if fresh else None,
+                        _v(rs.amp_port, i) if fresh else None,
+                        _v(rs.amp_stbd, i) if fresh else None,
+                        valid=h is not None,
+                        peak_port_deg=_v(rs.peak_port, i),
+                        peak_stbd_deg=_v(rs.peak_stbd, i),
+                        reset_utc=reset_dt[k],
+                        talker=tk["HRM"],
+                    ),
+                )
             elif s == "XDR":
                 r, p = _v(heel, i), _v(pitch, i)
                 if r is not None or p is not None:
-                    yield ti, xdr_roll_pitch(r, p, roll_id=xdr_roll_id, pitch_id=xdr_pitch_id,
-                                             roll_sign=xdr_roll_sign, pitch_sign=xdr_pitch_sign, talker=tk["XDR"])
+                    yield (
+                        ti,
+                        xdr_roll_pitch(
+                            r,
+                            p,
+                            roll_id=xdr_roll_id,
+                            pitch_id=xdr_pitch_id,
+                            roll_sign=xdr_roll_sign,
+                            pitch_sign=xdr_pitch_sign,
+                            talker=tk["XDR"],
+                        ),
+                    )
             elif s == "HDG":
                 sh = _v(hs.sensor, i)
                 if sh is not None:
@@ -373,20 +439,30 @@ def nmea_lines(rec: Recording, sentences: list[str] | tuple[str, ...], rate_hz: 
             elif s == "PASHR":
                 hv = _v(heave, i) if ok_heave else None
                 sd = [_v(a, i) for a in stds]
-                yield ti, pashr_sentence(None if off is None else ti + off, _v(true_arr, i), _v(heel, i),
-                                         _v(pitch, i), hv, sd[0], sd[1], sd[2] if _v(true_arr, i) is not None else None,
-                                         aiding=1 if gnss[i] else 0, imu_status=1 if ok_heave else 0)
+                yield (
+                    ti,
+                    pashr_sentence(
+                        None if off is None else ti + off,
+                        _v(true_arr, i),
+                        _v(heel, i),
+                        _v(pitch, i),
+                        hv,
+                        sd[0],
+                        sd[1],
+                        sd[2] if _v(true_arr, i) is not None else None,
+                        aiding=1 if gnss[i] else 0,
+                        imu_status=1 if ok_heave else 0,
+                    ),
+                )
             elif s == "TSS1":
                 hv, r, p = _v(heave, i), _v(heel, i), _v(pitch, i)
                 if hv is None or r is None or p is None:
                     continue  # a fixed-length frame has no empty field: no frame rather than a made-up value
                 q = "G" if gnss[i] else "U"
-                yield ti, tss1_frame(hv, r, p, q if ok_heave else q.lower(), _v(hacc, i) or 0.0,
-                                     _v(vacc, i) or 0.0)
+                yield ti, tss1_frame(hv, r, p, q if ok_heave else q.lower(), _v(hacc, i) or 0.0, _v(vacc, i) or 0.0)
 
 
-def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_rows: int = 400,
-              **kw: Any) -> int:
+def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_rows: int = 400, **kw: Any) -> int:
     """Largest number of bytes (with CR/LF) one output instant takes, over about ``sample_rows`` instants spread
     evenly over the whole recording (fields fill in as it goes: HRM's period and peak hold, ...), + 2 bytes a
     sentence of margin for wider numbers."""
@@ -403,39 +479,73 @@ def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_row
     return int(per[k] + 2 * count[k])
 
 
-def header_lines(*, source: str, sentences: list[str], plan: RatePlan | None, heading_ref: str,
-                 heading_source: str, heave_positive: str, card_from: str | None, deviation_deg: float | None,
-                 variation_deg: float | None, utc: str | None, talkers: dict[str, str]) -> list[str]:
+def header_lines(
+    *,
+    source: str,
+    sentences: list[str],
+    plan: RatePlan | None,
+    heading_ref: str,
+    heading_source: str,
+    heave_positive: str,
+    card_from: str | None,
+    deviation_deg: float | None,
+    variation_deg: float | None,
+    utc: str | None,
+    talkers: dict[str, str],
+) -> list[str]:
     """The ``#`` header block of an NMEA log written by imutool (conventions, flags, rate; read back as
     comments by imutool's reader)."""
+
     def ew(v: float | None) -> str:
         return "null (unknown)" if v is None else f"{abs(v):.1f}° {'E' if v >= 0 else 'W'}"
 
-    lines = [f"imutool nmea from {source}",
-             f"sentences: {','.join(sentences)}" + (f" at {plan.describe()}" if plan else ""),
-             "angles deg; roll + starboard down; pitch + bow up; heading clockwise from north; ROT deg/min "
-             "+ to starboard",
-             f"heave: m, positive {heave_positive.upper()} (--heave-positive {heave_positive}; TSS1 defines + up)"]
+    lines = [
+        f"imutool nmea from {source}",
+        f"sentences: {','.join(sentences)}" + (f" at {plan.describe()}" if plan else ""),
+        "angles deg; roll + starboard down; pitch + bow up; heading clockwise from north; ROT deg/min + to starboard",
+        f"heave: m, positive {heave_positive.upper()} (--heave-positive {heave_positive}; TSS1 defines + up)",
+    ]
     if any(s in sentences for s in ("HDG", "HDT", "THS", "PASHR")):
         dev = f"card {card_from}" if card_from else ew(deviation_deg)
-        lines.append(f"heading input: {heading_ref}; deviation {dev}; variation {ew(variation_deg)}; "
-                     f"source {heading_source} (HDT/THS/ROT talker {talkers.get('THS', '?')}, HDG talker "
-                     f"{talkers.get('HDG', '?')})")
-    lines.append("UTC: " + (utc or "not known (no start time in the recording)"
-                            + (": PASHR time fields empty" if "PASHR" in sentences else "")))
+        lines.append(
+            f"heading input: {heading_ref}; deviation {dev}; variation {ew(variation_deg)}; "
+            f"source {heading_source} (HDT/THS/ROT talker {talkers.get('THS', '?')}, HDG talker "
+            f"{talkers.get('HDG', '?')})"
+        )
+    lines.append(
+        "UTC: "
+        + (
+            utc
+            or "not known (no start time in the recording)"
+            + (": PASHR time fields empty" if "PASHR" in sentences else "")
+        )
+    )
     if "PASHR" in sentences:
-        lines.append("PASHR: heave empty and IMU status 0 while the heave settles (settled = 0); aiding flag "
-                     "1 only with GNSS in the recording")
+        lines.append(
+            "PASHR: heave empty and IMU status 0 while the heave settles (settled = 0); aiding flag "
+            "1 only with GNSS in the recording"
+        )
     if "TSS1" in sentences:
-        lines.append("TSS1: status U/G unaided/GNSS-aided, lower case while settling; vertical acceleration from "
-                     "the heave rate, horizontal from accel x/y (00 without it)")
+        lines.append(
+            "TSS1: status U/G unaided/GNSS-aided, lower case while settling; vertical acceleration from "
+            "the heave rate, horizontal from accel x/y (00 without it)"
+        )
     table = str.maketrans({"°": " deg", "≈": "~", "−": "-", "×": "x", "→": "->"})
     return [("# " + x).translate(table).encode("ascii", "replace").decode("ascii") for x in lines]
 
 
-def write_log(rec: Recording, path: str, sentences: list[str] | tuple[str, ...], *, rate_hz: float | None = None,
-              baud: int = 4800, source: str = "", header: bool = True, time_prefix: bool = False,
-              **kw: Any) -> dict[str, Any]:
+def write_log(
+    rec: Recording,
+    path: str,
+    sentences: list[str] | tuple[str, ...],
+    *,
+    rate_hz: float | None = None,
+    baud: int = 4800,
+    source: str = "",
+    header: bool = True,
+    time_prefix: bool = False,
+    **kw: Any,
+) -> dict[str, Any]:
     """Plan the rate against ``baud`` (:func:`plan_rate`), then write the '#' header block and the sentences
     (CR/LF, atomic) to ``path``. ``kw`` as :func:`nmea_lines`. Returns counts, rate and line use."""
     from formats.atomic import atomic_path
@@ -445,32 +555,55 @@ def write_log(rec: Recording, path: str, sentences: list[str] | tuple[str, ...],
         raise ImutoolError("the recording has no rows", path=path)
     nb = row_bytes(rec, sents, **kw)
     if nb == 0:
-        raise ImutoolError(f"no sentence could be written: the recording lacks the channels for {','.join(sents)} "
-                           f"(has {', '.join(rec.channels)})", path=path)
+        raise ImutoolError(
+            f"no sentence could be written: the recording lacks the channels for {','.join(sents)} "
+            f"(has {', '.join(rec.channels)})",
+            path=path,
+        )
     plan = plan_rate(nb, baud, rate_hz, input_rate(rec))
     us = kw.get("utc_start")
     off = us.timestamp() - float(rec.time[0]) if us is not None else utc_offset_s(rec)
-    utc = (None if off is None else "recording time + offset, first row " + datetime.fromtimestamp(
-        float(rec.time[0]) + off, tz=timezone.utc).isoformat().replace("+00:00", "Z"))
+    utc = (
+        None
+        if off is None
+        else "recording time + offset, first row "
+        + datetime.fromtimestamp(float(rec.time[0]) + off, tz=timezone.utc).isoformat().replace("+00:00", "Z")
+    )
     src = kw.get("heading_source", "auto")
     talkers = {"HDG": "HC", "THS": TRUE_TALKER[src], **(kw.get("talkers") or {})}
     counts: dict[str, int] = {}
     with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="") as fh:
         if header:
-            for h in header_lines(source=source, sentences=sents, plan=plan,
-                                  heading_ref=kw.get("heading_ref", "magnetic"), heading_source=src,
-                                  heave_positive=kw.get("heave_positive", "up"), card_from=kw.get("card_from"),
-                                  deviation_deg=kw.get("deviation_deg"), variation_deg=kw.get("variation_deg"),
-                                  utc=utc, talkers=talkers):
+            for h in header_lines(
+                source=source,
+                sentences=sents,
+                plan=plan,
+                heading_ref=kw.get("heading_ref", "magnetic"),
+                heading_source=src,
+                heave_positive=kw.get("heave_positive", "up"),
+                card_from=kw.get("card_from"),
+                deviation_deg=kw.get("deviation_deg"),
+                variation_deg=kw.get("variation_deg"),
+                utc=utc,
+                talkers=talkers,
+            ):
                 fh.write(h + "\r\n")
         for ts, s in nmea_lines(rec, sents, plan.rate_hz, **{k: v for k, v in kw.items() if k != "card_from"}):
             fh.write((f"{ts:.3f} " if time_prefix else "") + s + "\r\n")
             k = sentence_kind(s)
             counts[k] = counts.get(k, 0) + 1
-    return {"path": path, "sentences": counts, "total": int(sum(counts.values())), "rate_hz": plan.rate_hz,
-            "rate_chosen": plan.chosen, "bytes_per_s": round(plan.bytes_per_s, 1),
-            "line_bytes_per_s": plan.capacity_bytes_per_s, "baud": baud,
-            "heave_positive": kw.get("heave_positive", "up"), "utc": utc}
+    return {
+        "path": path,
+        "sentences": counts,
+        "total": int(sum(counts.values())),
+        "rate_hz": plan.rate_hz,
+        "rate_chosen": plan.chosen,
+        "bytes_per_s": round(plan.bytes_per_s, 1),
+        "line_bytes_per_s": plan.capacity_bytes_per_s,
+        "baud": baud,
+        "heave_positive": kw.get("heave_positive", "up"),
+        "utc": utc,
+    }
 
 
 def sentence_kind(s: str) -> str:

@@ -41,17 +41,29 @@ def sample_rate(t: np.ndarray) -> tuple[float, str]:
     mean_rate = (len(t) - 1) / float(t[-1] - t[0])
     med = float(np.median(np.diff(t)))
     if abs(med * mean_rate - 1.0) > 0.05:
-        return mean_rate, (f"irregular timestamps (median step {1e3 * med:.2f} ms vs mean {1e3 / mean_rate:.2f} ms): "
-                           f"samples taken as uniform at the mean rate {mean_rate:.3f} Hz")
+        return mean_rate, (
+            f"irregular timestamps (median step {1e3 * med:.2f} ms vs mean {1e3 / mean_rate:.2f} ms): "
+            f"samples taken as uniform at the mean rate {mean_rate:.3f} Hz"
+        )
     return mean_rate, "regular"
 
 
-def allan_noise(inputs: str | os.PathLike | list[str] | tuple[str, ...], output: str | os.PathLike, *,
-                plot: str | os.PathLike | None = None, kalibr: str | os.PathLike | None = None,
-                topic_name: str = "/imu0", kalibr_fallback: str = "refuse",
-                channels: str | tuple[str, ...] = ("gyro", "accel", "mag"), per_decade: int = 10,
-                start: float | None = None, end: float | None = None, stage: Callable[[str], None] | None = None,
-                on_input: Callable[[str, dict[str, Any]], None] | None = None, **load_options: Any) -> NoiseRun:
+def allan_noise(
+    inputs: str | os.PathLike | list[str] | tuple[str, ...],
+    output: str | os.PathLike,
+    *,
+    plot: str | os.PathLike | None = None,
+    kalibr: str | os.PathLike | None = None,
+    topic_name: str = "/imu0",
+    kalibr_fallback: str = "refuse",
+    channels: str | tuple[str, ...] = ("gyro", "accel", "mag"),
+    per_decade: int = 10,
+    start: float | None = None,
+    end: float | None = None,
+    stage: Callable[[str], None] | None = None,
+    on_input: Callable[[str, dict[str, Any]], None] | None = None,
+    **load_options: Any,
+) -> NoiseRun:
     """Allan deviation of the static recording(s) ``inputs`` → noise file ``output`` (.yaml).
 
     channels: which of gyro, accel, mag to analyse (the first input holding each is used); per_decade: cluster
@@ -124,18 +136,30 @@ def allan_noise(inputs: str | os.PathLike | list[str] | tuple[str, ...], output:
                 values[f"{name}_random_walk_xyz"] = [float(v) for v in k_]
             else:
                 values[f"{name}_random_walk_upper_bound"] = float(np.max(sm["K_upper"]))
-            info[name] = {"file": path, "rate_hz": round(fs, 3), "samples": int(len(y)),
-                          "duration_s": round(float(len(y) / fs), 1), "dropped_nan_rows": int((~ok).sum()),
-                          "timing": timing,
-                          "gaps": len(rep.get("gaps", [])),
-                          "N": n_, "B": b_, "K": k_, "tau_min_s": res.summary()["tau_min_s"],
-                          "B_upper_bound": sm["B_upper_bound"], "allan_minimum": sm["B_kind"],
-                          "K_resolved": sm["K_resolved"], "K_upper_bound": sm["K_upper"],
-                          "units": {"N": f"{SI[name]}/√Hz", "B": SI[name], "K": f"{SI[name]}/√s"}}
+            info[name] = {
+                "file": path,
+                "rate_hz": round(fs, 3),
+                "samples": int(len(y)),
+                "duration_s": round(float(len(y) / fs), 1),
+                "dropped_nan_rows": int((~ok).sum()),
+                "timing": timing,
+                "gaps": len(rep.get("gaps", [])),
+                "N": n_,
+                "B": b_,
+                "K": k_,
+                "tau_min_s": res.summary()["tau_min_s"],
+                "B_upper_bound": sm["B_upper_bound"],
+                "allan_minimum": sm["B_kind"],
+                "K_resolved": sm["K_resolved"],
+                "K_upper_bound": sm["K_upper"],
+                "units": {"N": f"{SI[name]}/√Hz", "B": SI[name], "K": f"{SI[name]}/√s"},
+            }
             if name == "gyro":  # degrees at the user surface
-                info[name]["deg"] = {"ARW_deg_per_rt_h": [float(np.degrees(v) * 60) for v in n_],
-                                     "B_deg_per_h": [float(np.degrees(v) * 3600) for v in b_],
-                                     "K_deg_per_h_per_rt_h": [float(np.degrees(v) * 3600 * 60) for v in k_]}
+                info[name]["deg"] = {
+                    "ARW_deg_per_rt_h": [float(np.degrees(v) * 60) for v in n_],
+                    "B_deg_per_h": [float(np.degrees(v) * 3600) for v in b_],
+                    "K_deg_per_h_per_rt_h": [float(np.degrees(v) * 3600 * 60) for v in k_],
+                }
     if not results:
         raise ImutoolError(f"none of the channels {', '.join(wanted)} found in {', '.join(inputs)}")
     values["rate_hz"] = float(max(rates))

@@ -88,8 +88,9 @@ def _columns(stream: Any) -> int | None:
 class Bar:
     """A progress bar on stderr (tqdm), or a silent stand-in when not interactive. Use as a context manager."""
 
-    def __init__(self, label: str, total: int | None = None, unit: str = "it", quiet: bool = False,
-                 stream: Any = None) -> None:
+    def __init__(
+        self, label: str, total: int | None = None, unit: str = "it", quiet: bool = False, stream: Any = None
+    ) -> None:
         self.label = label
         self.total = total
         self.unit = unit
@@ -101,9 +102,19 @@ class Bar:
 
             out = sys.stderr if stream is None else stream
             cols = _columns(out)
-            self._tq = tqdm(total=total, desc=label, unit=unit, file=out, leave=False, ncols=cols,
-                            nrows=None if cols is None else 24, dynamic_ncols=cols is None,
-                            unit_scale=total is None or total >= 100_000, mininterval=0.2, smoothing=0.1)
+            self._tq = tqdm(
+                total=total,
+                desc=label,
+                unit=unit,
+                file=out,
+                leave=False,
+                ncols=cols,
+                nrows=None if cols is None else 24,
+                dynamic_ncols=cols is None,
+                unit_scale=total is None or total >= 100_000,
+                mininterval=0.2,
+                smoothing=0.1,
+            )
             _OPEN.add(self)
 
     @property

@@ -121,16 +121,24 @@ class RollCycles:
 
     def of_side(self, side: int) -> RollCycles:
         m = self.side == side
-        return RollCycles(*(None if getattr(self, f) is None else getattr(self, f)[m]
-                            for f in self.__dataclass_fields__))
+        return RollCycles(
+            *(None if getattr(self, f) is None else getattr(self, f)[m] for f in self.__dataclass_fields__)
+        )
 
     def as_recording(self) -> Recording:
         """The per-cycle table as a Recording (time = t_peak) for writing with formats.write."""
-        rec = Recording(self.t_peak.copy(),
-                        {"side": self.side.astype(float), "peak_heel": self.peak_deg, "amplitude": self.amplitude_deg,
-                         "period": self.period_s, "t_start": self.t_start, "t_end": self.t_end},
-                        {"side": "1", "peak_heel": "deg", "amplitude": "deg", "period": "s", "t_start": "s",
-                         "t_end": "s"})
+        rec = Recording(
+            self.t_peak.copy(),
+            {
+                "side": self.side.astype(float),
+                "peak_heel": self.peak_deg,
+                "amplitude": self.amplitude_deg,
+                "period": self.period_s,
+                "t_start": self.t_start,
+                "t_end": self.t_end,
+            },
+            {"side": "1", "peak_heel": "deg", "amplitude": "deg", "period": "s", "t_start": "s", "t_end": "s"},
+        )
         rec.meta["content"] = "roll cycles per MSC.363(92) §3: side +1 starboard / -1 port; time = time of the maximum"
         return rec
 
@@ -174,15 +182,36 @@ class RollStats:
 
     def as_recording(self, meta: dict[str, Any] | None = None) -> Recording:
         """Per-sample columns: heel, roll_period, period_port/stbd, amp_port/stbd, peak_port/stbd, ..."""
-        ch = {"heel": self.heel, "roll_period": self.roll_period, "period_port": self.period_port,
-              "period_stbd": self.period_stbd, "amp_port": self.amp_port, "amp_stbd": self.amp_stbd,
-              "peak_port": self.peak_port, "peak_stbd": self.peak_stbd, "peak_reset_time": self.reset_time,
-              "roll_valid": self.valid.astype(float)}
-        units = {"heel": "deg", "roll_period": "s", "period_port": "s", "period_stbd": "s", "amp_port": "deg",
-                 "amp_stbd": "deg", "peak_port": "deg", "peak_stbd": "deg", "peak_reset_time": "s", "roll_valid": "1"}
+        ch = {
+            "heel": self.heel,
+            "roll_period": self.roll_period,
+            "period_port": self.period_port,
+            "period_stbd": self.period_stbd,
+            "amp_port": self.amp_port,
+            "amp_stbd": self.amp_stbd,
+            "peak_port": self.peak_port,
+            "peak_stbd": self.peak_stbd,
+            "peak_reset_time": self.reset_time,
+            "roll_valid": self.valid.astype(float),
+        }
+        units = {
+            "heel": "deg",
+            "roll_period": "s",
+            "period_port": "s",
+            "period_stbd": "s",
+            "amp_port": "deg",
+            "amp_stbd": "deg",
+            "peak_port": "deg",
+            "peak_stbd": "deg",
+            "peak_reset_time": "s",
+            "roll_valid": "1",
+        }
         rec = Recording(self.time.copy(), ch, units, dict(meta or {}))
-        rec.meta["roll_stats"] = {**self.settings, "resets_utc": self.resets_utc,
-                                  "convention": "heel + starboard down; amp_port/peak_port positive (HRM)"}
+        rec.meta["roll_stats"] = {
+            **self.settings,
+            "resets_utc": self.resets_utc,
+            "convention": "heel + starboard down; amp_port/peak_port positive (HRM)",
+        }
         return rec
 
 
@@ -221,8 +250,8 @@ def _refine(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, 
                 return float(t[ie] + sv * w), float(a0 + a1 * sv + a2 * sv * sv)
     elif i0 < ie < i1 - 1 and np.isfinite(x[ie - 1]) and np.isfinite(x[ie + 1]):
         # too few samples for the least-squares window (low rate): parabola through the 3 samples at the top
-        tt = t[ie - 1:ie + 2] - t[ie]
-        a2, a1, a0 = np.polyfit(tt, x[ie - 1:ie + 2], 2)
+        tt = t[ie - 1 : ie + 2] - t[ie]
+        a2, a1, a0 = np.polyfit(tt, x[ie - 1 : ie + 2], 2)
         if a2 * side < 0:
             tv = -a1 / (2 * a2)
             if tt[0] <= tv <= tt[2]:
@@ -258,9 +287,16 @@ def _crest_width(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: 
     return float(hi - lo)
 
 
-def roll_cycles(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5, centre: str = "zero",
-                centre_window_s: float = 120.0, refine_frac: float = 0.2, max_period_s: float = 60.0,
-                crest_band_deg: float = 0.1) -> RollCycles:
+def roll_cycles(
+    t: np.ndarray,
+    heel_deg: np.ndarray,
+    hysteresis_deg: float = 0.5,
+    centre: str = "zero",
+    centre_window_s: float = 120.0,
+    refine_frac: float = 0.2,
+    max_period_s: float = 60.0,
+    crest_band_deg: float = 0.1,
+) -> RollCycles:
     """Completed roll excursions of a heel series (t s, heel deg + stbd) per MSC.363(92) §3 (see module doc).
 
     crest_band_deg (deg): band below the extremum that defines each cycle's crest width ``crest_s`` (the
@@ -339,9 +375,17 @@ def _utc_of(t: float, utc_start: datetime | None) -> str | None:
     return None
 
 
-def roll_stats(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5, centre: str = "zero",
-               centre_window_s: float = 120.0, refine_frac: float = 0.2, max_period_s: float = 60.0,
-               resets_s: list[float] | tuple[float, ...] = (), utc_start: datetime | None = None) -> RollStats:
+def roll_stats(
+    t: np.ndarray,
+    heel_deg: np.ndarray,
+    hysteresis_deg: float = 0.5,
+    centre: str = "zero",
+    centre_window_s: float = 120.0,
+    refine_frac: float = 0.2,
+    max_period_s: float = 60.0,
+    resets_s: list[float] | tuple[float, ...] = (),
+    utc_start: datetime | None = None,
+) -> RollStats:
     """Per-sample MSC.363(92) roll statistics (causal) and the cycle table.
 
     t: s; heel_deg: deg, + starboard down. resets_s: peak-hold reset times (s, same base as t); the
@@ -352,6 +396,7 @@ def roll_stats(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5,
     x = np.asarray(heel_deg, float)
     cyc = roll_cycles(t, x, hysteresis_deg, centre, centre_window_s, refine_frac, max_period_s)
     n = t.size
+
     # causal step functions: value of the latest completed excursion at or before each sample
     def step(idx_sel: np.ndarray, values: np.ndarray) -> np.ndarray:
         out = np.full(n, np.nan)
@@ -391,22 +436,42 @@ def roll_stats(t: np.ndarray, heel_deg: np.ndarray, hysteresis_deg: float = 0.5,
             # no heel to a side yet → 0 on that side (a heel that never went to port has no port peak)
             peak_stbd[m] = np.where(np.isfinite(a), np.maximum(a, 0.0), np.nan)
             peak_port[m] = np.where(np.isfinite(b), np.maximum(b, 0.0), np.nan)
-    settings = {"hysteresis_deg": hysteresis_deg, "centre": centre, "centre_window_s": centre_window_s,
-                "refine_frac": refine_frac, "max_period_s": max_period_s,
-                "definitions": "MSC.363(92) annex §3: period between successive maxima on the same side"}
-    return RollStats(t, x, roll_period, period_port, period_stbd, amp_port, amp_stbd, peak_port, peak_stbd,
-                     reset_time, valid, cyc, settings, [_utc_of(r, utc_start) for r in resets])
+    settings = {
+        "hysteresis_deg": hysteresis_deg,
+        "centre": centre,
+        "centre_window_s": centre_window_s,
+        "refine_frac": refine_frac,
+        "max_period_s": max_period_s,
+        "definitions": "MSC.363(92) annex §3: period between successive maxima on the same side",
+    }
+    return RollStats(
+        t,
+        x,
+        roll_period,
+        period_port,
+        period_stbd,
+        amp_port,
+        amp_stbd,
+        peak_port,
+        peak_stbd,
+        reset_time,
+        valid,
+        cyc,
+        settings,
+        [_utc_of(r, utc_start) for r in resets],
+    )
 
 
 def heel_of(rec: Recording, path: str = "recording", channel: str | None = None) -> np.ndarray:
     """The heel series (deg, + starboard) of a recording: ``channel`` if given, else ``heel`` (HRM) or ``roll``."""
     if channel and channel not in rec.channels:
         raise ImutoolError(f"no channel {channel!r}; has {', '.join(rec.channels) or 'none'}", path=path)
-    for name in ((channel,) if channel else ("heel", "roll")):
+    for name in (channel,) if channel else ("heel", "roll"):
         if name in rec.channels:
             a = rec.get(name, "deg") if rec.units.get(name) else rec[name]
             if a.ndim != 1:
                 raise ImutoolError(f"channel {name!r} must be one column", path=path)
             return np.asarray(a, float)
-    raise ImutoolError(f"needs a 'roll' or 'heel' channel (deg, + starboard down); has "
-                       f"{', '.join(rec.channels) or 'none'}", path=path)
+    raise ImutoolError(
+        f"needs a 'roll' or 'heel' channel (deg, + starboard down); has {', '.join(rec.channels) or 'none'}", path=path
+    )

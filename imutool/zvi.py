@@ -37,8 +37,13 @@ DEFAULTS: dict[str, dict[str, float]] = {
     # B_g rad/s, B_a m/s² (per-sample accel difference), windows in s
     "paper": {"b_g": 0.6, "b_a": 2.0, "window_g_s": 0.05, "window_a_s": 0.05, "min_duration_s": 0.05},
     # sigma_a m/s², sigma_g rad/s (Skog's 0.01 m/s² and 0.1 deg/s), gamma dimensionless
-    "shoe": {"gamma": 1e5, "sigma_a": 0.01, "sigma_g": float(np.radians(0.1)), "window_s": 0.05,
-             "min_duration_s": 0.05},
+    "shoe": {
+        "gamma": 1e5,
+        "sigma_a": 0.01,
+        "sigma_g": float(np.radians(0.1)),
+        "window_s": 0.05,
+        "min_duration_s": 0.05,
+    },
     "are": {"gamma": 1e5, "sigma_g": float(np.radians(0.1)), "window_s": 0.05, "min_duration_s": 0.05},
     "mv": {"gamma": 1.5e4, "sigma_a": 0.01, "window_s": 0.05, "min_duration_s": 0.05},
     "mag": {"gamma": 1.5e4, "sigma_a": 0.01, "window_s": 0.05, "min_duration_s": 0.05},
@@ -164,8 +169,9 @@ def resolve_params(detector: str, **params: float | None) -> dict[str, float]:
     return p
 
 
-def detect_zvi(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, detector: str = "shoe",
-               **params: float | None) -> ZviResult:
+def detect_zvi(
+    time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, detector: str = "shoe", **params: float | None
+) -> ZviResult:
     """Detect zero-velocity samples. time (N,) s, gyro (N,3) rad/s, accel (N,3) m/s² specific force.
 
     ``params`` override :data:`DEFAULTS` for the detector (see :data:`PARAM_HELP`).
@@ -237,9 +243,16 @@ def flag_scores(flags: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     return {"precision": precision, "recall": recall, "f1": f1, "accuracy": float(np.mean(f == r))}
 
 
-def pick_threshold(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, truth: np.ndarray,
-                   detector: str = "shoe", param: str | None = None, grid: np.ndarray | None = None,
-                   **params: float | None) -> dict[str, Any]:
+def pick_threshold(
+    time: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    truth: np.ndarray,
+    detector: str = "shoe",
+    param: str | None = None,
+    grid: np.ndarray | None = None,
+    **params: float | None,
+) -> dict[str, Any]:
     """Grid search of one detector parameter maximising F1 against labelled flags.
 
     ``param`` defaults to ``gamma`` (``b_g`` for the paper detector); ``grid`` defaults to 61 log-spaced values
@@ -262,8 +275,15 @@ def pick_threshold(time: np.ndarray, gyro: np.ndarray, accel: np.ndarray, truth:
         scores.append(flag_scores(res.flags, truth))
     f1 = np.array([s["f1"] for s in scores])
     k = int(np.argmax(f1))
-    return {"param": param, "value": float(grid[k]), "f1": float(f1[k]), "precision": scores[k]["precision"],
-            "recall": scores[k]["recall"], "grid": grid, "f1_grid": f1}
+    return {
+        "param": param,
+        "value": float(grid[k]),
+        "f1": float(f1[k]),
+        "precision": scores[k]["precision"],
+        "recall": scores[k]["recall"],
+        "grid": grid,
+        "f1_grid": f1,
+    }
 
 
 def write_intervals(result: ZviResult, path: str | Path) -> None:
@@ -281,8 +301,9 @@ def write_intervals(result: ZviResult, path: str | Path) -> None:
             tmp.write_text("\n".join(lines) + "\n")
 
 
-def plot_zvi(result: ZviResult, gyro: np.ndarray, accel: np.ndarray, path: str | Path,
-             truth: np.ndarray | None = None) -> None:
+def plot_zvi(
+    result: ZviResult, gyro: np.ndarray, accel: np.ndarray, path: str | Path, truth: np.ndarray | None = None
+) -> None:
     """Plot |gyro|, |accel|, the statistic against its threshold and the detected intervals (PNG/PDF)."""
     import matplotlib
 
@@ -306,11 +327,14 @@ def plot_zvi(result: ZviResult, gyro: np.ndarray, accel: np.ndarray, path: str |
         for s, e in interval_indices(result.flags):
             a.axvspan(t[s], t[e - 1], color="0.85", zorder=0, lw=0)
     if truth is not None:
-        ax[2].plot(t, np.where(np.asarray(truth) > 0.5, result.threshold, np.nan), color="C3", lw=2,
-                   label="truth stance")
+        ax[2].plot(
+            t, np.where(np.asarray(truth) > 0.5, result.threshold, np.nan), color="C3", lw=2, label="truth stance"
+        )
     ax[2].legend(loc="upper right", fontsize=8)
-    ax[0].set_title(f"Zero-velocity intervals ({result.detector}): {len(result.intervals)} intervals, "
-                    f"{100 * np.mean(result.flags):.1f} % of samples (grey)")
+    ax[0].set_title(
+        f"Zero-velocity intervals ({result.detector}): {len(result.intervals)} intervals, "
+        f"{100 * np.mean(result.flags):.1f} % of samples (grey)"
+    )
     fig.tight_layout()
     path = Path(path)
     with atomic_path(path) as tmp:

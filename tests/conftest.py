@@ -43,8 +43,14 @@ def run_cli_on_pty(args: list[str], cwd, env: dict) -> tuple[int, str, str]:
 
     master, slave = pty.openpty()
     try:
-        p = subprocess.Popen([sys.executable, "-c", "from imutool.cli import main; main()", *args], cwd=cwd,
-                             stdout=subprocess.PIPE, stderr=slave, stdin=subprocess.DEVNULL, env=env)
+        p = subprocess.Popen(
+            [sys.executable, "-c", "from imutool.cli import main; main()", *args],
+            cwd=cwd,
+            stdout=subprocess.PIPE,
+            stderr=slave,
+            stdin=subprocess.DEVNULL,
+            env=env,
+        )
         os.close(slave)
         chunks = []
         while True:

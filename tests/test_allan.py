@@ -50,8 +50,8 @@ def test_overlapping_estimator_matches_direct_formula():
     theta = np.concatenate([[0.0], np.cumsum(y - y.mean()) / fs])
     for i, mm in enumerate(m):  # every k for m < 16 (exact); every s-th k beyond (s = 2, 4, 16 here)
         s = 1 if mm < 16 else 2 ** int(np.floor(np.log2(mm // 8)))
-        d = (theta[2 * mm:] - 2 * theta[mm:-mm] + theta[:-2 * mm])[::s]
-        assert adev[i] == pytest.approx(np.sqrt(np.mean(d ** 2) / (2 * (mm / fs) ** 2)), rel=1e-10)
+        d = (theta[2 * mm :] - 2 * theta[mm:-mm] + theta[: -2 * mm])[::s]
+        assert adev[i] == pytest.approx(np.sqrt(np.mean(d**2) / (2 * (mm / fs) ** 2)), rel=1e-10)
 
 
 def test_allan_refuses_nan_and_short_input():
@@ -62,9 +62,15 @@ def test_allan_refuses_nan_and_short_input():
 
 
 def test_noise_yaml_and_kalibr_round_trip(tmp_path):
-    vals = {"gyro_noise_density": 1.5e-4, "gyro_bias_instability": 3e-5, "gyro_random_walk": 2e-6,
-            "gyro_noise_density_xyz": [1e-4, 2e-4, 1.5e-4], "accel_noise_density": 2e-3, "rate_hz": 100.0,
-            "source": 'a "quoted" #name.csv'}
+    vals = {
+        "gyro_noise_density": 1.5e-4,
+        "gyro_bias_instability": 3e-5,
+        "gyro_random_walk": 2e-6,
+        "gyro_noise_density_xyz": [1e-4, 2e-4, 1.5e-4],
+        "accel_noise_density": 2e-3,
+        "rate_hz": 100.0,
+        "source": 'a "quoted" #name.csv',
+    }
     write_noise(tmp_path / "noise.yaml", vals)
     back = load_noise(tmp_path / "noise.yaml")
     assert back == vals
@@ -76,20 +82,26 @@ def test_noise_yaml_and_kalibr_round_trip(tmp_path):
         write_kalibr(tmp_path / "imu.yaml", {**vals, "accel_random_walk": 0.0})
     write_kalibr(tmp_path / "imu.yaml", {**vals, "accel_random_walk": 3e-4})
     text = (tmp_path / "imu.yaml").read_text()
-    for key in ("gyroscope_noise_density: 0.00015", "gyroscope_random_walk: 2e-06", "update_rate: 100.0",
-                "accelerometer_noise_density: 0.002", "accelerometer_random_walk: 0.0003", 'rostopic: "/imu0"'):
+    for key in (
+        "gyroscope_noise_density: 0.00015",
+        "gyroscope_random_walk: 2e-06",
+        "update_rate: 100.0",
+        "accelerometer_noise_density: 0.002",
+        "accelerometer_random_walk: 0.0003",
+        'rostopic: "/imu0"',
+    ):
         assert key in text
     assert "UPPER BOUND" not in text
     # the explicit fallback writes the labelled upper bound and says so
-    w = write_kalibr(tmp_path / "imu2.yaml", {**vals, "accel_random_walk_upper_bound": 4e-4},
-                     fallback="upper-bound")
+    w = write_kalibr(tmp_path / "imu2.yaml", {**vals, "accel_random_walk_upper_bound": 4e-4}, fallback="upper-bound")
     text = (tmp_path / "imu2.yaml").read_text()
     line = next(ln for ln in text.splitlines() if ln.startswith("accelerometer_random_walk:"))
     assert "0.0004" in line and "UPPER BOUND" in line and "WARNING" in text
     assert len(w) == 1 and "upper bound" in w[0]
     with pytest.raises(ImutoolError, match="gyroscope_noise_density"):  # no fallback for a noise density
-        write_kalibr(tmp_path / "imu3.yaml", {"accel_noise_density": 1e-3, "accel_random_walk": 1e-4},
-                     fallback="upper-bound")
+        write_kalibr(
+            tmp_path / "imu3.yaml", {"accel_noise_density": 1e-3, "accel_random_walk": 1e-4}, fallback="upper-bound"
+        )
     (tmp_path / "bad.yaml").write_text("foo: 1\n")
     with pytest.raises(ImutoolError, match="none of the keys"):
         load_noise(tmp_path / "bad.yaml")
@@ -140,12 +152,32 @@ def test_allan_cli_labels_and_refuses_unresolved_kalibr(tmp_path):
     rec.add("gyro", rng.standard_normal((n, 3)) * 1e-3 * np.sqrt(fs), "rad/s")
     rec.add("accel", rng.standard_normal((n, 3)) * 2e-3 * np.sqrt(fs) + [0, 0, -9.81], "m/s^2")
     formats.write(rec, tmp_path / "static.csv")
-    r = CliRunner().invoke(cli, ["allan", str(tmp_path / "static.csv"), "-o", str(tmp_path / "noise.yaml"),
-                                 "--kalibr", str(tmp_path / "imu.yaml")])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "allan",
+            str(tmp_path / "static.csv"),
+            "-o",
+            str(tmp_path / "noise.yaml"),
+            "--kalibr",
+            str(tmp_path / "imu.yaml"),
+        ],
+    )
     assert r.exit_code != 0 and "random_walk not resolved" in str(r.exception)
     assert not (tmp_path / "imu.yaml").exists()
-    r = CliRunner().invoke(cli, ["allan", str(tmp_path / "static.csv"), "-o", str(tmp_path / "noise2.yaml"),
-                                 "--kalibr", str(tmp_path / "imu.yaml"), "--kalibr-fallback", "upper-bound"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "allan",
+            str(tmp_path / "static.csv"),
+            "-o",
+            str(tmp_path / "noise2.yaml"),
+            "--kalibr",
+            str(tmp_path / "imu.yaml"),
+            "--kalibr-fallback",
+            "upper-bound",
+        ],
+    )
     assert r.exit_code == 0, r.output
     assert "not resolved (<=" in r.stdout and "bias inst. B" not in r.stdout and "warning: kalibr" in r.stderr
     text = (tmp_path / "imu.yaml").read_text()
@@ -161,8 +193,18 @@ def test_allan_cli_on_the_real_static_recording(shared, tmp_path, capsys):
     d = shared("mag_hmc5883l", "unmoved-with-x-pointing-forward-10min")
     out = tmp_path / "noise.yaml"
     with pytest.raises(SystemExit) as e:
-        main(["allan", str(d / "mpu6050_gyroscope.csv"), str(d / "hmc5883l_compass.csv"), "-o", str(out),
-              "--plot", str(tmp_path / "allan.png"), "--json"])
+        main(
+            [
+                "allan",
+                str(d / "mpu6050_gyroscope.csv"),
+                str(d / "hmc5883l_compass.csv"),
+                "-o",
+                str(out),
+                "--plot",
+                str(tmp_path / "allan.png"),
+                "--json",
+            ]
+        )
     assert e.value.code == 0
     noise = load_noise(out)
     kinds = noise["gyro_allan_minimum_xyz"]
@@ -175,7 +217,17 @@ def test_allan_cli_on_the_real_static_recording(shared, tmp_path, capsys):
     assert "irregular timestamps" in capsys.readouterr().out
     # no accelerometer in these files: a kalibr file would need made-up accelerometer terms — refused
     with pytest.raises(SystemExit) as e:
-        main(["allan", str(d / "mpu6050_gyroscope.csv"), "-o", str(tmp_path / "n2.yaml"), "--kalibr",
-              str(tmp_path / "imu.yaml"), "--kalibr-fallback", "upper-bound"])
+        main(
+            [
+                "allan",
+                str(d / "mpu6050_gyroscope.csv"),
+                "-o",
+                str(tmp_path / "n2.yaml"),
+                "--kalibr",
+                str(tmp_path / "imu.yaml"),
+                "--kalibr-fallback",
+                "upper-bound",
+            ]
+        )
     assert e.value.code == 2 and "accelerometer_noise_density" in capsys.readouterr().err
     assert not (tmp_path / "imu.yaml").exists()

@@ -41,7 +41,7 @@ def _rmse(a, b, wrap=False):
     e = np.asarray(a) - np.asarray(b)
     if wrap:
         e = wrap_deg180(e)
-    return float(np.sqrt(np.mean(e ** 2)))
+    return float(np.sqrt(np.mean(e**2)))
 
 
 def test_ship_roll_accuracy_beats_paper_and_lpf(roll_rec):
@@ -55,8 +55,7 @@ def test_ship_roll_accuracy_beats_paper_and_lpf(roll_rec):
 
 
 def test_nees_and_invariants(roll_rec):
-    res, _ = run_ekf(roll_rec.time, roll_rec["gyro"], roll_rec["accel"], roll_rec["mag"], EkfParams(),
-                     keep_cov=True)
+    res, _ = run_ekf(roll_rec.time, roll_rec["gyro"], roll_rec["accel"], roll_rec["mag"], EkfParams(), keep_cov=True)
     assert np.allclose(np.linalg.norm(res.q, axis=1), 1.0, atol=1e-9)
     P = res.cov[::500]
     assert np.allclose(P, np.transpose(P, (0, 2, 1)), atol=1e-15)
@@ -98,8 +97,14 @@ def test_updates_every_n_samples_are_the_same_filter(roll_rec):
     nis1, nis4 = (run_ekf(t, g, a, m, EkfParams(update_every=n))[1][S_NIS_A] for n in (1, 4))
     assert nis4 == pytest.approx(nis1, rel=0.1), (nis4, nis1)
     d = EkfParams()
-    per_update = replace(d, update_every=4, accel_noise=2 * d.accel_noise, accel_noise_gain=2 * d.accel_noise_gain,
-                         mag_noise_deg=40.0, rest_noise=2 * d.rest_noise)  # σ per update: each ×√4
+    per_update = replace(
+        d,
+        update_every=4,
+        accel_noise=2 * d.accel_noise,
+        accel_noise_gain=2 * d.accel_noise_gain,
+        mag_noise_deg=40.0,
+        rest_noise=2 * d.rest_noise,
+    )  # σ per update: each ×√4
     assert run(per_update)[2][0] > 1.3 * sd1[0]
     a2, m2 = a.copy(), m.copy()
     a2[1::2] = np.nan  # every update row of N = 4 (rows 3, 7, ...) without an accelerometer sample
@@ -144,7 +149,7 @@ def test_turn_with_gnss_compensation():
 
 def _lag_matrix(st: np.ndarray) -> np.ndarray:
     """M = R_Iᵀ W from a filter state: the low-passed measurement's tilt error per unit gyro-bias error (s)."""
-    return quat_to_matrix(st[S_QI:S_QI + 4]).T @ st[S_WY:S_WY + 9].reshape(3, 3)
+    return quat_to_matrix(st[S_QI : S_QI + 4]).T @ st[S_WY : S_WY + 9].reshape(3, 3)
 
 
 def test_the_low_pass_lag_of_a_bias_error_is_modelled():
@@ -189,7 +194,7 @@ def test_gyro_scale_noise_is_tilt_only():
     sd = {}
     for gs in (0.0, 0.01):
         res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], EkfParams(gyro_scale_noise=gs))
-        sd[gs] = np.degrees(res.std[len(rec) // 2:]).mean(axis=0)
+        sd[gs] = np.degrees(res.std[len(rec) // 2 :]).mean(axis=0)
     ratio = sd[0.01] / sd[0.0]
     assert ratio[0] > 1.1 and ratio[1] > 1.1, ratio  # roll, pitch: measured 1.20, 1.16
     assert abs(ratio[2] - 1.0) < 0.005, ratio  # heading: 1.0006 (isotropic noise gave 1.05)
@@ -276,8 +281,14 @@ def test_streaming_chunks_equal_one_pass(roll_rec):
     parts = []
     for i in range(0, len(roll_rec), n):
         sl = slice(i, i + n)
-        r, st = run_ekf(roll_rec.time[sl], roll_rec["gyro"][sl], roll_rec["accel"][sl], roll_rec["mag"][sl],
-                        state=st, dt_nominal=0.005)
+        r, st = run_ekf(
+            roll_rec.time[sl],
+            roll_rec["gyro"][sl],
+            roll_rec["accel"][sl],
+            roll_rec["mag"][sl],
+            state=st,
+            dt_nominal=0.005,
+        )
         parts.append(r.q)
     assert np.allclose(np.vstack(parts), one.q, atol=1e-12)
 
@@ -313,8 +324,9 @@ def test_cli_streamed_filter_equals_in_memory(tmp_path):
     outs = {}
     for name, extra in (("memory", []), ("stream", ["--stream-mb", "0", "--chunk-rows", "997"])):
         outs[name] = tmp_path / f"{name}.csv"
-        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(outs[name]), "--json", "--mounting", "x,-y,-z",
-                                       *extra])
+        run = CliRunner().invoke(
+            cli, ["filter", str(src), "-o", str(outs[name]), "--json", "--mounting", "x,-y,-z", *extra]
+        )
         assert run.exit_code == 0, run.output
         summary = json.loads(run.stdout)
     assert summary["method"] == "ekf (streamed)" and summary["skipped_rows"] == 1
@@ -344,8 +356,12 @@ def test_cli_filter_and_evaluate(tmp_path):
     assert bad.exit_code == 2 and "update-every" in bad.output
 
 
-BROAD = ["02_undisturbed_slow_rotation_B", "05_undisturbed_slow_rotation_with_breaks_B",
-         "07_undisturbed_fast_rotation_B", "24_disturbed_tapping_A"]
+BROAD = [
+    "02_undisturbed_slow_rotation_B",
+    "05_undisturbed_slow_rotation_with_breaks_B",
+    "07_undisturbed_fast_rotation_B",
+    "24_disturbed_tapping_A",
+]
 
 
 def test_broad_real_data_meets_vqf(shared):
@@ -382,8 +398,7 @@ def test_cli_gnss_from_nmea_file(tmp_path):
     lines = []
     for i in np.flatnonzero(np.diff(np.floor(rec.time), prepend=-1) > 0):  # 1 Hz fixes, alternating RMC / VTG
         kn, cog = rec["ref_sog"][i] / (1852 / 3600), rec["ref_cog"][i] % 360
-        body = (f"GPRMC,000000,A,,,,,{kn:.2f},{cog:.2f},010125,,,A" if i % 2 else
-                f"GPVTG,{cog:.2f},T,,M,{kn:.2f},N,,K,A")
+        body = f"GPRMC,000000,A,,,,,{kn:.2f},{cog:.2f},010125,,,A" if i % 2 else f"GPVTG,{cog:.2f},T,,M,{kn:.2f},N,,K,A"
         lines.append(f"{rec.time[i]:.3f};A;${body}*{checksum(body)}")
     gnss = tmp_path / "gnss.nmea"
     gnss.write_text("\n".join(lines) + "\n")
@@ -446,8 +461,9 @@ def test_zero_lag_smoother_on_the_bridge_low_passes_the_compensated_force():
     the RTS pass's (measured 0.16° RMS vs 0.26° causal, 0.18° RTS alone); fed the raw force it would be 1.79°."""
     rec = simulate("ship-at-sea", duration=300, seed=3, turn_start=100)
     r = np.array(rec.meta["lever_arm_m"])
-    res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"], lever_arm=r,
-                     keep_cov=True)
+    res, _ = run_ekf(
+        rec.time, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"], lever_arm=r, keep_cov=True
+    )
     assert not np.allclose(res.force, rec["accel"], atol=0.05)  # the lever arm and the turn were taken out
     sm = zero_lag_smooth(res, rec["gyro"], rec["accel"], rec["mag"], None, rec["sog"], rec["cog"], r)
     rts = rts_smooth(res, rec["gyro"])
@@ -651,7 +667,7 @@ def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
         summary = json.loads(run.stdout)
         said = [w for w in formats.read(out).meta.get("warnings", []) if "magnetometer was rejected" in w]
         if broken:
-            (a, b), = summary["mag_rejected_spans_s"]  # one span across the chunk edges, from the change to the end
+            ((a, b),) = summary["mag_rejected_spans_s"]  # one span across the chunk edges, from the change to the end
             assert 40.0 <= a < 41.0 and b == pytest.approx(rec.time[-1])
             assert "magnetometer was rejected for 110 s" in run.stderr and len(said) == 1
         else:
@@ -672,8 +688,12 @@ def test_sog_cog_without_a_magnetometer_heading_is_said(tmp_path, streamed):
     nanmag = rec.copy()
     nanmag.channels["mag"] = np.full_like(rec["mag"], np.nan)  # the column is there, no field in it
     extra = ["--stream-mb", "0", "--chunk-rows", "2500"] if streamed else []
-    for name, r, gnss, said in (("with_mag", rec, [], False), ("no_mag", nomag, [], True),
-                                ("nan_mag", nanmag, [], True), ("no_mag_no_gnss", nomag, ["--no-gnss"], False)):
+    for name, r, gnss, said in (
+        ("with_mag", rec, [], False),
+        ("no_mag", nomag, [], True),
+        ("nan_mag", nanmag, [], True),
+        ("no_mag_no_gnss", nomag, ["--no-gnss"], False),
+    ):
         src, out = tmp_path / f"{name}.csv", tmp_path / f"{name}_est.csv"
         formats.write(r, src)
         run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), *gnss, *extra])
@@ -712,14 +732,31 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     rec = simulate("ship-roll", duration=20, seed=1)
     src = tmp_path / "roll.csv"
     formats.write(rec, src)
-    run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(tmp_path / "e.csv"), "-q", "--params", str(f),
-                                   "--param", "bias_rw=3e-5", "--save-params", str(tmp_path / "used.toml")])
+    run = CliRunner().invoke(
+        cli,
+        [
+            "filter",
+            str(src),
+            "-o",
+            str(tmp_path / "e.csv"),
+            "-q",
+            "--params",
+            str(f),
+            "--param",
+            "bias_rw=3e-5",
+            "--save-params",
+            str(tmp_path / "used.toml"),
+        ],
+    )
     assert run.exit_code == 0, run.output
     used = EkfParams.from_toml(str(tmp_path / "used.toml"))
     assert used.mag_noise_deg == 12.5 and used.bias_rw == 3e-5 and used.mag_mode == "full"
     assert formats.read(tmp_path / "e.csv").meta["filter"]["bias_rw"] == 3e-5
-    for args, needle in ((["--param", "nonsense=1"], "nonsense"), (["--param", "gyro_noise=nan"], "gyro_noise"),
-                         (["--param", "accel_lp_tau=-1"], "accel_lp_tau")):
+    for args, needle in (
+        (["--param", "nonsense=1"], "nonsense"),
+        (["--param", "gyro_noise=nan"], "gyro_noise"),
+        (["--param", "accel_lp_tau=-1"], "accel_lp_tau"),
+    ):
         code, _, err = run_main(["filter", src, "-o", tmp_path / "x.csv", *args], capsys)
         assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
         assert not (tmp_path / "x.csv").exists()
@@ -736,29 +773,48 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     assert "mag_noise_deg = 20" in err and "--param mag_noise_deg=0" in err and "mag_reference_tau = 0" in err
     assert "mag_new_time" in err and "mag_bias_gate" in err  # saved before the new-field acceptance and the gate
     assert err.count("note:") == 4
-    code, out, err = run_main(["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0",
-                               "--json"], capsys)
+    code, out, err = run_main(
+        ["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0", "--json"], capsys
+    )
     assert code == 0 and json.loads(out)["update_every"] == 4  # 200 Hz: every 4th
     assert "update_every = 1" not in err and err.count("note:") == 3 and "mag_noise_deg = 20" in err
-    code, out, err = run_main(["filter", src, "-o", tmp_path / "o2b.csv", "--params", old, "--update-every", "0",
-                               "--param", "mag_noise_deg=0"], capsys)
+    code, out, err = run_main(
+        [
+            "filter",
+            src,
+            "-o",
+            tmp_path / "o2b.csv",
+            "--params",
+            old,
+            "--update-every",
+            "0",
+            "--param",
+            "mag_noise_deg=0",
+        ],
+        capsys,
+    )
     assert code == 0 and err.count("note:") == 1 and "mag_new_time" in err
     last_release = tmp_path / "last_release.toml"  # saved with mag_heading_density, before mag_new_time
     last_release.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2c.csv", "--params", last_release], capsys)
     assert code == 0 and err.count("note:") == 1 and "mag_new_time" in err
     two_stage = tmp_path / "two_stage.toml"  # saved before the Butterworth: every key of its day, no smoother_lp_tau
-    two_stage.write_text("[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
-                         "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
+    two_stage.write_text(
+        "[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
+        "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n"
+    )
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2d.csv", "--params", two_stage], capsys)
     assert code == 0 and err.count("note:") == 1 and "Butterworth" in err and "has no smoother_lp_tau" in err
-    code, out, err = run_main(["filter", src, "-o", tmp_path / "o2e.csv", "--params", f.with_name("used.toml"),
-                               "--param", "accel_lp_tau=2"], capsys)  # a file saved now, one override: no note
+    code, out, err = run_main(
+        ["filter", src, "-o", tmp_path / "o2e.csv", "--params", f.with_name("used.toml"), "--param", "accel_lp_tau=2"],
+        capsys,
+    )  # a file saved now, one override: no note
     assert code == 0 and "Butterworth" not in err
     meta = formats.read(tmp_path / "o2b.csv").meta["filter"]
     assert meta["mag_noise_deg"] == 0 and meta["mag_heading_density"] == EkfParams().mag_heading_density
-    code, out, err = run_main(["filter", src, "-o", tmp_path / "o3.csv", "--params", f.with_name("used.toml"),
-                               "--json"], capsys)
+    code, out, err = run_main(
+        ["filter", src, "-o", tmp_path / "o3.csv", "--params", f.with_name("used.toml"), "--json"], capsys
+    )
     assert code == 0 and json.loads(out)["update_every"] == 4  # a file saved now: it pins σ (12.5), said alone
     assert err.count("note:") == 1 and "mag_noise_deg = 12.5" in err
 
@@ -776,10 +832,23 @@ def test_smooth_summary_reports_both_errors(tmp_path):
 
 
 BROAD_VQF = {  # VQF 2.1.2 causal 9D, default parameters, total / inclination RMSE (deg): ../shared/data/broad/MANIFEST
-    "01": (1.99, 0.60), "02": (1.38, 0.43), "04": (1.07, 0.79), "05": (0.99, 0.35), "06": (4.03, 0.80),
-    "07": (1.75, 1.02), "10": (1.80, 0.30), "11": (0.90, 0.42), "16": (0.74, 0.54), "21": (4.08, 1.72),
-    "24": (1.55, 0.61), "26": (1.75, 0.56), "28": (4.04, 1.21), "29": (2.38, 1.06), "33": (3.75, 0.60),
-    "35": (1.09, 0.66)}
+    "01": (1.99, 0.60),
+    "02": (1.38, 0.43),
+    "04": (1.07, 0.79),
+    "05": (0.99, 0.35),
+    "06": (4.03, 0.80),
+    "07": (1.75, 1.02),
+    "10": (1.80, 0.30),
+    "11": (0.90, 0.42),
+    "16": (0.74, 0.54),
+    "21": (4.08, 1.72),
+    "24": (1.55, 0.61),
+    "26": (1.75, 0.56),
+    "28": (4.04, 1.21),
+    "29": (2.38, 1.06),
+    "33": (3.75, 0.60),
+    "35": (1.09, 0.66),
+}
 
 
 def test_broad_all_16_trials_no_divergence(shared):
@@ -806,8 +875,16 @@ def test_broad_all_16_trials_no_divergence(shared):
         ms = evaluate_quaternion(sm.q, rec["ref_q"], moving)
         tot, inc = m["total"]["rmse"], m["inclination"]["rmse"]
         vt, vi = BROAD_VQF[f.name[:2]]
-        rows.append((tot, inc, tot / max(2 * vt, vt + 2), inc / max(2 * vi, vi + 2),
-                     ms["total"]["rmse"], ms["inclination"]["rmse"]))
+        rows.append(
+            (
+                tot,
+                inc,
+                tot / max(2 * vt, vt + 2),
+                inc / max(2 * vi, vi + 2),
+                ms["total"]["rmse"],
+                ms["inclination"]["rmse"],
+            )
+        )
     r = np.array(rows)
     assert len(r) == 16
     assert r[:, 2:4].max() <= 1.0, r  # no trial above its ceiling
@@ -826,15 +903,42 @@ def _boxcar(x: np.ndarray, k: int) -> np.ndarray:
 # 2.77 / 1.156 (`python benchmarks/attitude_broad.py --rates`)
 BROAD_VQF_LOWER_RATES = {
     3: {
-        "01": (1.97, 0.68), "02": (1.43, 0.45), "04": (1.16, 0.89), "05": (1.02, 0.38), "06": (4.20, 0.82),
-        "07": (2.55, 1.05), "10": (1.79, 0.30), "11": (0.89, 0.42), "16": (0.74, 0.53), "21": (4.47, 2.46),
-        "24": (1.60, 0.61), "26": (1.94, 0.57), "28": (4.79, 1.67), "29": (3.05, 1.31), "33": (3.73, 0.76),
-        "35": (1.24, 0.88)},
+        "01": (1.97, 0.68),
+        "02": (1.43, 0.45),
+        "04": (1.16, 0.89),
+        "05": (1.02, 0.38),
+        "06": (4.20, 0.82),
+        "07": (2.55, 1.05),
+        "10": (1.79, 0.30),
+        "11": (0.89, 0.42),
+        "16": (0.74, 0.53),
+        "21": (4.47, 2.46),
+        "24": (1.60, 0.61),
+        "26": (1.94, 0.57),
+        "28": (4.79, 1.67),
+        "29": (3.05, 1.31),
+        "33": (3.73, 0.76),
+        "35": (1.24, 0.88),
+    },
     6: {
-        "01": (1.98, 0.82), "02": (1.49, 0.51), "04": (1.30, 1.05), "05": (1.09, 0.44), "06": (4.75, 0.87),
-        "07": (4.75, 1.48), "10": (1.77, 0.29), "11": (0.87, 0.41), "16": (0.93, 0.60), "21": (4.87, 3.82),
-        "24": (1.67, 0.62), "26": (2.29, 0.59), "28": (6.16, 2.56), "29": (4.85, 2.15), "33": (3.77, 1.04),
-        "35": (1.72, 1.24)}}
+        "01": (1.98, 0.82),
+        "02": (1.49, 0.51),
+        "04": (1.30, 1.05),
+        "05": (1.09, 0.44),
+        "06": (4.75, 0.87),
+        "07": (4.75, 1.48),
+        "10": (1.77, 0.29),
+        "11": (0.87, 0.41),
+        "16": (0.93, 0.60),
+        "21": (4.87, 3.82),
+        "24": (1.67, 0.62),
+        "26": (2.29, 0.59),
+        "28": (6.16, 2.56),
+        "29": (4.85, 2.15),
+        "33": (3.77, 1.04),
+        "35": (1.72, 1.24),
+    },
+}
 
 
 def test_broad_at_lower_sample_rates(shared):
@@ -856,8 +960,9 @@ def test_broad_at_lower_sample_rates(shared):
             t = rec.time[: (len(rec.time) // k) * k].reshape(-1, k)[:, -1]
             q_ref = rec["ref_q"][: len(t) * k].reshape(-1, k, 4)[:, -1]
             moving = (rec["movement"][: len(t) * k].reshape(-1, k)[:, -1]) > 0
-            res, _ = run_ekf(t, _boxcar(rec.get("gyro", "rad/s"), k), _boxcar(rec.get("accel", "m/s^2"), k),
-                             _boxcar(rec["mag"], k))
+            res, _ = run_ekf(
+                t, _boxcar(rec.get("gyro", "rad/s"), k), _boxcar(rec.get("accel", "m/s^2"), k), _boxcar(rec["mag"], k)
+            )
             assert res.summary["inconsistent_samples"] == 0, (k, f.name)
             m = evaluate_quaternion(res.q, q_ref, moving)
             tot, inc = m["total"]["rmse"], m["inclination"]["rmse"]
@@ -942,8 +1047,13 @@ def test_accel_update_leaves_heading_alone_in_6d():
     qr = rec["ref_q"]
 
     def drift(ah):
-        res, _ = run_ekf(rec.time, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), None,
-                         EkfParams(mag_mode="off", accel_heading=ah, init_heading_sigma_deg=30))
+        res, _ = run_ekf(
+            rec.time,
+            rec.get("gyro", "rad/s"),
+            rec.get("accel", "m/s^2"),
+            None,
+            EkfParams(mag_mode="off", accel_heading=ah, init_heading_sigma_deg=30),
+        )
         e = _heading_error_deg(res.q, qr)
         return np.abs(wrap_deg180(e - e[0])).max()
 
@@ -963,16 +1073,18 @@ def test_magnetic_disturbance_is_a_state_not_a_sample():
     md[win & (np.arange(len(t)) % 10 != 0)] *= 1.5
 
     def worst(hold):
-        res, _ = run_ekf(t, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), md,
-                         EkfParams(mag_disturbance_hold=hold))
+        res, _ = run_ekf(
+            t, rec.get("gyro", "rad/s"), rec.get("accel", "m/s^2"), md, EkfParams(mag_disturbance_hold=hold)
+        )
         return np.abs(_heading_error_deg(res.q, rec["ref_q"])[win]).max()
 
     held, per_sample = worst(EkfParams().mag_disturbance_hold), worst(0.0)
     assert held <= 15.0 and per_sample >= 2.5 * held, (held, per_sample)
 
 
-def _heading_follows_a_turned_field(rate_hz: float, prm: EkfParams, turn_deg: float = 15.0,
-                                    first_second_scale: float = 1.0, mag_every: int = 1) -> np.ndarray:
+def _heading_follows_a_turned_field(
+    rate_hz: float, prm: EkfParams, turn_deg: float = 15.0, first_second_scale: float = 1.0, mag_every: int = 1
+) -> np.ndarray:
     """Fraction of a 15° turn of the earth's field about the vertical (norm and dip kept, so no gate sees it; at
     60 s of a rolling ship) that the heading has followed 5, 10 and 20 s later: the heading's time constant.
     ``first_second_scale``: the field's norm over the first second (a start beside steel); ``mag_every``: the
@@ -1010,8 +1122,9 @@ def test_heading_follows_the_magnetometer_at_the_same_pace_at_any_rate():
         assert np.abs(_heading_follows_a_turned_field(rate, fixed_ref) - ref).max() <= 0.02, rate
     assert np.abs(_heading_follows_a_turned_field(200.0, fixed_ref, mag_every=4) - ref).max() <= 0.02
     old = EkfParams(mag_noise_deg=20.0, mag_reference_tau=0.0)
-    assert np.abs(_heading_follows_a_turned_field(10.0, old) - _heading_follows_a_turned_field(200.0, old)).max() \
-        >= 0.05
+    assert (
+        np.abs(_heading_follows_a_turned_field(10.0, old) - _heading_follows_a_turned_field(200.0, old)).max() >= 0.05
+    )
     defaults = [_heading_follows_a_turned_field(rate, EkfParams()) for rate in (200.0, 20.0)]
     assert np.abs(defaults[0] - defaults[1]).max() <= 0.04, defaults
     # a slow, noisy magnetometer: σ per sample held at the floor, no false alarm
@@ -1203,8 +1316,9 @@ def test_a_heading_far_off_does_not_teach_the_gyro_bias():
         f[t < 8.0] += np.array([0.0, 20.0, 0.0])
         m = mag_of(f)
         moving = t > 10
-        without = np.sqrt(np.mean(_inclination_error_deg(run_ekf(t, g, a, m, EkfParams(mag_bias_gate=0.0))[0].q,
-                                                         q)[moving] ** 2))
+        without = np.sqrt(
+            np.mean(_inclination_error_deg(run_ekf(t, g, a, m, EkfParams(mag_bias_gate=0.0))[0].q, q)[moving] ** 2)
+        )
         res, _ = run_ekf(t, g, a, m, EkfParams())
         gated = np.sqrt(np.mean(_inclination_error_deg(res.q, q)[moving] ** 2))
         assert without > 1.5 and gated < 0.7 * without, (without, gated)
@@ -1245,7 +1359,7 @@ def test_projected_accel_update_is_the_joseph_form_of_its_gain():
     h = rng.normal(size=3)
     h /= np.linalg.norm(h)
     y = rng.normal(size=3) * 0.01
-    sig2 = 0.03 ** 2
+    sig2 = 0.03**2
     for drop_att, drop_bias in ((True, True), (True, False), (False, True)):
         P = P0.copy()
         dx = np.zeros(6)
@@ -1304,7 +1418,7 @@ def test_accel_noise_floor_is_a_sensor_property_not_the_motion():
         res_loud, st_loud = run_ekf(t[t < 80], gyro[t < 80], acc[t < 80], None, prm)
         _, st_end = run_ekf(t, gyro, acc, None, prm)
         floors[rise] = (st_loud[S_AFLOOR], st_loud[S_AVAR], st_end[S_AFLOOR], res_loud.std[-1, 0])
-    quiet = sigma ** 2  # the estimator's target: σ² per axis
+    quiet = sigma**2  # the estimator's target: σ² per axis
     f0, avar0, end0, roll_sd0 = floors[0.0]
     f1, avar1, end1, roll_sd1 = floors[300.0]
     assert avar1 > 10 * quiet and f0 == avar0  # the 10-s mean sees the jerk; rise time 0 uses it as is
@@ -1352,8 +1466,9 @@ def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
             r.add("heading_true", with_col["heading_true"], "deg")
         src, out = tmp_path / f"{name}.csv", tmp_path / f"{name}_est.csv"
         formats.write(r, src)
-        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "--lever-arm", lever, "--json",
-                                       *opts, *extra])
+        run = CliRunner().invoke(
+            cli, ["filter", str(src), "-o", str(out), "--lever-arm", lever, "--json", *opts, *extra]
+        )
         assert run.exit_code == 0, run.output
         s = json.loads(run.stdout)
         est = formats.read(out)
@@ -1371,8 +1486,8 @@ def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
         assert float(est.meta["heading_input_lag_s"]) == s["heading_input_lag_s"]
         assert est.meta["heading_source"] == s["heading_source"]
         assert "SOG/COG" not in run.stderr, run.stderr
-        assert np.sqrt(np.mean(roll ** 2)) <= 0.5 and roll.max() <= 1.0, (name, roll.max())  # 0.14 / 0.42
-        assert np.sqrt(np.mean(head ** 2)) <= 0.5, name  # 0.14
+        assert np.sqrt(np.mean(roll**2)) <= 0.5 and roll.max() <= 1.0, (name, roll.max())  # 0.14 / 0.42
+        assert np.sqrt(np.mean(head**2)) <= 0.5, name  # 0.14
 
 
 def test_an_empty_heading_input_is_said_and_a_stopped_gyrocompass_is_not_interpolated(tmp_path):
@@ -1417,8 +1532,17 @@ def test_a_glitched_or_wrong_gyrocompass_fix_is_handled(tmp_path):
             hh[(t >= 60) & (t < 60.5)] += 120.0
         if name == "first":
             hh[t < 0.6] += 150.0
-        res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], None, EkfParams(), rec["sog"], rec["cog"],
-                         lever_arm=np.array(rec.meta["lever_arm_m"]), heading_deg=hh % 360)
+        res, _ = run_ekf(
+            rec.time,
+            rec["gyro"],
+            rec["accel"],
+            None,
+            EkfParams(),
+            rec["sog"],
+            rec["cog"],
+            lever_arm=np.array(rec.meta["lever_arm_m"]),
+            heading_deg=hh % 360,
+        )
         runs[name] = (np.degrees(quat_to_euler(res.q)[2]), res.summary)
     assert runs["glitch"][1]["heading_input_rejected"] >= 1 and runs["clean"][1]["heading_input_rejected"] == 0
     assert np.abs(wrap_deg180(runs["glitch"][0] - runs["clean"][0])).max() < 0.5
@@ -1458,8 +1582,9 @@ def test_attach_heading_sorts_refuses_a_file_without_clock_and_keeps_fix_times(t
     rec = simulate("ship-roll", duration=30, seed=1)
     t0 = rec.time[0]
     fixes = [(1, 10.0), (3, 30.0), (2, 20.0), (2, 21.0), (10, 100.0), (11, 110.0)]
-    unsorted = formats.Recording(t0 + np.array([f[0] for f in fixes], float),
-                                 {"heading_true": np.array([f[1] for f in fixes])}, {})
+    unsorted = formats.Recording(
+        t0 + np.array([f[0] for f in fixes], float), {"heading_true": np.array([f[1] for f in fixes])}, {}
+    )
     monkeypatch.setattr(filtering.formats, "read", lambda path: unsorted)
     out = filtering.attach_heading(rec, tmp_path / "h.csv")["heading_true"]
     monkeypatch.undo()
@@ -1505,9 +1630,11 @@ def test_attach_gnss_sorts_bridges_an_outage_and_refuses_a_file_without_clock(tm
     rec = simulate("ship-roll", duration=30, seed=1)
     t0 = rec.time[0]
     fixes = [(1, 1.0, 10.0), (3, 3.0, 30.0), (2, 2.0, 20.0), (2, 2.5, 25.0), (10, 10.0, 100.0), (11, 11.0, 110.0)]
-    unsorted = formats.Recording(t0 + np.array([f[0] for f in fixes], float),
-                                 {"sog": np.array([f[1] for f in fixes]), "cog": np.array([f[2] for f in fixes])},
-                                 {})
+    unsorted = formats.Recording(
+        t0 + np.array([f[0] for f in fixes], float),
+        {"sog": np.array([f[1] for f in fixes]), "cog": np.array([f[2] for f in fixes])},
+        {},
+    )
     monkeypatch.setattr(filtering.formats, "read", lambda path: unsorted)
     out = filtering.attach_gnss(rec, tmp_path / "g.csv")
     monkeypatch.undo()
@@ -1540,16 +1667,31 @@ def test_a_late_gyrocompass_is_read_later_with_heading_input_latency(tmp_path, c
     noise = np.random.default_rng(0).normal(0.0, 0.3, len(tf))
     hf = np.round((np.interp(tf - 0.8, rec.time, unwrapped) + noise) % 360, 1)  # the heading 0.8 s before
     hdt = tmp_path / "hdt.nmea"
-    hdt.write_text("".join(f"{t:.3f};A;$HEHDT,{h:.1f},T*{checksum(f'HEHDT,{h:.1f},T')}\n" for t, h in zip(tf, hf,
-                                                                                                        strict=True)))
+    hdt.write_text(
+        "".join(f"{t:.3f};A;$HEHDT,{h:.1f},T*{checksum(f'HEHDT,{h:.1f},T')}\n" for t, h in zip(tf, hf, strict=True))
+    )
     src = tmp_path / "imu.csv"
     formats.write(nomag, src)
     late = rec.time - rec.time[0] >= 60
     rms = {}
     for latency in (0.0, 0.8):
         out = tmp_path / f"est_{latency}.csv"
-        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "--lever-arm", lever, "--heading",
-                                       str(hdt), "--param", f"heading_input_latency={latency}", "--json"])
+        run = CliRunner().invoke(
+            cli,
+            [
+                "filter",
+                str(src),
+                "-o",
+                str(out),
+                "--lever-arm",
+                lever,
+                "--heading",
+                str(hdt),
+                "--param",
+                f"heading_input_latency={latency}",
+                "--json",
+            ],
+        )
         assert run.exit_code == 0, run.output
         s = json.loads(run.stdout)
         assert s["heading_input_lag_s"] == pytest.approx(0.8, abs=0.2)  # measured from the run: 0.92
@@ -1563,14 +1705,27 @@ def test_a_late_gyrocompass_is_read_later_with_heading_input_latency(tmp_path, c
     with_col.add("heading_true", np.degrees(np.interp(rec.time, tf, np.unwrap(np.radians(hf)))) % 360, "deg")
     formats.write(with_col, tmp_path / "with_col.csv")
     out = tmp_path / "streamed.csv"
-    code, _, err = run_main(["filter", tmp_path / "with_col.csv", "-o", out, "--stream-mb", "0", "--param",
-                             "heading_input_latency=0.8", "-q"], capsys)
+    code, _, err = run_main(
+        [
+            "filter",
+            tmp_path / "with_col.csv",
+            "-o",
+            out,
+            "--stream-mb",
+            "0",
+            "--param",
+            "heading_input_latency=0.8",
+            "-q",
+        ],
+        capsys,
+    )
     assert code == 2 and "heading_input_latency" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1 and not out.exists(), err
     lags = {}  # without the latency, streamed in chunks and in memory: the same lag measured, and said
     for name, extra in (("memory", []), ("streamed", ["--stream-mb", "0", "--chunk-rows", "5000"])):
-        code, stdout, err = run_main(["filter", tmp_path / "with_col.csv", "-o", tmp_path / f"{name}.csv", "--json",
-                                      *extra], capsys)
+        code, stdout, err = run_main(
+            ["filter", tmp_path / "with_col.csv", "-o", tmp_path / f"{name}.csv", "--json", *extra], capsys
+        )
         assert code == 0 and "lags the gyro by about" in err, err
         summary = json.loads(stdout)
         assert summary["method"].endswith("(streamed)") == (name == "streamed"), summary["method"]
@@ -1599,8 +1754,9 @@ def test_the_heading_lag_is_measured_where_the_heading_moves_and_not_said_where_
                 assert bool(warns) == (lag > 0), warns
             else:  # nothing moves: no lag is reported, nothing is said
                 assert summary == {"heading_input_lag_s": None} and warns == [], (lag, m)
-    assert heading_lag_check(measure_heading_lag(rec.time[:5000], col[:5000], res.q[:5000], rec["gyro"][:5000],
-                                                 res.bias[:5000]), 0.0) == ({"heading_input_lag_s": None}, [])
+    assert heading_lag_check(
+        measure_heading_lag(rec.time[:5000], col[:5000], res.q[:5000], rec["gyro"][:5000], res.bias[:5000]), 0.0
+    ) == ({"heading_input_lag_s": None}, [])
     rec = simulate("ship-roll", duration=200, seed=1)  # a feed stamped 0.6 s early: a clock offset, said so
     early = np.degrees(np.interp(rec.time + 0.6, rec.time, np.unwrap(np.radians(rec["ref_heading"])))) % 360
     res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], None, heading_deg=early)

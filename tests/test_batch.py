@@ -26,8 +26,11 @@ pytest.importorskip("pyarrow", reason="the batch tests write Parquet (the [parqu
 def _write_good(path: Path, n: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 100.0
-    rec = Recording(t, {"gyro": rng.normal(0, 0.01, (n, 3)), "accel": rng.normal(0, 0.1, (n, 3)) + [0, 0, -9.81]},
-                    meta={"ship": f"ship{seed % 2}", "seed": seed})
+    rec = Recording(
+        t,
+        {"gyro": rng.normal(0, 0.01, (n, 3)), "accel": rng.normal(0, 0.1, (n, 3)) + [0, 0, -9.81]},
+        meta={"ship": f"ship{seed % 2}", "seed": seed},
+    )
     formats.write(rec, path)
 
 
@@ -54,8 +57,20 @@ def _run(args: list[str], capsys) -> tuple[int, str, str]:
 def test_mixed_good_and_broken(tmp_path, capsys):
     broken = _mixed_dir(tmp_path / "in")
     out = tmp_path / "out"
-    code, stdout, err = _run(["batch", "convert", str(tmp_path / "in"), "-o", str(out / "{rel}" / "{stem}.parquet"),
-                              "-j", "2", "--summary", str(out / "batch.csv")], capsys)
+    code, stdout, err = _run(
+        [
+            "batch",
+            "convert",
+            str(tmp_path / "in"),
+            "-o",
+            str(out / "{rel}" / "{stem}.parquet"),
+            "-j",
+            "2",
+            "--summary",
+            str(out / "batch.csv"),
+        ],
+        capsys,
+    )
     assert code == 1, err  # some failed
     for name, n in (("a", 500), ("b", 700), ("sub/c", 300)):
         rec = formats.read(out / f"{name}.parquet")
@@ -76,8 +91,20 @@ def test_mixed_good_and_broken(tmp_path, capsys):
     # no temporary files left anywhere
     assert not [p for p in out.rglob("*.tmp")]
     # --json: machine-readable totals and per-file results
-    code, stdout, _ = _run(["batch", "convert", str(tmp_path / "in"), "-o", str(out / "{rel}" / "{stem}.parquet"),
-                            "-j", "1", "--resume", "--json"], capsys)
+    code, stdout, _ = _run(
+        [
+            "batch",
+            "convert",
+            str(tmp_path / "in"),
+            "-o",
+            str(out / "{rel}" / "{stem}.parquet"),
+            "-j",
+            "1",
+            "--resume",
+            "--json",
+        ],
+        capsys,
+    )
     d = json.loads(stdout)
     assert code == 1 and d["totals"]["skipped"] == 3 and d["totals"]["failed"] == 3 and d["totals"]["ok"] == 0
 
@@ -87,9 +114,23 @@ def test_all_ok_exit_0_and_manifest_fields(tmp_path, capsys):
         _write_good(tmp_path / f"r{i}.csv", 200 + i, i)
     man = tmp_path / "fleet.csv"
     man.write_text("input,ship,voyage\nr0.csv,Aurora,V1\nr1.csv,Aurora,V2\nr2.csv,Borealis,V1\n")
-    code, stdout, err = _run(["batch", "convert", "--manifest", str(man), "-o",
-                              str(tmp_path / "out" / "{ship}" / "{voyage}_{stem}.csv"), "-j", "1", "--summary",
-                              str(tmp_path / "s.parquet"), "--figure", "rows_in"], capsys)
+    code, stdout, err = _run(
+        [
+            "batch",
+            "convert",
+            "--manifest",
+            str(man),
+            "-o",
+            str(tmp_path / "out" / "{ship}" / "{voyage}_{stem}.csv"),
+            "-j",
+            "1",
+            "--summary",
+            str(tmp_path / "s.parquet"),
+            "--figure",
+            "rows_in",
+        ],
+        capsys,
+    )
     assert code == 0, err
     assert (tmp_path / "out" / "Borealis" / "V1_r2.csv").exists()
     import pyarrow.parquet as pq
@@ -102,8 +143,9 @@ def test_all_ok_exit_0_and_manifest_fields(tmp_path, capsys):
 def test_template_errors(tmp_path, capsys):
     _write_good(tmp_path / "a.csv", 50, 0)
     _write_good(tmp_path / "b.csv", 50, 1)
-    code, _, err = _run(["batch", "convert", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "-o",
-                         str(tmp_path / "same.csv")], capsys)
+    code, _, err = _run(
+        ["batch", "convert", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"), "-o", str(tmp_path / "same.csv")], capsys
+    )
     assert code == 2 and "both map to output" in err
     code, _, err = _run(["batch", "convert", str(tmp_path / "a.csv"), "-o", str(tmp_path / "{nope}.csv")], capsys)
     assert code == 2 and "unknown field {nope}" in err
@@ -125,8 +167,21 @@ def test_resume_after_sigkill(tmp_path):
     for i in range(n_files):
         _write_good(src / f"v{i}.csv", 60_000, i)
     out = tmp_path / "out"
-    cmd = [sys.executable, "-c", "from imutool.cli import main; main()", "batch", "convert", str(src), "-o",
-           str(out / "{stem}.parquet"), "-j", "1", "--args", "--chunk-rows 1500", "-q"]
+    cmd = [
+        sys.executable,
+        "-c",
+        "from imutool.cli import main; main()",
+        "batch",
+        "convert",
+        str(src),
+        "-o",
+        str(out / "{stem}.parquet"),
+        "-j",
+        "1",
+        "--args",
+        "--chunk-rows 1500",
+        "-q",
+    ]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.Popen(cmd, start_new_session=True, env=env)
     deadline = time.monotonic() + 120
@@ -141,7 +196,7 @@ def test_resume_after_sigkill(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)  # the batch and its worker, mid-batch
         proc.wait()
     assert proc.returncode == -signal.SIGKILL, "the batch finished before it could be killed (make jobs longer)"
-    done = sorted(p.name[1:-len(batch.MARKER_SUFFIX)] for p in out.glob(f".*{batch.MARKER_SUFFIX}"))
+    done = sorted(p.name[1 : -len(batch.MARKER_SUFFIX)] for p in out.glob(f".*{batch.MARKER_SUFFIX}"))
     assert 2 <= len(done) < n_files
     before = {name: _stamp(out / name) for name in done}
     # a stale output of an unfinished job (e.g. an earlier run's, no marker) must be redone, not trusted
@@ -163,14 +218,17 @@ def test_dask_local_cluster_gives_identical_outputs(tmp_path, capsys):
     pytest.importorskip("dask.distributed", reason="dask[distributed] not installed (the [dask] extra)")
     _mixed_dir(tmp_path / "in")
     base = ["batch", "convert", str(tmp_path / "in"), "--args", "--chunk-rows 200"]
-    code_p, out_p, _ = _run(base + ["-o", str(tmp_path / "pool" / "{rel}" / "{stem}.parquet"), "-j", "2", "--json"],
-                            capsys)
-    code_d, out_d, err = _run(base + ["-o", str(tmp_path / "dask" / "{rel}" / "{stem}.parquet"), "--dask", "-j", "2",
-                                      "--json"], capsys)
+    code_p, out_p, _ = _run(
+        base + ["-o", str(tmp_path / "pool" / "{rel}" / "{stem}.parquet"), "-j", "2", "--json"], capsys
+    )
+    code_d, out_d, err = _run(
+        base + ["-o", str(tmp_path / "dask" / "{rel}" / "{stem}.parquet"), "--dask", "-j", "2", "--json"], capsys
+    )
     assert code_p == code_d == 1, err
     rp, rd = json.loads(out_p)["results"], json.loads(out_d)["results"]
-    assert [(r["input"], r["status"], r["error"], r["rows"]) for r in rp] == \
-        [(r["input"], r["status"], r["error"], r["rows"]) for r in rd]
+    assert [(r["input"], r["status"], r["error"], r["rows"]) for r in rp] == [
+        (r["input"], r["status"], r["error"], r["rows"]) for r in rd
+    ]
     files_p = sorted(p.relative_to(tmp_path / "pool") for p in (tmp_path / "pool").rglob("*.parquet"))
     files_d = sorted(p.relative_to(tmp_path / "dask") for p in (tmp_path / "dask").rglob("*.parquet"))
     assert files_p == files_d and len(files_p) == 3
@@ -207,8 +265,10 @@ def test_library_call_runner_equals_the_command(tmp_path, capsys):
 
     for i in range(3):
         formats.write(simulate("ship-roll", duration=10, seed=i), tmp_path / "in" / f"v{i}.csv")
-    code, out, err = _run(["batch", "filter", str(tmp_path / "in"), "-o", str(tmp_path / "cli" / "{stem}.csv"),
-                           "-j", "1", "--quiet"], capsys)
+    code, out, err = _run(
+        ["batch", "filter", str(tmp_path / "in"), "-o", str(tmp_path / "cli" / "{stem}.csv"), "-j", "1", "--quiet"],
+        capsys,
+    )
     assert code == 0, err
     jobs = batch.make_jobs([str(tmp_path / "in")], str(tmp_path / "lib" / "{stem}.csv"))
     res = batch.run_batch(jobs, batch.Call(run_filter), workers=2)

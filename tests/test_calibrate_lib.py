@@ -38,14 +38,22 @@ def _sections(path):
 
 CASES = {
     "mag-sphere": (["calibrate", "mag", "sphere.csv"], lambda f, o: lib.calibrate_mag(f / "sphere.csv", o)),
-    "mag-swing": (["calibrate", "mag", "swing.csv", "--method", "swing"],
-                  lambda f, o: lib.calibrate_mag(f / "swing.csv", o, method="swing")),
-    "gyro": (["calibrate", "gyro", "sixpos.csv", "--min-rest", "1.5"],
-             lambda f, o: lib.calibrate_gyro(f / "sixpos.csv", o, rest=lib.rest_options(min_rest_s=1.5))),
-    "accel": (["calibrate", "accel", "sixpos.csv", "--latitude", "59.4"],
-              lambda f, o: lib.calibrate_accel(f / "sixpos.csv", o, latitude=59.4)),
-    "deviation": (["calibrate", "deviation", "swing.csv", "--vessel", "MV Test", "--new"],
-                  lambda f, o: lib.deviation_card(f / "swing.csv", [o], vessel="MV Test", append=False)),
+    "mag-swing": (
+        ["calibrate", "mag", "swing.csv", "--method", "swing"],
+        lambda f, o: lib.calibrate_mag(f / "swing.csv", o, method="swing"),
+    ),
+    "gyro": (
+        ["calibrate", "gyro", "sixpos.csv", "--min-rest", "1.5"],
+        lambda f, o: lib.calibrate_gyro(f / "sixpos.csv", o, rest=lib.rest_options(min_rest_s=1.5)),
+    ),
+    "accel": (
+        ["calibrate", "accel", "sixpos.csv", "--latitude", "59.4"],
+        lambda f, o: lib.calibrate_accel(f / "sixpos.csv", o, latitude=59.4),
+    ),
+    "deviation": (
+        ["calibrate", "deviation", "swing.csv", "--vessel", "MV Test", "--new"],
+        lambda f, o: lib.deviation_card(f / "swing.csv", [o], vessel="MV Test", append=False),
+    ),
 }
 
 
@@ -73,8 +81,9 @@ def test_recording_source_and_accuracy(files, tmp_path):
     b = lib.calibrate_mag(rec, tmp_path / "b.toml")
     assert np.array_equal(a.fit.b, b.fit.b) and np.array_equal(a.fit.A, b.fit.A)
     assert np.allclose(a.fit.b, [12, -25, 8], atol=0.5)  # the scenario's default hard iron, µT
-    card = lib.deviation_card(formats.read(files / "swing.csv"), [tmp_path / "card.txt"],
-                              heading_column="ref_compass_heading", variation=0.0)  # simulated variation: 0
+    card = lib.deviation_card(
+        formats.read(files / "swing.csv"), [tmp_path / "card.txt"], heading_column="ref_compass_heading", variation=0.0
+    )  # simulated variation: 0
     truth = formats.read(files / "swing.csv").meta["deviation_deg"]
     assert np.allclose([card.summary["coefficients_deg"][n] for n in "ABCDE"], truth, atol=0.05)
     assert (tmp_path / "card.txt").read_text().strip()

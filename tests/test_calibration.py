@@ -49,7 +49,7 @@ def test_sphere_recovers_b_and_A_at_noise_level(sphere):
     assert _rel_frob(fit.A, a) < 0.01
     # residual at the noise level: not larger than the residual of the true parameters
     true_res = np.linalg.norm((sphere["mag"] - b) @ a.T, axis=1) - 50.0
-    assert fit.residual_rms_ut <= 1.02 * np.sqrt(np.mean(true_res ** 2))
+    assert fit.residual_rms_ut <= 1.02 * np.sqrt(np.mean(true_res**2))
     assert fit.coverage > 0.95
     # uncertainty from the Jacobian: positive, and the actual error is within a few sigma
     assert np.all(fit.b_std > 0) and np.all(np.abs(fit.b - b) < 6 * fit.b_std + 0.02)
@@ -115,8 +115,9 @@ def test_too_few_samples_and_flat_data_are_refused():
     with pytest.raises(ImutoolError, match="at least 20"):
         calibrate_sphere(np.ones((5, 3)), "full")
     with pytest.raises(ImutoolError, match="coverage"):
-        calibrate_sphere(np.column_stack([np.cos(np.arange(100.0)), np.sin(np.arange(100.0)), np.zeros(100)]) * 40,
-                         "full")
+        calibrate_sphere(
+            np.column_stack([np.cos(np.arange(100.0)), np.sin(np.arange(100.0)), np.zeros(100)]) * 40, "full"
+        )
 
 
 def test_crosswalk_forms_state_the_formula():
@@ -176,7 +177,7 @@ def test_swing_recovers_horizontal_hard_and_soft_iron(swing):
     assert "bz" in fit.extra["section"]["unobservable"]
     r, p = roll_pitch_from_accel(swing["accel"])
     err = wrap180(heading_from_mag(fit.apply(swing["mag"]), r, p) - swing["ref_compass_heading"])
-    assert np.sqrt(np.mean(err ** 2)) < 0.5
+    assert np.sqrt(np.mean(err**2)) < 0.5
 
 
 def test_swing_refuses_a_partial_turn(swing):
@@ -193,9 +194,9 @@ def test_deviation_card_recovered_from_a_swing(swing):
     card = fit_deviation(compass, swing["ref_heading"] - swing.meta["variation_deg"])
     assert np.all(np.abs(card.coefficients - truth) < 0.2)
     err = wrap180(card.correct(compass) - swing["ref_heading"])
-    assert np.sqrt(np.mean(err ** 2)) <= 0.5
+    assert np.sqrt(np.mean(err**2)) <= 0.5
     raw_err = wrap180(compass - swing["ref_heading"])
-    assert np.sqrt(np.mean(raw_err ** 2)) > 2.0  # the deviation was worth correcting
+    assert np.sqrt(np.mean(raw_err**2)) > 2.0  # the deviation was worth correcting
     assert all(v > 0 for v in card.std.values())
 
 
@@ -211,8 +212,15 @@ def test_deviation_refuses_partial_circle_and_card_table():
 
 # -- calibration file --------------------------------------------------------------------------------------------
 def test_toml_writer_round_trip():
-    data = {"top": 1, "mag": {"b": [1.5, -2.25e-7, 3.0], "A": [[1.0, 0.1], [0.1, 1.0]], "kind": 'f"ull\\',
-                              "provenance": {"input": "a b.csv", "fit": {"n": 3, "ok": True}}}}
+    data = {
+        "top": 1,
+        "mag": {
+            "b": [1.5, -2.25e-7, 3.0],
+            "A": [[1.0, 0.1], [0.1, 1.0]],
+            "kind": 'f"ull\\',
+            "provenance": {"input": "a b.csv", "fit": {"n": 3, "ok": True}},
+        },
+    }
     back = loads_toml(dumps_toml(data))
     assert back == data
 

@@ -33,8 +33,12 @@ def test_mag_sphere_then_show_in_every_form(files, tmp_path, capsys):
     c = load_calibration(cal)
     prov = c.sections["mag"]["provenance"]
     assert len(prov["input_sha256"]) == 64 and prov["date_utc"].endswith("Z") and prov["fit"]["coverage"] > 0.9
-    for form, needle in (("matlab", "(D - b) * A"), ("fusion", "softIronMatrix"), ("magneto", "Combined bias"),
-                         ("text", "m_true = A (m_meas - b)")):
+    for form, needle in (
+        ("matlab", "(D - b) * A"),
+        ("fusion", "softIronMatrix"),
+        ("magneto", "Combined bias"),
+        ("text", "m_true = A (m_meas - b)"),
+    ):
         code, out, _ = run(["calibrate", "show", cal, "--as", form], capsys)
         assert code == 0 and needle in out
     code, out, _ = run(["calibrate", "show", cal, "--as", "json"], capsys)
@@ -42,12 +46,25 @@ def test_mag_sphere_then_show_in_every_form(files, tmp_path, capsys):
 
 
 def test_half_sphere_refused_in_one_line(files, tmp_path, capsys):
-    code, out, err = run(["calibrate", "mag", files / "half.csv", "-o", tmp_path / "c.toml", "--kind", "full"],
-                         capsys)
+    code, out, err = run(["calibrate", "mag", files / "half.csv", "-o", tmp_path / "c.toml", "--kind", "full"], capsys)
     assert code == 2 and "coverage" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "c.toml").exists()
-    code, out, err = run(["calibrate", "mag", files / "half.csv", "-o", tmp_path / "c.toml", "--kind", "full",
-                          "--min-coverage", "0.4", "--field", "50"], capsys)
+    code, out, err = run(
+        [
+            "calibrate",
+            "mag",
+            files / "half.csv",
+            "-o",
+            tmp_path / "c.toml",
+            "--kind",
+            "full",
+            "--min-coverage",
+            "0.4",
+            "--field",
+            "50",
+        ],
+        capsys,
+    )
     assert code == 0 and "warning: coverage only" in out
 
 
@@ -57,8 +74,9 @@ def test_swing_then_deviation_card_with_calibration_applied(files, tmp_path, cap
     assert code == 0, err
     assert "not observable in a swing" in out
     card = tmp_path / "card.pdf"
-    code, out, err = run(["calibrate", "deviation", files / "swing.csv", "--calibration", cal, "-o", card,
-                          "-o", cal, "--json"], capsys)
+    code, out, err = run(
+        ["calibrate", "deviation", files / "swing.csv", "--calibration", cal, "-o", card, "-o", cal, "--json"], capsys
+    )
     assert code == 0, err
     s = json.loads(out)
     truth = formats.read(files / "swing.csv").meta["deviation_deg"]
@@ -74,9 +92,23 @@ def test_deviation_from_a_separate_bearings_csv(files, tmp_path, capsys):
     ref = formats.Recording(rec.time[::50].copy())
     ref.add("bearing", rec["ref_heading"][::50], "deg")
     formats.write(ref, tmp_path / "bearings.csv")
-    code, out, err = run(["calibrate", "deviation", files / "swing.csv", "--heading-column", "ref_compass_heading",
-                          "--reference", tmp_path / "bearings.csv", "-o", tmp_path / "card.png", "--json",
-                          "--variation", "0"], capsys)  # a true reference needs the variation (simulated: 0)
+    code, out, err = run(
+        [
+            "calibrate",
+            "deviation",
+            files / "swing.csv",
+            "--heading-column",
+            "ref_compass_heading",
+            "--reference",
+            tmp_path / "bearings.csv",
+            "-o",
+            tmp_path / "card.png",
+            "--json",
+            "--variation",
+            "0",
+        ],
+        capsys,
+    )  # a true reference needs the variation (simulated: 0)
     assert code == 0, err
     s = json.loads(out)
     assert "bearing" in s["reference"]
@@ -109,9 +141,23 @@ def test_deviation_against_an_nmea_gyrocompass_log(tmp_path, capsys):
     ref = formats.Recording(rec.time.copy())
     ref.add("heading", rec["ref_heading"], "deg")
     formats.write(ref, tmp_path / "gyro.nmea")  # $HEHDT at 10 Hz (read back on the sentence-index clock)
-    code, out, err = run(["calibrate", "deviation", tmp_path / "swing.csv", "--heading-column",
-                          "ref_compass_heading", "--reference", tmp_path / "gyro.nmea", "-o", tmp_path / "c.toml",
-                          "--json", "--variation", "0"], capsys)  # true reference: variation required
+    code, out, err = run(
+        [
+            "calibrate",
+            "deviation",
+            tmp_path / "swing.csv",
+            "--heading-column",
+            "ref_compass_heading",
+            "--reference",
+            tmp_path / "gyro.nmea",
+            "-o",
+            tmp_path / "c.toml",
+            "--json",
+            "--variation",
+            "0",
+        ],
+        capsys,
+    )  # true reference: variation required
     assert code == 0, err
     s = json.loads(out)
     assert "gyro.nmea:heading (true)" in s["reference"]
@@ -123,6 +169,7 @@ def test_fitting_refuses_mounting_and_an_already_applied_section(files, tmp_path
     code, _, err = run(["calibrate", "mag", files / "sphere.csv", "-o", cal, "--mounting", "x,-y,-z"], capsys)
     assert code == 2 and "sensor axes" in err
     assert run(["calibrate", "mag", files / "sphere.csv", "-o", cal], capsys)[0] == 0
-    code, _, err = run(["calibrate", "mag", files / "sphere.csv", "-o", tmp_path / "c2.toml", "--calibration", cal],
-                       capsys)
+    code, _, err = run(
+        ["calibrate", "mag", files / "sphere.csv", "-o", tmp_path / "c2.toml", "--calibration", cal], capsys
+    )
     assert code == 2 and "already has a [mag] section" in err

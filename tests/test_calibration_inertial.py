@@ -10,8 +10,20 @@ from formats.errors import ImutoolError
 from formats.frames import euler_to_quat
 from imutool.sim.sensor import MPU6050_ACCEL, MPU6050_GYRO, SensorErrors, imu_recording
 
-POSES = [(0, 0), (180, 0), (90, 0), (-90, 0), (0, 89.9), (0, -89.9),
-         (45, 30), (-60, -20), (120, 40), (30, -60), (-135, 10), (70, 70)]
+POSES = [
+    (0, 0),
+    (180, 0),
+    (90, 0),
+    (-90, 0),
+    (0, 89.9),
+    (0, -89.9),
+    (45, 30),
+    (-60, -20),
+    (120, 40),
+    (30, -60),
+    (-135, 10),
+    (70, 70),
+]
 
 
 def poses_recording(poses=POSES, hold=6.0, move=3.0, rate=100.0, seed=0, temp_slope=None, quats=None):

@@ -40,8 +40,9 @@ def test_full_sphere_simulation_still_covers_everything():
 
 
 def test_real_static_hmc5883l_is_refused(shared):
-    m = formats.read(shared("mag_hmc5883l", "unmoved-with-x-pointing-forward-10min",
-                            "hmc5883l_compass.csv")).get("mag", "uT")
+    m = formats.read(shared("mag_hmc5883l", "unmoved-with-x-pointing-forward-10min", "hmc5883l_compass.csv")).get(
+        "mag", "uT"
+    )
     with pytest.raises(ImutoolError, match=r"coverage \d% of the sphere"):
         calibrate_sphere(m, "auto")
     with pytest.raises(ImutoolError, match="coverage"):
@@ -55,8 +56,7 @@ def test_real_full_sphere_hmc5883l_is_accepted(shared):
 
 
 def test_flat_heading_turn_is_refused_for_a_sphere_fit(shared):
-    m = formats.read(shared("mag_hmc5883l", "rotate-ccw-around-z-pointing-up", "hmc5883l_compass.csv")).get(
-        "mag", "uT")
+    m = formats.read(shared("mag_hmc5883l", "rotate-ccw-around-z-pointing-up", "hmc5883l_compass.csv")).get("mag", "uT")
     with pytest.raises(ImutoolError, match="--method swing"):
         calibrate_sphere(m, "auto")
 
@@ -72,14 +72,22 @@ def test_check_soft_iron():
 
 GOOD_MAG = "[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n"
 BAD = {
-    "zero_A": ("[mag]\nb = [1.0, 2.0, 3.0]\nA = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n",
-               r"\[mag\] A .*singular \(rank 0\)"),
-    "rank1_A": ("[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, 1.0]]\n",
-                r"\[mag\] A .*rank 1"),
-    "ill_A": ("[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 20.0]]\n",
-              r"\[mag\] A .*badly conditioned"),
-    "mirror_A": ("[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]\n",
-                 "negative determinant"),
+    "zero_A": (
+        "[mag]\nb = [1.0, 2.0, 3.0]\nA = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n",
+        r"\[mag\] A .*singular \(rank 0\)",
+    ),
+    "rank1_A": (
+        "[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [1.0, 1.0, 1.0]]\n",
+        r"\[mag\] A .*rank 1",
+    ),
+    "ill_A": (
+        "[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 20.0]]\n",
+        r"\[mag\] A .*badly conditioned",
+    ),
+    "mirror_A": (
+        "[mag]\nb = [1.0, 2.0, 3.0]\nA = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]\n",
+        "negative determinant",
+    ),
     "nan_b": (GOOD_MAG.replace("1.0, 2.0, 3.0", "nan, 2.0, 3.0"), r"mag\.b: non-finite"),
     "inf_b": (GOOD_MAG.replace("1.0, 2.0, 3.0", "inf, 2.0, 3.0"), r"mag\.b: non-finite"),
     "neg_field": (GOOD_MAG + "field_ut = -50.0\n", r"\[mag\] field_ut = -50.0"),
@@ -93,10 +101,14 @@ BAD = {
     "dev_huge": ("[deviation]\nB = -176.0\n", r"\[deviation\] B = -176.0° is beyond"),
     "gyro_nan": ("[gyro]\nbias = [nan, 0.0, 0.0]\n", r"gyro\.bias: non-finite"),
     "gyro_dps": ("[gyro]\nbias = [5.0, 0.0, 0.0]\n", r"\[gyro\] bias .*deg/s written as rad/s"),
-    "gyro_scale0": ("[gyro]\nbias = [0.0, 0.0, 0.0]\nscale = [[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n",
-                    r"\[gyro\] scale is singular"),
-    "accel_T": ("[accel]\nbias = [0.0, 0.0, 0.0]\nT = [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]]\n",
-                r"\[accel\] T scales by 3…3"),
+    "gyro_scale0": (
+        "[gyro]\nbias = [0.0, 0.0, 0.0]\nscale = [[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n",
+        r"\[gyro\] scale is singular",
+    ),
+    "accel_T": (
+        "[accel]\nbias = [0.0, 0.0, 0.0]\nT = [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]]\n",
+        r"\[accel\] T scales by 3…3",
+    ),
     "mount": ('[mounting]\nremap = "x,x,z"\n', r"\[mounting\] remap"),
     "mount_mis": ('[mounting]\nremap = "x,y,z"\nmisalignment_deg = [0.0, 90.0, 0.0]\n', r"\[mounting\] misalignment"),
 }

@@ -46,7 +46,7 @@ def test_bridge_round_trip_with_wrap_and_corruption(binary):
     dec = br.BridgeDecoder(binary=binary)
     got = []
     for i in range(0, len(stream), 7):  # arbitrary chunking
-        got += dec.feed(stream[i:i + 7])
+        got += dec.feed(stream[i : i + 7])
     assert [f.seq for f in got] == [f.seq for j, f in enumerate(frames) if j not in (3, 7)]
     assert all(g.counts == frames[[f.seq for f in frames].index(g.seq)].counts for g in got)
     assert dec.stats.bad_checksum + dec.stats.malformed >= 1
@@ -72,8 +72,12 @@ def test_bridge_scale_factors_from_datasheets():
 def test_bridge_config_line_sets_scales():
     dec = br.BridgeDecoder()
     dec.feed(br.encode_config(br.Scales("mpu6050", 8, 1000, "qmc5883l", 2)))
-    assert (dec.scales.accel_fs_g, dec.scales.gyro_fs_dps, dec.scales.mag, dec.scales.mag_gain) == (8, 1000,
-                                                                                                    "qmc5883l", 2)
+    assert (dec.scales.accel_fs_g, dec.scales.gyro_fs_dps, dec.scales.mag, dec.scales.mag_gain) == (
+        8,
+        1000,
+        "qmc5883l",
+        2,
+    )
 
 
 # -- durable sink ----------------------------------------------------------------------------------------------
@@ -123,8 +127,9 @@ def _serve_in_thread(tmp_path, **kw):
 
 
 def test_serial_bridge_capture_accounts_for_every_frame(tmp_path):
-    link, th, box = _serve_in_thread(tmp_path, protocol="bridge-binary", rate_hz=400, duration=4.0,
-                                     corrupt_fraction=0.01, replug_every=1.5)
+    link, th, box = _serve_in_thread(
+        tmp_path, protocol="bridge-binary", rate_hz=400, duration=4.0, corrupt_fraction=0.01, replug_every=1.5
+    )
     stop = StopFlag()
     threading.Thread(target=lambda: (th.join(), time.sleep(1.0), setattr(stop, "stop", True)), daemon=True).start()
     out = tmp_path / "deck.csv"
@@ -164,8 +169,20 @@ def test_serial_nmea_capture_keeps_raw_log_and_counts_bad_lines(tmp_path):
 
 
 def test_capture_cli_bad_port_is_one_line(tmp_path):
-    r = subprocess.run([sys.executable, "-c", "from imutool.cli import main; main()", "capture", "serial",
-                        "/dev/does-not-exist", "-o", str(tmp_path / "x.csv")], capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from imutool.cli import main; main()",
+            "capture",
+            "serial",
+            "/dev/does-not-exist",
+            "-o",
+            str(tmp_path / "x.csv"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "/dev/does-not-exist" in r.stderr and "Traceback" not in r.stderr
 
@@ -242,8 +259,9 @@ def _fake_slave(fd: int, unit: int, input_regs: dict[int, int], stop: threading.
                 continue
             fn, addr, count = req[1], *struct.unpack(">HH", req[2:6])
             if fn == 4:
-                body = bytes([unit, 4, 2 * count]) + b"".join(struct.pack(">H", input_regs.get(addr + i, 0))
-                                                              for i in range(count))
+                body = bytes([unit, 4, 2 * count]) + b"".join(
+                    struct.pack(">H", input_regs.get(addr + i, 0)) for i in range(count)
+                )
             else:
                 body = bytes([unit, fn | 0x80, 2])
             os.write(fd, body + struct.pack("<H", _modbus_crc(body)))
@@ -256,16 +274,19 @@ def test_modbus_capture_against_fake_slave(tmp_path):
     from imutool.capture.serve import open_pty
 
     prof = tmp_path / "incl.toml"
-    prof.write_text('[device]\nname = "test inclinometer"\nunit = 7\nbaud = 9600\nrate_hz = 20\n'
-                    '[[register]]\nname = "roll"\naddress = 0\ntype = "int16"\nscale = 0.01\nunit = "deg"\n'
-                    '[[register]]\nname = "pitch"\naddress = 1\ntype = "int16"\nscale = 0.01\nunit = "deg"\n'
-                    '[[register]]\nname = "heading"\naddress = 2\ntype = "float32"\nunit = "deg"\n')
+    prof.write_text(
+        '[device]\nname = "test inclinometer"\nunit = 7\nbaud = 9600\nrate_hz = 20\n'
+        '[[register]]\nname = "roll"\naddress = 0\ntype = "int16"\nscale = 0.01\nunit = "deg"\n'
+        '[[register]]\nname = "pitch"\naddress = 1\ntype = "int16"\nscale = 0.01\nunit = "deg"\n'
+        '[[register]]\nname = "heading"\naddress = 2\ntype = "float32"\nunit = "deg"\n'
+    )
     assert request_blocks(read_profile(str(prof)).registers) == [("input", 0, 4)]
     hi, lo = struct.unpack(">HH", struct.pack(">f", 123.5))
     master, slave, name = open_pty()
     stop = threading.Event()
-    th = threading.Thread(target=_fake_slave, args=(master, 7, {0: (-1234) & 0xFFFF, 1: 250, 2: hi, 3: lo}, stop),
-                          daemon=True)
+    th = threading.Thread(
+        target=_fake_slave, args=(master, 7, {0: (-1234) & 0xFFFF, 1: 250, 2: hi, 3: lo}, stop), daemon=True
+    )
     th.start()
     try:
         s = capture_modbus(name, str(prof), str(tmp_path / "m.csv"), duration=0.6, status_s=None, quiet=True)
@@ -296,8 +317,14 @@ def test_soak_zero_silent_loss(tmp_path):
         from capture_soak import run_soak
     finally:
         sys.path.pop(0)
-    res = run_soak(duration=float(os.environ.get("IMUTOOL_SOAK_S", "60")), rate=500, replugs=5, corrupt=0.002,
-                   kill=True, workdir=str(tmp_path))
+    res = run_soak(
+        duration=float(os.environ.get("IMUTOOL_SOAK_S", "60")),
+        rate=500,
+        replugs=5,
+        corrupt=0.002,
+        kill=True,
+        workdir=str(tmp_path),
+    )
     assert res["silent_loss"] == 0, res
     # a replug that falls while the killed capture is restarting is not seen as a reopen by either process
     assert res["replugs"] >= 3 and res["port_reopen_events"] >= res["replugs"] - 1 and res["restarts_resumed"] == 1

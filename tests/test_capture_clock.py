@@ -36,7 +36,7 @@ def test_mcu_clock_with_drift_and_wrap_is_mapped_to_utc_per_frame():
     assert len(t) == len(t_send) and np.all(np.diff(t) > 0)  # one distinct time per frame
     err = t - (1.75e9 + t_send)
     # within the read latency (1–5 ms); before the drift is fitted (a few windows) up to ~1 ms early
-    assert np.all(err > -1e-3) and np.all(err < 0.006) and np.all(err[len(err) // 2:] >= 0)
+    assert np.all(err > -1e-3) and np.all(err < 0.006) and np.all(err[len(err) // 2 :] >= 0)
     assert np.std(np.diff(t) - 0.005) < 2e-4  # the MCU's steady spacing, not the read bursts
     assert abs(clock.as_meta()["drift_ppm"] - 80) < 10
 
@@ -77,17 +77,58 @@ def test_capture_from_simulate_serve_then_info_keeps_every_frame(tmp_path):
     log = tmp_path / "sent.json"
     cli = [sys.executable, "-c", "from imutool.cli import main; main()"]
     env = dict(os.environ)
-    server = subprocess.Popen(cli + ["simulate", "--serve", link, "--protocol", "bridge", "--rate", "200",
-                                     "--duration", "4", "--serve-log", str(log), "--start-delay", "0.5",
-                                     "--start-when", str(out.with_suffix(".events.jsonl")), "-q"],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    server = subprocess.Popen(
+        cli
+        + [
+            "simulate",
+            "--serve",
+            link,
+            "--protocol",
+            "bridge",
+            "--rate",
+            "200",
+            "--duration",
+            "4",
+            "--serve-log",
+            str(log),
+            "--start-delay",
+            "0.5",
+            "--start-when",
+            str(out.with_suffix(".events.jsonl")),
+            "-q",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     try:
         deadline = time.monotonic() + 30
         while not os.path.lexists(link) and time.monotonic() < deadline:
             time.sleep(0.05)
-        cap = subprocess.run(cli + ["capture", "serial", link, "--baud", "115200", "--protocol", "bridge", "-o",
-                                    str(out), "--duration", "9s", "--status", "0", "--json"],
-                             capture_output=True, text=True, timeout=60, env=env)
+        cap = subprocess.run(
+            cli
+            + [
+                "capture",
+                "serial",
+                link,
+                "--baud",
+                "115200",
+                "--protocol",
+                "bridge",
+                "-o",
+                str(out),
+                "--duration",
+                "9s",
+                "--status",
+                "0",
+                "--json",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=env,
+        )
         assert cap.returncode == 0, cap.stderr
         server.wait(timeout=30)
     finally:
@@ -103,8 +144,12 @@ def test_capture_from_simulate_serve_then_info_keeps_every_frame(tmp_path):
     assert len(np.unique(rec.time)) == len(rec) == sent["sent"] and np.all(np.diff(rec.time) > 0)
     assert np.median(np.diff(rec.time)) == pytest_approx(0.005, 5e-4)
     # and no later command drops anything
-    filt = subprocess.run(cli + ["filter", str(out), "-o", str(tmp_path / "est.csv"), "--json"],
-                          capture_output=True, text=True, timeout=120)
+    filt = subprocess.run(
+        cli + ["filter", str(out), "-o", str(tmp_path / "est.csv"), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert filt.returncode == 0, filt.stderr
     v = json.loads(filt.stdout)["validation"][0]
     assert v["rows_dropped"] == 0 and v["rows_kept"] == sent["sent"]

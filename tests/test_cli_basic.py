@@ -80,8 +80,10 @@ def test_info_backwards_is_reported_not_fatal(tmp_path):
 
 def test_info_foreign_csv_prints_mapping(tmp_path):
     p = tmp_path / "f.csv"
-    p.write_text("Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),acc_x_g,acc_y_g,acc_z_g\n"
-                 "0,180,0,0,0,0,1\n0.01,180,0,0,0,0,1\n")
+    p.write_text(
+        "Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),acc_x_g,acc_y_g,acc_z_g\n"
+        "0,180,0,0,0,0,1\n0.01,180,0,0,0,0,1\n"
+    )
     r = _run("info", str(p))
     assert "column mapping (inferred):" in r.output
     assert "Gyroscope X (deg/s)->gyro_x[deg/s]" in r.output and "acc_z_g->accel_z[g]" in r.output
@@ -136,8 +138,7 @@ def test_plot_decimates_long_series(tmp_path):
     rec = Recording(t)
     rec.add("heave", y[:, 0], unit="m")
     write_csv(rec, str(p))
-    s = json.loads(_run("plot", str(p), "heave", "-o", str(tmp_path / "h.png"), "--max-points", "500",
-                        "--json").output)
+    s = json.loads(_run("plot", str(p), "heave", "-o", str(tmp_path / "h.png"), "--max-points", "500", "--json").output)
     assert s["rows"] == n and s["points_per_line"] <= 700  # ≈ --max-points (row count estimated)
 
 

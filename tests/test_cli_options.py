@@ -36,14 +36,26 @@ def _cases() -> list:
         cases.append(pytest.param([*path, "--no-such-option-xyz"], "--no-such-option-xyz", id=f"{tag}: unknown"))
         if any(isinstance(p, click.Argument) and p.required for p in cmd.params):
             cases.append(pytest.param([*path], None, id=f"{tag}: missing argument"))
-        choice = next((p for p in cmd.params if isinstance(p, click.Option) and isinstance(p.type, click.Choice)
-                       and not p.is_flag), None)
+        choice = next(
+            (
+                p
+                for p in cmd.params
+                if isinstance(p, click.Option) and isinstance(p.type, click.Choice) and not p.is_flag
+            ),
+            None,
+        )
         if choice is not None:
             opt = max(choice.opts, key=len)
             cases.append(pytest.param([*path, opt, "nonsense-choice"], opt, id=f"{tag}: bad choice {opt}"))
         for kind, bad in ((click.types.IntParamType, "twelve"), (click.types.FloatParamType, "1.2.3")):
-            num = next((p for p in cmd.params if isinstance(p, click.Option) and isinstance(p.type, kind)
-                        and not p.is_flag and p.nargs == 1), None)
+            num = next(
+                (
+                    p
+                    for p in cmd.params
+                    if isinstance(p, click.Option) and isinstance(p.type, kind) and not p.is_flag and p.nargs == 1
+                ),
+                None,
+            )
             if num is not None:
                 opt = max(num.opts, key=len)
                 cases.append(pytest.param([*path, opt, bad], opt, id=f"{tag}: bad type {opt}"))
@@ -52,8 +64,20 @@ def _cases() -> list:
 
 def test_every_command_is_walked():
     names = {" ".join(p) for p, _ in COMMANDS}
-    for must in ("info", "filter", "simulate", "convert", "calibrate mag", "calibrate accel", "report inclinometer",
-                 "capture serial", "allan", "zvi", "ins", "heave"):
+    for must in (
+        "info",
+        "filter",
+        "simulate",
+        "convert",
+        "calibrate mag",
+        "calibrate accel",
+        "report inclinometer",
+        "capture serial",
+        "allan",
+        "zvi",
+        "ins",
+        "heave",
+    ):
         assert must in names, f"{must} not listed by the CLI"
 
 

@@ -34,5 +34,5 @@ def test_swing_beats_raw_with_calibration_and_variation():
     assert s["method"] == "compass-gyro"
     e = wrap_deg180(out["heading"] - rec["ref_heading"])
     e_raw = wrap_deg180(out["heading_raw"] - rec["ref_heading"])
-    assert np.sqrt(np.mean(e ** 2)) < 0.5 * np.sqrt(np.mean(e_raw ** 2))
-    assert np.sqrt(np.mean(e ** 2)) < 0.2
+    assert np.sqrt(np.mean(e**2)) < 0.5 * np.sqrt(np.mean(e_raw**2))
+    assert np.sqrt(np.mean(e**2)) < 0.2

@@ -134,7 +134,7 @@ def test_ambiguous_topics_error(tmp_path, csv_in, capsys):
         for name in ("/imu/a", "/imu/b"):
             c = w.add_connection(name, "sensor_msgs/msg/Imu", typestore=ts)
             for o, n, t in zip(raw.offs, raw.lens, raw.rec_ns, strict=True):
-                w.write(c, int(t), raw.buf[o: o + n].tobytes())
+                w.write(c, int(t), raw.buf[o : o + n].tobytes())
     code, _, err = run(["convert", two, tmp_path / "x.csv"], capsys)
     assert code == 2
     assert err.count("\n") == 1 and "/imu/a (sensor_msgs/msg/Imu, 300 msgs)" in err and "--topic" in err
@@ -164,8 +164,15 @@ def test_bag_to_nmea_derives_heading_from_q(shared, tmp_path, capsys):
     assert first.split(",")[1] == "69.3"
 
 
-@pytest.mark.parametrize("ext,extra", [(".parquet", []), (".bag", []), (".nmea", ["--sentences", "HDT,XDR"]),
-                                       (".csv", ["--no-stream", "--mounting", "x,-y,-z"])])
+@pytest.mark.parametrize(
+    "ext,extra",
+    [
+        (".parquet", []),
+        (".bag", []),
+        (".nmea", ["--sentences", "HDT,XDR"]),
+        (".csv", ["--no-stream", "--mounting", "x,-y,-z"]),
+    ],
+)
 def test_python_convert_equals_cli(tmp_path, csv_in, capsys, ext, extra):
     """imutool.convert.convert (the library route) writes what `imutool convert` writes and returns its summary."""
     import formats
@@ -197,8 +204,9 @@ def test_python_convert_progress_and_refusals(tmp_path, csv_in):
 
     calls: list[tuple[int, int | None]] = []
     stages: list[str] = []
-    s = convert(csv_in, tmp_path / "o.parquet", chunk_rows=100, progress=lambda d, t: calls.append((d, t)),
-                stage=stages.append)
+    s = convert(
+        csv_in, tmp_path / "o.parquet", chunk_rows=100, progress=lambda d, t: calls.append((d, t)), stage=stages.append
+    )
     assert s["streamed"] and [d for d, _ in calls] == [100, 200, 300] and not stages
     s = convert(tmp_path / "o.parquet", tmp_path / "o.bag", stage=stages.append)
     assert stages == ["reading", "writing"] and s["rows_in"] == 300

@@ -36,12 +36,11 @@ typedef union { float array[9]; struct { float xx; float xy; float xz; float yx;
 @pytest.fixture()
 def cal(tmp_path):
     p = tmp_path / "cal.toml"
-    update_calibration(str(p), "mag", {"model": "m_true = A (m_meas - b)", "A": A.tolist(), "b": B.tolist(),
-                                       "field_ut": 49.75}, False)
-    update_calibration(str(p), "gyro", {"model": "w = S (w_meas - b)", "bias": GB.tolist(), "scale": GS.tolist()},
-                       True)
-    update_calibration(str(p), "accel", {"model": "f = T (f_meas - b)", "bias": AB.tolist(), "T": AT.tolist()},
-                       True)
+    update_calibration(
+        str(p), "mag", {"model": "m_true = A (m_meas - b)", "A": A.tolist(), "b": B.tolist(), "field_ut": 49.75}, False
+    )
+    update_calibration(str(p), "gyro", {"model": "w = S (w_meas - b)", "bias": GB.tolist(), "scale": GS.tolist()}, True)
+    update_calibration(str(p), "accel", {"model": "f = T (f_meas - b)", "bias": AB.tolist(), "T": AT.tolist()}, True)
     return p
 
 
@@ -59,8 +58,10 @@ def test_c_snippet_compiles_and_carries_the_numbers(cal, tmp_path):
     code = show(cal, "c")
     assert code.splitlines()[0].startswith("//") and "# imutool" not in code
     assert show(cal, "fusion") == code
-    body = {m.group(1): _floats(m.group(2)) for m in
-            re.finditer(r"const Fusion\w+ (\w+) = \{\.array = \{([^}]*)\}\};", code)}
+    body = {
+        m.group(1): _floats(m.group(2))
+        for m in re.finditer(r"const Fusion\w+ (\w+) = \{\.array = \{([^}]*)\}\};", code)
+    }
     assert np.allclose(body["softIronMatrix"], A.ravel(), rtol=1e-7)
     assert np.allclose(body["hardIronOffset"], B, rtol=1e-7)
     assert np.allclose(body["gyroscopeOffset"], np.degrees(GB), rtol=1e-7)  # Fusion's gyroscope is deg/s
@@ -72,14 +73,20 @@ def test_c_snippet_compiles_and_carries_the_numbers(cal, tmp_path):
     (tmp_path / "Fusion.h").write_text(FUSION_STUB)
     src = tmp_path / "cal.c"
     src.write_text(code)
-    res = subprocess.run([cc, "-fsyntax-only", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic",
-                          "-I", str(tmp_path), str(src)], capture_output=True, text=True, timeout=60)
+    res = subprocess.run(
+        [cc, "-fsyntax-only", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-I", str(tmp_path), str(src)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert res.returncode == 0, res.stderr
     # a snippet with the old first line is rejected by the same compiler (the test can tell)
     bad = tmp_path / "bad.c"
     bad.write_text("# imutool: m_true = A (m_meas - b)\n" + code)
-    assert subprocess.run([cc, "-fsyntax-only", "-I", str(tmp_path), str(bad)], capture_output=True,
-                          timeout=60).returncode != 0
+    assert (
+        subprocess.run([cc, "-fsyntax-only", "-I", str(tmp_path), str(bad)], capture_output=True, timeout=60).returncode
+        != 0
+    )
 
 
 def test_matlab_snippet_parses_back(cal):

@@ -55,9 +55,24 @@ def test_parser_bit_identical_to_float_on_random_decimals():
         if rng.random() < 0.7:
             s += f"e{int(rng.integers(-345, 330))}"
         toks.append(s)
-    toks += ["2.2250738585072011e-308", "2.2250738585072012e-308", "4.9406564584124654e-324", "2.4703282292062328e-324",
-             "2.4703282292062327e-324", "1.7976931348623157e308", "1.7976931348623159e308", "9007199254740993",
-             "0.1", "1e23", "8.98846567431158e307", "7.2057594037927933e16", "1e-400", "1e400", "-0", "-0.0e5"]
+    toks += [
+        "2.2250738585072011e-308",
+        "2.2250738585072012e-308",
+        "4.9406564584124654e-324",
+        "2.4703282292062328e-324",
+        "2.4703282292062327e-324",
+        "1.7976931348623157e308",
+        "1.7976931348623159e308",
+        "9007199254740993",
+        "0.1",
+        "1e23",
+        "8.98846567431158e307",
+        "7.2057594037927933e16",
+        "1e-400",
+        "1e400",
+        "-0",
+        "-0.0e5",
+    ]
     got = _parse_tokens(toks)
     ref = np.array([float(t) for t in toks])
     assert np.array_equal(_bits(got), _bits(ref))
@@ -67,9 +82,30 @@ def test_writer_round_trips_random_bit_patterns_and_is_short():
     rng = np.random.default_rng(4)
     x = rng.integers(0, 2**64 - 1, 50000, dtype=np.uint64, endpoint=True).view(np.float64)
     x = x[np.isfinite(x)]
-    x = np.concatenate([x, rng.standard_normal(20000), np.round(rng.standard_normal(20000), 5),
-                        [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e308, 1.7976931348623157e308,
-                         0.1, 0.3, 1e16, 1e-5, 123.0, 9007199254740993.0, np.inf, -np.inf]])
+    x = np.concatenate(
+        [
+            x,
+            rng.standard_normal(20000),
+            np.round(rng.standard_normal(20000), 5),
+            [
+                0.0,
+                -0.0,
+                5e-324,
+                -5e-324,
+                2.2250738585072014e-308,
+                1e308,
+                1.7976931348623157e308,
+                0.1,
+                0.3,
+                1e16,
+                1e-5,
+                123.0,
+                9007199254740993.0,
+                np.inf,
+                -np.inf,
+            ],
+        ]
+    )
     text = format_array(x[:, None]).decode()
     toks = text.split("\n")[:-1]
     back = np.array([float(t) for t in toks])
@@ -158,6 +194,7 @@ def test_csvwriter_and_iter_csv_stream_equal_whole_file(tmp_path):
     with CsvWriter(q) as w:
         for c in chunks:
             w.write(c)
+
     def rows(path):
         return [ln for ln in open(path, "rb").read().split(b"\n") if not ln.startswith(b"#")]
 
@@ -177,8 +214,10 @@ def test_csvwriter_aborted_leaves_nothing(tmp_path):
 
 # -- bad input -------------------------------------------------------------------------------------------------
 def test_bad_rows_counted_with_line_numbers(tmp_path):
-    text = ("# imutool-csv: 1\ntime,gyro_x,gyro_y,gyro_z\n0,1,2,3\n0.1,1,2\n0.2,1,x,3\n\n# a comment\n"
-            "0.3,1,2,3,4\n0.4,1e5,-2,nan\n0.5,,inf,-inf\n0.6,1.2.3,0,0\n")
+    text = (
+        "# imutool-csv: 1\ntime,gyro_x,gyro_y,gyro_z\n0,1,2,3\n0.1,1,2\n0.2,1,x,3\n\n# a comment\n"
+        "0.3,1,2,3,4\n0.4,1e5,-2,nan\n0.5,,inf,-inf\n0.6,1.2.3,0,0\n"
+    )
     p = _write_text(tmp_path / "bad.csv", text)
     rec = read_csv(p)
     assert len(rec) == 3
@@ -218,15 +257,18 @@ def test_tab_separated(tmp_path):
     assert np.array_equal(rec["gyro"], [[1, 2, 3], [4, 5, 6]])
 
 
-@pytest.mark.parametrize("content, match", [
-    (b"", "no header row"),
-    (b"# only a comment\n", "no header row"),
-    (b"1,2,3\n4,5,6\n", "numbers, not column names"),
-    (b"a,,c\n1,2,3\n", "empty column name"),
-    (b"x,y\n1,2\n", "no time column"),
-    (b"time,x\nfoo,bar\n", "no data rows"),
-    (b"\x00\x01\x02\xff\xfe", "not text"),
-])
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        (b"", "no header row"),
+        (b"# only a comment\n", "no header row"),
+        (b"1,2,3\n4,5,6\n", "numbers, not column names"),
+        (b"a,,c\n1,2,3\n", "empty column name"),
+        (b"x,y\n1,2\n", "no time column"),
+        (b"time,x\nfoo,bar\n", "no data rows"),
+        (b"\x00\x01\x02\xff\xfe", "not text"),
+    ],
+)
 def test_bad_files_raise_one_clear_error(tmp_path, content, match):
     p = _write_text(tmp_path / "bad.csv", content)
     with pytest.raises(ImutoolError, match=match):
@@ -250,8 +292,12 @@ def test_fuzz_arbitrary_bytes_never_crash(tmp_path_factory, blob):
     assert rec["a"].shape == (len(rec),)
 
 
-_cell = st.one_of(st.floats(allow_nan=True).map(repr), st.text("0123456789.-+eE naif", max_size=6),
-                  st.just(""), st.integers().map(str))
+_cell = st.one_of(
+    st.floats(allow_nan=True).map(repr),
+    st.text("0123456789.-+eE naif", max_size=6),
+    st.just(""),
+    st.integers().map(str),
+)
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -287,35 +333,48 @@ def test_fuzz_garbled_rows_are_counted_or_parsed_like_float(tmp_path_factory, ro
 
 
 # -- foreign CSV inference ---------------------------------------------------------------------------------
-@pytest.mark.parametrize("header, target, unit", [
-    ("Gyroscope X (deg/s)", "gyro_x", "deg/s"),
-    ("gyro_z_dps", "gyro_z", "dps"),
-    ("gyr_y", "gyro_y", "rad/s"),
-    ("acc_x_g", "accel_x", "g"),
-    ("Accelerometer Y (m/s^2)", "accel_y", "m/s^2"),
-    ("accel_z [m/s2]", "accel_z", "m/s2"),
-    ("AccZ (mg)", "accel_z", "mg"),
-    ("mag_x_gauss", "mag_x", "gauss"),
-    ("Magnetometer Z (uT)", "mag_z", "uT"),
-    ("mag_y (mG)", "mag_y", "mgauss"),  # milligauss on a magnetometer, not milli-g
-    ("mag_x_t", "mag_x", "T"),
-    ("MagY (nT)", "mag_y", "nT"),
-    ("Time [s]", "time", "s"),
-    ("time_s", "time", "s"),
-    ("timestamp (ms)", "time", "ms"),
-    ("temp_c", "temp", "degC"),
-    ("movement", "movement", None),
-])
+@pytest.mark.parametrize(
+    "header, target, unit",
+    [
+        ("Gyroscope X (deg/s)", "gyro_x", "deg/s"),
+        ("gyro_z_dps", "gyro_z", "dps"),
+        ("gyr_y", "gyro_y", "rad/s"),
+        ("acc_x_g", "accel_x", "g"),
+        ("Accelerometer Y (m/s^2)", "accel_y", "m/s^2"),
+        ("accel_z [m/s2]", "accel_z", "m/s2"),
+        ("AccZ (mg)", "accel_z", "mg"),
+        ("mag_x_gauss", "mag_x", "gauss"),
+        ("Magnetometer Z (uT)", "mag_z", "uT"),
+        ("mag_y (mG)", "mag_y", "mgauss"),  # milligauss on a magnetometer, not milli-g
+        ("mag_x_t", "mag_x", "T"),
+        ("MagY (nT)", "mag_y", "nT"),
+        ("Time [s]", "time", "s"),
+        ("time_s", "time", "s"),
+        ("timestamp (ms)", "time", "ms"),
+        ("temp_c", "temp", "degC"),
+        ("movement", "movement", None),
+    ],
+)
 def test_infer_mapping_headers(header, target, unit):
     cm = infer_mapping([header]).columns[0]
     assert cm.target == target
     assert (cm.unit or None) == unit
 
 
-@pytest.mark.parametrize("unit, value, si", [
-    ("deg/s", 180.0, math.pi), ("rad/s", 2.0, 2.0), ("g", 1.0, 9.80665), ("m/s^2", 3.0, 3.0),
-    ("gauss", 0.5, 50.0), ("mG", 500.0, 50.0), ("T", 5e-5, 50.0), ("uT", 50.0, 50.0), ("nT", 50000.0, 50.0),
-])
+@pytest.mark.parametrize(
+    "unit, value, si",
+    [
+        ("deg/s", 180.0, math.pi),
+        ("rad/s", 2.0, 2.0),
+        ("g", 1.0, 9.80665),
+        ("m/s^2", 3.0, 3.0),
+        ("gauss", 0.5, 50.0),
+        ("mG", 500.0, 50.0),
+        ("T", 5e-5, 50.0),
+        ("uT", 50.0, 50.0),
+        ("nT", 50000.0, 50.0),
+    ],
+)
 def test_units_converted_to_si(tmp_path, unit, value, si):
     q = {"deg/s": "gyro", "rad/s": "gyro", "g": "accel", "m/s^2": "accel"}.get(unit, "mag")
     p = _write_text(tmp_path / "u.csv", f"t,{q}_x ({unit}),{q}_y ({unit}),{q}_z ({unit})\n0,{value},0,0\n")
@@ -332,8 +391,11 @@ def test_counts_with_scale_by_option_and_profile(tmp_path):
     assert rec["accel"][0, 2] == pytest.approx(16384 * 6.1035e-05 * 9.80665)
     assert rec.meta["column_mapping_origin"] == "options"
     assert rec["label"][0] == 3.0  # unknown column kept
-    prof = _write_text(tmp_path / "p.toml", '[columns]\nax = { to = "accel_x", unit = "counts", scale = 0.5 }\n'
-                                            'ay = "accel_y"\naz = { to = "accel_z", unit = "g" }\n')
+    prof = _write_text(
+        tmp_path / "p.toml",
+        '[columns]\nax = { to = "accel_x", unit = "counts", scale = 0.5 }\n'
+        'ay = "accel_y"\naz = { to = "accel_z", unit = "g" }\n',
+    )
     rec = read_csv(p, profile=prof)
     assert rec["accel"][0].tolist() == pytest.approx([500.0, -2000.0, 16384 * 9.80665])
     assert rec.meta["column_mapping_origin"].startswith("profile")
@@ -349,8 +411,11 @@ def test_mapping_option_errors():
 
 
 def test_unknown_columns_written_back_unchanged(tmp_path):
-    p = _write_text(tmp_path / "f.csv", "Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),"
-                                        "movement,zvi\n0,1,2,3,1,0\n0.01,1,2,3,0,1\n")
+    p = _write_text(
+        tmp_path / "f.csv",
+        "Time (s),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),"
+        "movement,zvi\n0,1,2,3,1,0\n0.01,1,2,3,0,1\n",
+    )
     rec = read_csv(p)
     q = str(tmp_path / "o.csv")
     write_csv(rec, q)
@@ -381,12 +446,15 @@ def test_real_broad_keeps_reference_and_labels(shared):
     assert np.allclose(np.linalg.norm(rec["ref_q"][ok], axis=1), 1.0, atol=1e-6)
 
 
-@pytest.mark.parametrize("name, channel, unit", [
-    ("hmc5883l_compass.csv", "mag", "gauss"),
-    ("mpu6050_accelerometer.csv", "accel", "g"),
-    ("mpu6050_gyroscope.csv", "gyro", "dps"),
-    ("mpu6050_temperature.csv", "temp", "degC"),
-])
+@pytest.mark.parametrize(
+    "name, channel, unit",
+    [
+        ("hmc5883l_compass.csv", "mag", "gauss"),
+        ("mpu6050_accelerometer.csv", "accel", "g"),
+        ("mpu6050_gyroscope.csv", "gyro", "dps"),
+        ("mpu6050_temperature.csv", "temp", "degC"),
+    ],
+)
 def test_real_hmc5883l_mpu6050(shared, name, channel, unit):
     rec = read_csv(str(shared("mag_hmc5883l", "full-sphere", name)))
     assert channel in rec.channels and len(rec) > 1000
@@ -405,12 +473,20 @@ def test_real_duplicates_short_walk(shared):
     assert np.all(np.diff(clean.time) > 0)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                 HealthCheck.function_scoped_fixture])
-@given(st.lists(st.tuples(st.floats(allow_nan=True, allow_infinity=False, allow_subnormal=True),
-                          st.floats(allow_nan=True, allow_infinity=False, allow_subnormal=True),
-                          st.sampled_from([0.0, -0.0, 5e-324, 1e308, -1.7976931348623157e308, math.nan])),
-                min_size=1, max_size=30))
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(allow_nan=True, allow_infinity=False, allow_subnormal=True),
+            st.floats(allow_nan=True, allow_infinity=False, allow_subnormal=True),
+            st.sampled_from([0.0, -0.0, 5e-324, 1e308, -1.7976931348623157e308, math.nan]),
+        ),
+        min_size=1,
+        max_size=30,
+    )
+)
 def test_hypothesis_file_round_trip_bit_exact(tmp_path, rows):
     a = np.array(rows, dtype=np.float64)
     rec = Recording(np.arange(len(rows), dtype=float))
@@ -468,8 +544,10 @@ def test_in_background_passes_items_and_raises_the_worker_error_in_order():
 
 def test_background_writer_equals_foreground_and_reports_disk_errors(tmp_path):
     rng = np.random.default_rng(3)
-    chunks = [Recording(np.arange(k, k + 5000) * 0.01, {"gyro": rng.standard_normal((5000, 3))})
-              for k in range(0, 20000, 5000)]
+    chunks = [
+        Recording(np.arange(k, k + 5000) * 0.01, {"gyro": rng.standard_normal((5000, 3))})
+        for k in range(0, 20000, 5000)
+    ]
     for bg in (False, True):
         with CsvWriter(str(tmp_path / f"w{bg}.csv"), background=bg) as w:
             for c in chunks:
@@ -495,8 +573,11 @@ def test_fixed_decimals_columns(tmp_path):
     assert format_array(x, decimals=np.array([6, 6, 6, 6, 6, 6])) == b"1.234568,0,359.999999,,-0.0025,1e+20\n"
     assert format_array(x[:, :2], decimals=np.array([0, -1])) == b"1,-4e-07\n"
     t = np.array([0.005, 0.01])
-    rec = Recording(t, {"roll": np.array([1.0 / 3, -2.0 / 3]), "q": np.array([[1, 0, 0, 0], [0.5, 0.5, 0.5, 0.5]]) / 3},
-                    meta={"csv_decimals": {"roll": 3, "q": 2}})
+    rec = Recording(
+        t,
+        {"roll": np.array([1.0 / 3, -2.0 / 3]), "q": np.array([[1, 0, 0, 0], [0.5, 0.5, 0.5, 0.5]]) / 3},
+        meta={"csv_decimals": {"roll": 3, "q": 2}},
+    )
     p = str(tmp_path / "d.csv")
     write_csv(rec, p)
     lines = open(p).read().splitlines()
@@ -531,8 +612,10 @@ def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings):
     plain = p.stat().st_size
     assert read_csv(str(p)).meta["warnings"] == ["first chunk"]
     p.unlink()
-    final = {"warnings": ["first chunk"] + [f"warning {i}: ≈ {'x' * 30}" for i in range(n_warnings)],
-             "validation": {"rows_read": 1000, "absurd_samples_interpolated": {"gyro": 3}}}
+    final = {
+        "warnings": ["first chunk"] + [f"warning {i}: ≈ {'x' * 30}" for i in range(n_warnings)],
+        "validation": {"rows_read": 1000, "absurd_samples_interpolated": {"gyro": 3}},
+    }
     with CsvWriter(str(p), reserve_meta=room) as w:
         w.write(rec.select(slice(0, 400)))
         w.write(rec.select(slice(400, 1000)))

@@ -39,22 +39,52 @@ def swing(tmp_path_factory):
 
 
 def test_true_reference_without_variation_is_refused(swing, tmp_path):
-    code, out, err = run(["calibrate", "deviation", swing / "swing.csv", "--heading-column", "ref_compass_heading",
-                          "--reference", swing / "gyro.csv", "-o", tmp_path / "c.toml"])
+    code, out, err = run(
+        [
+            "calibrate",
+            "deviation",
+            swing / "swing.csv",
+            "--heading-column",
+            "ref_compass_heading",
+            "--reference",
+            swing / "gyro.csv",
+            "-o",
+            tmp_path / "c.toml",
+        ]
+    )
     assert code != 0 and "TRUE heading" in err and "--variation" in err
     assert not (tmp_path / "c.toml").exists()
     # with the variation the card is right (the case: A came out −2.0° instead of +1.5°)
-    code, out, err = run(["calibrate", "deviation", swing / "swing.csv", "--heading-column", "ref_compass_heading",
-                          "--reference", swing / "gyro.csv", "-o", tmp_path / "c.toml", "--variation", "-3.5",
-                          "--json"])
+    code, out, err = run(
+        [
+            "calibrate",
+            "deviation",
+            swing / "swing.csv",
+            "--heading-column",
+            "ref_compass_heading",
+            "--reference",
+            swing / "gyro.csv",
+            "-o",
+            tmp_path / "c.toml",
+            "--variation",
+            "-3.5",
+            "--json",
+        ]
+    )
     assert code == 0, err
     s = json.loads(out)
     assert np.allclose([s["coefficients_deg"][n] for n in "ABCDE"], TRUTH, atol=0.02)
 
 
 # NOAA WMM2025 report test values (height 0): decimal year, lat, lon, declination (deg, published to 0.01)
-WMM2025_TEST = [(2025.0, 80.0, 0.0, 1.28), (2025.0, 0.0, 120.0, -0.16), (2025.0, -80.0, 240.0, 68.78),
-                (2027.5, 80.0, 0.0, 2.59), (2027.5, 0.0, 120.0, -0.24), (2027.5, -80.0, 240.0, 68.49)]
+WMM2025_TEST = [
+    (2025.0, 80.0, 0.0, 1.28),
+    (2025.0, 0.0, 120.0, -0.16),
+    (2025.0, -80.0, 240.0, 68.78),
+    (2027.5, 80.0, 0.0, 2.59),
+    (2027.5, 0.0, 120.0, -0.24),
+    (2027.5, -80.0, 240.0, 68.49),
+]
 
 
 def test_wmm_declination_matches_the_published_test_values():
@@ -80,10 +110,30 @@ def test_true_reference_corrected_from_the_wmm(tmp_path):
     ref = formats.Recording(rec.time.copy())
     ref.add("heading", rec["ref_heading"], "deg")
     formats.write(ref, tmp_path / "gyro.csv")
-    code, out, err = run(["calibrate", "deviation", tmp_path / "swing.csv", "--heading-column",
-                          "ref_compass_heading", "--reference", tmp_path / "gyro.csv", "-o", tmp_path / "card.txt",
-                          "-o", tmp_path / "c.toml", "--position", f"{lat},{lon}", "--date", day.isoformat(),
-                          "--vessel", "MV Aurora", "--place", "Tallinn roads", "--json"])
+    code, out, err = run(
+        [
+            "calibrate",
+            "deviation",
+            tmp_path / "swing.csv",
+            "--heading-column",
+            "ref_compass_heading",
+            "--reference",
+            tmp_path / "gyro.csv",
+            "-o",
+            tmp_path / "card.txt",
+            "-o",
+            tmp_path / "c.toml",
+            "--position",
+            f"{lat},{lon}",
+            "--date",
+            day.isoformat(),
+            "--vessel",
+            "MV Aurora",
+            "--place",
+            "Tallinn roads",
+            "--json",
+        ]
+    )
     assert code == 0, err
     s = json.loads(out)
     assert s["variation_deg"] == pytest.approx(var) and "WMM-2025" in s["variation_source"]
@@ -147,10 +197,25 @@ def test_narrow_span_is_refused_whatever_min_span_says():
 
 def test_mismatched_calibration_gives_a_flagged_absurd_card(swing, tmp_path):
     cal = tmp_path / "wrong.toml"  # a hard iron that is not this sensor's (near the 25 µT horizontal field)
-    update_calibration(str(cal), "mag", {"model": "m_true = A (m_meas - b)", "A": np.eye(3).tolist(),
-                                         "b": [20.0, 0.0, 0.0], "field_ut": 50.0}, False)
-    r = CliRunner().invoke(cli, ["calibrate", "deviation", str(swing / "swing.csv"), "--calibration", str(cal),
-                                 "-o", str(tmp_path / "c.txt"), "--json"])
+    update_calibration(
+        str(cal),
+        "mag",
+        {"model": "m_true = A (m_meas - b)", "A": np.eye(3).tolist(), "b": [20.0, 0.0, 0.0], "field_ut": 50.0},
+        False,
+    )
+    r = CliRunner().invoke(
+        cli,
+        [
+            "calibrate",
+            "deviation",
+            str(swing / "swing.csv"),
+            "--calibration",
+            str(cal),
+            "-o",
+            str(tmp_path / "c.txt"),
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     s = json.loads(r.stdout)
     assert s["max_abs_deviation_deg"] > 20.0
@@ -162,15 +227,19 @@ def test_position_and_date_from_an_nmea_reference_log(tmp_path):
     from calibration.wmm import parse_position, position_from_nmea
 
     log = tmp_path / "gyro.nmea"
-    log.write_text("$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n"
-                   "$HEHDT,84.4,T*17\r\n"
-                   "$GPRMC,123520,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*60\r\n")
+    log.write_text(
+        "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n"
+        "$HEHDT,84.4,T*17\r\n"
+        "$GPRMC,123520,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*60\r\n"
+    )
     lat, lon, day = position_from_nmea(str(log))
     assert lat == pytest.approx(48.1173, abs=1e-4) and lon == pytest.approx(11.5167, abs=1e-4)
     assert day == date(1994, 3, 23)
     void = tmp_path / "void.nmea"  # status V and fix 0: no position
-    void.write_text("$GPRMC,123520,V,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*77\r\n"
-                    "$GPGGA,123519,4807.038,N,01131.000,E,0,08,0.9,545.4,M,46.9,M,,*46\r\n")
+    void.write_text(
+        "$GPRMC,123520,V,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W*77\r\n"
+        "$GPGGA,123519,4807.038,N,01131.000,E,0,08,0.9,545.4,M,46.9,M,,*46\r\n"
+    )
     assert position_from_nmea(str(void))[:2] == (None, None)
     assert parse_position("-33.87,151.21") == (-33.87, 151.21)
     with pytest.raises(formats.ImutoolError, match="latitude"):

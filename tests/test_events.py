@@ -37,8 +37,16 @@ def test_parametric_roll_detected_with_onset(seed):
 
 
 def test_parametric_roll_from_heave_and_other_settings():
-    rec = simulate("parametric-roll", duration=700.0, rate_hz=10.0, seed=3, onset_s=200.0, growth_rate=0.05,
-                   encounter_period_s=8.0, max_roll_deg=35.0)
+    rec = simulate(
+        "parametric-roll",
+        duration=700.0,
+        rate_hz=10.0,
+        seed=3,
+        onset_s=200.0,
+        growth_rate=0.05,
+        encounter_period_s=8.0,
+        max_roll_deg=35.0,
+    )
     rec.remove("ref_pitch")
     res = events.analyse(rec, roll_channel="ref_roll", heave_channel="ref_heave")
     (e,) = [e for e in res["events"] if e["type"] == "parametric_roll"]
@@ -46,12 +54,15 @@ def test_parametric_roll_from_heave_and_other_settings():
     assert abs(e["t_onset"] - 200.0) <= 1.5 * 16.0 and abs(e["period_s"] - 16.0) < 0.5
 
 
-@pytest.mark.parametrize("name,opts", [
-    ("ship-at-sea", {}),  # irregular sea, roll 19° at 12 s, pitch 8 s
-    ("ship-at-sea", {"roll_period": 16.0, "pitch_period": 8.0}),  # tuned 2:1 but a linear (unlocked) response
-    ("ship-roll", {"roll_period_s": 14.0, "pitch_period_s": 7.0}),  # steady 15° roll at exactly 2 × pitch period
-    ("parametric-roll", {"onset_s": 1e9}),  # tuned background roll, never growing
-])
+@pytest.mark.parametrize(
+    "name,opts",
+    [
+        ("ship-at-sea", {}),  # irregular sea, roll 19° at 12 s, pitch 8 s
+        ("ship-at-sea", {"roll_period": 16.0, "pitch_period": 8.0}),  # tuned 2:1 but a linear (unlocked) response
+        ("ship-roll", {"roll_period_s": 14.0, "pitch_period_s": 7.0}),  # steady 15° roll at exactly 2 × pitch period
+        ("parametric-roll", {"onset_s": 1e9}),  # tuned background roll, never growing
+    ],
+)
 def test_normal_sea_not_detected(name, opts):
     for seed in (0, 1):
         rec = simulate(name, duration=800.0, rate_hz=10.0, seed=seed, **opts)
@@ -102,8 +113,12 @@ def test_hourly_statistics_msc363():
     start = events.utc_start_of(Recording(t[:1]), "2025-02-01T09:30:00Z")
     rows = events.hourly_statistics(t, x, cyc, [], 3600.0, start)
     # aligned to the UTC hour: 09:30–10:00, 10:00–11:00, 11:00–12:00, 12:00–12:30
-    assert [r["utc_start"] for r in rows] == ["2025-02-01T09:00:00Z", "2025-02-01T10:00:00Z",
-                                              "2025-02-01T11:00:00Z", "2025-02-01T12:00:00Z"]
+    assert [r["utc_start"] for r in rows] == [
+        "2025-02-01T09:00:00Z",
+        "2025-02-01T10:00:00Z",
+        "2025-02-01T11:00:00Z",
+        "2025-02-01T12:00:00Z",
+    ]
     assert [r["amplitude_stbd_max_deg"] for r in rows] == pytest.approx([5.0, 12.0, 12.0, 8.0], abs=0.05)
     assert rows[1]["amplitude_port_mean_deg"] == pytest.approx((5.0 + 12.0) / 2, abs=0.5)  # half an hour each
     for r in rows:
@@ -122,22 +137,53 @@ def _run(args: list[str], capsys) -> tuple[int, str, str]:
 
 def test_batch_then_fleet_table_and_plot(tmp_path, capsys):
     root = tmp_path / "fleet"
-    specs = [("Aurora", "V001", "parametric-roll", {}), ("Aurora", "V002", "ship-at-sea", {}),
-             ("Borealis", "V017", "parametric-roll", {"onset_s": 150.0})]
+    specs = [
+        ("Aurora", "V001", "parametric-roll", {}),
+        ("Aurora", "V002", "ship-at-sea", {}),
+        ("Borealis", "V017", "parametric-roll", {"onset_s": 150.0}),
+    ]
     for k, (ship, voyage, scen, opts) in enumerate(specs):
         rec = simulate(scen, duration=700.0, rate_hz=5.0, seed=k, **opts)
         rec.meta["utc_start"] = f"2025-0{k + 1}-10T06:00:00Z"
         (root / ship).mkdir(parents=True, exist_ok=True)
         formats.write(rec, root / ship / f"{voyage}.csv")
-    code, out, err = _run(["batch", "events detect", str(root), "-o", str(tmp_path / "ev" / "{parent}_{stem}.json"),
-                           "--args", "--roll-channel ref_roll --pitch-channel ref_pitch", "-j", "1",
-                           "--figure", "parametric_roll_episodes", "--figure", "max_heel_deg"], capsys)
+    code, out, err = _run(
+        [
+            "batch",
+            "events detect",
+            str(root),
+            "-o",
+            str(tmp_path / "ev" / "{parent}_{stem}.json"),
+            "--args",
+            "--roll-channel ref_roll --pitch-channel ref_pitch",
+            "-j",
+            "1",
+            "--figure",
+            "parametric_roll_episodes",
+            "--figure",
+            "max_heel_deg",
+        ],
+        capsys,
+    )
     assert code == 0, err + out
     one = json.loads((tmp_path / "ev" / "Aurora_V001.json").read_text())
     assert one["ship"] == "Aurora" and one["voyage"] == "V001" and one["summary"]["parametric_roll_episodes"] == 1
     assert one["hourly"] and one["hourly"][0]["utc_start"] == "2025-01-10T06:00:00Z"
-    code, out, err = _run(["events", "fleet", str(tmp_path / "ev"), "-o", str(tmp_path / "fleet.csv"), "--voyages",
-                           str(tmp_path / "voyages.csv"), "--plot", str(tmp_path / "fleet.png"), "--json"], capsys)
+    code, out, err = _run(
+        [
+            "events",
+            "fleet",
+            str(tmp_path / "ev"),
+            "-o",
+            str(tmp_path / "fleet.csv"),
+            "--voyages",
+            str(tmp_path / "voyages.csv"),
+            "--plot",
+            str(tmp_path / "fleet.png"),
+            "--json",
+        ],
+        capsys,
+    )
     assert code == 0, err
     s = json.loads(out)
     assert s["ships"] == 2 and s["voyages"] == 3 and s["parametric_roll_episodes"] == 2
@@ -146,8 +192,10 @@ def test_batch_then_fleet_table_and_plot(tmp_path, capsys):
     with open(tmp_path / "fleet.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     para = [r for r in rows if r["type"] == "parametric_roll"]
-    assert {(r["ship"], r["voyage"], r["month"]) for r in para} == {("Aurora", "V001", "2025-01"),
-                                                                  ("Borealis", "V017", "2025-03")}
+    assert {(r["ship"], r["voyage"], r["month"]) for r in para} == {
+        ("Aurora", "V001", "2025-01"),
+        ("Borealis", "V017", "2025-03"),
+    }
     with open(tmp_path / "voyages.csv", newline="") as f:
         voy = {r["voyage"]: r for r in csv.DictReader(f)}
     assert abs(float(voy["V001"]["worst_roll_deg"])) > 24 and 17 < abs(float(voy["V002"]["worst_roll_deg"])) < 21

@@ -40,10 +40,14 @@ def _same_numeric_columns(a_path, b_path):
 CASES = {
     "ekf": ([], {}),
     "ekf-smooth": (["--smooth"], {"smooth": True}),
-    "ekf-mounted-params": (["--mounting", "x,-y,-z", "--param", "mag_noise_deg=10", "--no-gnss"],
-                           {"mounting": "x,-y,-z", "params": EkfParams(mag_noise_deg=10.0), "use_gnss": False}),
-    "ekf-streamed": (["--stream-mb", "0", "--chunk-rows", "997", "--lever-arm", "0,0,-2", "--mounting", "x,-y,-z"],
-                     {"stream_mb": 0, "chunk_rows": 997, "lever_arm": (0, 0, -2), "mounting": "x,-y,-z"}),
+    "ekf-mounted-params": (
+        ["--mounting", "x,-y,-z", "--param", "mag_noise_deg=10", "--no-gnss"],
+        {"mounting": "x,-y,-z", "params": EkfParams(mag_noise_deg=10.0), "use_gnss": False},
+    ),
+    "ekf-streamed": (
+        ["--stream-mb", "0", "--chunk-rows", "997", "--lever-arm", "0,0,-2", "--mounting", "x,-y,-z"],
+        {"stream_mb": 0, "chunk_rows": 997, "lever_arm": (0, 0, -2), "mounting": "x,-y,-z"},
+    ),
     "lpf": (["--method", "lpf", "--cutoff", "0.3"], {"method": "lpf", "cutoff_hz": 0.3}),
     "compass": (["--method", "compass"], {"method": "compass"}),
 }
@@ -90,15 +94,24 @@ def test_recording_in_memory_equals_path(roll_csv, tmp_path):
 def test_progress_and_on_input(roll_csv, tmp_path):
     calls: list[tuple[int, int | None]] = []
     seen: list[str] = []
-    run_filter(str(roll_csv), str(tmp_path / "a.csv"), progress=lambda d, t: calls.append((d, t)),
-               on_input=lambda p, rep: seen.append(p))
+    run_filter(
+        str(roll_csv),
+        str(tmp_path / "a.csv"),
+        progress=lambda d, t: calls.append((d, t)),
+        on_input=lambda p, rep: seen.append(p),
+    )
     assert seen == [str(roll_csv)] and calls and calls[-1] == (6001, 6001)
     calls.clear()
     seen.clear()
     reports: list[dict] = []
-    res = run_filter(str(roll_csv), str(tmp_path / "b.parquet"), stream_mb=0, chunk_rows=2500,
-                     progress=lambda d, t: calls.append((d, t)),
-                     on_input=lambda p, rep: (seen.append(p), reports.append(rep)))
+    res = run_filter(
+        str(roll_csv),
+        str(tmp_path / "b.parquet"),
+        stream_mb=0,
+        chunk_rows=2500,
+        progress=lambda d, t: calls.append((d, t)),
+        on_input=lambda p, rep: (seen.append(p), reports.append(rep)),
+    )
     assert res.summary["method"] == "ekf (streamed)" and res.summary["rows"] == 6001
     assert [d for d, _ in calls] == [2500, 5000, 6001]  # streamed: chunk by chunk, no whole-file load
     # the input's report comes once, at the end, over all the chunks
@@ -190,15 +203,16 @@ def test_parquet_filter_streams_with_bounded_memory(tmp_path):
     for n in (400_000, 2_000_000):
         src, dst = tmp_path / f"in{n}.parquet", tmp_path / f"est{n}.parquet"
         subprocess.run([sys.executable, "-c", _MAKE, str(src), str(n)], check=True, env=env)
-        r = subprocess.run([sys.executable, "-c", _FILTER, str(src), str(dst)], env=env, capture_output=True,
-                           text=True, timeout=300)
+        r = subprocess.run(
+            [sys.executable, "-c", _FILTER, str(src), str(dst)], env=env, capture_output=True, text=True, timeout=300
+        )
         assert r.returncode == 0, r.stderr[-2000:]
         base, peak = map(float, r.stderr.split()[-2:])
         f = pq.ParquetFile(dst)
         assert f.metadata.num_rows == n and f.metadata.num_row_groups >= n // 262_144
         last = f.read_row_group(f.metadata.num_row_groups - 1, columns=["roll", "ref_roll"])
         err = np.asarray(last["roll"]) - np.asarray(last["ref_roll"])
-        assert np.sqrt(np.mean(err ** 2)) < 1.0  # the estimate is right to the end, not just written
+        assert np.sqrt(np.mean(err**2)) < 1.0  # the estimate is right to the end, not just written
         grew[n] = peak - base
         src.unlink()
         dst.unlink()
@@ -242,8 +256,9 @@ def test_streamed_filter_checks_its_input_like_an_in_memory_run(roll_csv, tmp_pa
     for out in (tmp_path / "degs_out.csv", tmp_path / "degs_out.parquet"):
         if out.suffix == ".parquet":
             pytest.importorskip("pyarrow", reason="Parquet needs the [parquet] extra (pyarrow)")
-        run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "--json", "--stream-mb", "0",
-                                       "--chunk-rows", "2500"])
+        run = CliRunner().invoke(
+            cli, ["filter", str(src), "-o", str(out), "--json", "--stream-mb", "0", "--chunk-rows", "2500"]
+        )
         assert run.exit_code == 0, run.output
         s = json.loads(run.stdout)
         assert s["method"] == "ekf (streamed)"
@@ -276,8 +291,11 @@ def test_chunk_checks_across_chunk_edges_and_the_end_of_a_stream(roll_csv, tmp_p
     gyro = np.concatenate([p["gyro"] for p in parts])
     assert not np.any(np.abs(np.nan_to_num(gyro)) > 100)  # none left for the EKF
     report, warns = checks.finish(len(bad), len(bad))
-    assert sum(report.get("absurd_samples_interpolated", {}).values()) + sum(
-        report.get("absurd_samples_set_nan", {}).values()) == 3
+    assert (
+        sum(report.get("absurd_samples_interpolated", {}).values())
+        + sum(report.get("absurd_samples_set_nan", {}).values())
+        == 3
+    )
     assert not any("unit or scale error" in w for w in warns)
     assert checks.meta_warnings(warns)[0] == "an earlier warning"
 
@@ -294,8 +312,7 @@ def test_chunk_checks_across_chunk_edges_and_the_end_of_a_stream(roll_csv, tmp_p
     src = tmp_path / "dup.csv"
     src.write_text("".join(dup))
     out = tmp_path / "dup_out.csv"
-    code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--chunk-rows", "2500", "--strict"],
-                            capsys)
+    code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--chunk-rows", "2500", "--strict"], capsys)
     assert code == 2 and "DROPPED" in err and not out.exists(), err
     assert not [f for f in tmp_path.iterdir() if f.name.startswith(".dup_out")]
     code, _, err = run_main(["filter", src, "-o", out, "--stream-mb", "0", "--chunk-rows", "2500", "--json"], capsys)

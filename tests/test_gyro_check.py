@@ -148,7 +148,7 @@ def test_the_checked_share_is_per_run_whatever_the_chunk_size():
     for chunk in (n, 10_000):
         chk = GyroScaleCheck()
         for i in range(0, n, chunk):
-            chk.add(t[i:i + chunk], gyro[i:i + chunk], np.zeros((min(chunk, n - i), 3)), force[i:i + chunk])
+            chk.add(t[i : i + chunk], gyro[i : i + chunk], np.zeros((min(chunk, n - i), 3)), force[i : i + chunk])
         used.append(chk.checked)
         assert chk.report()[0]["gyro_scale_check"]["pairs"] > 20
     assert max(used) <= max(100_000, 0.1 * n) + 400, used  # + one pair of 2-s windows at 100 Hz

@@ -62,8 +62,10 @@ def test_degenerate_layouts_are_refused(kind):
 def test_coplanar_and_too_few_axes_refused():
     eye = np.eye(3)
     pts = [(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0), (0.1, 0.1, 0)]
-    lay = G.Layout([G.Sensor(f"S{i}", np.array(p, float), eye, [f"s{i}_{c}" for c in "xyz"])
-                    for i, p in enumerate(pts)], name="flat")
+    lay = G.Layout(
+        [G.Sensor(f"S{i}", np.array(p, float), eye, [f"s{i}_{c}" for c in "xyz"]) for i, p in enumerate(pts)],
+        name="flat",
+    )
     with pytest.raises(ImutoolError, match="coplanar"):
         G.check_layout(lay)
 
@@ -75,10 +77,13 @@ def test_toml_example_equals_preset_and_single_axis_layout_works(tmp_path):
     assert np.allclose(p1, p2) and np.allclose(d1, d2) and c1 == c2
     # 15 single-axis sensors on a tetrahedron-like frame: full rank, solvable
     rng = np.random.default_rng(0)
-    body = [f"[[sensor]]\nname = \"s{i}\"\nposition = [{x}, {y}, {z}]\ndirection = [{a}, {b}, {c}]\n"
-            f"column = \"c{i}\"\nunit = \"g\"\n"
-            for i, ((x, y, z), (a, b, c)) in enumerate(zip(rng.normal(0, 0.2, (15, 3)), rng.normal(0, 1, (15, 3)),
-                                                           strict=True))]
+    body = [
+        f'[[sensor]]\nname = "s{i}"\nposition = [{x}, {y}, {z}]\ndirection = [{a}, {b}, {c}]\n'
+        f'column = "c{i}"\nunit = "g"\n'
+        for i, ((x, y, z), (a, b, c)) in enumerate(
+            zip(rng.normal(0, 0.2, (15, 3)), rng.normal(0, 1, (15, 3)), strict=True)
+        )
+    ]
     f = tmp_path / "l.toml"
     f.write_text("\n".join(body))
     single = G.load_layout(str(f))
@@ -96,8 +101,7 @@ def test_ntnu_roll_from_accelerometer_pair(shared):
     from imutool.metrics import best_lag, interp_to
 
     rec = formats.read(str(shared("ntnu_waves", "3012_1.csv")))
-    res = G.planar_roll(rec.time, rec["acc_heave_ps"], rec["acc_heave_sb"], [0, -0.13, 0], [0, 0.13, 0],
-                        [0, 0, -1])
+    res = G.planar_roll(rec.time, rec["acc_heave_ps"], rec["acc_heave_sb"], [0, -0.13, 0], [0, 0.13, 0], [0, 0, -1])
     roll, cam = res["roll"], rec["roll"]  # camera Roll [rad]: found positive starboard down, as FRD
     lag, _ = best_lag(rec.time, roll, rec.time, cam, 0.1)
     m = (rec.time > 1 / res["cutoff_hz"]) & (rec.time < rec.time[-1] - 1 / res["cutoff_hz"])
@@ -117,8 +121,12 @@ def test_cli_check_layout_and_refusal(tmp_path):
     res = runner.invoke(cli, ["gyrofree", "--layout", str(EXAMPLE), "--check-layout", "--json"])
     assert res.exit_code == 0 and "condition_number" in res.output
     f = tmp_path / "c.toml"
-    f.write_text("".join(f"[[sensor]]\nposition = [{0.1 * i}, 0, 0]\naxes = 'xyz'\ncolumns = ['a{i}', 'b{i}', "
-                         f"'c{i}']\n" for i in range(4)))
+    f.write_text(
+        "".join(
+            f"[[sensor]]\nposition = [{0.1 * i}, 0, 0]\naxes = 'xyz'\ncolumns = ['a{i}', 'b{i}', 'c{i}']\n"
+            for i in range(4)
+        )
+    )
     with pytest.raises(SystemExit) as ei:
         main(["gyrofree", "--layout", str(f), "--check-layout", "-q"])
     assert ei.value.code == 2

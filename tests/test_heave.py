@@ -137,8 +137,7 @@ def test_cli_heave_writes_positive_up_and_reports_bad_column(tmp_path):
     rec = heave_platform(duration=120, rate_hz=20, seed=2)
     src = tmp_path / "p.csv"
     formats.write(rec, str(src))
-    res = CliRunner().invoke(cli, ["heave", str(src), "-o", str(tmp_path / "h.csv"), "--method", "paper",
-                                   "--json"])
+    res = CliRunner().invoke(cli, ["heave", str(src), "-o", str(tmp_path / "h.csv"), "--method", "paper", "--json"])
     assert res.exit_code == 0, res.output
     text = (tmp_path / "h.csv").read_text()
     assert "positive UP" in text.split("time,")[0]
@@ -229,8 +228,7 @@ def test_line_spectrum_uses_the_harmonic_kf_and_a_sea_the_bank():
     assert summ["realtime_bank_share"] < 0.05
     assert _rmse(out, rec["ref_heave"]) <= 0.004
     t = np.arange(0, 600, 0.1)
-    tr = H.Tracking(np.array([100, 1500]), np.array([[0.1], [0.1]]), np.array([0.1, 0.1]),
-                    spread=np.array([0.3, 0.02]))
+    tr = H.Tracking(np.array([100, 1500]), np.array([[0.1], [0.1]]), np.array([0.1, 0.1]), spread=np.array([0.3, 0.02]))
     w = H.spread_weight(t, tr, 5.0)
     assert w[0] == 1 and w[1000] == 1 and w[-1] < 0.01 and np.all(np.diff(w) <= 1e-12)
 

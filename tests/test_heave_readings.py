@@ -74,8 +74,20 @@ def test_evaluate_compares_a_positive_down_file_as_positive_up(tmp_path):
     ref = formats.Recording(T.copy())
     ref.add("ref_heave", REF, "m")
     formats.write(ref, tmp_path / "ref.csv")
-    r = CliRunner().invoke(cli, ["evaluate", str(tmp_path / "down.csv"), "--reference", str(tmp_path / "ref.csv"),
-                                 "--channel", "heave", "--max-lag", "0", "--json"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "evaluate",
+            str(tmp_path / "down.csv"),
+            "--reference",
+            str(tmp_path / "ref.csv"),
+            "--channel",
+            "heave",
+            "--max-lag",
+            "0",
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     h = json.loads(r.stdout)["heave"]
     assert h["heave"]["rmse"] == pytest.approx(0.01, abs=1e-6) and "estimate down" in h["compared"]

@@ -72,8 +72,9 @@ def leftovers(out: Path) -> list[str]:
     return found
 
 
-def check(args: list, *, inputs, outputs=(), cwd: Path | None = None, ok: bool = False,
-          names=None) -> tuple[int, str, str]:
+def check(
+    args: list, *, inputs, outputs=(), cwd: Path | None = None, ok: bool = False, names=None
+) -> tuple[int, str, str]:
     """Run a hostile case and assert the contract (see the module docstring)."""
     before = snapshot(inputs)
     code, out, err = run(args, cwd)
@@ -87,8 +88,9 @@ def check(args: list, *, inputs, outputs=(), cwd: Path | None = None, ok: bool =
         assert len(lines) == 1, f"expected one line on stderr, got {len(lines)}:\n{err}"
         assert err.strip().splitlines()[-1] == lines[0]
         named = [str(n) for n in (names if names is not None else [*inputs, *outputs])]
-        assert any(Path(n).name in lines[0] or n in lines[0] for n in named), \
+        assert any(Path(n).name in lines[0] or n in lines[0] for n in named), (
             f"the message names none of {named}: {lines[0]}"
+        )
         for o in outputs:
             assert not leftovers(Path(o)), f"left behind: {leftovers(Path(o))}"
     assert snapshot(inputs) == before, "an input was modified"
@@ -151,22 +153,22 @@ def corpus(tmp_path_factory) -> dict[str, Path]:
     put("inf.csv", _csv(np.column_stack([t, np.full((300, 9), np.inf)])))
     put("time_nan.csv", _csv(np.column_stack([np.full(300, np.nan), rng.normal(size=(300, 9))])))
     put("time_1e300.csv", _csv(np.column_stack([1e300 * (1 + t), rng.normal(size=(300, 9))])))
-    put("time_huge_step.csv", _csv(np.column_stack([np.r_[t[:150], 1e300 + t[150:]],
-                                                    rng.normal(size=(300, 9))])))
+    put("time_huge_step.csv", _csv(np.column_stack([np.r_[t[:150], 1e300 + t[150:]], rng.normal(size=(300, 9))])))
     put("huge_values.csv", _csv(np.column_stack([t, np.full((300, 9), 1e300)])))
     put("text.csv", (SENSOR + "\n" + "\n".join(["a,b,c,d,e,f,g,h,i,j"] * 200) + "\n").encode())
     put("semicolon.csv", text.replace(",", ";").encode())
     put("decimal_comma.csv", text.replace(",", ";").replace(".", ",").encode())
-    put("comma_decimal_comma.csv", ("\n".join(head[:1] + [r.replace(".", ",") for r in head[1:200]]) + "\n")
-        .encode())
+    put("comma_decimal_comma.csv", ("\n".join(head[:1] + [r.replace(".", ",") for r in head[1:200]]) + "\n").encode())
     put("tabs.csv", text.replace(",", "\t").encode())
     put("bom.csv", b"\xef\xbb\xbf" + roll)
     put("crlf.csv", roll.replace(b"\n", b"\r\n"))
     put("utf16.csv", text[:20_000].encode("utf-16"))
     put("truncated.csv", roll[: len(roll) // 2])
     put("truncated_header.csv", roll[:40])
-    put("ragged.csv", ("\n".join(head[:1] + [r + (",1,2" if i % 2 else "") for i, r in enumerate(head[1:300])])
-                       + "\n").encode())
+    put(
+        "ragged.csv",
+        ("\n".join(head[:1] + [r + (",1,2" if i % 2 else "") for i, r in enumerate(head[1:300])]) + "\n").encode(),
+    )
     wide_header = "time," + ",".join(f"c{i}" for i in range(5000))
     put("wide.csv", _csv(rng.normal(size=(20, 5001)), wide_header))
     put("no_time.csv", _csv(rng.normal(size=(300, 9)), SENSOR.replace("time,", "")))
@@ -193,17 +195,21 @@ def corpus(tmp_path_factory) -> dict[str, Path]:
     put("cal_gyro_nan.toml", b"[gyro]\nbias = [nan, 0.0, 0.0]\n")
     put("cal_gyro_text.toml", b'[gyro]\nbias = "fast"\n')
     put("cal_dev_bad.toml", b'[deviation]\nA = "x"\nB = [1, 2]\n')
-    put("cal_version.toml", b'version = 99\n[gyro]\nbias = [0.0, 0.0, 0.0]\n')
+    put("cal_version.toml", b"version = 99\n[gyro]\nbias = [0.0, 0.0, 0.0]\n")
     # gyro-free layouts
     lay = LAYOUT.read_text()
     put("layout_syntax.toml", b"[[sensor]\nposition = [0, 0\n")
     put("layout_empty.toml", b"")
     put("layout_nan.toml", lay.replace("[-0.1, 0.0, 0.0]", "[nan, 0.0, 0.0]").encode())
     put("layout_inf.toml", lay.replace("[-0.1, 0.0, 0.0]", "[inf, 0.0, 0.0]").encode())
-    put("layout_one.toml", lay.split("[[sensor]]")[0].encode() + b"[[sensor]]\n" + lay.split("[[sensor]]")[1]
-        .encode())
-    put("layout_same_pos.toml", lay.replace("[-0.1, 0.0, 0.0]", "[0.0, 0.0, 0.0]")
-        .replace("[0.0, 0.1, 0.0]", "[0.0, 0.0, 0.0]").replace("[0.0, 0.0, 0.1]", "[0.0, 0.0, 0.0]").encode())
+    put("layout_one.toml", lay.split("[[sensor]]")[0].encode() + b"[[sensor]]\n" + lay.split("[[sensor]]")[1].encode())
+    put(
+        "layout_same_pos.toml",
+        lay.replace("[-0.1, 0.0, 0.0]", "[0.0, 0.0, 0.0]")
+        .replace("[0.0, 0.1, 0.0]", "[0.0, 0.0, 0.0]")
+        .replace("[0.0, 0.0, 0.1]", "[0.0, 0.0, 0.0]")
+        .encode(),
+    )
     put("layout_missing_cols.toml", lay.replace('"a4_x"', '"nope_x"').encode())
     put("layout_bad_axes.toml", lay.replace('axes = "xyz"', 'axes = "qqq"', 1).encode())
     put("layout_bad_unit.toml", lay.replace('unit = "m/s^2"', 'unit = "furlongs"').encode())
@@ -211,15 +217,53 @@ def corpus(tmp_path_factory) -> dict[str, Path]:
 
 
 # -- bad files × every command that reads a recording ------------------------------------------------------------
-BAD_FILES = ["empty.csv", "binary.csv", "nul.csv", "header_only.csv", "comments_only.csv", "text.csv",
-             "truncated_header.csv", "no_time.csv", "utf16.csv", "garbage.bag", "truncated.bag", "empty.bag",
-             "garbage.db3", "garbage.mcap", "garbage.nmea", "empty.nmea"]
+BAD_FILES = [
+    "empty.csv",
+    "binary.csv",
+    "nul.csv",
+    "header_only.csv",
+    "comments_only.csv",
+    "text.csv",
+    "truncated_header.csv",
+    "no_time.csv",
+    "utf16.csv",
+    "garbage.bag",
+    "truncated.bag",
+    "empty.bag",
+    "garbage.db3",
+    "garbage.mcap",
+    "garbage.nmea",
+    "empty.nmea",
+]
 # degenerate but readable: a command may answer (exit 0) or refuse (exit 2, one line), never crash
-DEGENERATE = ["one_row.csv", "two_rows.csv", "zeros.csv", "const_time.csv", "nan.csv", "time_nan.csv",
-              "time_1e300.csv", "zero_data.csv", "inf.csv", "huge_values.csv", "time_huge_step.csv"]
+DEGENERATE = [
+    "one_row.csv",
+    "two_rows.csv",
+    "zeros.csv",
+    "const_time.csv",
+    "nan.csv",
+    "time_nan.csv",
+    "time_1e300.csv",
+    "zero_data.csv",
+    "inf.csv",
+    "huge_values.csv",
+    "time_huge_step.csv",
+]
 # may be readable (exit 0 is fine), but never a crash, and every failure is one line
-ODD_FILES = ["semicolon.csv", "decimal_comma.csv", "comma_decimal_comma.csv", "tabs.csv", "bom.csv", "crlf.csv",
-             "truncated.csv", "ragged.csv", "wide.csv", "backwards.csv", "long_line.csv", "nonsense.nmea"]
+ODD_FILES = [
+    "semicolon.csv",
+    "decimal_comma.csv",
+    "comma_decimal_comma.csv",
+    "tabs.csv",
+    "bom.csv",
+    "crlf.csv",
+    "truncated.csv",
+    "ragged.csv",
+    "wide.csv",
+    "backwards.csv",
+    "long_line.csv",
+    "nonsense.nmea",
+]
 
 # command → (args with IN and OUT placeholders, output file name or None)
 READERS = {
@@ -309,53 +353,112 @@ def test_wide_csv_is_quick(corpus, tmp_path):
 
     t0 = time.perf_counter()
     check(["info", corpus["wide.csv"]], inputs=[corpus["wide.csv"]], ok=True)
-    check(["convert", corpus["wide.csv"], tmp_path / "w.csv", "-q"], inputs=[corpus["wide.csv"]],
-          outputs=[tmp_path / "w.csv"], ok=True)
+    check(
+        ["convert", corpus["wide.csv"], tmp_path / "w.csv", "-q"],
+        inputs=[corpus["wide.csv"]],
+        outputs=[tmp_path / "w.csv"],
+        ok=True,
+    )
     assert time.perf_counter() - t0 < 60  # a hang, not a speed figure
 
 
 # -- calibration files and layouts ---------------------------------------------------------------------------
-BAD_CALS = ["cal_syntax.toml", "cal_empty.toml", "cal_binary.toml", "cal_nosection.toml", "cal_zero_A.toml",
-            "cal_rank1_A.toml", "cal_nan_b.toml", "cal_short_b.toml", "cal_gyro_nan.toml", "cal_gyro_text.toml",
-            "cal_dev_bad.toml", "cal_version.toml"]
+BAD_CALS = [
+    "cal_syntax.toml",
+    "cal_empty.toml",
+    "cal_binary.toml",
+    "cal_nosection.toml",
+    "cal_zero_A.toml",
+    "cal_rank1_A.toml",
+    "cal_nan_b.toml",
+    "cal_short_b.toml",
+    "cal_gyro_nan.toml",
+    "cal_gyro_text.toml",
+    "cal_dev_bad.toml",
+    "cal_version.toml",
+]
 
 
 @pytest.mark.parametrize("cal", BAD_CALS)
 def test_bad_calibration_file(corpus, tmp_path, cal):
     out = tmp_path / "est.csv"
-    check(["filter", corpus["roll.csv"], "--calibration", corpus[cal], "-o", out, "-q"],
-          inputs=[corpus["roll.csv"], corpus[cal]], outputs=[out], names=[corpus[cal]])
+    check(
+        ["filter", corpus["roll.csv"], "--calibration", corpus[cal], "-o", out, "-q"],
+        inputs=[corpus["roll.csv"], corpus[cal]],
+        outputs=[out],
+        names=[corpus[cal]],
+    )
 
 
-@pytest.mark.parametrize("cal", ["cal_syntax.toml", "cal_binary.toml", "cal_nan_b.toml", "cal_zero_A.toml",
-                                 "cal_gyro_nan.toml", "cal_version.toml", "cal_dev_bad.toml"])
+@pytest.mark.parametrize(
+    "cal",
+    [
+        "cal_syntax.toml",
+        "cal_binary.toml",
+        "cal_nan_b.toml",
+        "cal_zero_A.toml",
+        "cal_gyro_nan.toml",
+        "cal_version.toml",
+        "cal_dev_bad.toml",
+    ],
+)
 def test_bad_calibration_show_and_convert(corpus, tmp_path, cal):
     check(["calibrate", "show", corpus[cal]], inputs=[corpus[cal]], names=[corpus[cal]])
     out = tmp_path / "o.csv"
-    check(["convert", corpus["roll.csv"], out, "--calibration", corpus[cal], "-q"],
-          inputs=[corpus["roll.csv"], corpus[cal]], outputs=[out], names=[corpus[cal]])
+    check(
+        ["convert", corpus["roll.csv"], out, "--calibration", corpus[cal], "-q"],
+        inputs=[corpus["roll.csv"], corpus[cal]],
+        outputs=[out],
+        names=[corpus[cal]],
+    )
 
 
-@pytest.mark.parametrize("cal", ["cal_syntax.toml", "cal_binary.toml", "cal_nosection.toml", "cal_nan_b.toml",
-                                 "cal_zero_A.toml", "cal_gyro_nan.toml", "cal_version.toml"])
+@pytest.mark.parametrize(
+    "cal",
+    [
+        "cal_syntax.toml",
+        "cal_binary.toml",
+        "cal_nosection.toml",
+        "cal_nan_b.toml",
+        "cal_zero_A.toml",
+        "cal_gyro_nan.toml",
+        "cal_version.toml",
+    ],
+)
 def test_append_onto_a_bad_calibration_file_is_refused(corpus, tmp_path, cal):
     target = tmp_path / "cal.toml"
     target.write_bytes(corpus[cal].read_bytes())
     before = digest(target)
-    code, _, err = check(["calibrate", "gyro", corpus["static.csv"], "-o", target, "--append", "-q"],
-                         inputs=[corpus["static.csv"], target], names=[target])
+    code, _, err = check(
+        ["calibrate", "gyro", corpus["static.csv"], "-o", target, "--append", "-q"],
+        inputs=[corpus["static.csv"], target],
+        names=[target],
+    )
     assert digest(target) == before
 
 
-LAYOUTS = ["layout_syntax.toml", "layout_empty.toml", "layout_nan.toml", "layout_inf.toml", "layout_one.toml",
-           "layout_same_pos.toml", "layout_missing_cols.toml", "layout_bad_axes.toml", "layout_bad_unit.toml"]
+LAYOUTS = [
+    "layout_syntax.toml",
+    "layout_empty.toml",
+    "layout_nan.toml",
+    "layout_inf.toml",
+    "layout_one.toml",
+    "layout_same_pos.toml",
+    "layout_missing_cols.toml",
+    "layout_bad_axes.toml",
+    "layout_bad_unit.toml",
+]
 
 
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_bad_gyrofree_layout(corpus, tmp_path, layout):
     out = tmp_path / "rates.csv"
-    check(["gyrofree", corpus["array.csv"], "--layout", corpus[layout], "-o", out, "-q"],
-          inputs=[corpus["array.csv"], corpus[layout]], outputs=[out], names=[corpus[layout], corpus["array.csv"]])
+    check(
+        ["gyrofree", corpus["array.csv"], "--layout", corpus[layout], "-o", out, "-q"],
+        inputs=[corpus["array.csv"], corpus[layout]],
+        outputs=[out],
+        names=[corpus[layout], corpus["array.csv"]],
+    )
 
 
 def test_nan_in_gyrofree_data(corpus, tmp_path):
@@ -397,14 +500,50 @@ OPTION_CASES = {
     "gyro-window0": ["calibrate", "gyro", "@static.csv", "-o", "OUT.toml", "--window", "0"],
     "accel-gravity-neg": ["calibrate", "accel", "@static.csv", "-o", "OUT.toml", "--gravity", "-9.8"],
     "accel-latitude-100": ["calibrate", "accel", "@static.csv", "-o", "OUT.toml", "--latitude", "100"],
-    "incl-angle-floor-neg": ["report", "inclinometer", "@est.csv", "--reference", "@roll.csv", "-o", "OUT.pdf",
-                             "--angle-floor", "-1"],
-    "incl-angle-pct-neg": ["report", "inclinometer", "@est.csv", "--reference", "@roll.csv", "-o", "OUT.pdf",
-                           "--angle-pct", "-5"],
-    "heading-static-limit-neg": ["report", "heading", "@est.csv", "--reference", "@roll.csv", "-o", "OUT.pdf",
-                                 "--static-limit", "-1"],
-    "report-max-lag-nan": ["report", "heading", "@est.csv", "--reference", "@roll.csv", "-o", "OUT.pdf",
-                           "--max-lag", "nan"],
+    "incl-angle-floor-neg": [
+        "report",
+        "inclinometer",
+        "@est.csv",
+        "--reference",
+        "@roll.csv",
+        "-o",
+        "OUT.pdf",
+        "--angle-floor",
+        "-1",
+    ],
+    "incl-angle-pct-neg": [
+        "report",
+        "inclinometer",
+        "@est.csv",
+        "--reference",
+        "@roll.csv",
+        "-o",
+        "OUT.pdf",
+        "--angle-pct",
+        "-5",
+    ],
+    "heading-static-limit-neg": [
+        "report",
+        "heading",
+        "@est.csv",
+        "--reference",
+        "@roll.csv",
+        "-o",
+        "OUT.pdf",
+        "--static-limit",
+        "-1",
+    ],
+    "report-max-lag-nan": [
+        "report",
+        "heading",
+        "@est.csv",
+        "--reference",
+        "@roll.csv",
+        "-o",
+        "OUT.pdf",
+        "--max-lag",
+        "nan",
+    ],
     "allan-per-decade0": ["allan", "@static.csv", "-o", "OUT.yaml", "--per-decade", "0"],
     "allan-start-after-end": ["allan", "@static.csv", "-o", "OUT.yaml", "--start", "20", "--end", "5"],
     "plot-start-after-end": ["plot", "@roll.csv", "gyro", "-o", "OUT.png", "--start", "20", "--end", "5"],
@@ -447,8 +586,12 @@ def test_out_of_range_option(corpus, tmp_path, case):
         else:
             args.append(a)
     opt = [a for a in OPTION_CASES[case] if a.startswith("--")][-1]  # the option under test comes last
-    check([*args, "-q"] if case.split("-")[0] not in ("evaluate",) else args, inputs=inputs, outputs=outputs,
-          names=[opt, *inputs, *outputs])
+    check(
+        [*args, "-q"] if case.split("-")[0] not in ("evaluate",) else args,
+        inputs=inputs,
+        outputs=outputs,
+        names=[opt, *inputs, *outputs],
+    )
 
 
 def test_every_numeric_option_has_a_declared_range():
@@ -503,22 +646,67 @@ WRITERS = {
     "roll": ["roll", "@est.csv", "-o", "OUT"],
     "roll-cycles": ["roll", "@est.csv", "-o", "NEW.csv", "--cycles", "OUT"],
     "nmea": ["nmea", "@est.csv", "-o", "OUT"],
-    "report": ["report", "inclinometer", "@est.csv", "--reference", "@roll.csv", "--ref-channel", "ref_roll", "-o",
-               "OUT"],
-    "report-json": ["report", "heading", "@est.csv", "--reference", "@roll.csv", "--ref-channel", "ref_heading",
-                    "-o", "NEW.pdf", "--json-out", "OUT"],
+    "report": [
+        "report",
+        "inclinometer",
+        "@est.csv",
+        "--reference",
+        "@roll.csv",
+        "--ref-channel",
+        "ref_roll",
+        "-o",
+        "OUT",
+    ],
+    "report-json": [
+        "report",
+        "heading",
+        "@est.csv",
+        "--reference",
+        "@roll.csv",
+        "--ref-channel",
+        "ref_heading",
+        "-o",
+        "NEW.pdf",
+        "--json-out",
+        "OUT",
+    ],
     "gyrofree": ["gyrofree", "@array.csv", "--layout", str(LAYOUT), "-o", "OUT"],
     "simulate": ["simulate", "ship-roll", "-o", "OUT", "--duration", "5"],
     "evaluate-plot": ["evaluate", "@est.csv", "--reference", "@roll.csv", "--plot", "OUT"],
     "events": ["events", "detect", "@est.csv", "-o", "OUT"],
     "events-csv": ["events", "detect", "@est.csv", "-o", "NEW.json", "--events-csv", "OUT"],
 }
-EXT = {"convert": ".csv", "convert-o": ".csv", "filter": ".csv", "plot": ".png", "allan": ".yaml",
-       "allan-kalibr": ".yaml", "allan-plot": ".png", "heave": ".csv", "heave-nmea": ".nmea", "zvi": ".csv",
-       "zvi-flags": ".csv", "ins": ".csv", "ins-strides": ".csv", "cal-mag": ".toml", "cal-mag-plot": ".png",
-       "cal-gyro": ".toml", "cal-gyro-append": ".toml", "cal-accel": ".toml", "cal-deviation": ".toml",
-       "roll": ".csv", "roll-cycles": ".csv", "nmea": ".nmea", "report": ".pdf", "report-json": ".json",
-       "gyrofree": ".csv", "simulate": ".csv", "evaluate-plot": ".png", "events": ".json", "events-csv": ".csv"}
+EXT = {
+    "convert": ".csv",
+    "convert-o": ".csv",
+    "filter": ".csv",
+    "plot": ".png",
+    "allan": ".yaml",
+    "allan-kalibr": ".yaml",
+    "allan-plot": ".png",
+    "heave": ".csv",
+    "heave-nmea": ".nmea",
+    "zvi": ".csv",
+    "zvi-flags": ".csv",
+    "ins": ".csv",
+    "ins-strides": ".csv",
+    "cal-mag": ".toml",
+    "cal-mag-plot": ".png",
+    "cal-gyro": ".toml",
+    "cal-gyro-append": ".toml",
+    "cal-accel": ".toml",
+    "cal-deviation": ".toml",
+    "roll": ".csv",
+    "roll-cycles": ".csv",
+    "nmea": ".nmea",
+    "report": ".pdf",
+    "report-json": ".json",
+    "gyrofree": ".csv",
+    "simulate": ".csv",
+    "evaluate-plot": ".png",
+    "events": ".json",
+    "events-csv": ".csv",
+}
 
 
 def _writer(corpus, tmp_path, cmd: str, out) -> tuple[list, list]:
@@ -613,8 +801,9 @@ def test_cd_sub_convert_parent_deletes_nothing(corpus, tmp_path):
     assert digest(d) == before
 
 
-@pytest.mark.parametrize("cmd", ["convert", "filter", "allan-kalibr", "cal-gyro", "report", "simulate",
-                                 "zvi-flags", "roll-cycles"])
+@pytest.mark.parametrize(
+    "cmd", ["convert", "filter", "allan-kalibr", "cal-gyro", "report", "simulate", "zvi-flags", "roll-cycles"]
+)
 def test_output_parent_is_a_file(corpus, tmp_path, cmd):
     f = tmp_path / ("file" + EXT[cmd])
     f.write_text("I am a file\n")
@@ -624,10 +813,12 @@ def test_output_parent_is_a_file(corpus, tmp_path, cmd):
     assert f.read_text() == "I am a file\n"
 
 
-@pytest.mark.parametrize("cmd", ["convert", "filter", "heave", "cal-mag", "report", "simulate", "nmea", "plot",
-                                 "allan"])
-@pytest.mark.parametrize("target", ["/dev/full", "/dev/null", "/proc/imutool_test.csv", "/sys/imutool_test.csv",
-                                    "/proc/self/imutool/x.csv"])
+@pytest.mark.parametrize(
+    "cmd", ["convert", "filter", "heave", "cal-mag", "report", "simulate", "nmea", "plot", "allan"]
+)
+@pytest.mark.parametrize(
+    "target", ["/dev/full", "/dev/null", "/proc/imutool_test.csv", "/sys/imutool_test.csv", "/proc/self/imutool/x.csv"]
+)
 def test_unwritable_targets(corpus, tmp_path, cmd, target):
     args, inputs = _writer(corpus, tmp_path, cmd, target)
     check(args, inputs=inputs, names=[target])
@@ -684,8 +875,9 @@ def test_bag_folder_input_is_never_the_output(corpus, tmp_path):
 
 def test_output_named_twice(corpus, tmp_path):
     out = tmp_path / "a.yaml"
-    check(["allan", corpus["static.csv"], "-o", out, "--kalibr", out, "-q"], inputs=[corpus["static.csv"]],
-          outputs=[out])
+    check(
+        ["allan", corpus["static.csv"], "-o", out, "--kalibr", out, "-q"], inputs=[corpus["static.csv"]], outputs=[out]
+    )
 
 
 def test_calibration_file_is_not_an_output_of_convert(corpus, tmp_path):
@@ -693,8 +885,9 @@ def test_calibration_file_is_not_an_output_of_convert(corpus, tmp_path):
     code, _, err = run(["calibrate", "gyro", corpus["static.csv"], "-o", cal, "-q"])
     assert code == 0, err
     out = tmp_path / "x.csv"
-    check(["convert", corpus["roll.csv"], cal, "--calibration", cal, "-q"], inputs=[corpus["roll.csv"], cal],
-          names=[cal])
+    check(
+        ["convert", corpus["roll.csv"], cal, "--calibration", cal, "-q"], inputs=[corpus["roll.csv"], cal], names=[cal]
+    )
     assert not out.exists()
 
 
@@ -705,8 +898,9 @@ def test_deviation_merges_into_its_own_calibration_file(corpus, tmp_path):
     cal = tmp_path / "cal.toml"
     code, _, err = run(["calibrate", "gyro", corpus["static.csv"], "-o", cal, "-q"])
     assert code == 0, err
-    code, _, err = run(["calibrate", "deviation", corpus["roll.csv"], "--calibration", cal, "-o", cal, "-q",
-                        "--min-span", "1"])
+    code, _, err = run(
+        ["calibrate", "deviation", corpus["roll.csv"], "--calibration", cal, "-o", cal, "-q", "--min-span", "1"]
+    )
     assert "Traceback" not in err and "internal error" not in err
     if code == 0:
         assert {"gyro", "deviation"} <= set(load_calibration(cal).sections)
@@ -724,15 +918,27 @@ def _limited(args: list, cwd: Path, limit: int) -> subprocess.CompletedProcess:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    return subprocess.run([sys.executable, "-c", "from imutool.cli import main; main()", *map(str, args)],
-                          cwd=cwd, capture_output=True, text=True, preexec_fn=pre, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-c", "from imutool.cli import main; main()", *map(str, args)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        preexec_fn=pre,
+        timeout=300,
+    )
 
 
-@pytest.mark.parametrize("cmd", [["convert", "@roll.csv", "OUT.csv"], ["convert", "@roll.csv", "OUT.bag"],
-                                 ["filter", "@roll.csv", "-o", "OUT.csv"],
-                                 ["heave", "@roll.csv", "-o", "OUT.csv"],
-                                 ["nmea", "@est.csv", "-o", "OUT.nmea", "--baud", "460800"]],  # every row
-                         ids=["convert-csv", "convert-bag", "filter", "heave", "nmea"])
+@pytest.mark.parametrize(
+    "cmd",
+    [
+        ["convert", "@roll.csv", "OUT.csv"],
+        ["convert", "@roll.csv", "OUT.bag"],
+        ["filter", "@roll.csv", "-o", "OUT.csv"],
+        ["heave", "@roll.csv", "-o", "OUT.csv"],
+        ["nmea", "@est.csv", "-o", "OUT.nmea", "--baud", "460800"],
+    ],  # every row
+    ids=["convert-csv", "convert-bag", "filter", "heave", "nmea"],
+)
 def test_full_disk(corpus, tmp_path, cmd):
     out = None
     args = []

@@ -144,8 +144,22 @@ def test_cli_track_plot_and_summary(tmp_path):
     formats.write(r, src)
     out = tmp_path / "track.csv"
     png = tmp_path / "track.png"
-    res = CliRunner().invoke(cli, ["ins", str(src), "-o", str(out), "--zupt", "--height-update", "--plot", str(png),
-                                   "--strides", str(tmp_path / "strides.csv"), "--json"])
+    res = CliRunner().invoke(
+        cli,
+        [
+            "ins",
+            str(src),
+            "-o",
+            str(out),
+            "--zupt",
+            "--height-update",
+            "--plot",
+            str(png),
+            "--strides",
+            str(tmp_path / "strides.csv"),
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     s = json.loads(res.output)
     assert s["strides"]["count"] == 4

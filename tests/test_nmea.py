@@ -45,8 +45,15 @@ from formats.nmea import (  # noqa: E402
     xdr_sentence,
 )
 
-GPSD_LOGS = ["bundg_zeus_9.log", "hemi.log", "pypilot.log", "rst39.log", "saab-r4.log",
-             "skytraq-PX1172RH_DS.log", "tnt-revolution.log"]
+GPSD_LOGS = [
+    "bundg_zeus_9.log",
+    "hemi.log",
+    "pypilot.log",
+    "rst39.log",
+    "saab-r4.log",
+    "skytraq-PX1172RH_DS.log",
+    "tnt-revolution.log",
+]
 
 
 def _valid_for_pynmea2(s: str) -> None:
@@ -54,7 +61,7 @@ def _valid_for_pynmea2(s: str) -> None:
     try:
         pynmea2.parse(s, check=True)
     except pynmea2.SentenceTypeError:
-        body = s[1:s.index("*")]
+        body = s[1 : s.index("*")]
         assert pynmea2.NMEASentence.checksum(body) == int(s[-2:], 16)
 
 
@@ -114,8 +121,21 @@ def test_parse_sentence_checksum_policies():
     assert parse_sentence("!AIVDM,1,1,,B,13aGhtw0R<OJf=6LgQ?Ad1FF05`L,0*24").type == "VDM"
 
 
-@pytest.mark.parametrize("line", ["", "hello", "$", "$GP", "$GPHDT", "#comment", "$G\x00HDT,1,T*00",
-                                  "$SDVLW,$SDVLW,,N,322.0,N*4E", "$gphdt,1.0,T", "$GPHDT,1*2*00"])
+@pytest.mark.parametrize(
+    "line",
+    [
+        "",
+        "hello",
+        "$",
+        "$GP",
+        "$GPHDT",
+        "#comment",
+        "$G\x00HDT,1,T*00",
+        "$SDVLW,$SDVLW,,N,322.0,N*4E",
+        "$gphdt,1.0,T",
+        "$GPHDT,1*2*00",
+    ],
+)
 def test_parse_sentence_garbage_raises_parse_error(line):
     with pytest.raises(NmeaParseError):
         parse_sentence(line, "ignore")
@@ -177,9 +197,19 @@ def test_decode_pashr_attitude_and_heave():
 
 # -- writers: round trips ----------------------------------------------------------------------------------------
 @settings(max_examples=150, deadline=None)
-@given(h=st.floats(-720, 720), r=st.floats(-90, 90), p=st.floats(-90, 90), hv=st.floats(-20, 20),
-       dev=st.floats(-30, 30), var=st.floats(-60, 60), rot=st.floats(-9999, 9999),
-       per=st.floats(0, 99), ap=st.floats(0, 90), asb=st.floats(0, 90), tod=st.floats(0, 86399.9))
+@given(
+    h=st.floats(-720, 720),
+    r=st.floats(-90, 90),
+    p=st.floats(-90, 90),
+    hv=st.floats(-20, 20),
+    dev=st.floats(-30, 30),
+    var=st.floats(-60, 60),
+    rot=st.floats(-9999, 9999),
+    per=st.floats(0, 99),
+    ap=st.floats(0, 90),
+    asb=st.floats(0, 90),
+    tod=st.floats(0, 86399.9),
+)
 def test_every_writer_round_trips(h, r, p, hv, dev, var, rot, per, ap, asb, tod):
     wrapped = h % 360.0
 
@@ -294,11 +324,17 @@ def test_iter_sentences_derives_rot_from_heading():
 
 # -- whole logs: time bases, prefixes, errors ---------------------------------------------------------------------
 def test_read_log_with_timestamps_and_comments(tmp_path):
-    lines = ["# comment", "", "1700000000.000 $HEHDT,10.0,T*" + checksum("HEHDT,10.0,T"),
-             "2023-11-14T22:13:20.500Z " + _s("HEHDT,11.0,T"),
-             "1700000001000;N;" + _s("YXXDR,A,1.5,D,ROLL"),
-             "\\s:GYRO,c:1700000001.5*00\\" + _s("HEHDT,12.0,T"),
-             "1700000002 $HEHDT,13.0,T*FF", "1700000003 $HEHDT,1", "1700000004 {\"class\":\"X\"}"]
+    lines = [
+        "# comment",
+        "",
+        "1700000000.000 $HEHDT,10.0,T*" + checksum("HEHDT,10.0,T"),
+        "2023-11-14T22:13:20.500Z " + _s("HEHDT,11.0,T"),
+        "1700000001000;N;" + _s("YXXDR,A,1.5,D,ROLL"),
+        "\\s:GYRO,c:1700000001.5*00\\" + _s("HEHDT,12.0,T"),
+        "1700000002 $HEHDT,13.0,T*FF",
+        "1700000003 $HEHDT,1",
+        '1700000004 {"class":"X"}',
+    ]
     p = tmp_path / "stamped.log"
     p.write_text("\n".join(lines) + "\n")
     rec = read_nmea(p)
@@ -317,13 +353,16 @@ def test_read_log_with_timestamps_and_comments(tmp_path):
 
 
 def test_nmea_time_base_dates_rollover_and_spliced_prefix(tmp_path):
-    lines = [_s("GPZDA,235959,16,04,14,-02,00"),  # 2-digit year as B&G GoFree sends it
-             _s("HEHDT,1.0,T"), _s("HEHDT,2.0,T"),
-             _s("GPGGA,000001,,,,,0,,,,M,,M,,"),  # after midnight, no new date yet
-             _s("HEHDT,3.0,T"),
-             "garbage" + _s("HEHDT,4.0,T"),  # not a timestamp: counted, sentence still read
-             _s("GPGGA,000000,,,,,0,,,,M,,M,,"),  # backwards: not used as a time anchor
-             _s("HEHDT,5.0,T")]
+    lines = [
+        _s("GPZDA,235959,16,04,14,-02,00"),  # 2-digit year as B&G GoFree sends it
+        _s("HEHDT,1.0,T"),
+        _s("HEHDT,2.0,T"),
+        _s("GPGGA,000001,,,,,0,,,,M,,M,,"),  # after midnight, no new date yet
+        _s("HEHDT,3.0,T"),
+        "garbage" + _s("HEHDT,4.0,T"),  # not a timestamp: counted, sentence still read
+        _s("GPGGA,000000,,,,,0,,,,M,,M,,"),  # backwards: not used as a time anchor
+        _s("HEHDT,5.0,T"),
+    ]
     p = tmp_path / "midnight.nmea"
     p.write_text("\r\n".join(lines))
     rec = read_nmea(p)
@@ -334,8 +373,16 @@ def test_nmea_time_base_dates_rollover_and_spliced_prefix(tmp_path):
     assert rec.meta["time"]["start_utc"].startswith("2014-04-16T23:59:59")
 
 
-@pytest.mark.parametrize("zda", ["GPZDA,235959,31,12,9999,,", "GPZDA,000000,01,01,0001,,", "GPZDA,99,99,99,99,,",
-                                 "GPRMC,000000,A,,,,,,,311299,,,A", "GPGGA,123456.789,,,,,0,,,,M,,M,,"])
+@pytest.mark.parametrize(
+    "zda",
+    [
+        "GPZDA,235959,31,12,9999,,",
+        "GPZDA,000000,01,01,0001,,",
+        "GPZDA,99,99,99,99,,",
+        "GPRMC,000000,A,,,,,,,311299,,,A",
+        "GPGGA,123456.789,,,,,0,,,,M,,M,,",
+    ],
+)
 def test_extreme_dates_do_not_crash(tmp_path, zda):
     p = tmp_path / "dates.log"
     p.write_text("\n".join([_s("HEHDT,1.0,T"), _s(zda), _s("HEHDT,2.0,T"), _s(zda), _s("HEHDT,3.0,T")]))
@@ -385,15 +432,23 @@ def test_gpsd_logs_expected_content(shared):
     assert np.isfinite(r["pitch"]).sum() == 8 and np.isfinite(r["roll"]).sum() == 7
     assert np.nanmin(r["rot"]) == pytest.approx(-0.008)
     r = read_nmea(shared("nmea_gpsd", "hemi.log"))
-    assert r.meta["sentences"]["HDT"] == {"parsed": 4, "partial": 0, "no_data": 211, "bad_checksum": 0,
-                                          "malformed": 0, "unsupported": 0}
+    assert r.meta["sentences"]["HDT"] == {
+        "parsed": 4,
+        "partial": 0,
+        "no_data": 211,
+        "bad_checksum": 0,
+        "malformed": 0,
+        "unsupported": 0,
+    }
     r = read_nmea(shared("nmea_gpsd", "rst39.log"))
     assert r.meta["time_source"] == "nmea" and r.meta["time"]["origin"].startswith("unix")
     # every PASHR row sits at the time its own hhmmss.sss field gives (2014-02-19, from RMC)
     base = datetime(2014, 2, 19, tzinfo=timezone.utc).timestamp()
-    pashr_t = [base + 20 * 3600 + 41 * 60 + float(ln.split(",")[1][4:])
-               for ln in Path(shared("nmea_gpsd", "rst39.log")).read_text().splitlines()
-               if ln.startswith("$PASHR")]
+    pashr_t = [
+        base + 20 * 3600 + 41 * 60 + float(ln.split(",")[1][4:])
+        for ln in Path(shared("nmea_gpsd", "rst39.log")).read_text().splitlines()
+        if ln.startswith("$PASHR")
+    ]
     m = np.isfinite(r["heave"])
     assert np.allclose(r.time[m], pashr_t, atol=1e-6)
     r = read_nmea(shared("nmea_gpsd", "bundg_zeus_9.log"))
@@ -416,8 +471,14 @@ def test_signalk_corrupted_lines_counted(shared):
 
 
 # gpsd's .chk echoes each input sentence followed by the JSON it produced for it.
-_GPSD_KEYS = {"heading_true": "heading", "heading_mag": "mheading", "roll": "roll", "pitch": "pitch",
-              "rot": "rot", "heave": "heave"}
+_GPSD_KEYS = {
+    "heading_true": "heading",
+    "heading_mag": "mheading",
+    "roll": "roll",
+    "pitch": "pitch",
+    "rot": "rot",
+    "heave": "heave",
+}
 
 
 def _decodes(raw: str) -> bool:
@@ -461,8 +522,9 @@ def gpsd_agreement(chk: Path, lookahead: int = 12) -> tuple[collections.Counter,
             continue
         how = "compared"
         if not att:
-            nxt = next((g for g in groups[gi + 1: gi + 1 + lookahead] if any(r.get("class") == "ATT" for r in g[1])),
-                       None)
+            nxt = next(
+                (g for g in groups[gi + 1 : gi + 1 + lookahead] if any(r.get("class") == "ATT" for r in g[1])), None
+            )
             if nxt is not None and _decodes(nxt[0]):
                 nxt = None  # that ATT belongs to a sentence we decode ourselves: not this sentence's value
             if nxt is None:
@@ -490,14 +552,19 @@ def test_agrees_with_gpsd_decode(shared):
         total.update(stats)
     n = sum(v for k, v in total.items() if k.startswith("compared"))
     assert n >= 80
-    for key in ("compared: HDT.heading_true", "compared: HDM.heading_mag", "compared: XDR.roll",
-                "compared: XDR.pitch", "compared: ROT.rot", "compared: PSTI.pitch"):
+    for key in (
+        "compared: HDT.heading_true",
+        "compared: HDM.heading_mag",
+        "compared: XDR.roll",
+        "compared: XDR.pitch",
+        "compared: ROT.rot",
+        "compared: PSTI.pitch",
+    ):
         assert total[key] > 0, key
 
 
 # -- fuzz: only counted skips or ImutoolError ------------------------------------------------------------------
-_nmeaish = st.text(alphabet=st.sampled_from(list("$!*,.-+0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ \\:;#\t")),
-                   max_size=90)
+_nmeaish = st.text(alphabet=st.sampled_from(list("$!*,.-+0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ \\:;#\t")), max_size=90)
 
 
 @settings(max_examples=200, deadline=None)
@@ -515,9 +582,14 @@ def test_fuzz_parse_sentence(line):
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(data=st.one_of(st.binary(max_size=400),
-                      st.lists(st.one_of(_nmeaish, _nmeaish.map(lambda b: _s("HEHDT," + b.lstrip("$!")))),
-                               max_size=20).map(lambda ls: "\n".join(ls).encode())))
+@given(
+    data=st.one_of(
+        st.binary(max_size=400),
+        st.lists(st.one_of(_nmeaish, _nmeaish.map(lambda b: _s("HEHDT," + b.lstrip("$!")))), max_size=20).map(
+            lambda ls: "\n".join(ls).encode()
+        ),
+    )
+)
 def test_fuzz_read_nmea(tmp_path, data):
     p = tmp_path / "fuzz.log"
     p.write_bytes(data)
@@ -542,8 +614,12 @@ if __name__ == "__main__":  # print the agreement table against gpsd's decode
         grand.update(stats)
         line = ", ".join(f"{k} {v}" for k, v in sorted(stats.items()))
         print(f"{name}: {line}" + (f"; BAD {bad[:3]}" if bad else ""))
-    print("TOTAL compared:", sum(v for k, v in grand.items() if k.startswith("compared")),
-          "disagreements:", sum(v for k, v in grand.items() if k.startswith("DISAGREE")))
+    print(
+        "TOTAL compared:",
+        sum(v for k, v in grand.items() if k.startswith("compared")),
+        "disagreements:",
+        sum(v for k, v in grand.items() if k.startswith("DISAGREE")),
+    )
 
 
 def test_decode_rmc_vtg_sog_cog(tmp_path):
@@ -562,7 +638,9 @@ def test_decode_rmc_vtg_sog_cog(tmp_path):
     with pytest.raises(NmeaFieldError, match="speed"):
         decode(_s("GPVTG,054.7,T,034.4,M,fast,N,010.2,K,A"))
     p = tmp_path / "gnss.nmea"
-    p.write_text("\n".join(f"{t:.1f};A;" + _s(f"GPRMC,12000{t},A,,,,,{10 * t:.1f},{359.5 + t:.1f},230394,,,A")
-                           for t in range(3)) + "\n")
+    p.write_text(
+        "\n".join(f"{t:.1f};A;" + _s(f"GPRMC,12000{t},A,,,,,{10 * t:.1f},{359.5 + t:.1f},230394,,,A") for t in range(3))
+        + "\n"
+    )
     rec = read_nmea(p)
     assert np.allclose(rec.get("sog", "m/s"), [0, 10 * kn, 20 * kn]) and np.allclose(rec["cog"], [359.5, 0.5, 1.5])

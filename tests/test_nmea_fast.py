@@ -77,11 +77,40 @@ def _split_lines_oracle(buf: bytearray, data: bytes) -> list[bytes]:
 # -- generated lines ------------------------------------------------------------------------------------------
 _NUM = st.one_of(st.none(), st.floats(-400.0, 400.0, allow_nan=False), st.integers(-999, 999))
 _FIELD_CHARS = "0123456789.-+eEinfaAVTDMNWSKR _"
-_FIELD = st.one_of(st.sampled_from(["", "A", "V", "T", "M", "N", "E", "W", "D", "K", "ROLL", "PTCH", "HEEL",
-                                    "TRIM", "PITCH", " 1.5", "1.5 ", "inf", "nan", "1e3", "-.5", "5.", "1_0", "036",
-                                    "123456.78", "120000"]),
-                   st.text(_FIELD_CHARS, max_size=8),
-                   st.floats(-1e6, 1e6, allow_nan=False).map(repr))
+_FIELD = st.one_of(
+    st.sampled_from(
+        [
+            "",
+            "A",
+            "V",
+            "T",
+            "M",
+            "N",
+            "E",
+            "W",
+            "D",
+            "K",
+            "ROLL",
+            "PTCH",
+            "HEEL",
+            "TRIM",
+            "PITCH",
+            " 1.5",
+            "1.5 ",
+            "inf",
+            "nan",
+            "1e3",
+            "-.5",
+            "5.",
+            "1_0",
+            "036",
+            "123456.78",
+            "120000",
+        ]
+    ),
+    st.text(_FIELD_CHARS, max_size=8),
+    st.floats(-1e6, 1e6, allow_nan=False).map(repr),
+)
 
 
 def _frame(address: str, fields: list[str]) -> str:
@@ -92,8 +121,9 @@ def _frame(address: str, fields: list[str]) -> str:
 @st.composite
 def writer_sentences(draw) -> str:
     """A sentence from one of the repo's writers (valid by construction)."""
-    kind = draw(st.sampled_from(["HDT", "THS", "HDG", "ROT", "XDR", "XDRG", "HRM", "PASHR", "HDM", "RMC", "VTG",
-                                 "PSTI"]))
+    kind = draw(
+        st.sampled_from(["HDT", "THS", "HDG", "ROT", "XDR", "XDRG", "HRM", "PASHR", "HDM", "RMC", "VTG", "PSTI"])
+    )
     v = [draw(_NUM) for _ in range(5)]
     f = [None if x is None else float(x) for x in v]
     if kind == "HDT":
@@ -105,14 +135,26 @@ def writer_sentences(draw) -> str:
     if kind == "ROT":
         return nmea.rot_sentence(f[0], valid=draw(st.booleans()))
     if kind == "XDR":
-        return nmea.xdr_roll_pitch(f[0], f[1], roll_id=draw(st.sampled_from(["ROLL", "HEEL", "Roll"])),
-                                   pitch_id=draw(st.sampled_from(["PTCH", "PITCH", "TRIM", "FOO"])),
-                                   roll_sign=draw(st.sampled_from([1, -1])))
+        return nmea.xdr_roll_pitch(
+            f[0],
+            f[1],
+            roll_id=draw(st.sampled_from(["ROLL", "HEEL", "Roll"])),
+            pitch_id=draw(st.sampled_from(["PTCH", "PITCH", "TRIM", "FOO"])),
+            roll_sign=draw(st.sampled_from([1, -1])),
+        )
     if kind == "XDRG":  # any groups, including non-angle ones and odd units
-        groups = draw(st.lists(st.tuples(st.sampled_from(["A", "D", "C", "P", ""]), _NUM,
-                                         st.sampled_from(["D", "M", "C", "", "B"]),
-                                         st.sampled_from(["ROLL", "PTCH", "HEEL", "AIRTEMP", "Heel Angle"])),
-                               min_size=1, max_size=3))
+        groups = draw(
+            st.lists(
+                st.tuples(
+                    st.sampled_from(["A", "D", "C", "P", ""]),
+                    _NUM,
+                    st.sampled_from(["D", "M", "C", "", "B"]),
+                    st.sampled_from(["ROLL", "PTCH", "HEEL", "AIRTEMP", "Heel Angle"]),
+                ),
+                min_size=1,
+                max_size=3,
+            )
+        )
         return nmea.xdr_sentence([(a, None if b is None else float(b), c, d) for a, b, c, d in groups])
     if kind == "HRM":
         return nmea.hrm_sentence(f[0], f[1], f[2], f[3], valid=draw(st.booleans()), peak_port_deg=f[4])
@@ -121,13 +163,31 @@ def writer_sentences(draw) -> str:
     if kind == "HDM":
         return nmea.format_sentence("HC", "HDM", [f[0], "M"], [1, None])
     if kind == "RMC":
-        return nmea.format_sentence("GP", "RMC", ["120000.00", draw(st.sampled_from("AV")), "", "", "", "",
-                                                  f[0], f[1], "211126", "", "", draw(st.sampled_from("ADN"))])
+        return nmea.format_sentence(
+            "GP",
+            "RMC",
+            [
+                "120000.00",
+                draw(st.sampled_from("AV")),
+                "",
+                "",
+                "",
+                "",
+                f[0],
+                f[1],
+                "211126",
+                "",
+                "",
+                draw(st.sampled_from("ADN")),
+            ],
+        )
     if kind == "VTG":
-        return nmea.format_sentence("GP", "VTG", [f[0], "T", "", "M", f[1], "N", f[2], "K",
-                                                  draw(st.sampled_from("ADN"))])
-    return nmea.format_sentence("P", "STI", ["036", "120000.00", "211126", f[0], f[1], f[2],
-                                             draw(st.sampled_from("ANF"))])
+        return nmea.format_sentence(
+            "GP", "VTG", [f[0], "T", "", "M", f[1], "N", f[2], "K", draw(st.sampled_from("ADN"))]
+        )
+    return nmea.format_sentence(
+        "P", "STI", ["036", "120000.00", "211126", f[0], f[1], f[2], draw(st.sampled_from("ANF"))]
+    )
 
 
 @st.composite
@@ -146,23 +206,40 @@ def corrupted(draw, base) -> str:
     """A sentence damaged in one way; body damage is re-checksummed half of the time (a device that sends
     garbage with a valid checksum), so the decoders' checks are reached, not only the checksum test."""
     s = draw(base)
-    how = draw(st.sampled_from(["none", "flip", "delete", "truncate", "insert", "empty_field", "no_checksum",
-                                "lower_checksum", "whitespace", "bang"]))
+    how = draw(
+        st.sampled_from(
+            [
+                "none",
+                "flip",
+                "delete",
+                "truncate",
+                "insert",
+                "empty_field",
+                "no_checksum",
+                "lower_checksum",
+                "whitespace",
+                "bang",
+            ]
+        )
+    )
     body, tail = s[1:-3], s[-3:]
     n = len(body)
     if how == "flip":
         i = draw(st.integers(0, n - 1))
         c = draw(st.sampled_from(list("0123456789ABCDEF.,-*$!AVTMEWXn \t") + ["\ufffd", "\x7f", "\x00"]))
-        body = body[:i] + c + body[i + 1:]
+        body = body[:i] + c + body[i + 1 :]
     elif how == "delete":
         i = draw(st.integers(0, n - 1))
-        body = body[:i] + body[i + 1:]
+        body = body[:i] + body[i + 1 :]
     elif how == "truncate":
-        body = body[:draw(st.integers(0, n))]
+        body = body[: draw(st.integers(0, n))]
     elif how == "insert":
         i = draw(st.integers(0, n))
-        body = body[:i] + draw(st.sampled_from(["$", "*", ",", "*00", "GPGGA,1", ",,", "nan", "inf", "1e400", "_"])) \
+        body = (
+            body[:i]
+            + draw(st.sampled_from(["$", "*", ",", "*00", "GPGGA,1", ",,", "nan", "inf", "1e400", "_"]))
             + body[i:]
+        )
     elif how == "empty_field":
         parts = body.split(",")
         parts[draw(st.integers(0, len(parts) - 1))] = ""
@@ -217,11 +294,28 @@ def test_fast_path_examples():
 
 
 EDIT_BASES = [
-    "HEHDT,123.4,T", "HCHDM,12.5,M", "HCHDG,120.3,1.2,E,3.4,W", "HCHDG,120.3,,,3.4,W", "TIROT,-3.2,A", "TIROT,3,V",
-    "HETHS,123.4,A", "HETHS,5,V", "HETHS,,E", "YXXDR,A,-1.5,D,PTCH,A,3.2,D,ROLL", "YXXDR,A,2,,HEEL,C,10,C,AIR",
-    "IIHRM,1.5,8.0,3.0,4.0,A,5.0,6.0,120000,21,11", "PASHR,120000.000,12.00,T,1.00,-2.00,0.30,,,,1,0",
-    "GPRMC,120000.00,A,,,,,5.5,271.2,211126,,,A", "GPVTG,271.2,T,,M,5.5,N,10.2,K,A", "PSTI,036,120000,211126,1,2,3,A",
-    "HEHDT,nan,T", "HEHDT,inf,T", "HEHDT, ,T", "HEHDT,1e2,T", "HEHDT,-0.0,T", "HETHS,12,AA",
+    "HEHDT,123.4,T",
+    "HCHDM,12.5,M",
+    "HCHDG,120.3,1.2,E,3.4,W",
+    "HCHDG,120.3,,,3.4,W",
+    "TIROT,-3.2,A",
+    "TIROT,3,V",
+    "HETHS,123.4,A",
+    "HETHS,5,V",
+    "HETHS,,E",
+    "YXXDR,A,-1.5,D,PTCH,A,3.2,D,ROLL",
+    "YXXDR,A,2,,HEEL,C,10,C,AIR",
+    "IIHRM,1.5,8.0,3.0,4.0,A,5.0,6.0,120000,21,11",
+    "PASHR,120000.000,12.00,T,1.00,-2.00,0.30,,,,1,0",
+    "GPRMC,120000.00,A,,,,,5.5,271.2,211126,,,A",
+    "GPVTG,271.2,T,,M,5.5,N,10.2,K,A",
+    "PSTI,036,120000,211126,1,2,3,A",
+    "HEHDT,nan,T",
+    "HEHDT,inf,T",
+    "HEHDT, ,T",
+    "HEHDT,1e2,T",
+    "HEHDT,-0.0,T",
+    "HETHS,12,AA",
 ]
 EDIT_CHARS = list("\t\x7f\x00\ufffd$!*, AVXTNMEWD-.09enif_+") + ["", "\r\n"]
 
@@ -234,21 +328,31 @@ def test_every_single_character_edit_of_clean_sentences():
         assert_equivalent(_frame(base, []))
         for i in range(len(base) + 1):
             for c in EDIT_CHARS:
-                for body in {base[:i] + c + base[i + 1:], base[:i] + c + base[i:]}:
+                for body in {base[:i] + c + base[i + 1 :], base[:i] + c + base[i:]}:
                     taken += assert_equivalent(_frame(body, []) if body else "$*00")
     assert taken > 5000
 
 
 def test_real_logs_fast_equals_full(shared):
     """Every line of the real gpsd and Signal K logs (as received, and from its first '$'/'!')."""
-    files = [shared("nmea_gpsd", n) for n in ("bundg_zeus_9.log", "hemi.log", "pypilot.log", "rst39.log",
-                                              "saab-r4.log", "skytraq-PX1172RH_DS.log", "tnt-revolution.log")]
+    files = [
+        shared("nmea_gpsd", n)
+        for n in (
+            "bundg_zeus_9.log",
+            "hemi.log",
+            "pypilot.log",
+            "rst39.log",
+            "saab-r4.log",
+            "skytraq-PX1172RH_DS.log",
+            "tnt-revolution.log",
+        )
+    ]
     files += [shared("nmea_signalk", n) for n in ("gofree-merrimac.log", "n2kd-183-merrimac.log")]
     taken = checked = 0
     for p in files:
         for line in Path(p).read_text(encoding="latin-1").splitlines():
             starts = [i for i in (line.find("$"), line.find("!")) if i >= 0]
-            for variant in {line, line[min(starts):]} if starts else {line}:
+            for variant in {line, line[min(starts) :]} if starts else {line}:
                 checked += 1
                 taken += assert_equivalent(variant)
     assert checked > 13000 and taken > 2000  # the fast path is really exercised on real sentences
@@ -256,9 +360,10 @@ def test_real_logs_fast_equals_full(shared):
 
 # -- the capture loop: batching, raw log, rows and counts ------------------------------------------------------
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.binary(max_size=300) | st.sampled_from([b"\n", b"\r\n", b"$HEHDT,1,T*0F\r\n", b"\xff\n"]),
-                max_size=20),
-       st.integers(0, 9000))
+@given(
+    st.lists(st.binary(max_size=300) | st.sampled_from([b"\n", b"\r\n", b"$HEHDT,1,T*0F\r\n", b"\xff\n"]), max_size=20),
+    st.integers(0, 9000),
+)
 def test_split_text_gives_the_original_lines(chunks, long_len):
     chunks = chunks + [b"x" * long_len, b"\n"]
     b_old, b_new = bytearray(), bytearray()
@@ -293,8 +398,17 @@ class _FakePort:
 
 def _capture(tmp: Path, chunks: list[bytes], policy: str) -> tuple[dict, list[str], list[list[float]]]:
     stop = StopFlag()
-    summary = capture_nmea("fake", 4800, str(tmp / "o.csv"), status_s=None, quiet=True, checksum_policy=policy,
-                           opener=lambda port, baud: _FakePort(chunks, stop), stop=stop, force=True)
+    summary = capture_nmea(
+        "fake",
+        4800,
+        str(tmp / "o.csv"),
+        status_s=None,
+        quiet=True,
+        checksum_policy=policy,
+        opener=lambda port, baud: _FakePort(chunks, stop),
+        stop=stop,
+        force=True,
+    )
     raw = (tmp / "o.nmea").read_bytes().decode("utf-8").split("\n")[:-1]  # a stray CR stays inside its line
     rows = []
     for ln in (tmp / "o.csv").read_text().splitlines():
@@ -333,8 +447,7 @@ _RUNS = itertools.count()
 
 
 def _stream(data: st.DataObject) -> bytes:
-    lines = data.draw(st.lists(ANY_LINE | st.sampled_from(["", "  ", "garbage", "\x00\x01"]), min_size=1,
-                               max_size=60))
+    lines = data.draw(st.lists(ANY_LINE | st.sampled_from(["", "  ", "garbage", "\x00\x01"]), min_size=1, max_size=60))
     ends = data.draw(st.lists(st.sampled_from(["\r\n", "\n"]), min_size=len(lines), max_size=len(lines)))
     return "".join(a + b for a, b in zip(lines, ends, strict=True)).encode("latin-1", "replace")
 
@@ -360,7 +473,8 @@ def test_capture_output_equals_original_loop(tmp_path, monkeypatch, policy, data
         assert [ln[28:] for ln in raw] == raw_lines  # '<ISO UTC stamp> <line as received>'
         assert all(ln[26:28] == "Z " for ln in raw)
         assert summary["rows"] == len(rows) == len(got_rows)
-        np.testing.assert_array_equal(np.array(got_rows).reshape(-1, 2 + len(NMEA_COLUMNS))[:, 2:],
-                                      np.array(rows).reshape(-1, len(NMEA_COLUMNS)))
+        np.testing.assert_array_equal(
+            np.array(got_rows).reshape(-1, 2 + len(NMEA_COLUMNS))[:, 2:], np.array(rows).reshape(-1, len(NMEA_COLUMNS))
+        )
         results.append((summary["lines"], summary["frames"], summary["error_kinds"], raw_lines, got_rows))
     assert results[0][:4] == results[1][:4]

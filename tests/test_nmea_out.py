@@ -56,7 +56,7 @@ def _check_line(s: str) -> None:
         if ps.talker != "P":
             assert pyn.sentence_type == ps.formatter
     except pynmea2.SentenceTypeError:
-        body = s[1:s.index("*")]
+        body = s[1 : s.index("*")]
         assert pynmea2.NMEASentence.checksum(body) == int(s[-2:], 16)
 
 
@@ -158,9 +158,20 @@ def test_talkers_follow_the_heading_source_and_ths_mode_is_honest():
 
 def test_xdr_ids_signs_and_forced_talkers():
     rec = est(duration=3.0)
-    lines = [s for _, s in nmea_lines(rec, ["XDR", "THS"], None, xdr_roll_id="HEEL", xdr_pitch_id="TRIM",
-                                      xdr_roll_sign=-1, heading_ref="true", ths_mode="S",
-                                      talkers={"XDR": "II", "THS": "IN"})]
+    lines = [
+        s
+        for _, s in nmea_lines(
+            rec,
+            ["XDR", "THS"],
+            None,
+            xdr_roll_id="HEEL",
+            xdr_pitch_id="TRIM",
+            xdr_roll_sign=-1,
+            heading_ref="true",
+            ths_mode="S",
+            talkers={"XDR": "II", "THS": "IN"},
+        )
+    ]
     xdr = [s for s in lines if "XDR" in s][-1]
     assert xdr.startswith("$IIXDR") and ",HEEL" in xdr and ",TRIM" in xdr
     vals = decode(xdr, xdr_map={"HEEL": "-roll", "TRIM": "pitch"})  # receiver undoes the sign
@@ -272,8 +283,9 @@ def test_cli_file_header_rate_and_stamp_roundtrip(tmp_path):
     src = tmp_path / "est.csv"
     formats.write(est(), src)
     out = tmp_path / "out.nmea"
-    r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(out), "--sentences", "HRM,XDR", "--rate", "2",
-                                 "--time-prefix", "--json"])
+    r = CliRunner().invoke(
+        cli, ["nmea", str(src), "-o", str(out), "--sentences", "HRM,XDR", "--rate", "2", "--time-prefix", "--json"]
+    )
     assert r.exit_code == 0, r.output
     s = json.loads(r.output)
     assert s["sentences"] == {"HRM": 120, "XDR": 120} and s["rate_hz"] == 2.0 and not s["rate_chosen"]
@@ -291,11 +303,11 @@ def test_cli_file_header_rate_and_stamp_roundtrip(tmp_path):
     assert r.exit_code != 0 and "variation" in str(r.exception)
     assert not (tmp_path / "x.nmea").exists()
     # too fast for 4800 Bd: refused with the rate that fits; without --rate one is chosen
-    r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(tmp_path / "y.nmea"), "--sentences", "HRM,XDR",
-                                 "--rate", "10"])
+    r = CliRunner().invoke(
+        cli, ["nmea", str(src), "-o", str(tmp_path / "y.nmea"), "--sentences", "HRM,XDR", "--rate", "10"]
+    )
     assert r.exit_code != 0 and "does not fit" in str(r.exception) and not (tmp_path / "y.nmea").exists()
-    r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(tmp_path / "z.nmea"), "--sentences", "HRM,XDR",
-                                 "--json"])
+    r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(tmp_path / "z.nmea"), "--sentences", "HRM,XDR", "--json"])
     s = json.loads(r.output)
     assert s["rate_chosen"] and s["rate_hz"] <= 5.0 and s["bytes_per_s"] <= 432
 
@@ -309,8 +321,24 @@ def test_cli_hdg_uses_the_calibration_card(tmp_path):
     src = tmp_path / "est.csv"
     formats.write(est(duration=10.0, fs=2.0), src)
     out = tmp_path / "hdg.nmea"
-    r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(out), "--sentences", "HDG", "--calibration", str(cal),
-                                 "--heading-ref", "compass", "--variation", "-2.5", "--json"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "nmea",
+            str(src),
+            "-o",
+            str(out),
+            "--sentences",
+            "HDG",
+            "--calibration",
+            str(cal),
+            "--heading-ref",
+            "compass",
+            "--variation",
+            "-2.5",
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     lines = [ln for ln in out.read_text().splitlines() if ln.startswith("$")]
     assert any(f"card {cal}" in ln for ln in out.read_text().splitlines() if ln.startswith("#"))
@@ -319,15 +347,35 @@ def test_cli_hdg_uses_the_calibration_card(tmp_path):
         d = decode(ln)
         assert d["deviation"] == pytest.approx(round(float(card.deviation_deg(h)), 1), abs=1e-9)
         assert d["variation"] == pytest.approx(-2.5)
-    r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(tmp_path / "h2.nmea"), "--sentences", "HDG",
-                                 "--calibration", str(cal), "--deviation", "1"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "nmea",
+            str(src),
+            "-o",
+            str(tmp_path / "h2.nmea"),
+            "--sentences",
+            "HDG",
+            "--calibration",
+            str(cal),
+            "--deviation",
+            "1",
+        ],
+    )
     assert r.exit_code != 0 and "one of them" in str(r.exception)
 
 
 def test_write_log_and_heave_nmea_cli(tmp_path):
     rec = motion(settle_s=10.0)
-    info = write_log(rec, str(tmp_path / "m.nmea"), ["PASHR", "TSS1"], baud=9600, source="test",
-                     heading_ref="true", heave_positive="down")
+    info = write_log(
+        rec,
+        str(tmp_path / "m.nmea"),
+        ["PASHR", "TSS1"],
+        baud=9600,
+        source="test",
+        heading_ref="true",
+        heave_positive="down",
+    )
     text = (tmp_path / "m.nmea").read_text()
     assert "# heave: m, positive DOWN" in text and info["sentences"]["TSS1"] == info["sentences"]["PASHR"]
     for ln in text.splitlines():
@@ -339,8 +387,22 @@ def test_write_log_and_heave_nmea_cli(tmp_path):
     sea = tmp_path / "sea.csv"
     r = CliRunner().invoke(cli, ["simulate", "sea-state", "-o", str(sea), "--set", "duration=120"])
     assert r.exit_code == 0, r.output
-    r = CliRunner().invoke(cli, ["heave", str(sea), "-o", str(tmp_path / "h.csv"), "--nmea", str(tmp_path / "h.nmea"),
-                                 "--heave-positive", "down", "--order", "4", "--json"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "heave",
+            str(sea),
+            "-o",
+            str(tmp_path / "h.csv"),
+            "--nmea",
+            str(tmp_path / "h.nmea"),
+            "--heave-positive",
+            "down",
+            "--order",
+            "4",
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     s = json.loads(r.output)
     assert s["heave_positive"] == "down" and s["nmea"]["sentences"]["PASHR"] > 0
@@ -390,8 +452,21 @@ def test_serial_output_through_a_pseudo_terminal(tmp_path):
     th = threading.Thread(target=reader, daemon=True)
     th.start()
     try:
-        r = CliRunner().invoke(cli, ["nmea", str(src), "--serial", port, "--baud", "38400", "--no-realtime",
-                                     "--sentences", "HRM,XDR", "--json"])
+        r = CliRunner().invoke(
+            cli,
+            [
+                "nmea",
+                str(src),
+                "--serial",
+                port,
+                "--baud",
+                "38400",
+                "--no-realtime",
+                "--sentences",
+                "HRM,XDR",
+                "--json",
+            ],
+        )
         assert r.exit_code == 0, r.output
         deadline = time.monotonic() + 5.0
         while got.count(b"\r\n") < 80 and time.monotonic() < deadline:

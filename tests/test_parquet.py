@@ -25,9 +25,16 @@ from imutool.cli import main  # noqa: E402
 def _rec(n: int = 2000, seed: int = 0) -> Recording:
     rng = np.random.default_rng(seed)
     t = 1.7e9 + np.arange(n) / 200.0 + rng.uniform(0, 1e-6, n)  # Unix time with sub-µs jitter: all 17 digits
-    rec = Recording(t, meta={"sensor": "test IMU", "rate_hz": 200.0, "mounting": {"remap": "x,-y,-z",
-                                                                                   "misalignment_deg": [0.5, 0, 1]},
-                             "note": "a: b, c", "count": 3})
+    rec = Recording(
+        t,
+        meta={
+            "sensor": "test IMU",
+            "rate_hz": 200.0,
+            "mounting": {"remap": "x,-y,-z", "misalignment_deg": [0.5, 0, 1]},
+            "note": "a: b, c",
+            "count": 3,
+        },
+    )
     rec.add("gyro", rng.normal(0, 0.1, (n, 3)))
     rec.add("accel", rng.normal(0, 1, (n, 3)) + [0, 0, -9.81])
     rec.add("mag", rng.normal(20, 5, (n, 3)))
@@ -94,9 +101,12 @@ def test_streamed_chunks_equal_whole_file(tmp_path):
     chunks = list(iter_parquet(p, chunk_rows=700))
     assert [len(c) for c in chunks] == [700] * 7 + [100]
     assert all(c.meta["sensor"] == "test IMU" for c in chunks)
-    whole = Recording(np.concatenate([c.time for c in chunks]),
-                      {k: np.concatenate([c[k] for c in chunks]) for k in rec.channels},
-                      dict(chunks[0].units), columns={k: list(v) for k, v in chunks[0].columns.items()})
+    whole = Recording(
+        np.concatenate([c.time for c in chunks]),
+        {k: np.concatenate([c[k] for c in chunks]) for k in rec.channels},
+        dict(chunks[0].units),
+        columns={k: list(v) for k, v in chunks[0].columns.items()},
+    )
     _same(rec, whole)
     # the streamed API the filter uses: formats.iter_chunks dispatches CSV and Parquet alike
     assert [len(c) for c in formats.iter_chunks(p, chunk_rows=2500)] == [2500, 2500]
@@ -150,8 +160,16 @@ def test_background_writer_same_file_and_errors_surface(tmp_path):
 def test_foreign_parquet_and_errors(tmp_path):
     n = 50
     t = pa.array(np.datetime64("2024-03-01T12:00:00", "ns") + np.arange(n) * np.timedelta64(10, "ms"))
-    table = pa.table({"time": t, "accel_x": np.zeros(n), "accel_y": np.zeros(n), "accel_z": np.full(n, -9.81),
-                      "ship": pa.array(["Aurora"] * n), "flag": pa.array([True, False] * 25)})
+    table = pa.table(
+        {
+            "time": t,
+            "accel_x": np.zeros(n),
+            "accel_y": np.zeros(n),
+            "accel_z": np.full(n, -9.81),
+            "ship": pa.array(["Aurora"] * n),
+            "flag": pa.array([True, False] * 25),
+        }
+    )
     pq.write_table(table, tmp_path / "foreign.parquet")
     rec = formats.read(tmp_path / "foreign.parquet")
     assert rec.time[0] == pytest.approx(1709294400.0) and rec.time[1] - rec.time[0] == pytest.approx(0.01)
@@ -240,8 +258,13 @@ def test_large_parquet_streams_with_bounded_memory(tmp_path):
     for n in (500_000, 2_000_000):
         src, dst = tmp_path / f"big{n}.parquet", tmp_path / f"out{n}.parquet"
         subprocess.run([sys.executable, "-c", _MAKE_SCRIPT, str(src), str(n)], check=True, env=env)
-        r = subprocess.run([sys.executable, "-c", _STREAM_SCRIPT, str(src), str(dst)], check=True, env=env,
-                           capture_output=True, text=True)
+        r = subprocess.run(
+            [sys.executable, "-c", _STREAM_SCRIPT, str(src), str(dst)],
+            check=True,
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         rows, base, peak = r.stdout.split()
         assert int(rows) == n and pq.ParquetFile(dst).metadata.num_rows == n
         grew[n] = float(peak) - float(base)
@@ -266,6 +289,8 @@ def test_final_meta_goes_into_the_footer(tmp_path):
     assert np.array_equal(back.time, rec.time)
     assert next(iter_parquet(p, chunk_rows=500)).meta["note"] == "replaced"
     # another tool's file with a stray key of that name is not ours: its metadata are not taken
-    pq.write_table(pa.table({"time": [0.0, 1.0]}).replace_schema_metadata({"imutool_final": '{"x": 1}'}),
-                   tmp_path / "other.parquet")
+    pq.write_table(
+        pa.table({"time": [0.0, 1.0]}).replace_schema_metadata({"imutool_final": '{"x": 1}'}),
+        tmp_path / "other.parquet",
+    )
     assert "x" not in read_parquet(tmp_path / "other.parquet").meta

@@ -19,11 +19,16 @@ def roll():
     return simulate("ship-roll", duration=60, seed=1)
 
 
-def _foreign(rec, path, gyro_factor=1.0, accel_factor=1.0, mag_factor=1.0, names=("gx", "gy", "gz", "ax", "ay",
-                                                                                  "az", "mx", "my", "mz")):
+def _foreign(
+    rec,
+    path,
+    gyro_factor=1.0,
+    accel_factor=1.0,
+    mag_factor=1.0,
+    names=("gx", "gy", "gz", "ax", "ay", "az", "mx", "my", "mz"),
+):
     """A foreign CSV without units in the header, values scaled into another unit."""
-    data = np.column_stack([rec.time, rec["gyro"] * gyro_factor, rec["accel"] * accel_factor,
-                            rec["mag"] * mag_factor])
+    data = np.column_stack([rec.time, rec["gyro"] * gyro_factor, rec["accel"] * accel_factor, rec["mag"] * mag_factor])
     np.savetxt(path, data, delimiter=",", header="time," + ",".join(names), comments="", fmt="%.9g")
     return path
 
@@ -61,8 +66,11 @@ def test_deg_per_s_gyro_without_units_warns_and_strict_refuses(roll, tmp_path, c
 
 
 def test_rad_per_s_values_under_a_deg_per_s_header_contradiction_warns(roll, tmp_path, capsys):
-    p = _foreign(roll, tmp_path / "contra.csv",
-                 names=("gyro_x_dps", "gyro_y_dps", "gyro_z_dps", "ax", "ay", "az", "mx", "my", "mz"))
+    p = _foreign(
+        roll,
+        tmp_path / "contra.csv",
+        names=("gyro_x_dps", "gyro_y_dps", "gyro_z_dps", "ax", "ay", "az", "mx", "my", "mz"),
+    )
     code, out, err = run(["info", p], capsys)
     assert code == 0
     assert "header declares gyro in dps" in err and "look like rad/s" in err
@@ -162,8 +170,9 @@ def test_bridge_absurd_library_rules(roll):
     r["gyro"][10, 2] = -1e300
     r["gyro"][2000:2110, 0] = 1e9  # a 0.55 s run: too long to interpolate → NaN
     out, rep = bridge_absurd(r)
-    assert np.isfinite(out["gyro"][10]).all() and np.allclose(out["gyro"][10], (r["gyro"][9] + r["gyro"][11]) / 2,
-                                                              atol=1e-12)
+    assert np.isfinite(out["gyro"][10]).all() and np.allclose(
+        out["gyro"][10], (r["gyro"][9] + r["gyro"][11]) / 2, atol=1e-12
+    )
     assert np.isnan(out["gyro"][2000:2110, 0]).all() and rep.set_nan == {"gyro": 110} and rep.bridged == {"gyro": 1}
     assert r["gyro"][10, 2] == -1e300  # input untouched
     # most samples beyond range: a units problem, left alone and said
@@ -212,10 +221,12 @@ def test_every_estimate_says_what_was_wrong_with_its_input(roll, tmp_path, capsy
     bad.channels["gyro"][1000:1002] = 1e6  # two corrupt samples
     src = tmp_path / "bad.csv"
     formats.write(bad, src)
-    outs = {"heave": ["heave", src, "-o", tmp_path / "heave.csv"],
-            "zvi": ["zvi", src, "-o", tmp_path / "zvi.csv", "--flags", tmp_path / "zvi_flags.csv"],
-            "filter": ["filter", src, "-o", tmp_path / "filter.csv"],
-            "roll": ["roll", tmp_path / "filter.csv", "-o", tmp_path / "roll.csv"]}
+    outs = {
+        "heave": ["heave", src, "-o", tmp_path / "heave.csv"],
+        "zvi": ["zvi", src, "-o", tmp_path / "zvi.csv", "--flags", tmp_path / "zvi_flags.csv"],
+        "filter": ["filter", src, "-o", tmp_path / "filter.csv"],
+        "roll": ["roll", tmp_path / "filter.csv", "-o", tmp_path / "roll.csv"],
+    }
     for name, args in outs.items():
         code, _, err = run([*args, "-q"], capsys)
         assert code == 0, (name, err)

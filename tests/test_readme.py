@@ -51,7 +51,7 @@ def runnable(cmds: list[str]) -> list[str]:
     assert len(cmds) >= 2, "README has fewer than two fenced commands"
     assert cmds[0].startswith("pip install . && "), cmds[0]
     assert "pytest" in cmds[1], cmds[1]
-    return [cmds[0][len("pip install . && "):]] + [c for c in cmds[2:] if not _is_hardware(c) and not _is_extra(c)]
+    return [cmds[0][len("pip install . && ") :]] + [c for c in cmds[2:] if not _is_hardware(c) and not _is_extra(c)]
 
 
 def _is_extra(cmd: str) -> bool:
@@ -108,8 +108,17 @@ def test_every_readme_command_runs(tmp_path):
     _fresh_copy(clone)
     env = _imutool_on_path(tmp_path / "bin")
     for i, cmd in enumerate(cmds, 1):
-        r = subprocess.run(["bash", "-e", "-c", cmd], cwd=clone, env=env, capture_output=True, text=True,
-                           timeout=300, stdin=subprocess.DEVNULL)
-        assert r.returncode == 0, (f"README command {i}/{len(cmds)} failed (exit {r.returncode}):\n  {cmd}\n"
-                                   f"stderr: {r.stderr[-3000:]}\nstdout: {r.stdout[-1500:]}")
+        r = subprocess.run(
+            ["bash", "-e", "-c", cmd],
+            cwd=clone,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            stdin=subprocess.DEVNULL,
+        )
+        assert r.returncode == 0, (
+            f"README command {i}/{len(cmds)} failed (exit {r.returncode}):\n  {cmd}\n"
+            f"stderr: {r.stderr[-3000:]}\nstdout: {r.stdout[-1500:]}"
+        )
         assert "Traceback" not in r.stderr and "internal error" not in r.stderr, (cmd, r.stderr[-3000:])

@@ -114,8 +114,9 @@ def test_merge_77hz_mag_onto_99hz_imu_interpolation_bound():
     t_mag = 0.0031 + np.arange(0, 20, 1 / 77.0)
     imu = _rec(t_imu, gyro=np.stack([np.sin(w * t_imu)] * 3, axis=1))
     amp = 40.0
-    mag = _rec(t_mag, mag=np.stack([amp * np.sin(w * t_mag), amp * np.cos(w * t_mag), np.full(t_mag.size, -30.0)],
-                                   axis=1))
+    mag = _rec(
+        t_mag, mag=np.stack([amp * np.sin(w * t_mag), amp * np.cos(w * t_mag), np.full(t_mag.size, -30.0)], axis=1)
+    )
     m = merge([imu, mag], clock=imu)
     assert set(m.channels) == {"gyro", "mag"}
     assert np.all(m.time >= t_mag[0]) and np.all(m.time <= t_mag[-1])

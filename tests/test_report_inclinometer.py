@@ -21,8 +21,12 @@ from imutool.report.simulate import inclinometer_test, write_sample_data, write_
 from imutool.roll import roll_stats
 
 SAMPLE_TOML = str(Path(__file__).resolve().parents[1] / "sample_data" / "test_info.toml")
-SHORT = {"steps": (0.0, 5.0, 10.0, 30.0, -5.0, -10.0, -30.0, 0.0), "hold_s": 15.0,
-         "dynamic": ((8.0, 10.0, 10.0, 5), (12.0, 20.0, 14.0, 4)), "long_s": 0.0}
+SHORT = {
+    "steps": (0.0, 5.0, 10.0, 30.0, -5.0, -10.0, -30.0, 0.0),
+    "hold_s": 15.0,
+    "dynamic": ((8.0, 10.0, 10.0, 5), (12.0, 20.0, 14.0, 4)),
+    "long_s": 0.0,
+}
 
 
 def items(ev):
@@ -31,8 +35,9 @@ def items(ev):
 
 @pytest.fixture(scope="module")
 def injected():
-    dut, ref, segs = inclinometer_test(offset_deg=0.3, scale=0.02, lag_s=0.4, noise_deg=0.05, ref_noise_deg=0.01,
-                                       seed=2, **SHORT)
+    dut, ref, segs = inclinometer_test(
+        offset_deg=0.3, scale=0.02, lag_s=0.4, noise_deg=0.05, ref_noise_deg=0.01, seed=2, **SHORT
+    )
     ev, _ = inclinometer_evidence(dut, ref, options=InclinometerOptions(align="xcorr"))
     return ev, segs
 
@@ -72,8 +77,9 @@ def test_static_offset_flips_at_one_degree(tmp_path, offset, expect):
     dut, ref, segs = inclinometer_test(offset_deg=offset, **SHORT)
     steps = tmp_path / "steps.csv"
     write_steps_csv(segs, str(steps))
-    ev, _ = inclinometer_evidence(dut, ref, steps_path=str(steps),
-                                  options=InclinometerOptions(declared_heel_range_deg=30.0))
+    ev, _ = inclinometer_evidence(
+        dut, ref, steps_path=str(steps), options=InclinometerOptions(declared_heel_range_deg=30.0)
+    )
     st = items(ev)["static_heel"]
     assert st["status"] == expect
     small = [r for r in st["rows"] if abs(r["reference_deg"]) <= 10]
@@ -95,11 +101,18 @@ def _device_outputs(ref: Recording, d_amp=0.0, d_period=0.0) -> Recording:
     """A DUT that reports HRM-like fields: the reference's own statistics plus injected errors."""
     rs = roll_stats(ref.time, ref["roll"])
     heel = ref["roll"] + 0.01  # the device's heel (not sample-for-sample the reference: that is refused)
-    return Recording(ref.time.copy(), {"roll": heel, "roll_period": rs.roll_period + d_period,
-                                       "amp_port": rs.amp_port + d_amp, "amp_stbd": rs.amp_stbd + d_amp,
-                                       "peak_port": rs.peak_port, "peak_stbd": rs.peak_stbd},
-                     {"roll_period": "s", "amp_port": "deg", "amp_stbd": "deg", "peak_port": "deg",
-                      "peak_stbd": "deg"})
+    return Recording(
+        ref.time.copy(),
+        {
+            "roll": heel,
+            "roll_period": rs.roll_period + d_period,
+            "amp_port": rs.amp_port + d_amp,
+            "amp_stbd": rs.amp_stbd + d_amp,
+            "peak_port": rs.peak_port,
+            "peak_stbd": rs.peak_stbd,
+        },
+        {"roll_period": "s", "amp_port": "deg", "amp_stbd": "deg", "peak_port": "deg", "peak_stbd": "deg"},
+    )
 
 
 @pytest.mark.parametrize("d,expect", [(0.97, "pass"), (1.03, "fail")])
@@ -139,8 +152,7 @@ def test_never_pass_without_data():
     assert amp["status"] == "not tested" and amp["derived_result"] == "pass"
     assert len(amp["rows"]) == 3 and amp["cycles"]["judged"] == 6 and "not reported by the device" in amp["reason"]
     # steps on one side only
-    dut, ref, _ = inclinometer_test(steps=(0.0, 5.0, 10.0, 20.0), dynamic=(), long_s=0.0, hold_s=15.0,
-                                    noise_deg=0.02)
+    dut, ref, _ = inclinometer_test(steps=(0.0, 5.0, 10.0, 20.0), dynamic=(), long_s=0.0, hold_s=15.0, noise_deg=0.02)
     ev, _ = inclinometer_evidence(dut, ref)
     assert items(ev)["static_heel"]["status"] == "insufficient data"
     jsonschema.validate(ev, load_schema())
@@ -196,10 +208,23 @@ def test_cli_pdf_and_json(tmp_path):
     files = write_sample_data(str(tmp_path / "sample"), rate_hz=5.0)
     pdf = tmp_path / "out" / "evidence.pdf"
     # a CSV DUT: amplitude/period/peak hold only derived by imutool, no interface → INCOMPLETE, exit status 1
-    r = CliRunner().invoke(cli, ["report", "inclinometer", files["inclinometer_dut.csv"], "--reference",
-                                 files["inclinometer_reference.csv"], "--static-steps",
-                                 files["inclinometer_steps.csv"], "-o", str(pdf), "--device", "SIM-INC-1 s/n 1",
-                                 "--json"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "report",
+            "inclinometer",
+            files["inclinometer_dut.csv"],
+            "--reference",
+            files["inclinometer_reference.csv"],
+            "--static-steps",
+            files["inclinometer_steps.csv"],
+            "-o",
+            str(pdf),
+            "--device",
+            "SIM-INC-1 s/n 1",
+            "--json",
+        ],
+    )
     assert r.exit_code == 1, r.output
     summary = json.loads(r.output)
     ev = json.loads((tmp_path / "out" / "evidence.json").read_text())
@@ -213,10 +238,23 @@ def test_cli_pdf_and_json(tmp_path):
     assert pdf.exists() and pdf.read_bytes()[:5] == b"%PDF-"
     # the HRM capture and the example test record: every required item tested → PASS, exit status 0
     pdf2 = tmp_path / "out" / "evidence_hrm.pdf"
-    r = CliRunner().invoke(cli, ["report", "inclinometer", files["inclinometer_dut.nmea"], "--reference",
-                                 files["inclinometer_reference.csv"], "--static-steps",
-                                 files["inclinometer_steps.csv"], "--test-info", SAMPLE_TOML, "-o", str(pdf2),
-                                 "--json"])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "report",
+            "inclinometer",
+            files["inclinometer_dut.nmea"],
+            "--reference",
+            files["inclinometer_reference.csv"],
+            "--static-steps",
+            files["inclinometer_steps.csv"],
+            "--test-info",
+            SAMPLE_TOML,
+            "-o",
+            str(pdf2),
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     summary = json.loads(r.output)
     assert summary["overall"] == "pass" and summary["exit_status"] == 0
@@ -231,12 +269,22 @@ def test_cli_pdf_and_json(tmp_path):
     for png in pages:
         img = mpimg.imread(png)[..., :3]
         h, w = img.shape[:2]
-        mid = img[int(0.1 * h):int(0.9 * h), int(0.1 * w):int(0.9 * w)]
+        mid = img[int(0.1 * h) : int(0.9 * h), int(0.1 * w) : int(0.9 * w)]
         ink.append(float(np.mean(mid.mean(axis=2) < 0.9)))
     assert min(ink) > 0.005, f"a nearly blank page: {ink}"  # no empty pages (a page break before nothing)
     # a bad output name is one clear error
-    r = CliRunner().invoke(cli, ["report", "inclinometer", files["inclinometer_dut.csv"], "--reference",
-                                 files["inclinometer_reference.csv"], "-o", str(tmp_path / "x.txt")])
+    r = CliRunner().invoke(
+        cli,
+        [
+            "report",
+            "inclinometer",
+            files["inclinometer_dut.csv"],
+            "--reference",
+            files["inclinometer_reference.csv"],
+            "-o",
+            str(tmp_path / "x.txt"),
+        ],
+    )
     assert r.exit_code != 0 and ".pdf" in str(r.exception)
 
 

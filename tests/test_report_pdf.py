@@ -19,8 +19,9 @@ from imutool.report.testinfo import load_test_info
 
 SAMPLE_TOML = Path(__file__).resolve().parents[1] / "sample_data" / "test_info.toml"
 
-needs_pdftotext = pytest.mark.skipif(shutil.which("pdftotext") is None,
-                                     reason="pdftotext (poppler-utils) not installed: PDF text not extracted")
+needs_pdftotext = pytest.mark.skipif(
+    shutil.which("pdftotext") is None, reason="pdftotext (poppler-utils) not installed: PDF text not extracted"
+)
 
 
 def _pdf_text(pdf: Path) -> tuple[str, list[str]]:
@@ -41,8 +42,9 @@ def long_report(tmp_path_factory):
     dut, ref, _ = inclinometer_test(noise_deg=0.05, offset_deg=0.2, dynamic=dyn, long_s=0.0, hold_s=12.0)
     info = load_test_info(str(SAMPLE_TOML))
     info["test"]["witness"] = None  # a blank field must be printed as a line to fill
-    ev, plots = inclinometer_evidence(dut, ref, test_info=info,
-                                      options=InclinometerOptions(declared_period_range_s=(5.0, 12.0)))
+    ev, plots = inclinometer_evidence(
+        dut, ref, test_info=info, options=InclinometerOptions(declared_period_range_s=(5.0, 12.0))
+    )
     pdf = tmp / "evidence.pdf"
     pages = render_pdf(ev, plots, str(pdf))
     return ev, pdf, pages
@@ -109,7 +111,7 @@ def test_pdf_pages_render_without_overprinting(long_report, tmp_path):
         img = mpimg.imread(png)[..., :3].mean(axis=2)
         h = img.shape[0]
         # body ends at 54 pt from the bottom, footer rule at 32 pt: the band 36-52 pt must be blank on text pages
-        band = img[h - int(52 / 842 * h):h - int(36 / 842 * h), int(0.1 * img.shape[1]):int(0.9 * img.shape[1])]
+        band = img[h - int(52 / 842 * h) : h - int(36 / 842 * h), int(0.1 * img.shape[1]) : int(0.9 * img.shape[1])]
         assert float(np.mean(band < 0.8)) < 0.02, f"{png.name}: ink between body and footer"
 
 

@@ -18,8 +18,12 @@ from imutool.report.simulate import inclinometer_test, sea_pair
 from imutool.report.testinfo import FIELDS, load_test_info, missing_fields
 
 SAMPLE_TOML = Path(__file__).resolve().parents[1] / "sample_data" / "test_info.toml"
-SHORT = {"steps": (0.0, 10.0, 30.0, -10.0, -30.0, 0.0), "hold_s": 12.0, "dynamic": ((8.0, 10.0, 10.0, 5),),
-         "long_s": 0.0}
+SHORT = {
+    "steps": (0.0, 10.0, 30.0, -10.0, -30.0, 0.0),
+    "hold_s": 12.0,
+    "dynamic": ((8.0, 10.0, 10.0, 5),),
+    "long_s": 0.0,
+}
 
 
 def items(ev):
@@ -81,8 +85,17 @@ def test_seven_percent_scale_fails():
 
 
 # ---- refusals ------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("kw", [{"angle_floor_deg": 0.0}, {"angle_floor_deg": -1.0}, {"angle_pct": 0.0},
-                                {"period_floor_s": -0.5}, {"period_pct": -5.0}, {"angle_pct": 150.0}])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"angle_floor_deg": 0.0},
+        {"angle_floor_deg": -1.0},
+        {"angle_pct": 0.0},
+        {"period_floor_s": -0.5},
+        {"period_pct": -5.0},
+        {"angle_pct": 150.0},
+    ],
+)
 def test_impossible_tolerances_are_refused(kw):
     dut, ref, _ = inclinometer_test(noise_deg=0.02, **SHORT)
     with pytest.raises(ImutoolError, match="tolerance"):
@@ -93,8 +106,9 @@ def test_device_against_itself_or_unrelated_reference_is_refused(tmp_path):
     dut, ref, _ = inclinometer_test(noise_deg=0.05, **SHORT)
     p = tmp_path / "dut.csv"
     formats.write(dut, str(p))
-    r = CliRunner().invoke(cli, ["report", "inclinometer", str(p), "--reference", str(p), "-o",
-                                 str(tmp_path / "e.pdf")])
+    r = CliRunner().invoke(
+        cli, ["report", "inclinometer", str(p), "--reference", str(p), "-o", str(tmp_path / "e.pdf")]
+    )
     assert r.exit_code == 2 or (r.exit_code != 0 and "own reference" in str(r.exception))
     with pytest.raises(ImutoolError, match="own reference"):
         inclinometer_evidence(ref, ref)  # the same samples
@@ -159,8 +173,9 @@ def test_guard_band_decision_rule(tmp_path):
     toml.write_text('[reference]\nuncertainty_k2_deg = 0.2\n[decision_rule]\nrule = "guard band"\n')
     ev, _ = inclinometer_evidence(dut, ref, test_info=load_test_info(str(toml)))
     st = items(ev)["static_heel"]
-    assert st["status"] == "fail" and all(abs(r["tolerance_deg"] - 0.8) < 1e-9 for r in st["rows"]
-                                          if abs(r["reference_deg"]) < 20)
+    assert st["status"] == "fail" and all(
+        abs(r["tolerance_deg"] - 0.8) < 1e-9 for r in st["rows"] if abs(r["reference_deg"]) < 20
+    )
     assert any(c["id"] == "decision_rule" and "guard band" in c["text"] for c in ev["criteria"])
     with pytest.raises(ImutoolError, match="uncertainty"):
         inclinometer_evidence(dut, ref, options=InclinometerOptions(guard_band=True))
@@ -183,15 +198,18 @@ def test_example_test_record_is_complete_and_blank_fields_stay_blank(tmp_path):
     assert ev["test_record_missing"] == miss
 
 
-@pytest.mark.parametrize("text,msg", [
-    ('[dut]\nheel_range = 30\n', "unknown field"),
-    ('[lab]\nx = 1\n', "unknown section"),
-    ('[external.display]\nresult = "pass"\n', "evidence"),
-    ('[external.display]\nresult = "ok"\nevidence = "x"\n', "result"),
-    ('[decision_rule]\nrule = "whatever"\n', "rule"),
-    ('[dut]\nperiod_range_s = [30, 4]\n', "min, max"),
-    ('not toml [', "TOML"),
-])
+@pytest.mark.parametrize(
+    "text,msg",
+    [
+        ("[dut]\nheel_range = 30\n", "unknown field"),
+        ("[lab]\nx = 1\n", "unknown section"),
+        ('[external.display]\nresult = "pass"\n', "evidence"),
+        ('[external.display]\nresult = "ok"\nevidence = "x"\n', "result"),
+        ('[decision_rule]\nrule = "whatever"\n', "rule"),
+        ("[dut]\nperiod_range_s = [30, 4]\n", "min, max"),
+        ("not toml [", "TOML"),
+    ],
+)
 def test_bad_test_record_is_one_clear_error(tmp_path, text, msg):
     p = tmp_path / "t.toml"
     p.write_text(text)

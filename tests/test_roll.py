@@ -183,8 +183,17 @@ def _cycles(side, t_start, t_end):
 
     n = len(side)
     z = np.zeros(n)
-    return RollCycles(np.asarray(side), z.copy(), z.copy(), z.copy(), np.full(n, np.nan), np.asarray(t_start, float),
-                      np.asarray(t_end, float), np.zeros(n, np.int64), z.copy())
+    return RollCycles(
+        np.asarray(side),
+        z.copy(),
+        z.copy(),
+        z.copy(),
+        np.full(n, np.nan),
+        np.asarray(t_start, float),
+        np.asarray(t_end, float),
+        np.zeros(n, np.int64),
+        z.copy(),
+    )
 
 
 def test_pair_cycles_by_time_overlap_one_to_one():

@@ -43,8 +43,15 @@ def _header(ts, ros1: bool, ns: int, frame: str, seq: int = 0):
 def _imu_msg(ts, ros1, ns, frame, q_xyzw, gyro, accel, qcov, gcov, acov, seq=0):
     Q = ts.types["geometry_msgs/msg/Quaternion"]
     V = ts.types["geometry_msgs/msg/Vector3"]
-    return ts.types[IMU](_header(ts, ros1, ns, frame, seq), Q(*q_xyzw), np.asarray(qcov, float), V(*gyro),
-                         np.asarray(gcov, float), V(*accel), np.asarray(acov, float))
+    return ts.types[IMU](
+        _header(ts, ros1, ns, frame, seq),
+        Q(*q_xyzw),
+        np.asarray(qcov, float),
+        V(*gyro),
+        np.asarray(gcov, float),
+        V(*accel),
+        np.asarray(acov, float),
+    )
 
 
 def _write_raw_bag(path: Path, kind: str, topics: dict[str, tuple[str, list]], compression: str | None = None):
@@ -70,8 +77,9 @@ def _write_raw_bag(path: Path, kind: str, topics: dict[str, tuple[str, list]], c
     return path
 
 
-def _random_imu_msgs(ros1: bool, n: int, rng, frame="imu_link", t0_ns=1_700_000_000_000_000_000, dt_ns=10_000_000,
-                     full_cov=False):
+def _random_imu_msgs(
+    ros1: bool, n: int, rng, frame="imu_link", t0_ns=1_700_000_000_000_000_000, dt_ns=10_000_000, full_cov=False
+):
     ts = _store(ros1)
     msgs = []
     for i in range(n):
@@ -80,8 +88,9 @@ def _random_imu_msgs(ros1: bool, n: int, rng, frame="imu_link", t0_ns=1_700_000_
         c = [rng.normal(size=(3, 3)) for _ in range(3)]
         covs = [(a @ a.T).ravel() if full_cov else np.diag(np.diag(a @ a.T)).ravel() for a in c]
         ns = t0_ns + i * dt_ns
-        msgs.append((ns + 12345, _imu_msg(ts, ros1, ns, frame, q, rng.normal(size=3), rng.normal(size=3) * 9,
-                                          *covs, seq=i)))
+        msgs.append(
+            (ns + 12345, _imu_msg(ts, ros1, ns, frame, q, rng.normal(size=3), rng.normal(size=3) * 9, *covs, seq=i))
+        )
     return msgs
 
 
@@ -128,9 +137,24 @@ def test_level_sensor_reads_minus_g_and_heading(tmp_path):
     """A level ROS IMU (z up reads +g) facing north-east: imutool sees accel z = -g, heading 45 deg, z-rate sign."""
     ts = _store(True)
     yaw = np.radians(45.0) / 2  # ENU yaw 45 deg: x between East and North → heading 45 deg
-    msgs = [(i * 10**7 + 1, _imu_msg(ts, True, i * 10**7 + 1, "imu", [0, 0, np.sin(yaw), np.cos(yaw)],
-                                     [0, 0, 0.1], [0, 0, 9.81], np.eye(3).ravel() * 1e-4, np.zeros(9),
-                                     np.zeros(9))) for i in range(5)]
+    msgs = [
+        (
+            i * 10**7 + 1,
+            _imu_msg(
+                ts,
+                True,
+                i * 10**7 + 1,
+                "imu",
+                [0, 0, np.sin(yaw), np.cos(yaw)],
+                [0, 0, 0.1],
+                [0, 0, 9.81],
+                np.eye(3).ravel() * 1e-4,
+                np.zeros(9),
+                np.zeros(9),
+            ),
+        )
+        for i in range(5)
+    ]
     p = _write_raw_bag(tmp_path / "level.bag", "ros1", {"/imu": (IMU, msgs)})
     rec = read_bag(p)
     assert np.allclose(rec["accel"], [0, 0, -9.81])
@@ -148,8 +172,11 @@ def test_full_covariance_rotated(tmp_path):
     p = _write_raw_bag(tmp_path / "cov", "sqlite3", {"/imu": (IMU, msgs)})
     rec = read_bag(p)
     R = np.diag([1.0, -1.0, -1.0])
-    for name, attr in (("q_cov", "orientation_covariance"), ("gyro_cov", "angular_velocity_covariance"),
-                       ("accel_cov", "linear_acceleration_covariance")):
+    for name, attr in (
+        ("q_cov", "orientation_covariance"),
+        ("gyro_cov", "angular_velocity_covariance"),
+        ("accel_cov", "linear_acceleration_covariance"),
+    ):
         c_flu = np.stack([getattr(m, attr) for _, m in msgs]).reshape(-1, 3, 3)
         expect = np.einsum("ij,njk,lk->nil", R, c_flu, R).reshape(-1, 9)
         assert np.array_equal(rec[name], expect)
@@ -162,16 +189,22 @@ def test_absent_orientation_marked_minus_one(tmp_path):
     ts = _store(True)
     cov = np.zeros(9)
     cov[0] = -1
-    msgs = [(i * 10**7 + 5, _imu_msg(ts, True, i * 10**7 + 5, "imu", [0, 0, 0, 0], [1, 2, 3], [4, 5, 6], cov,
-                                     np.zeros(9), np.zeros(9))) for i in range(4)]
+    msgs = [
+        (
+            i * 10**7 + 5,
+            _imu_msg(ts, True, i * 10**7 + 5, "imu", [0, 0, 0, 0], [1, 2, 3], [4, 5, 6], cov, np.zeros(9), np.zeros(9)),
+        )
+        for i in range(4)
+    ]
     rec = read_bag(_write_raw_bag(tmp_path / "noq.bag", "ros1", {"/imu": (IMU, msgs)}))
     assert "q" not in rec and "roll_std" not in rec
     assert np.array_equal(rec["gyro"], np.tile([1.0, -2.0, -3.0], (4, 1)))
 
 
 # -- fast decode equals rosbags' own deserialisation ------------------------------------------------------------
-@pytest.mark.parametrize("kind,compression", [("ros1", None), ("ros1", "bz2"), ("ros1", "lz4"),
-                                              ("sqlite3", None), ("mcap", None)])
+@pytest.mark.parametrize(
+    "kind,compression", [("ros1", None), ("ros1", "bz2"), ("ros1", "lz4"), ("sqlite3", None), ("mcap", None)]
+)
 def test_fast_equals_rosbags(tmp_path, kind, compression):
     rng = np.random.default_rng(11)
     ros1 = kind == "ros1"
@@ -179,13 +212,34 @@ def test_fast_equals_rosbags(tmp_path, kind, compression):
     # one message with a different frame_id length (variable-length header)
     ts = _store(ros1)
     t, m = imu[70]
-    imu[70] = (t, _imu_msg(ts, ros1, t - 12345, "a_much_longer_frame", [0, 0, 0, 1], [1, 1, 1], [2, 2, 2],
-                           np.eye(3).ravel(), np.eye(3).ravel(), np.eye(3).ravel()))
+    imu[70] = (
+        t,
+        _imu_msg(
+            ts,
+            ros1,
+            t - 12345,
+            "a_much_longer_frame",
+            [0, 0, 0, 1],
+            [1, 1, 1],
+            [2, 2, 2],
+            np.eye(3).ravel(),
+            np.eye(3).ravel(),
+            np.eye(3).ravel(),
+        ),
+    )
     M = ts.types[MAG]
     V = ts.types["geometry_msgs/msg/Vector3"]
-    mag = [(i * 13_000_000 + imu[0][0], M(_header(ts, ros1, i * 13_000_000 + imu[0][0], "mag"),
-                                           V(*(rng.normal(size=3) * 4e-5)), np.eye(3).ravel() * 1e-14))
-           for i in range(120)]
+    mag = [
+        (
+            i * 13_000_000 + imu[0][0],
+            M(
+                _header(ts, ros1, i * 13_000_000 + imu[0][0], "mag"),
+                V(*(rng.normal(size=3) * 4e-5)),
+                np.eye(3).ravel() * 1e-14,
+            ),
+        )
+        for i in range(120)
+    ]
     name = "b.bag" if ros1 else f"b_{kind}"
     p = _write_raw_bag(tmp_path / name, kind, {"/imu/data": (IMU, imu), "/imu/mag": (MAG, mag)}, compression)
     fast = read_bag(p)
@@ -280,8 +334,13 @@ def test_topic_selection_and_stamps(tmp_path):
 
 def test_zero_header_stamps_suggest_record(tmp_path):
     ts = _store(False)
-    msgs = [(10**9 + i * 10**7, _imu_msg(ts, False, 0, "imu", [0, 0, 0, 1], [0, 0, 0], [0, 0, 9.8],
-                                         np.zeros(9), np.zeros(9), np.zeros(9))) for i in range(5)]
+    msgs = [
+        (
+            10**9 + i * 10**7,
+            _imu_msg(ts, False, 0, "imu", [0, 0, 0, 1], [0, 0, 0], [0, 0, 9.8], np.zeros(9), np.zeros(9), np.zeros(9)),
+        )
+        for i in range(5)
+    ]
     p = _write_raw_bag(tmp_path / "zero", "sqlite3", {"/imu": (IMU, msgs)})
     with pytest.raises(ImutoolError, match="zero header stamp.*--stamp record"):
         read_bag(p)

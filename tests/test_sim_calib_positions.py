@@ -16,8 +16,9 @@ def test_six_position_poses_point_each_axis_up_and_down():
     f = rec.get("ref_accel", "m/s^2")
     hold = rec.meta["hold_s"]
     period = hold + rec.meta["move_s"]
-    means = np.array([f[(rec.time > k * period + 1) & (rec.time < k * period + hold - 1)].mean(axis=0)
-                      for k in range(6)])
+    means = np.array(
+        [f[(rec.time > k * period + 1) & (rec.time < k * period + hold - 1)].mean(axis=0) for k in range(6)]
+    )
     # every pose puts ±g on exactly one body axis, and the six cover all of ±x, ±y, ±z
     dominant = {(int(np.argmax(np.abs(m))), int(np.sign(m[np.argmax(np.abs(m))]))) for m in means}
     assert dominant == {(a, s) for a in range(3) for s in (-1, 1)}

@@ -160,12 +160,26 @@ def test_ship_at_sea_cli_lever_arm(tmp_path):
     from imutool.cli import cli
 
     out = tmp_path / "voyage.csv"
-    run = CliRunner().invoke(cli, ["simulate", "ship-at-sea", "-o", str(out), "--duration", "5",
-                                   "--set", "lever_arm=-10,2,-15", "--set", "turn_rate_dps=0"])
+    run = CliRunner().invoke(
+        cli,
+        [
+            "simulate",
+            "ship-at-sea",
+            "-o",
+            str(out),
+            "--duration",
+            "5",
+            "--set",
+            "lever_arm=-10,2,-15",
+            "--set",
+            "turn_rate_dps=0",
+        ],
+    )
     assert run.exit_code == 0, run.output
     rec = formats.read(str(out))
     assert list(rec.meta["lever_arm_m"]) == [-10.0, 2.0, -15.0]
     assert {"sog", "cog", "ref_sog", "ref_cog", "ref_q", "ref_roll", "ref_pos"} <= set(rec.channels)
-    bad = CliRunner().invoke(cli, ["simulate", "ship-at-sea", "-o", str(tmp_path / "x.csv"), "--duration", "5",
-                                   "--set", "lever_arm=1,2"])
+    bad = CliRunner().invoke(
+        cli, ["simulate", "ship-at-sea", "-o", str(tmp_path / "x.csv"), "--duration", "5", "--set", "lever_arm=1,2"]
+    )
     assert bad.exit_code != 0 and "lever_arm" in str(bad.exception) and not (tmp_path / "x.csv").exists()

@@ -13,12 +13,25 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_ruff_clean():
-    if shutil.which("ruff") is None and subprocess.run([sys.executable, "-m", "ruff", "--version"],
-                                                       capture_output=True).returncode != 0:
+def _ruff(*args: str) -> subprocess.CompletedProcess:
+    if (
+        shutil.which("ruff") is None
+        and subprocess.run([sys.executable, "-m", "ruff", "--version"], capture_output=True).returncode != 0
+    ):
         pytest.skip("ruff not installed (it is in the [test] extra)")
-    r = subprocess.run([sys.executable, "-m", "ruff", "check", "--no-cache", str(ROOT)], capture_output=True,
-                       text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "ruff", *args, "--no-cache", str(ROOT)], capture_output=True, text=True
+    )
+
+
+def test_ruff_clean():
+    r = _ruff("check")
+    assert r.returncode == 0, r.stdout[-3000:]
+
+
+def test_ruff_formatted():
+    """`ruff format` was applied once to the whole tree; this keeps it so (run `ruff format .` to mend)."""
+    r = _ruff("format", "--check")
     assert r.returncode == 0, r.stdout[-3000:]
 
 
@@ -34,8 +47,9 @@ def _imports(pkg: str) -> list[tuple[Path, str]]:
     return out
 
 
-@pytest.mark.parametrize("pkg,forbidden", [("formats", ("imutool", "calibration", "click")),
-                                           ("calibration", ("imutool", "click"))])
+@pytest.mark.parametrize(
+    "pkg,forbidden", [("formats", ("imutool", "calibration", "click")), ("calibration", ("imutool", "click"))]
+)
 def test_imports_only_go_downward(pkg, forbidden):
     bad = [f"{f.relative_to(ROOT)} imports {m}" for f, m in _imports(pkg) if m.split(".")[0] in forbidden]
     assert not bad, bad
@@ -45,8 +59,11 @@ def test_no_shared_data_copied_into_repo():
     shared = ROOT.parent / "shared" / "data"
     if not shared.exists():
         pytest.skip("../shared/data absent")
-    names = {p.name for p in shared.rglob("*") if p.is_file() and p.suffix in (".csv", ".bag", ".db3", ".mcap",
-                                                                                 ".log", ".mat", ".hdf5")}
+    names = {
+        p.name
+        for p in shared.rglob("*")
+        if p.is_file() and p.suffix in (".csv", ".bag", ".db3", ".mcap", ".log", ".mat", ".hdf5")
+    }
     tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True).stdout.split()
     copies = [t for t in tracked if Path(t).name in names]
     assert not copies, copies

@@ -66,11 +66,13 @@ def test_shoe_statistic_matches_definition():
     g = rng.normal(0, 0.01, (n, 3))
     res = detect_zvi(t, g, a, "shoe", window_s=w / 100.0, min_duration_s=0.0)
     m = 20
-    ya = a[m - 2:m + 3]
-    yg = g[m - 2:m + 3]
+    ya = a[m - 2 : m + 3]
+    yg = g[m - 2 : m + 3]
     mean = ya.mean(axis=0)
-    ref = np.mean(np.sum((ya - 9.80665 * mean / np.linalg.norm(mean)) ** 2, axis=1) / 0.01**2
-                  + np.sum(yg**2, axis=1) / np.radians(0.1) ** 2)
+    ref = np.mean(
+        np.sum((ya - 9.80665 * mean / np.linalg.norm(mean)) ** 2, axis=1) / 0.01**2
+        + np.sum(yg**2, axis=1) / np.radians(0.1) ** 2
+    )
     assert res.statistic[m] == pytest.approx(ref, rel=1e-9)
 
 
@@ -100,8 +102,7 @@ def test_cli_writes_interval_table_and_plot(tmp_path):
     formats.write(walk(seed=11, n_steps=4), src)
     out = tmp_path / "iv.csv"
     png = tmp_path / "zvi.png"
-    r = CliRunner().invoke(cli, ["zvi", str(src), "-o", str(out), "--detector", "paper", "--plot", str(png),
-                                 "--json"])
+    r = CliRunner().invoke(cli, ["zvi", str(src), "-o", str(out), "--detector", "paper", "--plot", str(png), "--json"])
     assert r.exit_code == 0, r.output
     summary = json.loads(r.output)
     assert summary["score_vs_ref_zvi"]["f1"] >= 0.95

@@ -81,9 +81,16 @@ class Scales:
         return GAUSS_TO_UT / table[self.mag_gain]
 
     def as_meta(self) -> dict:
-        return {"imu": self.imu, "accel_fs_g": self.accel_fs_g, "gyro_fs_dps": self.gyro_fs_dps, "mag": self.mag,
-                "mag_gain": self.mag_gain, "accel_m_s2_per_lsb": self.accel, "gyro_rad_s_per_lsb": self.gyro,
-                "mag_uT_per_lsb": self.mag_ut}
+        return {
+            "imu": self.imu,
+            "accel_fs_g": self.accel_fs_g,
+            "gyro_fs_dps": self.gyro_fs_dps,
+            "mag": self.mag,
+            "mag_gain": self.mag_gain,
+            "accel_m_s2_per_lsb": self.accel,
+            "gyro_rad_s_per_lsb": self.gyro,
+            "mag_uT_per_lsb": self.mag_ut,
+        }
 
 
 def xor_checksum(body: bytes) -> int:
@@ -259,9 +266,16 @@ class DecoderStats:
     configs: int = 0
 
     def as_dict(self) -> dict:
-        return {"frames": self.frames, "bad_checksum": self.bad_checksum, "malformed": self.malformed,
-                "garbage_bytes": self.garbage_bytes, "repeated": self.repeated, "dropped_by_sequence": self.dropped,
-                "sequence_gaps": len(self.gaps), "config_lines": self.configs}
+        return {
+            "frames": self.frames,
+            "bad_checksum": self.bad_checksum,
+            "malformed": self.malformed,
+            "garbage_bytes": self.garbage_bytes,
+            "repeated": self.repeated,
+            "dropped_by_sequence": self.dropped,
+            "sequence_gaps": len(self.gaps),
+            "config_lines": self.configs,
+        }
 
 
 class BridgeDecoder:
@@ -335,7 +349,7 @@ class BridgeDecoder:
             if status[i] == 1:
                 rows.append(vals[i])
             elif status[i] == 2:
-                f = self._decode_line_raw(arr[bounds[i, 0]:bounds[i, 1]].tobytes())
+                f = self._decode_line_raw(arr[bounds[i, 0] : bounds[i, 1]].tobytes())
                 if f is not None:
                     rows.append(np.array([f.seq, f.t_us, *f.counts], dtype=np.int64))
         return np.array(rows, dtype=np.int64).reshape(-1, 12)
@@ -367,7 +381,7 @@ class BridgeDecoder:
             return None
         body = line[1:star]
         try:
-            cs = int(line[star + 1:star + 3], 16)
+            cs = int(line[star + 1 : star + 3], 16)
         except ValueError:
             self.stats.malformed += 1
             return None
@@ -397,8 +411,12 @@ def frames_to_si(frames: list[Frame], scales: Scales) -> dict[str, np.ndarray]:
     """Channels in SI from frames: seq, t_mcu (s), accel (m/s²), gyro (rad/s), mag (µT), temp (°C)."""
     if not frames:
         return {}
-    return counts_to_si(np.array([f.seq for f in frames]), np.array([f.t_us for f in frames]),
-                        np.array([f.counts for f in frames]), scales)
+    return counts_to_si(
+        np.array([f.seq for f in frames]),
+        np.array([f.t_us for f in frames]),
+        np.array([f.counts for f in frames]),
+        scales,
+    )
 
 
 def counts_to_si(seq: np.ndarray, t_us: np.ndarray, counts: np.ndarray, scales: Scales) -> dict[str, np.ndarray]:

@@ -111,8 +111,12 @@ class FrameClock:
             return np.empty(0)
         if self._m0 is None and self.segments == 0:
             self.segments = 1
-        if self.source == "t_mcu" and n > 1 and np.all(t_us == t_us[0]) and (
-                self._last_raw is None or self._last_raw == t_us[0]):
+        if (
+            self.source == "t_mcu"
+            and n > 1
+            and np.all(t_us == t_us[0])
+            and (self._last_raw is None or self._last_raw == t_us[0])
+        ):
             self.source = "seq"  # no MCU clock: count frames instead
         if self.source == "seq":
             m = self._seq_seconds(self._unwrap_seq(seq), arrival)
@@ -149,12 +153,18 @@ class FrameClock:
         self._last_out = float(t)
 
     def as_meta(self) -> dict:
-        return {"source": self.source, "offset_s": self._offset, "drift_ppm": self._drift * 1e6,
-                "segments": self.segments, "window_s": self.window_s}
+        return {
+            "source": self.source,
+            "offset_s": self._offset,
+            "drift_ppm": self._drift * 1e6,
+            "segments": self.segments,
+            "window_s": self.window_s,
+        }
 
 
-def spread_by_baud(arrival: float, line_lengths: list[int], tail_bytes: int, baud: int,
-                   last: float = -np.inf) -> np.ndarray:
+def spread_by_baud(
+    arrival: float, line_lengths: list[int], tail_bytes: int, baud: int, last: float = -np.inf
+) -> np.ndarray:
     """Per-line stamps for lines of one batch that all arrived by ``arrival`` (UTC s).
 
     line_lengths: bytes of each complete line (newline excluded); tail_bytes: bytes received after the last

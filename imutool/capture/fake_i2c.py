@@ -28,7 +28,7 @@ class FakeMPU6050(FakeDevice):
         self.accel_counts, self.gyro_counts, self.temp_count = accel_counts, gyro_counts, temp_count
 
     def refresh(self) -> None:
-        self.regs[0x3B:0x3B + 14] = struct.pack(">7h", *self.accel_counts, self.temp_count, *self.gyro_counts)
+        self.regs[0x3B : 0x3B + 14] = struct.pack(">7h", *self.accel_counts, self.temp_count, *self.gyro_counts)
 
 
 class FakeHMC5883L(FakeDevice):
@@ -84,7 +84,7 @@ class FakeSMBus:
     def read_i2c_block_data(self, addr: int, reg: int, length: int) -> list[int]:
         dev = self._dev(addr)
         dev.refresh()
-        return list(dev.regs[reg:reg + length])
+        return list(dev.regs[reg : reg + length])
 
     def close(self) -> None:
         pass

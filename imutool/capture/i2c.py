@@ -54,18 +54,33 @@ def _io(fn, what: str, bus_name: str, addr: int):
 class MPU6050:
     """MPU6050 6-axis IMU: accel (m/s²), gyro (rad/s), temperature (°C)."""
 
-    def __init__(self, bus, address: int = 0x68, accel_fs_g: int = 2, gyro_fs_dps: int = 250,
-                 dlpf: int = 3, sample_div: int = 4, bus_name: str = "?", bypass: bool = False):
+    def __init__(
+        self,
+        bus,
+        address: int = 0x68,
+        accel_fs_g: int = 2,
+        gyro_fs_dps: int = 250,
+        dlpf: int = 3,
+        sample_div: int = 4,
+        bus_name: str = "?",
+        bypass: bool = False,
+    ):
         if address not in (0x68, 0x69):
             raise ImutoolError(f"MPU6050 address 0x{address:02X}: must be 0x68 (AD0 low) or 0x69 (AD0 high)")
         self.bus, self.addr, self.bus_name = bus, address, bus_name
         self.scales = Scales(accel_fs_g=accel_fs_g, gyro_fs_dps=gyro_fs_dps)
         who = _io(lambda: bus.read_byte_data(address, MPU_WHO_AM_I), "WHO_AM_I", bus_name, address)
         if (who & 0x7E) != 0x68:  # WHO_AM_I holds bits 6:1 of the address: 0x68 regardless of AD0
-            raise ImutoolError(f"I2C bus {bus_name}, address 0x{address:02X}: WHO_AM_I = 0x{who:02X}, expected 0x68 "
-                               "(not an MPU6050; an MPU6500/9250 answers 0x70/0x71)")
-        w = lambda reg, val: _io(lambda: bus.write_byte_data(address, reg, val), f"write 0x{reg:02X}",  # noqa: E731
-                                 bus_name, address)
+            raise ImutoolError(
+                f"I2C bus {bus_name}, address 0x{address:02X}: WHO_AM_I = 0x{who:02X}, expected 0x68 "
+                "(not an MPU6050; an MPU6500/9250 answers 0x70/0x71)"
+            )
+        w = lambda reg, val: _io(  # noqa: E731
+            lambda: bus.write_byte_data(address, reg, val),
+            f"write 0x{reg:02X}",
+            bus_name,
+            address,
+        )
         w(MPU_PWR_MGMT_1, 0x01)  # wake, clock from the X gyro PLL
         w(MPU_SMPLRT_DIV, sample_div)  # sample rate = 1 kHz / (1 + div) with the DLPF on
         w(MPU_CONFIG, dlpf & 0x07)
@@ -76,8 +91,9 @@ class MPU6050:
             w(MPU_INT_PIN_CFG, 0x02)
 
     def read(self) -> tuple[np.ndarray, np.ndarray, float]:
-        raw = _io(lambda: self.bus.read_i2c_block_data(self.addr, MPU_ACCEL_XOUT_H, 14), "read data",
-                  self.bus_name, self.addr)
+        raw = _io(
+            lambda: self.bus.read_i2c_block_data(self.addr, MPU_ACCEL_XOUT_H, 14), "read data", self.bus_name, self.addr
+        )
         v = struct.unpack(">7h", bytes(raw))
         acc = np.array(v[0:3], dtype=float) * self.scales.accel
         gyr = np.array(v[4:7], dtype=float) * self.scales.gyro
@@ -93,10 +109,16 @@ class HMC5883L:
         self.lsb_per_gauss = HMC5883L_LSB_PER_GAUSS[gain]
         ident = bytes(_io(lambda: bus.read_i2c_block_data(HMC_ADDR, HMC_ID, 3), "ID registers", bus_name, HMC_ADDR))
         if ident != HMC_ID_BYTES:
-            raise ImutoolError(f"I2C bus {bus_name}, address 0x1E: ID = {ident!r}, expected b'H43' (not an HMC5883L;"
-                               " a QMC5883L sits at 0x0D)")
-        w = lambda reg, val: _io(lambda: bus.write_byte_data(HMC_ADDR, reg, val), f"write 0x{reg:02X}",  # noqa: E731
-                                 bus_name, HMC_ADDR)
+            raise ImutoolError(
+                f"I2C bus {bus_name}, address 0x1E: ID = {ident!r}, expected b'H43' (not an HMC5883L;"
+                " a QMC5883L sits at 0x0D)"
+            )
+        w = lambda reg, val: _io(  # noqa: E731
+            lambda: bus.write_byte_data(HMC_ADDR, reg, val),
+            f"write 0x{reg:02X}",
+            bus_name,
+            HMC_ADDR,
+        )
         w(HMC_CRA, (0b11 << 5) | (rate_code << 2))  # 8-sample average, output rate code (6 = 75 Hz)
         w(HMC_CRB, gain << 5)
         w(HMC_MODE, 0x00)  # continuous measurement
@@ -117,10 +139,15 @@ class QMC5883L:
         self.lsb_per_gauss = QMC5883L_LSB_PER_GAUSS[range_gauss]
         chip = _io(lambda: bus.read_byte_data(QMC_ADDR, QMC_CHIP_ID), "chip ID", bus_name, QMC_ADDR)
         if chip != 0xFF:
-            raise ImutoolError(f"I2C bus {bus_name}, address 0x0D: chip ID = 0x{chip:02X}, expected 0xFF "
-                               "(not a QMC5883L)")
-        w = lambda reg, val: _io(lambda: bus.write_byte_data(QMC_ADDR, reg, val), f"write 0x{reg:02X}",  # noqa: E731
-                                 bus_name, QMC_ADDR)
+            raise ImutoolError(
+                f"I2C bus {bus_name}, address 0x0D: chip ID = 0x{chip:02X}, expected 0xFF (not a QMC5883L)"
+            )
+        w = lambda reg, val: _io(  # noqa: E731
+            lambda: bus.write_byte_data(QMC_ADDR, reg, val),
+            f"write 0x{reg:02X}",
+            bus_name,
+            QMC_ADDR,
+        )
         w(QMC_SETRESET, 0x01)
         rng = 0x10 if range_gauss == 8 else 0x00
         w(QMC_CTRL1, 0x01 | 0x0C | rng)  # continuous, 200 Hz, range, OSR 512
@@ -131,11 +158,26 @@ class QMC5883L:
         return v * 100.0 / self.lsb_per_gauss
 
 
-def capture_i2c(bus_id: str, out: str, imu: str | None = "mpu6050", mag: str | None = "hmc5883l",
-                rate_hz: float = 200.0, imu_address: int = 0x68, accel_fs_g: int = 2, gyro_fs_dps: int = 250,
-                mag_gain: int | None = None, bypass: bool = False, duration: float | None = None,
-                rotate_s: float | None = None, status_s: float | None = 10.0, quiet: bool = False,
-                append: bool = False, force: bool = False, bus=None, stop: StopFlag | None = None) -> dict:
+def capture_i2c(
+    bus_id: str,
+    out: str,
+    imu: str | None = "mpu6050",
+    mag: str | None = "hmc5883l",
+    rate_hz: float = 200.0,
+    imu_address: int = 0x68,
+    accel_fs_g: int = 2,
+    gyro_fs_dps: int = 250,
+    mag_gain: int | None = None,
+    bypass: bool = False,
+    duration: float | None = None,
+    rotate_s: float | None = None,
+    status_s: float | None = 10.0,
+    quiet: bool = False,
+    append: bool = False,
+    force: bool = False,
+    bus=None,
+    stop: StopFlag | None = None,
+) -> dict:
     """Read an MPU6050 and/or a magnetometer on a Linux I2C bus at a steady rate into an imutool CSV (SI)."""
     import time as _time
     from pathlib import Path
@@ -167,8 +209,13 @@ def capture_i2c(bus_id: str, out: str, imu: str | None = "mpu6050", mag: str | N
     base = Path(out)
     if base.suffix.lower() != ".csv":
         base = base / f"i2c_{utc_name()}.csv"
-    meta = {"source": f"I2C {name}: {imu or '-'} @0x{imu_address:02X}, {mag or '-'}", "rate_hz": rate_hz,
-            "time": "UTC epoch seconds", "units": "time_mono=s", "captured_by": "imutool capture i2c"}
+    meta = {
+        "source": f"I2C {name}: {imu or '-'} @0x{imu_address:02X}, {mag or '-'}",
+        "rate_hz": rate_hz,
+        "time": "UTC epoch seconds",
+        "units": "time_mono=s",
+        "captured_by": "imutool capture i2c",
+    }
     if dev_imu:
         meta["scales"] = dev_imu.scales.as_meta()
     csv = CaptureCsv(base, cols, meta, rotate_s=rotate_s, append=append, overwrite=force)

@@ -77,9 +77,16 @@ def read_profile(path: str) -> Profile:
         for key in ("name", "address"):
             if key not in r:
                 raise ImutoolError(f"{where}: missing '{key}'", path=path)
-        reg = Register(str(r["name"]), int(r["address"]), str(r.get("table", "input")), str(r.get("type", "int16")),
-                       float(r.get("scale", 1.0)), float(r.get("offset", 0.0)), r.get("unit"),
-                       str(r.get("word_order", "big")))
+        reg = Register(
+            str(r["name"]),
+            int(r["address"]),
+            str(r.get("table", "input")),
+            str(r.get("type", "int16")),
+            float(r.get("scale", 1.0)),
+            float(r.get("offset", 0.0)),
+            r.get("unit"),
+            str(r.get("word_order", "big")),
+        )
         if reg.table not in ("input", "holding"):
             raise ImutoolError(f"{where}: table must be 'input' or 'holding'", path=path)
         if reg.type not in _TYPES:
@@ -93,8 +100,14 @@ def read_profile(path: str) -> Profile:
         regs.append(reg)
     if not regs:
         raise ImutoolError("no [[register]] entries", path=path)
-    return Profile(str(dev.get("name", "modbus device")), int(dev.get("unit", 1)), int(dev.get("baud", 9600)),
-                   str(dev.get("parity", "N")), float(dev.get("rate_hz", 10.0)), regs)
+    return Profile(
+        str(dev.get("name", "modbus device")),
+        int(dev.get("unit", 1)),
+        int(dev.get("baud", 9600)),
+        str(dev.get("parity", "N")),
+        float(dev.get("rate_hz", 10.0)),
+        regs,
+    )
 
 
 def request_blocks(regs: list[Register]) -> list[tuple[str, int, int]]:
@@ -114,8 +127,9 @@ def request_blocks(regs: list[Register]) -> list[tuple[str, int, int]]:
 class ModbusPoller:
     """Reads all profile registers from one device with pymodbus's RTU client."""
 
-    def __init__(self, port: str, profile: Profile, unit: int | None = None, baud: int | None = None,
-                 timeout: float = 0.5):
+    def __init__(
+        self, port: str, profile: Profile, unit: int | None = None, baud: int | None = None, timeout: float = 0.5
+    ):
         try:
             from pymodbus.client import ModbusSerialClient
         except ImportError:
@@ -123,8 +137,9 @@ class ModbusPoller:
         self.profile = profile
         self.unit = profile.unit if unit is None else unit
         self.port = port
-        self.client = ModbusSerialClient(port, baudrate=baud or profile.baud, parity=profile.parity, timeout=timeout,
-                                         retries=1)
+        self.client = ModbusSerialClient(
+            port, baudrate=baud or profile.baud, parity=profile.parity, timeout=timeout, retries=1
+        )
         if not self.client.connect():
             raise ImutoolError("cannot open the Modbus serial port", path=port)
         self.blocks = request_blocks(profile.registers)
@@ -137,24 +152,38 @@ class ModbusPoller:
             try:
                 rr = fn(start, count=count, device_id=self.unit)
             except Exception as e:  # pymodbus raises ModbusException / ConnectionException
-                raise ImutoolError(f"Modbus unit {self.unit}: no answer reading {table} {start}+{count}: {e}",
-                                   path=self.port) from None
+                raise ImutoolError(
+                    f"Modbus unit {self.unit}: no answer reading {table} {start}+{count}: {e}", path=self.port
+                ) from None
             if rr.isError():
-                raise ImutoolError(f"Modbus unit {self.unit}: exception response {rr} for {table} {start}+{count}",
-                                   path=self.port)
+                raise ImutoolError(
+                    f"Modbus unit {self.unit}: exception response {rr} for {table} {start}+{count}", path=self.port
+                )
             for i, w in enumerate(rr.registers):
                 words[(table, start + i)] = w
-        return {r.name: r.decode([words[(r.table, r.address + k)] for k in range(r.words)])
-                for r in self.profile.registers}
+        return {
+            r.name: r.decode([words[(r.table, r.address + k)] for k in range(r.words)]) for r in self.profile.registers
+        }
 
     def close(self) -> None:
         self.client.close()
 
 
-def capture_modbus(port: str, profile_path: str, out: str, unit: int | None = None, baud: int | None = None,
-                   rate_hz: float | None = None, duration: float | None = None, rotate_s: float | None = None,
-                   status_s: float | None = 10.0, quiet: bool = False, append: bool = False, force: bool = False,
-                   stop=None) -> dict:
+def capture_modbus(
+    port: str,
+    profile_path: str,
+    out: str,
+    unit: int | None = None,
+    baud: int | None = None,
+    rate_hz: float | None = None,
+    duration: float | None = None,
+    rotate_s: float | None = None,
+    status_s: float | None = 10.0,
+    quiet: bool = False,
+    append: bool = False,
+    force: bool = False,
+    stop=None,
+) -> dict:
     """Poll a Modbus RTU device at a steady rate into an imutool CSV (values scaled per the profile)."""
     import time
     from pathlib import Path
@@ -173,9 +202,14 @@ def capture_modbus(port: str, profile_path: str, out: str, unit: int | None = No
     if base.suffix.lower() != ".csv":
         base = base / f"modbus_{utc_name()}.csv"
     units = ", ".join(f"{r.name}={r.unit}" for r in prof.registers if r.unit)
-    meta = {"source": f"Modbus RTU {port} unit {poller.unit}: {prof.name}", "profile": profile_path,
-            "rate_hz": rate, "time": "UTC epoch seconds", "units": units + (", " if units else "") + "time_mono=s",
-            "captured_by": "imutool capture modbus"}
+    meta = {
+        "source": f"Modbus RTU {port} unit {poller.unit}: {prof.name}",
+        "profile": profile_path,
+        "rate_hz": rate,
+        "time": "UTC epoch seconds",
+        "units": units + (", " if units else "") + "time_mono=s",
+        "captured_by": "imutool capture modbus",
+    }
     csv = CaptureCsv(base, cols, meta, rotate_s=rotate_s, append=append, overwrite=force)
     stats = CaptureStats(started_utc=iso_utc(time.time()))
     status = StatusLine(status_s, quiet)

@@ -78,9 +78,11 @@ class StatusLine:
         count = stats.frames
         rate = (count - self._last_count) / max(now - self._last, 1e-9)
         self._last, self._last_count = now, count
-        msg = (f"{datetime.now(timezone.utc).strftime('%H:%M:%S')}Z {rate:8.1f}/s  frames {count}  "
-               f"drops {stats.dropped}  errors {stats.errors}  reopen {stats.reopen_count}  "
-               f"{size_bytes / 1e6:.2f} MB")
+        msg = (
+            f"{datetime.now(timezone.utc).strftime('%H:%M:%S')}Z {rate:8.1f}/s  frames {count}  "
+            f"drops {stats.dropped}  errors {stats.errors}  reopen {stats.reopen_count}  "
+            f"{size_bytes / 1e6:.2f} MB"
+        )
         sys.stderr.write(("\r" + msg) if self.tty else (msg + "\n"))
         sys.stderr.flush()
 
@@ -97,8 +99,15 @@ class PollStats:
     achieved_hz: float = 0.0
 
 
-def poll(read_fn, rate_hz: float, on_sample, duration: float | None, stop_check=lambda: False,
-         clock=time.monotonic, sleep=time.sleep) -> PollStats:
+def poll(
+    read_fn,
+    rate_hz: float,
+    on_sample,
+    duration: float | None,
+    stop_check=lambda: False,
+    clock=time.monotonic,
+    sleep=time.sleep,
+) -> PollStats:
     """Call ``read_fn()`` at a steady rate; a tick later than one period is an overrun (counted).
 
     ``on_sample(t_mono, value)`` receives each reading. A read error is counted and the loop goes on.
@@ -134,9 +143,16 @@ def poll(read_fn, rate_hz: float, on_sample, duration: float | None, stop_check=
 
 def finish_poll_capture(csv, stats: CaptureStats, stop: StopFlag, ps: PollStats, rate_hz: float) -> dict:
     """Close a polled capture's CSV with its summary trailer; returns the summary (with the file names)."""
-    summary = {"started_utc": stats.started_utc, "stopped_utc": iso_utc(time.time()),
-               "stop_reason": stop.reason or "duration reached", "samples": ps.samples, "rate_hz": rate_hz,
-               "achieved_hz": round(ps.achieved_hz, 3), "overruns": ps.overruns, "read_errors": ps.read_errors}
+    summary = {
+        "started_utc": stats.started_utc,
+        "stopped_utc": iso_utc(time.time()),
+        "stop_reason": stop.reason or "duration reached",
+        "samples": ps.samples,
+        "rate_hz": rate_hz,
+        "achieved_hz": round(ps.achieved_hz, 3),
+        "overruns": ps.overruns,
+        "read_errors": ps.read_errors,
+    }
     csv.close(summary)
     summary["files"] = csv.file.files
     return summary

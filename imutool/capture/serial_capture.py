@@ -27,21 +27,71 @@ from .sink import CaptureCsv, EventLog, RotatingFile, last_complete_row
 if TYPE_CHECKING:
     from .bridge import Scales
 
-NMEA_COLUMNS = ["heading_true", "heading_mag", "heading_sensor", "deviation", "variation", "rot", "roll", "pitch",
-                "heel", "heave", "roll_period", "amp_port", "amp_stbd", "sog", "cog"]
-NMEA_UNITS = {"heading_true": "deg", "heading_mag": "deg", "heading_sensor": "deg", "deviation": "deg",
-              "variation": "deg", "rot": "deg/min", "roll": "deg", "pitch": "deg", "heel": "deg", "heave": "m",
-              "roll_period": "s", "amp_port": "deg", "amp_stbd": "deg", "sog": "m/s", "cog": "deg"}
-BRIDGE_COLUMNS = ["time", "time_mono", "seq", "t_mcu", "accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y", "gyro_z",
-                  "mag_x", "mag_y", "mag_z", "temp"]
+NMEA_COLUMNS = [
+    "heading_true",
+    "heading_mag",
+    "heading_sensor",
+    "deviation",
+    "variation",
+    "rot",
+    "roll",
+    "pitch",
+    "heel",
+    "heave",
+    "roll_period",
+    "amp_port",
+    "amp_stbd",
+    "sog",
+    "cog",
+]
+NMEA_UNITS = {
+    "heading_true": "deg",
+    "heading_mag": "deg",
+    "heading_sensor": "deg",
+    "deviation": "deg",
+    "variation": "deg",
+    "rot": "deg/min",
+    "roll": "deg",
+    "pitch": "deg",
+    "heel": "deg",
+    "heave": "m",
+    "roll_period": "s",
+    "amp_port": "deg",
+    "amp_stbd": "deg",
+    "sog": "m/s",
+    "cog": "deg",
+}
+BRIDGE_COLUMNS = [
+    "time",
+    "time_mono",
+    "seq",
+    "t_mcu",
+    "accel_x",
+    "accel_y",
+    "accel_z",
+    "gyro_x",
+    "gyro_y",
+    "gyro_z",
+    "mag_x",
+    "mag_y",
+    "mag_z",
+    "temp",
+]
 
 
 class SerialSource:
     """A serial port that reopens itself with backoff; yields (bytes, t_wall, t_mono) chunks."""
 
-    def __init__(self, port: str, baud: int, stats: CaptureStats, max_backoff: float = 5.0,
-                 opener: Callable | None = None, log: Callable[[str], None] | None = None,
-                 events: EventLog | None = None):
+    def __init__(
+        self,
+        port: str,
+        baud: int,
+        stats: CaptureStats,
+        max_backoff: float = 5.0,
+        opener: Callable | None = None,
+        log: Callable[[str], None] | None = None,
+        events: EventLog | None = None,
+    ):
         self.port_name = port
         self.baud = baud
         self.stats = stats
@@ -82,8 +132,11 @@ class SerialSource:
                 self._backoff = min(self._backoff * 2, self.max_backoff)
                 self._next_try = time.monotonic() + self._backoff
                 return b"", time.time(), time.monotonic()
-            gap = {"start_utc": iso_utc(self._down_wall), "end_utc": iso_utc(time.time()),
-                   "length_s": round(time.monotonic() - (self._down_since or time.monotonic()), 3)}
+            gap = {
+                "start_utc": iso_utc(self._down_wall),
+                "end_utc": iso_utc(time.time()),
+                "length_s": round(time.monotonic() - (self._down_since or time.monotonic()), 3),
+            }
             self.stats.port_gaps.append(gap)
             self.stats.reopen_count += 1
             self.log(f"port {self.port_name} reopened after {gap['length_s']} s")
@@ -137,8 +190,15 @@ def _split_text(buf: bytearray, data: bytes) -> list[str]:
     return lines
 
 
-def run_loop(source: SerialSource, on_data: Callable[[bytes, float, float], None], stats: CaptureStats,
-             duration: float | None, status: StatusLine, size: Callable[[], int], stop: StopFlag) -> None:
+def run_loop(
+    source: SerialSource,
+    on_data: Callable[[bytes, float, float], None],
+    stats: CaptureStats,
+    duration: float | None,
+    status: StatusLine,
+    size: Callable[[], int],
+    stop: StopFlag,
+) -> None:
     t_end = None if duration is None else time.monotonic() + duration
     while not stop.stop:
         if t_end is not None and time.monotonic() >= t_end:
@@ -150,10 +210,20 @@ def run_loop(source: SerialSource, on_data: Callable[[bytes, float, float], None
         status.update(stats, size())
 
 
-def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, rotate_s: float | None = None,
-                 status_s: float | None = 10.0, quiet: bool = False, append: bool = False, force: bool = False,
-                 checksum_policy: str = "require", opener: Callable | None = None,
-                 stop: StopFlag | None = None) -> dict:
+def capture_nmea(
+    port: str,
+    baud: int,
+    out: str,
+    duration: float | None = None,
+    rotate_s: float | None = None,
+    status_s: float | None = 10.0,
+    quiet: bool = False,
+    append: bool = False,
+    force: bool = False,
+    checksum_policy: str = "require",
+    opener: Callable | None = None,
+    stop: StopFlag | None = None,
+) -> dict:
     """Record NMEA 0183 from a serial port.
 
     ``out`` is a folder (created) or a ``.csv`` path. Writes ``<name>.nmea`` — the raw log, every line as
@@ -167,9 +237,12 @@ def capture_nmea(port: str, baud: int, out: str, duration: float | None = None, 
         base = base / f"nmea_{utc_name()}.csv"
     stats = CaptureStats(started_utc=iso_utc(time.time()))
     columns = ["time", "time_mono"] + NMEA_COLUMNS
-    meta = {"source": f"serial {port} @ {baud} baud (NMEA 0183)",
-            "time": "UTC epoch seconds at arrival (lines of one read spread back by the baud rate, 10 bits/byte)",
-            "units": ", ".join(f"{k}={v}" for k, v in NMEA_UNITS.items()), "captured_by": "imutool capture serial"}
+    meta = {
+        "source": f"serial {port} @ {baud} baud (NMEA 0183)",
+        "time": "UTC epoch seconds at arrival (lines of one read spread back by the baud rate, 10 bits/byte)",
+        "units": ", ".join(f"{k}={v}" for k, v in NMEA_UNITS.items()),
+        "captured_by": "imutool capture serial",
+    }
     kw = {"rotate_s": rotate_s, "append": append, "overwrite": force}
     csv = CaptureCsv(base, columns, meta, array_rows=False, **kw)  # rows come as text (see NmeaRows)
     raw = RotatingFile(base.with_suffix(".nmea"), "", **kw)
@@ -265,10 +338,21 @@ class NmeaRows:
         return "" if cells is None else ",".join(cells)
 
 
-def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales: Scales | None = None,
-                   duration: float | None = None, rotate_s: float | None = None, status_s: float | None = 10.0,
-                   quiet: bool = False, append: bool = False, force: bool = False, opener: Callable | None = None,
-                   stop: StopFlag | None = None) -> dict:
+def capture_bridge(
+    port: str,
+    baud: int,
+    out: str,
+    binary: bool = False,
+    scales: Scales | None = None,
+    duration: float | None = None,
+    rotate_s: float | None = None,
+    status_s: float | None = 10.0,
+    quiet: bool = False,
+    append: bool = False,
+    force: bool = False,
+    opener: Callable | None = None,
+    stop: StopFlag | None = None,
+) -> dict:
     """Record bridge-protocol frames (text or binary) from a serial port into an imutool CSV in SI units."""
     from .bridge import BridgeDecoder, counts_to_si  # numba kernels: only the bridge protocol needs them
 
@@ -277,19 +361,28 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
         base = base / f"bridge_{utc_name()}.csv"
     stats = CaptureStats(started_utc=iso_utc(time.time()))
     dec = BridgeDecoder(binary=binary, scales=scales)
-    meta = {"source": f"serial {port} @ {baud} baud (imutool bridge, {'binary' if binary else 'text'})",
-            "time": "UTC epoch seconds per frame: MCU clock (t_mcu) mapped to UTC by an offset and drift fitted to "
-                    "the arrival times (lower envelope; docs/capture.md)",
-            "time_mono": "host monotonic clock at the read that carried the frame",
-            "scales": dec.scales.as_meta(),
-            "units": "seq=1, t_mcu=s, time_mono=s", "captured_by": "imutool capture serial --protocol bridge"}
+    meta = {
+        "source": f"serial {port} @ {baud} baud (imutool bridge, {'binary' if binary else 'text'})",
+        "time": "UTC epoch seconds per frame: MCU clock (t_mcu) mapped to UTC by an offset and drift fitted to "
+        "the arrival times (lower envelope; docs/capture.md)",
+        "time_mono": "host monotonic clock at the read that carried the frame",
+        "scales": dec.scales.as_meta(),
+        "units": "seq=1, t_mcu=s, time_mono=s",
+        "captured_by": "imutool capture serial --protocol bridge",
+    }
     resume = last_complete_row(base) if append and not rotate_s else None
     csv = CaptureCsv(base, BRIDGE_COLUMNS, meta, rotate_s=rotate_s, append=append, overwrite=force)
     events = EventLog(base.with_suffix(".events.jsonl"), append=True)
     src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log, events=events)
     src.open_first()
-    events.add("started", port=port, baud=baud, protocol="bridge-binary" if binary else "bridge", file=csv.file.current,
-               truncated_partial_bytes=csv.file.truncated_bytes)
+    events.add(
+        "started",
+        port=port,
+        baud=baud,
+        protocol="bridge-binary" if binary else "bridge",
+        file=csv.file.current,
+        truncated_partial_bytes=csv.file.truncated_bytes,
+    )
     if resume is not None:
         try:
             dec.resume_after(int(float(resume[BRIDGE_COLUMNS.index("seq")])))
@@ -315,14 +408,28 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
         stats.frames = s.frames
         stats.dropped = s.dropped
         stats.errors = s.bad_checksum + s.malformed
-        stats.error_kinds = {"bad_checksum": s.bad_checksum, "malformed": s.malformed,
-                             "garbage_bytes": s.garbage_bytes, "repeated": s.repeated}
+        stats.error_kinds = {
+            "bad_checksum": s.bad_checksum,
+            "malformed": s.malformed,
+            "garbage_bytes": s.garbage_bytes,
+            "repeated": s.repeated,
+        }
         n = len(seq)
         if not n:
             return
         ch = counts_to_si(seq, t_us, counts, dec.scales)
-        block = np.column_stack([clock.map(t_us, seq, tw), np.full(n, tm), ch["seq"], ch["t_mcu"], ch["accel"],
-                                 ch["gyro"], ch["mag"], ch["temp"]])
+        block = np.column_stack(
+            [
+                clock.map(t_us, seq, tw),
+                np.full(n, tm),
+                ch["seq"],
+                ch["t_mcu"],
+                ch["accel"],
+                ch["gyro"],
+                ch["mag"],
+                ch["temp"],
+            ]
+        )
         csv.write_rows(block)
 
     try:
@@ -345,9 +452,18 @@ def capture_bridge(port: str, baud: int, out: str, binary: bool = False, scales:
 
 
 def _summary(stats: CaptureStats, reason: str) -> dict:
-    return {"started_utc": stats.started_utc, "stopped_utc": iso_utc(time.time()), "stop_reason": reason or "stopped",
-            "lines": stats.lines, "frames": stats.frames, "errors": stats.errors, "dropped": stats.dropped,
-            "reopened": stats.reopen_count, "port_gaps": stats.port_gaps, "error_kinds": dict(stats.error_kinds)}
+    return {
+        "started_utc": stats.started_utc,
+        "stopped_utc": iso_utc(time.time()),
+        "stop_reason": reason or "stopped",
+        "lines": stats.lines,
+        "frames": stats.frames,
+        "errors": stats.errors,
+        "dropped": stats.dropped,
+        "reopened": stats.reopen_count,
+        "port_gaps": stats.port_gaps,
+        "error_kinds": dict(stats.error_kinds),
+    }
 
 
 def utc_name() -> str:

@@ -82,14 +82,29 @@ class ServeLog:
     reconnects: int = 0
 
     def as_dict(self) -> dict:
-        return {"sent": self.sent, "corrupted": self.corrupted, "first_id": self.first_id, "last_id": self.last_id,
-                "reconnects": self.reconnects}
+        return {
+            "sent": self.sent,
+            "corrupted": self.corrupted,
+            "first_id": self.first_id,
+            "last_id": self.last_id,
+            "reconnects": self.reconnects,
+        }
 
 
-def serve(protocol: str = "bridge", rate_hz: float = 200.0, duration: float | None = None, seed: int = 0,
-          corrupt_fraction: float = 0.0, link: str | None = None, replug_every: float | None = None,
-          log_path: str | None = None, announce=print, stop_check=lambda: False,
-          start_delay: float = 0.0, start_when: str | None = None) -> ServeLog:
+def serve(
+    protocol: str = "bridge",
+    rate_hz: float = 200.0,
+    duration: float | None = None,
+    seed: int = 0,
+    corrupt_fraction: float = 0.0,
+    link: str | None = None,
+    replug_every: float | None = None,
+    log_path: str | None = None,
+    announce=print,
+    stop_check=lambda: False,
+    start_delay: float = 0.0,
+    start_when: str | None = None,
+) -> ServeLog:
     """Serve frames into a pty until ``duration`` (s) or ``stop_check()``; returns what was sent.
 
     protocol: ``nmea``, ``bridge`` (text) or ``bridge-binary``. ``link``: a path kept pointing at the current

@@ -36,8 +36,15 @@ class RotatingFile:
     cutting a partial last line left by a crash; the cut is reported in ``truncated_bytes``).
     """
 
-    def __init__(self, path: str | os.PathLike, header: str = "", rotate_s: float | None = None,
-                 fsync_interval: float = 1.0, append: bool = False, overwrite: bool = False):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        header: str = "",
+        rotate_s: float | None = None,
+        fsync_interval: float = 1.0,
+        append: bool = False,
+        overwrite: bool = False,
+    ):
         self.base = Path(path)
         self.header = header
         self.rotate_s = rotate_s
@@ -106,8 +113,9 @@ class RotatingFile:
     @staticmethod
     def _raise(e: OSError, p: Path) -> None:
         if e.errno in (errno.ENOSPC, errno.EDQUOT):
-            raise DiskFull("disk full: capture stopped; everything up to the last complete line is kept",
-                           path=str(p)) from None
+            raise DiskFull(
+                "disk full: capture stopped; everything up to the last complete line is kept", path=str(p)
+            ) from None
         raise ImutoolError(f"cannot write: {e.strerror}", path=str(p)) from None
 
     def write(self, text: str) -> None:
@@ -206,8 +214,11 @@ class EventLog:
     def add(self, event: str, **fields) -> None:
         import json
 
-        rec = {"utc": datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z"),
-               "event": event, **fields}
+        rec = {
+            "utc": datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z"),
+            "event": event,
+            **fields,
+        }
         self.file.write(json.dumps(rec) + "\n")
 
     def close(self) -> None:

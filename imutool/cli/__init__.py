@@ -63,8 +63,11 @@ class LazyGroup(click.Group):
                 formatter.write_dl(rows)
 
 
-@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
-             epilog="Example: imutool simulate ship-roll -o roll.csv && imutool filter roll.csv -o est.csv")
+@click.group(
+    cls=LazyGroup,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    epilog="Example: imutool simulate ship-roll -o roll.csv && imutool filter roll.csv -o est.csv",
+)
 @click.version_option(__version__, prog_name="imutool")
 @click.option("--debug", is_flag=True, help="Show full tracebacks on errors.")
 @click.pass_context
@@ -102,8 +105,11 @@ def main(argv: list[str] | None = None) -> None:
     except click.ClickException as e:  # usage errors (missing argument, bad choice/type, unknown option): one line
         ctx = getattr(e, "ctx", None)
         where = ctx.command_path if ctx is not None else _command_path(args)
-        click.echo(f"{where}: error: {_one_line(e.format_message())}"
-                   + (f" (see '{where} --help')" if isinstance(e, click.UsageError) else ""), err=True)
+        click.echo(
+            f"{where}: error: {_one_line(e.format_message())}"
+            + (f" (see '{where} --help')" if isinstance(e, click.UsageError) else ""),
+            err=True,
+        )
         sys.exit(2)
     except ImutoolError as e:
         if debug:

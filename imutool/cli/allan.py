@@ -19,26 +19,48 @@ _LABEL = {"gyro": ("ARW", "rad/s/√Hz"), "accel": ("VRW", "m/s²/√Hz"), "mag"
 
 @click.command("allan", epilog="Example: imutool allan static.csv -o noise.yaml --plot allan.png --kalibr imu.yaml")
 @click.argument("inputs", nargs=-1, required=True, metavar="INPUT...")
-@click.option("-o", "--output", required=True,
-              help="Noise file (.yaml, SI: rad/s/√Hz, m/s²/√Hz, µT/√Hz): white noise, bias instability and random "
-                   "walk per sensor, to fill in the noise options of filter/ins or a kalibr config.")
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    help="Noise file (.yaml, SI: rad/s/√Hz, m/s²/√Hz, µT/√Hz): white noise, bias instability and random "
+    "walk per sensor, to fill in the noise options of filter/ins or a kalibr config.",
+)
 @click.option("--plot", default=None, help="Log-log Allan deviation plot with the fitted lines (.png/.pdf).")
 @click.option("--kalibr", default=None, help="Also write a kalibr-style imu.yaml here.")
 @click.option("--topic-name", default="/imu0", show_default=True, help="rostopic written into the kalibr file.")
-@click.option("--kalibr-fallback", type=click.Choice(["refuse", "upper-bound"]), default="refuse", show_default=True,
-              help="A random walk the recording does not resolve: refuse the kalibr file, or write its upper bound "
-                   "(labelled in the file, with a warning). Never a silent 0.")
-@click.option("--channels", default="gyro,accel,mag", show_default=True,
-              help="Channels to analyse (those present in the inputs).")
+@click.option(
+    "--kalibr-fallback",
+    type=click.Choice(["refuse", "upper-bound"]),
+    default="refuse",
+    show_default=True,
+    help="A random walk the recording does not resolve: refuse the kalibr file, or write its upper bound "
+    "(labelled in the file, with a warning). Never a silent 0.",
+)
+@click.option(
+    "--channels", default="gyro,accel,mag", show_default=True, help="Channels to analyse (those present in the inputs)."
+)
 @click.option("--per-decade", type=int, default=10, show_default=True, help="Cluster times per decade of τ.")
 @click.option("--start", type=float, default=None, help="Use data from this time (s) on.")
 @click.option("--end", type=float, default=None, help="Use data before this time (s).")
 @input_options
 @output_options
 @safe_outputs("output", "plot", "kalibr")
-def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: str | None, topic_name: str,
-              kalibr_fallback: str, channels: str, per_decade: int, start: float | None, end: float | None,
-              as_json: bool, quiet: bool, **io: Any) -> None:
+def allan_cmd(
+    inputs: tuple[str, ...],
+    output: str,
+    plot: str | None,
+    kalibr: str | None,
+    topic_name: str,
+    kalibr_fallback: str,
+    channels: str,
+    per_decade: int,
+    start: float | None,
+    end: float | None,
+    as_json: bool,
+    quiet: bool,
+    **io: Any,
+) -> None:
     """Allan deviation of a static recording (several INPUT files: one per sensor, each on its own clock).
 
     For each axis: N (ARW/VRW) read at τ = 1 s on the slope −½ line, bias instability B = min σ / 0.664 when a
@@ -51,9 +73,21 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
 
     wanted = [c.strip() for c in channels.split(",") if c.strip()]
     steps = stages("allan", [*inputs, *wanted, "writing"], quiet)
-    run = allan_noise(inputs, output, plot=plot, kalibr=kalibr, topic_name=topic_name, kalibr_fallback=kalibr_fallback,
-                      channels=channels, per_decade=per_decade, start=start, end=end, stage=steps.stage,
-                      on_input=note_input, **io)
+    run = allan_noise(
+        inputs,
+        output,
+        plot=plot,
+        kalibr=kalibr,
+        topic_name=topic_name,
+        kalibr_fallback=kalibr_fallback,
+        channels=channels,
+        per_decade=per_decade,
+        start=start,
+        end=end,
+        stage=steps.stage,
+        on_input=note_input,
+        **io,
+    )
     results, info, warnings = run.results, run.info, run.summary["warnings"]
     lines = [f"Allan deviation → {output}" + (f", {kalibr}" if kalibr else "") + (f", {plot}" if plot else "")]
     for r in results:
@@ -63,27 +97,34 @@ def allan_cmd(inputs: tuple[str, ...], output: str, plot: str | None, kalibr: st
         if info[r.name]["timing"] != "regular":
             lines.append(f"    note: {info[r.name]['timing']}")
         taus = "   at τ = " + ", ".join(f"{v:.3g}" for v in s["tau_min_s"]) + " s"
-        lab_b = {"bias instability": "flicker floor", "crossover": "white/random-walk crossover, NOT a bias "
-                 "instability", "upper bound": "σ still falling: upper bound"}
+        lab_b = {
+            "bias instability": "flicker floor",
+            "crossover": "white/random-walk crossover, NOT a bias instability",
+            "upper bound": "σ still falling: upper bound",
+        }
         taus += " (" + "; ".join(lab_b[k] for k in s["B_kind"]) + ")"
         is_b = all(k == "bias instability" for k in s["B_kind"])
         blab = "bias inst. B" if is_b else "Allan min/0.664"
 
         def kfmt(scale: float, s=s) -> str:
-            return "  ".join(f"{v * scale:.4g}" if ok else f"not resolved (<= {ub * scale:.3g})"
-                             for v, ok, ub in zip(s["K"], s["K_resolved"], s["K_upper"], strict=True))
+            return "  ".join(
+                f"{v * scale:.4g}" if ok else f"not resolved (<= {ub * scale:.3g})"
+                for v, ok, ub in zip(s["K"], s["K_resolved"], s["K_upper"], strict=True)
+            )
+
         if r.name == "gyro":  # degrees at the user surface (the noise file stays SI)
             lines.append("    ARW N          (°/√h) = " + "  ".join(f"{np.degrees(v) * 60:.4g}" for v in s["N"]))
-            lines.append(f"    {blab:15s} (°/h) = " + "  ".join(f"{np.degrees(v) * 3600:.4g}" for v in s["B"])
-                         + taus)
+            lines.append(f"    {blab:15s} (°/h) = " + "  ".join(f"{np.degrees(v) * 3600:.4g}" for v in s["B"]) + taus)
             lines.append("    rate RW K    (°/h/√h) = " + kfmt(np.degrees(1.0) * 216000))
         else:
             lines.append(f"    {lab} N  ({unit:>11s}) = " + "  ".join(f"{v:.4g}" for v in s["N"]))
             lines.append(f"    {blab} ({_SI[r.name]:>9s}) = " + "  ".join(f"{v:.4g}" for v in s["B"]) + taus)
             lines.append(f"    random walk K ({_SI[r.name]}/√s) = " + kfmt(1.0))
         if any(k == "upper bound" for k in s["B_kind"]):
-            lines.append("    note: σ(τ) still falls at the longest τ on some axes: B there is an upper bound and K is "
-                         "not resolved (record longer)")
+            lines.append(
+                "    note: σ(τ) still falls at the longest τ on some axes: B there is an upper bound and K is "
+                "not resolved (record longer)"
+            )
     steps.close()
     for w in warnings:
         click.echo(f"warning: {w}", err=True)

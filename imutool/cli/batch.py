@@ -74,43 +74,103 @@ def _resolve(command: list[str]) -> click.Command:
     return cmd
 
 
-@click.command("batch", context_settings={"ignore_unknown_options": False},
-               epilog="Example: imutool batch filter 'voyages/**/*.csv' -o 'est/{rel}/{stem}_est.csv' "
-                      "--summary est/batch.csv   |   imutool batch convert data/ -o 'pq/{stem}.parquet' --resume")
+@click.command(
+    "batch",
+    context_settings={"ignore_unknown_options": False},
+    epilog="Example: imutool batch filter 'voyages/**/*.csv' -o 'est/{rel}/{stem}_est.csv' "
+    "--summary est/batch.csv   |   imutool batch convert data/ -o 'pq/{stem}.parquet' --resume",
+)
 @click.argument("command")
 @click.argument("inputs", nargs=-1)
-@click.option("-o", "--output", "template", default=None, metavar="TEMPLATE",
-              help="Output name template: {stem} {name} {ext} {parent} {rel} {index} {input} and manifest columns "
-                   "(e.g. 'out/{stem}_est.csv'). Omit for commands without an output.")
-@click.option("--manifest", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="CSV (column 'input', optional 'output' and any fields such as ship, voyage) or TOML ([[job]]).")
-@click.option("--pattern", "patterns", multiple=True, metavar="GLOB",
-              help="Files a folder input contributes (repeatable; default the data extensions: "
-                   + " ".join(_batch.DATA_PATTERNS) + ").")
-@click.option("--args", "extra", default="", metavar="'OPTIONS'",
-              help="Options passed to COMMAND for every input (one quoted string, placeholders allowed).")
-@click.option("-j", "--workers", type=click.IntRange(min=1), default=None,
-              help="Worker processes (default: all usable cores); with --dask the LocalCluster's workers.")
+@click.option(
+    "-o",
+    "--output",
+    "template",
+    default=None,
+    metavar="TEMPLATE",
+    help="Output name template: {stem} {name} {ext} {parent} {rel} {index} {input} and manifest columns "
+    "(e.g. 'out/{stem}_est.csv'). Omit for commands without an output.",
+)
+@click.option(
+    "--manifest",
+    default=None,
+    type=click.Path(exists=True, dir_okay=False),
+    help="CSV (column 'input', optional 'output' and any fields such as ship, voyage) or TOML ([[job]]).",
+)
+@click.option(
+    "--pattern",
+    "patterns",
+    multiple=True,
+    metavar="GLOB",
+    help="Files a folder input contributes (repeatable; default the data extensions: "
+    + " ".join(_batch.DATA_PATTERNS)
+    + ").",
+)
+@click.option(
+    "--args",
+    "extra",
+    default="",
+    metavar="'OPTIONS'",
+    help="Options passed to COMMAND for every input (one quoted string, placeholders allowed).",
+)
+@click.option(
+    "-j",
+    "--workers",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Worker processes (default: all usable cores); with --dask the LocalCluster's workers.",
+)
 @click.option("--dask", "use_dask", is_flag=True, help="Run on a dask.distributed LocalCluster (1 thread/worker).")
-@click.option("--scheduler", default=None, metavar="tcp://HOST:8786",
-              help="Run on a running Dask cluster (workers need imutool and the same paths).")
-@click.option("--resume", is_flag=True,
-              help="Skip inputs whose output is complete (completion marker matches input and output).")
-@click.option("--force", is_flag=True,
-              help="Replace existing outputs (passes --force to commands that have it; --resume implies it for "
-                   "the outputs it redoes).")
-@click.option("--summary", "summary_path", default=None, metavar="PATH",
-              help="Write the per-file table (status, rows, duration, key figures) as .csv or .parquet.")
-@click.option("--figure", "figures", multiple=True, metavar="KEY",
-              help="Key figure from each command's JSON summary (dotted path, repeatable; default: its first "
-                   "numeric values).")
+@click.option(
+    "--scheduler",
+    default=None,
+    metavar="tcp://HOST:8786",
+    help="Run on a running Dask cluster (workers need imutool and the same paths).",
+)
+@click.option(
+    "--resume", is_flag=True, help="Skip inputs whose output is complete (completion marker matches input and output)."
+)
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Replace existing outputs (passes --force to commands that have it; --resume implies it for "
+    "the outputs it redoes).",
+)
+@click.option(
+    "--summary",
+    "summary_path",
+    default=None,
+    metavar="PATH",
+    help="Write the per-file table (status, rows, duration, key figures) as .csv or .parquet.",
+)
+@click.option(
+    "--figure",
+    "figures",
+    multiple=True,
+    metavar="KEY",
+    help="Key figure from each command's JSON summary (dotted path, repeatable; default: its first numeric values).",
+)
 @click.option("--dry-run", is_flag=True, help="List the jobs (input → output) and stop.")
 @click.option("--json", "as_json", is_flag=True, help="Print totals and per-file results as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress or table (exit status still tells).")
-def batch_cmd(command: str, inputs: tuple[str, ...], template: str | None, manifest: str | None,
-              patterns: tuple[str, ...], extra: str, workers: int | None, use_dask: bool, scheduler: str | None,
-              resume: bool, force: bool, summary_path: str | None, figures: tuple[str, ...], dry_run: bool,
-              as_json: bool, quiet: bool) -> None:
+def batch_cmd(
+    command: str,
+    inputs: tuple[str, ...],
+    template: str | None,
+    manifest: str | None,
+    patterns: tuple[str, ...],
+    extra: str,
+    workers: int | None,
+    use_dask: bool,
+    scheduler: str | None,
+    resume: bool,
+    force: bool,
+    summary_path: str | None,
+    figures: tuple[str, ...],
+    dry_run: bool,
+    as_json: bool,
+    quiet: bool,
+) -> None:
     """Run COMMAND (e.g. filter, convert, events, 'calibrate mag') over INPUTS: files, folders, globs.
 
     Each input runs as `imutool COMMAND INPUT -o OUTPUT ARGS --json` in its own job; a failing input is listed
@@ -146,22 +206,37 @@ def batch_cmd(command: str, inputs: tuple[str, ...], template: str | None, manif
     runner = partial(run_command, argv)
     t0 = time.perf_counter()
     with bar("batch", total=len(jobs), unit="file", quiet=quiet or as_json) as b:  # done/total, rate, ETA
-        results = _batch.run_batch(jobs, runner, workers=workers, scheduler="local" if use_dask else scheduler,
-                                   resume=resume, figures=figures or None, on_result=lambda r: b.advance(1),
-                                   signature=json.dumps([a for a in argv if a != "--force"]))
+        results = _batch.run_batch(
+            jobs,
+            runner,
+            workers=workers,
+            scheduler="local" if use_dask else scheduler,
+            resume=resume,
+            figures=figures or None,
+            on_result=lambda r: b.advance(1),
+            signature=json.dumps([a for a in argv if a != "--force"]),
+        )
     wall = time.perf_counter() - t0
     tot = _batch.totals(results, wall)
     if summary_path:
         _batch.write_summary(results, summary_path)
     if as_json:
-        emit_summary({"totals": tot, "summary_file": summary_path,
-                      "results": [{k: v for k, v in r.as_dict().items() if k != "summary"} for r in results]},
-                     True, False)
+        emit_summary(
+            {
+                "totals": tot,
+                "summary_file": summary_path,
+                "results": [{k: v for k, v in r.as_dict().items() if k != "summary"} for r in results],
+            },
+            True,
+            False,
+        )
     elif not quiet:
         lines = _batch.format_table(results)
-        lines.append(f"{tot['jobs']} jobs: {tot['ok']} ok, {tot['failed']} failed, {tot['skipped']} skipped "
-                     f"(complete earlier); {tot['rows']} rows in {tot['wall_seconds']:.1f} s wall"
-                     + (f"; summary → {summary_path}" if summary_path else ""))
+        lines.append(
+            f"{tot['jobs']} jobs: {tot['ok']} ok, {tot['failed']} failed, {tot['skipped']} skipped "
+            f"(complete earlier); {tot['rows']} rows in {tot['wall_seconds']:.1f} s wall"
+            + (f"; summary → {summary_path}" if summary_path else "")
+        )
         for ln in lines:
             click.echo(ln)
     if tot["failed"]:

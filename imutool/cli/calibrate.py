@@ -17,9 +17,14 @@ from imutool.cli.common import emit_summary, input_options, note_input, output_o
 
 
 def _with_option(f):
-    return click.option("--with", "with_files", multiple=True, type=click.Path(exists=True),
-                        help="Another file of the same run (e.g. the accelerometer CSV when each sensor has its "
-                             "own file), merged onto INPUT's clock. Repeatable.")(f)
+    return click.option(
+        "--with",
+        "with_files",
+        multiple=True,
+        type=click.Path(exists=True),
+        help="Another file of the same run (e.g. the accelerometer CSV when each sensor has its "
+        "own file), merged onto INPUT's clock. Repeatable.",
+    )(f)
 
 
 @click.group("calibrate", epilog="Example: imutool calibrate mag sphere.csv -o cal.toml --plot cal.png")
@@ -33,27 +38,62 @@ def calibrate_group() -> None:
 
 
 # -- mag -------------------------------------------------------------------------------------------------------
-@calibrate_group.command("mag", epilog="Example: imutool calibrate mag sphere.csv -o cal.toml --plot cal.png   |   "
-                                       "imutool calibrate mag swing.csv -o cal.toml --method swing")
+@calibrate_group.command(
+    "mag",
+    epilog="Example: imutool calibrate mag sphere.csv -o cal.toml --plot cal.png   |   "
+    "imutool calibrate mag swing.csv -o cal.toml --method swing",
+)
 @click.argument("input_path", metavar="INPUT")
 @click.option("-o", "--output", required=True, help="Calibration file (.toml).")
-@click.option("--method", type=click.Choice(["sphere", "swing"]), default="sphere", show_default=True,
-              help="sphere: full 3-D rotations (bench); swing: the vessel turns in heading only (2-D fit).")
-@click.option("--kind", type=click.Choice(["auto", "offset", "diag", "full"]), default="auto", show_default=True,
-              help="Sphere fit: offset = hard iron only; diag = + axis scale; full = + symmetric soft iron; auto "
-                   "= simplest within 5% of the best residual.")
-@click.option("--field", "field_ut", type=float, default=None,
-              help="Expected field strength (µT) to scale A; default: det A = 1 (volume preserving).")
-@click.option("--min-coverage", type=float, default=None,
-              help="Refuse below this sphere coverage (0–1); default offset 0.25, diag 0.45, full 0.60.")
-@click.option("--grid-bands", type=int, default=8, show_default=True,
-              help="Equal-area coverage grid: bands in z (× twice as many longitude sectors).")
-@click.option("--horizontal-field", type=float, default=None,
-              help="Swing: horizontal field (µT) to scale A; default det A_xy = 1.")
-@click.option("--bz-prior", type=float, default=0.0, show_default=True,
-              help="Swing: vertical hard iron (µT), unobservable in a swing.")
-@click.option("--a33-prior", type=float, default=None,
-              help="Swing: vertical soft-iron scale; default √det A_xy.")
+@click.option(
+    "--method",
+    type=click.Choice(["sphere", "swing"]),
+    default="sphere",
+    show_default=True,
+    help="sphere: full 3-D rotations (bench); swing: the vessel turns in heading only (2-D fit).",
+)
+@click.option(
+    "--kind",
+    type=click.Choice(["auto", "offset", "diag", "full"]),
+    default="auto",
+    show_default=True,
+    help="Sphere fit: offset = hard iron only; diag = + axis scale; full = + symmetric soft iron; auto "
+    "= simplest within 5% of the best residual.",
+)
+@click.option(
+    "--field",
+    "field_ut",
+    type=float,
+    default=None,
+    help="Expected field strength (µT) to scale A; default: det A = 1 (volume preserving).",
+)
+@click.option(
+    "--min-coverage",
+    type=float,
+    default=None,
+    help="Refuse below this sphere coverage (0–1); default offset 0.25, diag 0.45, full 0.60.",
+)
+@click.option(
+    "--grid-bands",
+    type=int,
+    default=8,
+    show_default=True,
+    help="Equal-area coverage grid: bands in z (× twice as many longitude sectors).",
+)
+@click.option(
+    "--horizontal-field",
+    type=float,
+    default=None,
+    help="Swing: horizontal field (µT) to scale A; default det A_xy = 1.",
+)
+@click.option(
+    "--bz-prior",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Swing: vertical hard iron (µT), unobservable in a swing.",
+)
+@click.option("--a33-prior", type=float, default=None, help="Swing: vertical soft-iron scale; default √det A_xy.")
 @click.option("--plot", default=None, help="Before/after plot (.png/.pdf).")
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance (default: from the input metadata).")
@@ -61,27 +101,59 @@ def calibrate_group() -> None:
 @input_options
 @output_options
 @safe_outputs("output", "plot", append="append")
-def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: float | None,
-            min_coverage: float | None, grid_bands: int, horizontal_field: float | None, bz_prior: float,
-            a33_prior: float | None, plot: str | None, append: bool, sensor: str | None,
-            with_files: tuple[str, ...], as_json: bool, quiet: bool, **io: Any) -> None:
+def mag_cmd(
+    input_path: str,
+    output: str,
+    method: str,
+    kind: str,
+    field_ut: float | None,
+    min_coverage: float | None,
+    grid_bands: int,
+    horizontal_field: float | None,
+    bz_prior: float,
+    a33_prior: float | None,
+    plot: str | None,
+    append: bool,
+    sensor: str | None,
+    with_files: tuple[str, ...],
+    as_json: bool,
+    quiet: bool,
+    **io: Any,
+) -> None:
     """Hard/soft-iron calibration of the magnetometer in INPUT."""
     from imutool.calibrate import calibrate_mag
 
     steps = _steps(quiet)
-    run = calibrate_mag(input_path, output, method=method, kind=kind, field_ut=field_ut, min_coverage=min_coverage,
-                        grid_bands=grid_bands, horizontal_field=horizontal_field, bz_prior=bz_prior,
-                        a33_prior=a33_prior, plot=plot, append=append, sensor=sensor, with_files=with_files,
-                        on_input=note_input, stage=steps.stage, **io)
+    run = calibrate_mag(
+        input_path,
+        output,
+        method=method,
+        kind=kind,
+        field_ut=field_ut,
+        min_coverage=min_coverage,
+        grid_bands=grid_bands,
+        horizontal_field=horizontal_field,
+        bz_prior=bz_prior,
+        a33_prior=a33_prior,
+        plot=plot,
+        append=append,
+        sensor=sensor,
+        with_files=with_files,
+        on_input=note_input,
+        stage=steps.stage,
+        **io,
+    )
     fit, summary = run.fit, run.summary
-    lines = [f"mag calibration ({method}, kind {fit.kind}) → {output}", f"  {fit.reason}",
-             "  model  m_true = A (m_meas − b)",
-             f"  b (µT) = {np.array2string(fit.b, precision=3)} ± {np.array2string(fit.b_std, precision=3)}",
-             "  A      = " + np.array2string(fit.A, precision=5).replace("\n", "\n           "),
-             f"  field {fit.field_ut:.2f} µT, residual {fit.residual_rms_ut:.3g} µT RMS, coverage "
-             f"{100 * fit.coverage:.0f}%",
-             f"  {'|m|' if method == 'sphere' else 'horizontal |m_h|'} relative std: raw {100 * fit.raw_rel_std:.2f}%"
-             f" → calibrated {100 * fit.cal_rel_std:.2f}%"]
+    lines = [
+        f"mag calibration ({method}, kind {fit.kind}) → {output}",
+        f"  {fit.reason}",
+        "  model  m_true = A (m_meas − b)",
+        f"  b (µT) = {np.array2string(fit.b, precision=3)} ± {np.array2string(fit.b_std, precision=3)}",
+        "  A      = " + np.array2string(fit.A, precision=5).replace("\n", "\n           "),
+        f"  field {fit.field_ut:.2f} µT, residual {fit.residual_rms_ut:.3g} µT RMS, coverage {100 * fit.coverage:.0f}%",
+        f"  {'|m|' if method == 'sphere' else 'horizontal |m_h|'} relative std: raw {100 * fit.raw_rel_std:.2f}%"
+        f" → calibrated {100 * fit.cal_rel_std:.2f}%",
+    ]
     if method == "swing":
         lines.append(f"  not observable in a swing: {summary['unobservable']}")
     lines += [f"  warning: {w}" for w in fit.warnings]
@@ -90,63 +162,150 @@ def mag_cmd(input_path: str, output: str, method: str, kind: str, field_ut: floa
 
 
 # -- deviation -------------------------------------------------------------------------------------------------
-@calibrate_group.command("deviation", epilog="Example: imutool calibrate deviation swing.csv --reference gnss.nmea "
-                                             "-o card.pdf -o card.txt -o cal.toml --vessel 'MV Aurora'")
+@calibrate_group.command(
+    "deviation",
+    epilog="Example: imutool calibrate deviation swing.csv --reference gnss.nmea "
+    "-o card.pdf -o card.txt -o cal.toml --vessel 'MV Aurora'",
+)
 @click.argument("input_path", metavar="INPUT")
-@click.option("-o", "--output", "outputs", multiple=True, required=True,
-              help="Card (.pdf/.png/.svg plot + text; .txt text card) and/or calibration file (.toml, section "
-                   "[deviation]). Repeatable.")
-@click.option("--reference", default=None, type=click.Path(exists=True),
-              help="Reference headings: NMEA log (HDT/THS/HDM...), CSV (heading, cog or bearing column). "
-                   "Default: a reference column of INPUT (ref_heading).")
-@click.option("--reference-column", default=None,
-              help=f"Column with the reference heading (deg); default the first of {', '.join(REF_NAMES)}.")
-@click.option("--reference-kind", type=click.Choice(["auto", "true", "magnetic"]), default="auto",
-              show_default=True, help="Whether the reference is true or magnetic heading (auto: magnetic for "
-                                      "heading_mag / ref_heading_mag, else true).")
-@click.option("--variation", type=float, default=None,
-              help="Magnetic variation (declination), deg, east positive: magnetic = true − variation. A true "
-                   "reference without it is refused unless --position (or a position in the reference log) and "
-                   "a date give it from the World Magnetic Model (needs imutool[wmm]).")
-@click.option("--position", default=None, metavar="LAT,LON",
-              help="Where the swing was done (decimal deg, N/E +): latitude for the card, and the WMM variation "
-                   "when --variation is not given. Default: first RMC/GGA fix of the reference log.")
-@click.option("--date", "date_opt", default=None, metavar="YYYY-MM-DD",
-              help="Date of the swing (card header, WMM). Default: the recording's real start time.")
+@click.option(
+    "-o",
+    "--output",
+    "outputs",
+    multiple=True,
+    required=True,
+    help="Card (.pdf/.png/.svg plot + text; .txt text card) and/or calibration file (.toml, section "
+    "[deviation]). Repeatable.",
+)
+@click.option(
+    "--reference",
+    default=None,
+    type=click.Path(exists=True),
+    help="Reference headings: NMEA log (HDT/THS/HDM...), CSV (heading, cog or bearing column). "
+    "Default: a reference column of INPUT (ref_heading).",
+)
+@click.option(
+    "--reference-column",
+    default=None,
+    help=f"Column with the reference heading (deg); default the first of {', '.join(REF_NAMES)}.",
+)
+@click.option(
+    "--reference-kind",
+    type=click.Choice(["auto", "true", "magnetic"]),
+    default="auto",
+    show_default=True,
+    help="Whether the reference is true or magnetic heading (auto: magnetic for "
+    "heading_mag / ref_heading_mag, else true).",
+)
+@click.option(
+    "--variation",
+    type=float,
+    default=None,
+    help="Magnetic variation (declination), deg, east positive: magnetic = true − variation. A true "
+    "reference without it is refused unless --position (or a position in the reference log) and "
+    "a date give it from the World Magnetic Model (needs imutool[wmm]).",
+)
+@click.option(
+    "--position",
+    default=None,
+    metavar="LAT,LON",
+    help="Where the swing was done (decimal deg, N/E +): latitude for the card, and the WMM variation "
+    "when --variation is not given. Default: first RMC/GGA fix of the reference log.",
+)
+@click.option(
+    "--date",
+    "date_opt",
+    default=None,
+    metavar="YYYY-MM-DD",
+    help="Date of the swing (card header, WMM). Default: the recording's real start time.",
+)
 @click.option("--vessel", default=None, help="Card header: vessel name.")
 @click.option("--compass", "compass_name", default=None, help="Card header: compass (make, model, serial).")
 @click.option("--place", default=None, help="Card header: place of the swing.")
 @click.option("--conditions", default=None, help="Card header: swing conditions (loading, trim, heel, weather...).")
-@click.option("--adjuster", default=None, help="Card header: compass adjuster's name (the card keeps a signature "
-                                                "line).")
-@click.option("--card-info", default=None, type=click.Path(exists=True, dir_okay=False),
-              help="TOML with the header fields (vessel, compass, place, date, latitude, longitude, conditions, "
-                   "adjuster); options override it.")
-@click.option("--max-deviation", type=float, default=5.0, show_default=True,
-              help="Warn above this |deviation| (deg): compass to be adjusted (ISO 25862 as quoted: 5° in service).")
-@click.option("--time-offset", type=float, default=0.0, show_default=True,
-              help="Seconds added to the reference times to align them with INPUT.")
-@click.option("--heading-column", default=None,
-              help="Compass heading column of INPUT (deg); default: 'heading' if present, else from mag (+ accel "
-                   "tilt compensation, after --calibration).")
-@click.option("--min-speed", type=float, default=2.0, show_default=True,
-              help="With a GNSS course-over-ground reference and a 'sog' column (kn): use rows at or above this.")
-@click.option("--min-span", type=float, default=270.0, show_default=True,
-              help="Refuse if the compass headings cover less of the circle (deg). Whatever it says, headings "
-                   "that cannot separate the A–E harmonics are refused.")
-@click.option("--append/--new", default=True, show_default=True,
-              help="Merge [deviation] into an existing .toml (or write a new one).")
+@click.option(
+    "--adjuster", default=None, help="Card header: compass adjuster's name (the card keeps a signature line)."
+)
+@click.option(
+    "--card-info",
+    default=None,
+    type=click.Path(exists=True, dir_okay=False),
+    help="TOML with the header fields (vessel, compass, place, date, latitude, longitude, conditions, "
+    "adjuster); options override it.",
+)
+@click.option(
+    "--max-deviation",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Warn above this |deviation| (deg): compass to be adjusted (ISO 25862 as quoted: 5° in service).",
+)
+@click.option(
+    "--time-offset",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Seconds added to the reference times to align them with INPUT.",
+)
+@click.option(
+    "--heading-column",
+    default=None,
+    help="Compass heading column of INPUT (deg); default: 'heading' if present, else from mag (+ accel "
+    "tilt compensation, after --calibration).",
+)
+@click.option(
+    "--min-speed",
+    type=float,
+    default=2.0,
+    show_default=True,
+    help="With a GNSS course-over-ground reference and a 'sog' column (kn): use rows at or above this.",
+)
+@click.option(
+    "--min-span",
+    type=float,
+    default=270.0,
+    show_default=True,
+    help="Refuse if the compass headings cover less of the circle (deg). Whatever it says, headings "
+    "that cannot separate the A–E harmonics are refused.",
+)
+@click.option(
+    "--append/--new",
+    default=True,
+    show_default=True,
+    help="Merge [deviation] into an existing .toml (or write a new one).",
+)
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
 @_with_option
 @input_options
 @output_options
 @safe_outputs("outputs", append="append")
-def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | None, reference_column: str | None,
-                  reference_kind: str, variation: float | None, position: str | None, date_opt: str | None,
-                  vessel: str | None, compass_name: str | None, place: str | None, conditions: str | None,
-                  adjuster: str | None, card_info: str | None, max_deviation: float, time_offset: float,
-                  heading_column: str | None, min_speed: float, min_span: float, append: bool, sensor: str | None,
-                  with_files: tuple[str, ...], as_json: bool, quiet: bool, **io: Any) -> None:
+def deviation_cmd(
+    input_path: str,
+    outputs: tuple[str, ...],
+    reference: str | None,
+    reference_column: str | None,
+    reference_kind: str,
+    variation: float | None,
+    position: str | None,
+    date_opt: str | None,
+    vessel: str | None,
+    compass_name: str | None,
+    place: str | None,
+    conditions: str | None,
+    adjuster: str | None,
+    card_info: str | None,
+    max_deviation: float,
+    time_offset: float,
+    heading_column: str | None,
+    min_speed: float,
+    min_span: float,
+    append: bool,
+    sensor: str | None,
+    with_files: tuple[str, ...],
+    as_json: bool,
+    quiet: bool,
+    **io: Any,
+) -> None:
     """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ from compass vs reference headings.
 
     The card: header (vessel, compass, place, date, latitude, variation, reference, conditions), coefficients
@@ -157,31 +316,56 @@ def deviation_cmd(input_path: str, outputs: tuple[str, ...], reference: str | No
     from imutool.calibrate import deviation_card
 
     steps = _steps(quiet)
-    run = deviation_card(input_path, outputs, reference=reference, reference_column=reference_column,
-                         reference_kind=reference_kind, variation=variation, position=position, date=date_opt,
-                         vessel=vessel, compass=compass_name, place=place, conditions=conditions, adjuster=adjuster,
-                         info=card_info, max_deviation=max_deviation, time_offset=time_offset,
-                         heading_column=heading_column, min_speed=min_speed, min_span=min_span, append=append,
-                         sensor=sensor, with_files=with_files, on_input=note_input, stage=steps.stage, **io)
+    run = deviation_card(
+        input_path,
+        outputs,
+        reference=reference,
+        reference_column=reference_column,
+        reference_kind=reference_kind,
+        variation=variation,
+        position=position,
+        date=date_opt,
+        vessel=vessel,
+        compass=compass_name,
+        place=place,
+        conditions=conditions,
+        adjuster=adjuster,
+        info=card_info,
+        max_deviation=max_deviation,
+        time_offset=time_offset,
+        heading_column=heading_column,
+        min_speed=min_speed,
+        min_span=min_span,
+        append=append,
+        sensor=sensor,
+        with_files=with_files,
+        on_input=note_input,
+        stage=steps.stage,
+        **io,
+    )
     card, summary, d = run.fit, run.summary, run.details
     src, rsrc, rname, kind = d["compass_source"], d["reference_source"], d["reference_column"], d["reference_kind"]
     variation, var_src = d["variation"], d["variation_source"]
-    lines = [f"deviation card ({card.quality['n']} samples; compass from {src}; reference {rsrc}:{rname}, {kind})",
-             "  δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ   (magnetic = compass + δ; E add, W subtract)",
-             "  " + "  ".join(f"{n} = {ew(getattr(card, n), 2)} ± {card.std.get(n, float('nan')):.2f}°"
-                              for n in "ABCDE")]
+    lines = [
+        f"deviation card ({card.quality['n']} samples; compass from {src}; reference {rsrc}:{rname}, {kind})",
+        "  δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ   (magnetic = compass + δ; E add, W subtract)",
+        "  " + "  ".join(f"{n} = {ew(getattr(card, n), 2)} ± {card.std.get(n, float('nan')):.2f}°" for n in "ABCDE"),
+    ]
     if kind == "true":
         lines.append(f"  variation {ew(variation, 2)} ({var_src})")
-    lines += [f"  residual {card.quality['residual_rms_deg']:.3f}° RMS, max {card.quality['residual_max_deg']:.2f}°; "
-              f"largest deviation {card.max_abs_deg():.1f}°", "  compass → deviation:"]
+    lines += [
+        f"  residual {card.quality['residual_rms_deg']:.3f}° RMS, max {card.quality['residual_max_deg']:.2f}°; "
+        f"largest deviation {card.max_abs_deg():.1f}°",
+        "  compass → deviation:",
+    ]
     tab = card.table(15.0)
     for i in range(0, len(tab), 6):
-        lines.append("   " + "  ".join(f"{p:03.0f}° {ew(d):>7s}" for p, d, _ in tab[i:i + 6]))
+        lines.append("   " + "  ".join(f"{p:03.0f}° {ew(d):>7s}" for p, d, _ in tab[i : i + 6]))
     if card.invertible():
         lines.append("  magnetic → compass (course to steer):")
         tm = card.table_magnetic(15.0)
         for i in range(0, len(tm), 6):
-            lines.append("   " + "  ".join(f"{m:03.0f}°→{p:05.1f}°" for m, _, p in tm[i:i + 6]))
+            lines.append("   " + "  ".join(f"{m:03.0f}°→{p:05.1f}°" for m, _, p in tm[i : i + 6]))
     lines.append(f"  written: {', '.join(outputs)}")
     for w in card.warnings:
         click.echo(f"warning: {w}", err=True)
@@ -199,14 +383,37 @@ def _steps(quiet: bool):
 # -- gyro ------------------------------------------------------------------------------------------------------
 def _rest_options(f):
     opts = [
-        click.option("--window", "window_s", type=float, default=1.0, show_default=True,
-                     help="Rest detection: moving-std window (s)."),
-        click.option("--gyro-std", "gyro_std_deg", type=float, default=0.5, show_default=True,
-                     help="Rest detection: gyro moving std below this (deg/s)."),
-        click.option("--accel-std", type=float, default=0.1, show_default=True,
-                     help="Rest detection: accel moving std below this (m/s²)."),
-        click.option("--min-rest", "min_rest_s", type=float, default=2.0, show_default=True,
-                     help="Rest detection: shortest rest interval kept (s)."),
+        click.option(
+            "--window",
+            "window_s",
+            type=float,
+            default=1.0,
+            show_default=True,
+            help="Rest detection: moving-std window (s).",
+        ),
+        click.option(
+            "--gyro-std",
+            "gyro_std_deg",
+            type=float,
+            default=0.5,
+            show_default=True,
+            help="Rest detection: gyro moving std below this (deg/s).",
+        ),
+        click.option(
+            "--accel-std",
+            type=float,
+            default=0.1,
+            show_default=True,
+            help="Rest detection: accel moving std below this (m/s²).",
+        ),
+        click.option(
+            "--min-rest",
+            "min_rest_s",
+            type=float,
+            default=2.0,
+            show_default=True,
+            help="Rest detection: shortest rest interval kept (s).",
+        ),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -216,11 +423,20 @@ def _rest_options(f):
 @calibrate_group.command("gyro", epilog="Example: imutool calibrate gyro static.csv -o cal.toml --append")
 @click.argument("input_path", metavar="INPUT")
 @click.option("-o", "--output", required=True, help="Calibration file (.toml).")
-@click.option("--turns-deg", type=float, default=None,
-              help="Each motion between rests is a turn of this many degrees about one axis: fit scale and "
-                   "misalignment (needs turns about all three axes).")
-@click.option("--min-temp-range", type=float, default=1.0, show_default=True,
-              help="Fit a temperature slope only if the rest samples span this many °C.")
+@click.option(
+    "--turns-deg",
+    type=float,
+    default=None,
+    help="Each motion between rests is a turn of this many degrees about one axis: fit scale and "
+    "misalignment (needs turns about all three axes).",
+)
+@click.option(
+    "--min-temp-range",
+    type=float,
+    default=1.0,
+    show_default=True,
+    help="Fit a temperature slope only if the rest samples span this many °C.",
+)
 @_rest_options
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
@@ -228,23 +444,50 @@ def _rest_options(f):
 @input_options
 @output_options
 @safe_outputs("output", append="append")
-def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_range: float, window_s: float,
-             gyro_std_deg: float, accel_std: float, min_rest_s: float, append: bool, sensor: str | None,
-             with_files: tuple[str, ...], as_json: bool, quiet: bool, **io: Any) -> None:
+def gyro_cmd(
+    input_path: str,
+    output: str,
+    turns_deg: float | None,
+    min_temp_range: float,
+    window_s: float,
+    gyro_std_deg: float,
+    accel_std: float,
+    min_rest_s: float,
+    append: bool,
+    sensor: str | None,
+    with_files: tuple[str, ...],
+    as_json: bool,
+    quiet: bool,
+    **io: Any,
+) -> None:
     """Gyro bias over automatically detected rest intervals (+ temperature slope, + scale from known turns)."""
     from imutool.calibrate import calibrate_gyro, rest_options
 
     steps = _steps(quiet)
-    run = calibrate_gyro(input_path, output, turns_deg=turns_deg, min_temp_range=min_temp_range,
-                         rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s), append=append,
-                         sensor=sensor, with_files=with_files, on_input=note_input, stage=steps.stage, **io)
+    run = calibrate_gyro(
+        input_path,
+        output,
+        turns_deg=turns_deg,
+        min_temp_range=min_temp_range,
+        rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
+        append=append,
+        sensor=sensor,
+        with_files=with_files,
+        on_input=note_input,
+        stage=steps.stage,
+        **io,
+    )
     cal, summary = run.fit, run.summary
-    lines = [f"gyro calibration → {output}",
-             f"  rest: {cal.n_rest} intervals, {cal.rest_s:.1f} s",
-             f"  bias (deg/s) = {np.array2string(np.degrees(cal.bias), precision=4)}"]
+    lines = [
+        f"gyro calibration → {output}",
+        f"  rest: {cal.n_rest} intervals, {cal.rest_s:.1f} s",
+        f"  bias (deg/s) = {np.array2string(np.degrees(cal.bias), precision=4)}",
+    ]
     if cal.temp_slope is not None:
-        lines.append(f"  temperature slope (deg/s/°C) = {np.array2string(np.degrees(cal.temp_slope), precision=5)}"
-                     f" about {cal.temp_ref:.2f} °C")
+        lines.append(
+            f"  temperature slope (deg/s/°C) = {np.array2string(np.degrees(cal.temp_slope), precision=5)}"
+            f" about {cal.temp_ref:.2f} °C"
+        )
     elif "temp_note" in cal.quality:
         lines.append(f"  {cal.quality['temp_note']}")
     if cal.scale is not None:
@@ -254,15 +497,25 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
 
 
 # -- accel -----------------------------------------------------------------------------------------------------
-@calibrate_group.command("accel", epilog="Example: imutool calibrate accel sixpos.csv -o cal.toml --append "
-                                         "--latitude 59.4")
+@calibrate_group.command(
+    "accel", epilog="Example: imutool calibrate accel sixpos.csv -o cal.toml --append --latitude 59.4"
+)
 @click.argument("input_path", metavar="INPUT")
 @click.option("-o", "--output", required=True, help="Calibration file (.toml).")
-@click.option("--kind", type=click.Choice(["auto", "offset", "diag", "full"]), default="auto", show_default=True,
-              help="offset: bias; diag: + scale; full: + misalignment (≥ 9 poses); auto by pose count.")
+@click.option(
+    "--kind",
+    type=click.Choice(["auto", "offset", "diag", "full"]),
+    default="auto",
+    show_default=True,
+    help="offset: bias; diag: + scale; full: + misalignment (≥ 9 poses); auto by pose count.",
+)
 @click.option("--gravity", type=float, default=None, help="Local gravity (m/s²); default from --latitude.")
-@click.option("--latitude", type=float, default=None,
-              help="Latitude (deg) for WGS-84 normal gravity; default: standard gravity 9.80665.")
+@click.option(
+    "--latitude",
+    type=float,
+    default=None,
+    help="Latitude (deg) for WGS-84 normal gravity; default: standard gravity 9.80665.",
+)
 @click.option("--height", type=float, default=0.0, show_default=True, help="Height (m) for the gravity formula.")
 @click.option("--min-poses", type=int, default=6, show_default=True, help="Fewest distinct static poses accepted.")
 @_rest_options
@@ -272,25 +525,54 @@ def gyro_cmd(input_path: str, output: str, turns_deg: float | None, min_temp_ran
 @input_options
 @output_options
 @safe_outputs("output", append="append")
-def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, latitude: float | None, height: float,
-              min_poses: int, window_s: float, gyro_std_deg: float, accel_std: float, min_rest_s: float,
-              append: bool, sensor: str | None, with_files: tuple[str, ...], as_json: bool, quiet: bool,
-              **io: Any) -> None:
+def accel_cmd(
+    input_path: str,
+    output: str,
+    kind: str,
+    gravity: float | None,
+    latitude: float | None,
+    height: float,
+    min_poses: int,
+    window_s: float,
+    gyro_std_deg: float,
+    accel_std: float,
+    min_rest_s: float,
+    append: bool,
+    sensor: str | None,
+    with_files: tuple[str, ...],
+    as_json: bool,
+    quiet: bool,
+    **io: Any,
+) -> None:
     """Accelerometer bias, scale and misalignment from six or more static poses (detected automatically)."""
     from imutool.calibrate import calibrate_accel, rest_options
 
     steps = _steps(quiet)
-    run = calibrate_accel(input_path, output, kind=kind, gravity=gravity, latitude=latitude, height=height,
-                          min_poses=min_poses, rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
-                          append=append, sensor=sensor, with_files=with_files, on_input=note_input,
-                          stage=steps.stage, **io)
+    run = calibrate_accel(
+        input_path,
+        output,
+        kind=kind,
+        gravity=gravity,
+        latitude=latitude,
+        height=height,
+        min_poses=min_poses,
+        rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
+        append=append,
+        sensor=sensor,
+        with_files=with_files,
+        on_input=note_input,
+        stage=steps.stage,
+        **io,
+    )
     cal, summary = run.fit, run.summary
     gravity = summary["gravity_m_s2"]
-    lines = [f"accel calibration ({cal.kind}, {cal.quality['poses']} poses, g = {gravity:.5f} m/s²) → {output}",
-             "  model f = T (f_meas − b)",
-             f"  b (m/s²) = {np.array2string(cal.bias, precision=4)} ± {np.array2string(cal.bias_std, precision=4)}",
-             "  T = " + np.array2string(cal.T, precision=5).replace("\n", "\n      "),
-             f"  residual {cal.residual_rms:.4g} m/s² RMS over the poses"]
+    lines = [
+        f"accel calibration ({cal.kind}, {cal.quality['poses']} poses, g = {gravity:.5f} m/s²) → {output}",
+        "  model f = T (f_meas − b)",
+        f"  b (m/s²) = {np.array2string(cal.bias, precision=4)} ± {np.array2string(cal.bias_std, precision=4)}",
+        "  T = " + np.array2string(cal.T, precision=5).replace("\n", "\n      "),
+        f"  residual {cal.residual_rms:.4g} m/s² RMS over the poses",
+    ]
     if "note" in cal.quality:
         lines.append(f"  note: {cal.quality['note']}")
     steps.close()
@@ -300,11 +582,16 @@ def accel_cmd(input_path: str, output: str, kind: str, gravity: float | None, la
 # -- show ------------------------------------------------------------------------------------------------------
 @calibrate_group.command("show", epilog="Example: imutool calibrate show cal.toml --as c > cal.h")
 @click.argument("path", metavar="CAL.toml", type=click.Path(exists=True, dir_okay=False))
-@click.option("--as", "form", type=click.Choice(["text", "c", "fusion", "matlab", "python", "json", "magneto"]),
-              default="text", show_default=True,
-              help="text: the file and the deviation card; c (= fusion): x-io Fusion C; matlab: magcal A, b, "
-                   "expmfs; python: numpy; json: every section; magneto: Magneto's printout. Code forms paste and "
-                   "compile/run as printed.")
+@click.option(
+    "--as",
+    "form",
+    type=click.Choice(["text", "c", "fusion", "matlab", "python", "json", "magneto"]),
+    default="text",
+    show_default=True,
+    help="text: the file and the deviation card; c (= fusion): x-io Fusion C; matlab: magcal A, b, "
+    "expmfs; python: numpy; json: every section; magneto: Magneto's printout. Code forms paste and "
+    "compile/run as printed.",
+)
 def show_cmd(path: str, form: str) -> None:
     """Print a calibration file, or paste-ready code: C (x-io Fusion), MATLAB, Python/numpy, JSON, Magneto."""
     from calibration.crosswalk import render
@@ -332,9 +619,11 @@ def show_cmd(path: str, form: str) -> None:
                 continue
             click.echo(f"  {k} = {v}")
         if prov:
-            click.echo(f"  provenance: {prov.get('method', '')}; {prov.get('input', '')} "
-                       f"sha256 {str(prov.get('input_sha256', ''))[:12]}…; {prov.get('date_utc', '')}; "
-                       f"sensor {prov.get('sensor', '') or '?'}")
+            click.echo(
+                f"  provenance: {prov.get('method', '')}; {prov.get('input', '')} "
+                f"sha256 {str(prov.get('input_sha256', ''))[:12]}…; {prov.get('date_utc', '')}; "
+                f"sensor {prov.get('sensor', '') or '?'}"
+            )
     dev = cal.deviation
     if dev is not None:
         click.echo("")

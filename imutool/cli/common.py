@@ -21,24 +21,61 @@ T = TypeVar("T")
 def input_options(f: Callable) -> Callable:
     """The options every command that reads sensor data accepts."""
     opts = [
-        click.option("--columns", default=None, metavar="MAP",
-                     help="Foreign CSV column mapping: 'Src=target:unit[*scale],...' (rest inferred)."),
-        click.option("--profile", default=None, type=click.Path(exists=True, dir_okay=False),
-                     help="TOML sensor profile with the column/unit mapping."),
+        click.option(
+            "--columns",
+            default=None,
+            metavar="MAP",
+            help="Foreign CSV column mapping: 'Src=target:unit[*scale],...' (rest inferred).",
+        ),
+        click.option(
+            "--profile",
+            default=None,
+            type=click.Path(exists=True, dir_okay=False),
+            help="TOML sensor profile with the column/unit mapping.",
+        ),
         click.option("--topic", default=None, help="Bag topic to read (listed when ambiguous)."),
-        click.option("--stamp", type=click.Choice(["header", "record"]), default="header", show_default=True,
-                     help="Bag time: message header stamp or bag record time."),
-        click.option("--duplicates", type=click.Choice(["drop", "mean", "error"]), default="drop",
-                     show_default=True, help="Policy for rows sharing a timestamp."),
-        click.option("--backwards", type=click.Choice(["error", "sort", "drop"]), default="error",
-                     show_default=True, help="Policy for time going backwards."),
-        click.option("--mounting", default=None, metavar="REMAP[;R,P,Y]",
-                     help="Sensor→body axes, e.g. 'x,-y,-z' or 'y,x,-z;0.5,0,1.2' (misalignment deg)."),
-        click.option("--calibration", "calibration_file", default=None,
-                     type=click.Path(exists=True, dir_okay=False), help="Calibration TOML to apply."),
-        click.option("--strict", is_flag=True, expose_value=False, callback=_remember_strict,
-                     help="Input warnings (implausible units or axes, absurd samples, >1 % of rows dropped by "
-                          "validation) are errors (exit 2)."),
+        click.option(
+            "--stamp",
+            type=click.Choice(["header", "record"]),
+            default="header",
+            show_default=True,
+            help="Bag time: message header stamp or bag record time.",
+        ),
+        click.option(
+            "--duplicates",
+            type=click.Choice(["drop", "mean", "error"]),
+            default="drop",
+            show_default=True,
+            help="Policy for rows sharing a timestamp.",
+        ),
+        click.option(
+            "--backwards",
+            type=click.Choice(["error", "sort", "drop"]),
+            default="error",
+            show_default=True,
+            help="Policy for time going backwards.",
+        ),
+        click.option(
+            "--mounting",
+            default=None,
+            metavar="REMAP[;R,P,Y]",
+            help="Sensor→body axes, e.g. 'x,-y,-z' or 'y,x,-z;0.5,0,1.2' (misalignment deg).",
+        ),
+        click.option(
+            "--calibration",
+            "calibration_file",
+            default=None,
+            type=click.Path(exists=True, dir_okay=False),
+            help="Calibration TOML to apply.",
+        ),
+        click.option(
+            "--strict",
+            is_flag=True,
+            expose_value=False,
+            callback=_remember_strict,
+            help="Input warnings (implausible units or axes, absurd samples, >1 % of rows dropped by "
+            "validation) are errors (exit 2).",
+        ),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -63,10 +100,20 @@ def strict_requested() -> bool:
     return bool(ctx is not None and ctx.meta.get("imutool.strict"))
 
 
-def load_input(path: str, *, columns: str | None = None, profile: str | None = None, topic: str | None = None,
-               stamp: str = "header", duplicates: str = "drop", backwards: str = "error",
-               mounting: str | None = None, calibration_file: str | None = None,
-               validate: bool = True, strict: bool | None = None) -> tuple[Recording, dict[str, Any]]:
+def load_input(
+    path: str,
+    *,
+    columns: str | None = None,
+    profile: str | None = None,
+    topic: str | None = None,
+    stamp: str = "header",
+    duplicates: str = "drop",
+    backwards: str = "error",
+    mounting: str | None = None,
+    calibration_file: str | None = None,
+    validate: bool = True,
+    strict: bool | None = None,
+) -> tuple[Recording, dict[str, Any]]:
     """Read, validate, bridge absurd samples, apply calibration and mounting, check plausibility.
 
     Returns (recording, validation report dict): the library's :func:`imutool.loading.load_recording`, plus
@@ -78,9 +125,18 @@ def load_input(path: str, *, columns: str | None = None, profile: str | None = N
     """
     from imutool.loading import load_recording
 
-    rec, report = load_recording(path, columns=columns, profile=profile, topic=topic, stamp=stamp,
-                                 duplicates=duplicates, backwards=backwards, mounting=mounting,
-                                 calibration_file=calibration_file, validate=validate)
+    rec, report = load_recording(
+        path,
+        columns=columns,
+        profile=profile,
+        topic=topic,
+        stamp=stamp,
+        duplicates=duplicates,
+        backwards=backwards,
+        mounting=mounting,
+        calibration_file=calibration_file,
+        validate=validate,
+    )
     if len(rec):
         note_input(path, report, strict)
     return rec, report
@@ -115,8 +171,7 @@ def emit_summary(summary: dict[str, Any], as_json: bool, quiet: bool, lines: Ite
         if lines is None and not as_json:
             lines = list(_default_lines(summary))
         summary = dict(summary)
-        summary.setdefault("validation", [{k: v for k, v in r.items() if k != "plausibility_figures"}
-                                          for r in inputs])
+        summary.setdefault("validation", [{k: v for k, v in r.items() if k != "plausibility_figures"} for r in inputs])
         warns = [w for r in inputs for w in r.get("warnings", [])]
         if warns:
             have = summary.get("warnings")
@@ -136,10 +191,14 @@ def _validation_lines(inputs: list[dict[str, Any]]) -> Iterator[str]:
     for r in inputs:
         why = "; ".join(f"{n} {k}" for k, n in r.get("dropped", {}).items())
         bridged = sum(r.get("absurd_samples_interpolated", {}).values()) + sum(
-            r.get("absurd_samples_set_nan", {}).values())
-        yield (f"validation: {r['input']}: {r.get('rows_read', r.get('rows'))} rows read, {r.get('rows_kept')} kept"
-               + (f" (dropped: {why})" if why else "") + (f"; {bridged} absurd samples bridged" if bridged else "")
-               + (f"; {len(r['warnings'])} warning(s) on stderr" if r.get("warnings") else ""))
+            r.get("absurd_samples_set_nan", {}).values()
+        )
+        yield (
+            f"validation: {r['input']}: {r.get('rows_read', r.get('rows'))} rows read, {r.get('rows_kept')} kept"
+            + (f" (dropped: {why})" if why else "")
+            + (f"; {bridged} absurd samples bridged" if bridged else "")
+            + (f"; {len(r['warnings'])} warning(s) on stderr" if r.get("warnings") else "")
+        )
 
 
 def _default_lines(summary: dict[str, Any], indent: str = "") -> Iterator[str]:
@@ -163,8 +222,14 @@ def show_progress(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
 
-def progress(items: Iterable[T], total: int | None, label: str, quiet: bool, unit: str = "it",
-             weight: Callable[[T], int] | None = None) -> Iterator[T]:
+def progress(
+    items: Iterable[T],
+    total: int | None,
+    label: str,
+    quiet: bool,
+    unit: str = "it",
+    weight: Callable[[T], int] | None = None,
+) -> Iterator[T]:
     """Progress bar on stderr when interactive (quiet or not a TTY: no output); see imutool.progress."""
     from imutool.progress import bar
 
@@ -204,8 +269,6 @@ def lazy_bar(label: str, unit: str = "it", quiet: bool = False) -> LazyBar:
     return LazyBar(label, unit, quiet)
 
 
-
-
 def parse_vector(text: str, n: int = 3, what: str = "value") -> np.ndarray:
     try:
         v = np.array([float(x) for x in text.split(",")])
@@ -214,7 +277,6 @@ def parse_vector(text: str, n: int = 3, what: str = "value") -> np.ndarray:
     if v.shape != (n,):
         raise ImutoolError(f"{what} {text!r}: expected {n} comma-separated numbers")
     return v
-
 
 
 class FiniteFloat(click.FloatRange):
@@ -276,8 +338,11 @@ def safe_outputs(*names: str, append: str | None = None) -> Callable:
                         raise ImutoolError(str(e), path=ins[0]) from None
                     raise
 
-        return click.option("--force", is_flag=True,
-                            help="Replace existing output files (never an input, never a folder other than a ROS2 "
-                                 "bag folder imutool wrote).")(wrapper)
+        return click.option(
+            "--force",
+            is_flag=True,
+            help="Replace existing output files (never an input, never a folder other than a ROS2 "
+            "bag folder imutool wrote).",
+        )(wrapper)
 
     return deco

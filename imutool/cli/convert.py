@@ -23,38 +23,88 @@ from imutool.cli.common import (
 from imutool.progress import stages
 
 
-@click.command("convert", epilog="Example: imutool convert roll.csv roll.bag   |   "
-               "imutool convert test1.bag imu.csv --topic /imu/data --stamp header")
+@click.command(
+    "convert",
+    epilog="Example: imutool convert roll.csv roll.bag   |   "
+    "imutool convert test1.bag imu.csv --topic /imu/data --stamp header",
+)
 @click.argument("input_path", metavar="IN", type=click.Path(exists=True))
 @click.argument("output_arg", metavar="OUT", required=False)
 @click.option("-o", "--output", default=None, help="Output (alternative to the OUT argument).")
 @input_options
-@click.option("--sentences", default="HDT,XDR", show_default=True,
-              help="NMEA output: sentence types, comma-separated (HDT, HDG, THS, ROT, XDR, PASHR, HRM...).")
+@click.option(
+    "--sentences",
+    default="HDT,XDR",
+    show_default=True,
+    help="NMEA output: sentence types, comma-separated (HDT, HDG, THS, ROT, XDR, PASHR, HRM...).",
+)
 @click.option("--nmea-rate", type=float, default=None, help="NMEA output: sentence rate in Hz (default: input).")
 @click.option("--talker", default=None, help="NMEA output: talker ID (default per sentence).")
 @click.option("--imu-topic", default="/imu/data", show_default=True, help="Bag output: sensor_msgs/Imu topic.")
-@click.option("--mag-topic", default="/imu/mag", show_default=True,
-              help="Bag output: sensor_msgs/MagneticField topic (written when the input has mag).")
+@click.option(
+    "--mag-topic",
+    default="/imu/mag",
+    show_default=True,
+    help="Bag output: sensor_msgs/MagneticField topic (written when the input has mag).",
+)
 @click.option("--frame-id", default=None, help="Bag output: header frame_id (default: the input bag's, or imu_link).")
-@click.option("--storage", type=click.Choice(["sqlite3", "mcap"]), default=None,
-              help="ROS2 folder output storage (default sqlite3; .db3/.mcap names decide by themselves).")
-@click.option("--compression", type=click.Choice(["none", "bz2", "lz4"]), default="none", show_default=True,
-              help="ROS1 output chunk compression.")
-@click.option("--vector3-mag-unit", default="T", show_default=True,
-              help="Bag input: unit of a geometry_msgs/Vector3Stamped magnetometer topic.")
-@click.option("--chunk-rows", type=int, default=500_000, show_default=True,
-              help="CSV/Parquet → CSV/Parquet: rows per streamed chunk (bounds memory).")
-@click.option("--no-stream", is_flag=True,
-              help="CSV/Parquet → CSV/Parquet: read the whole file (allows --backwards sort).")
+@click.option(
+    "--storage",
+    type=click.Choice(["sqlite3", "mcap"]),
+    default=None,
+    help="ROS2 folder output storage (default sqlite3; .db3/.mcap names decide by themselves).",
+)
+@click.option(
+    "--compression",
+    type=click.Choice(["none", "bz2", "lz4"]),
+    default="none",
+    show_default=True,
+    help="ROS1 output chunk compression.",
+)
+@click.option(
+    "--vector3-mag-unit",
+    default="T",
+    show_default=True,
+    help="Bag input: unit of a geometry_msgs/Vector3Stamped magnetometer topic.",
+)
+@click.option(
+    "--chunk-rows",
+    type=int,
+    default=500_000,
+    show_default=True,
+    help="CSV/Parquet → CSV/Parquet: rows per streamed chunk (bounds memory).",
+)
+@click.option(
+    "--no-stream", is_flag=True, help="CSV/Parquet → CSV/Parquet: read the whole file (allows --backwards sort)."
+)
 @output_options
 @safe_outputs("output_arg", "output")
-def convert_cmd(input_path: str, output_arg: str | None, output: str | None, columns: str | None,
-                profile: str | None, topic: str | None, stamp: str, duplicates: str, backwards: str,
-                mounting: str | None, calibration_file: str | None, sentences: str, nmea_rate: float | None,
-                talker: str | None, imu_topic: str, mag_topic: str, frame_id: str | None, storage: str | None,
-                compression: str, vector3_mag_unit: str, chunk_rows: int, no_stream: bool, as_json: bool,
-                quiet: bool) -> None:
+def convert_cmd(
+    input_path: str,
+    output_arg: str | None,
+    output: str | None,
+    columns: str | None,
+    profile: str | None,
+    topic: str | None,
+    stamp: str,
+    duplicates: str,
+    backwards: str,
+    mounting: str | None,
+    calibration_file: str | None,
+    sentences: str,
+    nmea_rate: float | None,
+    talker: str | None,
+    imu_topic: str,
+    mag_topic: str,
+    frame_id: str | None,
+    storage: str | None,
+    compression: str,
+    vector3_mag_unit: str,
+    chunk_rows: int,
+    no_stream: bool,
+    as_json: bool,
+    quiet: bool,
+) -> None:
     """Convert IN to OUT: .csv, .parquet, .bag (ROS1), .db3/.mcap or a folder (ROS2), .nmea/.log (NMEA 0183)."""
     out = output or output_arg
     if not out:
@@ -70,21 +120,41 @@ def convert_cmd(input_path: str, output_arg: str | None, output: str | None, col
         bar = stages("convert", ["reading", "writing"], quiet)
         stage = bar.stage
     with bar:
-        summary = convert(input_path, out, stream=not no_stream, chunk_rows=chunk_rows, sentences=sentences,
-                          nmea_rate=nmea_rate, talker=talker, imu_topic=imu_topic, mag_topic=mag_topic,
-                          frame_id=frame_id, storage=storage, compression=compression,
-                          vector3_mag_unit=vector3_mag_unit, progress=None if stage else bar, stage=stage,
-                          strict=strict_requested(), on_input=note_input, columns=columns, profile=profile,
-                          topic=topic, stamp=stamp,
-                          duplicates=duplicates, backwards=backwards, mounting=mounting,
-                          calibration_file=calibration_file)
+        summary = convert(
+            input_path,
+            out,
+            stream=not no_stream,
+            chunk_rows=chunk_rows,
+            sentences=sentences,
+            nmea_rate=nmea_rate,
+            talker=talker,
+            imu_topic=imu_topic,
+            mag_topic=mag_topic,
+            frame_id=frame_id,
+            storage=storage,
+            compression=compression,
+            vector3_mag_unit=vector3_mag_unit,
+            progress=None if stage else bar,
+            stage=stage,
+            strict=strict_requested(),
+            on_input=note_input,
+            columns=columns,
+            profile=profile,
+            topic=topic,
+            stamp=stamp,
+            duplicates=duplicates,
+            backwards=backwards,
+            mounting=mounting,
+            calibration_file=calibration_file,
+        )
     emit_summary(summary, as_json, quiet, lines=_lines(summary))
 
 
 def _lines(s: dict[str, Any]) -> list[str]:
-    out = [f"{s['input']} ({s['from']}) → {s['output']} ({s['to']})",
-           f"rows in {s.get('rows_in')}, rows out {s.get('rows_out')}"
-           + (" (streamed)" if s.get("streamed") else "")]
+    out = [
+        f"{s['input']} ({s['from']}) → {s['output']} ({s['to']})",
+        f"rows in {s.get('rows_in')}, rows out {s.get('rows_out')}" + (" (streamed)" if s.get("streamed") else ""),
+    ]
     if "bag_in" in s:
         b = s["bag_in"]
         out.append(f"bag: {b['format']}, topics {b['topics']}, frame_id {b['frame_id']}, time = {b['stamp']} stamp")
@@ -94,8 +164,9 @@ def _lines(s: dict[str, Any]) -> list[str]:
         out.append(f"sentences written: {s['sentences_out']}")
     out.append("channels: " + ", ".join(s.get("channels", [])))
     if s.get("channels_not_written"):
-        out.append("NOT written (no field in sensor_msgs/Imu or MagneticField): "
-                   + ", ".join(s["channels_not_written"]))
+        out.append(
+            "NOT written (no field in sensor_msgs/Imu or MagneticField): " + ", ".join(s["channels_not_written"])
+        )
     out.append("frame conversions: " + "; ".join(s["conversions"]))
     for a in s.get("validation_actions", []):
         out.append(f"time base: {a}")

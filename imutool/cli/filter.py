@@ -24,65 +24,150 @@ from imutool.cli.common import (
 )
 
 
-@click.command("filter", epilog="Example: imutool simulate ship-roll -o roll.csv && "
-                                "imutool filter roll.csv -o est.csv --smooth")
+@click.command(
+    "filter", epilog="Example: imutool simulate ship-roll -o roll.csv && imutool filter roll.csv -o est.csv --smooth"
+)
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output file (.csv, .bag, ...).")
-@click.option("--method", type=click.Choice(["ekf", "lpf", "accel", "compass"]), default="ekf", show_default=True,
-              help="ekf: quaternion EKF with gyro bias; lpf: Butterworth low-passed accel tilt + magnetic heading "
-                   "(paper baseline); accel: unfiltered accelerometer tilt; compass: heading Kalman filter.")
-@click.option("--params", "params_file", type=click.Path(exists=True, dir_okay=False), default=None,
-              help="EKF: TOML file with tuning parameters (every constant, its unit and default: "
-                   "`--save-params FILE` writes the full set).")
-@click.option("--param", "param_items", multiple=True, metavar="NAME=VALUE",
-              help="EKF: override one tuning parameter (repeatable), e.g. --param mag_noise_deg=10.")
-@click.option("--save-params", type=click.Path(dir_okay=False), default=None,
-              help="EKF: write the parameters used (TOML, with units) to this file.")
-@click.option("--update-every", type=int, default=None,
-              help="EKF: covariance propagation + accel/mag updates every N samples (paper: 40 at 200 Hz). Default "
-                   "(or 0): N = ⌊sample rate / update_rate_hz⌋ (50 Hz: 4 at 200 Hz; 1 with the raw accelerometer, "
-                   "accel_lp_tau 0). The noise figures are per sample, so N sets the speed, not the filter.")
-@click.option("--mag-mode", type=click.Choice(["heading", "full", "off"]), default=None,
-              help="EKF magnetometer use: heading only (default; never touches roll/pitch), full 3-D vector "
-                   "(paper), off.")
-@click.option("--smooth", is_flag=True,
-              help="EKF: add the offline smoother (the accelerometer low-pass run forwards and backwards, a second "
-                   "filter pass, the RTS backward pass: zero-lag estimates).")
-@click.option("--lever-arm", default=None, metavar="X,Y,Z",
-              help="EKF: sensor position relative to the vessel's centre of rotation, m, body FRD (x bow, "
-                   "y starboard, z down; a bridge 20 m above the roll centre is z = -20): the tangential and "
-                   "centripetal accelerations ω̇×r + ω×(ω×r) are removed before the accelerometer update.")
-@click.option("--gnss", "gnss_path", type=click.Path(exists=True, dir_okay=False), default=None,
-              help="EKF: NMEA or CSV file with sog (m/s) and cog (deg) for centripetal compensation "
-                   "(sog/cog columns of INPUT are used automatically).")
+@click.option(
+    "--method",
+    type=click.Choice(["ekf", "lpf", "accel", "compass"]),
+    default="ekf",
+    show_default=True,
+    help="ekf: quaternion EKF with gyro bias; lpf: Butterworth low-passed accel tilt + magnetic heading "
+    "(paper baseline); accel: unfiltered accelerometer tilt; compass: heading Kalman filter.",
+)
+@click.option(
+    "--params",
+    "params_file",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="EKF: TOML file with tuning parameters (every constant, its unit and default: "
+    "`--save-params FILE` writes the full set).",
+)
+@click.option(
+    "--param",
+    "param_items",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="EKF: override one tuning parameter (repeatable), e.g. --param mag_noise_deg=10.",
+)
+@click.option(
+    "--save-params",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="EKF: write the parameters used (TOML, with units) to this file.",
+)
+@click.option(
+    "--update-every",
+    type=int,
+    default=None,
+    help="EKF: covariance propagation + accel/mag updates every N samples (paper: 40 at 200 Hz). Default "
+    "(or 0): N = ⌊sample rate / update_rate_hz⌋ (50 Hz: 4 at 200 Hz; 1 with the raw accelerometer, "
+    "accel_lp_tau 0). The noise figures are per sample, so N sets the speed, not the filter.",
+)
+@click.option(
+    "--mag-mode",
+    type=click.Choice(["heading", "full", "off"]),
+    default=None,
+    help="EKF magnetometer use: heading only (default; never touches roll/pitch), full 3-D vector (paper), off.",
+)
+@click.option(
+    "--smooth",
+    is_flag=True,
+    help="EKF: add the offline smoother (the accelerometer low-pass run forwards and backwards, a second "
+    "filter pass, the RTS backward pass: zero-lag estimates).",
+)
+@click.option(
+    "--lever-arm",
+    default=None,
+    metavar="X,Y,Z",
+    help="EKF: sensor position relative to the vessel's centre of rotation, m, body FRD (x bow, "
+    "y starboard, z down; a bridge 20 m above the roll centre is z = -20): the tangential and "
+    "centripetal accelerations ω̇×r + ω×(ω×r) are removed before the accelerometer update.",
+)
+@click.option(
+    "--gnss",
+    "gnss_path",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="EKF: NMEA or CSV file with sog (m/s) and cog (deg) for centripetal compensation "
+    "(sog/cog columns of INPUT are used automatically).",
+)
 @click.option("--no-gnss", is_flag=True, help="EKF: ignore sog/cog even when present.")
-@click.option("--heading", "heading_path", type=click.Path(exists=True, dir_okay=False), default=None,
-              help="EKF: NMEA (HDT/THS) or CSV file with heading_true (deg) from a gyrocompass: the filter's heading "
-                   "measurement instead of the magnetometer (a heading_true column of INPUT is used "
-                   "automatically); its delay: --param heading_input_latency=SECONDS.")
+@click.option(
+    "--heading",
+    "heading_path",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="EKF: NMEA (HDT/THS) or CSV file with heading_true (deg) from a gyrocompass: the filter's heading "
+    "measurement instead of the magnetometer (a heading_true column of INPUT is used "
+    "automatically); its delay: --param heading_input_latency=SECONDS.",
+)
 @click.option("--cutoff", type=float, default=0.5, show_default=True, help="lpf: cutoff frequency, Hz.")
 @click.option("--order", type=int, default=2, show_default=True, help="lpf: Butterworth order.")
-@click.option("--compass-model", type=click.Choice(["auto", "scalar", "gyro"]), default="auto", show_default=True,
-              help="compass: scalar KF (paper) or two-state with the gyro rate of turn (auto: gyro if present).")
+@click.option(
+    "--compass-model",
+    type=click.Choice(["auto", "scalar", "gyro"]),
+    default="auto",
+    show_default=True,
+    help="compass: scalar KF (paper) or two-state with the gyro rate of turn (auto: gyro if present).",
+)
 @click.option("--q", "comp_q", type=float, default=0.003, show_default=True, help="compass: Q, deg² per sample.")
 @click.option("--r", "comp_r", type=float, default=2.0, show_default=True, help="compass: R, deg².")
-@click.option("--variation", type=float, default=0.0, show_default=True,
-              help="compass: magnetic variation, deg east positive (true = magnetic + variation).")
+@click.option(
+    "--variation",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="compass: magnetic variation, deg east positive (true = magnetic + variation).",
+)
 @click.option("--paper-init", is_flag=True, help="compass: x0 = 0, P0 = 0 as in the paper.")
-@click.option("--chunk-rows", type=int, default=1_000_000, show_default=True,
-              help="EKF on CSV/Parquet: stream the file in chunks of this many rows when larger than --stream-mb.")
-@click.option("--stream-mb", type=float, default=300.0, show_default=True,
-              help="EKF on CSV/Parquet: stream (bounded memory) when the input is larger than this (MB; Parquet: "
-                   "its data as float64 in memory).")
+@click.option(
+    "--chunk-rows",
+    type=int,
+    default=1_000_000,
+    show_default=True,
+    help="EKF on CSV/Parquet: stream the file in chunks of this many rows when larger than --stream-mb.",
+)
+@click.option(
+    "--stream-mb",
+    type=float,
+    default=300.0,
+    show_default=True,
+    help="EKF on CSV/Parquet: stream (bounded memory) when the input is larger than this (MB; Parquet: "
+    "its data as float64 in memory).",
+)
 @input_options
 @output_options
 @safe_outputs("output", "save_params")
-def filter_cmd(input_path: str, output: str, method: str, params_file: str | None, param_items: tuple[str, ...],
-               save_params: str | None, update_every: int | None, mag_mode: str | None, smooth: bool,
-               lever_arm: str | None, gnss_path: str | None, no_gnss: bool, heading_path: str | None,
-               cutoff: float, order: int,
-               compass_model: str, comp_q: float, comp_r: float, variation: float, paper_init: bool,
-               chunk_rows: int, stream_mb: float, as_json: bool, quiet: bool, **io: Any) -> None:
+def filter_cmd(
+    input_path: str,
+    output: str,
+    method: str,
+    params_file: str | None,
+    param_items: tuple[str, ...],
+    save_params: str | None,
+    update_every: int | None,
+    mag_mode: str | None,
+    smooth: bool,
+    lever_arm: str | None,
+    gnss_path: str | None,
+    no_gnss: bool,
+    heading_path: str | None,
+    cutoff: float,
+    order: int,
+    compass_model: str,
+    comp_q: float,
+    comp_r: float,
+    variation: float,
+    paper_init: bool,
+    chunk_rows: int,
+    stream_mb: float,
+    as_json: bool,
+    quiet: bool,
+    **io: Any,
+) -> None:
     """Estimate roll, pitch and heading (deg) from INPUT (gyro/accel/mag, or an NMEA heading for compass).
 
     Output columns: roll, pitch, heading (deg), qw..qz (body→NED), gyro_bias_x..z (rad/s), roll_std,
@@ -94,36 +179,59 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
     from imutool.filtering import run_filter
 
     params = ekf_params(params_file, param_items, update_every, mag_mode)
-    if params_file and update_every is None and not quiet and params.update_every == 1 \
-            and params.pins_every_sample(params_file):
-        click.echo(f"note: {params_file} sets update_every = 1, as every parameters file saved before 2026-11-26 "
-                   "does: the filter updates every sample (the same filter, about 2.3x slower than the default); "
-                   "set update_every = 0 there, or --update-every 0, for updates every ⌊rate / update_rate_hz⌋ "
-                   "samples", err=True)
+    if (
+        params_file
+        and update_every is None
+        and not quiet
+        and params.update_every == 1
+        and params.pins_every_sample(params_file)
+    ):
+        click.echo(
+            f"note: {params_file} sets update_every = 1, as every parameters file saved before 2026-11-26 "
+            "does: the filter updates every sample (the same filter, about 2.3x slower than the default); "
+            "set update_every = 0 there, or --update-every 0, for updates every ⌊rate / update_rate_hz⌋ "
+            "samples",
+            err=True,
+        )
     if params_file and not quiet and params.mag_noise_deg > 0 and params.pins_mag_sigma(params_file):
-        click.echo(f"note: {params_file} sets mag_noise_deg = {params.mag_noise_deg:g}, a σ per sample at any rate "
-                   "(every parameters file saved before mag_heading_density existed does), so the heading's time "
-                   "constant grows as the rate falls (21 s at 286 Hz, 49 s at 50 Hz); set mag_noise_deg = 0 there, "
-                   "or --param mag_noise_deg=0, for mag_heading_density (deg·√s, the same at every rate)", err=True)
+        click.echo(
+            f"note: {params_file} sets mag_noise_deg = {params.mag_noise_deg:g}, a σ per sample at any rate "
+            "(every parameters file saved before mag_heading_density existed does), so the heading's time "
+            "constant grows as the rate falls (21 s at 286 Hz, 49 s at 50 Hz); set mag_noise_deg = 0 there, "
+            "or --param mag_noise_deg=0, for mag_heading_density (deg·√s, the same at every rate)",
+            err=True,
+        )
         if "mag_reference_tau" not in params.keys_in_file(params_file):
-            click.echo("note: the magnetometer's gates now compare with the mean accepted field, not its first "
-                       "sample (mag_reference_tau = 0: as before)", err=True)
+            click.echo(
+                "note: the magnetometer's gates now compare with the mean accepted field, not its first "
+                "sample (mag_reference_tau = 0: as before)",
+                err=True,
+            )
     given = params.keys_in_file(params_file) if params_file else set()
     given |= {item.split("=", 1)[0].strip() for item in param_items}
-    if params_file and not quiet and "mag_new_time" not in given \
-            and ("mag_heading_density" in given or params.pins_mag_sigma(params_file)):
-        click.echo(f"note: {params_file} does not set mag_new_time or mag_bias_gate (files saved before the "
-                   "new-field acceptance, commit 1816144, do not): the magnetometer's new-field acceptance and the "
-                   "gate on its bias learning apply with their defaults (set either to 0 for the behaviour before)",
-                   err=True)
+    if (
+        params_file
+        and not quiet
+        and "mag_new_time" not in given
+        and ("mag_heading_density" in given or params.pins_mag_sigma(params_file))
+    ):
+        click.echo(
+            f"note: {params_file} does not set mag_new_time or mag_bias_gate (files saved before the "
+            "new-field acceptance, commit 1816144, do not): the magnetometer's new-field acceptance and the "
+            "gate on its bias learning apply with their defaults (set either to 0 for the behaviour before)",
+            err=True,
+        )
     in_file = params.keys_in_file(params_file) if params_file else set()
     if params_file and not quiet and "accel_lp_tau" in in_file and "smoother_lp_tau" not in in_file:
-        click.echo(f"note: {params_file} sets accel_lp_tau and has no smoother_lp_tau, as every parameters file "
-                   "saved before the accelerometer's low-pass became a second-order Butterworth (2026-11-27) does: "
-                   "if it is such a file, its accel_lp_tau is now the Butterworth's delay (its 3 s with 0.003 and "
-                   "2.8: 0.736° mean inclination on BROAD, 0.739 with the old two stages); the defaults are "
-                   "accel_lp_tau 2.5, gyro_scale_noise 0.01, accel_noise_gain 4 (0.727°) — delete those three keys "
-                   "to take them", err=True)
+        click.echo(
+            f"note: {params_file} sets accel_lp_tau and has no smoother_lp_tau, as every parameters file "
+            "saved before the accelerometer's low-pass became a second-order Butterworth (2026-11-27) does: "
+            "if it is such a file, its accel_lp_tau is now the Butterworth's delay (its 3 s with 0.003 and "
+            "2.8: 0.736° mean inclination on BROAD, 0.739 with the old two stages); the defaults are "
+            "accel_lp_tau 2.5, gyro_scale_noise 0.01, accel_noise_gain 4 (0.727°) — delete those three keys "
+            "to take them",
+            err=True,
+        )
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
@@ -133,20 +241,34 @@ def filter_cmd(input_path: str, output: str, method: str, params_file: str | Non
         with atomic_path(save_params) as tmp:
             tmp.write_text(params.to_toml(), encoding="utf-8")
     with lazy_bar("filter", unit="samples", quiet=quiet) as b:
-        res = run_filter(input_path, output, method=method, params=params, smooth=smooth, lever_arm=lever,
-                         gnss=gnss_path if gnss_path and not no_gnss else None, use_gnss=not no_gnss,
-                         heading=heading_path,
-                         cutoff_hz=cutoff, order=order,
-                         compass=CompassParams(q=comp_q, r=comp_r, model=compass_model, variation_deg=variation,
-                                               paper_init=paper_init),
-                         params_file=params_file, chunk_rows=chunk_rows, stream_mb=stream_mb, progress=b,
-                         strict=strict_requested(), on_input=note_input, **io)
+        res = run_filter(
+            input_path,
+            output,
+            method=method,
+            params=params,
+            smooth=smooth,
+            lever_arm=lever,
+            gnss=gnss_path if gnss_path and not no_gnss else None,
+            use_gnss=not no_gnss,
+            heading=heading_path,
+            cutoff_hz=cutoff,
+            order=order,
+            compass=CompassParams(
+                q=comp_q, r=comp_r, model=compass_model, variation_deg=variation, paper_init=paper_init
+            ),
+            params_file=params_file,
+            chunk_rows=chunk_rows,
+            stream_mb=stream_mb,
+            progress=b,
+            strict=strict_requested(),
+            on_input=note_input,
+            **io,
+        )
     _warn(res.summary)
     emit_summary(res.summary, as_json, quiet)
 
 
-def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None,
-               mag_mode: str | None) -> Any:
+def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None, mag_mode: str | None) -> Any:
     """EkfParams from the defaults, then --params FILE, then --param NAME=VALUE, then the everyday flags."""
     from imutool.attitude import PARAM_DOC, EkfParams
 

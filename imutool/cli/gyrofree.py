@@ -12,33 +12,72 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 from imutool.loading import input_notes
 
 
-@click.command("gyrofree", epilog="Example: imutool simulate accel-array -o array.csv && "
-               "imutool gyrofree array.csv --layout paper -o rates.csv")
+@click.command(
+    "gyrofree",
+    epilog="Example: imutool simulate accel-array -o array.csv && "
+    "imutool gyrofree array.csv --layout paper -o rates.csv",
+)
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True), required=False)
 @click.option("-o", "--output", default=None, type=click.Path(), help="Output file (.csv, ...).")
-@click.option("--layout", "layout_path", required=True,
-              help="Layout TOML (positions m body FRD, axes, columns, units) or 'paper' (r = 0.1 m).")
+@click.option(
+    "--layout",
+    "layout_path",
+    required=True,
+    help="Layout TOML (positions m body FRD, axes, columns, units) or 'paper' (r = 0.1 m).",
+)
 @click.option("--check-layout", is_flag=True, help="Only check observability/conditioning of the layout.")
-@click.option("--noise", type=float, default=None,
-              help="Accelerometer noise σ per sample (m/s²) [default: layout noise_density·√fs, else estimated].")
+@click.option(
+    "--noise",
+    type=float,
+    default=None,
+    help="Accelerometer noise σ per sample (m/s²) [default: layout noise_density·√fs, else estimated].",
+)
 @click.option("--initial-rate", default=None, metavar="WX,WY,WZ", help="Initial ω (deg/s) [default from data].")
-@click.option("--initial-sign", type=click.Choice(["+", "-"]), default="+", show_default=True,
-              help="Sign of the largest initial ω component (h(ω) = h(−ω)).")
-@click.option("--tilt-gain", type=float, default=0.0, show_default=True,
-              help="Gravity tilt correction gain (1/s) from the centre specific force (0 = pure integration).")
-@click.option("--rate-rw", type=float, default=None,
-              help="ω random walk in Q, deg/s/√s [default 0.00573 = 1e-4 rad/s/√s].")
-@click.option("--planar", default=None, metavar="COL1,COL2",
-              help="Reduced mode: two parallel single-axis accelerometers (layout sensors' columns) → roll.")
+@click.option(
+    "--initial-sign",
+    type=click.Choice(["+", "-"]),
+    default="+",
+    show_default=True,
+    help="Sign of the largest initial ω component (h(ω) = h(−ω)).",
+)
+@click.option(
+    "--tilt-gain",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Gravity tilt correction gain (1/s) from the centre specific force (0 = pure integration).",
+)
+@click.option(
+    "--rate-rw", type=float, default=None, help="ω random walk in Q, deg/s/√s [default 0.00573 = 1e-4 rad/s/√s]."
+)
+@click.option(
+    "--planar",
+    default=None,
+    metavar="COL1,COL2",
+    help="Reduced mode: two parallel single-axis accelerometers (layout sensors' columns) → roll.",
+)
 @click.option("--causal", is_flag=True, help="Planar mode: causal band-pass integration (default zero-phase).")
 @click.option("--cutoff", type=float, default=None, help="Planar mode band-pass cut-off Hz [0.3 × dominant].")
 @input_options
 @output_options
 @safe_outputs("output")
-def gyrofree_cmd(input_path: str | None, output: str | None, layout_path: str, check_layout: bool,
-                 noise: float | None, initial_rate: str | None, initial_sign: str, tilt_gain: float,
-                 rate_rw: float, planar: str | None, causal: bool, cutoff: float | None, as_json: bool,
-                 quiet: bool, **inopts) -> None:
+def gyrofree_cmd(
+    input_path: str | None,
+    output: str | None,
+    layout_path: str,
+    check_layout: bool,
+    noise: float | None,
+    initial_rate: str | None,
+    initial_sign: str,
+    tilt_gain: float,
+    rate_rw: float,
+    planar: str | None,
+    causal: bool,
+    cutoff: float | None,
+    as_json: bool,
+    quiet: bool,
+    **inopts,
+) -> None:
     """ω (rad/s), ω̇ (rad/s²), f_O and attitude from N accelerometers (no gyro); --check-layout for geometry."""
     from imutool import gyrofree as gf
 
@@ -72,12 +111,17 @@ def gyrofree_cmd(input_path: str | None, output: str | None, layout_path: str, c
         out.add("roll_rate", res["roll_rate"], "rad/s")
         out.add("roll", np.degrees(res["roll"]), "deg")
         out.meta["roll"] = "deg, positive starboard down (FRD), dynamic part only (static heel not observable)"
-        summary = {"mode": "planar roll", "columns": names, "cutoff_hz": round(res["cutoff_hz"], 4),
-                   "integration": "causal" if causal else "zero-phase"}
+        summary = {
+            "mode": "planar roll",
+            "columns": names,
+            "cutoff_hz": round(res["cutoff_hz"], 4),
+            "integration": "causal" if causal else "zero-phase",
+        }
     else:
         w0 = np.radians(parse_vector(initial_rate, 3, "--initial-rate")) if initial_rate else None
         rate_rw = 1e-4 if rate_rw is None else float(np.radians(rate_rw))  # options in degrees, SI inside
-        out, summary = gf.gyrofree_recording(rec, layout, noise, 1.0 if initial_sign == "+" else -1.0, w0,
-                                             tilt_gain, rate_rw)
+        out, summary = gf.gyrofree_recording(
+            rec, layout, noise, 1.0 if initial_sign == "+" else -1.0, w0, tilt_gain, rate_rw
+        )
     formats.write(out, output)
     emit_summary({"input": input_path, "output": output, "rows": len(out), **summary}, as_json, quiet)

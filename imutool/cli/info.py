@@ -59,8 +59,10 @@ def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards
     policy = backwards
     if n_back and backwards == "error":
         policy = "sort"
-        notes.append(f"time goes backwards {n_back} times: other commands refuse this file unless given "
-                     "--backwards sort|drop (summarised here after sorting)")
+        notes.append(
+            f"time goes backwards {n_back} times: other commands refuse this file unless given "
+            "--backwards sort|drop (summarised here after sorting)"
+        )
     rec, rep = rec_raw.validated(duplicates=duplicates, backwards=policy, source=path)
     pos = np.diff(rec.time) if len(rec) > 1 else np.empty(0)
     gaps = rep.gaps
@@ -73,12 +75,16 @@ def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards
         "end_s": _num(rec.time[-1]) if len(rec) else None,
         "duration_s": _num(rec.duration),
         "rate_hz": _num(rec.rate_hz),
-        "step_s": {"median": _num(np.median(pos)) if pos.size else None,
-                   "min": _num(pos.min()) if pos.size else None,
-                   "max": _num(pos.max()) if pos.size else None},
-        "gaps": {"count": len(gaps), "missing_s": _num(sum(g[1] for g in gaps) - len(gaps) * rep.median_dt)
-                 if gaps else 0.0,
-                 "first": [{"start_s": a, "length_s": b} for a, b in gaps[:10]]},
+        "step_s": {
+            "median": _num(np.median(pos)) if pos.size else None,
+            "min": _num(pos.min()) if pos.size else None,
+            "max": _num(pos.max()) if pos.size else None,
+        },
+        "gaps": {
+            "count": len(gaps),
+            "missing_s": _num(sum(g[1] for g in gaps) - len(gaps) * rep.median_dt) if gaps else 0.0,
+            "first": [{"start_s": a, "length_s": b} for a, b in gaps[:10]],
+        },
         "duplicate_timestamps": rep.duplicates,
         "duplicate_timestamps_with_different_data": rep.duplicates_conflicting,
         "backwards_steps": n_back,
@@ -93,8 +99,10 @@ def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards
     }
     cm = rec_raw.meta.get("column_mapping")
     if cm:
-        summary["column_mapping"] = {"origin": rec_raw.meta.get("column_mapping_origin", "inferred"),
-                                     "columns": [s.strip() for s in str(cm).split(";") if s.strip()]}
+        summary["column_mapping"] = {
+            "origin": rec_raw.meta.get("column_mapping_origin", "inferred"),
+            "columns": [s.strip() for s in str(cm).split(";") if s.strip()],
+        }
     return summary
 
 
@@ -117,28 +125,34 @@ def _lines(s: dict[str, Any]) -> list[str]:
     st = s["step_s"]
     out = [
         f"file:      {s['file']} ({s['format']})",
-        f"rows:      {s['rows']}" + (f" ({s['rows_after_validation']} after validation)"
-                                     if s["rows_after_validation"] != s["rows"] else ""),
+        f"rows:      {s['rows']}"
+        + (f" ({s['rows_after_validation']} after validation)" if s["rows_after_validation"] != s["rows"] else ""),
         f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
         f"rate:      {_fmt(s['rate_hz'])} Hz (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, "
         f"max {_fmt(st['max'])} s)",
-        f"gaps:      {s['gaps']['count']}" + (f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
-                                              f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
-                                              f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
-                                              if s["gaps"]["count"] else ""),
+        f"gaps:      {s['gaps']['count']}"
+        + (
+            f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
+            f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
+            f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
+            if s["gaps"]["count"]
+            else ""
+        ),
         f"duplicate timestamps: {s['duplicate_timestamps']} "
         f"({s['duplicate_timestamps_with_different_data']} with different data)",
         f"time going backwards: {s['backwards_steps']}",
-        f"rows with NaN: {s['rows_with_nan']}" + (
-            " (" + ", ".join(f"{k} {v}" for k, v in s["nan_by_channel"].items()) + ")" if s["nan_by_channel"] else ""),
+        f"rows with NaN: {s['rows_with_nan']}"
+        + (" (" + ", ".join(f"{k} {v}" for k, v in s["nan_by_channel"].items()) + ")" if s["nan_by_channel"] else ""),
     ]
     if s["skipped_rows"]:
         out.append(f"malformed rows skipped: {s['skipped_rows']} (" + "; ".join(s["skipped_rows_first"]) + ")")
     out.append("channels (unit; min / mean / max per axis; angles and rates in degrees):")
     for name, c in s["channels"].items():
         cols = c["columns"]
-        axes = " | ".join(f"{col} {_fmt(a)} / {_fmt(m)} / {_fmt(b)}"
-                          for col, a, m, b in zip(cols, c["min"], c["mean"], c["max"], strict=False))
+        axes = " | ".join(
+            f"{col} {_fmt(a)} / {_fmt(m)} / {_fmt(b)}"
+            for col, a, m, b in zip(cols, c["min"], c["mean"], c["max"], strict=False)
+        )
         out.append(f"  {name:<12} [{c['unit'] or '-'}]  {axes}")
     if s["column_mapping"]:
         out.append(f"column mapping ({s['column_mapping']['origin']}):")
@@ -158,14 +172,34 @@ def _lines(s: dict[str, Any]) -> list[str]:
 @click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=True))
 @input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def info_cmd(path: str, columns: str | None, profile: str | None, topic: str | None, stamp: str, duplicates: str,
-             backwards: str, mounting: str | None, calibration_file: str | None, as_json: bool) -> None:
+def info_cmd(
+    path: str,
+    columns: str | None,
+    profile: str | None,
+    topic: str | None,
+    stamp: str,
+    duplicates: str,
+    backwards: str,
+    mounting: str | None,
+    calibration_file: str | None,
+    as_json: bool,
+) -> None:
     """Summarise FILE (CSV, ROS1/ROS2 bag, NMEA log): duration, rows, rate (median, min/max step), gaps,
     duplicate timestamps, NaN rows, channels with units and min/mean/max per axis, metadata, the foreign-CSV
     column mapping used, and what the time-base validation would do. Units are SI except angles and angular
     rates, shown in degrees (deg, deg/s) whatever the file holds (the JSON names the unit in the file)."""
-    rec, _ = load_input(path, columns=columns, profile=profile, topic=topic, stamp=stamp, duplicates=duplicates,
-                        backwards=backwards, mounting=mounting, calibration_file=calibration_file, validate=False)
+    rec, _ = load_input(
+        path,
+        columns=columns,
+        profile=profile,
+        topic=topic,
+        stamp=stamp,
+        duplicates=duplicates,
+        backwards=backwards,
+        mounting=mounting,
+        calibration_file=calibration_file,
+        validate=False,
+    )
     if len(rec) == 0:
         raise ImutoolError("no samples", path=path)
     summary = summarize(path, rec, duplicates=duplicates, backwards=backwards)

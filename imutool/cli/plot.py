@@ -59,8 +59,9 @@ def envelope(t: np.ndarray, y: np.ndarray, bucket: int) -> tuple[np.ndarray, np.
     return t2, y2
 
 
-def _collect(path: str, wanted: tuple[str, ...], start: float | None, end: float | None, max_points: int,
-             io: dict) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Recording, int]:
+def _collect(
+    path: str, wanted: tuple[str, ...], start: float | None, end: float | None, max_points: int, io: dict
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Recording, int]:
     """Decimated (t, y) per matched channel; streams CSV files, reads others whole."""
     plain_csv = formats.kind_of(path) == "csv" and not io.get("mounting") and not io.get("calibration_file")
     if plain_csv:
@@ -80,8 +81,11 @@ def _collect(path: str, wanted: tuple[str, ...], start: float | None, end: float
                 est_rows = max(len(chunk), int(size / max(1, _bytes_per_row(path, len(chunk)))))
                 bucket = max(1, -(-2 * est_rows // max_points))  # 2 points per bucket
             total += len(chunk)
-            chunk = chunk.slice_time(None if start is None else t0 + start, None if end is None else t0 + end) \
-                if (start is not None or end is not None) else chunk
+            chunk = (
+                chunk.slice_time(None if start is None else t0 + start, None if end is None else t0 + end)
+                if (start is not None or end is not None)
+                else chunk
+            )
             if not len(chunk):
                 continue
             for n in names:
@@ -89,8 +93,11 @@ def _collect(path: str, wanted: tuple[str, ...], start: float | None, end: float
                 parts.setdefault(n, []).append(envelope(chunk.time - t0, a, bucket))
         if template is None:
             raise ImutoolError("no data rows", path=path)
-        out = {n: (np.concatenate([p[0] for p in parts[n]]), np.concatenate([p[1] for p in parts[n]]))
-               for n in names if n in parts}
+        out = {
+            n: (np.concatenate([p[0] for p in parts[n]]), np.concatenate([p[1] for p in parts[n]]))
+            for n in names
+            if n in parts
+        }
         return out, template, total
     rec, _ = load_input(path, validate=False, **io)
     if not len(rec):
@@ -118,18 +125,39 @@ def _bytes_per_row(path: str, rows: int) -> float:
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output .png, .pdf or .svg.")
 @click.option("--start", type=float, default=None, help="Start, seconds from the first sample.")
 @click.option("--end", type=float, default=None, help="End, seconds from the first sample.")
-@click.option("--max-points", type=int, default=20000, show_default=True,
-              help="Per line; longer series are decimated to a min/max envelope.")
+@click.option(
+    "--max-points",
+    type=int,
+    default=20000,
+    show_default=True,
+    help="Per line; longer series are decimated to a min/max envelope.",
+)
 @click.option("--title", default=None, help="Figure title (default: the file name).")
 @click.option("--dpi", type=int, default=120, show_default=True, help="Resolution of PNG output.")
 @input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="No summary output.")
 @safe_outputs("output")
-def plot_cmd(path: str, channels: tuple[str, ...], output: str, start: float | None, end: float | None,
-             max_points: int, title: str | None, dpi: int, columns: str | None, profile: str | None,
-             topic: str | None, stamp: str, duplicates: str, backwards: str, mounting: str | None,
-             calibration_file: str | None, as_json: bool, quiet: bool) -> None:
+def plot_cmd(
+    path: str,
+    channels: tuple[str, ...],
+    output: str,
+    start: float | None,
+    end: float | None,
+    max_points: int,
+    title: str | None,
+    dpi: int,
+    columns: str | None,
+    profile: str | None,
+    topic: str | None,
+    stamp: str,
+    duplicates: str,
+    backwards: str,
+    mounting: str | None,
+    calibration_file: str | None,
+    as_json: bool,
+    quiet: bool,
+) -> None:
     """Plot CHANNEL... of FILE (names or prefixes: `gyro accel`, `ref`) to a PNG/PDF, one subplot each,
     units in the axis labels (angular rates in deg/s, angles in deg), time in seconds from the first sample."""
     ext = Path(output).suffix.lower()
@@ -137,8 +165,16 @@ def plot_cmd(path: str, channels: tuple[str, ...], output: str, start: float | N
         raise ImutoolError(f"plot output must end in {', '.join(_FORMATS)} (got {output!r})")
     if max_points < 10:
         raise ImutoolError("--max-points must be at least 10")
-    io = {"columns": columns, "profile": profile, "topic": topic, "stamp": stamp, "duplicates": duplicates,
-          "backwards": backwards, "mounting": mounting, "calibration_file": calibration_file}
+    io = {
+        "columns": columns,
+        "profile": profile,
+        "topic": topic,
+        "stamp": stamp,
+        "duplicates": duplicates,
+        "backwards": backwards,
+        "mounting": mounting,
+        "calibration_file": calibration_file,
+    }
     series, rec, total = _collect(path, channels, start, end, max_points, io)
     if not series:
         raise ImutoolError("no samples in the requested time window", path=path)

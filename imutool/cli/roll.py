@@ -35,20 +35,58 @@ def parse_resets(text: str | None) -> list[float]:
 def roll_options(f):
     """Options of the roll-cycle detector shared by `roll` and `nmea`."""
     opts = [
-        click.option("--hysteresis", "hysteresis_deg", type=float, default=0.5, show_default=True,
-                     help="Hysteresis (deg) around the centre: oscillations smaller than ± this are ignored."),
-        click.option("--centre", type=click.Choice(["zero", "running"]), default="zero", show_default=True,
-                     help="Centre of the port/starboard split: 0 (level ship) or a running mean (listing ship)."),
-        click.option("--centre-window", "centre_window_s", type=float, default=120.0, show_default=True,
-                     help="Running-mean window (s) for --centre running."),
-        click.option("--refine", "refine_frac", type=float, default=0.2, show_default=True,
-                     help="Peak refinement: parabola over ± this fraction of the excursion duration."),
-        click.option("--max-period", "max_period_s", type=float, default=60.0, show_default=True,
-                     help="Longest roll period accepted (s); longer gaps are not periods."),
-        click.option("--reset", "resets", default=None, metavar="T1,T2,...",
-                     help="Peak-hold reset times (s, recording time); the start is always a reset."),
-        click.option("--utc-start", default=None, metavar="ISO",
-                     help="UTC of time 0 (for the reset time/date); Unix-epoch times need none."),
+        click.option(
+            "--hysteresis",
+            "hysteresis_deg",
+            type=float,
+            default=0.5,
+            show_default=True,
+            help="Hysteresis (deg) around the centre: oscillations smaller than ± this are ignored.",
+        ),
+        click.option(
+            "--centre",
+            type=click.Choice(["zero", "running"]),
+            default="zero",
+            show_default=True,
+            help="Centre of the port/starboard split: 0 (level ship) or a running mean (listing ship).",
+        ),
+        click.option(
+            "--centre-window",
+            "centre_window_s",
+            type=float,
+            default=120.0,
+            show_default=True,
+            help="Running-mean window (s) for --centre running.",
+        ),
+        click.option(
+            "--refine",
+            "refine_frac",
+            type=float,
+            default=0.2,
+            show_default=True,
+            help="Peak refinement: parabola over ± this fraction of the excursion duration.",
+        ),
+        click.option(
+            "--max-period",
+            "max_period_s",
+            type=float,
+            default=60.0,
+            show_default=True,
+            help="Longest roll period accepted (s); longer gaps are not periods.",
+        ),
+        click.option(
+            "--reset",
+            "resets",
+            default=None,
+            metavar="T1,T2,...",
+            help="Peak-hold reset times (s, recording time); the start is always a reset.",
+        ),
+        click.option(
+            "--utc-start",
+            default=None,
+            metavar="ISO",
+            help="UTC of time 0 (for the reset time/date); Unix-epoch times need none.",
+        ),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -58,15 +96,32 @@ def roll_options(f):
 @click.command("roll", epilog="Example: imutool roll est.csv -o roll_stats.csv --cycles cycles.csv")
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(), help="Per-sample statistics (.csv).")
-@click.option("--cycles", "cycles_path", default=None, type=click.Path(),
-              help="Also write the per-cycle table (one row per port/starboard maximum) to this CSV.")
+@click.option(
+    "--cycles",
+    "cycles_path",
+    default=None,
+    type=click.Path(),
+    help="Also write the per-cycle table (one row per port/starboard maximum) to this CSV.",
+)
 @roll_options
 @input_options
 @output_options
 @safe_outputs("output", "cycles_path")
-def roll_cmd(input_path: str, output: str, cycles_path: str | None, hysteresis_deg: float, centre: str,
-             centre_window_s: float, refine_frac: float, max_period_s: float, resets: str | None,
-             utc_start: str | None, as_json: bool, quiet: bool, **io) -> None:
+def roll_cmd(
+    input_path: str,
+    output: str,
+    cycles_path: str | None,
+    hysteresis_deg: float,
+    centre: str,
+    centre_window_s: float,
+    refine_frac: float,
+    max_period_s: float,
+    resets: str | None,
+    utc_start: str | None,
+    as_json: bool,
+    quiet: bool,
+    **io,
+) -> None:
     """Roll statistics per IMO MSC.363(92) §3 from the `roll` (or HRM `heel`) channel of INPUT.
 
     Heel is in degrees, + starboard down. Roll period = time between successive maxima on the same side
@@ -77,17 +132,30 @@ def roll_cmd(input_path: str, output: str, cycles_path: str | None, hysteresis_d
 
     rec, _val = load_input(input_path, **io)
     heel = heel_of(rec, input_path)
-    rs = roll_stats(rec.time, heel, hysteresis_deg=hysteresis_deg, centre=centre, centre_window_s=centre_window_s,
-                    refine_frac=refine_frac, max_period_s=max_period_s, resets_s=parse_resets(resets),
-                    utc_start=parse_utc(utc_start))
+    rs = roll_stats(
+        rec.time,
+        heel,
+        hysteresis_deg=hysteresis_deg,
+        centre=centre,
+        centre_window_s=centre_window_s,
+        refine_frac=refine_frac,
+        max_period_s=max_period_s,
+        resets_s=parse_resets(resets),
+        utc_start=parse_utc(utc_start),
+    )
     meta = {k: v for k, v in rec.meta.items() if k in ("sensor", "device", "frame", "mounting", "calibration")}
     meta["source"] = input_path
     meta.update(input_notes(rec.meta))
     formats.write(rs.as_recording(meta), output)
     if cycles_path:
         formats.write(rs.cycles.as_recording(), cycles_path)
-    summary = {"input": input_path, "output": output, "cycles_output": cycles_path, **rs.summary(),
-               "settings": rs.settings}
+    summary = {
+        "input": input_path,
+        "output": output,
+        "cycles_output": cycles_path,
+        **rs.summary(),
+        "settings": rs.settings,
+    }
     lines = [f"{input_path}: {len(rec)} samples, {len(rs.cycles)} half-cycles → {output}"]
     s = rs.summary()
     for side in ("starboard", "port"):
@@ -96,6 +164,8 @@ def roll_cmd(input_path: str, output: str, cycles_path: str | None, hysteresis_d
         amp = f"{d['amplitude_mean_deg']:.2f}° (max {d['amplitude_max_deg']:.2f}°)" if d["excursions"] else "-"
         lines.append(f"  {side:9s}: {d['excursions']} maxima, mean period {per}, mean amplitude {amp}")
     pp, ps = s["peak_hold_port_deg"], s["peak_hold_stbd_deg"]
-    lines.append(f"  peak hold since reset: port {pp if pp is None else round(pp, 2)}°, "
-                 f"starboard {ps if ps is None else round(ps, 2)}° (reset {s['last_reset_utc'] or 'at start'})")
+    lines.append(
+        f"  peak hold since reset: port {pp if pp is None else round(pp, 2)}°, "
+        f"starboard {ps if ps is None else round(ps, 2)}° (reset {s['last_reset_utc'] or 'at start'})"
+    )
     emit_summary(summary, as_json, quiet, lines)

@@ -23,35 +23,79 @@ def _parse_set(items: tuple[str, ...]) -> dict:
     return out
 
 
-@click.command("simulate", epilog="Example: imutool simulate ship-roll -o roll.csv --seed 1   |   "
-               "imutool simulate --serve auto --protocol bridge --rate 200")
+@click.command(
+    "simulate",
+    epilog="Example: imutool simulate ship-roll -o roll.csv --seed 1   |   "
+    "imutool simulate --serve auto --protocol bridge --rate 200",
+)
 @click.argument("scenario", type=click.Choice(list(sim.SCENARIOS)), metavar="SCENARIO", required=False)
 @click.option("-o", "--output", type=click.Path(dir_okay=True), help="Output file (.csv, .bag...).")
-@click.option("--serve", default=None, metavar="auto|LINK",
-              help="Stream live frames into a new pseudo-terminal instead of writing a file; 'auto' prints the "
-                   "port, a path keeps a symlink to it (for demos and capture tests).")
-@click.option("--protocol", type=click.Choice(["nmea", "bridge", "bridge-binary"]), default="bridge",
-              show_default=True, help="With --serve: what to stream.")
-@click.option("--corrupt", type=float, default=0.0, show_default=True,
-              help="With --serve: fraction of frames with one flipped bit.")
+@click.option(
+    "--serve",
+    default=None,
+    metavar="auto|LINK",
+    help="Stream live frames into a new pseudo-terminal instead of writing a file; 'auto' prints the "
+    "port, a path keeps a symlink to it (for demos and capture tests).",
+)
+@click.option(
+    "--protocol",
+    type=click.Choice(["nmea", "bridge", "bridge-binary"]),
+    default="bridge",
+    show_default=True,
+    help="With --serve: what to stream.",
+)
+@click.option(
+    "--corrupt",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="With --serve: fraction of frames with one flipped bit.",
+)
 @click.option("--replug-every", type=float, default=None, help="With --serve: simulate unplugging every N s.")
 @click.option("--serve-log", default=None, help="With --serve: write what was sent (JSON) here at the end.")
-@click.option("--start-delay", type=float, default=1.0, show_default=True,
-              help="With --serve: seconds between announcing the port and the first frame.")
-@click.option("--start-when", default=None, metavar="FILE",
-              help="With --serve: wait until FILE exists before streaming (e.g. a capture's events log).")
+@click.option(
+    "--start-delay",
+    type=float,
+    default=1.0,
+    show_default=True,
+    help="With --serve: seconds between announcing the port and the first frame.",
+)
+@click.option(
+    "--start-when",
+    default=None,
+    metavar="FILE",
+    help="With --serve: wait until FILE exists before streaming (e.g. a capture's events log).",
+)
 @click.option("--duration", type=float, default=None, help="Length in s (scenario default if omitted).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Sample rate in Hz (scenario default).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed (deterministic output).")
-@click.option("--set", "settings", multiple=True, metavar="NAME=VALUE",
-              help="Scenario option, repeatable (e.g. --set roll_amplitude_deg=20).")
+@click.option(
+    "--set",
+    "settings",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Scenario option, repeatable (e.g. --set roll_amplitude_deg=20).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("output", "serve_log")
-def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, protocol: str, corrupt: float,
-                 replug_every: float | None, serve_log: str | None, start_delay: float, start_when: str | None,
-                 duration: float | None, rate_hz: float | None, seed: int, settings: tuple[str, ...], as_json: bool,
-                 quiet: bool) -> None:
+def simulate_cmd(
+    scenario: str | None,
+    output: str | None,
+    serve: str | None,
+    protocol: str,
+    corrupt: float,
+    replug_every: float | None,
+    serve_log: str | None,
+    start_delay: float,
+    start_when: str | None,
+    duration: float | None,
+    rate_hz: float | None,
+    seed: int,
+    settings: tuple[str, ...],
+    as_json: bool,
+    quiet: bool,
+) -> None:
     """Simulate SCENARIO (ship-roll, sea-state, turn, compass-swing, mag-sphere, static, six-position, walk, ...).
 
     Scenario options (--set NAME=VALUE) are the keyword arguments of the scenario functions in imutool.sim; an
@@ -59,9 +103,19 @@ def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, pr
     if serve:
         from imutool.capture.serve import serve as serve_pty
 
-        log = serve_pty(protocol, rate_hz or 200.0, duration, seed, corrupt, None if serve == "auto" else serve,
-                        replug_every, serve_log, announce=lambda name: click.echo(f"serving on {name}", err=True),
-                        start_delay=start_delay, start_when=start_when)
+        log = serve_pty(
+            protocol,
+            rate_hz or 200.0,
+            duration,
+            seed,
+            corrupt,
+            None if serve == "auto" else serve,
+            replug_every,
+            serve_log,
+            announce=lambda name: click.echo(f"serving on {name}", err=True),
+            start_delay=start_delay,
+            start_when=start_when,
+        )
         emit_summary({"protocol": protocol, **log.as_dict(), "corrupted": len(log.corrupted)}, as_json, quiet)
         return
     if not scenario or not output:
@@ -81,6 +135,12 @@ def simulate_cmd(scenario: str | None, output: str | None, serve: str | None, pr
     steps.stage(f"writing {output}")
     formats.write(rec, output)
     steps.close()
-    summary = {"scenario": scenario, "output": output, "rows": len(rec), "duration_s": round(rec.duration, 3),
-               "rate_hz": round(rec.rate_hz, 3), "channels": list(rec.channels)}
+    summary = {
+        "scenario": scenario,
+        "output": output,
+        "rows": len(rec),
+        "duration_s": round(rec.duration, 3),
+        "rate_hz": round(rec.rate_hz, 3),
+        "channels": list(rec.channels),
+    }
     emit_summary(summary, as_json, quiet)

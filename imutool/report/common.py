@@ -21,16 +21,23 @@ import numpy as np
 PASS, FAIL, INSUFFICIENT, NOT_TESTED = "pass", "fail", "insufficient data", "not tested"
 STATUSES = (PASS, FAIL, INSUFFICIENT, NOT_TESTED)
 
-SCOPE = ("This report is test evidence produced by imutool from recorded data. It is NOT a type approval: type "
-         "approval (e.g. MED wheelmark, recognised-organisation or flag acceptance) is granted by the "
-         "Administration or a recognised organisation. Criteria whose source could not be confirmed are listed "
-         "with their confidence tag (legend of the standards excerpts shipped with imutool, "
-         "imutool/report/standards.md: A verbatim, B secondary quote, C partial, R recalled and not confirmed, "
-         "I imutool's inference).")
+SCOPE = (
+    "This report is test evidence produced by imutool from recorded data. It is NOT a type approval: type "
+    "approval (e.g. MED wheelmark, recognised-organisation or flag acceptance) is granted by the "
+    "Administration or a recognised organisation. Criteria whose source could not be confirmed are listed "
+    "with their confidence tag (legend of the standards excerpts shipped with imutool, "
+    "imutool/report/standards.md: A verbatim, B secondary quote, C partial, R recalled and not confirmed, "
+    "I imutool's inference)."
+)
 STANDARDS_FILE = "imutool/report/standards.md (shipped with imutool)"
 
-CONFIDENCE = {"A": "seen verbatim", "B": "secondary source quoting the text", "C": "partial (titles / TOC only)",
-              "R": "recalled, NOT confirmed", "I": "imutool inference, not a requirement"}
+CONFIDENCE = {
+    "A": "seen verbatim",
+    "B": "secondary source quoting the text",
+    "C": "partial (titles / TOC only)",
+    "R": "recalled, NOT confirmed",
+    "I": "imutool inference, not a requirement",
+}
 
 
 def check_tolerance(name: str, floor: float, pct: float, unit: str) -> None:
@@ -38,8 +45,10 @@ def check_tolerance(name: str, floor: float, pct: float, unit: str) -> None:
     from formats.errors import ImutoolError
 
     if not (np.isfinite(floor) and floor > 0):
-        raise ImutoolError(f"{name} tolerance floor must be > 0 {unit} (got {floor:g}): a zero or negative "
-                           "tolerance cannot be met by any instrument")
+        raise ImutoolError(
+            f"{name} tolerance floor must be > 0 {unit} (got {floor:g}): a zero or negative "
+            "tolerance cannot be met by any instrument"
+        )
     if not (np.isfinite(pct) and 0 < pct < 100):
         raise ImutoolError(f"{name} tolerance must be between 0 and 100 % of reading (got {pct:g} %)")
 
@@ -56,8 +65,13 @@ def standards_cited(ids: list[str]) -> list[dict[str, str]]:
             continue
         c = [x.strip().replace("\\|", "|").replace("**", "") for x in re.split(r"(?<!\\)\|", line.strip()[1:-1])]
         if len(c) >= 5:
-            rows[c[0]] = {"id": c[0], "requirement": c[1].replace("*", ""), "value": c[2], "source": c[3],
-                          "confidence": c[4]}
+            rows[c[0]] = {
+                "id": c[0],
+                "requirement": c[1].replace("*", ""),
+                "value": c[2],
+                "source": c[3],
+                "confidence": c[4],
+            }
     return [rows[i] for i in ids if i in rows]
 
 
@@ -85,8 +99,11 @@ def judge(err: np.ndarray, tol: np.ndarray | float, criterion: str = "max", n_mi
     if n == 0:
         return NOT_TESTED, {"worst_ratio": None, "p95_ratio": None, "n_exceed": 0}
     r = np.abs(e[ok]) / tl[ok]
-    info = {"worst_ratio": float(r.max()), "p95_ratio": float(np.percentile(r, 95)),
-            "n_exceed": int(np.count_nonzero(r > 1.0))}
+    info = {
+        "worst_ratio": float(r.max()),
+        "p95_ratio": float(np.percentile(r, 95)),
+        "n_exceed": int(np.count_nonzero(r > 1.0)),
+    }
     if n < n_min:
         return INSUFFICIENT, info
     value = info["worst_ratio"] if criterion == "max" else info["p95_ratio"]
@@ -136,12 +153,15 @@ def tool_identity() -> dict[str, Any]:
     git = None
     try:
         root = Path(__file__).resolve().parents[2]
-        out = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
-                             timeout=5)
+        out = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5)
         if out.returncode == 0:
             git = out.stdout.strip()
-            dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                                   capture_output=True, text=True, timeout=5)
+            dirty = subprocess.run(
+                ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                capture_output=True,
+                text=True,
+                timeout=5,
+            )
             if dirty.returncode == 0 and dirty.stdout.strip():
                 git += " (modified)"
     except (OSError, subprocess.SubprocessError):
@@ -160,16 +180,25 @@ def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> 
     if rec is None:
         return clean({"path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind})
     meta = {k: v for k, v in rec.meta.items() if k not in ("validation",)}
-    return clean({
-        "path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind,
-        "rows": int(len(rec)), "rate_hz": float(rec.rate_hz) if len(rec) > 1 else None,
-        "duration_s": float(rec.duration), "channel": channel, "meta": meta,
-        "validation": rec.meta.get("validation"),
-    })
+    return clean(
+        {
+            "path": os.fspath(path),
+            "sha256": sha256_of(path),
+            "bytes": os.path.getsize(path),
+            "kind": kind,
+            "rows": int(len(rec)),
+            "rate_hz": float(rec.rate_hz) if len(rec) > 1 else None,
+            "duration_s": float(rec.duration),
+            "channel": channel,
+            "meta": meta,
+            "validation": rec.meta.get("validation"),
+        }
+    )
 
 
-def plateaus(t: np.ndarray, x: np.ndarray, band: float, min_s: float, settle_s: float = 2.0,
-             window_s: float = 2.0) -> list[tuple[float, float]]:
+def plateaus(
+    t: np.ndarray, x: np.ndarray, band: float, min_s: float, settle_s: float = 2.0, window_s: float = 2.0
+) -> list[tuple[float, float]]:
     """Stationary stretches of x: runs where the range of x over ±window_s/2 stays ≤ band, lasting ≥ min_s.
 
     Returns [(start, end)] in s, each trimmed by settle_s at the start (the table settling after a move).
@@ -216,8 +245,16 @@ def overall(items: list[dict[str, Any]], required: tuple[str, ...]) -> dict[str,
         headline = f"FAIL: {', '.join(failed)}"
     else:
         headline = f"INCOMPLETE: passed: {', '.join(passed) or 'none'}; not tested: {', '.join(untested)}"
-    return {"status": status, "headline": headline, "counts": counts, "required_items": list(required),
-            "required_not_passed": missing, "passed": passed, "failed": failed, "not_tested": untested,
-            "exit_status": 0 if status == PASS else 1,
-            "rule": "fail if any item fails; pass only if every required item was tested and passed; otherwise "
-                    "incomplete. Exit status 0 pass, 1 fail or incomplete, 2 usage error"}
+    return {
+        "status": status,
+        "headline": headline,
+        "counts": counts,
+        "required_items": list(required),
+        "required_not_passed": missing,
+        "passed": passed,
+        "failed": failed,
+        "not_tested": untested,
+        "exit_status": 0 if status == PASS else 1,
+        "rule": "fail if any item fails; pass only if every required item was tested and passed; otherwise "
+        "incomplete. Exit status 0 pass, 1 fail or incomplete, 2 usage error",
+    }

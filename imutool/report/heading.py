@@ -42,22 +42,44 @@ from .common import (
 )
 
 EDITIONS = [
-    {"document": "IMO MSC.116(73)", "edition": "Performance standards for transmitting heading devices (THDs)",
-     "role": "static, dynamic, follow-up and transmission limits §4.3.2", "confidence": "A"},
-    {"document": "ISO 22090-2", "edition": "2014 (geomagnetic principles), excerpt of §6.4 only",
-     "role": "static test at ≥ 4 equidistant headings, ±1.0° (95 %)", "confidence": "B"},
-    {"document": "IEC 61162-1", "edition": "HDG/HDT/THS as reproduced in public sources",
-     "role": "interface", "confidence": "B"},
+    {
+        "document": "IMO MSC.116(73)",
+        "edition": "Performance standards for transmitting heading devices (THDs)",
+        "role": "static, dynamic, follow-up and transmission limits §4.3.2",
+        "confidence": "A",
+    },
+    {
+        "document": "ISO 22090-2",
+        "edition": "2014 (geomagnetic principles), excerpt of §6.4 only",
+        "role": "static test at ≥ 4 equidistant headings, ±1.0° (95 %)",
+        "confidence": "B",
+    },
+    {
+        "document": "IEC 61162-1",
+        "edition": "HDG/HDT/THS as reproduced in public sources",
+        "role": "interface",
+        "confidence": "B",
+    },
 ]
 
 UNCONFIRMED = [
-    {"id": "ISO22090-2-5.5", "text": "ISO 22090-2 §5.5 follow-up limit: not seen; MSC.116(73) §4.3.2.4 figures used.",
-     "confidence": "B"},
+    {
+        "id": "ISO22090-2-5.5",
+        "text": "ISO 22090-2 §5.5 follow-up limit: not seen; MSC.116(73) §4.3.2.4 figures used.",
+        "confidence": "B",
+    },
     {"id": "ISO22090-2-5.6", "text": "Card settling time limit (§5.6): not found; not tested.", "confidence": "-"},
-    {"id": "ISO22090-2-5.3", "text": "The ±1.0° (95 %) static figure is stated for the compass-card type; applied "
-     "here to the DMC as the closest figure.", "confidence": "B"},
-    {"id": "A.382", "text": "The magnetic sensing part must also meet A.382(X) and be tested separately: not covered.",
-     "confidence": "A"},
+    {
+        "id": "ISO22090-2-5.3",
+        "text": "The ±1.0° (95 %) static figure is stated for the compass-card type; applied "
+        "here to the DMC as the closest figure.",
+        "confidence": "B",
+    },
+    {
+        "id": "A.382",
+        "text": "The magnetic sensing part must also meet A.382(X) and be tested separately: not covered.",
+        "confidence": "A",
+    },
 ]
 
 NOT_TESTED_ALWAYS = [
@@ -108,8 +130,9 @@ def heading_of(rec: Recording, channel: str | None, path: str) -> tuple[np.ndarr
         if n in rec.channels:
             a = rec.get(n, "deg") if rec.units.get(n) else rec[n]
             return np.asarray(a, float), n
-    raise ImutoolError(f"needs a heading channel ({', '.join(names)}); has {', '.join(rec.channels) or 'none'}",
-                       path=path)
+    raise ImutoolError(
+        f"needs a heading channel ({', '.join(names)}); has {', '.join(rec.channels) or 'none'}", path=path
+    )
 
 
 def heading_capture_check(path: str) -> dict[str, Any]:
@@ -141,14 +164,40 @@ def heading_capture_check(path: str) -> dict[str, Any]:
             if f1:
                 d = len(f1.split(".")[1]) if "." in f1 else 0
                 decimals[d] = decimals.get(d, 0) + 1
-    return {"heading_sentences": n, "types": types, "checksum_ok": ok, "checksum_bad": bad,
-            "checksum_pass_rate": ok / n if n else None, "decimals": {str(k): v for k, v in decimals.items()}}
+    return {
+        "heading_sentences": n,
+        "types": types,
+        "checksum_ok": ok,
+        "checksum_bad": bad,
+        "checksum_pass_rate": ok / n if n else None,
+        "decimals": {str(k): v for k, v in decimals.items()},
+    }
 
 
-def _item(id_: str, clause: str, title: str, status: str, reason: str, criterion: str | None = None,
-          stats_: dict | None = None, rows: list | None = None, extra: dict | None = None) -> dict[str, Any]:
-    return clean({"id": id_, "clause": clause, "title": title, "status": status, "reason": reason,
-                  "criterion": criterion, "stats": stats_ or {}, "rows": rows or [], **(extra or {})})
+def _item(
+    id_: str,
+    clause: str,
+    title: str,
+    status: str,
+    reason: str,
+    criterion: str | None = None,
+    stats_: dict | None = None,
+    rows: list | None = None,
+    extra: dict | None = None,
+) -> dict[str, Any]:
+    return clean(
+        {
+            "id": id_,
+            "clause": clause,
+            "title": title,
+            "status": status,
+            "reason": reason,
+            "criterion": criterion,
+            "stats": stats_ or {},
+            "rows": rows or [],
+            **(extra or {}),
+        }
+    )
 
 
 def _unwrap_deg(h: np.ndarray) -> np.ndarray:
@@ -158,10 +207,19 @@ def _unwrap_deg(h: np.ndarray) -> np.ndarray:
     return out
 
 
-def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = None, ref_path: str | None = None,
-                     dut_channel: str | None = None, ref_channel: str | None = None, dut_correction_deg: float = 0.0,
-                     options: HeadingOptions | None = None, identification: dict[str, Any] | None = None,
-                     test_info: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+def heading_evidence(
+    dut: Recording,
+    ref: Recording,
+    *,
+    dut_path: str | None = None,
+    ref_path: str | None = None,
+    dut_channel: str | None = None,
+    ref_channel: str | None = None,
+    dut_correction_deg: float = 0.0,
+    options: HeadingOptions | None = None,
+    identification: dict[str, Any] | None = None,
+    test_info: dict[str, Any] | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """Build the heading-device evidence (JSON-safe dict) and plot arrays (see module docstring).
 
     dut_correction_deg is added to the DUT heading first (e.g. magnetic variation, E +, to compare a magnetic
@@ -205,13 +263,22 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     rot[:w] = np.nan  # moving-average edge effects
     rot[-w:] = np.nan
     crit_txt = "every sample |error| ≤ limit" if o.criterion == "max" else "95th percentile |error| ≤ limit"
-    alignment = {"method": "cross-correlation of wrapped heading (imutool.metrics.best_lag, wrap_deg)",
-                 "lag_s": lag, "lag_positive_means": "DUT lags the reference", "rms_at_lag_deg": lag_rms,
-                 "mean_error_removed_for_lag_deg": mean_err,
-                 "applied": o.align == "xcorr", "search_range_s": o.max_lag_s,
-                 "note": ("lag removed (independent clocks): latency is NOT assessed by the follow-up test"
-                          if o.align == "xcorr" else "no lag removed (common clock): latency counts as error"),
-                 "dut_correction_deg": dut_correction_deg, "overlap_s": overlap}
+    alignment = {
+        "method": "cross-correlation of wrapped heading (imutool.metrics.best_lag, wrap_deg)",
+        "lag_s": lag,
+        "lag_positive_means": "DUT lags the reference",
+        "rms_at_lag_deg": lag_rms,
+        "mean_error_removed_for_lag_deg": mean_err,
+        "applied": o.align == "xcorr",
+        "search_range_s": o.max_lag_s,
+        "note": (
+            "lag removed (independent clocks): latency is NOT assessed by the follow-up test"
+            if o.align == "xcorr"
+            else "no lag removed (common clock): latency counts as error"
+        ),
+        "dut_correction_deg": dut_correction_deg,
+        "overlap_s": overlap,
+    }
     warnings: list[str] = []
     if o.align == "xcorr":
         warnings.append("time lag removed before comparison: the follow-up error does not include the DUT latency")
@@ -225,10 +292,12 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
         roll = np.interp(t, dut.time, np.asarray(dut["roll"], float))
     spans = plateaus(t, u_ref, o.step_band_deg, o.step_min_s, o.step_settle_s)
     if roll is not None:
+
         def still(a: float, b: float) -> bool:
             r = roll[(t >= a) & (t <= b)]
             r = r[np.isfinite(r)]
             return r.size == 0 or float(np.ptp(r)) < o.min_roll_range_deg
+
         spans = [(a, b) for a, b in spans if still(a, b)]
     static_mask = np.zeros(t.size, bool)
     rows = []
@@ -243,10 +312,19 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
         st, _ = judge(ee, o.static_limit_deg, o.criterion)
         errs.append(ee)
         hdg = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(h_ref[mm])))))) % 360.0
-        rows.append({"heading_deg": hdg, "start_s": a, "end_s": b, "n": int(mm.sum()),
-                     "error_mean_deg": float(ee.mean()), "max_abs_error_deg": float(np.abs(ee).max()),
-                     "p95_abs_error_deg": float(np.percentile(np.abs(ee), 95)), "limit_deg": o.static_limit_deg,
-                     "status": st})
+        rows.append(
+            {
+                "heading_deg": hdg,
+                "start_s": a,
+                "end_s": b,
+                "n": int(mm.sum()),
+                "error_mean_deg": float(ee.mean()),
+                "max_abs_error_deg": float(np.abs(ee).max()),
+                "p95_abs_error_deg": float(np.percentile(np.abs(ee), 95)),
+                "limit_deg": o.static_limit_deg,
+                "status": st,
+            }
+        )
     # distinct headings (within 5°) and the largest circular gap
     hd = sorted({round(r["heading_deg"] / 5.0) * 5.0 % 360.0 for r in rows})
     gap = float(max(np.diff(np.concatenate([hd, [hd[0] + 360.0]])))) if hd else 360.0
@@ -258,15 +336,34 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
         nf = sum(r["status"] == FAIL for r in rows)
         st, why = FAIL, f"{nf} of {len(rows)} headings outside ±{o.static_limit_deg}°"
     elif len(hd) < o.min_headings or gap > max_gap:
-        st, why = INSUFFICIENT, (f"{len(hd)} distinct headings, largest gap {gap:.0f}°; ≥ {o.min_headings} "
-                                 f"equidistant headings (gap ≤ {max_gap:.0f}°) needed")
+        st, why = (
+            INSUFFICIENT,
+            (
+                f"{len(hd)} distinct headings, largest gap {gap:.0f}°; ≥ {o.min_headings} "
+                f"equidistant headings (gap ≤ {max_gap:.0f}°) needed"
+            ),
+        )
     else:
-        st, why = PASS, (f"{len(hd)} distinct headings (largest gap {gap:.0f}°), all within ±{o.static_limit_deg}°"
-                         + ("" if len(hd) >= 8 else "; 8 headings are preferable"))
-    items.append(_item("static", "MSC.116(73) §4.3.2.2 (A); ISO 22090-2 §6.4/§5.3 (B)", "Static heading error", st,
-                       why, f"|error| ≤ {o.static_limit_deg}° at each heading; {crit_txt}", stats(ee_all), rows,
-                       {"distinct_headings": len(hd), "largest_gap_deg": gap, "unit": "deg",
-                        "source": "device heading"}))
+        st, why = (
+            PASS,
+            (
+                f"{len(hd)} distinct headings (largest gap {gap:.0f}°), all within ±{o.static_limit_deg}°"
+                + ("" if len(hd) >= 8 else "; 8 headings are preferable")
+            ),
+        )
+    items.append(
+        _item(
+            "static",
+            "MSC.116(73) §4.3.2.2 (A); ISO 22090-2 §6.4/§5.3 (B)",
+            "Static heading error",
+            st,
+            why,
+            f"|error| ≤ {o.static_limit_deg}° at each heading; {crit_txt}",
+            stats(ee_all),
+            rows,
+            {"distinct_headings": len(hd), "largest_gap_deg": gap, "unit": "deg", "source": "device heading"},
+        )
+    )
 
     # ---- follow-up by rate-of-turn band --------------------------------------------------------------------
     turning = both & ~static_mask & (np.abs(rot) >= o.turn_min_dps)
@@ -286,17 +383,20 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
     mt = turning & np.isfinite(e_fu) & np.isfinite(rot)
     if mt.sum() > 10 and o.follow_up_relative and len(rows) >= 2:
         alignment["latency_from_follow_up_s"] = float(-np.sum(e_fu[mt] * rot[mt]) / np.sum(rot[mt] ** 2))
-        alignment["latency_method"] = ("least squares of the follow-up error on the reference rate of turn: "
-                                       "error = −rate · latency (static error by heading removed)")
+        alignment["latency_method"] = (
+            "least squares of the follow-up error on the reference rate of turn: "
+            "error = −rate · latency (static error by heading removed)"
+        )
     # band by the largest |rate| within ± rot_window_s: the start of an abrupt turn belongs to the faster band
     from scipy.ndimage import maximum_filter1d
 
     arot = maximum_filter1d(np.nan_to_num(np.abs(rot)), 2 * w + 1, mode="nearest")
     arot[~np.isfinite(rot)] = np.nan
     top = o.band_max_dps * (1 + o.band_margin)
-    for id_, lo, hi, lim, nominal in (("follow_up_10", o.turn_min_dps, o.band_split_dps, o.follow_low_deg,
-                                       o.band_split_dps),
-                                      ("follow_up_20", o.band_split_dps, top, o.follow_high_deg, o.band_max_dps)):
+    for id_, lo, hi, lim, nominal in (
+        ("follow_up_10", o.turn_min_dps, o.band_split_dps, o.follow_low_deg, o.band_split_dps),
+        ("follow_up_20", o.band_split_dps, top, o.follow_high_deg, o.band_max_dps),
+    ):
         m = turning & (arot > lo) & (arot <= hi)
         secs = float(m.sum() * dt)
         st, jinfo = judge(e_fu[m], lim, o.criterion)
@@ -308,20 +408,38 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
             st = FAIL if st == FAIL else INSUFFICIENT
             why = f"{secs:.1f} s of turning in the band; ≥ {o.min_band_s:g} s needed"
         else:
-            why = (f"{secs:.1f} s of turning, max |rate| {float(np.nanmax(arot[m])):.1f} °/s: {jinfo['n_exceed']} of "
-                   f"{int(m.sum())} samples beyond ±{lim}° (static error removed); raw error: {jraw['n_exceed']} "
-                   f"beyond, max {float(np.nanmax(np.abs(e[m]))):.2f}°")
+            why = (
+                f"{secs:.1f} s of turning, max |rate| {float(np.nanmax(arot[m])):.1f} °/s: {jinfo['n_exceed']} of "
+                f"{int(m.sum())} samples beyond ±{lim}° (static error removed); raw error: {jraw['n_exceed']} "
+                f"beyond, max {float(np.nanmax(np.abs(e[m]))):.2f}°"
+            )
             if id_ == "follow_up_20" and st == PASS and fast_s < o.min_band_s:
                 st = INSUFFICIENT
-                why += (f"; the ISO 22090-2 follow-up test turns at {o.follow_up_test_dps:g} °/s: ≥ {o.min_band_s:g} s "
-                        f"at ≥ {o.follow_up_test_frac * o.follow_up_test_dps:g} °/s needed ({fast_s:.1f} s)")
-        items.append(_item(id_, "MSC.116(73) §4.3.2.4 (A); ISO 22090-2 follow-up test at 20 °/s (B)",
-                           f"Follow-up error, rate of turn {lo:g}-{nominal:g} °/s", st, why,
-                           f"|error| ≤ {lim}°; {crit_txt}", stats(e_fu[m]), [],
-                           {"unit": "deg", "duration_s": secs, "error_definition": fu_note,
-                            "raw_error_stats": stats(e[m]), "raw_status": st_raw if m.any() else NOT_TESTED,
-                            "source": "device heading",
-                            "seconds_at_test_rate": fast_s}))
+                why += (
+                    f"; the ISO 22090-2 follow-up test turns at {o.follow_up_test_dps:g} °/s: ≥ {o.min_band_s:g} s "
+                    f"at ≥ {o.follow_up_test_frac * o.follow_up_test_dps:g} °/s needed ({fast_s:.1f} s)"
+                )
+        items.append(
+            _item(
+                id_,
+                "MSC.116(73) §4.3.2.4 (A); ISO 22090-2 follow-up test at 20 °/s (B)",
+                f"Follow-up error, rate of turn {lo:g}-{nominal:g} °/s",
+                st,
+                why,
+                f"|error| ≤ {lim}°; {crit_txt}",
+                stats(e_fu[m]),
+                [],
+                {
+                    "unit": "deg",
+                    "duration_s": secs,
+                    "error_definition": fu_note,
+                    "raw_error_stats": stats(e[m]),
+                    "raw_status": st_raw if m.any() else NOT_TESTED,
+                    "source": "device heading",
+                    "seconds_at_test_rate": fast_s,
+                },
+            )
+        )
     fast = turning & (arot > top)
     if fast.any():
         warnings.append(f"{fast.sum() * dt:.1f} s of turning faster than {o.band_max_dps:g} °/s: reported, not judged")
@@ -337,8 +455,9 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
 
         win = max(3, int(round(o.roll_window_s / dt)))
         rf = np.nan_to_num(roll)
-        rolling = (maximum_filter1d(rf, win, mode="nearest") - minimum_filter1d(rf, win, mode="nearest")
-                   ) >= o.min_roll_range_deg
+        rolling = (
+            maximum_filter1d(rf, win, mode="nearest") - minimum_filter1d(rf, win, mode="nearest")
+        ) >= o.min_roll_range_deg
         m = quiet & np.isfinite(roll) & rolling
         secs = float(m.sum() * dt)
         extra["duration_s"] = secs
@@ -362,14 +481,26 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
             freq_bad = osc > o.dynamic_small_deg and f_dom >= o.dynamic_max_freq_hz
             if st == PASS and freq_bad:
                 st = FAIL
-            why = (f"{secs:.0f} s at constant heading, roll range {rr:.1f}°: max |error| {amp:.2f}°, oscillation "
-                   f"±{half_pp:.2f}° at {f_dom:.3f} Hz" + ("; oscillation > 0.5° faster than 0.033 Hz" if freq_bad
-                                                          else ""))
+            why = (
+                f"{secs:.0f} s at constant heading, roll range {rr:.1f}°: max |error| {amp:.2f}°, oscillation "
+                f"±{half_pp:.2f}° at {f_dom:.3f} Hz" + ("; oscillation > 0.5° faster than 0.033 Hz" if freq_bad else "")
+            )
             if secs < o.min_dynamic_s and st != FAIL:
                 st, why = INSUFFICIENT, why + f"; ≥ {o.min_dynamic_s:g} s needed"
-    items.append(_item("dynamic", "MSC.116(73) §4.3.2.3 (A)", "Dynamic error (rolling at constant heading)", st, why,
-                       f"|error| ≤ {o.dynamic_limit_deg}°; oscillations > ±{o.dynamic_small_deg}° slower than "
-                       f"{o.dynamic_max_freq_hz} Hz", stats(ed), [], extra))
+    items.append(
+        _item(
+            "dynamic",
+            "MSC.116(73) §4.3.2.3 (A)",
+            "Dynamic error (rolling at constant heading)",
+            st,
+            why,
+            f"|error| ≤ {o.dynamic_limit_deg}°; oscillations > ±{o.dynamic_small_deg}° slower than "
+            f"{o.dynamic_max_freq_hz} Hz",
+            stats(ed),
+            [],
+            extra,
+        )
+    )
 
     # ---- interface ----------------------------------------------------------------------------------------------
     is_nmea = dut_path is not None and os.path.splitext(dut_path)[1].lower() in (".nmea", ".log", ".txt", ".nmea0183")
@@ -382,53 +513,126 @@ def heading_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = N
             st, why = FAIL, f"{cap['checksum_bad']} bad checksums, {coarse} headings with < 0.1° resolution"
         else:
             st, why = PASS, f"{cap['heading_sentences']} sentences, checksums valid, resolution ≤ 0.1°"
-        items.append(_item("interface", "MSC.116(73) §4.3.2.1 (A), §4.4", "Interface and resolution", st, why,
-                           "valid checksums; heading resolution 0.1° (transmission + resolution < ±0.2°)",
-                           {"n": cap["heading_sentences"]}, [], {"capture": cap}))
+        items.append(
+            _item(
+                "interface",
+                "MSC.116(73) §4.3.2.1 (A), §4.4",
+                "Interface and resolution",
+                st,
+                why,
+                "valid checksums; heading resolution 0.1° (transmission + resolution < ±0.2°)",
+                {"n": cap["heading_sentences"]},
+                [],
+                {"capture": cap},
+            )
+        )
     else:
-        items.append(_item("interface", "MSC.116(73) §4.3.2.1", "Interface and resolution", NOT_TESTED,
-                           "the DUT input is not an NMEA capture"))
+        items.append(
+            _item(
+                "interface",
+                "MSC.116(73) §4.3.2.1",
+                "Interface and resolution",
+                NOT_TESTED,
+                "the DUT input is not an NMEA capture",
+            )
+        )
 
-    not_tested = [f"{it['title']} ({it['clause']}): {it['reason']}" for it in items
-                  if it["status"] in (NOT_TESTED, INSUFFICIENT)] + NOT_TESTED_ALWAYS
+    not_tested = [
+        f"{it['title']} ({it['clause']}): {it['reason']}" for it in items if it["status"] in (NOT_TESTED, INSUFFICIENT)
+    ] + NOT_TESTED_ALWAYS
     ev = {
-        "schema": "imutool-evidence/1", "report": "heading",
+        "schema": "imutool-evidence/1",
+        "report": "heading",
         "title": "Heading device: test evidence per ISO 22090-2 / IMO MSC.116(73)",
-        "generated_utc": now_utc(), "tool": tool_identity(), "scope": SCOPE,
-        "test_record": clean(dict(tinfo)), "test_record_missing": missing_fields(tinfo),
-        "identification": clean(identification or {}) | {
+        "generated_utc": now_utc(),
+        "tool": tool_identity(),
+        "scope": SCOPE,
+        "test_record": clean(dict(tinfo)),
+        "test_record_missing": missing_fields(tinfo),
+        "identification": clean(identification or {})
+        | {
             "dut_device": dut.meta.get("device") or dut.meta.get("sensor"),
             "reference_device": ref.meta.get("device") or ref.meta.get("sensor"),
-            "mounting": clean(dut.meta.get("mounting")), "calibration": clean(dut.meta.get("calibration"))},
-        "inputs": {"dut": input_record(dut_path, dut, dch, "nmea" if is_nmea else "recording"),
-                   "reference": input_record(ref_path, ref, rch, "recording"), "static_steps": None},
-        "conventions": {"angle_unit": "deg", "time_unit": "s",
-                        "sign": "heading clockwise from north in [0, 360); error = wrap180(DUT − reference); rate of "
-                                "turn + clockwise (°/s)",
-                        "frame": "NED (heading about the down axis)",
-                        "time_base": "reference time (s); DUT resampled (unwrapped, linear) onto it"},
+            "mounting": clean(dut.meta.get("mounting")),
+            "calibration": clean(dut.meta.get("calibration")),
+        },
+        "inputs": {
+            "dut": input_record(dut_path, dut, dch, "nmea" if is_nmea else "recording"),
+            "reference": input_record(ref_path, ref, rch, "recording"),
+            "static_steps": None,
+        },
+        "conventions": {
+            "angle_unit": "deg",
+            "time_unit": "s",
+            "sign": "heading clockwise from north in [0, 360); error = wrap180(DUT − reference); rate of "
+            "turn + clockwise (°/s)",
+            "frame": "NED (heading about the down axis)",
+            "time_base": "reference time (s); DUT resampled (unwrapped, linear) onto it",
+        },
         "editions": EDITIONS,
         "criteria": [
-            {"id": "static", "text": f"static error ≤ ±{o.static_limit_deg}°", "source": "MSC.116(73) §4.3.2.2",
-             "confidence": "A"},
-            {"id": "static_95", "text": "±1.0° (95 %) at ≥ 4 equidistant headings", "source": "ISO 22090-2 §6.4/§5.3",
-             "confidence": "B"},
-            {"id": "dynamic", "text": f"dynamic error ≤ ±{o.dynamic_limit_deg}°; > ±{o.dynamic_small_deg}° only below "
-             f"{o.dynamic_max_freq_hz} Hz", "source": "MSC.116(73) §4.3.2.3", "confidence": "A"},
-            {"id": "follow_up", "text": f"±{o.follow_low_deg}° up to {o.band_split_dps:g} °/s, ±{o.follow_high_deg}° "
-             f"{o.band_split_dps:g}-{o.band_max_dps:g} °/s", "source": "MSC.116(73) §4.3.2.4", "confidence": "A"},
-            {"id": "follow_up_error", "text": fu_note, "source": "imutool choice (MSC.116(73) names the follow-up "
-             "error without a measurement recipe here)", "confidence": "I"},
-            {"id": "statistic", "text": crit_txt, "source": "imutool default (strictest)" if o.criterion == "max"
-             else "ISO 22090-2 95 % figure", "confidence": "I" if o.criterion == "max" else "B"},
+            {
+                "id": "static",
+                "text": f"static error ≤ ±{o.static_limit_deg}°",
+                "source": "MSC.116(73) §4.3.2.2",
+                "confidence": "A",
+            },
+            {
+                "id": "static_95",
+                "text": "±1.0° (95 %) at ≥ 4 equidistant headings",
+                "source": "ISO 22090-2 §6.4/§5.3",
+                "confidence": "B",
+            },
+            {
+                "id": "dynamic",
+                "text": f"dynamic error ≤ ±{o.dynamic_limit_deg}°; > ±{o.dynamic_small_deg}° only below "
+                f"{o.dynamic_max_freq_hz} Hz",
+                "source": "MSC.116(73) §4.3.2.3",
+                "confidence": "A",
+            },
+            {
+                "id": "follow_up",
+                "text": f"±{o.follow_low_deg}° up to {o.band_split_dps:g} °/s, ±{o.follow_high_deg}° "
+                f"{o.band_split_dps:g}-{o.band_max_dps:g} °/s",
+                "source": "MSC.116(73) §4.3.2.4",
+                "confidence": "A",
+            },
+            {
+                "id": "follow_up_error",
+                "text": fu_note,
+                "source": "imutool choice (MSC.116(73) names the follow-up error without a measurement recipe here)",
+                "confidence": "I",
+            },
+            {
+                "id": "statistic",
+                "text": crit_txt,
+                "source": "imutool default (strictest)" if o.criterion == "max" else "ISO 22090-2 95 % figure",
+                "confidence": "I" if o.criterion == "max" else "B",
+            },
         ],
-        "settings": clean(asdict(o)), "alignment": clean(alignment), "items": items,
-        "overall": overall(items, REQUIRED), "not_tested": not_tested, "unconfirmed": UNCONFIRMED,
+        "settings": clean(asdict(o)),
+        "alignment": clean(alignment),
+        "items": items,
+        "overall": overall(items, REQUIRED),
+        "not_tested": not_tested,
+        "unconfirmed": UNCONFIRMED,
         "warnings": warnings,
     }
-    plots = {"t": t, "ref": h_ref, "dut": d, "err": e, "err_fu": e_fu, "rot": rot, "static_mask": static_mask,
-             "static_rows": rows,
-             "turn_mask": turning, "err_raw": e, "static_limit_deg": o.static_limit_deg,
-             "follow_low_deg": o.follow_low_deg,
-             "follow_high_deg": o.follow_high_deg, "band_split_dps": o.band_split_dps, "band_max_dps": o.band_max_dps}
+    plots = {
+        "t": t,
+        "ref": h_ref,
+        "dut": d,
+        "err": e,
+        "err_fu": e_fu,
+        "rot": rot,
+        "static_mask": static_mask,
+        "static_rows": rows,
+        "turn_mask": turning,
+        "err_raw": e,
+        "static_limit_deg": o.static_limit_deg,
+        "follow_low_deg": o.follow_low_deg,
+        "follow_high_deg": o.follow_high_deg,
+        "band_split_dps": o.band_split_dps,
+        "band_max_dps": o.band_max_dps,
+    }
     return ev, plots

@@ -47,33 +47,69 @@ from .common import (
 )
 
 EDITIONS = [
-    {"document": "IMO MSC.363(92)", "edition": "Performance standards for electronic inclinometers, adopted 14 June "
-     "2013", "role": "accuracy criteria (angle, period), definitions §3", "confidence": "A"},
-    {"document": "ISO 19697", "edition": "2016 (the ISO/DIS 19697 revision of 2025 was not available)",
-     "role": "test clause structure §6.2-§6.10 (clause titles only)", "confidence": "C"},
-    {"document": "IEC 61162-1", "edition": "HRM sentence as reproduced in vendor manuals (Ed.5 2016 likely)",
-     "role": "interface, sign convention (+ starboard), HRM fields", "confidence": "B"},
-    {"document": "IMO MSC.1/Circ.1575", "edition": "PNT guidance, Appendix C Table C-1",
-     "role": "95 % interpretation of the accuracy (option --criterion p95)", "confidence": "A"},
-    {"document": "SOLAS V/19.2.12 (MSC.532(107))", "edition": "in force 1 January 2026",
-     "role": "carriage requirement (context only)", "confidence": "A/B"},
+    {
+        "document": "IMO MSC.363(92)",
+        "edition": "Performance standards for electronic inclinometers, adopted 14 June 2013",
+        "role": "accuracy criteria (angle, period), definitions §3",
+        "confidence": "A",
+    },
+    {
+        "document": "ISO 19697",
+        "edition": "2016 (the ISO/DIS 19697 revision of 2025 was not available)",
+        "role": "test clause structure §6.2-§6.10 (clause titles only)",
+        "confidence": "C",
+    },
+    {
+        "document": "IEC 61162-1",
+        "edition": "HRM sentence as reproduced in vendor manuals (Ed.5 2016 likely)",
+        "role": "interface, sign convention (+ starboard), HRM fields",
+        "confidence": "B",
+    },
+    {
+        "document": "IMO MSC.1/Circ.1575",
+        "edition": "PNT guidance, Appendix C Table C-1",
+        "role": "95 % interpretation of the accuracy (option --criterion p95)",
+        "confidence": "A",
+    },
+    {
+        "document": "SOLAS V/19.2.12 (MSC.532(107))",
+        "edition": "in force 1 January 2026",
+        "role": "carriage requirement (context only)",
+        "confidence": "A/B",
+    },
 ]
 
 UNCONFIRMED = [
     {"id": "P6", "text": "Roll amplitude display resolution (1° is likely but not confirmed).", "confidence": "R"},
-    {"id": "P7", "text": "That MSC.363(92) itself requires a peak-hold display is not confirmed (it is in the IEC "
-     "61162-1 HRM notes and ISO 19697 §6.10 title).", "confidence": "C"},
-    {"id": "P9", "text": "Heel-angle measuring range: not found; the tested range is what the data covered.",
-     "confidence": "-"},
+    {
+        "id": "P7",
+        "text": "That MSC.363(92) itself requires a peak-hold display is not confirmed (it is in the IEC "
+        "61162-1 HRM notes and ISO 19697 §6.10 title).",
+        "confidence": "C",
+    },
+    {
+        "id": "P9",
+        "text": "Heel-angle measuring range: not found; the tested range is what the data covered.",
+        "confidence": "-",
+    },
     {"id": "P10", "text": "Roll-period measuring range: not found.", "confidence": "-"},
-    {"id": "P11", "text": "Output update rate, power-up/settling time, alarm thresholds: not found.",
-     "confidence": "-"},
-    {"id": "P13", "text": "VDR recording of rolling motion (MSC.333(90) §5.5): recalled, not seen.",
-     "confidence": "R"},
-    {"id": "ISO19697-5.2", "text": "Acceleration test conditions of ISO 19697 §5.2: not known; not evaluated.",
-     "confidence": "C"},
-    {"id": "ISO19697-6.4", "text": "Long-term test duration and limit of ISO 19697 §6.4: not known; imutool "
-     "applies the heel tolerance over the whole hold and reports the drift rate.", "confidence": "C"},
+    {
+        "id": "P11",
+        "text": "Output update rate, power-up/settling time, alarm thresholds: not found.",
+        "confidence": "-",
+    },
+    {"id": "P13", "text": "VDR recording of rolling motion (MSC.333(90) §5.5): recalled, not seen.", "confidence": "R"},
+    {
+        "id": "ISO19697-5.2",
+        "text": "Acceleration test conditions of ISO 19697 §5.2: not known; not evaluated.",
+        "confidence": "C",
+    },
+    {
+        "id": "ISO19697-6.4",
+        "text": "Long-term test duration and limit of ISO 19697 §6.4: not known; imutool "
+        "applies the heel tolerance over the whole hold and reports the drift rate.",
+        "confidence": "C",
+    },
 ]
 
 NOT_TESTED_ALWAYS = [
@@ -86,9 +122,21 @@ SRC_DEVICE = "reported by the device (HRM fields)"
 SRC_DERIVED = "derived by imutool from the device's heel angle (imutool.roll)"
 
 # every item the requirement asks for; the overall result is PASS only when all were tested and passed
-REQUIRED = ("static_heel", "dynamic_heel", "amplitude_stbd", "amplitude_port", "roll_period", "long_term",
-            "peak_hold", "lateral_acceleration", "interface", "display", "alarms", "power_supply",
-            "environmental_emc")
+REQUIRED = (
+    "static_heel",
+    "dynamic_heel",
+    "amplitude_stbd",
+    "amplitude_port",
+    "roll_period",
+    "long_term",
+    "peak_hold",
+    "lateral_acceleration",
+    "interface",
+    "display",
+    "alarms",
+    "power_supply",
+    "environmental_emc",
+)
 CITED = ["P1", "P2", "P3", "P4", "P5", "P6", "P7", "P8", "P9", "P10", "P11", "P12", "P14"]
 
 
@@ -149,11 +197,15 @@ class InclinometerOptions:
         if self.guard_band:
             u = self.uncertainty_k2_deg
             if u is None:
-                raise ImutoolError("the guard-band decision rule needs the reference's expanded uncertainty "
-                                   "(test record [reference] uncertainty_k2_deg)")
+                raise ImutoolError(
+                    "the guard-band decision rule needs the reference's expanded uncertainty "
+                    "(test record [reference] uncertainty_k2_deg)"
+                )
             if u >= self.angle_floor_deg:
-                raise ImutoolError(f"reference uncertainty U = {u:g}° is not below the {self.angle_floor_deg:g}° "
-                                   "tolerance: with a guard band nothing could pass (use a better reference)")
+                raise ImutoolError(
+                    f"reference uncertainty U = {u:g}° is not below the {self.angle_floor_deg:g}° "
+                    "tolerance: with a guard band nothing could pass (use a better reference)"
+                )
 
 
 def _read_steps(path: str) -> list[tuple[float, float, float | None]]:
@@ -166,8 +218,9 @@ def _read_steps(path: str) -> list[tuple[float, float, float | None]]:
         raise ImutoolError("static steps file is empty", path=path)
     head = [h.strip().lower() for h in lines[0][1].split(",")]
     if "start" not in head or "end" not in head:
-        raise ImutoolError("static steps file needs a header 'start,end[,reference]' (s, s, deg)", path=path,
-                           line=lines[0][0])
+        raise ImutoolError(
+            "static steps file needs a header 'start,end[,reference]' (s, s, deg)", path=path, line=lines[0][0]
+        )
     ia, ib = head.index("start"), head.index("end")
     ir = head.index("reference") if "reference" in head else None
     for ln, text in lines[1:]:
@@ -176,8 +229,9 @@ def _read_steps(path: str) -> list[tuple[float, float, float | None]]:
             a, b = float(f[ia]), float(f[ib])
             r = float(f[ir]) if ir is not None and ir < len(f) and f[ir] not in ("", "nan") else None
         except (ValueError, IndexError):
-            raise ImutoolError(f"bad step row {text!r} (expected start,end[,reference] numbers)", path=path,
-                               line=ln) from None
+            raise ImutoolError(
+                f"bad step row {text!r} (expected start,end[,reference] numbers)", path=path, line=ln
+            ) from None
         if not b > a:
             raise ImutoolError(f"step end {b} is not after start {a}", path=path, line=ln)
         rows.append((a, b, r))
@@ -195,16 +249,30 @@ def _dut_outputs(dut: Recording, heel: np.ndarray, o: InclinometerOptions) -> tu
                 out[k] = np.asarray(dut[k], float)
         return out, SRC_DEVICE
     rs = roll_stats(dut.time, heel, hysteresis_deg=o.hysteresis_deg)
-    return ({"amp_port": rs.amp_port, "amp_stbd": rs.amp_stbd, "roll_period": rs.roll_period,
-             "period_port": rs.period_port, "period_stbd": rs.period_stbd, "peak_port": rs.peak_port,
-             "peak_stbd": rs.peak_stbd},
-            SRC_DERIVED)
+    return (
+        {
+            "amp_port": rs.amp_port,
+            "amp_stbd": rs.amp_stbd,
+            "roll_period": rs.roll_period,
+            "period_port": rs.period_port,
+            "period_stbd": rs.period_stbd,
+            "peak_port": rs.peak_port,
+            "peak_stbd": rs.peak_stbd,
+        },
+        SRC_DERIVED,
+    )
 
 
 _HRM_FIELDS = [
-    ("heel", r"(-?\d+(\.\d+)?)?"), ("period", r"(\d+(\.\d+)?)?"), ("amp_port", r"(\d+(\.\d+)?)?"),
-    ("amp_stbd", r"(\d+(\.\d+)?)?"), ("status", r"[AV]"), ("peak_port", r"(\d+(\.\d+)?)?"),
-    ("peak_stbd", r"(\d+(\.\d+)?)?"), ("reset_time", r"(\d{6}(\.\d+)?)?"), ("reset_day", r"(\d{2})?"),
+    ("heel", r"(-?\d+(\.\d+)?)?"),
+    ("period", r"(\d+(\.\d+)?)?"),
+    ("amp_port", r"(\d+(\.\d+)?)?"),
+    ("amp_stbd", r"(\d+(\.\d+)?)?"),
+    ("status", r"[AV]"),
+    ("peak_port", r"(\d+(\.\d+)?)?"),
+    ("peak_stbd", r"(\d+(\.\d+)?)?"),
+    ("reset_time", r"(\d{6}(\.\d+)?)?"),
+    ("reset_day", r"(\d{2})?"),
     ("reset_month", r"(\d{2})?"),
 ]
 
@@ -222,7 +290,7 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
                 continue
             n_lines += 1
             k = line.find("$")
-            if k < 0 or line[k + 3:k + 7] != "HRM,":
+            if k < 0 or line[k + 3 : k + 7] != "HRM,":
                 continue
             s = line[k:]
             n_hrm += 1
@@ -244,23 +312,53 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
             ck_ok += 1
             fields = body.split(",")[1:]
             good = len(fields) in (5, 10) and all(
-                re.fullmatch(pat, fields[i]) is not None for i, (_n, pat) in enumerate(_HRM_FIELDS[:len(fields)]))
+                re.fullmatch(pat, fields[i]) is not None for i, (_n, pat) in enumerate(_HRM_FIELDS[: len(fields)])
+            )
             if not good:
                 fmt_bad += 1
                 if len(first_bad) < 5:
                     first_bad.append(f"line {lineno}: field format {s[:60]!r}")
             elif len(fields) >= 5:
                 status[fields[4]] = status.get(fields[4], 0) + 1
-    return {"lines": n_lines, "hrm_sentences": n_hrm, "checksum_ok": ck_ok, "checksum_bad": ck_bad,
-            "checksum_missing": ck_missing, "checksum_pass_rate": (ck_ok / n_hrm) if n_hrm else None,
-            "field_format_errors": fmt_bad, "over_82_chars": too_long, "talkers": talkers,
-            "status_counts": status, "first_problems": first_bad}
+    return {
+        "lines": n_lines,
+        "hrm_sentences": n_hrm,
+        "checksum_ok": ck_ok,
+        "checksum_bad": ck_bad,
+        "checksum_missing": ck_missing,
+        "checksum_pass_rate": (ck_ok / n_hrm) if n_hrm else None,
+        "field_format_errors": fmt_bad,
+        "over_82_chars": too_long,
+        "talkers": talkers,
+        "status_counts": status,
+        "first_problems": first_bad,
+    }
 
 
-def _item(id_: str, clause: str, title: str, status: str, reason: str, criterion: str | None = None,
-          stats_: dict | None = None, rows: list | None = None, extra: dict | None = None) -> dict[str, Any]:
-    return clean({"id": id_, "clause": clause, "title": title, "status": status, "reason": reason,
-                  "criterion": criterion, "stats": stats_ or {}, "rows": rows or [], **(extra or {})})
+def _item(
+    id_: str,
+    clause: str,
+    title: str,
+    status: str,
+    reason: str,
+    criterion: str | None = None,
+    stats_: dict | None = None,
+    rows: list | None = None,
+    extra: dict | None = None,
+) -> dict[str, Any]:
+    return clean(
+        {
+            "id": id_,
+            "clause": clause,
+            "title": title,
+            "status": status,
+            "reason": reason,
+            "criterion": criterion,
+            "stats": stats_ or {},
+            "rows": rows or [],
+            **(extra or {}),
+        }
+    )
 
 
 def _durations(t: np.ndarray) -> np.ndarray:
@@ -271,9 +369,18 @@ def _durations(t: np.ndarray) -> np.ndarray:
     return 0.5 * (np.concatenate([[g[0]], g]) + np.concatenate([g, [g[-1]]]))
 
 
-def _judged_cycles(t: np.ndarray, cr: Any, cd: Any, pair: np.ndarray, moving: np.ndarray, outs_al: dict,
-                   device: bool, o: InclinometerOptions, tola: Any, tolp: Any
-                   ) -> tuple[dict[int, list], list, dict[str, dict[str, int]]]:
+def _judged_cycles(
+    t: np.ndarray,
+    cr: Any,
+    cd: Any,
+    pair: np.ndarray,
+    moving: np.ndarray,
+    outs_al: dict,
+    device: bool,
+    o: InclinometerOptions,
+    tola: Any,
+    tolp: Any,
+) -> tuple[dict[int, list], list, dict[str, dict[str, int]]]:
     """Amplitude and period rows of the reference cycles that can be judged, and why the others were not.
 
     A reference excursion k is judged for amplitude when it is clear of the static steps, its maximum is at
@@ -319,9 +426,16 @@ def _judged_cycles(t: np.ndarray, cr: Any, cd: Any, pair: np.ndarray, moving: np
                 no(why_a, "no DUT value")
             else:
                 a_ref = float(cr.amplitude_deg[k])
-                amp_rows[s].append({"t_peak_s": float(cr.t_peak[k]), "side": side, "reference_deg": a_ref,
-                                    "dut_deg": a_dut, "error_deg": a_dut - a_ref,
-                                    "tolerance_deg": float(tola(a_ref))})
+                amp_rows[s].append(
+                    {
+                        "t_peak_s": float(cr.t_peak[k]),
+                        "side": side,
+                        "reference_deg": a_ref,
+                        "dut_deg": a_dut,
+                        "error_deg": a_dut - a_ref,
+                        "tolerance_deg": float(tola(a_ref)),
+                    }
+                )
         # period: same-side maxima k-2 and k with one opposite excursion between (imutool.roll)
         if not np.isfinite(cr.period_s[k]) or k < 2 or not moving[k - 2]:
             no(why_p, "no previous same-side maximum in the motion")
@@ -342,11 +456,25 @@ def _judged_cycles(t: np.ndarray, cr: Any, cd: Any, pair: np.ndarray, moving: np
         if not np.isfinite(p_dut):
             no(why_p, "no DUT value")
             continue
-        per_rows.append({"t_peak_s": float(cr.t_peak[k]), "side": side, "reference_s": p_ref, "dut_s": p_dut,
-                         "error_s": p_dut - p_ref, "tolerance_s": tl, "crest_s": float(crest)})
-    counts = {"amplitude": {"reference_maxima": len(cr), "judged": len(amp_rows[PORT]) + len(amp_rows[STBD]),
-                            "not_judged": why_a},
-              "period": {"reference_maxima": len(cr), "judged": len(per_rows), "not_judged": why_p}}
+        per_rows.append(
+            {
+                "t_peak_s": float(cr.t_peak[k]),
+                "side": side,
+                "reference_s": p_ref,
+                "dut_s": p_dut,
+                "error_s": p_dut - p_ref,
+                "tolerance_s": tl,
+                "crest_s": float(crest),
+            }
+        )
+    counts = {
+        "amplitude": {
+            "reference_maxima": len(cr),
+            "judged": len(amp_rows[PORT]) + len(amp_rows[STBD]),
+            "not_judged": why_a,
+        },
+        "period": {"reference_maxima": len(cr), "judged": len(per_rows), "not_judged": why_p},
+    }
     return amp_rows, per_rows, counts
 
 
@@ -354,16 +482,29 @@ def _device_function(st: str, why: str, src: str) -> tuple[str, str, str | None]
     """A device function (amplitude, period, peak hold) passes only on the values the device reported."""
     if src == SRC_DEVICE or st in (NOT_TESTED,):
         return st, why, None
-    return NOT_TESTED, (f"values {SRC_DERIVED}, not reported by the device: the device's own function is not "
-                        f"tested (imutool's derived values would give: {st}; {why})"), st
+    return (
+        NOT_TESTED,
+        (
+            f"values {SRC_DERIVED}, not reported by the device: the device's own function is not "
+            f"tested (imutool's derived values would give: {st}; {why})"
+        ),
+        st,
+    )
 
 
-def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | None = None,
-                          ref_path: str | None = None, steps_path: str | None = None,
-                          options: InclinometerOptions | None = None,
-                          identification: dict[str, Any] | None = None, dut_channel: str | None = None,
-                          ref_channel: str | None = None, test_info: dict[str, Any] | None = None
-                          ) -> tuple[dict[str, Any], dict[str, Any]]:
+def inclinometer_evidence(
+    dut: Recording,
+    ref: Recording,
+    *,
+    dut_path: str | None = None,
+    ref_path: str | None = None,
+    steps_path: str | None = None,
+    options: InclinometerOptions | None = None,
+    identification: dict[str, Any] | None = None,
+    dut_channel: str | None = None,
+    ref_channel: str | None = None,
+    test_info: dict[str, Any] | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """Build the inclinometer evidence (JSON-safe dict) and the plot arrays. See module docstring.
 
     dut_channel / ref_channel choose the heel channels (default ``heel``, else ``roll``), e.g. ``ref_roll`` to use
@@ -391,17 +532,24 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     dch = dut_channel or ("heel" if "heel" in dut.channels else "roll")
     rch = ref_channel or ("heel" if "heel" in ref.channels else "roll")
     if (dut_path and ref_path and os.path.realpath(dut_path) == os.path.realpath(ref_path) and dch == rch) or (
-            dut is ref and dch == rch):
-        raise ImutoolError(f"the reference is the DUT itself (same file, channel {dch!r}): a device cannot be its "
-                           "own reference", path=ref_path)
+        dut is ref and dch == rch
+    ):
+        raise ImutoolError(
+            f"the reference is the DUT itself (same file, channel {dch!r}): a device cannot be its own reference",
+            path=ref_path,
+        )
     t = ref.time
     dts = _durations(t)
-    crit_txt = ("every sample/cycle |error| ≤ tolerance" if o.criterion == "max"
-                else "95th percentile of |error|/tolerance ≤ 1 (MSC.1/Circ.1575 95 % bound)")
+    crit_txt = (
+        "every sample/cycle |error| ≤ tolerance"
+        if o.criterion == "max"
+        else "95th percentile of |error|/tolerance ≤ 1 (MSC.1/Circ.1575 95 % bound)"
+    )
     u_a = o.uncertainty_k2_deg if o.guard_band else 0.0
     u_p = (o.uncertainty_k2_s or 0.0) if o.guard_band else 0.0
-    gb_txt = (f"; acceptance limit = tolerance − U (guard band, U = {u_a:g}° / {u_p:g} s at k = 2)" if o.guard_band
-              else "")
+    gb_txt = (
+        f"; acceptance limit = tolerance − U (guard band, U = {u_a:g}° / {u_p:g} s at k = 2)" if o.guard_band else ""
+    )
     angle_txt = f"max({o.angle_floor_deg:g}°, {o.angle_pct:g} % of reference reading){gb_txt}; {crit_txt}"
     period_txt = f"max({o.period_floor_s:g} s, {o.period_pct:g} % of reference reading){gb_txt}; {crit_txt}"
 
@@ -415,7 +563,7 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     okd = np.isfinite(h_dut)
     if okd.sum() < 10 or np.isfinite(h_ref).sum() < 10:
         raise ImutoolError("DUT and reference need at least 10 finite heel samples each")
-    overlap = (min(dut.time[-1], t[-1]) - max(dut.time[0], t[0]))
+    overlap = min(dut.time[-1], t[-1]) - max(dut.time[0], t[0])
     if overlap <= 0:
         raise ImutoolError("the DUT and reference recordings do not overlap in time (check the clocks)")
     lag, lag_rms = best_lag(dut.time[okd], h_dut[okd], t, h_ref, o.max_lag_s)
@@ -426,27 +574,43 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     e = d - h_ref
     both = np.isfinite(e)
     if both.sum() >= 10 and float(np.max(np.abs(e[both]))) == 0.0 and float(np.ptp(h_ref[both])) > 0:
-        raise ImutoolError("the reference is identical to the DUT sample for sample: a device cannot be its own "
-                           "reference (wrong file or channel?)", path=ref_path)
-    corr = float(np.corrcoef(d[both], h_ref[both])[0, 1]) if both.sum() > 2 and np.ptp(h_ref[both]) > 0 \
-        else float("nan")
+        raise ImutoolError(
+            "the reference is identical to the DUT sample for sample: a device cannot be its own "
+            "reference (wrong file or channel?)",
+            path=ref_path,
+        )
+    corr = (
+        float(np.corrcoef(d[both], h_ref[both])[0, 1]) if both.sum() > 2 and np.ptp(h_ref[both]) > 0 else float("nan")
+    )
     if np.isfinite(corr) and abs(corr) < 0.5 and float(np.std(h_ref[both])) > 0.5:
-        raise ImutoolError(f"the DUT and reference heel are uncorrelated (r = {corr:.2f}): not the same motion "
-                           "(wrong file, channel, axis or clock?)", path=ref_path)
+        raise ImutoolError(
+            f"the DUT and reference heel are uncorrelated (r = {corr:.2f}): not the same motion "
+            "(wrong file, channel, axis or clock?)",
+            path=ref_path,
+        )
     if both.sum() > 2:
         b1, b0 = np.polyfit(h_ref[both], d[both], 1)
     else:
         b1, b0 = float("nan"), float("nan")
     alignment = {
         "method": "cross-correlation: constant lag minimising RMS(DUT(t) − REF(t − lag)) (imutool.metrics.best_lag)",
-        "lag_s": lag, "lag_positive_means": "DUT lags the reference", "rms_at_lag_deg": lag_rms,
-        "search_range_s": o.max_lag_s, "lag_at_search_limit": bool(lag_at_edge),
+        "lag_s": lag,
+        "lag_positive_means": "DUT lags the reference",
+        "rms_at_lag_deg": lag_rms,
+        "search_range_s": o.max_lag_s,
+        "lag_at_search_limit": bool(lag_at_edge),
         "applied": o.align == "xcorr",
-        "note": ("lag removed before comparison (independent clocks assumed); use --align none to count "
-                 "latency as error") if o.align == "xcorr" else "no lag removed (common clock assumed)",
+        "note": (
+            "lag removed before comparison (independent clocks assumed); use --align none to count latency as error"
+        )
+        if o.align == "xcorr"
+        else "no lag removed (common clock assumed)",
         "correlation": corr,
-        "linear_fit": {"offset_deg": b0, "scale_error": b1 - 1.0,
-                       "model": "DUT = offset + (1 + scale_error) · REF on aligned samples"},
+        "linear_fit": {
+            "offset_deg": b0,
+            "scale_error": b1 - 1.0,
+            "model": "DUT = offset + (1 + scale_error) · REF on aligned samples",
+        },
         "overlap_s": overlap,
     }
     warnings: list[str] = []
@@ -475,8 +639,10 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         step_src = f"steps file {os.path.basename(steps_path)}"
     else:
         steps = [(a, b, None) for a, b in plateaus(t, h_ref, o.step_band_deg, o.step_min_s, o.step_settle_s)]
-        step_src = (f"plateaus detected in the reference (range ≤ {o.step_band_deg}° over 2 s, ≥ {o.step_min_s} s, "
-                    f"first {o.step_settle_s} s ignored)")
+        step_src = (
+            f"plateaus detected in the reference (range ≤ {o.step_band_deg}° over 2 s, ≥ {o.step_min_s} s, "
+            f"first {o.step_settle_s} s ignored)"
+        )
     steps = [(a, b, rv) for a, b, rv in steps if not acc_any[(t >= a) & (t <= b)].any()]
     static_mask = np.zeros(t.size, bool)
     step_rows = []
@@ -493,10 +659,20 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         tl = float(tola(rmean))
         st, info_ = judge(ee, tl, o.criterion)
         errs_static.append(ee)
-        step_rows.append({"start_s": a, "end_s": b, "reference_deg": rmean, "dut_mean_deg": float(np.mean(d[mm])),
-                          "error_mean_deg": float(np.mean(ee)), "error_std_deg": float(np.std(ee)),
-                          "max_abs_error_deg": float(np.max(np.abs(ee))),
-                          "tolerance_deg": tl, "n": int(mm.sum()), "status": st})
+        step_rows.append(
+            {
+                "start_s": a,
+                "end_s": b,
+                "reference_deg": rmean,
+                "dut_mean_deg": float(np.mean(d[mm])),
+                "error_mean_deg": float(np.mean(ee)),
+                "error_std_deg": float(np.std(ee)),
+                "max_abs_error_deg": float(np.max(np.abs(ee))),
+                "tolerance_deg": tl,
+                "n": int(mm.sum()),
+                "status": st,
+            }
+        )
     tested = [r for r in step_rows if r["status"] in (PASS, FAIL)]
     n_stbd = sum(1 for r in tested if r["reference_deg"] > o.level_band_deg)
     n_port = sum(1 for r in tested if r["reference_deg"] < -o.level_band_deg)
@@ -508,23 +684,55 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     elif any(r["status"] == FAIL for r in tested):
         st, why = FAIL, f"{sum(r['status'] == FAIL for r in tested)} of {len(tested)} steps outside tolerance"
     elif n_stbd < o.min_steps_per_side or n_port < o.min_steps_per_side:
-        st, why = INSUFFICIENT, (f"{n_stbd} starboard and {n_port} port steps; at least {o.min_steps_per_side} "
-                                 "per side needed")
+        st, why = (
+            INSUFFICIENT,
+            (f"{n_stbd} starboard and {n_port} port steps; at least {o.min_steps_per_side} per side needed"),
+        )
     elif R is None:
-        st, why = INSUFFICIENT, (f"all {len(tested)} steps within tolerance ({lo_s:+.0f}° to {hi_s:+.0f}°), but the "
-                                 "device's declared heel range is not stated (test record [dut] heel_range_deg): "
-                                 "coverage of the range cannot be assessed")
+        st, why = (
+            INSUFFICIENT,
+            (
+                f"all {len(tested)} steps within tolerance ({lo_s:+.0f}° to {hi_s:+.0f}°), but the "
+                "device's declared heel range is not stated (test record [dut] heel_range_deg): "
+                "coverage of the range cannot be assessed"
+            ),
+        )
     elif min(hi_s, -lo_s) < o.range_cover_frac * R:
-        st, why = INSUFFICIENT, (f"steps reach {lo_s:+.0f}° to {hi_s:+.0f}°; the declared range ±{R:g}° needs steps "
-                                 f"to at least ±{o.range_cover_frac * R:.0f}° on both sides")
+        st, why = (
+            INSUFFICIENT,
+            (
+                f"steps reach {lo_s:+.0f}° to {hi_s:+.0f}°; the declared range ±{R:g}° needs steps "
+                f"to at least ±{o.range_cover_frac * R:.0f}° on both sides"
+            ),
+        )
     else:
-        st, why = PASS, (f"all {len(tested)} steps within tolerance ({n_stbd} starboard, {n_port} port), "
-                         f"{lo_s:+.0f}° to {hi_s:+.0f}° covering the declared range ±{R:g}°")
+        st, why = (
+            PASS,
+            (
+                f"all {len(tested)} steps within tolerance ({n_stbd} starboard, {n_port} port), "
+                f"{lo_s:+.0f}° to {hi_s:+.0f}° covering the declared range ±{R:g}°"
+            ),
+        )
     ee_all = np.concatenate(errs_static) if errs_static else np.array([])
-    items.append(_item("static_heel", "ISO 19697 §6.2; MSC.363(92) accuracy (P3)", "Static actual heel angle", st,
-                       why, angle_txt, stats(ee_all), step_rows,
-                       {"unit": "deg", "source": "device heel angle",
-                        "steps_from": step_src, "range_tested_deg": [lo_s, hi_s], "declared_range_deg": R}))
+    items.append(
+        _item(
+            "static_heel",
+            "ISO 19697 §6.2; MSC.363(92) accuracy (P3)",
+            "Static actual heel angle",
+            st,
+            why,
+            angle_txt,
+            stats(ee_all),
+            step_rows,
+            {
+                "unit": "deg",
+                "source": "device heel angle",
+                "steps_from": step_src,
+                "range_tested_deg": [lo_s, hi_s],
+                "declared_range_deg": R,
+            },
+        )
+    )
 
     # ---- reference and DUT roll cycles ----------------------------------------------------------------------
     rs_ref = roll_stats(t, h_ref, hysteresis_deg=o.hysteresis_deg)
@@ -543,15 +751,31 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     if not dyn.any():
         st, why = NOT_TESTED, "no data outside the static steps"
     elif dyn_s < o.min_dynamic_s or n_cyc < 2 * o.min_cycles:
-        st, why = (FAIL if st == FAIL else INSUFFICIENT), (
-            f"{dyn_s:.0f} s of motion with {n_cyc} roll half-cycles; at least {o.min_dynamic_s:g} s and "
-            f"{2 * o.min_cycles} needed" + ("; tolerance exceeded" if st == FAIL else ""))
+        st, why = (
+            (FAIL if st == FAIL else INSUFFICIENT),
+            (
+                f"{dyn_s:.0f} s of motion with {n_cyc} roll half-cycles; at least {o.min_dynamic_s:g} s and "
+                f"{2 * o.min_cycles} needed" + ("; tolerance exceeded" if st == FAIL else "")
+            ),
+        )
     else:
-        why = (f"{info_['n_exceed']} of {int(dyn.sum())} samples outside tolerance; worst |error|/tolerance "
-               f"{info_['worst_ratio']:.2f}, 95th percentile {info_['p95_ratio']:.2f}")
-    items.append(_item("dynamic_heel", "ISO 19697 §6.3; MSC.363(92) accuracy (P3)", "Dynamic actual heel angle", st,
-                       why, angle_txt, stats(e_dyn), [], {"unit": "deg", "duration_s": dyn_s, "ratio": info_,
-                                                          "source": "device heel angle"}))
+        why = (
+            f"{info_['n_exceed']} of {int(dyn.sum())} samples outside tolerance; worst |error|/tolerance "
+            f"{info_['worst_ratio']:.2f}, 95th percentile {info_['p95_ratio']:.2f}"
+        )
+    items.append(
+        _item(
+            "dynamic_heel",
+            "ISO 19697 §6.3; MSC.363(92) accuracy (P3)",
+            "Dynamic actual heel angle",
+            st,
+            why,
+            angle_txt,
+            stats(e_dyn),
+            [],
+            {"unit": "deg", "duration_s": dyn_s, "ratio": info_, "source": "device heel angle"},
+        )
+    )
 
     # ---- amplitude port / starboard and roll period (§6.3, §6.5) --------------------------------------------
     # only excursions clear of the static steps (and of the acceleration segment) are roll cycles
@@ -559,13 +783,18 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     i_b = np.searchsorted(t, cr.t_end, side="right")
     cs = np.concatenate([[0], np.cumsum(static_mask | acc_any)])
     moving = (cs[np.minimum(i_b, t.size)] - cs[i_a]) == 0
-    amp_rows, per_rows, cyc_counts = _judged_cycles(t, cr, cd, pair, moving, outs_al, out_src == SRC_DEVICE, o,
-                                                    tola, tolp)
-    resol = (f"cycles judged: reference maximum ≥ {o.min_cycle_amp_deg:g}°, paired one-to-one with a DUT "
-             f"excursion by time overlap; periods also need both crests (samples within {o.crest_band_deg:g}° of "
-             "the maximum) narrower than the period tolerance")
-    for s, id_, title in ((STBD, "amplitude_stbd", "Roll amplitude to starboard"),
-                          (PORT, "amplitude_port", "Roll amplitude to port")):
+    amp_rows, per_rows, cyc_counts = _judged_cycles(
+        t, cr, cd, pair, moving, outs_al, out_src == SRC_DEVICE, o, tola, tolp
+    )
+    resol = (
+        f"cycles judged: reference maximum ≥ {o.min_cycle_amp_deg:g}°, paired one-to-one with a DUT "
+        f"excursion by time overlap; periods also need both crests (samples within {o.crest_band_deg:g}° of "
+        "the maximum) narrower than the period tolerance"
+    )
+    for s, id_, title in (
+        (STBD, "amplitude_stbd", "Roll amplitude to starboard"),
+        (PORT, "amplitude_port", "Roll amplitude to port"),
+    ):
         rows = amp_rows[s]
         err = np.array([r["error_deg"] for r in rows])
         tl = np.array([r["tolerance_deg"] for r in rows])
@@ -581,10 +810,25 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         else:
             why = f"{info_['n_exceed']} of {len(rows)} judged cycles outside tolerance"
         st, why, derived = _device_function(st, why, out_src)
-        items.append(_item(id_, "ISO 19697 §6.3; MSC.363(92) accuracy (P3), display both sides (P6)", title, st, why,
-                           angle_txt, stats(err), rows,
-                           {"unit": "deg", "source": out_src, "derived_result": derived,
-                            "cycles": cyc_counts["amplitude"], "judging": resol}))
+        items.append(
+            _item(
+                id_,
+                "ISO 19697 §6.3; MSC.363(92) accuracy (P3), display both sides (P6)",
+                title,
+                st,
+                why,
+                angle_txt,
+                stats(err),
+                rows,
+                {
+                    "unit": "deg",
+                    "source": out_src,
+                    "derived_result": derived,
+                    "cycles": cyc_counts["amplitude"],
+                    "judging": resol,
+                },
+            )
+        )
     err = np.array([r["error_s"] for r in per_rows])
     tl = np.array([r["tolerance_s"] for r in per_rows])
     for r in per_rows:
@@ -596,25 +840,48 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
     if st == NOT_TESTED:
         why = "no judged roll period (needs two judged maxima on the same side)"
     elif min(per_sides.values()) < o.min_cycles:
-        why = (f"{per_sides['stbd']} starboard and {per_sides['port']} port judged periods; at least "
-               f"{o.min_cycles} per side")
+        why = (
+            f"{per_sides['stbd']} starboard and {per_sides['port']} port judged periods; at least "
+            f"{o.min_cycles} per side"
+        )
         st = FAIL if info_["n_exceed"] else INSUFFICIENT
-    elif st == PASS and (min(judged_p) > prange[0] / o.range_cover_frac or max(judged_p) < o.range_cover_frac
-                         * prange[1]):
+    elif st == PASS and (
+        min(judged_p) > prange[0] / o.range_cover_frac or max(judged_p) < o.range_cover_frac * prange[1]
+    ):
         st = INSUFFICIENT
-        why = (f"all {len(per_rows)} judged periods within tolerance, but they span {min(judged_p):.1f}-"
-               f"{max(judged_p):.1f} s; the {'declared' if o.declared_period_range_s else 'default (P10, I)'} range "
-               f"{prange[0]:g}-{prange[1]:g} s is not covered")
+        why = (
+            f"all {len(per_rows)} judged periods within tolerance, but they span {min(judged_p):.1f}-"
+            f"{max(judged_p):.1f} s; the {'declared' if o.declared_period_range_s else 'default (P10, I)'} range "
+            f"{prange[0]:g}-{prange[1]:g} s is not covered"
+        )
     else:
-        why = (f"{info_['n_exceed']} of {len(per_rows)} judged periods outside tolerance "
-               f"({min(judged_p):.1f}-{max(judged_p):.1f} s)")
+        why = (
+            f"{info_['n_exceed']} of {len(per_rows)} judged periods outside tolerance "
+            f"({min(judged_p):.1f}-{max(judged_p):.1f} s)"
+        )
     st, why, derived = _device_function(st, why, out_src)
-    items.append(_item("roll_period", "ISO 19697 §6.5; MSC.363(92) accuracy (P4), definition §3 (P1)", "Roll period",
-                       st, why, period_txt, stats(err), per_rows,
-                       {"unit": "s", "source": out_src, "derived_result": derived, "cycles": cyc_counts["period"],
-                        "judging": resol, "period_range_s": list(prange),
-                        "definition": "time between successive maxima on the same side; port "
-                        "and starboard tracked separately (imutool.roll)"}))
+    items.append(
+        _item(
+            "roll_period",
+            "ISO 19697 §6.5; MSC.363(92) accuracy (P4), definition §3 (P1)",
+            "Roll period",
+            st,
+            why,
+            period_txt,
+            stats(err),
+            per_rows,
+            {
+                "unit": "s",
+                "source": out_src,
+                "derived_result": derived,
+                "cycles": cyc_counts["period"],
+                "judging": resol,
+                "period_range_s": list(prange),
+                "definition": "time between successive maxima on the same side; port "
+                "and starboard tracked separately (imutool.roll)",
+            },
+        )
+    )
 
     # ---- long-term (§6.4) ------------------------------------------------------------------------------------
     holds = []
@@ -634,27 +901,52 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         coef, cov = np.polyfit(tt, ee, 1, cov=True) if m.sum() > 3 else (np.array([np.nan, np.nan]), None)
         slope = float(coef[0]) * 3600.0
         u95 = float(2.0 * np.sqrt(cov[0, 0]) * 3600.0) if cov is not None else float("nan")
-        extra.update({"duration_s": dur, "start_s": a, "end_s": b, "drift_deg_per_h": slope,
-                      "drift_u95_deg_per_h": u95, "drift_limit_deg_per_h": o.drift_limit_deg_per_h})
+        extra.update(
+            {
+                "duration_s": dur,
+                "start_s": a,
+                "end_s": b,
+                "drift_deg_per_h": slope,
+                "drift_u95_deg_per_h": u95,
+                "drift_limit_deg_per_h": o.drift_limit_deg_per_h,
+            }
+        )
         st, info_ = judge(ee, tola(rr), o.criterion)
-        base = (f"{dur:.0f} s hold at {float(np.mean(rr)):.1f}°: drift {slope:+.3f} ± {u95:.3f} °/h (95 %); "
-                f"{info_['n_exceed']} samples outside tolerance")
+        base = (
+            f"{dur:.0f} s hold at {float(np.mean(rr)):.1f}°: drift {slope:+.3f} ± {u95:.3f} °/h (95 %); "
+            f"{info_['n_exceed']} samples outside tolerance"
+        )
         if dur < o.long_term_min_s:
             st = FAIL if st == FAIL else INSUFFICIENT
-            why = (f"longest hold {dur:.0f} s is shorter than the {o.long_term_min_s:g} s minimum (--long-term-min; "
-                   f"ISO 19697 §6.4 duration not known, C): too short to resolve long-term drift; " + base)
+            why = (
+                f"longest hold {dur:.0f} s is shorter than the {o.long_term_min_s:g} s minimum (--long-term-min; "
+                f"ISO 19697 §6.4 duration not known, C): too short to resolve long-term drift; " + base
+            )
         elif o.drift_limit_deg_per_h is not None and u95 > 0.5 * o.drift_limit_deg_per_h:
             st = FAIL if st == FAIL else INSUFFICIENT
-            why = (f"drift resolution ±{u95:.3f} °/h cannot resolve the {o.drift_limit_deg_per_h:g} °/h limit "
-                   "(needs ≤ half of it; longer hold needed); " + base)
+            why = (
+                f"drift resolution ±{u95:.3f} °/h cannot resolve the {o.drift_limit_deg_per_h:g} °/h limit "
+                "(needs ≤ half of it; longer hold needed); " + base
+            )
         elif o.drift_limit_deg_per_h is not None and abs(slope) > o.drift_limit_deg_per_h:
             st, why = FAIL, f"drift beyond {o.drift_limit_deg_per_h:g} °/h; " + base
         else:
             why = base
-    items.append(_item("long_term", "ISO 19697 §6.4 (duration/limit not confirmed, C)", "Long-term heel (drift)", st,
-                       why, angle_txt + f" over a hold ≥ {o.long_term_min_s:g} s"
-                       + (f"; |drift| ≤ {o.drift_limit_deg_per_h:g} °/h" if o.drift_limit_deg_per_h else ""),
-                       stats(ee), [], extra))
+    items.append(
+        _item(
+            "long_term",
+            "ISO 19697 §6.4 (duration/limit not confirmed, C)",
+            "Long-term heel (drift)",
+            st,
+            why,
+            angle_txt
+            + f" over a hold ≥ {o.long_term_min_s:g} s"
+            + (f"; |drift| ≤ {o.drift_limit_deg_per_h:g} °/h" if o.drift_limit_deg_per_h else ""),
+            stats(ee),
+            [],
+            extra,
+        )
+    )
 
     # ---- peak hold (§6.10) -----------------------------------------------------------------------------------
     own_peak = "peak_port" in dut.channels and "peak_stbd" in dut.channels
@@ -672,30 +964,60 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         last = int(np.flatnonzero(m)[-1])
         ee = dp[m] - rp[m]
         e_peak.append(ee)
-        peak_rows.append({"side": name, "reference_deg": float(rp[last]), "dut_deg": float(dp[last]),
-                          "error_deg": float(dp[last] - rp[last]), "tolerance_deg": float(tola(rp[last])),
-                          "max_abs_error_deg": float(np.max(np.abs(ee)))})
+        peak_rows.append(
+            {
+                "side": name,
+                "reference_deg": float(rp[last]),
+                "dut_deg": float(dp[last]),
+                "error_deg": float(dp[last] - rp[last]),
+                "tolerance_deg": float(tola(rp[last])),
+                "max_abs_error_deg": float(np.max(np.abs(ee))),
+            }
+        )
     peak_src = SRC_DEVICE if own_peak else SRC_DERIVED
     if not peak_rows:
         st, why, eall = NOT_TESTED, "the DUT provides no peak-hold output", np.array([])
     else:
         eall = np.concatenate(e_peak)
-        st, info_ = judge(np.array([r["error_deg"] for r in peak_rows]),
-                          np.array([r["tolerance_deg"] for r in peak_rows]), "max")
+        st, info_ = judge(
+            np.array([r["error_deg"] for r in peak_rows]), np.array([r["tolerance_deg"] for r in peak_rows]), "max"
+        )
         why = "final peak-hold values since the reset compared with the reference maxima"
     st, why, derived = _device_function(st, why, peak_src)
-    items.append(_item("peak_hold", "ISO 19697 §6.10 (title only); IEC 61162-1 HRM (P7, C)", "Roll peak hold", st,
-                       why, f"max({o.angle_floor_deg:g}°, {o.angle_pct:g} % of reading), 1° resolution (P7)",
-                       stats(eall), peak_rows, {"unit": "deg", "source": peak_src, "derived_result": derived,
-                                                "reset_utc": rs_ref.resets_utc}))
+    items.append(
+        _item(
+            "peak_hold",
+            "ISO 19697 §6.10 (title only); IEC 61162-1 HRM (P7, C)",
+            "Roll peak hold",
+            st,
+            why,
+            f"max({o.angle_floor_deg:g}°, {o.angle_pct:g} % of reading), 1° resolution (P7)",
+            stats(eall),
+            peak_rows,
+            {"unit": "deg", "source": peak_src, "derived_result": derived, "reset_utc": rs_ref.resets_utc},
+        )
+    )
 
     # ---- heel under lateral acceleration (ISO 19697 §5.2) ----------------------------------------------------
-    acc_txt = (f"heel tolerance {angle_txt.split(';')[0]} while |lateral acceleration| ≥ {o.lat_accel_min_ms2:g} "
-               "m/s² (ISO 19697 §5.2 conditions not known, C; imutool applies the heel tolerance)")
+    acc_txt = (
+        f"heel tolerance {angle_txt.split(';')[0]} while |lateral acceleration| ≥ {o.lat_accel_min_ms2:g} "
+        "m/s² (ISO 19697 §5.2 conditions not known, C; imutool applies the heel tolerance)"
+    )
     if lat is None:
-        items.append(_item("lateral_acceleration", "ISO 19697 §5.2 (C)", "Heel under lateral acceleration",
-                           NOT_TESTED, f"the reference has no {o.lat_accel_channel!r} channel (applied lateral "
-                           "acceleration, m/s², + starboard)", acc_txt, {}, [], {"unit": "deg"}))
+        items.append(
+            _item(
+                "lateral_acceleration",
+                "ISO 19697 §5.2 (C)",
+                "Heel under lateral acceleration",
+                NOT_TESTED,
+                f"the reference has no {o.lat_accel_channel!r} channel (applied lateral "
+                "acceleration, m/s², + starboard)",
+                acc_txt,
+                {},
+                [],
+                {"unit": "deg"},
+            )
+        )
     else:
         m = acc_mask & both
         secs = float(dts[m].sum())
@@ -708,16 +1030,27 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
             st = FAIL if st == FAIL else INSUFFICIENT
             why = f"{secs:.0f} s under acceleration; ≥ {o.lat_accel_min_s:g} s needed"
         else:
-            why = (f"{secs:.0f} s at up to {amax:.2f} m/s² (apparent tilt of an accelerometer "
-                   f"{np.degrees(np.arctan2(amax, 9.80665)):.1f}°): {info_['n_exceed']} of {int(m.sum())} samples "
-                   f"outside tolerance, max |error| {float(np.max(np.abs(ea))):.2f}°")
-        items.append(_item("lateral_acceleration", "ISO 19697 §5.2 (C)", "Heel under lateral acceleration", st, why,
-                           acc_txt, stats(ea), [], {"unit": "deg", "duration_s": secs, "max_accel_ms2": amax,
-                                                    "source": "device heel angle"}))
+            why = (
+                f"{secs:.0f} s at up to {amax:.2f} m/s² (apparent tilt of an accelerometer "
+                f"{np.degrees(np.arctan2(amax, 9.80665)):.1f}°): {info_['n_exceed']} of {int(m.sum())} samples "
+                f"outside tolerance, max |error| {float(np.max(np.abs(ea))):.2f}°"
+            )
+        items.append(
+            _item(
+                "lateral_acceleration",
+                "ISO 19697 §5.2 (C)",
+                "Heel under lateral acceleration",
+                st,
+                why,
+                acc_txt,
+                stats(ea),
+                [],
+                {"unit": "deg", "duration_s": secs, "max_accel_ms2": amax, "source": "device heel angle"},
+            )
+        )
 
     # ---- interface (§6.6) ------------------------------------------------------------------------------------
-    is_nmea = dut_path is not None and os.path.splitext(dut_path)[1].lower() in (".nmea", ".log", ".txt",
-                                                                                  ".nmea0183")
+    is_nmea = dut_path is not None and os.path.splitext(dut_path)[1].lower() in (".nmea", ".log", ".txt", ".nmea0183")
     if is_nmea:
         cap = hrm_capture_check(dut_path)
         dtt = np.round(np.diff(dut.time), 3)
@@ -729,38 +1062,86 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         if cap["hrm_sentences"] == 0:
             st, why = FAIL, "no HRM sentence in the capture"
         elif cap["checksum_bad"] or cap["checksum_missing"] or cap["field_format_errors"] or cap["over_82_chars"]:
-            st, why = FAIL, (f"{cap['checksum_bad']} bad and {cap['checksum_missing']} missing checksums, "
-                             f"{cap['field_format_errors']} field-format errors, {cap['over_82_chars']} over 82 chars "
-                             f"in {cap['hrm_sentences']} HRM sentences")
+            st, why = (
+                FAIL,
+                (
+                    f"{cap['checksum_bad']} bad and {cap['checksum_missing']} missing checksums, "
+                    f"{cap['field_format_errors']} field-format errors, {cap['over_82_chars']} over 82 chars "
+                    f"in {cap['hrm_sentences']} HRM sentences"
+                ),
+            )
         else:
-            st, why = PASS, (f"{cap['hrm_sentences']} HRM sentences, all checksums and field formats valid; median "
-                             f"output rate {rate:.2f} Hz (no confirmed rate requirement, P11)" if rate else "")
-        items.append(_item("interface", "ISO 19697 §6.6; IEC 61162-1 HRM (standards.md §2.2)",
-                           "Interface: HRM sentence capture", st, why,
-                           "every HRM sentence: valid checksum, IEC 61162-1 field formats, ≤ 82 characters",
-                           {"n": cap["hrm_sentences"]}, [], {"capture": cap, "meta": clean(dut.meta.get("nmea", {})),
-                                                             "source": SRC_DEVICE}))
+            st, why = (
+                PASS,
+                (
+                    f"{cap['hrm_sentences']} HRM sentences, all checksums and field formats valid; median "
+                    f"output rate {rate:.2f} Hz (no confirmed rate requirement, P11)"
+                    if rate
+                    else ""
+                ),
+            )
+        items.append(
+            _item(
+                "interface",
+                "ISO 19697 §6.6; IEC 61162-1 HRM (standards.md §2.2)",
+                "Interface: HRM sentence capture",
+                st,
+                why,
+                "every HRM sentence: valid checksum, IEC 61162-1 field formats, ≤ 82 characters",
+                {"n": cap["hrm_sentences"]},
+                [],
+                {"capture": cap, "meta": clean(dut.meta.get("nmea", {})), "source": SRC_DEVICE},
+            )
+        )
     else:
-        items.append(_item("interface", "ISO 19697 §6.6", "Interface: HRM sentence capture", NOT_TESTED,
-                           "the DUT input is not an NMEA capture (give the raw HRM log as DUT to test the interface)"))
+        items.append(
+            _item(
+                "interface",
+                "ISO 19697 §6.6",
+                "Interface: HRM sentence capture",
+                NOT_TESTED,
+                "the DUT input is not an NMEA capture (give the raw HRM log as DUT to test the interface)",
+            )
+        )
 
     # ---- clauses imutool cannot test from data: the test house's attestation ----------------------------------
     for key, (title, clause) in EXTERNAL.items():
         att = info["external"].get(key)
         if att:
-            items.append(_item(key, clause, title, att["result"], f"attested by the test house: {att['evidence']}"
-                               + (f" ({att['by']})" if att.get("by") else "") + " — not verified by imutool",
-                               None, {"n": 1}, [], {"source": "test record attestation (not verified by imutool)"}))
+            items.append(
+                _item(
+                    key,
+                    clause,
+                    title,
+                    att["result"],
+                    f"attested by the test house: {att['evidence']}"
+                    + (f" ({att['by']})" if att.get("by") else "")
+                    + " — not verified by imutool",
+                    None,
+                    {"n": 1},
+                    [],
+                    {"source": "test record attestation (not verified by imutool)"},
+                )
+            )
         else:
-            items.append(_item(key, clause, title, NOT_TESTED, "not in the data; the test record gives no "
-                               f"[external.{key}] attestation with evidence"))
+            items.append(
+                _item(
+                    key,
+                    clause,
+                    title,
+                    NOT_TESTED,
+                    f"not in the data; the test record gives no [external.{key}] attestation with evidence",
+                )
+            )
 
-    not_tested = [f"{it['title']} ({it['clause']}): {it['reason']}" for it in items
-                  if it["status"] in (NOT_TESTED, INSUFFICIENT)] + NOT_TESTED_ALWAYS
+    not_tested = [
+        f"{it['title']} ({it['clause']}): {it['reason']}" for it in items if it["status"] in (NOT_TESTED, INSUFFICIENT)
+    ] + NOT_TESTED_ALWAYS
     ident = clean(identification or {}) | {
         "dut_device": dut.meta.get("device") or dut.meta.get("sensor"),
         "reference_device": ref.meta.get("device") or ref.meta.get("sensor"),
-        "mounting": clean(dut.meta.get("mounting")), "calibration": clean(dut.meta.get("calibration")),
+        "mounting": clean(dut.meta.get("mounting")),
+        "calibration": clean(dut.meta.get("calibration")),
         "filter": clean(dut.meta.get("filter")),
     }
     ev = {
@@ -773,36 +1154,79 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         "test_record": clean({k: v for k, v in info.items()}),
         "test_record_missing": missing_fields(info),
         "identification": ident,
-        "inputs": {"dut": input_record(dut_path, dut, dch, "nmea" if is_nmea else "recording"),
-                   "reference": input_record(ref_path, ref, rch, "recording"),
-                   "static_steps": input_record(steps_path, None, None, "steps") if steps_path else None},
-        "conventions": {"angle_unit": "deg", "time_unit": "s",
-                        "sign": "heel + starboard down, − port (IEC 61162-1 HRM, P8); port amplitude positive",
-                        "frame": "vessel body FRD (x bow, y starboard, z down)",
-                        "time_base": "reference time (s); DUT resampled linearly onto it",
-                        "lateral_acceleration": "m/s², + starboard, kinematic (gravity excluded)"},
+        "inputs": {
+            "dut": input_record(dut_path, dut, dch, "nmea" if is_nmea else "recording"),
+            "reference": input_record(ref_path, ref, rch, "recording"),
+            "static_steps": input_record(steps_path, None, None, "steps") if steps_path else None,
+        },
+        "conventions": {
+            "angle_unit": "deg",
+            "time_unit": "s",
+            "sign": "heel + starboard down, − port (IEC 61162-1 HRM, P8); port amplitude positive",
+            "frame": "vessel body FRD (x bow, y starboard, z down)",
+            "time_base": "reference time (s); DUT resampled linearly onto it",
+            "lateral_acceleration": "m/s², + starboard, kinematic (gravity excluded)",
+        },
         "editions": EDITIONS,
         "criteria": [
-            {"id": "angle", "text": f"heel angle and roll amplitude: max({o.angle_floor_deg:g}°, {o.angle_pct:g} % of "
-             "reading)", "source": "MSC.363(92) annex, accuracy clause (P3)", "confidence": "B"},
-            {"id": "period", "text": f"roll period: max({o.period_floor_s:g} s, {o.period_pct:g} % of reading)",
-             "source": "MSC.363(92) annex, accuracy clause (P4)", "confidence": "B"},
-            {"id": "statistic", "text": crit_txt, "source": "MSC.1/Circ.1575 Table C-1 (P12)" if o.criterion == "p95"
-             else "imutool default (strictest reading)", "confidence": "A" if o.criterion == "p95" else "I"},
-            {"id": "reading", "text": "the 'reading' in '% of reading' is the reference value",
-             "source": "imutool choice", "confidence": "I"},
-            {"id": "decision_rule", "text": ("guard band: acceptance limit = tolerance − U of the reference (k = 2)"
-                                             if o.guard_band else "simple acceptance: the measured error is compared "
-                                             "with the tolerance; the reference uncertainty is stated, not deducted"),
-             "source": "ILAC-G8 decision rules (test record [decision_rule])", "confidence": "I"},
-            {"id": "device_functions", "text": "amplitude, period and peak hold pass only on values the device "
-             "reported (HRM); values derived by imutool from the heel are shown but leave the item not tested",
-             "source": "imutool rule", "confidence": "I"},
-            {"id": "long_term", "text": f"hold ≥ {o.long_term_min_s:g} s", "source": "imutool minimum (ISO 19697 §6.4 "
-             "duration not known)", "confidence": "I"},
-            {"id": "ranges", "text": f"static steps to ≥ {o.range_cover_frac:.0%} of the declared heel range on both "
-             f"sides; judged periods across the declared period range (default {o.default_period_range_s[0]:g}-"
-             f"{o.default_period_range_s[1]:g} s)", "source": "imutool rule (P9, P10 not found)", "confidence": "I"},
+            {
+                "id": "angle",
+                "text": f"heel angle and roll amplitude: max({o.angle_floor_deg:g}°, {o.angle_pct:g} % of reading)",
+                "source": "MSC.363(92) annex, accuracy clause (P3)",
+                "confidence": "B",
+            },
+            {
+                "id": "period",
+                "text": f"roll period: max({o.period_floor_s:g} s, {o.period_pct:g} % of reading)",
+                "source": "MSC.363(92) annex, accuracy clause (P4)",
+                "confidence": "B",
+            },
+            {
+                "id": "statistic",
+                "text": crit_txt,
+                "source": "MSC.1/Circ.1575 Table C-1 (P12)"
+                if o.criterion == "p95"
+                else "imutool default (strictest reading)",
+                "confidence": "A" if o.criterion == "p95" else "I",
+            },
+            {
+                "id": "reading",
+                "text": "the 'reading' in '% of reading' is the reference value",
+                "source": "imutool choice",
+                "confidence": "I",
+            },
+            {
+                "id": "decision_rule",
+                "text": (
+                    "guard band: acceptance limit = tolerance − U of the reference (k = 2)"
+                    if o.guard_band
+                    else "simple acceptance: the measured error is compared "
+                    "with the tolerance; the reference uncertainty is stated, not deducted"
+                ),
+                "source": "ILAC-G8 decision rules (test record [decision_rule])",
+                "confidence": "I",
+            },
+            {
+                "id": "device_functions",
+                "text": "amplitude, period and peak hold pass only on values the device "
+                "reported (HRM); values derived by imutool from the heel are shown but leave the item not tested",
+                "source": "imutool rule",
+                "confidence": "I",
+            },
+            {
+                "id": "long_term",
+                "text": f"hold ≥ {o.long_term_min_s:g} s",
+                "source": "imutool minimum (ISO 19697 §6.4 duration not known)",
+                "confidence": "I",
+            },
+            {
+                "id": "ranges",
+                "text": f"static steps to ≥ {o.range_cover_frac:.0%} of the declared heel range on both "
+                f"sides; judged periods across the declared period range (default {o.default_period_range_s[0]:g}-"
+                f"{o.default_period_range_s[1]:g} s)",
+                "source": "imutool rule (P9, P10 not found)",
+                "confidence": "I",
+            },
         ],
         "standards_cited": {"file": STANDARDS_FILE, "rows": standards_cited(CITED)},
         "settings": clean(asdict(o)),
@@ -813,11 +1237,24 @@ def inclinometer_evidence(dut: Recording, ref: Recording, *, dut_path: str | Non
         "unconfirmed": UNCONFIRMED,
         "warnings": warnings,
     }
-    plots = {"t": t, "ref": h_ref, "dut": d, "err": e, "tol": tola(h_ref), "static_mask": static_mask,
-             "acc_mask": acc_mask, "steps": step_rows, "amp_rows": amp_rows[STBD] + amp_rows[PORT],
-             "per_rows": per_rows, "tol_angle": tola, "tol_period": tolp,
-             "tol_angle_label": f"tolerance max({o.angle_floor_deg:g}°, {o.angle_pct:g} %)",
-             "tol_period_label": f"tolerance max({o.period_floor_s:g} s, {o.period_pct:g} %)",
-             "ref_peak_stbd": ref_ps, "ref_peak_port": ref_pp,
-             "dut_peak_stbd": outs_al.get("peak_stbd"), "dut_peak_port": outs_al.get("peak_port")}
+    plots = {
+        "t": t,
+        "ref": h_ref,
+        "dut": d,
+        "err": e,
+        "tol": tola(h_ref),
+        "static_mask": static_mask,
+        "acc_mask": acc_mask,
+        "steps": step_rows,
+        "amp_rows": amp_rows[STBD] + amp_rows[PORT],
+        "per_rows": per_rows,
+        "tol_angle": tola,
+        "tol_period": tolp,
+        "tol_angle_label": f"tolerance max({o.angle_floor_deg:g}°, {o.angle_pct:g} %)",
+        "tol_period_label": f"tolerance max({o.period_floor_s:g} s, {o.period_pct:g} %)",
+        "ref_peak_stbd": ref_ps,
+        "ref_peak_port": ref_pp,
+        "dut_peak_stbd": outs_al.get("peak_stbd"),
+        "dut_peak_port": outs_al.get("peak_port"),
+    }
     return ev, plots

@@ -141,8 +141,9 @@ class Layout:
         if self.y - h < MB:
             self._new_page()
 
-    def text(self, x: float, y: float, s: str, size: float, weight: str = "normal", color: str = "black",
-             ha: str = "left") -> None:
+    def text(
+        self, x: float, y: float, s: str, size: float, weight: str = "normal", color: str = "black", ha: str = "left"
+    ) -> None:
         self.page.append(("text", x, y, s, size, weight, color, ha))
 
     def space(self, h: float) -> None:
@@ -160,8 +161,9 @@ class Layout:
             self.text(ML, self.y, ln, size, "bold")
         self.y -= 3
 
-    def para(self, s: str, size: float = 8.5, indent: float = 0.0, weight: str = "normal",
-             color: str = "black") -> None:
+    def para(
+        self, s: str, size: float = 8.5, indent: float = 0.0, weight: str = "normal", color: str = "black"
+    ) -> None:
         lh = size * 1.3
         for ln in self.m.wrap(s, TW - indent, size, weight):
             self._need(lh)
@@ -183,8 +185,10 @@ class Layout:
 
     def kv(self, pairs: list[tuple[str, str]], size: float = 8.5, key_w: float = 170.0) -> None:
         lh = size * 1.3
-        total = sum(max(len(self.m.wrap(k, key_w - 8, size, "bold")), len(self.m.wrap(v, TW - key_w, size))) * lh + 2
-                    for k, v in pairs)
+        total = sum(
+            max(len(self.m.wrap(k, key_w - 8, size, "bold")), len(self.m.wrap(v, TW - key_w, size))) * lh + 2
+            for k, v in pairs
+        )
         if total <= 250.0:  # a short list stays on one page
             self._need(total)
         for k, v in pairs:
@@ -200,9 +204,16 @@ class Layout:
                     self.text(ML + key_w, self.y, vl[i], size)
             self.y -= 2
 
-    def table(self, headers: list[str], rows: list[list[str]], units: list[str] | None = None, size: float = 7.5,
-              caption: str | None = None, weights: list[float] | None = None, numeric: list[bool] | None = None
-              ) -> None:
+    def table(
+        self,
+        headers: list[str],
+        rows: list[list[str]],
+        units: list[str] | None = None,
+        size: float = 7.5,
+        caption: str | None = None,
+        weights: list[float] | None = None,
+        numeric: list[bool] | None = None,
+    ) -> None:
         """A table that paginates: rows never cut, the header (and units) repeated on every page."""
         m = self.m
         pad = 4.0
@@ -211,14 +222,19 @@ class Layout:
         numeric = numeric or [False] * ncol
         nat = []
         for j in range(ncol):
-            w = max([m.width(w_, size, "bold") for w_ in (headers[j].split(" ") + [units[j]])]
-                    + [m.width(r[j], size) for r in rows] + [8.0])
+            w = max(
+                [m.width(w_, size, "bold") for w_ in (headers[j].split(" ") + [units[j]])]
+                + [m.width(r[j], size) for r in rows]
+                + [8.0]
+            )
             nat.append(w + 2 * pad + 1.0)  # + 1 pt: rounding in the measured widths never forces a wrap
         tot = sum(nat)
         if tot > TW:  # shrink the wide columns first (they wrap), never below their longest header word
             # numbers never wrap; text columns shrink down to their longest header word
-            minw = [nat[j] if numeric[j] else max(m.width(w_, size, "bold") for w_ in headers[j].split(" ")) + 2 * pad
-                    for j in range(ncol)]
+            minw = [
+                nat[j] if numeric[j] else max(m.width(w_, size, "bold") for w_ in headers[j].split(" ")) + 2 * pad
+                for j in range(ncol)
+            ]
             wts = weights or [1.0] * ncol
             widths = list(nat)
             excess = tot - TW
@@ -307,15 +323,26 @@ def _draw_page(fig: Any, ops: list[tuple]) -> None:
     for op in ops:
         if op[0] == "text":
             _, x, y, s, size, weight, color, ha = op
-            fig.text(x / PW, y / PH, s, fontsize=size, weight=weight, color=color, ha=ha, va="baseline",
-                     family=FONT, parse_math=False)
+            fig.text(
+                x / PW,
+                y / PH,
+                s,
+                fontsize=size,
+                weight=weight,
+                color=color,
+                ha=ha,
+                va="baseline",
+                family=FONT,
+                parse_math=False,
+            )
         elif op[0] == "line":
             _, x0, y0, x1, y1, lw = op
             fig.add_artist(_line(x0, y0, x1, y1, lw))
         elif op[0] == "rect":
             _, x, y, w, h, col = op
-            fig.add_artist(Rectangle((x / PW, y / PH), w / PW, h / PH, transform=fig.transFigure, color=col, lw=0,
-                                     zorder=-1))
+            fig.add_artist(
+                Rectangle((x / PW, y / PH), w / PW, h / PH, transform=fig.transFigure, color=col, lw=0, zorder=-1)
+            )
 
 
 def _line(x0: float, y0: float, x1: float, y1: float, lw: float) -> Any:
@@ -327,13 +354,34 @@ def _line(x0: float, y0: float, x1: float, y1: float, lw: float) -> Any:
 def _footer(fig: Any, ev: dict[str, Any], k: int, n: int) -> None:
     num = (ev.get("test_record") or {}).get("report", {}).get("number") or "________"
     fig.add_artist(_line(ML, MB - 22, PW - MR, MB - 22, 0.4))
-    fig.text(ML / PW, (MB - 34) / PH,
-             f"Report No. {num}   ·   {ev['title']}   ·   result {ev['overall']['status'].upper()}",
-             fontsize=6.5, color="#444444", family=FONT, parse_math=False)
-    fig.text(ML / PW, (MB - 43) / PH, f"imutool {ev['tool']['version']} · generated {ev['generated_utc']} · test "
-             "evidence only, not a type approval", fontsize=6.0, color="#666666", family=FONT, parse_math=False)
-    fig.text((PW - MR) / PW, (MB - 34) / PH, f"page {k} of {n}", fontsize=7.5, weight="bold", ha="right",
-             family=FONT, parse_math=False)
+    fig.text(
+        ML / PW,
+        (MB - 34) / PH,
+        f"Report No. {num}   ·   {ev['title']}   ·   result {ev['overall']['status'].upper()}",
+        fontsize=6.5,
+        color="#444444",
+        family=FONT,
+        parse_math=False,
+    )
+    fig.text(
+        ML / PW,
+        (MB - 43) / PH,
+        f"imutool {ev['tool']['version']} · generated {ev['generated_utc']} · test evidence only, not a type approval",
+        fontsize=6.0,
+        color="#666666",
+        family=FONT,
+        parse_math=False,
+    )
+    fig.text(
+        (PW - MR) / PW,
+        (MB - 34) / PH,
+        f"page {k} of {n}",
+        fontsize=7.5,
+        weight="bold",
+        ha="right",
+        family=FONT,
+        parse_math=False,
+    )
 
 
 _STATUS_COLOUR = {"pass": "#1b7a3a", "fail": "#b0201e", "incomplete": "#b36b00"}
@@ -345,9 +393,14 @@ def _test_record_blocks(L: Layout, ev: dict[str, Any]) -> None:
     tr = ev.get("test_record") or {}
     L.heading("Test record")
     src = tr.get("source")
-    L.para(("From " + os.path.basename(src) + ". ") if src else "No test record was given (--test-info). "
-           "Blank lines are fields the test record does not state: fill them in by hand; imutool never invents "
-           "them.", size=8)
+    L.para(
+        ("From " + os.path.basename(src) + ". ")
+        if src
+        else "No test record was given (--test-info). "
+        "Blank lines are fields the test record does not state: fill them in by hand; imutool never invents "
+        "them.",
+        size=8,
+    )
     pairs = []
     for sec, key, label, _ in FIELDS:
         v = (tr.get(sec) or {}).get(key)
@@ -366,12 +419,28 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
     L.para(ov["rule"], size=7.5, color="#333333")
     L.para("Scope: " + ev["scope"], size=7.5)
     L.heading("Items (one row per requirement; source says whether the device reported the values)", 11)
-    L.table(["item", "clause", "status", "source", "unit", "N", "max |error|", "RMS", "p95 |error|", "mean"],
-            [[it["id"], it["clause"], it["status"], it.get("source") or "-", it.get("unit", ""),
-              _fmt(it["stats"].get("n")), _fmt(it["stats"].get("max_abs")), _fmt(it["stats"].get("rmse")),
-              _fmt(it["stats"].get("p95_abs")), _fmt(it["stats"].get("mean"))] for it in ev["items"]],
-            size=7.0, caption=None, weights=[0.3, 1.5, 0.3, 1.5, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1],
-            numeric=[False] * 5 + [True] * 5)
+    L.table(
+        ["item", "clause", "status", "source", "unit", "N", "max |error|", "RMS", "p95 |error|", "mean"],
+        [
+            [
+                it["id"],
+                it["clause"],
+                it["status"],
+                it.get("source") or "-",
+                it.get("unit", ""),
+                _fmt(it["stats"].get("n")),
+                _fmt(it["stats"].get("max_abs")),
+                _fmt(it["stats"].get("rmse")),
+                _fmt(it["stats"].get("p95_abs")),
+                _fmt(it["stats"].get("mean")),
+            ]
+            for it in ev["items"]
+        ],
+        size=7.0,
+        caption=None,
+        weights=[0.3, 1.5, 0.3, 1.5, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1],
+        numeric=[False] * 5 + [True] * 5,
+    )
     for it in ev["items"]:
         L.para(f"{it['id']} — {it['status']}: {it['reason']}", size=7.5, indent=0)
     _test_record_blocks(L, ev)
@@ -388,30 +457,48 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
             continue
         pairs = [(name.replace("_", " "), f"{inp.get('path')}"), ("sha256", str(inp.get("sha256")))]
         if inp.get("rows") is not None:
-            pairs.append(("content", f"{inp.get('kind')}, {_fmt(inp.get('rows'))} rows, {_fmt(inp.get('rate_hz'), 2)}"
-                                     f" Hz (median), {_fmt(inp.get('duration_s'), 1)} s, channel "
-                                     f"{inp.get('channel', '-')}"))
+            pairs.append(
+                (
+                    "content",
+                    f"{inp.get('kind')}, {_fmt(inp.get('rows'))} rows, {_fmt(inp.get('rate_hz'), 2)}"
+                    f" Hz (median), {_fmt(inp.get('duration_s'), 1)} s, channel "
+                    f"{inp.get('channel', '-')}",
+                )
+            )
         L.kv(pairs)
     L.heading("Units, frames and sign conventions")
     L.kv([(k.replace("_", " "), str(v)) for k, v in ev["conventions"].items()])
     L.heading("Editions applied (confidence: A verbatim, B secondary quote, C partial, R recalled, I inference)")
-    L.table(["document", "edition", "role", "conf."],
-            [[e["document"], e["edition"], e.get("role", ""), e["confidence"]] for e in ev["editions"]],
-            weights=[0.5, 1.0, 1.0, 0.1])
+    L.table(
+        ["document", "edition", "role", "conf."],
+        [[e["document"], e["edition"], e.get("role", ""), e["confidence"]] for e in ev["editions"]],
+        weights=[0.5, 1.0, 1.0, 0.1],
+    )
     L.heading("Criteria applied")
-    L.table(["id", "criterion", "source", "conf."],
-            [[c["id"], c["text"], c["source"], c["confidence"]] for c in ev["criteria"]], weights=[0.2, 1.5, 1, 0.1])
+    L.table(
+        ["id", "criterion", "source", "conf."],
+        [[c["id"], c["text"], c["source"], c["confidence"]] for c in ev["criteria"]],
+        weights=[0.2, 1.5, 1, 0.1],
+    )
     a = ev["alignment"]
     L.heading("Time alignment")
-    pairs = [("method", a["method"]), ("lag (s)", f"{_fmt(a.get('lag_s'), 3)} ({a.get('lag_positive_means', '')})"),
-             ("applied", f"{_fmt(a['applied'])}: {a.get('note', '')}")]
+    pairs = [
+        ("method", a["method"]),
+        ("lag (s)", f"{_fmt(a.get('lag_s'), 3)} ({a.get('lag_positive_means', '')})"),
+        ("applied", f"{_fmt(a['applied'])}: {a.get('note', '')}"),
+    ]
     if "correlation" in a:
         pairs.append(("correlation", _fmt(a["correlation"], 4)))
     lf = a.get("linear_fit")
     if lf:
-        pairs.append(("linear fit", f"offset {_fmt(lf.get('offset_deg'), 3)} deg, scale error "
-                                    f"{_fmt(100 * lf['scale_error'] if lf.get('scale_error') is not None else None, 2)}"
-                                    f" %  ({lf.get('model', '')})"))
+        pairs.append(
+            (
+                "linear fit",
+                f"offset {_fmt(lf.get('offset_deg'), 3)} deg, scale error "
+                f"{_fmt(100 * lf['scale_error'] if lf.get('scale_error') is not None else None, 2)}"
+                f" %  ({lf.get('model', '')})",
+            )
+        )
     if "rms_at_lag_deg" in a:
         pairs.append(("RMS at the lag (deg)", _fmt(a["rms_at_lag_deg"], 3)))
     if "latency_from_follow_up_s" in a:
@@ -433,23 +520,39 @@ def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
         cyc = it.get("cycles")
         if cyc:
             nj = "; ".join(f"{v} {k}" for k, v in cyc["not_judged"].items()) or "none"
-            pairs.append(("cycles", f"{cyc['judged']} of {cyc['reference_maxima']} reference maxima judged; not "
-                                    f"judged: {nj}"))
+            pairs.append(
+                ("cycles", f"{cyc['judged']} of {cyc['reference_maxima']} reference maxima judged; not judged: {nj}")
+            )
         if it.get("raw_error_stats"):
             r = it["raw_error_stats"]
-            pairs.append(("raw error (static error included)", f"N {_fmt(r.get('n'))}, max |error| "
-                          f"{_fmt(r.get('max_abs'))} deg, RMS {_fmt(r.get('rmse'))} deg, p95 {_fmt(r.get('p95_abs'))}"
-                          f" deg; status on the raw error: {it.get('raw_status', '-')}"))
+            pairs.append(
+                (
+                    "raw error (static error included)",
+                    f"N {_fmt(r.get('n'))}, max |error| "
+                    f"{_fmt(r.get('max_abs'))} deg, RMS {_fmt(r.get('rmse'))} deg, p95 {_fmt(r.get('p95_abs'))}"
+                    f" deg; status on the raw error: {it.get('raw_status', '-')}",
+                )
+            )
         if it.get("drift_deg_per_h") is not None:
-            pairs.append(("drift", f"{_fmt(it['drift_deg_per_h'], 3)} ± {_fmt(it.get('drift_u95_deg_per_h'), 3)} "
-                                   f"°/h (95 %) over {_fmt(it.get('duration_s'), 0)} s"))
+            pairs.append(
+                (
+                    "drift",
+                    f"{_fmt(it['drift_deg_per_h'], 3)} ± {_fmt(it.get('drift_u95_deg_per_h'), 3)} "
+                    f"°/h (95 %) over {_fmt(it.get('duration_s'), 0)} s",
+                )
+            )
         L.kv(pairs, size=8)
         rows = it.get("rows") or []
         if rows:
             keys = row_keys(rows)
             labels = [key_label(k) for k in keys]
-            L.table([lb for lb, _ in labels], [row_cells(keys, r) for r in rows], units=[u for _, u in labels],
-                    caption=f"{it['id']}: {len(rows)} rows", numeric=[k not in ("side", "status") for k in keys])
+            L.table(
+                [lb for lb, _ in labels],
+                [row_cells(keys, r) for r in rows],
+                units=[u for _, u in labels],
+                caption=f"{it['id']}: {len(rows)} rows",
+                numeric=[k not in ("side", "status") for k in keys],
+            )
         if it.get("capture"):
             L.kv([(k.replace("_", " "), _fmt(v)) for k, v in it["capture"].items()], size=7.5)
     L.heading("Not tested / insufficient data")
@@ -458,9 +561,12 @@ def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
     sc = ev.get("standards_cited")
     if sc:
         L.heading(f"Standards excerpts applied ({sc['file']})")
-        L.table(["id", "requirement", "value", "conf."],
-                [[r["id"], r["requirement"], r["value"], r["confidence"]] for r in sc["rows"]],
-                weights=[0.1, 2.0, 1.0, 0.1], size=7.0)
+        L.table(
+            ["id", "requirement", "value", "conf."],
+            [[r["id"], r["requirement"], r["value"], r["confidence"]] for r in sc["rows"]],
+            weights=[0.1, 2.0, 1.0, 0.1],
+            size=7.0,
+        )
     L.heading("Figures from the standards that are NOT confirmed")
     for u in ev["unconfirmed"]:
         L.para(f"• {u['id']} [{u['confidence']}]: {u['text']}", size=8)
@@ -471,10 +577,14 @@ def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
     L.heading("Settings")
     L.kv([(k.replace("_", " "), _fmt(v, 3)) for k, v in ev["settings"].items()], size=7.5, key_w=190)
     L.heading("Sign-off")
-    L.para("The undersigned confirm that the test was carried out as recorded above and that this evidence "
-           "belongs to the device identified in the test record.", size=8)
-    L.signatures(["Operator (test house)", "Witness (surveyor / recognised organisation)",
-                  "Approved for the test house"])
+    L.para(
+        "The undersigned confirm that the test was carried out as recorded above and that this evidence "
+        "belongs to the device identified in the test record.",
+        size=8,
+    )
+    L.signatures(
+        ["Operator (test house)", "Witness (surveyor / recognised organisation)", "Approved for the test house"]
+    )
 
 
 def _shade_static(ax: Any, t: np.ndarray, mask: np.ndarray | None, color: str = "0.9") -> None:
@@ -485,14 +595,28 @@ def _shade_static(ax: Any, t: np.ndarray, mask: np.ndarray | None, color: str = 
         ax.axvspan(t[a], t[b - 1], color=color, lw=0)
 
 
-def _side_error_panel(ax: Any, rows: list[dict[str, Any]], unit_sfx: str, what: str, tol_fn: Any, tol_label: str,
-                      empty: str, xlabel: str, ylabel: str) -> None:
+def _side_error_panel(
+    ax: Any,
+    rows: list[dict[str, Any]],
+    unit_sfx: str,
+    what: str,
+    tol_fn: Any,
+    tol_label: str,
+    empty: str,
+    xlabel: str,
+    ylabel: str,
+) -> None:
     """Port/starboard errors against the reference value with the configured tolerance band (± tol_fn)."""
     for side, mk, col in (("stbd", "o", "C0"), ("port", "s", "C4")):
         mine = [r for r in rows if r["side"] == side]
         if mine:
-            ax.plot([r["reference" + unit_sfx] for r in mine], [r["error" + unit_sfx] for r in mine], mk, color=col,
-                    label=f"{side} {what}")
+            ax.plot(
+                [r["reference" + unit_sfx] for r in mine],
+                [r["error" + unit_sfx] for r in mine],
+                mk,
+                color=col,
+                label=f"{side} {what}",
+            )
     if rows:
         xs = np.linspace(0, max(r["reference" + unit_sfx] for r in rows) * 1.1 + 1, 100)
         tl = tol_fn(xs)
@@ -533,8 +657,9 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     if lt and lt.get("start_s") is not None and t.size and lt["end_s"] - lt["start_s"] > 0.5 * (t[-1] - t[0]):
         # the long hold has its own plot: show the programme before it at a readable scale
         axs[2].set_xlim(t[0], lt["start_s"] + 30.0)
-        axs[0].set_title(f"programme before the long-term hold (from {lt['start_s']:.0f} s: see the long-term plot)",
-                         fontsize=8)
+        axs[0].set_title(
+            f"programme before the long-term hold (from {lt['start_s']:.0f} s: see the long-term plot)", fontsize=8
+        )
     for ax in axs:
         ax.grid(alpha=0.3)
     figs.append(fig)
@@ -545,8 +670,13 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     if steps:
         x = np.array([r["reference_deg"] for r in steps])
         axs[0].errorbar(x, [r["error_mean_deg"] for r in steps], yerr=None, fmt="o", color="C1", label="mean error")
-        axs[0].plot(x, [np.sign(r["error_mean_deg"] or 1) * r["max_abs_error_deg"] for r in steps], "x", color="C3",
-                    label="max |error| (signed)")
+        axs[0].plot(
+            x,
+            [np.sign(r["error_mean_deg"] or 1) * r["max_abs_error_deg"] for r in steps],
+            "x",
+            color="C3",
+            label="max |error| (signed)",
+        )
         xs = np.linspace(min(x.min(), -1), max(x.max(), 1), 200)
         tl = p["tol_angle"](xs)
         axs[0].fill_between(xs, -tl, tl, color="C2", alpha=0.25, lw=0, label=p["tol_angle_label"])
@@ -555,10 +685,28 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
         axs[0].text(0.5, 0.5, "no static steps: not tested", ha="center", transform=axs[0].transAxes)
     axs[0].set_xlabel("reference heel (deg)")
     axs[0].set_ylabel("error (deg)")
-    _side_error_panel(axs[1], p["amp_rows"], "_deg", "amplitude", p["tol_angle"], p["tol_angle_label"],
-                      "no roll cycles: not tested", "reference amplitude (deg)", "amplitude error (deg)")
-    _side_error_panel(axs[2], p["per_rows"], "_s", "period", p["tol_period"], p["tol_period_label"],
-                      "no roll periods: not tested", "reference period (s)", "period error (s)")
+    _side_error_panel(
+        axs[1],
+        p["amp_rows"],
+        "_deg",
+        "amplitude",
+        p["tol_angle"],
+        p["tol_angle_label"],
+        "no roll cycles: not tested",
+        "reference amplitude (deg)",
+        "amplitude error (deg)",
+    )
+    _side_error_panel(
+        axs[2],
+        p["per_rows"],
+        "_s",
+        "period",
+        p["tol_period"],
+        p["tol_period_label"],
+        "no roll periods: not tested",
+        "reference period (s)",
+        "period error (s)",
+    )
     for ax in axs:
         ax.grid(alpha=0.3)
     fig.tight_layout(rect=(0, 0.06, 1, 0.97))
@@ -632,10 +780,14 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     fig.suptitle("Static error by heading and follow-up error by rate of turn", fontsize=11)
     rows = p["static_rows"]
     if rows:
-        axs[0].bar([r["heading_deg"] for r in rows], [r["error_mean_deg"] for r in rows], width=12, color="C1",
-                   label="mean error")
-        axs[0].plot([r["heading_deg"] for r in rows], [r["p95_abs_error_deg"] for r in rows], "kx",
-                    label="p95 |error|")
+        axs[0].bar(
+            [r["heading_deg"] for r in rows],
+            [r["error_mean_deg"] for r in rows],
+            width=12,
+            color="C1",
+            label="mean error",
+        )
+        axs[0].plot([r["heading_deg"] for r in rows], [r["p95_abs_error_deg"] for r in rows], "kx", label="p95 |error|")
         axs[0].axhline(lim, color="C3", ls="--", lw=0.8)
         axs[0].axhline(-lim, color="C3", ls="--", lw=0.8, label=f"±{lim:g}°")
         axs[0].legend(fontsize=7)
@@ -646,10 +798,22 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[0].set_xlim(-20, 360)
     m = p["turn_mask"]
     if np.any(m):
-        axs[1].plot(np.abs(p["rot"][m]), p.get("err_raw", p["err"])[m], ".", ms=1.2, color="0.6",
-                    label="raw error (static error included)")
-        axs[1].plot(np.abs(p["rot"][m]), p.get("err_fu", p["err"])[m], ".", ms=1.5, color="C0",
-                    label="static error removed (judged)")
+        axs[1].plot(
+            np.abs(p["rot"][m]),
+            p.get("err_raw", p["err"])[m],
+            ".",
+            ms=1.2,
+            color="0.6",
+            label="raw error (static error included)",
+        )
+        axs[1].plot(
+            np.abs(p["rot"][m]),
+            p.get("err_fu", p["err"])[m],
+            ".",
+            ms=1.5,
+            color="C0",
+            label="static error removed (judged)",
+        )
         bx = [0, p["band_split_dps"], p["band_split_dps"], p["band_max_dps"]]
         by = np.array([p["follow_low_deg"], p["follow_low_deg"], p["follow_high_deg"], p["follow_high_deg"]])
         axs[1].plot(bx, by, "C3--", lw=1, label="limit (MSC.116(73) defaults unless changed)")
@@ -686,6 +850,7 @@ def render_pdf(ev: dict[str, Any], plots: dict[str, Any], path: str) -> int:
     tail.pages = [p for p in tail.pages if p]
     figs = _inclinometer_figures(ev, plots) if ev["report"] == "inclinometer" else _heading_figures(ev, plots)
     total = len(head.pages) + len(figs) + len(tail.pages)
+
     def text_page(ops):
         fig = plt.figure(figsize=A4)
         _draw_page(fig, ops)

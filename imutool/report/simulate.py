@@ -21,8 +21,13 @@ from formats import Recording
 
 DEFAULT_STEPS = (0.0, 5.0, 10.0, 20.0, 30.0, 45.0, -5.0, -10.0, -20.0, -30.0, -45.0, 0.0)
 # (period s, starboard amplitude deg, port amplitude deg, cycles): periods 4-30 s (standards.md P10, I)
-DEFAULT_DYNAMIC = ((4.0, 5.0, 5.0, 8), (8.0, 10.0, 10.0, 6), (12.0, 20.0, 20.0, 5), (15.0, 25.0, 15.0, 4),
-                   (30.0, 15.0, 15.0, 3))
+DEFAULT_DYNAMIC = (
+    (4.0, 5.0, 5.0, 8),
+    (8.0, 10.0, 10.0, 6),
+    (12.0, 20.0, 20.0, 5),
+    (15.0, 25.0, 15.0, 4),
+    (30.0, 15.0, 15.0, 3),
+)
 G = 9.80665  # m/s²
 
 
@@ -32,11 +37,19 @@ def _ramp(a: float, b: float, n: int) -> np.ndarray:
     return a + (b - a) * s
 
 
-def inclinometer_programme(rate_hz: float = 10.0, steps: tuple[float, ...] = DEFAULT_STEPS, hold_s: float = 20.0,
-                           transition_s: float = 4.0, dynamic: tuple = DEFAULT_DYNAMIC, long_deg: float = 5.0,
-                           long_s: float = 3700.0, long_rate_hz: float = 1.0, lat_accel_ms2: float = 0.0,
-                           lat_accel_s: float = 60.0, lat_accel_period_s: float = 20.0
-                           ) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]], np.ndarray]:
+def inclinometer_programme(
+    rate_hz: float = 10.0,
+    steps: tuple[float, ...] = DEFAULT_STEPS,
+    hold_s: float = 20.0,
+    transition_s: float = 4.0,
+    dynamic: tuple = DEFAULT_DYNAMIC,
+    long_deg: float = 5.0,
+    long_s: float = 3700.0,
+    long_rate_hz: float = 1.0,
+    lat_accel_ms2: float = 0.0,
+    lat_accel_s: float = 60.0,
+    lat_accel_period_s: float = 20.0,
+) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]], np.ndarray]:
     """True table heel and the programme: (t s, heel deg + stbd, segments [{kind, start, end, ...}], lateral
     acceleration m/s² + starboard).
 
@@ -77,16 +90,33 @@ def inclinometer_programme(rate_hz: float = 10.0, steps: tuple[float, ...] = DEF
         n = int(round(cycles * period * rate_hz))
         sn = np.sin(2 * np.pi * np.arange(n) * dt / period)
         t0, t1 = add(np.where(sn > 0, a_s * sn, a_p * sn))
-        segs.append({"kind": "dynamic", "start": t0, "end": t1, "period_s": period, "amp_stbd_deg": a_s,
-                     "amp_port_deg": a_p, "cycles": cycles})
+        segs.append(
+            {
+                "kind": "dynamic",
+                "start": t0,
+                "end": t1,
+                "period_s": period,
+                "amp_stbd_deg": a_s,
+                "amp_port_deg": a_p,
+                "cycles": cycles,
+            }
+        )
     if lat_accel_ms2 > 0 and lat_accel_s > 0:
         add(_ramp(cur, 0.0, n_tr))
         cur = 0.0
         n = int(round(lat_accel_s * rate_hz))
         a = lat_accel_ms2 * np.sin(2 * np.pi * np.arange(n) * dt / lat_accel_period_s)
         t0, t1 = add(np.zeros(n), a)
-        segs.append({"kind": "lateral_acceleration", "start": t0, "end": t1, "reference_deg": 0.0,
-                     "lat_accel_ms2": lat_accel_ms2, "period_s": lat_accel_period_s})
+        segs.append(
+            {
+                "kind": "lateral_acceleration",
+                "start": t0,
+                "end": t1,
+                "reference_deg": 0.0,
+                "lat_accel_ms2": lat_accel_ms2,
+                "period_s": lat_accel_period_s,
+            }
+        )
     if long_s > 0:
         add(_ramp(cur, long_deg, n_tr))
         step = 1.0 / long_rate_hz
@@ -100,10 +130,19 @@ def _shift(t: np.ndarray, x: np.ndarray, lag_s: float) -> np.ndarray:
     return np.interp(t - lag_s, t, x)
 
 
-def inclinometer_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, scale: float = 0.0,
-                      lag_s: float = 0.0, noise_deg: float = 0.0, drift_deg_per_h: float = 0.0,
-                      ref_noise_deg: float = 0.0, long_s: float = 3700.0, accel_coupling: float = 0.0,
-                      **programme: Any) -> tuple[Recording, Recording, list[dict[str, Any]]]:
+def inclinometer_test(
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    offset_deg: float = 0.0,
+    scale: float = 0.0,
+    lag_s: float = 0.0,
+    noise_deg: float = 0.0,
+    drift_deg_per_h: float = 0.0,
+    ref_noise_deg: float = 0.0,
+    long_s: float = 3700.0,
+    accel_coupling: float = 0.0,
+    **programme: Any,
+) -> tuple[Recording, Recording, list[dict[str, Any]]]:
     """(DUT recording, reference recording, segments) for an inclinometer test on a simulated tilt table.
 
     Both recordings hold ``roll`` (deg, + starboard down) and ``pitch`` (0); the reference also holds
@@ -120,25 +159,49 @@ def inclinometer_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 
     if noise_deg > 0:
         dut = dut + rng.normal(0.0, noise_deg, heel.size)
     zeros = np.zeros_like(t)
-    common = {"frame": "vessel body FRD (x bow, y starboard, z down)",
-              "convention": "roll + starboard down (deg)", "rate_hz": rate_hz, "seed": seed}
-    inj = {"offset_deg": offset_deg, "scale": scale, "lag_s": lag_s, "noise_deg": noise_deg,
-           "drift_deg_per_h": drift_deg_per_h, "accel_coupling": accel_coupling}
-    r_dut = Recording(t.copy(), {"roll": dut, "pitch": zeros.copy()}, {"roll": "deg", "pitch": "deg"},
-                      {**common, "sensor": "simulated inclinometer (DUT)", "device": "SIM-INC-1 s/n 0001 fw 1.0",
-                       "injected": inj})
+    common = {
+        "frame": "vessel body FRD (x bow, y starboard, z down)",
+        "convention": "roll + starboard down (deg)",
+        "rate_hz": rate_hz,
+        "seed": seed,
+    }
+    inj = {
+        "offset_deg": offset_deg,
+        "scale": scale,
+        "lag_s": lag_s,
+        "noise_deg": noise_deg,
+        "drift_deg_per_h": drift_deg_per_h,
+        "accel_coupling": accel_coupling,
+    }
+    r_dut = Recording(
+        t.copy(),
+        {"roll": dut, "pitch": zeros.copy()},
+        {"roll": "deg", "pitch": "deg"},
+        {**common, "sensor": "simulated inclinometer (DUT)", "device": "SIM-INC-1 s/n 0001 fw 1.0", "injected": inj},
+    )
     ch = {"roll": ref, "pitch": zeros.copy()}
     units = {"roll": "deg", "pitch": "deg"}
     if np.any(lat != 0):
         ch["lat_accel"] = lat
         units["lat_accel"] = "m/s^2"
-    r_ref = Recording(t.copy(), ch, units, {**common, "sensor": "simulated tilt table encoder (reference)",
-                                            "reference_noise_deg": ref_noise_deg})
+    r_ref = Recording(
+        t.copy(),
+        ch,
+        units,
+        {**common, "sensor": "simulated tilt table encoder (reference)", "reference_noise_deg": ref_noise_deg},
+    )
     return r_dut, r_ref, segs
 
 
-def irregular_roll(duration_s: float, rate_hz: float = 1.0, tp_s: float = 10.0, std_deg: float = 0.5,
-                   gamma: float = 3.3, seed: int = 0, n_comp: int = 400) -> tuple[np.ndarray, np.ndarray]:
+def irregular_roll(
+    duration_s: float,
+    rate_hz: float = 1.0,
+    tp_s: float = 10.0,
+    std_deg: float = 0.5,
+    gamma: float = 3.3,
+    seed: int = 0,
+    n_comp: int = 400,
+) -> tuple[np.ndarray, np.ndarray]:
     """Irregular ship roll (t s, heel deg) from a JONSWAP-shaped spectrum (peak period tp_s, peak enhancement
     gamma) as a sum of n_comp sines with random phases, scaled to a standard deviation of std_deg.
 
@@ -150,16 +213,25 @@ def irregular_roll(duration_s: float, rate_hz: float = 1.0, tp_s: float = 10.0, 
     wp = 2 * np.pi / tp_s
     w = np.linspace(0.4 * wp, 3.0 * wp, n_comp)
     sig = np.where(w <= wp, 0.07, 0.09)
-    spec = w ** -5 * np.exp(-1.25 * (wp / w) ** 4) * gamma ** np.exp(-((w - wp) ** 2) / (2 * sig ** 2 * wp ** 2))
+    spec = w**-5 * np.exp(-1.25 * (wp / w) ** 4) * gamma ** np.exp(-((w - wp) ** 2) / (2 * sig**2 * wp**2))
     amp = np.sqrt(2 * spec * (w[1] - w[0]))
     ph = rng.uniform(0, 2 * np.pi, n_comp)
     x = (amp[None, :] * np.cos(w[None, :] * t[:, None] + ph[None, :])).sum(axis=1)
     return t, x * std_deg / x.std()
 
 
-def sea_pair(duration_s: float = 1800.0, rate_hz: float = 1.0, tp_s: float = 10.0, std_deg: float = 0.5,
-             seed: int = 0, noise_ref_deg: float = 0.02, noise_dut_deg: float = 0.03, quant_deg: float = 0.01,
-             offset_deg: float = 0.0, scale: float = 0.0) -> tuple[Recording, Recording]:
+def sea_pair(
+    duration_s: float = 1800.0,
+    rate_hz: float = 1.0,
+    tp_s: float = 10.0,
+    std_deg: float = 0.5,
+    seed: int = 0,
+    noise_ref_deg: float = 0.02,
+    noise_dut_deg: float = 0.03,
+    quant_deg: float = 0.01,
+    offset_deg: float = 0.0,
+    scale: float = 0.0,
+) -> tuple[Recording, Recording]:
     """Two motion sensors on one ship at sea: (DUT, reference), each heel = truth + its own white noise,
     quantised to quant_deg (a 0.01° output resolution), sampled at rate_hz; the DUT optionally with an offset
     (deg) and a scale error (fraction)."""
@@ -169,9 +241,16 @@ def sea_pair(duration_s: float = 1800.0, rate_hz: float = 1.0, tp_s: float = 10.
     dut = (1 + scale) * x + offset_deg + rng.normal(0.0, noise_dut_deg, x.size)
     q = (lambda v: np.round(v / quant_deg) * quant_deg) if quant_deg > 0 else (lambda v: v)
     meta = {"frame": "vessel body FRD", "convention": "roll + starboard down (deg)", "rate_hz": rate_hz}
-    r_dut = Recording(t.copy(), {"roll": q(dut)}, {"roll": "deg"},
-                      {**meta, "sensor": "simulated motion sensor B (DUT)",
-                       "injected": {"offset_deg": offset_deg, "scale": scale, "noise_deg": noise_dut_deg}})
+    r_dut = Recording(
+        t.copy(),
+        {"roll": q(dut)},
+        {"roll": "deg"},
+        {
+            **meta,
+            "sensor": "simulated motion sensor B (DUT)",
+            "injected": {"offset_deg": offset_deg, "scale": scale, "noise_deg": noise_dut_deg},
+        },
+    )
     r_ref = Recording(t.copy(), {"roll": q(ref)}, {"roll": "deg"}, {**meta, "sensor": "simulated motion sensor A"})
     return r_dut, r_ref
 
@@ -187,10 +266,17 @@ def write_steps_csv(segs: list[dict[str, Any]], path: str) -> None:
             f.write(f"{s['start']:.3f},{s['end']:.3f},{s['reference_deg']:.3f}\n")
 
 
-def heading_programme(rate_hz: float = 10.0, headings: int = 8, hold_s: float = 20.0, slew_dps: float = 5.0,
-                      turn_rates: tuple[float, ...] = (8.0, 20.0), turn_deg: float = 360.0,
-                      roll_amp_deg: float = 10.0, roll_period_s: float = 10.0, rolling_s: float = 60.0
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+def heading_programme(
+    rate_hz: float = 10.0,
+    headings: int = 8,
+    hold_s: float = 20.0,
+    slew_dps: float = 5.0,
+    turn_rates: tuple[float, ...] = (8.0, 20.0),
+    turn_deg: float = 360.0,
+    roll_amp_deg: float = 10.0,
+    roll_period_s: float = 10.0,
+    rolling_s: float = 60.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
     """True (t s, heading deg unwrapped, roll deg, segments) of a turntable heading test."""
     dt = 1.0 / rate_hz
     hs: list[np.ndarray] = []
@@ -211,8 +297,14 @@ def heading_programme(rate_hz: float = 10.0, headings: int = 8, hold_s: float = 
             n_acc = int(round(1.0 * rate_hz))
             body = np.linspace(cur, to, n, endpoint=False)
             hs.append(body)
-            segs.append({"kind": kind, "start": t0 + n_acc * dt, "end": t_now() - n_acc * dt,
-                         "rate_dps": float(np.sign(to - cur) * rate)})
+            segs.append(
+                {
+                    "kind": kind,
+                    "start": t0 + n_acc * dt,
+                    "end": t_now() - n_acc * dt,
+                    "rate_dps": float(np.sign(to - cur) * rate),
+                }
+            )
         cur = to
 
     for k in range(headings):
@@ -228,19 +320,34 @@ def heading_programme(rate_hz: float = 10.0, headings: int = 8, hold_s: float = 
     t0 = t_now()
     n_roll = int(round(rolling_s * rate_hz))
     hs.append(np.full(n_roll, cur))
-    segs.append({"kind": "rolling", "start": t0, "end": t_now(), "heading_deg": cur % 360.0,
-                 "roll_amp_deg": roll_amp_deg, "roll_period_s": roll_period_s})
+    segs.append(
+        {
+            "kind": "rolling",
+            "start": t0,
+            "end": t_now(),
+            "heading_deg": cur % 360.0,
+            "roll_amp_deg": roll_amp_deg,
+            "roll_period_s": roll_period_s,
+        }
+    )
     heading = np.concatenate(hs)
     t = np.arange(heading.size) * dt
     roll = np.zeros_like(t)
-    m = (t >= t0)
+    m = t >= t0
     roll[m] = roll_amp_deg * np.sin(2 * np.pi * (t[m] - t0) / roll_period_s)
     return t, heading, roll, segs
 
 
-def heading_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, semicircular_deg: tuple[float, float]
-                 = (0.0, 0.0), lag_s: float = 0.0, noise_deg: float = 0.0, roll_coupling: float = 0.0,
-                 **programme: Any) -> tuple[Recording, Recording, list[dict[str, Any]]]:
+def heading_test(
+    rate_hz: float = 10.0,
+    seed: int = 0,
+    offset_deg: float = 0.0,
+    semicircular_deg: tuple[float, float] = (0.0, 0.0),
+    lag_s: float = 0.0,
+    noise_deg: float = 0.0,
+    roll_coupling: float = 0.0,
+    **programme: Any,
+) -> tuple[Recording, Recording, list[dict[str, Any]]]:
     """(DUT e.g. a digital magnetic compass, reference gyro, segments) for a heading-device test.
 
     DUT heading = truth(t − lag) + offset + a·sin(h) + b·cos(h) + roll_coupling·roll + noise (deg, wrapped to
@@ -255,21 +362,49 @@ def heading_test(rate_hz: float = 10.0, seed: int = 0, offset_deg: float = 0.0, 
     if noise_deg > 0:
         dut = dut + rng.normal(0.0, noise_deg, t.size)
     common = {"frame": "NED; heading clockwise from north (deg)", "rate_hz": rate_hz, "seed": seed}
-    inj = {"offset_deg": offset_deg, "semicircular_deg": list(semicircular_deg), "lag_s": lag_s,
-           "noise_deg": noise_deg, "roll_coupling": roll_coupling}
-    r_dut = Recording(t.copy(), {"heading": dut % 360.0, "roll": roll.copy()}, {},
-                      {**common, "sensor": "simulated digital magnetic compass (DUT)",
-                       "device": "SIM-DMC-1 s/n 0002 fw 1.0", "injected": inj})
-    r_ref = Recording(t.copy(), {"heading": h % 360.0, "roll": roll.copy()}, {},
-                      {**common, "sensor": "simulated gyro compass / turntable encoder (reference)"})
+    inj = {
+        "offset_deg": offset_deg,
+        "semicircular_deg": list(semicircular_deg),
+        "lag_s": lag_s,
+        "noise_deg": noise_deg,
+        "roll_coupling": roll_coupling,
+    }
+    r_dut = Recording(
+        t.copy(),
+        {"heading": dut % 360.0, "roll": roll.copy()},
+        {},
+        {
+            **common,
+            "sensor": "simulated digital magnetic compass (DUT)",
+            "device": "SIM-DMC-1 s/n 0002 fw 1.0",
+            "injected": inj,
+        },
+    )
+    r_ref = Recording(
+        t.copy(),
+        {"heading": h % 360.0, "roll": roll.copy()},
+        {},
+        {**common, "sensor": "simulated gyro compass / turntable encoder (reference)"},
+    )
     return r_dut, r_ref, segs
 
 
-SAMPLE_INCLINOMETER_ERRORS = {"offset_deg": 0.2, "scale": 0.01, "lag_s": 0.02, "noise_deg": 0.05,
-                              "drift_deg_per_h": 0.1, "accel_coupling": 0.05}
+SAMPLE_INCLINOMETER_ERRORS = {
+    "offset_deg": 0.2,
+    "scale": 0.01,
+    "lag_s": 0.02,
+    "noise_deg": 0.05,
+    "drift_deg_per_h": 0.1,
+    "accel_coupling": 0.05,
+}
 SAMPLE_LATERAL_ACCEL_MS2 = 1.0  # the sample programme's lateral-acceleration segment (peak, m/s²)
-SAMPLE_HEADING_ERRORS = {"offset_deg": 0.2, "semicircular_deg": (0.3, -0.2), "lag_s": 0.02, "noise_deg": 0.05,
-                         "roll_coupling": 0.02}
+SAMPLE_HEADING_ERRORS = {
+    "offset_deg": 0.2,
+    "semicircular_deg": (0.3, -0.2),
+    "lag_s": 0.02,
+    "noise_deg": 0.05,
+    "roll_coupling": 0.02,
+}
 
 
 def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict[str, str]:
@@ -290,8 +425,13 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
 
     os.makedirs(folder, exist_ok=True)
     out = {}
-    dut, ref, segs = inclinometer_test(rate_hz=rate_hz, seed=seed, ref_noise_deg=0.01,
-                                       lat_accel_ms2=SAMPLE_LATERAL_ACCEL_MS2, **SAMPLE_INCLINOMETER_ERRORS)
+    dut, ref, segs = inclinometer_test(
+        rate_hz=rate_hz,
+        seed=seed,
+        ref_noise_deg=0.01,
+        lat_accel_ms2=SAMPLE_LATERAL_ACCEL_MS2,
+        **SAMPLE_INCLINOMETER_ERRORS,
+    )
     for name, rec in (("inclinometer_dut.csv", dut), ("inclinometer_reference.csv", ref)):
         out[name] = os.path.join(folder, name)
         formats.write(rec, out[name])

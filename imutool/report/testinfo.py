@@ -108,8 +108,12 @@ def load_test_info(path: str | None) -> dict[str, Any]:
                 raise _bad(f"[{sec}] {key} must be a positive number ({label})", path)
             v = float(v)
         elif kind == "range":
-            if (not isinstance(v, list) or len(v) != 2 or not all(isinstance(x, (int, float)) for x in v)
-                    or not 0 < v[0] < v[1]):
+            if (
+                not isinstance(v, list)
+                or len(v) != 2
+                or not all(isinstance(x, (int, float)) for x in v)
+                or not 0 < v[0] < v[1]
+            ):
                 raise _bad(f"[{sec}] {key} must be [min, max] with 0 < min < max ({label})", path)
             v = [float(v[0]), float(v[1])]
         elif kind == "list":
@@ -131,12 +135,14 @@ def load_test_info(path: str | None) -> dict[str, Any]:
         if item not in EXTERNAL:
             raise _bad(f"unknown [external.{item}] (known: {', '.join(EXTERNAL)})", path)
         if not isinstance(v, dict) or v.get("result") not in ("pass", "fail"):
-            raise _bad(f"[external.{item}] needs result = \"pass\" or \"fail\"", path)
+            raise _bad(f'[external.{item}] needs result = "pass" or "fail"', path)
         if not str(v.get("evidence") or "").strip():
-            raise _bad(f"[external.{item}] needs evidence = \"<report no., photo, ...>\" (an attestation "
-                       "without evidence is not accepted)", path)
-        info["external"][item] = {"result": v["result"], "evidence": str(v["evidence"]),
-                                  "by": str(v.get("by") or "")}
+            raise _bad(
+                f'[external.{item}] needs evidence = "<report no., photo, ...>" (an attestation '
+                "without evidence is not accepted)",
+                path,
+            )
+        info["external"][item] = {"result": v["result"], "evidence": str(v["evidence"]), "by": str(v.get("by") or "")}
     info["source"] = os.fspath(path)
     return info
 

@@ -54,8 +54,12 @@ def options(name: str) -> list[str]:
     import inspect
 
     params = inspect.signature(scenario(name)).parameters
-    return [p for p in params if p not in ("duration", "rate_hz", "seed")
-            and params[p].kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)]
+    return [
+        p
+        for p in params
+        if p not in ("duration", "rate_hz", "seed")
+        and params[p].kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    ]
 
 
 def simulate(name: str, **options_) -> Recording:
@@ -63,8 +67,9 @@ def simulate(name: str, **options_) -> Recording:
     valid = options(name)
     unknown = [k for k in options_ if k not in valid and k not in ("duration", "rate_hz", "seed")]
     if unknown:
-        raise ImutoolError(f"scenario {name!r} has no option {', '.join(map(repr, unknown))}; "
-                           f"valid: {', '.join(valid)}")
+        raise ImutoolError(
+            f"scenario {name!r} has no option {', '.join(map(repr, unknown))}; valid: {', '.join(valid)}"
+        )
     import inspect
 
     defaults = {k: v.default for k, v in inspect.signature(scenario(name)).parameters.items()}

@@ -31,17 +31,28 @@ def integrate_quaternion(t: np.ndarray, w: np.ndarray, q0: np.ndarray | None = N
     wm = 0.5 * (w[1:] + w[:-1])
     dt = np.diff(t)
     ang = np.linalg.norm(wm, axis=1) * dt
-    axis = np.divide(wm, np.linalg.norm(wm, axis=1, keepdims=True), out=np.zeros_like(wm),
-                     where=np.linalg.norm(wm, axis=1, keepdims=True) > 0)
+    axis = np.divide(
+        wm,
+        np.linalg.norm(wm, axis=1, keepdims=True),
+        out=np.zeros_like(wm),
+        where=np.linalg.norm(wm, axis=1, keepdims=True) > 0,
+    )
     dq = np.concatenate([np.cos(ang / 2)[:, None], axis * np.sin(ang / 2)[:, None]], 1)
     for k in range(1, n):  # short scenarios: a plain loop is fine here (simulator only)
         q[k] = quat_multiply(q[k - 1], dq[k - 1])
     return quat_normalize(q)
 
 
-def accel_array(duration: float | None = None, rate_hz: float | None = None, seed: int = 0,
-                layout: str = "paper", r: float = 0.1, noise_ug: float = 100.0, bias_mps2: float = 0.0,
-                translation: float = 0.2) -> Recording:
+def accel_array(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    layout: str = "paper",
+    r: float = 0.1,
+    noise_ug: float = 100.0,
+    bias_mps2: float = 0.0,
+    translation: float = 0.2,
+) -> Recording:
     """Paper rates, array ``layout`` ('paper' preset with distance r m, or a layout TOML path).
 
     Defaults: 20 s at 100 Hz, noise density ``noise_ug`` µg/√Hz per axis (a mid-range MEMS), no bias
@@ -60,8 +71,9 @@ def accel_array(duration: float | None = None, rate_hz: float | None = None, see
     f0 = specific_force(q, acc_ned, GRAVITY)
     pos, dirs, cols, units = lay.rows()
     a = design_matrix(pos, dirs)
-    quad = np.stack([w[:, 0] ** 2, w[:, 1] ** 2, w[:, 2] ** 2, w[:, 0] * w[:, 1], w[:, 0] * w[:, 2],
-                     w[:, 1] * w[:, 2]], 1)
+    quad = np.stack(
+        [w[:, 0] ** 2, w[:, 1] ** 2, w[:, 2] ** 2, w[:, 0] * w[:, 1], w[:, 0] * w[:, 2], w[:, 1] * w[:, 2]], 1
+    )
     u = np.concatenate([f0, wd, quad], 1)
     y = u @ a.T
     sigma = noise_ug * 1e-6 * GRAVITY * np.sqrt(rate_hz)
@@ -76,15 +88,27 @@ def accel_array(duration: float | None = None, rate_hz: float | None = None, see
         rec.add(c, v, un)
     roll, pitch, heading = quat_to_euler(q)
     rec.add("ref_gyro", w, "rad/s")
-    rec.add("ref_angular_accel", wd, "rad/s^2", columns=["ref_angular_accel_x", "ref_angular_accel_y",
-                                                          "ref_angular_accel_z"])
+    rec.add(
+        "ref_angular_accel",
+        wd,
+        "rad/s^2",
+        columns=["ref_angular_accel_x", "ref_angular_accel_y", "ref_angular_accel_z"],
+    )
     rec.add("ref_accel", f0, "m/s^2")
     rec.add("ref_q", q)
     rec.add("ref_roll", np.degrees(roll))
     rec.add("ref_pitch", np.degrees(pitch))
     rec.add("ref_heading", np.degrees(heading))
-    rec.meta.update({"rate_hz": rate_hz, "layout": lay.name, "accel_noise_ug_per_rthz": noise_ug,
-                     "accel_noise_sigma_mps2": round(float(sigma), 6), "accel_bias_sigma_mps2": bias_mps2,
-                     "frame": "body FRD; positions m; ref_q body->NED", "source": "imutool simulator (accel-array)",
-                     "rates": "paper: wx=0.005t+0.1, wy=0.1 sin(0.1t), wz=2.6 (+0.006(t-8) after 8 s)"})
+    rec.meta.update(
+        {
+            "rate_hz": rate_hz,
+            "layout": lay.name,
+            "accel_noise_ug_per_rthz": noise_ug,
+            "accel_noise_sigma_mps2": round(float(sigma), 6),
+            "accel_bias_sigma_mps2": bias_mps2,
+            "frame": "body FRD; positions m; ref_q body->NED",
+            "source": "imutool simulator (accel-array)",
+            "rates": "paper: wx=0.005t+0.1, wy=0.1 sin(0.1t), wz=2.6 (+0.006(t-8) after 8 s)",
+        }
+    )
     return rec

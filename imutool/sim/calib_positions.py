@@ -21,10 +21,20 @@ SIX_POSES = ((0.0, 0.0), (180.0, 0.0), (90.0, 0.0), (-90.0, 0.0), (0.0, 90.0), (
 EXTRA_POSES = ((45.0, 30.0), (-60.0, -20.0), (120.0, 40.0), (30.0, -60.0), (-135.0, 10.0), (70.0, 70.0))
 
 
-def six_position(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-                 poses: int = 6, hold_s: float = 6.0, move_s: float = 3.0, accel_bias_mg: float = 15.0,
-                 accel_scale_pct: float = 1.5, accel_misalignment_deg: float = 0.25,
-                 accel_noise_ug_rthz: float = 400.0, gyro_bias_deg_s: float = 0.5) -> Recording:
+def six_position(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    poses: int = 6,
+    hold_s: float = 6.0,
+    move_s: float = 3.0,
+    accel_bias_mg: float = 15.0,
+    accel_scale_pct: float = 1.5,
+    accel_misalignment_deg: float = 0.25,
+    accel_noise_ug_rthz: float = 400.0,
+    gyro_bias_deg_s: float = 0.5,
+) -> Recording:
     """Six-position (``poses=6``) or twelve-position (``poses=12``) accelerometer calibration recording.
 
     Accelerometer errors (drawn once per seed): bias uniform in ±accel_bias_mg mg per axis, scale-factor error
@@ -70,9 +80,14 @@ def six_position(duration: float | None = None, rate_hz: float | None = None, se
     gerr.bias = np.radians(rng.uniform(-gyro_bias_deg_s, gyro_bias_deg_s, 3))
     gerr.bias_rw = 0.0
     gerr.full_range = np.inf
-    meta = {"scenario": "six-position", "poses": len(table), "hold_s": round(hold_s, 6), "move_s": round(move_s, 6),
-            "accel_model": "f_meas = (I + diag(scale) + misalignment) f_true + bias",
-            "accel_bias_m_s2": np.asarray(aerr.bias).tolist(), "accel_scale": np.asarray(aerr.scale).tolist(),
-            "accel_misalignment": mis.tolist()}
-    return imu_recording(t, q, np.zeros((n, 3)), rng, gyro_errors=gerr, accel_errors=aerr, mag_errors=None,
-                         meta=meta)
+    meta = {
+        "scenario": "six-position",
+        "poses": len(table),
+        "hold_s": round(hold_s, 6),
+        "move_s": round(move_s, 6),
+        "accel_model": "f_meas = (I + diag(scale) + misalignment) f_true + bias",
+        "accel_bias_m_s2": np.asarray(aerr.bias).tolist(),
+        "accel_scale": np.asarray(aerr.scale).tolist(),
+        "accel_misalignment": mis.tolist(),
+    }
+    return imu_recording(t, q, np.zeros((n, 3)), rng, gyro_errors=gerr, accel_errors=aerr, mag_errors=None, meta=meta)

@@ -64,10 +64,18 @@ def _sphere_attitude(t: np.ndarray, duration: float, f_hat: np.ndarray) -> np.nd
     return quat_multiply(q_g, q_min)
 
 
-def mag_sphere(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-               hard_iron="12,-25,8", soft_iron="1.08,0.05,-0.03,0.05,0.93,0.06,-0.03,0.06,1.01",
-               field_ut: float = 50.0, inclination_deg: float = 60.0, noise_density_ut: float = 0.02,
-               coverage: str = "full") -> object:
+def mag_sphere(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    hard_iron="12,-25,8",
+    soft_iron="1.08,0.05,-0.03,0.05,0.93,0.06,-0.03,0.06,1.01",
+    field_ut: float = 50.0,
+    inclination_deg: float = 60.0,
+    noise_density_ut: float = 0.02,
+    coverage: str = "full",
+) -> object:
     """Sensor rotated by hand through every orientation: the field direction seen in body axes follows a spiral
     that covers the sphere uniformly (z sweeps −1 → 1 → −1 linearly over the run, longitude makes 20 turns),
     while the sensor also turns about the field at 0.3 rad/s.
@@ -83,28 +91,51 @@ def mag_sphere(duration: float | None = None, rate_hz: float | None = None, seed
     fld = earth_field_ned(field_ut, inclination_deg)
     q = _sphere_attitude(t, duration, fld / np.linalg.norm(fld))
     errs, b, a_s = _mag_errors(hard_iron, soft_iron, noise_density_ut)
-    rec = imu_recording(t, q, np.zeros((len(t), 3)), rng, mag_errors=errs, field_ned=fld,
-                        meta={"scenario": "mag-sphere", "sensor": "simulated HMC5883L + MPU6050"})
+    rec = imu_recording(
+        t,
+        q,
+        np.zeros((len(t), 3)),
+        rng,
+        mag_errors=errs,
+        field_ned=fld,
+        meta={"scenario": "mag-sphere", "sensor": "simulated HMC5883L + MPU6050"},
+    )
     if coverage == "half":
         rec = rec.select(rec["ref_mag"][:, 2] >= 0)
     elif coverage != "full":
         raise ImutoolError(f"coverage {coverage!r}: expected full or half")
-    rec.meta.update({
-        "mag_model": "m_meas = A_s m_true + b; correction m_true = A (m_meas - b), A = inv(A_s)",
-        "mag_hard_iron_ut": b.tolist(), "mag_soft_iron": a_s.tolist(),
-        "mag_correction_A": np.linalg.inv(a_s).tolist(), "field_ut": float(field_ut),
-        "mag_coverage": coverage,
-    })
+    rec.meta.update(
+        {
+            "mag_model": "m_meas = A_s m_true + b; correction m_true = A (m_meas - b), A = inv(A_s)",
+            "mag_hard_iron_ut": b.tolist(),
+            "mag_soft_iron": a_s.tolist(),
+            "mag_correction_A": np.linalg.inv(a_s).tolist(),
+            "field_ut": float(field_ut),
+            "mag_coverage": coverage,
+        }
+    )
     return rec
 
 
-def compass_swing(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-                  turns: float = 1.1, start_heading_deg: float = 10.0, deviation="1.5,3.0,-2.0,0.8,-0.6",
-                  hard_iron="6,-4,0", soft_iron="1.05,0.03,0,0.03,0.95,0,0,0,1",
-                  field_ut: float = 50.0, inclination_deg: float = 60.0, variation_deg: float = 0.0,
-                  roll_amplitude_deg: float = 2.0, roll_period_s: float = 8.0,
-                  pitch_amplitude_deg: float = 1.0, pitch_period_s: float = 6.0,
-                  noise_density_ut: float = 0.02) -> object:
+def compass_swing(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    turns: float = 1.1,
+    start_heading_deg: float = 10.0,
+    deviation="1.5,3.0,-2.0,0.8,-0.6",
+    hard_iron="6,-4,0",
+    soft_iron="1.05,0.03,0,0.03,0.95,0,0,0,1",
+    field_ut: float = 50.0,
+    inclination_deg: float = 60.0,
+    variation_deg: float = 0.0,
+    roll_amplitude_deg: float = 2.0,
+    roll_period_s: float = 8.0,
+    pitch_amplitude_deg: float = 1.0,
+    pitch_period_s: float = 6.0,
+    noise_density_ut: float = 0.02,
+) -> object:
     """A ship swinging slowly through ``turns`` × 360° in harbour, rolling and pitching a little.
 
     The compass heading ψc sweeps uniformly; the vessel's true magnetic heading is ψc + δ(ψc) with
@@ -120,16 +151,21 @@ def compass_swing(duration: float | None = None, rate_hz: float | None = None, s
     t = sample_times(duration, rate_hz, rng)
     coef = _vec(deviation, 5, "deviation")
     psi_c = np.radians(start_heading_deg) + 2 * np.pi * turns * t / duration
-    dev = coef @ np.stack([np.ones_like(psi_c), np.sin(psi_c), np.cos(psi_c), np.sin(2 * psi_c),
-                           np.cos(2 * psi_c)])
+    dev = coef @ np.stack([np.ones_like(psi_c), np.sin(psi_c), np.cos(psi_c), np.sin(2 * psi_c), np.cos(2 * psi_c)])
     psi_mag = psi_c + np.radians(dev)
     var = np.radians(variation_deg)
     roll = np.radians(roll_amplitude_deg) * np.sin(2 * np.pi * t / roll_period_s)
     pitch = np.radians(pitch_amplitude_deg) * np.sin(2 * np.pi * t / pitch_period_s + 0.7)
     q_true = euler_to_quat(roll, pitch, psi_mag + var)
     fld = earth_field_ned(field_ut, inclination_deg, variation_deg)
-    rec = imu_recording(t, q_true, np.zeros((len(t), 3)), rng, mag_errors=None,
-                        meta={"scenario": "compass-swing", "sensor": "simulated HMC5883L + MPU6050"})
+    rec = imu_recording(
+        t,
+        q_true,
+        np.zeros((len(t), 3)),
+        rng,
+        mag_errors=None,
+        meta={"scenario": "compass-swing", "sensor": "simulated HMC5883L + MPU6050"},
+    )
     errs, b, a_s = _mag_errors(hard_iron, soft_iron, noise_density_ut)
     seen = field_in_body(euler_to_quat(roll, pitch, psi_c + var), fld)  # the field the sensor sees
     m, _ = errs.apply(seen, rate_hz, rng)
@@ -137,12 +173,16 @@ def compass_swing(duration: float | None = None, rate_hz: float | None = None, s
     rec.add("ref_mag", field_in_body(q_true, fld), "uT")
     rec.add("ref_heading_mag", np.degrees(psi_mag) % 360.0, "deg")
     rec.add("ref_compass_heading", np.degrees(psi_c) % 360.0, "deg")
-    rec.meta.update({
-        "mag_model": "m_meas = A_s m_seen + b; correction m = A (m_meas - b), A = inv(A_s)",
-        "mag_hard_iron_ut": b.tolist(), "mag_soft_iron": a_s.tolist(),
-        "mag_correction_A": np.linalg.inv(a_s).tolist(), "field_ut": float(field_ut),
-        "deviation_deg": coef.tolist(),
-        "deviation_model": "magnetic = compass + A + B sin(psi) + C cos(psi) + D sin(2 psi) + E cos(2 psi)",
-        "variation_deg": float(variation_deg),
-    })
+    rec.meta.update(
+        {
+            "mag_model": "m_meas = A_s m_seen + b; correction m = A (m_meas - b), A = inv(A_s)",
+            "mag_hard_iron_ut": b.tolist(),
+            "mag_soft_iron": a_s.tolist(),
+            "mag_correction_A": np.linalg.inv(a_s).tolist(),
+            "field_ut": float(field_ut),
+            "deviation_deg": coef.tolist(),
+            "deviation_model": "magnetic = compass + A + B sin(psi) + C cos(psi) + D sin(2 psi) + E cos(2 psi)",
+            "variation_deg": float(variation_deg),
+        }
+    )
     return rec

@@ -46,12 +46,23 @@ def _irregular(t: np.ndarray, period: float, amp: float, rng: np.random.Generato
     return (np.sin(arg) * a).sum(1), (np.cos(arg) * (a * w)).sum(1)
 
 
-def parametric_roll(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-                    encounter_period_s: float = 10.0, roll_ratio: float = 2.0, onset_s: float = 300.0,
-                    growth_rate: float = 0.025, initial_roll_deg: float = 1.0, max_roll_deg: float = 25.0,
-                    pitch_amplitude_deg: float = 3.0, heave_amplitude_m: float = 2.0,
-                    irregular_roll_deg: float = 0.5, irregular_pitch_deg: float = 0.3,  # RMS, deg
-                    heading_deg: float = 0.0) -> Recording:
+def parametric_roll(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    encounter_period_s: float = 10.0,
+    roll_ratio: float = 2.0,
+    onset_s: float = 300.0,
+    growth_rate: float = 0.025,
+    initial_roll_deg: float = 1.0,
+    max_roll_deg: float = 25.0,
+    pitch_amplitude_deg: float = 3.0,
+    heave_amplitude_m: float = 2.0,
+    irregular_roll_deg: float = 0.5,
+    irregular_pitch_deg: float = 0.3,  # RMS, deg
+    heading_deg: float = 0.0,
+) -> Recording:
     """A container ship in head seas entering parametric roll (module docstring for the model).
 
     Defaults: 900 s at 20 Hz; Te 10 s, roll at 2·Te = 20 s from 1° at the onset 300 s growing with
@@ -88,13 +99,29 @@ def parametric_roll(duration: float | None = None, rate_hz: float | None = None,
     q = euler_to_quat(roll, pitch, np.full_like(t, psi))
     accel_ned = np.zeros((len(t), 3))
     accel_ned[:, 2] = -ddheave  # NED down = −heave
-    meta = {"scenario": "parametric-roll", "onset_s": float(onset_s), "encounter_period_s": encounter_period_s,
-            "roll_period_s": encounter_period_s * roll_ratio, "growth_rate_per_s": growth_rate,
-            "initial_roll_deg": initial_roll_deg, "max_roll_deg": max_roll_deg,
-            "pitch_amplitude_deg": pitch_amplitude_deg, "heave_amplitude_m": heave_amplitude_m,
-            "heave_convention": "heave m positive UP at the IMU (vessel CoG); accel body FRD"}
-    rec = imu_recording(t, q, accel_ned, rng, gyro_errors=MPU6050_GYRO, accel_errors=MPU6050_ACCEL, mag_errors=None,
-                        gyro_true=rates, meta=meta)
+    meta = {
+        "scenario": "parametric-roll",
+        "onset_s": float(onset_s),
+        "encounter_period_s": encounter_period_s,
+        "roll_period_s": encounter_period_s * roll_ratio,
+        "growth_rate_per_s": growth_rate,
+        "initial_roll_deg": initial_roll_deg,
+        "max_roll_deg": max_roll_deg,
+        "pitch_amplitude_deg": pitch_amplitude_deg,
+        "heave_amplitude_m": heave_amplitude_m,
+        "heave_convention": "heave m positive UP at the IMU (vessel CoG); accel body FRD",
+    }
+    rec = imu_recording(
+        t,
+        q,
+        accel_ned,
+        rng,
+        gyro_errors=MPU6050_GYRO,
+        accel_errors=MPU6050_ACCEL,
+        mag_errors=None,
+        gyro_true=rates,
+        meta=meta,
+    )
     rec.add("ref_heave", heave, "m")
     rec.add("ref_heave_rate", dheave, "m/s")
     return rec

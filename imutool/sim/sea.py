@@ -23,8 +23,9 @@ HEAVE_ACCEL_BIAS_RW = 2e-5  # m/s²/√s
 
 
 def _accel_errors(noise_ug: float, bias_up: float, bias_rw: float) -> SensorErrors:
-    return SensorErrors(noise_density=noise_ug * 1e-6 * GRAVITY, bias=np.array([0.004, -0.003, -bias_up]),
-                        bias_rw=bias_rw, quantum=0.0)
+    return SensorErrors(
+        noise_density=noise_ug * 1e-6 * GRAVITY, bias=np.array([0.004, -0.003, -bias_up]), bias_rw=bias_rw, quantum=0.0
+    )
 
 
 def jonswap(omega: np.ndarray, hs: float, tp: float, gamma: float = 3.3) -> np.ndarray:
@@ -61,23 +62,33 @@ def _synth(t, w, c):
     ddx = np.empty(len(t))
     step = max(1, 2_000_000 // max(1, len(w)))
     for i in range(0, len(t), step):
-        e = np.exp(1j * np.outer(t[i:i + step], w)) * c
-        x[i:i + step] = e.real.sum(1)
-        dx[i:i + step] = (e * (1j * w)).real.sum(1)
-        ddx[i:i + step] = (e * (-(w**2))).real.sum(1)
+        e = np.exp(1j * np.outer(t[i : i + step], w)) * c
+        x[i : i + step] = e.real.sum(1)
+        dx[i : i + step] = (e * (1j * w)).real.sum(1)
+        ddx[i : i + step] = (e * (-(w**2))).real.sum(1)
     return x, dx, ddx
 
 
-def _finish(t, heave, dheave, ddheave, roll, droll, pitch, dpitch, heading, rng, accel_errors, meta,
-            accel_horizontal=None):
+def _finish(
+    t, heave, dheave, ddheave, roll, droll, pitch, dpitch, heading, rng, accel_errors, meta, accel_horizontal=None
+):
     rates = body_rates_from_euler(roll, pitch, droll, dpitch, np.zeros_like(t))
     q = euler_to_quat(roll, pitch, np.full_like(t, heading))
     accel_ned = np.zeros((len(t), 3))
     accel_ned[:, 2] = -ddheave  # NED down = −heave
     if accel_horizontal is not None:
         accel_ned[:, :2] = accel_horizontal  # surge/sway in waves: what disturbs a real tilt filter
-    rec = imu_recording(t, q, accel_ned, rng, gyro_errors=MPU6050_GYRO, accel_errors=accel_errors,
-                        mag_errors=None, gyro_true=rates, meta=meta)
+    rec = imu_recording(
+        t,
+        q,
+        accel_ned,
+        rng,
+        gyro_errors=MPU6050_GYRO,
+        accel_errors=accel_errors,
+        mag_errors=None,
+        gyro_true=rates,
+        meta=meta,
+    )
     rec.add("ref_heave", heave, "m")
     rec.add("ref_heave_rate", dheave, "m/s")
     rec.add("ref_heave_accel", ddheave, "m/s^2")
@@ -85,13 +96,27 @@ def _finish(t, heave, dheave, ddheave, roll, droll, pitch, dpitch, heading, rng,
     return rec
 
 
-def sea_state(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, hs: float = 2.0,
-              tp: float = 9.0, gamma: float = 3.3, heave_period: float = 7.0, heave_damping: float = 0.35,
-              roll_period: float = 11.0, roll_damping: float = 0.08, pitch_period: float = 6.5,
-              pitch_damping: float = 0.3, wave_direction_deg: float = 60.0, heading_deg: float = 30.0,
-              components: int = 240, accel_noise_ug: float = HEAVE_ACCEL_NOISE_UG,
-              accel_bias_up: float = HEAVE_ACCEL_BIAS_UP, accel_bias_rw: float = HEAVE_ACCEL_BIAS_RW,
-              horizontal: float = 1.0) -> Recording:
+def sea_state(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    hs: float = 2.0,
+    tp: float = 9.0,
+    gamma: float = 3.3,
+    heave_period: float = 7.0,
+    heave_damping: float = 0.35,
+    roll_period: float = 11.0,
+    roll_damping: float = 0.08,
+    pitch_period: float = 6.5,
+    pitch_damping: float = 0.3,
+    wave_direction_deg: float = 60.0,
+    heading_deg: float = 30.0,
+    components: int = 240,
+    accel_noise_ug: float = HEAVE_ACCEL_NOISE_UG,
+    accel_bias_up: float = HEAVE_ACCEL_BIAS_UP,
+    accel_bias_rw: float = HEAVE_ACCEL_BIAS_RW,
+    horizontal: float = 1.0,
+) -> Recording:
     """A vessel in a JONSWAP sea (Hs m, Tp s, γ) with a 6-axis MEMS IMU at its centre of gravity.
 
     Heave = wave elevation through a damped 2nd-order response (natural period ``heave_period`` s); roll and
@@ -121,18 +146,44 @@ def sea_state(duration: float | None = None, rate_hz: float | None = None, seed:
         acc_h = np.stack([np.cos(wave_dir) * ddx, np.sin(wave_dir) * ddx], axis=1)
     roll, droll, _ = _synth(t, w, cr)
     pitch, dpitch, _ = _synth(t, w, cp)
-    meta = {"scenario_sea": "JONSWAP", "hs_m": hs, "tp_s": tp, "gamma": gamma,
-            "significant_heave_m": round(float(4 * np.std(heave)), 4),
-            "accel_noise_ug_per_rthz": accel_noise_ug, "accel_bias_up_mps2": accel_bias_up,
-            "accel_bias_rw_mps2_per_rts": accel_bias_rw, "horizontal_motion": float(horizontal)}
-    return _finish(t, heave, dheave, ddheave, roll, droll, pitch, dpitch, np.radians(heading_deg), rng,
-                   _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw), meta, acc_h)
+    meta = {
+        "scenario_sea": "JONSWAP",
+        "hs_m": hs,
+        "tp_s": tp,
+        "gamma": gamma,
+        "significant_heave_m": round(float(4 * np.std(heave)), 4),
+        "accel_noise_ug_per_rthz": accel_noise_ug,
+        "accel_bias_up_mps2": accel_bias_up,
+        "accel_bias_rw_mps2_per_rts": accel_bias_rw,
+        "horizontal_motion": float(horizontal),
+    }
+    return _finish(
+        t,
+        heave,
+        dheave,
+        ddheave,
+        roll,
+        droll,
+        pitch,
+        dpitch,
+        np.radians(heading_deg),
+        rng,
+        _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw),
+        meta,
+        acc_h,
+    )
 
 
-def heave_platform(duration: float | None = None, rate_hz: float | None = None, seed: int = 0,
-                   period: float = 6.0, amplitude: float = 0.04, accel_noise_ug: float = HEAVE_ACCEL_NOISE_UG,
-                   accel_bias_up: float = HEAVE_ACCEL_BIAS_UP, accel_bias_rw: float = HEAVE_ACCEL_BIAS_RW
-                   ) -> Recording:
+def heave_platform(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    period: float = 6.0,
+    amplitude: float = 0.04,
+    accel_noise_ug: float = HEAVE_ACCEL_NOISE_UG,
+    accel_bias_up: float = HEAVE_ACCEL_BIAS_UP,
+    accel_bias_rw: float = HEAVE_ACCEL_BIAS_RW,
+) -> Recording:
     """The heave paper's test platform: level, pure vertical sine (period 6 s, amplitude 0.03–0.05 m).
 
     Defaults: 300 s at 100 Hz, amplitude 0.04 m, heave-acceleration bias −0.022 m/s² (paper §3).
@@ -147,9 +198,26 @@ def heave_platform(duration: float | None = None, rate_hz: float | None = None, 
     dheave = amplitude * w * np.cos(w * t + ph)
     ddheave = -(w**2) * heave
     z = np.zeros_like(t)
-    meta = {"scenario_sea": "heave platform", "period_s": period, "amplitude_m": amplitude,
-            "significant_heave_m": round(float(4 * np.std(heave)), 4),
-            "accel_noise_ug_per_rthz": accel_noise_ug, "accel_bias_up_mps2": accel_bias_up,
-            "accel_bias_rw_mps2_per_rts": accel_bias_rw}
-    return _finish(t, heave, dheave, ddheave, z, z, z, z, 0.0, rng,
-                   _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw), meta)
+    meta = {
+        "scenario_sea": "heave platform",
+        "period_s": period,
+        "amplitude_m": amplitude,
+        "significant_heave_m": round(float(4 * np.std(heave)), 4),
+        "accel_noise_ug_per_rthz": accel_noise_ug,
+        "accel_bias_up_mps2": accel_bias_up,
+        "accel_bias_rw_mps2_per_rts": accel_bias_rw,
+    }
+    return _finish(
+        t,
+        heave,
+        dheave,
+        ddheave,
+        z,
+        z,
+        z,
+        z,
+        0.0,
+        rng,
+        _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw),
+        meta,
+    )

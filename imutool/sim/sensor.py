@@ -62,10 +62,14 @@ class SensorErrors:
 
 
 # Typical consumer MEMS (MPU6050 / HMC5883L class) figures, SI units.
-MPU6050_GYRO = SensorErrors(noise_density=np.radians(0.005), bias=0.0, bias_rw=np.radians(0.002),
-                            quantum=np.radians(250.0 / 32768), full_range=np.radians(250.0))
-MPU6050_ACCEL = SensorErrors(noise_density=400e-6 * GRAVITY, quantum=2 * GRAVITY / 32768,
-                             full_range=2 * GRAVITY)
+MPU6050_GYRO = SensorErrors(
+    noise_density=np.radians(0.005),
+    bias=0.0,
+    bias_rw=np.radians(0.002),
+    quantum=np.radians(250.0 / 32768),
+    full_range=np.radians(250.0),
+)
+MPU6050_ACCEL = SensorErrors(noise_density=400e-6 * GRAVITY, quantum=2 * GRAVITY / 32768, full_range=2 * GRAVITY)
 HMC5883L_MAG = SensorErrors(noise_density=0.02, quantum=100.0 / 1090.0)
 
 
@@ -89,8 +93,9 @@ def specific_force(q_body_to_ned: np.ndarray, accel_ned: np.ndarray, gravity: fl
     return np.einsum("nji,nj->ni", r, a)
 
 
-def earth_field_ned(intensity_ut: float = 50.0, inclination_deg: float = 60.0,
-                    declination_deg: float = 0.0) -> np.ndarray:
+def earth_field_ned(
+    intensity_ut: float = 50.0, inclination_deg: float = 60.0, declination_deg: float = 0.0
+) -> np.ndarray:
     """Earth magnetic field vector in NED (µT); inclination positive down (northern hemisphere)."""
     inc, dec = np.radians(inclination_deg), np.radians(declination_deg)
     return intensity_ut * np.array([np.cos(inc) * np.cos(dec), np.cos(inc) * np.sin(dec), np.sin(inc)])
@@ -103,8 +108,9 @@ def field_in_body(q_body_to_ned: np.ndarray, field_ned: np.ndarray) -> np.ndarra
     return np.einsum("nji,nj->ni", r, v)
 
 
-def sample_times(duration: float, rate_hz: float, rng: np.random.Generator, jitter_s: float = 0.0,
-                 dropout_fraction: float = 0.0) -> np.ndarray:
+def sample_times(
+    duration: float, rate_hz: float, rng: np.random.Generator, jitter_s: float = 0.0, dropout_fraction: float = 0.0
+) -> np.ndarray:
     """Sample instants: a uniform clock with optional Gaussian jitter (kept monotonic) and random dropouts."""
     n = int(round(duration * rate_hz)) + 1
     t = np.arange(n) / rate_hz

@@ -57,8 +57,14 @@ def _lever_accel(fn: EulerFn, t: np.ndarray, lever_b: np.ndarray) -> np.ndarray:
     return (pp - 2 * p0 + pm) / (_H * _H)
 
 
-def _sensors(rate_hz: float, accel_roll_noise_deg: float, gyro_bias_deg_s: float, gyro_bias_rw_deg_s: float,
-             rng: np.random.Generator, gyro_noise_deg_s_rthz: float) -> tuple[SensorErrors, SensorErrors]:
+def _sensors(
+    rate_hz: float,
+    accel_roll_noise_deg: float,
+    gyro_bias_deg_s: float,
+    gyro_bias_rw_deg_s: float,
+    rng: np.random.Generator,
+    gyro_noise_deg_s_rthz: float,
+) -> tuple[SensorErrors, SensorErrors]:
     g = SensorErrors(**{**MPU6050_GYRO.__dict__})
     g.bias = np.radians(rng.uniform(-gyro_bias_deg_s, gyro_bias_deg_s, 3))
     g.bias_rw = np.radians(gyro_bias_rw_deg_s)
@@ -69,15 +75,30 @@ def _sensors(rate_hz: float, accel_roll_noise_deg: float, gyro_bias_deg_s: float
     return g, a
 
 
-def ship_roll(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-              roll_amplitude_deg: float = 15.0, roll_period_s: float = 10.0,
-              pitch_amplitude_deg: float = 2.0, pitch_period_s: float = 7.0,
-              heading_deg: float = 45.0, yaw_amplitude_deg: float = 1.0,
-              accel_roll_noise_deg: float = 1.5, gyro_noise_deg_s_rthz: float = 0.005,
-              gyro_bias_deg_s: float = 0.5, gyro_bias_rw_deg_s: float = 0.002,
-              lever_x_m: float = 0.0, lever_y_m: float = 0.0, lever_z_m: float = -2.0,
-              mag_inclination_deg: float = 60.0, mag_declination_deg: float = 0.0,
-              jitter_s: float = 0.0, dropout_fraction: float = 0.0, mag: int = 1) -> Recording:
+def ship_roll(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    roll_amplitude_deg: float = 15.0,
+    roll_period_s: float = 10.0,
+    pitch_amplitude_deg: float = 2.0,
+    pitch_period_s: float = 7.0,
+    heading_deg: float = 45.0,
+    yaw_amplitude_deg: float = 1.0,
+    accel_roll_noise_deg: float = 1.5,
+    gyro_noise_deg_s_rthz: float = 0.005,
+    gyro_bias_deg_s: float = 0.5,
+    gyro_bias_rw_deg_s: float = 0.002,
+    lever_x_m: float = 0.0,
+    lever_y_m: float = 0.0,
+    lever_z_m: float = -2.0,
+    mag_inclination_deg: float = 60.0,
+    mag_declination_deg: float = 0.0,
+    jitter_s: float = 0.0,
+    dropout_fraction: float = 0.0,
+    mag: int = 1,
+) -> Recording:
     """The roll paper's simulation (§4.1): ±15° sinusoidal roll, small pitch/yaw, white noise, drifting bias.
 
     duration 120 s, 200 Hz by default. roll φ = A sin(2πt/T), pitch θ = B sin(2πt/Tp + 0.7), heading
@@ -101,41 +122,76 @@ def ship_roll(duration: float | None = None, rate_hz: float | None = None, seed:
     lever = np.array([lever_x_m, lever_y_m, lever_z_m], dtype=float)
     q = _quat(euler, t)
     acc = _lever_accel(euler, t, lever)
-    gerr, aerr = _sensors(rate_hz, accel_roll_noise_deg, gyro_bias_deg_s, gyro_bias_rw_deg_s, rng,
-                          gyro_noise_deg_s_rthz)
+    gerr, aerr = _sensors(
+        rate_hz, accel_roll_noise_deg, gyro_bias_deg_s, gyro_bias_rw_deg_s, rng, gyro_noise_deg_s_rthz
+    )
     fld = earth_field_ned(50.0, mag_inclination_deg, mag_declination_deg)
-    meta = {"scenario": "ship-roll", "roll_amplitude_deg": roll_amplitude_deg, "roll_period_s": roll_period_s,
-            "pitch_amplitude_deg": pitch_amplitude_deg, "heading_deg": heading_deg,
-            "accel_noise_sigma_m_s2": float(aerr.noise_density * np.sqrt(rate_hz)),
-            "accel_roll_noise_deg": accel_roll_noise_deg, "gyro_bias_rad_s": np.asarray(gerr.bias).tolist(),
-            "gyro_bias_rw_rad_s_rts": float(gerr.bias_rw), "lever_arm_m": lever.tolist(),
-            "mag_field_ned_uT": fld.tolist()}
-    return imu_recording(t, q, acc, rng, gyro_errors=gerr, accel_errors=aerr,
-                         mag_errors=HMC5883L_MAG if mag else None, field_ned=fld,
-                         gyro_true=_body_rate(euler, t), meta=meta)
+    meta = {
+        "scenario": "ship-roll",
+        "roll_amplitude_deg": roll_amplitude_deg,
+        "roll_period_s": roll_period_s,
+        "pitch_amplitude_deg": pitch_amplitude_deg,
+        "heading_deg": heading_deg,
+        "accel_noise_sigma_m_s2": float(aerr.noise_density * np.sqrt(rate_hz)),
+        "accel_roll_noise_deg": accel_roll_noise_deg,
+        "gyro_bias_rad_s": np.asarray(gerr.bias).tolist(),
+        "gyro_bias_rw_rad_s_rts": float(gerr.bias_rw),
+        "lever_arm_m": lever.tolist(),
+        "mag_field_ned_uT": fld.tolist(),
+    }
+    return imu_recording(
+        t,
+        q,
+        acc,
+        rng,
+        gyro_errors=gerr,
+        accel_errors=aerr,
+        mag_errors=HMC5883L_MAG if mag else None,
+        field_ned=fld,
+        gyro_true=_body_rate(euler, t),
+        meta=meta,
+    )
 
 
 def _smoothstep_integral(x: np.ndarray) -> np.ndarray:
     """∫₀ˣ s(u) du for the cubic smoothstep s = 3u² − 2u³ clipped to [0, 1] (x in ramp units)."""
     xc = np.clip(x, 0.0, 1.0)
-    return xc ** 3 - xc ** 4 / 2 + np.maximum(x - 1.0, 0.0)
+    return xc**3 - xc**4 / 2 + np.maximum(x - 1.0, 0.0)
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
     xc = np.clip(x, 0.0, 1.0)
-    return 3 * xc ** 2 - 2 * xc ** 3
+    return 3 * xc**2 - 2 * xc**3
 
 
-def turning_ship(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-                 speed_m_s: float = 10.0, rate_of_turn_deg_s: float = 3.0, straight_s: float = 20.0,
-                 ramp_s: float = 10.0, heel_deg: float = 3.0, heading_deg: float = 0.0,
-                 roll_amplitude_deg: float = 5.0, roll_period_s: float = 10.0,
-                 pitch_amplitude_deg: float = 1.0, pitch_period_s: float = 7.0,
-                 accel_roll_noise_deg: float = 1.5, gyro_noise_deg_s_rthz: float = 0.005,
-                 gyro_bias_deg_s: float = 0.5, gyro_bias_rw_deg_s: float = 0.002,
-                 lever_x_m: float = 0.0, lever_y_m: float = 0.0, lever_z_m: float = -2.0,
-                 gnss_rate_hz: float = 1.0, sog_noise_m_s: float = 0.05, cog_noise_deg: float = 0.5,
-                 mag_inclination_deg: float = 60.0, jitter_s: float = 0.0) -> Recording:
+def turning_ship(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    speed_m_s: float = 10.0,
+    rate_of_turn_deg_s: float = 3.0,
+    straight_s: float = 20.0,
+    ramp_s: float = 10.0,
+    heel_deg: float = 3.0,
+    heading_deg: float = 0.0,
+    roll_amplitude_deg: float = 5.0,
+    roll_period_s: float = 10.0,
+    pitch_amplitude_deg: float = 1.0,
+    pitch_period_s: float = 7.0,
+    accel_roll_noise_deg: float = 1.5,
+    gyro_noise_deg_s_rthz: float = 0.005,
+    gyro_bias_deg_s: float = 0.5,
+    gyro_bias_rw_deg_s: float = 0.002,
+    lever_x_m: float = 0.0,
+    lever_y_m: float = 0.0,
+    lever_z_m: float = -2.0,
+    gnss_rate_hz: float = 1.0,
+    sog_noise_m_s: float = 0.05,
+    cog_noise_deg: float = 0.5,
+    mag_inclination_deg: float = 60.0,
+    jitter_s: float = 0.0,
+) -> Recording:
     """A ship that runs straight for ``straight_s``, eases into a sustained turn over ``ramp_s`` and keeps it.
 
     Speed U (m/s) constant, rate of turn r (°/s, + = to starboard): centripetal acceleration U·r toward the
@@ -171,15 +227,33 @@ def turning_ship(duration: float | None = None, rate_hz: float | None = None, se
     # centre-of-rotation acceleration: U ψ̇ (−sin ψ, cos ψ, 0) (constant speed), plus the lever arm
     acc = speed_m_s * rate[:, None] * np.stack([-np.sin(hd), np.cos(hd), np.zeros_like(hd)], axis=1)
     acc = acc + _lever_accel(euler, t, lever)
-    gerr, aerr = _sensors(rate_hz, accel_roll_noise_deg, gyro_bias_deg_s, gyro_bias_rw_deg_s, rng,
-                          gyro_noise_deg_s_rthz)
+    gerr, aerr = _sensors(
+        rate_hz, accel_roll_noise_deg, gyro_bias_deg_s, gyro_bias_rw_deg_s, rng, gyro_noise_deg_s_rthz
+    )
     fld = earth_field_ned(50.0, mag_inclination_deg, 0.0)
-    meta = {"scenario": "turn", "speed_m_s": speed_m_s, "rate_of_turn_deg_s": rate_of_turn_deg_s,
-            "centripetal_m_s2": float(speed_m_s * abs(r_max)), "heel_deg": heel_deg,
-            "accel_roll_noise_deg": accel_roll_noise_deg, "gyro_bias_rad_s": np.asarray(gerr.bias).tolist(),
-            "lever_arm_m": lever.tolist(), "gnss_rate_hz": gnss_rate_hz}
-    rec = imu_recording(t, q, acc, rng, gyro_errors=gerr, accel_errors=aerr, mag_errors=HMC5883L_MAG,
-                        field_ned=fld, gyro_true=_body_rate(euler, t), meta=meta)
+    meta = {
+        "scenario": "turn",
+        "speed_m_s": speed_m_s,
+        "rate_of_turn_deg_s": rate_of_turn_deg_s,
+        "centripetal_m_s2": float(speed_m_s * abs(r_max)),
+        "heel_deg": heel_deg,
+        "accel_roll_noise_deg": accel_roll_noise_deg,
+        "gyro_bias_rad_s": np.asarray(gerr.bias).tolist(),
+        "lever_arm_m": lever.tolist(),
+        "gnss_rate_hz": gnss_rate_hz,
+    }
+    rec = imu_recording(
+        t,
+        q,
+        acc,
+        rng,
+        gyro_errors=gerr,
+        accel_errors=aerr,
+        mag_errors=HMC5883L_MAG,
+        field_ned=fld,
+        gyro_true=_body_rate(euler, t),
+        meta=meta,
+    )
     # GNSS: fixes at gnss_rate_hz, held until the next fix
     fix_idx = np.searchsorted(t, np.floor(t * gnss_rate_hz) / gnss_rate_hz, side="left")
     sog_fix = speed_m_s + rng.normal(0.0, sog_noise_m_s, len(t))
@@ -192,11 +266,23 @@ def turning_ship(duration: float | None = None, rate_hz: float | None = None, se
     return rec
 
 
-def static(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-           roll_deg: float = 0.0, pitch_deg: float = 0.0, heading_deg: float = 0.0,
-           gyro_noise_deg_s_rthz: float = 0.005, gyro_bias_deg_s: float = 0.5, gyro_bias_rw_deg_s: float = 0.002,
-           gyro_bias_instability_deg_s: float = 0.0, gyro_bias_tau_s: float = 100.0,
-           accel_noise_ug_rthz: float = 400.0, accel_bias_mg: float = 0.0, mag: int = 1) -> Recording:
+def static(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    roll_deg: float = 0.0,
+    pitch_deg: float = 0.0,
+    heading_deg: float = 0.0,
+    gyro_noise_deg_s_rthz: float = 0.005,
+    gyro_bias_deg_s: float = 0.5,
+    gyro_bias_rw_deg_s: float = 0.002,
+    gyro_bias_instability_deg_s: float = 0.0,
+    gyro_bias_tau_s: float = 100.0,
+    accel_noise_ug_rthz: float = 400.0,
+    accel_bias_mg: float = 0.0,
+    mag: int = 1,
+) -> Recording:
     """A sensor at rest (for Allan deviation, bias and noise work), vectorised so hours are cheap.
 
     Gyro: white noise (angle random walk N = gyro_noise_deg_s_rthz °/s/√Hz), constant bias drawn in
@@ -219,14 +305,27 @@ def static(duration: float | None = None, rate_hz: float | None = None, seed: in
     aerr = SensorErrors(**{**MPU6050_ACCEL.__dict__})
     aerr.noise_density = accel_noise_ug_rthz * 1e-6 * GRAVITY
     aerr.bias = rng.uniform(-1, 1, 3) * accel_bias_mg * 1e-3 * GRAVITY
-    meta = {"scenario": "static", "gyro_noise_density_rad_s_rthz": float(gerr.noise_density),
-            "gyro_bias_rad_s": np.asarray(gerr.bias).tolist(), "gyro_bias_rw_rad_s_rts": float(gerr.bias_rw),
-            "accel_noise_density_m_s2_rthz": float(aerr.noise_density),
-            "accel_bias_m_s2": np.asarray(aerr.bias).tolist(),
-            "gyro_bias_instability_rad_s": float(np.radians(gyro_bias_instability_deg_s)),
-            "gyro_bias_tau_s": gyro_bias_tau_s}
-    rec = imu_recording(t, np.ascontiguousarray(q), np.zeros((n, 3)), rng, gyro_errors=gerr, accel_errors=aerr,
-                        mag_errors=HMC5883L_MAG if mag else None, gyro_true=np.zeros((n, 3)), meta=meta)
+    meta = {
+        "scenario": "static",
+        "gyro_noise_density_rad_s_rthz": float(gerr.noise_density),
+        "gyro_bias_rad_s": np.asarray(gerr.bias).tolist(),
+        "gyro_bias_rw_rad_s_rts": float(gerr.bias_rw),
+        "accel_noise_density_m_s2_rthz": float(aerr.noise_density),
+        "accel_bias_m_s2": np.asarray(aerr.bias).tolist(),
+        "gyro_bias_instability_rad_s": float(np.radians(gyro_bias_instability_deg_s)),
+        "gyro_bias_tau_s": gyro_bias_tau_s,
+    }
+    rec = imu_recording(
+        t,
+        np.ascontiguousarray(q),
+        np.zeros((n, 3)),
+        rng,
+        gyro_errors=gerr,
+        accel_errors=aerr,
+        mag_errors=HMC5883L_MAG if mag else None,
+        gyro_true=np.zeros((n, 3)),
+        meta=meta,
+    )
     if gyro_bias_instability_deg_s > 0:
         # exact discretisation of a first-order Gauss-Markov process, run as a linear recursion (lfilter)
         from scipy.signal import lfilter

@@ -67,8 +67,9 @@ def parse_lever_arm(value: object) -> np.ndarray:
     return np.array(vals, dtype=float)
 
 
-def _spectrum_components(rng: np.random.Generator, period: float, damping: float,
-                         n: int) -> tuple[np.ndarray, np.ndarray]:
+def _spectrum_components(
+    rng: np.random.Generator, period: float, damping: float, n: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies ω (rad/s) and complex amplitudes of a random-phase realisation of the response spectrum."""
     wn = 2 * np.pi / period
     edges = np.linspace(_BAND[0] * wn, _BAND[1] * wn, n + 1)
@@ -100,7 +101,7 @@ def _synthesise(t: np.ndarray, parts: list[tuple[np.ndarray, np.ndarray]], peaks
             out[:, j] = y.reshape(3, nb * blk)[:, :n]
         else:
             for a in range(0, n, 4096):
-                out[:, j, a:a + 4096] = (coefs @ np.exp(1j * np.outer(w, t[a:a + 4096]))).real
+                out[:, j, a : a + 4096] = (coefs @ np.exp(1j * np.outer(w, t[a : a + 4096]))).real
     for j, pk in enumerate(peaks):
         m = np.max(np.abs(out[0, j])) if n else 0.0
         out[:, j] *= (pk / m) if m > 0 else 0.0
@@ -162,14 +163,33 @@ class VoyageMotion:
         return pos, vel, acc
 
 
-def voyage_motion(t: np.ndarray, seed: int = 0, *, roll_deg: float = 19.0, roll_period: float = 12.0,
-                  roll_damping: float = 0.1, pitch_deg: float = 3.0, pitch_period: float = 8.0,
-                  heave_m: float = 2.0, heave_period: float = 8.0, sway_m: float = 0.5,
-                  sway_period: float = 10.0, yaw_deg: float = 1.5, yaw_period: float = 12.0,
-                  severity: float = 1.0, heading_deg: float = 30.0, speed_mps: float = 8.0,
-                  turn_rate_dps: float = 3.0, turn_start: float = 120.0, turn_angle_deg: float = 360.0,
-                  turn_ramp: float = 10.0, gm_m: float = 2.0, heel_arm_m: float = 3.0,
-                  components: int = 96, rng: np.random.Generator | None = None) -> VoyageMotion:
+def voyage_motion(
+    t: np.ndarray,
+    seed: int = 0,
+    *,
+    roll_deg: float = 19.0,
+    roll_period: float = 12.0,
+    roll_damping: float = 0.1,
+    pitch_deg: float = 3.0,
+    pitch_period: float = 8.0,
+    heave_m: float = 2.0,
+    heave_period: float = 8.0,
+    sway_m: float = 0.5,
+    sway_period: float = 10.0,
+    yaw_deg: float = 1.5,
+    yaw_period: float = 12.0,
+    severity: float = 1.0,
+    heading_deg: float = 30.0,
+    speed_mps: float = 8.0,
+    turn_rate_dps: float = 3.0,
+    turn_start: float = 120.0,
+    turn_angle_deg: float = 360.0,
+    turn_ramp: float = 10.0,
+    gm_m: float = 2.0,
+    heel_arm_m: float = 3.0,
+    components: int = 96,
+    rng: np.random.Generator | None = None,
+) -> VoyageMotion:
     """The vessel's noise-free motion at times ``t`` (s); options as in :func:`ship_at_sea`.
 
     The random phases are drawn first from ``rng`` (or ``default_rng(seed)``), in a fixed order that does not
@@ -179,11 +199,13 @@ def voyage_motion(t: np.ndarray, seed: int = 0, *, roll_deg: float = 19.0, roll_
     rng = np.random.default_rng(seed) if rng is None else rng
     n_roll = max(8, int(components))
     n_other = max(8, n_roll // 3)
-    parts = [_spectrum_components(rng, roll_period, roll_damping, n_roll),
-             _spectrum_components(rng, pitch_period, _BROAD_DAMPING, n_other),
-             _spectrum_components(rng, yaw_period, _BROAD_DAMPING, n_other),
-             _spectrum_components(rng, heave_period, _BROAD_DAMPING, n_other),
-             _spectrum_components(rng, sway_period, _BROAD_DAMPING, n_other)]
+    parts = [
+        _spectrum_components(rng, roll_period, roll_damping, n_roll),
+        _spectrum_components(rng, pitch_period, _BROAD_DAMPING, n_other),
+        _spectrum_components(rng, yaw_period, _BROAD_DAMPING, n_other),
+        _spectrum_components(rng, heave_period, _BROAD_DAMPING, n_other),
+        _spectrum_components(rng, sway_period, _BROAD_DAMPING, n_other),
+    ]
     k = float(severity)
     peaks = [k * np.radians(roll_deg), k * np.radians(pitch_deg), k * np.radians(yaw_deg), k * heave_m, k * sway_m]
     wave = _synthesise(t, parts, peaks)  # (deriv, dof, N)
@@ -218,11 +240,14 @@ def voyage_motion(t: np.ndarray, seed: int = 0, *, roll_deg: float = 19.0, roll_
     q = euler_to_quat(ph, th, ps)
     omega = body_rates_from_euler(ph, th, dph, dth, dps)
     sf, cf, st, ct = np.sin(ph), np.cos(ph), np.sin(th), np.cos(th)
-    omega_dot = np.stack([
-        ddph - ddps * st - dps * dth * ct,
-        ddth * cf - dth * dph * sf + ddps * sf * ct + dps * dph * cf * ct - dps * dth * sf * st,
-        -ddth * sf - dth * dph * cf + ddps * cf * ct - dps * dph * sf * ct - dps * dth * cf * st,
-    ], axis=-1)
+    omega_dot = np.stack(
+        [
+            ddph - ddps * st - dps * dth * ct,
+            ddth * cf - dth * dph * sf + ddps * sf * ct + dps * dph * cf * ct - dps * dth * sf * st,
+            -ddth * sf - dth * dph * cf + ddps * cf * ct - dps * dph * sf * ct - dps * dth * cf * st,
+        ],
+        axis=-1,
+    )
 
     # hull reference point O: track along the course χ at speed V, sway s across it, heave h up
     course = psi0 + chi
@@ -237,25 +262,54 @@ def voyage_motion(t: np.ndarray, seed: int = 0, *, roll_deg: float = 19.0, roll_
         track[1:] = np.cumsum(seg, axis=0)
     pos = track + s[:, None] * e2 + h[:, None] * up - (s[0] * e2[0] + h[0] * up)
     vel = (speed_mps - s * chi_d)[:, None] * e1 + ds[:, None] * e2 + dh[:, None] * up
-    acc = ((-2 * ds * chi_d - s * chi_dd)[:, None] * e1
-           + (speed_mps * chi_d + dds - s * chi_d**2)[:, None] * e2 + ddh[:, None] * up)
+    acc = (
+        (-2 * ds * chi_d - s * chi_dd)[:, None] * e1
+        + (speed_mps * chi_d + dds - s * chi_d**2)[:, None] * e2
+        + ddh[:, None] * up
+    )
     return VoyageMotion(t, euler, q, omega, omega_dot, pos, vel, acc, h, chi_d, heel)
 
 
-def ship_at_sea(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, *,
-                lever_arm: object = BRIDGE_LEVER_ARM,
-                roll_deg: float = 19.0, roll_period: float = 12.0, roll_damping: float = 0.1,
-                pitch_deg: float = 3.0, pitch_period: float = 8.0, heave_m: float = 2.0,
-                heave_period: float = 8.0, sway_m: float = 0.5, sway_period: float = 10.0,
-                yaw_deg: float = 1.5, yaw_period: float = 12.0, severity: float = 1.0,
-                heading_deg: float = 30.0, speed_mps: float = 8.0, turn_rate_dps: float = 3.0,
-                turn_start: float = 120.0, turn_angle_deg: float = 360.0, turn_ramp: float = 10.0,
-                gm_m: float = 2.0, heel_arm_m: float = 3.0, components: int = 96,
-                noise: int = 1, gyro_noise_deg_s_rthz: float = 0.005, gyro_bias_deg_s: float = 0.5,
-                gyro_bias_rw_deg_s: float = 0.002, accel_noise_ug: float = 400.0, accel_bias_mg: float = 2.0,
-                accel_bias_rw: float = 1e-5, mag: int = 1, mag_inclination_deg: float = 60.0,
-                mag_declination_deg: float = 0.0, gnss_rate_hz: float = 1.0,
-                gnss_vel_noise_mps: float = 0.05) -> Recording:
+def ship_at_sea(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    *,
+    lever_arm: object = BRIDGE_LEVER_ARM,
+    roll_deg: float = 19.0,
+    roll_period: float = 12.0,
+    roll_damping: float = 0.1,
+    pitch_deg: float = 3.0,
+    pitch_period: float = 8.0,
+    heave_m: float = 2.0,
+    heave_period: float = 8.0,
+    sway_m: float = 0.5,
+    sway_period: float = 10.0,
+    yaw_deg: float = 1.5,
+    yaw_period: float = 12.0,
+    severity: float = 1.0,
+    heading_deg: float = 30.0,
+    speed_mps: float = 8.0,
+    turn_rate_dps: float = 3.0,
+    turn_start: float = 120.0,
+    turn_angle_deg: float = 360.0,
+    turn_ramp: float = 10.0,
+    gm_m: float = 2.0,
+    heel_arm_m: float = 3.0,
+    components: int = 96,
+    noise: int = 1,
+    gyro_noise_deg_s_rthz: float = 0.005,
+    gyro_bias_deg_s: float = 0.5,
+    gyro_bias_rw_deg_s: float = 0.002,
+    accel_noise_ug: float = 400.0,
+    accel_bias_mg: float = 2.0,
+    accel_bias_rw: float = 1e-5,
+    mag: int = 1,
+    mag_inclination_deg: float = 60.0,
+    mag_declination_deg: float = 0.0,
+    gnss_rate_hz: float = 1.0,
+    gnss_vel_noise_mps: float = 0.05,
+) -> Recording:
     """A vessel at sea with the IMU on the bridge: the MSC.363(92) inclinometer's hard case, with truth.
 
     Defaults: 600 s at 100 Hz. Sensor at ``lever_arm`` = (−30, 0, −20) m body FRD from the roll centre O (30 m
@@ -298,12 +352,31 @@ def ship_at_sea(duration: float | None = None, rate_hz: float | None = None, see
     lever = parse_lever_arm(lever_arm)
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
-    mo = voyage_motion(t, rng=rng, roll_deg=roll_deg, roll_period=roll_period, roll_damping=roll_damping,
-                       pitch_deg=pitch_deg, pitch_period=pitch_period, heave_m=heave_m, heave_period=heave_period,
-                       sway_m=sway_m, sway_period=sway_period, yaw_deg=yaw_deg, yaw_period=yaw_period,
-                       severity=severity, heading_deg=heading_deg, speed_mps=speed_mps,
-                       turn_rate_dps=turn_rate_dps, turn_start=turn_start, turn_angle_deg=turn_angle_deg,
-                       turn_ramp=turn_ramp, gm_m=gm_m, heel_arm_m=heel_arm_m, components=components)
+    mo = voyage_motion(
+        t,
+        rng=rng,
+        roll_deg=roll_deg,
+        roll_period=roll_period,
+        roll_damping=roll_damping,
+        pitch_deg=pitch_deg,
+        pitch_period=pitch_period,
+        heave_m=heave_m,
+        heave_period=heave_period,
+        sway_m=sway_m,
+        sway_period=sway_period,
+        yaw_deg=yaw_deg,
+        yaw_period=yaw_period,
+        severity=severity,
+        heading_deg=heading_deg,
+        speed_mps=speed_mps,
+        turn_rate_dps=turn_rate_dps,
+        turn_start=turn_start,
+        turn_angle_deg=turn_angle_deg,
+        turn_ramp=turn_ramp,
+        gm_m=gm_m,
+        heel_arm_m=heel_arm_m,
+        components=components,
+    )
     pos_s, vel_s, acc_s = mo.sensor_track(lever)
 
     # sensor error models: bias draws happen whether or not noise is on, so the sea stays the same
@@ -328,12 +401,17 @@ def ship_at_sea(duration: float | None = None, rate_hz: float | None = None, see
         "lever_arm_m": lever.tolist(),
         "lever_arm_frame": "body FRD, sensor relative to the hull reference point (centre of rotation), m",
         "sea_spectrum": f"2nd-order response to white excitation, band {_BAND[0]}-{_BAND[1]} wn; "
-                        f"roll zeta {roll_damping}, others {_BROAD_DAMPING}; peaks scaled to the options",
-        "roll_peak_deg": roll_deg * severity, "roll_period_s": roll_period,
+        f"roll zeta {roll_damping}, others {_BROAD_DAMPING}; peaks scaled to the options",
+        "roll_peak_deg": roll_deg * severity,
+        "roll_period_s": roll_period,
         "roll_significant_amplitude_deg": round(float(2 * np.degrees(np.std(mo.euler[0, 0] - mo.heel))), 3),
-        "pitch_peak_deg": pitch_deg * severity, "heave_peak_m": heave_m * severity,
-        "sway_peak_m": sway_m * severity, "yaw_peak_deg": yaw_deg * severity,
-        "speed_mps": speed_mps, "turn_rate_dps": turn_rate_dps, "turn_start_s": turn_start,
+        "pitch_peak_deg": pitch_deg * severity,
+        "heave_peak_m": heave_m * severity,
+        "sway_peak_m": sway_m * severity,
+        "yaw_peak_deg": yaw_deg * severity,
+        "speed_mps": speed_mps,
+        "turn_rate_dps": turn_rate_dps,
+        "turn_start_s": turn_start,
         "turn_angle_deg": turn_angle_deg,
         "turn_heel_deg": round(float(np.degrees(-np.arctan(c * np.radians(turn_rate_dps)))), 3),
         "centripetal_m_s2": round(float(speed_mps * abs(np.radians(turn_rate_dps))), 4),
@@ -344,8 +422,18 @@ def ship_at_sea(duration: float | None = None, rate_hz: float | None = None, see
         "gnss": f"sog/cog of the hull reference point at {gnss_rate_hz} Hz, held between fixes",
         "ref_pos_origin": "hull reference point at t=0 (NED, m); ref_pos/ref_vel are the sensor's",
     }
-    rec = imu_recording(t, mo.q, acc_s, rng, gyro_errors=gerr, accel_errors=aerr,
-                        mag_errors=merr if mag else None, field_ned=fld, gyro_true=mo.omega, meta=meta)
+    rec = imu_recording(
+        t,
+        mo.q,
+        acc_s,
+        rng,
+        gyro_errors=gerr,
+        accel_errors=aerr,
+        mag_errors=merr if mag else None,
+        field_ned=fld,
+        gyro_true=mo.omega,
+        meta=meta,
+    )
 
     # GNSS: fixes at k / gnss_rate_hz, zero-order hold until the next fix
     vh = mo.vel[:, :2]

@@ -40,15 +40,31 @@ def foot_sensors(rng: np.random.Generator, kind: str = "mems") -> tuple[SensorEr
     if kind != "mems":
         raise ImutoolError(f"walk: unknown sensor {kind!r} (mems, ideal)")
     g = 9.80665
-    gyro = SensorErrors(noise_density=np.radians(0.01), bias=rng.normal(0.0, np.radians(0.2), 3),
-                        bias_rw=np.radians(0.002), quantum=np.radians(2000.0 / 32768), full_range=np.radians(2000.0))
-    accel = SensorErrors(noise_density=150e-6 * g, bias=rng.normal(0.0, 0.02, 3), quantum=16 * g / 32768,
-                         full_range=16 * g)
+    gyro = SensorErrors(
+        noise_density=np.radians(0.01),
+        bias=rng.normal(0.0, np.radians(0.2), 3),
+        bias_rw=np.radians(0.002),
+        quantum=np.radians(2000.0 / 32768),
+        full_range=np.radians(2000.0),
+    )
+    accel = SensorErrors(
+        noise_density=150e-6 * g, bias=rng.normal(0.0, 0.02, 3), quantum=16 * g / 32768, full_range=16 * g
+    )
     return gyro, accel
 
 
-def _profiles(t: np.ndarray, starts: np.ndarray, origins: np.ndarray, headings: np.ndarray, swing_s: float,
-              step_length: float, turn: float, height: float, pitch_amp: float, tau_r: float) -> np.ndarray:
+def _profiles(
+    t: np.ndarray,
+    starts: np.ndarray,
+    origins: np.ndarray,
+    headings: np.ndarray,
+    swing_s: float,
+    step_length: float,
+    turn: float,
+    height: float,
+    pitch_amp: float,
+    tau_r: float,
+) -> np.ndarray:
     """Foot pose at times t: columns n, e, d (m), roll, pitch, heading (rad)."""
     k = np.searchsorted(starts, t, side="right") - 1  # the last swing started at or before t
     out = np.zeros((len(t), 6))
@@ -61,19 +77,33 @@ def _profiles(t: np.ndarray, starts: np.ndarray, origins: np.ndarray, headings: 
     out[:, 0] = origins[kk, 0] + step_length * s * np.cos(chord)
     out[:, 1] = origins[kk, 1] + step_length * s * np.sin(chord)
     out[:, 2] = -height * (1 - np.cos(2 * np.pi * tau)) ** 2 / 4
-    w = (1 - np.exp(-(tau / tau_r) ** 2)) * (1 - np.exp(-((1 - tau) / tau_r) ** 2))
+    w = (1 - np.exp(-((tau / tau_r) ** 2))) * (1 - np.exp(-(((1 - tau) / tau_r) ** 2)))
     out[:, 4] = -pitch_amp * np.sin(2 * np.pi * tau) * w
     out[:, 5] = headings[kk] + turn * s
     out[before] = np.concatenate([origins[0], [0.0, 0.0, 0.0, headings[0]]])
     return out
 
 
-def walk(duration: float | None = None, rate_hz: float | None = None, seed: int = 0, n_steps: int = 20,
-         step_length: float = 1.4, stance_s: float = 0.5, swing_s: float = 0.6, turn_deg: float = 0.0,
-         swing_height: float = 0.12, pitch_amplitude_deg: float = 25.0, onset_s: float = 0.02,
-         initial_rest_s: float = 2.0, final_rest_s: float = 1.0, heading_deg: float = 0.0,
-         tilt_deg: str | tuple[float, float] = (3.0, -8.0), sensor: str = "mems", geometry: str = "default",
-         jitter_s: float = 0.0) -> Recording:
+def walk(
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    seed: int = 0,
+    n_steps: int = 20,
+    step_length: float = 1.4,
+    stance_s: float = 0.5,
+    swing_s: float = 0.6,
+    turn_deg: float = 0.0,
+    swing_height: float = 0.12,
+    pitch_amplitude_deg: float = 25.0,
+    onset_s: float = 0.02,
+    initial_rest_s: float = 2.0,
+    final_rest_s: float = 1.0,
+    heading_deg: float = 0.0,
+    tilt_deg: str | tuple[float, float] = (3.0, -8.0),
+    sensor: str = "mems",
+    geometry: str = "default",
+    jitter_s: float = 0.0,
+) -> Recording:
     """Foot-mounted IMU walk with truth (see module doc). Units: m, s, deg at the interface.
 
     ``n_steps`` swings of ``step_length`` m each (stride of the instrumented foot), ``turn_deg`` heading change
@@ -111,8 +141,17 @@ def walk(duration: float | None = None, rate_hz: float | None = None, seed: int 
     origins = np.zeros((n_steps + 1, 2))
     origins[1:, 0] = np.cumsum(step_length * np.cos(chord))
     origins[1:, 1] = np.cumsum(step_length * np.sin(chord))
-    args = (starts, origins, headings, swing_s, step_length, turn, swing_height, np.radians(pitch_amplitude_deg),
-            onset_s / swing_s)
+    args = (
+        starts,
+        origins,
+        headings,
+        swing_s,
+        step_length,
+        turn,
+        swing_height,
+        np.radians(pitch_amplitude_deg),
+        onset_s / swing_s,
+    )
     p0 = _profiles(t, *args)
     pp = _profiles(t + _H, *args)
     pm = _profiles(t - _H, *args)
@@ -133,14 +172,32 @@ def walk(duration: float | None = None, rate_hz: float | None = None, seed: int 
 
     gyro_err, accel_err = foot_sensors(rng, sensor)
     distance = n_steps * step_length
-    meta = {"scenario": "walk", "n_steps": n_steps, "step_length_m": step_length, "distance_m": distance,
-            "turn_deg_per_step": turn_deg, "stance_s": stance_s, "swing_s": swing_s, "geometry": geometry,
-            "sensor_model": sensor, "tilt_deg": f"{tilt[0]},{tilt[1]}",
-            "true_gyro_bias_rad_s": ",".join(f"{v:.6g}" for v in np.broadcast_to(gyro_err.bias, (3,))),
-            "true_accel_bias_m_s2": ",".join(f"{v:.6g}" for v in np.broadcast_to(accel_err.bias, (3,))),
-            "frame": "body FRD (sensor on the foot); NED world, origin at the start"}
-    rec = imu_recording(t, q_true, acc_ned, rng, gyro_errors=gyro_err, accel_errors=accel_err, mag_errors=None,
-                        gyro_true=w_sensor, meta=meta)
+    meta = {
+        "scenario": "walk",
+        "n_steps": n_steps,
+        "step_length_m": step_length,
+        "distance_m": distance,
+        "turn_deg_per_step": turn_deg,
+        "stance_s": stance_s,
+        "swing_s": swing_s,
+        "geometry": geometry,
+        "sensor_model": sensor,
+        "tilt_deg": f"{tilt[0]},{tilt[1]}",
+        "true_gyro_bias_rad_s": ",".join(f"{v:.6g}" for v in np.broadcast_to(gyro_err.bias, (3,))),
+        "true_accel_bias_m_s2": ",".join(f"{v:.6g}" for v in np.broadcast_to(accel_err.bias, (3,))),
+        "frame": "body FRD (sensor on the foot); NED world, origin at the start",
+    }
+    rec = imu_recording(
+        t,
+        q_true,
+        acc_ned,
+        rng,
+        gyro_errors=gyro_err,
+        accel_errors=accel_err,
+        mag_errors=None,
+        gyro_true=w_sensor,
+        meta=meta,
+    )
     rec.add("ref_pos", pos, "m")
     rec.add("ref_vel", vel, "m/s")
     rec.add("ref_zvi", zvi, "1")
