@@ -355,7 +355,6 @@ def stream_ekf(
         F_MAG_REJ,
         F_MAG_USED,
         FlagSpans,
-        _heading_channel,
         gnss_heading_check,
         heading_check,
         heading_source_report,
@@ -367,6 +366,7 @@ def stream_ekf(
         run_ekf,
         tilt_check,
     )
+    from imutool.attitude.recording import _heading_channel
     from imutool.convert import META_ROOM, chunk_writer
     from imutool.gyro_check import GyroScaleCheck
     from imutool.loading import ChunkChecks

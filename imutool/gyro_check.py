@@ -52,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from imutool.attitude import _rmat, _turn
+from imutool.quaternion import qturn, rmat
 
 WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that fast hand motion does not alias
 # candidate factors on the gyro's rates: 0.25 … 4 in steps of 2^¼ (wrong full-scale ranges), and coarse steps of 2
@@ -126,11 +126,11 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, factors, g, ma
                     w1 = s1 * (gyro[k, 1] - bias[k, 1]) * dt
                     w2 = s2 * (gyro[k, 2] - bias[k, 2]) * dt
                     if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2):
-                        a0, a1, a2, a3 = _turn(a0, a1, a2, a3, w0, w1, w2)
+                        a0, a1, a2, a3 = qturn(a0, a1, a2, a3, w0, w1, w2)
                 f0, f1, f2 = force[k, 0], force[k, 1], force[k, 2]
                 if not (np.isfinite(f0) and np.isfinite(f1) and np.isfinite(f2)):
                     continue
-                _rmat(a0, a1, a2, a3, R)
+                rmat(a0, a1, a2, a3, R)
                 v0 = R[0, 0] * f0 + R[0, 1] * f1 + R[0, 2] * f2
                 v1 = R[1, 0] * f0 + R[1, 1] * f1 + R[1, 2] * f2
                 v2 = R[2, 0] * f0 + R[2, 1] * f1 + R[2, 2] * f2

@@ -32,6 +32,7 @@ from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
 from imutool.loading import input_notes
+from imutool.quaternion import rmat
 
 NX = 15  # error-state size: δθ 0:3, δr 3:6, δv 6:9, δb_a 9:12, δb_g 12:15
 
@@ -131,20 +132,6 @@ def _quat_step(q: np.ndarray, w: np.ndarray, wp: np.ndarray, T: float, order: in
 
 
 @njit(cache=True)
-def _rotmat(q: np.ndarray, r: np.ndarray) -> None:
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    r[0, 0] = 1 - 2 * (y * y + z * z)
-    r[0, 1] = 2 * (x * y - w * z)
-    r[0, 2] = 2 * (x * z + w * y)
-    r[1, 0] = 2 * (x * y + w * z)
-    r[1, 1] = 1 - 2 * (x * x + z * z)
-    r[1, 2] = 2 * (y * z - w * x)
-    r[2, 0] = 2 * (x * z - w * y)
-    r[2, 1] = 2 * (y * z + w * x)
-    r[2, 2] = 1 - 2 * (x * x + y * y)
-
-
-@njit(cache=True)
 def _apply_f(fth: np.ndarray, fvth: np.ndarray, fvba: np.ndarray, T: float, m: np.ndarray, out: np.ndarray) -> None:
     """out = F m for the block-sparse discrete F = A T (15×15) without forming F."""
     n = m.shape[1]
@@ -231,7 +218,7 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
     K = np.zeros((NX, 7))
     HP = np.zeros((7, NX))
     dx = np.zeros(NX)
-    _rotmat(q, R)
+    rmat(q[0], q[1], q[2], q[3], R)
     for i in range(3):
         f[i] = accel[k0, i] - ba[i]
         wprev[i] = gyro[k0, i] - bg[i]
@@ -266,7 +253,7 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
                 for j in range(3):
                     fvba[i, j] = -R[i, j] * T
             _quat_step(q, w, wp, T, order)
-            _rotmat(q, R)
+            rmat(q[0], q[1], q[2], q[3], R)
             for i in range(3):
                 f[i] = accel[k, i] - ba[i]
             for i in range(3):
@@ -357,7 +344,7 @@ def _ins_kernel(t, gyro, accel, zvi, k0, q0, bg0, ba0, prm, opt, pos, vel, qout,
             nz = q3 + q0_ * hz + q1 * hy - q2 * hx
             nrm = np.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
             q[0], q[1], q[2], q[3] = nw / nrm, nx / nrm, ny / nrm, nz / nrm
-            _rotmat(q, R)
+            rmat(q[0], q[1], q[2], q[3], R)
             for i in range(3):
                 r[i] += dx[3 + i]
                 v[i] += dx[6 + i]

@@ -16,9 +16,6 @@ from imutool.attitude import (
     F_MAG_NEW,
     F_MAG_REJ,
     F_MAG_USED,
-    S_NIS_A,
-    S_QI,
-    S_WY,
     EkfParams,
     ekf_recording,
     initial_state,
@@ -26,8 +23,9 @@ from imutool.attitude import (
     rts_smooth,
     run_ekf,
     zero_lag_smooth,
-    zero_phase_lp_kernel,
 )
+from imutool.attitude.layout import S_NIS_A, S_QI, S_WY
+from imutool.attitude.smoother import zero_phase_lp_kernel
 from imutool.baseline import lpf_attitude
 from imutool.sim import simulate
 
@@ -417,7 +415,7 @@ def test_cli_gnss_from_nmea_file(tmp_path):
 def test_learned_accel_noise_and_raw_mode():
     """The online white-noise estimate finds the simulator's σ_f = g·rad(1.5°); shocks do not inflate it; the
     paper's raw-accelerometer update (accel_lp_tau = 0, fixed σ) still runs and is worse on roll than the default."""
-    from imutool.attitude import S_AVAR
+    from imutool.attitude.layout import S_AVAR
 
     rec = simulate("ship-roll", duration=30, seed=3)
     a = rec["accel"].copy()
@@ -484,7 +482,7 @@ def test_zero_lag_smoother_on_the_bridge_low_passes_the_compensated_force():
 def test_smoother_that_cannot_fit_in_memory_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
     """`filter --smooth` keeps every sample's covariance (~1.4 kB/sample): where the memory available cannot hold
     it, one line naming the input and the need, exit 2, before anything is allocated or written."""
-    import imutool.attitude as att
+    import imutool.attitude.recording as att
 
     src = tmp_path / "roll.csv"
     formats.write(simulate("ship-roll", duration=20, seed=1), src)
@@ -1142,7 +1140,8 @@ def test_the_magnetometer_interval_and_its_sigma_per_sample():
     magnetometer on 100 Hz rows (steps of 0.01 and 0.02 s) is 1/70 s, not the median 0.01 s; one lost row leaves
     a regular interval exact (a stream's first chunk and the whole file agree); no usable interval falls back to
     the IMU's. σ = density / √dt, held at the floor for a slow magnetometer, pinned by mag_noise_deg."""
-    from imutool.attitude import P_MAG_NOISE, mag_interval
+    from imutool.attitude import mag_interval
+    from imutool.attitude.layout import P_MAG_NOISE
 
     t = np.arange(10000) * 0.01
     m = np.ones((10000, 3))
@@ -1351,7 +1350,8 @@ def test_heading_recovers_within_seconds_after_a_magnet_is_taken_away():
 def test_projected_accel_update_is_the_joseph_form_of_its_gain():
     """_drop_vertical turns the optimal update into K' = T K (T = I − diag(r rᵀ, r rᵀ)); its covariance must equal
     the Joseph form (I − K'H) P (I − K'H)ᵀ + K' R K'ᵀ computed densely, and δx must equal K' y."""
-    from imutool.attitude import _drop_vertical, _vec_update, _vertical_forms
+    from imutool.attitude.covariance import _drop_vertical, _vertical_forms
+    from imutool.attitude.updates import _vec_update
 
     rng = np.random.default_rng(4)
     a = rng.normal(size=(6, 6))
@@ -1403,7 +1403,7 @@ def test_accel_noise_floor_is_a_sensor_property_not_the_motion():
     but rises towards a louder one only with accel_noise_rise_time: 60 s of motion jerk (4× the sensor's noise in
     the second differences) must not de-weight the accelerometer as if the sensor had become 4× noisier.
     With rise time 0 the floor is the 10-s mean itself (the earlier behaviour)."""
-    from imutool.attitude import S_AFLOOR, S_AVAR
+    from imutool.attitude.layout import S_AFLOOR, S_AVAR
 
     rng = np.random.default_rng(3)
     fs, sigma = 200.0, 0.05

@@ -1,0 +1,90 @@
+"""The attitude filter: a quaternion EKF with gyro-bias states, its RTS and zero-lag smoothers, and self-checks.
+
+One concept per module (docs/architecture.md, "The attitude package"):
+
+- :mod:`~imutool.attitude.params` — :class:`EkfParams` and :data:`PARAM_DOC`: every tuning constant, its unit,
+  range and meaning; TOML in and out.
+- :mod:`~imutool.attitude.layout` — the state vector's slots (``S_*``), the parameter vector's (``P_*``) and the
+  per-sample flag bits (``F_*``).
+- :mod:`~imutool.attitude.kernel` — the per-sample loop (numba; the filter's equations are in its docstring), built
+  from :mod:`~imutool.attitude.covariance`, :mod:`~imutool.attitude.updates`, :mod:`~imutool.attitude.lowpass`,
+  :mod:`~imutool.attitude.magnetic` and the shared :mod:`imutool.quaternion` steps.
+- :mod:`~imutool.attitude.run` — :func:`run_ekf` over arrays (initial state, chunks, :class:`AttitudeResult`).
+- :mod:`~imutool.attitude.rts`, :mod:`~imutool.attitude.smoother` — the RTS pass and the zero-lag smoother.
+- :mod:`~imutool.attitude.selfcheck` — the self-check reports (inconsistency, heading, new field, tilt, GNSS).
+- :mod:`~imutool.attitude.recording` — :func:`ekf_recording`: the filter over a Recording, output channels.
+
+Frames and units: body FRD, world NED, q = [w, x, y, z] body→NED; gyro rad/s, accel m/s², mag µT, time s.
+"""
+
+from imutool.attitude.layout import (
+    F_ACC_REJ,
+    F_ACC_USED,
+    F_HDG_USED,
+    F_INCONSISTENT,
+    F_MAG_NEW,
+    F_MAG_REJ,
+    F_MAG_USED,
+    F_REST,
+    STATE_SIZE,
+)
+from imutool.attitude.params import PARAM_DOC, EkfParams
+from imutool.attitude.recording import (
+    OUTPUT_DECIMALS,
+    available_memory,
+    carry_labels,
+    check_smoother_memory,
+    ekf_recording,
+    quat_error_metrics,
+    result_recording,
+)
+from imutool.attitude.rts import rts_smooth
+from imutool.attitude.run import AttitudeResult, euler_std, initial_state, mag_interval, nominal_dt, run_ekf
+from imutool.attitude.selfcheck import (
+    FlagSpans,
+    gnss_heading_check,
+    heading_check,
+    heading_source_report,
+    inconsistency_report,
+    new_field_check,
+    self_check,
+    tilt_check,
+)
+from imutool.attitude.smoother import zero_lag_smooth
+
+__all__ = [
+    "F_ACC_REJ",
+    "F_ACC_USED",
+    "F_HDG_USED",
+    "F_INCONSISTENT",
+    "F_MAG_NEW",
+    "F_MAG_REJ",
+    "F_MAG_USED",
+    "F_REST",
+    "OUTPUT_DECIMALS",
+    "PARAM_DOC",
+    "STATE_SIZE",
+    "AttitudeResult",
+    "EkfParams",
+    "FlagSpans",
+    "available_memory",
+    "carry_labels",
+    "check_smoother_memory",
+    "ekf_recording",
+    "euler_std",
+    "gnss_heading_check",
+    "heading_check",
+    "heading_source_report",
+    "inconsistency_report",
+    "initial_state",
+    "mag_interval",
+    "new_field_check",
+    "nominal_dt",
+    "quat_error_metrics",
+    "result_recording",
+    "rts_smooth",
+    "run_ekf",
+    "self_check",
+    "tilt_check",
+    "zero_lag_smooth",
+]

@@ -1,0 +1,76 @@
+"""The EKF's fixed layouts: state vector slots (S_*), parameter vector slots (P_*), per-sample flag bits (F_*)."""
+
+from __future__ import annotations
+
+# the accelerometer low-pass starts as the running mean of its samples for this fraction of τ (its first samples
+# averaged: 0.25 s at τ = 2.5 s), then runs as the Butterworth from that mean (docs/attitude.md, "The low-pass")
+LP_MEAN_START = 0.1
+
+# ---- state vector layout (float64, carried between chunks) -------------------------------------------------
+S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)
+S_MREF, S_MNORM = 43, 46  # unit reference field in NED (3), reference norm
+S_TPREV, S_GPREV = 47, 48  # previous time, previous gyro (3)
+S_REST_T, S_AREJ_T, S_CNT_A, S_INIT = 51, 52, 53, 54  # S_CNT_A: samples since the last accel update
+S_DQ = 55  # accumulated rotation since the last covariance propagation (4)
+S_TACC = 59  # accumulated time since the last covariance propagation
+S_NGAPS, S_NAREJ, S_NMREJ, S_NREST, S_NGNAN, S_NUPD = 60, 61, 62, 63, 64, 65
+S_QI, S_LPV, S_LPY, S_LPINIT = 66, 70, 73, 76  # gyro-only quaternion body→I (4), accel low-pass in I: rate, output
+S_AVAR, S_APREV, S_NAVAR = 77, 78, 81  # accel white-noise variance estimate (m²/s⁴), previous raw accel, count
+S_APREV2 = 82  # raw accel two samples back (3)
+S_BHOLD = 85  # time left (s) during which accel updates may not move the bias
+S_BIASMAX = 86  # |b_i| bound (rad/s, copied from the parameters; ≤ 0: none)
+S_NIS_A, S_NIS_M, S_NINC = 87, 88, 89  # windowed mean NIS per degree of freedom (accel, mag heading); flagged count
+S_WLP, S_WDOT, S_WINIT = 90, 93, 96  # lever arm: low-passed body rate (3), its derivative (3), started flag
+S_SHOCK_T = 97  # continuous time (s) the accelerometer has been beyond the shock gate
+S_MDIST = 98  # magnetic disturbance level (peak-held deviation measure, decays with mag_disturbance_hold)
+S_AFLOOR = 99  # accel white-noise floor (m²/s⁴): the 10-s mean followed down at once, up with accel_noise_rise_time
+S_GW1, S_GW2, S_GWN, S_GWT = 100, 103, 106, 107  # tilt check: world-frame force low-pass stages (3+3), count, time
+S_NTILT, S_TILTMAX = 108, 109  # tilt check: flagged samples, largest tan² of the tilt checked
+S_WV, S_WY = 110, 119  # lag-weighted R_I of the low-pass (3×3 each, s): rate's and output's companions (W = W_Y)
+S_HLAST, S_HREJ_T, S_NHREJ = 128, 129, 130  # external heading: last update time (s), time rejected (s), count
+# multi-rate (update every N samples): per sensor, samples since its last update (mag, rest; accel: S_CNT_A), the
+# usable samples among them (accel: fed to the low-pass; mag: accepted; rest: still) and what the update averages:
+# the accepted magnetometer directions in the world frame (unit vectors, summed) and the still gyro samples (rad/s)
+S_CNT_M, S_CNT_R, S_USE_A, S_USE_M, S_USE_R = 131, 132, 133, 134, 135
+S_MSUM, S_RSUM = 136, 139
+# the magnetometer's reference norm and dip follow the accepted field (mag_reference_tau): the norms summed since
+# the last update, and how many samples the reference stands for (1: the first sample; running mean at start-up)
+S_MNSUM, S_MREF_N = 142, 143
+# a new field: where the magnetometer is rejected, the candidate field its samples agree on (norm µT, sine of the dip,
+# samples) and the time it has held while the body turned (s); how many times a candidate became the reference
+S_MCN, S_MCZ, S_MCCNT, S_MCT, S_NMNEW = 144, 145, 146, 147, 148
+S_MREF_T = 149  # the time the reference's own field has held while the body turned (s): confirmed at mag_new_first_time
+# the candidate's mean horizontal field direction in the world frame: the means of the unit field's north and east
+# components (only their angle is used); the time since the last magnetometer sample (s, gaps counted at gap_dt)
+S_MCX, S_MCY, S_MDT = 150, 151, 152
+STATE_SIZE = 153
+
+# ---- parameter vector layout ---------------------------------------------------------------------------------
+P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
+P_ACC_GATE, P_ACC_NIS, P_MAG_NORM_GATE, P_MAG_DIP_GATE = 4, 5, 6, 7
+P_GRAVITY, P_REST_GYRO, P_REST_ACC, P_REST_TIME, P_REST_NOISE = 8, 9, 10, 11, 12
+P_GAP_DT, P_GAP_RATE, P_REJ_TIMEOUT, P_GYRO_SCALE = 13, 14, 15, 16
+P_ACC_TAU, P_GYRO_PREV_W, P_ACC_ADAPT, P_ACC_SOFT, P_ACC_WN_GAIN = 17, 18, 19, 20, 21
+P_MAG_BIAS, P_ACC_BIAS_DEV, P_BIAS_MAX, P_BIAS_HOLD = 22, 23, 24, 25
+P_MAG_NORM_SOFT, P_MAG_DIP_SOFT = 26, 27
+P_NIS_TAU, P_NIS_LIMIT, P_LEVER_TAU, P_SHOCK_MAX = 28, 29, 30, 31
+P_ACC_VBIAS, P_ACC_HEAD, P_MAG_HOLD, P_HEAD_SCALE = 32, 33, 34, 35
+P_ACC_NOISE_RISE, P_TILT_WIN, P_TILT_LIM = 36, 37, 38
+P_ACC_LAG, P_HDG_NOISE, P_HDG_EVERY, P_MAG_REF_TAU = 39, 40, 41, 42
+P_MAG_NEW_TIME, P_MAG_NEW_RATE, P_MAG_NEW_FIRST = 43, 44, 45
+P_MAG_BIAS_GATE = 46
+N_PARAMS = 47
+
+# ---- flag bits in the per-sample output -------------------------------------------------------------------
+F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
+F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample (the last bit of uint8)
+
+# external heading (gyrocompass): a fix whose innovation is beyond this many σ is a glitch and skipped, for at most
+# this many seconds running; beyond, the heading that stayed away is taken outright
+HEADING_GATE_SIGMA, HEADING_REJECT_MAX_S = 4.0, 5.0
+
+
+# ================================================ numba kernels ================================================
+# LLVM fast-math flags that keep NaN/Inf semantics (the kernels test np.isfinite): contraction to FMA,
+# reassociation, reciprocal division, no signed zeros.
+_FASTMATH = {"contract", "reassoc", "arcp", "nsz"}

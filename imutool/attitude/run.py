@@ -1,0 +1,331 @@
+"""Running the EKF over arrays: initial state, chunks, the result (:func:`run_ekf`, :class:`AttitudeResult`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from formats.errors import ImutoolError
+from formats.frames import quat_to_euler
+from imutool.attitude.kernel import ekf_kernel
+from imutool.attitude.layout import (
+    S_B,
+    S_BIASMAX,
+    S_DQ,
+    S_HLAST,
+    S_MNORM,
+    S_MREF,
+    S_MREF_N,
+    S_NAREJ,
+    S_NGAPS,
+    S_NGNAN,
+    S_NHREJ,
+    S_NINC,
+    S_NMNEW,
+    S_NMREJ,
+    S_NREST,
+    S_NTILT,
+    S_NUPD,
+    S_P,
+    S_Q,
+    S_QI,
+    S_TILTMAX,
+    STATE_SIZE,
+)
+from imutool.attitude.params import EkfParams
+from imutool.progress import Progress, chunk_ranges
+
+# ================================================ Python API ================================================
+
+
+@dataclass
+class AttitudeResult:
+    """Per-sample EKF output (SI: q body→NED, bias rad/s, σ rad) and the run summary."""
+
+    time: np.ndarray
+    q: np.ndarray
+    bias: np.ndarray
+    std: np.ndarray  # (N,3) roll/pitch/heading σ, rad
+    flags: np.ndarray  # (N,) bit mask F_*
+    summary: dict = field(default_factory=dict)
+    cov: np.ndarray | None = None  # (N,6,6) posterior P when kept (smoother input)
+    force: np.ndarray | None = None  # (N,3) compensated specific force fed to the low-pass, m/s² body (smoother input)
+
+    def euler_deg(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r, p, h = quat_to_euler(self.q)
+        return np.degrees(r), np.degrees(p), np.degrees(h)
+
+
+def _first_finite_row(*arrays: np.ndarray) -> int:
+    """Index of the first row finite in every array (−1: none), scanning in growing blocks (O(1) on good data)."""
+    n = min(len(a) for a in arrays)
+    i0, step = 0, 1024
+    while i0 < n:
+        i1 = min(n, i0 + step)
+        ok = np.ones(i1 - i0, bool)
+        for a in arrays:
+            ok &= np.isfinite(a[i0:i1]).reshape(i1 - i0, -1).all(axis=1)
+        hit = np.flatnonzero(ok)
+        if hit.size:
+            return i0 + int(hit[0])
+        i0, step = i1, step * 4
+    return -1
+
+
+def nominal_dt(t: np.ndarray) -> float:
+    """Median positive time step (s) — over at most ~200 000 evenly spread steps (exact for shorter series)."""
+    i = np.arange(0, len(t) - 1, max(1, (len(t) - 1) // 200_000))
+    d = t[i + 1] - t[i]
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else 0.01
+
+
+def mag_interval(t: np.ndarray, mag: np.ndarray | None) -> float | None:
+    """The magnetometer's own sample interval (s) from the steps between its finite rows (a magnetometer slower than
+    the IMU leaves NaN rows between its samples): their median, or where more than a tenth of them differ from it
+    (a rate that does not divide the IMU's) their mean without gaps (steps over 3× the median); over the first
+    block of rows that has some (4096 rows, then 4× larger blocks: cheap on a day of samples); None where it has
+    fewer than two finite rows."""
+    if mag is None:
+        return None
+    i0, step, n = 0, 4096, len(t)
+    while i0 < n:
+        i1 = min(n, i0 + step)
+        ok = np.flatnonzero(np.isfinite(mag[i0:i1]).all(axis=1))
+        if ok.size >= 2:
+            d = np.diff(np.asarray(t[i0:i1])[ok])
+            d = d[d > 0]
+            if d.size:
+                med = float(np.median(d))
+                # steps of mixed lengths (a 70 Hz magnetometer on 100 Hz rows steps 0.01 and 0.02 s): their mean
+                # without gaps; else the median, exact whatever a lost row (so a stream's first chunk gives the
+                # same as the whole file)
+                mixed = np.mean(np.abs(d - med) > 0.01 * med) > 0.1
+                return float(np.mean(d[d <= 3.0 * med])) if mixed else med
+        i0, step = i1, step * 4
+    return None
+
+
+def initial_state(
+    accel: np.ndarray, mag: np.ndarray | None, params: EkfParams, heading: float | None = None
+) -> np.ndarray:
+    """State vector from the first valid accel (roll/pitch) and mag (heading, reference field) samples; an
+    external true ``heading`` (rad) instead of the magnetometer's (σ ``init_heading_sigma_deg`` either way)."""
+    st = np.zeros(STATE_SIZE)
+    i_acc = _first_finite_row(accel)
+    if i_acc < 0:
+        raise ImutoolError("no valid accelerometer sample to initialise the attitude")
+    a = accel[i_acc]
+    if not np.any(np.linalg.norm(accel[i_acc : i_acc + 100_000], axis=1) > 0):
+        raise ImutoolError("the accelerometer reads exactly zero: no specific force to level the attitude with")
+    roll = np.arctan2(-a[1], -a[2])
+    pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
+    heading_mag = 0.0
+    mref = np.array([np.cos(np.radians(60)), 0.0, np.sin(np.radians(60))])
+    mnorm = 0.0
+    if mag is not None:
+        i = _first_finite_row(mag, accel)
+        if i >= 0:
+            a = accel[i]
+            roll = np.arctan2(-a[1], -a[2])
+            pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
+            from formats.frames import euler_to_quat, quat_rotate
+
+            m = mag[i]
+            mw = quat_rotate(euler_to_quat(roll, pitch, 0.0), m)
+            heading_mag = np.arctan2(-mw[1], mw[0])
+            mnorm = float(np.linalg.norm(m))
+            hor = np.hypot(mw[0], mw[1])
+            if mnorm > 0:
+                mref = np.array([hor, 0.0, mw[2]]) / mnorm
+            else:  # a zero field: no heading, no reference (the updates skip a zero-norm field)
+                heading_mag, mnorm = 0.0, 0.0
+    from formats.frames import euler_to_quat
+
+    st[S_Q : S_Q + 4] = euler_to_quat(roll, pitch, heading_mag if heading is None else float(heading))
+    st[S_B : S_B + 3] = params.init_bias
+    P = np.zeros((6, 6))
+    rp = np.radians(params.init_roll_pitch_sigma_deg) ** 2
+    P[0, 0] = P[1, 1] = rp
+    P[2, 2] = np.radians(params.init_heading_sigma_deg) ** 2  # a first fix may be a glitch: the filter stays open
+    # express the NED-axis σ in body axes (heading σ is about the world vertical)
+    from formats.frames import quat_to_matrix
+
+    Rm = quat_to_matrix(st[S_Q : S_Q + 4])
+    P[:3, :3] = Rm.T @ P[:3, :3] @ Rm
+    P[3:, 3:] = np.eye(3) * params.init_bias_sigma**2
+    st[S_P : S_P + 36] = P.ravel()
+    st[S_MREF : S_MREF + 3] = mref
+    st[S_MNORM] = mnorm
+    st[S_MREF_N] = 1.0 if mnorm > 0 else 0.0
+    st[S_DQ] = 1.0
+    st[S_QI] = 1.0
+    st[S_HLAST] = -np.inf
+    return st
+
+
+def _gnss_arrays(
+    time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray | None, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    if sog is None or cog_deg is None:
+        z = np.full(n, np.nan)
+        return z, z, z, False
+    sog = np.asarray(sog, float)
+    cog = np.radians(np.asarray(cog_deg, float))
+    # tangential acceleration: derivative of SOG across GNSS fixes (held values: use the change points)
+    ok = np.isfinite(sog)
+    sogdot = np.zeros(n)
+    if ok.sum() > 2:
+        ts, vs = time[ok], sog[ok]
+        chg = np.concatenate([[True], np.diff(vs) != 0])
+        if chg.sum() > 2:
+            tf, vf = ts[chg], vs[chg]
+            sogdot = np.interp(time, tf, np.gradient(vf, tf))
+    return sog, cog, sogdot, True
+
+
+def run_ekf(
+    time: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    mag: np.ndarray | None = None,
+    params: EkfParams | None = None,
+    sog: np.ndarray | None = None,
+    cog_deg: np.ndarray | None = None,
+    state: np.ndarray | None = None,
+    keep_cov: bool = False,
+    dt_nominal: float | None = None,
+    cov_every_sample: bool | None = None,
+    lever_arm: np.ndarray | None = None,
+    progress: Progress | None = None,
+    accel_measurement: np.ndarray | None = None,
+    keep_force: bool = False,
+    heading_deg: np.ndarray | None = None,
+    dt_mag: float | None = None,
+) -> tuple[AttitudeResult, np.ndarray]:
+    """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
+
+    ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
+    :func:`rts_smooth`; 288 bytes/sample) and the compensated specific force (:func:`zero_lag_smooth`; 24
+    bytes/sample); ``keep_force`` keeps the force alone (:mod:`imutool.gyro_check`). GNSS compensation is used when
+    ``sog`` (m/s) and ``cog_deg`` are given.
+    ``accel_measurement`` (N,3) m/s² body replaces the filter's causal low-pass as the accelerometer measurement
+    (:func:`zero_lag_smooth`'s second pass).
+    ``heading_deg`` (N,) an external true heading (gyrocompass; deg, NaN where none): when given, it is the
+    heading measurement and the magnetometer is not used.
+    ``dt_mag`` (s) the magnetometer's own sample interval, which sets its σ per sample from
+    ``mag_heading_density`` (default: :func:`mag_interval` of these rows; a stream passes its first chunk's).
+    """
+    params = params or EkfParams()
+    t = np.ascontiguousarray(time, dtype=np.float64)
+    n = len(t)
+    g = np.ascontiguousarray(gyro, dtype=np.float64)
+    a = np.ascontiguousarray(accel, dtype=np.float64)
+    if heading_deg is None:
+        hdg = np.empty(0)
+    else:
+        hdg = np.radians(np.asarray(heading_deg, dtype=np.float64))
+        if hdg.shape != (n,):
+            raise ImutoolError(f"heading_deg must be ({n},), not {hdg.shape}")
+        mag = None  # a gyrocompass heading, not the magnetometer's
+    use_mag = mag is not None and params.mag_mode != "off"
+    m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
+    if dt_nominal is None:
+        dt_nominal = nominal_dt(t)
+    if state is None:  # the initial heading: a fix within 100 samples of the first valid accelerometer row (the
+        # same in memory and streamed); later fixes pull the heading in through the filter's updates
+        i_acc = _first_finite_row(a)
+        near = hdg[max(i_acc, 0) : max(i_acc, 0) + 100] if len(hdg) else hdg
+        first = np.flatnonzero(np.isfinite(near))
+        state = initial_state(a, m if use_mag else None, params, float(near[first[0]]) if len(first) else None)
+    st = np.array(state, dtype=np.float64)
+    if st.shape != (STATE_SIZE,):  # the kernel indexes it unchecked
+        raise ImutoolError(f"an EKF state must have {STATE_SIZE} entries, not {st.shape} (from another release?)")
+    if dt_mag is None and use_mag:
+        dt_mag = mag_interval(t, m)
+    prm = params.vector(dt_nominal, dt_mag)
+    st[S_BIASMAX] = params.bias_max
+    sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
+    lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(lever)):
+        raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")
+    q_out = np.empty((n, 4))
+    b_out = np.empty((n, 3))
+    std_out = np.empty((n, 3))
+    flags = np.zeros(n, dtype=np.uint8)
+    p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
+    keep_f = keep_cov or keep_force
+    f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
+    if accel_measurement is None:
+        meas = np.empty((0, 3))
+    else:
+        meas = np.ascontiguousarray(accel_measurement, dtype=np.float64)
+        if meas.shape != (n, 3):
+            raise ImutoolError(f"accel_measurement must be ({n}, 3), not {meas.shape}")
+    every = params.samples_per_update(dt_nominal)
+    cov_each = keep_cov if cov_every_sample is None else cov_every_sample
+    mode, cov_flag = params.mag_mode_code() if use_mag else 0, bool(cov_each or every == 1)
+    # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
+    for i0, i1 in [(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress):
+        ekf_kernel(
+            t[i0:i1],
+            g[i0:i1],
+            a[i0:i1],
+            m[i0:i1],
+            sg[i0:i1],
+            cg[i0:i1],
+            sd[i0:i1],
+            prm,
+            every,
+            mode,
+            cov_flag,
+            use_gnss,
+            lever,
+            st,
+            q_out[i0:i1],
+            b_out[i0:i1],
+            std_out[i0:i1],
+            flags[i0:i1],
+            p_store[i0:i1] if keep_cov else p_store,
+            meas[i0:i1] if len(meas) else meas,
+            f_out[i0:i1] if keep_f else f_out,
+            hdg[i0:i1] if len(hdg) else hdg,
+        )
+    summary = {
+        "samples": n,
+        "updates": int(st[S_NUPD]),
+        "update_every": every,
+        "accel_rejected": int(st[S_NAREJ]),
+        "mag_rejected": int(st[S_NMREJ]),
+        "mag_new_field": int(st[S_NMNEW]),
+        "rest_samples": int(st[S_NREST]),
+        "gaps": int(st[S_NGAPS]),
+        "gyro_nan_samples": int(st[S_NGNAN]),
+        "gnss_compensation": bool(use_gnss),
+        "inconsistent_samples": int(st[S_NINC]),
+        "tilt_check_samples": int(st[S_NTILT]),
+        "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
+    }
+    if len(hdg):
+        summary["heading_input_rejected"] = int(st[S_NHREJ])
+    return AttitudeResult(
+        t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None, f_out if keep_f else None
+    ), st
+
+
+def euler_std(q: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Roll/pitch/heading σ (N,3) rad from body-frame attitude covariances P[:, :3, :3] (δ(φ,θ,ψ) = E δθ)."""
+    roll, pitch, _ = quat_to_euler(q)
+    cp = np.maximum(np.cos(pitch), 1e-6)
+    sr, cr, tp = np.sin(roll), np.cos(roll), np.tan(pitch)
+    E = np.zeros((len(q), 3, 3))
+    E[:, 0, 0] = 1.0
+    E[:, 0, 1] = sr * tp
+    E[:, 0, 2] = cr * tp
+    E[:, 1, 1] = cr
+    E[:, 1, 2] = -sr
+    E[:, 2, 1] = sr / cp
+    E[:, 2, 2] = cr / cp
+    C = np.einsum("nij,njk,nlk->nil", E, P[:, :3, :3], E)
+    return np.sqrt(np.maximum(np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2]], axis=1), 0.0))
