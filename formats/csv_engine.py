@@ -116,7 +116,7 @@ _S60 = np.uint64(60)
 _S62 = np.uint64(62)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     """Full 64×64 → 128-bit product (hi, lo)."""
     a0 = a & _M32
@@ -133,7 +133,7 @@ def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     return hi, lo
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def decimal_to_double(w: np.uint64, q: int) -> float:
     """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""
     if w == _U0:
@@ -223,7 +223,7 @@ _FALLBACK = 1
 _GARBAGE = 2
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _lower(c: np.uint8) -> int:
     c = int(c)
     if 65 <= c <= 90:
@@ -466,7 +466,7 @@ def parse_block(
 
 
 # -- writer -------------------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     """round((hi·2^64 + lo) / 2^s) for 1 ≤ s ≤ 127 (result assumed < 2^64)."""
     s1 = s - 1
@@ -479,7 +479,7 @@ def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     return (r + _U1) >> _U1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     """≈ round(m·2^e2 · 10^(16 - e10)) (within ±1) for an integer m < 2^53."""
     k = 16 - e10
@@ -498,7 +498,7 @@ def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     return _round_shift(hi, lo, s)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
     """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed.
 

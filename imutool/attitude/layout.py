@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 # the accelerometer low-pass starts as the running mean of its samples for this fraction of τ (its first samples
 # averaged: 0.25 s at τ = 2.5 s), then runs as the Butterworth from that mean (docs/attitude.md, "The low-pass")
 LP_MEAN_START = 0.1
@@ -74,3 +76,9 @@ HEADING_GATE_SIGMA, HEADING_REJECT_MAX_S = 4.0, 5.0
 # LLVM fast-math flags that keep NaN/Inf semantics (the kernels test np.isfinite): contraction to FMA,
 # reassociation, reciprocal division, no signed zeros.
 _FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
+
+# ---- constant arguments of the compiled helpers ----------------------------------------------------------------
+# numba types a literal True or 3 passed to a compiled function as a type of its own and compiles that function
+# once more for it (docs/architecture.md, "Compile time"): constant arguments are these numpy scalars instead
+TRUE, FALSE = np.True_, np.False_
+ATT, BIAS = np.int64(0), np.int64(3)  # the first row of the attitude block [δθ] and of the bias block [δb] of P

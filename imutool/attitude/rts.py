@@ -7,7 +7,7 @@ from numba import njit
 
 from formats.errors import ImutoolError
 from imutool.attitude.covariance import _add_rrt, _propagate_cov
-from imutool.attitude.layout import _FASTMATH
+from imutool.attitude.layout import _FASTMATH, ATT
 from imutool.attitude.params import EkfParams
 from imutool.attitude.run import AttitudeResult, euler_std, nominal_dt
 from imutool.quaternion import qmul, rmat, rotvec_quat, vertical_in_body
@@ -63,7 +63,7 @@ def rts_kernel(
         _propagate_cov(Pp, phi, T, (gyro_noise**2 + gyro_scale**2 * wn2) * T, bias_rw**2 * T, F, tmp6)
         if (head_scale > 0 or gyro_scale > 0) and T > 0:  # the filter's scale-factor noise: tilt across the
             z0, z1, z2 = vertical_in_body(qp0, qp1, qp2, qp3)  # world vertical, heading along it
-            _add_rrt(Pp, 0, 0, (head_scale * head_scale - gyro_scale * gyro_scale) * wn2 * T, z0, z1, z2)
+            _add_rrt(Pp, ATT, ATT, (head_scale * head_scale - gyro_scale * gyro_scale) * wn2 * T, z0, z1, z2)
         if gap:
             inc = (gap_rate * dt) ** 2
             for i in range(3):
