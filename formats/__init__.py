@@ -65,7 +65,7 @@ def read(path: str | os.PathLike, **options) -> Recording:
 
         return read_parquet(path, **options)
     if kind in ("ros1", "ros2"):
-        from .rosbag import read_bag
+        from .bags import read_bag
 
         return read_bag(path, **options)
     from .nmea import read_nmea
@@ -86,7 +86,7 @@ def write(rec: Recording, path: str | os.PathLike, **options) -> None:
 
         return write_parquet(rec, path, **options)
     if kind in ("ros1", "ros2"):
-        from .rosbag import write_bag
+        from .bags import write_bag
 
         return write_bag(rec, path, **options)
     from .nmea import write_nmea

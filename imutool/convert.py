@@ -6,7 +6,7 @@ chunk by chunk (:func:`formats.iter_chunks`, Parquet by row groups), each chunk 
 boundaries), calibrated and mounted if asked, and appended to an atomic writer — bounded memory. Anything else
 (bags, NMEA, or a policy that needs the whole file: ``backwards='sort'``, ``duplicates='mean'``) is read whole,
 validated, calibrated, mounted and written; bags convert REP-103 FLU/ENU ↔ FRD/NED at the boundary
-(:mod:`formats.rosbag`). Returns the summary (rows in/out, channels, conversions applied, what the output format
+(:mod:`formats.bags`). Returns the summary (rows in/out, channels, conversions applied, what the output format
 could not carry).
 """
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from formats import Recording
+from formats.bags import read_bag
 from formats.csv import read_csv, write_csv
 from formats.frames import euler_to_quat
-from formats.rosbag import read_bag
 from imutool.cli import main
 
 RL = ("rosbags", "robot_localization")
@@ -124,7 +124,7 @@ def test_ambiguous_topics_error(tmp_path, csv_in, capsys):
     one = tmp_path / "one.bag"
     run(["convert", csv_in, one, "--quiet"], capsys)
     ts = get_typestore(Stores.ROS1_NOETIC)
-    from formats.rosbag import _Ros1Bag
+    from formats.bags.ros1 import Ros1Bag as _Ros1Bag
 
     bag = _Ros1Bag(str(one))
     imu = next(t for t in bag.topics().values() if t.name == "/imu/data")

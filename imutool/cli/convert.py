@@ -1,6 +1,6 @@
 """`imutool convert IN OUT`: CSV ↔ Parquet ↔ ROS1/ROS2 bags ↔ NMEA 0183 (format from each name's extension).
 
-Bags are converted REP-103 FLU/ENU ↔ FRD/NED at the boundary (formats.rosbag). CSV/Parquet → CSV/Parquet streams in
+Bags are converted REP-103 FLU/ENU ↔ FRD/NED at the boundary (formats.bags). CSV/Parquet → CSV/Parquet streams in
 chunks (bounded memory). The summary says rows in/out, channels, frame conversions applied and any channel the output
 format cannot carry. Options and printing only; the conversion is :func:`imutool.convert.convert`.
 """
