@@ -371,3 +371,12 @@ def test_read_em3000_file(tmp_path):
         read_em3000(p, rate_hz=None)  # the frames carry no time
     with pytest.raises(ImutoolError, match="read_em3000"):
         read_nmea(p)  # the NMEA reader names the right reader
+
+
+def test_tss1_shaped_noise_is_not_a_frame(tmp_path):
+    p = tmp_path / "noise.nmea"
+    # a lone ':' (found by the fuzz test), a 25-character line that is not a frame, then one real sentence
+    p.write_text(":\n:00FFCA -0003X-0325  0319\n" + SEAPATH_23 + "\n")
+    rec = read_nmea(p)
+    assert len(rec) == 1 and rec.meta["lines"]["not_nmea"] == 1
+    assert rec.meta["sentences"]["TSS1"]["malformed"] == 1  # shaped like TSS1, counted as a bad TSS1 frame

@@ -33,6 +33,7 @@ import numpy as np
 from pynmea2 import TalkerSentence
 
 from ..atomic import atomic_path
+from ..columns import load_profile
 from ..errors import ImutoolError
 from ..recording import Recording
 from . import motion
@@ -928,8 +929,6 @@ def read_nmea(
     xmap = _normalise_xdr_map(xdr_map)
     prof = profile
     if prof is not None and not isinstance(prof, dict):
-        from ..columns import load_profile
-
         prof = load_profile(os.fspath(prof))
     opts = motion.options_from(prof, pashr_heave_positive, tss_roll)
     try:
@@ -965,7 +964,7 @@ def read_nmea(
             continue
         i_d, i_b = st.find("$"), st.find("!")
         idx = min(i for i in (i_d, i_b) if i >= 0) if (i_d >= 0 or i_b >= 0) else -1
-        if idx < 0 and st[-25:][:1] == ":" and (len(st) == 25 or st[-26] in " \t;,"):
+        if idx < 0 and len(st) >= 25 and st[-25] == ":" and (len(st) == 25 or st[-26] in " \t;,"):
             frame, stamp = st[-25:], _parse_stamp(st[:-25]) if len(st) > 25 else None
             pos += 1
             try:
