@@ -19,8 +19,10 @@ decoded as sent):
   (``doc/nmeaMessages.md``), which emits these iXblue sentences and states their fields and signs (PHTRO
   letters M/P pitch bow up/down, B/T port down/up; PHLIN/PHOCT sway + port, heave + up; PHOCT pitch + bow
   down). iXblue's own interface library was not reachable here.
-- ``$PSAT,HPR`` (Hemisphere/CSI): CSI Wireless programming manual §2.14 and a NOAA ship log; the manuals
-  found give no sign convention: roll and pitch as sent.
+- ``$PSAT,HPR`` (Hemisphere/CSI): CSI Wireless programming manual §2.14 and a NOAA ship log. The tilt is the
+  elevation of the secondary antenna seen from the primary (negative when the secondary is below; the
+  ``$JATT,NEGTILT`` setting flips it, ``$JATT,ROLL`` makes it a roll): bow up / starboard down only when the
+  secondary antenna is forward / to starboard and NEGTILT is off. Decoded as sent.
 - ``$PRDID`` (Teledyne RDI; also Applanix POS MV and SBG): pynmea2's ``RDID`` layout (pitch first); signs
   from SBG's documentation (pitch + bow up, roll + port up). POS MV can send TSS or Tait-Bryan roll here
   (a setting): list ``PRDID`` in ``tss_roll`` for the former.
@@ -291,7 +293,8 @@ def _dec_phoct(s: NmeaSentence, opts: MotionOptions, problems: list[str]) -> dic
 # -- Hemisphere, Teledyne RDI, Trimble -----------------------------------------------------------------------------
 def _dec_psat(s: NmeaSentence, opts: MotionOptions, problems: list[str]) -> dict[str, float]:
     """$PSAT,HPR,time,heading,pitch,roll,N|G (heading source GNSS / gyro). Pitch or roll may be empty (two
-    antennas measure one of them). Signs as sent (not stated in the manuals found)."""
+    antennas measure one of them). Signs as sent: the secondary antenna's elevation seen from the primary,
+    flipped by the receiver's NEGTILT setting (see the module docstring)."""
     if _field(s, 0) != "HPR":
         raise _unsupported(s, "only PSAT,HPR is decoded")
     out: dict[str, float] = {}
@@ -665,7 +668,8 @@ CONVENTIONS: dict[str, str] = {
     "PHINF": "iXblue status word (bit 0 heading, 1 roll, 2 pitch invalid; 3 heave initialising) as phinf_status",
     "PHOCT": "roll + port up, pitch + bow DOWN → negated, heave + up, sway + PORT → negated, heading rate "
     "deg/min + clockwise → rot; status E drops the values",
-    "PSAT,HPR": "Hemisphere heading true, pitch and roll as sent (sign convention not documented publicly)",
+    "PSAT,HPR": "Hemisphere heading true; pitch/roll as sent: + when the secondary antenna is above the primary "
+    "(the receiver's NEGTILT setting flips it)",
     "PRDID": "pitch FIRST; pitch + bow up, roll + port up (= imutool), heading",
     "PTNL,AVR": "baseline yaw → heading, tilt → pitch, roll → roll as sent (Trimble states no sign)",
     "PASHR": "roll + starboard down, pitch + bow up, heading true; heave sign per device (setting "
