@@ -11,11 +11,11 @@ Units and signs at this surface (DESIGN.md, standards.md §2):
 - roll (= heel) positive **starboard down**, pitch positive **bow up**, heave in metres positive **up**;
 - HRM: heel + = starboard, port/starboard amplitudes and peak-hold values sent as positive numbers.
 
-Framing (``$``/``!`` + address + fields + ``*hh``) and checksums are done here; field decoding uses pynmea2's
-sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR; the field layouts of PASHR, PSXN, PRDID
-and PTNL,AVR are pynmea2's) and classes defined here, registered with pynmea2, where it lacks them (HRM, THS);
-SkyTraq ``$PSTI,036`` is decoded here, the motion sensors' sentences in :mod:`.motion`. One decoder per
-sentence type.
+Framing (``$``/``!`` + address + fields + ``*hh``) and checksums are done in :mod:`.framing`; field decoding
+uses pynmea2's sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR; the field layouts of PASHR,
+PSXN, PRDID and PTNL,AVR are pynmea2's) and classes defined here, registered with pynmea2, where it lacks them
+(HRM, THS); SkyTraq ``$PSTI,036`` is decoded here, the motion sensors' sentences in :mod:`.motion`. One decoder
+per sentence type.
 """
 
 from __future__ import annotations
