@@ -190,7 +190,17 @@ def test_decode_xdr_mapping_signs_and_misalignment():
 
 def test_decode_pashr_attitude_and_heave():
     d = decode("$PASHR,204132.000,010.51,T,+00.39,-00.79,-00.84,0.151,0.075,0.555,1,0*03")
-    assert d == {"heading_true": 10.51, "roll": 0.39, "pitch": -0.79, "heave": -0.84}
+    assert d == {
+        "heading_true": 10.51,
+        "roll": 0.39,
+        "pitch": -0.79,
+        "heave": -0.84,
+        "roll_std": 0.151,  # accuracy and status fields are kept as channels (issue 38)
+        "pitch_std": 0.075,
+        "heading_std": 0.555,
+        "pashr_aiding": 1.0,
+        "pashr_imu_status": 0.0,
+    }
     with pytest.raises(NmeaUnsupportedError):
         decode(_s("PASHR,ACK,GPS"))
 

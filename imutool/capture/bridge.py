@@ -19,15 +19,14 @@ start-up) or host options give the scale factors that turn counts into SI units.
 
 from __future__ import annotations
 
-import operator
 import struct
 from dataclasses import dataclass, field
-from functools import reduce
 
 import numpy as np
 from numba import njit
 
 from formats.errors import ImutoolError
+from formats.nmea import checksum_value
 from formats.units import STANDARD_GRAVITY
 
 # MPU6050 datasheet (RM-MPU-6000A §4.17/4.19): sensitivity per full-scale range.
@@ -94,8 +93,8 @@ class Scales:
 
 
 def xor_checksum(body: bytes) -> int:
-    """XOR of all bytes (the NMEA 0183 checksum)."""
-    return reduce(operator.xor, body, 0)
+    """XOR of all bytes (the NMEA 0183 checksum, :func:`formats.nmea.checksum_value`)."""
+    return checksum_value(body)
 
 
 def _crc_table() -> list[int]:

@@ -12,6 +12,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
+from formats.nmea import sentence_summary
 from imutool.cli.common import emit_summary, input_options, load_input
 
 # units shown in degrees (DESIGN: degrees at every user-facing surface); the file keeps what its header says
@@ -97,6 +98,8 @@ def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards
         "column_mapping": None,
         "validation_actions": list(rep.actions) + notes,
     }
+    if rec_raw.meta.get("sentences"):  # an NMEA log: every sentence named and counted, read or not
+        summary["nmea_sentences"] = sentence_summary(rec_raw.meta)
     cm = rec_raw.meta.get("column_mapping")
     if cm:
         summary["column_mapping"] = {
@@ -154,6 +157,16 @@ def _lines(s: dict[str, Any]) -> list[str]:
             for col, a, m, b in zip(cols, c["min"], c["mean"], c["max"], strict=False)
         )
         out.append(f"  {name:<12} [{c['unit'] or '-'}]  {axes}")
+    ns = s.get("nmea_sentences")
+    if ns:
+        for group, what in (
+            ("read", "read"),
+            ("not_read", "not read (imutool does not decode them)"),
+            ("no_data", "empty (no value in any field)"),
+            ("bad", "bad (checksum or format)"),
+        ):
+            if ns.get(group):
+                out.append(f"NMEA sentences {what}: " + ", ".join(f"{k} {n}" for k, n in ns[group].items()))
     if s["column_mapping"]:
         out.append(f"column mapping ({s['column_mapping']['origin']}):")
         out += [f"  {m}" for m in s["column_mapping"]["columns"]]

@@ -23,6 +23,7 @@ import numpy as np
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import wrap_deg180
+from formats.nmea import checksum
 from imutool.metrics import best_lag
 
 from .common import (
@@ -153,10 +154,7 @@ def heading_capture_check(path: str) -> dict[str, Any]:
             n += 1
             types[typ] = types.get(typ, 0) + 1
             body, star, cks = s[1:].partition("*")
-            x = 0
-            for ch in body:
-                x ^= ord(ch)
-            if not star or cks[:2].upper() != f"{x:02X}":
+            if not star or cks[:2].upper() != checksum(body):
                 bad += 1
                 continue
             ok += 1

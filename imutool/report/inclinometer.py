@@ -23,6 +23,7 @@ import numpy as np
 
 from formats import Recording
 from formats.errors import ImutoolError
+from formats.nmea import checksum
 from imutool.metrics import best_lag, interp_to
 from imutool.roll import PORT, STBD, heel_of, pair_cycles, roll_cycles, roll_stats
 
@@ -301,10 +302,7 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
             if not star:
                 ck_missing += 1
                 continue
-            x = 0
-            for ch in body:
-                x ^= ord(ch)
-            if cks[:2].upper() != f"{x:02X}":
+            if cks[:2].upper() != checksum(body):
                 ck_bad += 1
                 if len(first_bad) < 5:
                     first_bad.append(f"line {lineno}: checksum")

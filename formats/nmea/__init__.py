@@ -1,36 +1,68 @@
 """NMEA 0183 / IEC 61162-1 sentences: checksum, framing, decoding, writing, and whole-log reading.
 
+The package: :mod:`.framing` (the checksum — imutool's one implementation — framing and the errors),
+:mod:`.motion` (the motion sensors' proprietary sentences and the TSS1 frame), :mod:`.em3000` (Kongsberg's
+binary attitude frames), and this module (standard sentences, writers, whole logs). Every public name is
+importable from ``formats.nmea``.
+
 Units and signs at this surface (DESIGN.md, standards.md §2):
 
 - angles in degrees; heading clockwise from north in [0, 360); rate of turn in deg/min (+ = bow to starboard);
 - roll (= heel) positive **starboard down**, pitch positive **bow up**, heave in metres positive **up**;
 - HRM: heel + = starboard, port/starboard amplitudes and peak-hold values sent as positive numbers.
 
-Framing (``$``/``!`` + address + fields + ``*hh``) and checksums are done here; field decoding uses pynmea2's
-sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR; PASHR's field layout is pynmea2's
-``ASHRATT``) and classes defined here, registered with pynmea2, where it lacks them (HRM, THS); SkyTraq
-``$PSTI,036`` is decoded here. One decoder per sentence type.
+Framing (``$``/``!`` + address + fields + ``*hh``) and checksums are done in :mod:`.framing`; field decoding
+uses pynmea2's sentence classes where pynmea2 has the type (HDT, HDG, HDM, ROT, XDR; the field layouts of PASHR,
+PSXN, PRDID and PTNL,AVR are pynmea2's) and classes defined here, registered with pynmea2, where it lacks them
+(HRM, THS); SkyTraq ``$PSTI,036`` is decoded here, the motion sensors' sentences in :mod:`.motion`. One decoder
+per sentence type.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import operator
 import os
 import re
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from datetime import datetime, timezone
-from functools import reduce
 from typing import Any
 
 import numpy as np
 from pynmea2 import TalkerSentence
 
-from .atomic import atomic_path
-from .errors import ImutoolError
-from .recording import Recording
+from ..atomic import atomic_path
+from ..columns import load_profile
+from ..errors import ImutoolError
+from ..recording import Recording
+from . import motion
+from .em3000 import em3000_frame, read_em3000, scan_frames
+from .framing import (
+    _ADDR_RE,
+    CHECKSUM_POLICIES,
+    MAX_SENTENCE_LENGTH,
+    NmeaChecksumError,
+    NmeaFieldError,
+    NmeaParseError,
+    NmeaSentence,
+    NmeaUnsupportedError,
+    _num,
+    checksum,
+    checksum_value,
+    parse_sentence,
+)
+from .motion import (
+    HEAVE_SIGNS,
+    TSS1_LENGTH,
+    TSS1_STATUS,
+    MotionOptions,
+    decode_tss1,
+    euler_roll_to_tss,
+    parse_tss1,
+    tss1_frame,
+    tss_roll_to_euler,
+)
 
 __all__ = [
     "NmeaSentence",
@@ -43,6 +75,7 @@ __all__ = [
     "SUPPORTED_TYPES",
     "MAX_SENTENCE_LENGTH",
     "checksum",
+    "checksum_value",
     "format_sentence",
     "hrm_sentence",
     "xdr_sentence",
@@ -54,6 +87,17 @@ __all__ = [
     "pashr_sentence",
     "tss1_frame",
     "parse_tss1",
+    "decode_tss1",
+    "tss_roll_to_euler",
+    "euler_roll_to_tss",
+    "MotionOptions",
+    "HEAVE_SIGNS",
+    "TSS1_LENGTH",
+    "TSS1_STATUS",
+    "read_em3000",
+    "em3000_frame",
+    "scan_frames",
+    "sentence_summary",
     "utc_offset_s",
     "parse_sentence",
     "decode",
@@ -64,40 +108,9 @@ __all__ = [
     "iter_sentences",
 ]
 
-MAX_SENTENCE_LENGTH = 82  # characters including '$' and <CR><LF> (IEC 61162-1)
-CHECKSUM_POLICIES = ("require", "ignore", "accept-missing")
 TIME_SOURCES = ("auto", "stamp", "nmea", "index")
 THS_MODES = "AEMSV"  # autonomous, estimated (DR), manual, simulator, not valid
 _RESERVED = set("$!*,\\^~\r\n")
-
-
-# -- errors ---------------------------------------------------------------------------------------------------
-class NmeaParseError(ImutoolError):
-    """A line that is not a well-formed sentence (``kind`` = 'malformed')."""
-
-    kind = "malformed"
-
-    def __init__(
-        self, message: str, *, sentence_type: str | None = None, path: str | None = None, line: int | None = None
-    ):
-        super().__init__(message, path=path, line=line)
-        self.sentence_type = sentence_type
-
-
-class NmeaChecksumError(NmeaParseError):
-    """Checksum wrong, or missing under ``checksum_policy='require'`` (``kind`` = 'bad_checksum')."""
-
-    kind = "bad_checksum"
-
-
-class NmeaUnsupportedError(NmeaParseError):
-    """Well-formed sentence of a type imutool does not decode (``kind`` = 'unsupported')."""
-
-    kind = "unsupported"
-
-
-class NmeaFieldError(NmeaParseError):
-    """A field that should hold a number holds something else (``kind`` = 'malformed')."""
 
 
 # -- pynmea2 types it lacks (standards.md §2.2, §2.4) -----------------------------------------------------------
@@ -125,88 +138,6 @@ class THS(TalkerSentence):
         ("Heading (deg true)", "heading", float),
         ("Mode indicator", "mode"),
     )
-
-
-# -- framing ------------------------------------------------------------------------------------------------------
-@dataclasses.dataclass
-class NmeaSentence:
-    """One framed sentence. ``talker`` is 2 characters ('P' for proprietary); ``formatter`` the rest of the
-    address ('HDT'; 'ASHR' for $PASHR); ``fields`` the comma-separated data fields; ``checksum_ok`` True/False,
-    or None when the sentence carried no checksum."""
-
-    talker: str
-    formatter: str
-    fields: list[str]
-    checksum_ok: bool | None
-    raw: str
-
-    @property
-    def type(self) -> str:
-        """Type key used for counting and decoding: 'HDT', 'XDR', 'PASHR', 'VDM'..."""
-        return "P" + self.formatter if self.talker == "P" else self.formatter
-
-    @property
-    def address(self) -> str:
-        return self.talker + self.formatter
-
-
-def checksum(body: str) -> str:
-    """NMEA checksum: XOR of every character between '$'/'!' and '*' (both excluded), as 2 upper-case hex."""
-    return f"{reduce(operator.xor, body.encode('latin-1', 'replace'), 0) & 0xFF:02X}"
-
-
-_BAD_CHAR_RE = re.compile(r"[^\x20-\x7e]|[$!*]")
-_ADDR_RE = re.compile(r"^(?:P[A-Z0-9]{1,9}|[A-Z0-9]{2}[A-Z0-9]{3})$")
-_HEX2_RE = re.compile(r"[0-9A-Fa-f]{2}")
-
-
-def parse_sentence(line: str, checksum_policy: str = "require") -> NmeaSentence:
-    """Frame and checksum-check one sentence (leading/trailing whitespace and CR/LF are ignored).
-
-    checksum_policy: ``require`` (a missing or wrong checksum raises :class:`NmeaChecksumError`),
-    ``accept-missing`` (a missing checksum is accepted, a wrong one raises), ``ignore`` (never raises for the
-    checksum; ``checksum_ok`` says what was found). Anything that is not ``$``/``!`` + address + fields raises
-    :class:`NmeaParseError` (a subclass of ImutoolError).
-    """
-    if checksum_policy not in CHECKSUM_POLICIES:
-        raise ImutoolError(f"unknown checksum policy {checksum_policy!r} ({', '.join(CHECKSUM_POLICIES)})")
-    if not isinstance(line, str):
-        raise NmeaParseError("not a text line")
-    s = line.strip()
-    if len(s) < 7 or s[0] not in "$!":
-        raise NmeaParseError("does not start with '$' or '!' followed by an address")
-    star = s.rfind("*")
-    cs_ok: bool | None
-    if star >= 0 and len(s) - star == 3 and _HEX2_RE.fullmatch(s, star + 1):
-        body = s[1:star]
-        cs_ok = checksum(body) == s[star + 1 :].upper()
-    else:
-        body = s[1:]
-        cs_ok = None
-    addr = body.split(",", 1)[0]
-    stype = ("P" + addr[1:] if addr[:1] == "P" else addr[2:]) if _ADDR_RE.match(addr) else None
-    if cs_ok is False and checksum_policy != "ignore":
-        raise NmeaChecksumError(
-            f"checksum mismatch (got {s[star + 1 :]}, computed {checksum(body)})", sentence_type=stype
-        )
-    if cs_ok is None:
-        if "*" in body:
-            raise NmeaParseError("malformed checksum field", sentence_type=stype)
-        if checksum_policy == "require":
-            raise NmeaChecksumError("no checksum (checksum policy 'require')", sentence_type=stype)
-    if stype is None:
-        raise NmeaParseError(f"bad address field {addr[:12]!r}")
-    if "," not in body:
-        raise NmeaParseError("no data fields", sentence_type=stype)
-    bad = _BAD_CHAR_RE.search(body)
-    if bad:
-        raise NmeaParseError(
-            f"illegal character {bad.group()!r} inside the sentence (spliced line?)", sentence_type=stype
-        )
-    fields = body.split(",")[1:]
-    if addr[0] == "P":
-        return NmeaSentence("P", addr[1:], fields, cs_ok, s)
-    return NmeaSentence(addr[:2], addr[2:], fields, cs_ok, s)
 
 
 # -- decoding -------------------------------------------------------------------------------------------------
@@ -257,23 +188,6 @@ def _normalise_xdr_map(xdr_map: dict[str, Any] | None) -> dict[str, XdrMapping]:
 
 
 XDR_QUANTITIES = ("roll", "pitch", "heave")
-_HHMMSS_RE = re.compile(r"\d{6}(\.\d*)?")
-
-
-def _num(s: str | None, what: str, stype: str) -> float | None:
-    """Float of a field; None for an empty field; NmeaFieldError for garbage."""
-    if s is None:
-        return None
-    s = s.strip()
-    if s == "":
-        return None
-    try:
-        v = float(s)
-    except ValueError:
-        raise NmeaFieldError(f"{stype}: {what} field {s[:16]!r} is not a number", sentence_type=stype) from None
-    if not math.isfinite(v):
-        raise NmeaFieldError(f"{stype}: {what} field {s[:16]!r} is not finite", sentence_type=stype)
-    return v
 
 
 def _ew(value: float | None, letter: str | None, what: str, stype: str) -> float | None:
@@ -377,27 +291,6 @@ def _dec_xdr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) 
             continue
         if v is not None:
             out[mp.quantity] = mp.sign * v
-    return out
-
-
-def _dec_pashr(s: NmeaSentence, xmap: dict[str, XdrMapping], problems: list[str]) -> dict[str, float]:
-    """$PASHR attitude (OxTS/Applanix/RT300 layout): time, heading, 'T', roll, pitch, heave, accuracies...
-
-    Roll + starboard down, pitch + bow up, heave m + up (as the OxTS/Applanix manuals define it). Ashtech
-    command replies ($PASHR,ACK / POS / SAT ...) are not attitude: unsupported.
-    """
-    f = s.fields
-    if len(f) < 6 or not _HHMMSS_RE.fullmatch(f[0].strip()):
-        raise NmeaUnsupportedError("PASHR: not an attitude sentence (Ashtech reply)", sentence_type="PASHR")
-    d = f + [""] * 12
-    out: dict[str, float] = {}
-    h = _num(d[1], "heading", "PASHR")
-    if h is not None and d[2].strip().upper() == "T":
-        out["heading_true"] = h
-    for idx, key in ((3, "roll"), (4, "pitch"), (5, "heave")):
-        v = _num(d[idx], key, "PASHR")
-        if v is not None:
-            out[key] = v
     return out
 
 
@@ -510,47 +403,55 @@ _DECODERS: dict[str, Callable[[NmeaSentence, dict[str, XdrMapping], list[str]], 
     "ROT": _dec_rot,
     "THS": _dec_ths,
     "XDR": _dec_xdr,
-    "PASHR": _dec_pashr,
     "HRM": _dec_hrm,
     "PSTI": _dec_psti,
     "RMC": _dec_rmc,
     "VTG": _dec_vtg,
 }
-SUPPORTED_TYPES = tuple(_DECODERS)
+SUPPORTED_TYPES = tuple(_DECODERS) + tuple(motion.DECODERS)
 
 
-def decode(sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None) -> dict[str, float]:
+def decode(
+    sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None, options: MotionOptions | None = None
+) -> dict[str, float]:
     """Named values of one sentence (degrees, deg/min, metres, seconds; signs as in the module docstring).
 
     Keys: heading_true, heading_mag, heading_sensor, deviation, variation (E +), rot, roll, pitch, heave, heel,
     roll_period, amp_port, amp_stbd, peak_port, peak_stbd, peak_reset_time (s of day), peak_reset_day,
-    peak_reset_month, ths_mode (code point of the letter), sog (m/s, RMC/VTG), cog (deg true, RMC/VTG).
-    Only values present in the sentence are returned.
+    peak_reset_month, ths_mode (code point of the letter), sog (m/s, RMC/VTG), cog (deg true, RMC/VTG), and
+    the motion sentences' keys (:data:`formats.nmea.motion.CHANNELS`: rates, surge/sway, σ, status channels).
+    Only values present in the sentence are returned. ``options``: the per-device settings of the motion
+    sentences (PASHR heave sign, TSS rolls; :class:`MotionOptions`, default heave + up, TSS1 roll converted).
     Raises NmeaUnsupportedError for other types and NmeaFieldError for a non-numeric value field (XDR: only
     when no mapped group decoded; see :func:`decode_checked` for the partial case).
     """
-    values, problems = decode_checked(sentence, xdr_map)
+    values, problems = decode_checked(sentence, xdr_map, options)
     if problems and not values:
         raise NmeaFieldError(problems[0], sentence_type=sentence.type if isinstance(sentence, NmeaSentence) else None)
     return values
 
 
 def decode_checked(
-    sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None
+    sentence: NmeaSentence | str, xdr_map: dict[str, Any] | None = None, options: MotionOptions | None = None
 ) -> tuple[dict[str, float], list[str]]:
     """Like :func:`decode`, but returns (values, problems) where problems lists what was skipped (XDR)."""
     if isinstance(sentence, str):
         sentence = parse_sentence(sentence)
-    return _decode_with(sentence, _normalise_xdr_map(xdr_map))
+    return _decode_with(sentence, _normalise_xdr_map(xdr_map), options or motion.DEFAULT_OPTIONS)
 
 
-def _decode_with(sentence: NmeaSentence, xmap: dict[str, XdrMapping]) -> tuple[dict[str, float], list[str]]:
-    fn = _DECODERS.get(sentence.type)
-    if fn is None:
-        raise NmeaUnsupportedError(f"sentence type {sentence.type} is not decoded", sentence_type=sentence.type)
+def _decode_with(
+    sentence: NmeaSentence, xmap: dict[str, XdrMapping], opts: MotionOptions = motion.DEFAULT_OPTIONS
+) -> tuple[dict[str, float], list[str]]:
     problems: list[str] = []
-    values = fn(sentence, xmap, problems)
-    return values, problems
+    fn = _DECODERS.get(sentence.type)
+    if fn is not None:
+        return fn(sentence, xmap, problems), problems
+    mfn = motion.DECODERS.get(sentence.type)
+    if mfn is None:
+        key = motion.count_key(sentence)
+        raise NmeaUnsupportedError(f"sentence type {key} is not decoded", sentence_type=key)
+    return mfn(sentence, opts, problems), problems
 
 
 # -- fast path (live capture) -------------------------------------------------------------------------------------
@@ -599,15 +500,16 @@ def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, f
     if stype is None:
         return None
     fn = _DECODERS.get(stype)
-    if fn is None:
+    mfn = motion.DECODERS.get(stype) if fn is None else None
+    if fn is None and mfn is None:
         return None
     xmap = DEFAULT_XDR_MAP if xdr_map is None else _normalise_xdr_map(xdr_map)
     del f[0]
     talker, formatter = ("P", addr[1:]) if addr[0] == "P" else (addr[:2], addr[2:])
     s = NmeaSentence(talker, formatter, f, True, line)
     problems: list[str] = []
-    try:
-        values = fn(s, xmap, problems)  # the same decoders as decode(): only the framing checks are skipped
+    try:  # the same decoders as decode(): only the framing checks are skipped
+        values = fn(s, xmap, problems) if fn is not None else mfn(s, motion.DEFAULT_OPTIONS, problems)
     except Exception:  # NmeaFieldError, NmeaUnsupportedError...: the full path reports it
         return None
     return None if problems else values  # anything the decoder notes (XDR) is left to the full path
@@ -829,79 +731,6 @@ def pashr_sentence(
     return format_sentence("P", "ASHR", fields, [None, 2, None, 2, 2, 2, 3, 3, 3, None, None])
 
 
-# -- TSS1 (not NMEA: fixed-length ASCII heave/roll/pitch frame) ------------------------------------------------------
-TSS1_LENGTH = 27  # characters including CR/LF
-TSS1_STATUS = "UuGgHhFf"  # Unaided, GNSS(speed) aided, Heading aided, Full aided; lower case = settling
-_TSS1_RE = re.compile(r"^:([0-9A-F]{2})([0-9A-F]{4}) ([ -])(\d{4})([A-Za-z])([ -])(\d{4}) ([ -])(\d{4})$")
-
-
-def _tss1_signed(v: float, scale: float, what: str) -> str:
-    n = int(round(v * scale))
-    if abs(n) > 9999:
-        raise ImutoolError(f"TSS1: {what} {v:g} is outside the frame's range (±{9999 / scale:g})")
-    return ("-" if n < 0 else " ") + f"{abs(n):04d}"
-
-
-def tss1_frame(
-    heave_m: float,
-    roll_deg: float,
-    pitch_deg: float,
-    status: str = "U",
-    horizontal_accel_m_s2: float = 0.0,
-    vertical_accel_m_s2: float = 0.0,
-) -> str:
-    """TSS1 frame ``:XXAAAA MHHHHQMRRRR MPPPP`` (no CR/LF; 25 characters, 27 with CR/LF).
-
-    Layout (NovAtel OEM7 "TSS1" log; Norwegian Subsea and Kongsberg EK80 TSS1 pages): XX horizontal acceleration,
-    unsigned hex, 3.83 cm/s² per bit (0–9.81 m/s²); AAAA vertical acceleration, 16-bit two's-complement hex,
-    0.0625 cm/s² per bit (±20.48 m/s²); space; heave sign (space or '-') and 4 digits in cm; status Q
-    (:data:`TSS1_STATUS`); roll sign and 4 digits in 0.01° (+ = port up, i.e. starboard down); space; pitch sign
-    and 4 digits in 0.01° (+ bow up). The caller chooses the heave sign (TSS1 itself defines + = up)."""
-    if status not in TSS1_STATUS or len(status) != 1:
-        raise ImutoolError(f"TSS1 status {status!r} must be one of {TSS1_STATUS}")
-    for v, what in ((heave_m, "heave"), (roll_deg, "roll"), (pitch_deg, "pitch")):
-        if v is None or not math.isfinite(v):
-            raise ImutoolError(f"TSS1: {what} is missing (the frame has no empty field)")
-    xx = min(255, max(0, int(round(abs(horizontal_accel_m_s2 or 0.0) / 0.0383))))
-    va = int(round((vertical_accel_m_s2 or 0.0) / 0.000625))
-    va = min(32767, max(-32768, va)) & 0xFFFF
-    return (
-        f":{xx:02X}{va:04X} "
-        + _tss1_signed(heave_m, 100.0, "heave")
-        + status
-        + _tss1_signed(roll_deg, 100.0, "roll")
-        + " "
-        + _tss1_signed(pitch_deg, 100.0, "pitch")
-    )
-
-
-def parse_tss1(line: str) -> dict[str, float | str]:
-    """Decode one TSS1 frame (CR/LF optional): horizontal_accel, vertical_accel (m/s²), heave (m, as sent),
-    status (letter), settled (1.0/0.0 from the letter's case), roll, pitch (deg). Raises NmeaParseError."""
-    s = line.rstrip("\r\n")
-    m = _TSS1_RE.match(s)
-    if not m:
-        raise NmeaParseError(f"not a TSS1 frame: {s[:30]!r}", sentence_type="TSS1")
-    xx, aaaa, hs, hv, q, rs, rv, ps, pv = m.groups()
-    if q not in TSS1_STATUS:
-        raise NmeaFieldError(f"TSS1: status {q!r} is not one of {TSS1_STATUS}", sentence_type="TSS1")
-    va = int(aaaa, 16)
-    va = va - 0x10000 if va >= 0x8000 else va
-
-    def sg(sign: str, digits: str, scale: float) -> float:
-        return (-1.0 if sign == "-" else 1.0) * int(digits) / scale
-
-    return {
-        "horizontal_accel": int(xx, 16) * 0.0383,
-        "vertical_accel": va * 0.000625,
-        "heave": sg(hs, hv, 100.0),
-        "status": q,
-        "settled": 1.0 if q.isupper() else 0.0,
-        "roll": sg(rs, rv, 100.0),
-        "pitch": sg(ps, pv, 100.0),
-    }
-
-
 def utc_offset_s(rec: Recording) -> float | None:
     """Seconds to add to ``rec.time`` for Unix UTC, or None when the recording carries no real time.
 
@@ -989,7 +818,8 @@ def _date_epoch(day: int, month: int, year: int) -> float | None:
 
 
 def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
-    """(UTC time of day s, date epoch s at 00:00 UTC) carried by RMC, GGA, GLL, ZDA, PASHR or PSTI,036."""
+    """(UTC time of day s, date epoch s at 00:00 UTC) carried by RMC, GGA, GLL, ZDA, PASHR, PSTI,036, or a
+    motion sentence with a valid UTC field (PSBGA, PSBGB, PHOCT, PTNL,AVR)."""
     f = s.fields
     t = s.type
     try:
@@ -1018,6 +848,9 @@ def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
         if t == "PSTI" and len(f) >= 3 and f[0] == "036" and re.fullmatch(r"\d{6}", f[2].strip()):
             d = f[2].strip()
             return _tod(f[1]), _date_epoch(int(d[:2]), int(d[2:4]), 2000 + int(d[4:6]))
+        if t in motion.DECODERS:
+            u = motion.utc_field(s)
+            return (_tod(u), None) if u else (None, None)
     except ValueError:
         pass
     return None, None
@@ -1043,6 +876,7 @@ _CHANNELS: dict[str, tuple[str, str]] = {
     "ths_mode": ("ths_mode", "1"),
     "sog": ("sog", "m/s"),
     "cog": ("cog", "deg"),
+    **motion.CHANNELS,
 }
 _MAX_BAD_LINES = 10
 
@@ -1058,12 +892,22 @@ def read_nmea(
     time_source: str = "auto",
     nominal_rate_hz: float = 10.0,
     encoding: str = "latin-1",
+    pashr_heave_positive: str | None = None,
+    tss_roll: Iterable[str] | None = None,
+    profile: str | os.PathLike | dict[str, Any] | None = None,
 ) -> Recording:
     """Read an NMEA 0183 log into a Recording of decoded channels (see :func:`decode`; HRM heel → ``roll``).
 
     Lines: ``#`` comments, blank lines and non-NMEA text (e.g. gpsd JSON) are skipped; a line may carry a
     timestamp prefix before the ``$``/``!`` (Unix s or ms, ISO 8601, ``stamp;X;`` Signal K style, or an NMEA 4
-    ``\\c:...\\`` tag block). Bad lines are counted per sentence type and never fatal.
+    ``\\c:...\\`` tag block). TSS1 frames (``:XXAAAA MHHHHQMRRRR MPPPP``, no checksum) are read too. Bad
+    lines are counted per sentence type (proprietary ones by message: ``PSXN,23``) and never fatal; a sentence
+    imutool does not decode is counted as ``unsupported`` under its name (:func:`sentence_summary`).
+
+    Per-device settings of the motion sentences (:class:`MotionOptions`): ``pashr_heave_positive`` (``up``,
+    the default, or ``down``), ``tss_roll`` (sentence types whose roll is a TSS roll, converted to Euler roll;
+    default ``("TSS1",)``); or a ``profile`` (TOML path or dict) whose ``[nmea]`` table holds those keys (the
+    keyword arguments win). The settings and each sentence's source convention are in ``meta``.
 
     Time base (``time_source``; ``auto`` takes the first available): ``stamp`` = the per-line prefixes (s);
     ``nmea`` = UTC from RMC/GGA/GLL/ZDA/PASHR/PSTI,036: sentences between two time fixes are placed linearly by their
@@ -1083,13 +927,17 @@ def read_nmea(
         raise ImutoolError(f"nominal rate must be a positive number of Hz, not {nominal_rate_hz!r}")
     spath = os.fspath(path)
     xmap = _normalise_xdr_map(xdr_map)
+    prof = profile
+    if prof is not None and not isinstance(prof, dict):
+        prof = load_profile(os.fspath(prof))
+    opts = motion.options_from(prof, pashr_heave_positive, tss_roll)
     try:
         with open(spath, encoding=encoding, errors="replace", newline="") as fh:
             text = fh.read()
     except OSError as e:
         raise ImutoolError(f"cannot read: {e.strerror or e}", path=spath) from None
     if "\x00" in text[:4096] and text.count("\x00") > len(text) // 10:
-        raise ImutoolError("binary file, not an NMEA text log", path=spath)
+        raise ImutoolError("binary file, not an NMEA text log" + _em3000_hint(text), path=spath)
 
     counts: dict[str, dict[str, int]] = {}
     bad_lines: list[dict[str, Any]] = []
@@ -1116,6 +964,20 @@ def read_nmea(
             continue
         i_d, i_b = st.find("$"), st.find("!")
         idx = min(i for i in (i_d, i_b) if i >= 0) if (i_d >= 0 or i_b >= 0) else -1
+        if idx < 0 and len(st) >= 25 and st[-25] == ":" and (len(st) == 25 or st[-26] in " \t;,"):
+            frame, stamp = st[-25:], _parse_stamp(st[:-25]) if len(st) > 25 else None
+            pos += 1
+            try:
+                vals = motion.decode_tss1(frame, opts)
+            except NmeaParseError as e:
+                bad(lineno, "TSS1", e.kind, str(e))
+                continue
+            counts.setdefault("TSS1", _empty_counts())["parsed"] += 1
+            stamps_seen += stamp is not None
+            rows_vals.append(vals)
+            rows_pos.append(pos)
+            rows_stamp.append(stamp)
+            continue
         if idx < 0:
             n_other += 1
             continue
@@ -1126,12 +988,16 @@ def read_nmea(
         try:
             s = parse_sentence(st[idx:], checksum_policy)
         except NmeaParseError as e:
-            bad(lineno, e.sentence_type, e.kind, str(e))
+            key = e.sentence_type
+            if key and key in motion._SUBTYPED | {"PASHR"}:
+                key = motion.count_key_of(key, (st[idx:].split(",", 2) + ["", ""])[1].split("*")[0])
+            bad(lineno, key, e.kind, str(e))
             continue
         if stamp is not None:
             stamps_seen += 1
         stype = s.type
-        c = counts.setdefault(stype, _empty_counts())
+        ckey = motion.count_key(s)
+        c = counts.setdefault(ckey, _empty_counts())
         tod, de = _nmea_time(s)
         if tod is not None:
             anchors.append((pos, tod, de))
@@ -1141,7 +1007,7 @@ def read_nmea(
             for k in range(len(s.fields) // 4 if len(s.fields) % 4 == 0 else 0):
                 xdr_ids[s.fields[4 * k + 3].strip()] += 1
         try:
-            vals, problems = _decode_with(s, xmap)
+            vals, problems = _decode_with(s, xmap, opts)
             if problems and not vals:
                 raise NmeaFieldError(problems[0], sentence_type=stype)
         except NmeaUnsupportedError:
@@ -1151,10 +1017,10 @@ def read_nmea(
                 c["parsed"] += 1  # used for time only
             continue
         except NmeaParseError as e:
-            bad(lineno, stype, e.kind, str(e))
+            bad(lineno, ckey, e.kind, str(e))
             continue
         except Exception as e:  # a pynmea2 surprise must never abort a whole log
-            bad(lineno, stype, "malformed", f"{type(e).__name__}: {e}")
+            bad(lineno, ckey, "malformed", f"{type(e).__name__}: {e}")
             continue
         if (
             not vals
@@ -1167,7 +1033,7 @@ def read_nmea(
         if problems:
             c["partial"] += 1
             if len(bad_lines) < _MAX_BAD_LINES:
-                bad_lines.append({"line": lineno, "type": stype, "problem": "partial", "detail": problems[0][:120]})
+                bad_lines.append({"line": lineno, "type": ckey, "problem": "partial", "detail": problems[0][:120]})
         rows_vals.append(vals)
         rows_pos.append(pos)
         rows_stamp.append(stamp)
@@ -1176,7 +1042,8 @@ def read_nmea(
     if not rows_vals:
         summary = ", ".join(f"{k}: {v}" for k, v in sorted(counts.items()) if any(v.values())) or "none"
         raise ImutoolError(
-            f"no usable NMEA sentence with heading/attitude data (sentence counts: {summary})", path=spath
+            f"no usable NMEA sentence with heading/attitude data (sentence counts: {summary})" + _em3000_hint(text),
+            path=spath,
         )
 
     # -- time base
@@ -1235,7 +1102,46 @@ def read_nmea(
     )
     if "ths_mode" in data:
         rec.meta["ths_mode_codes"] = {str(float(ord(c))): c for c in THS_MODES}
+    seen = [k for k, v in counts.items() if v["parsed"]]
+    conv = motion.conventions_for(seen, opts)
+    if conv:
+        rec.meta["conventions"] = conv
+        rec.meta["motion_options"] = opts.as_meta()
+    codes = {k: motion.LETTER_CODES[k] for k in data if k in motion.LETTER_CODES}
+    if codes:
+        rec.meta["status_codes"] = codes
     return rec
+
+
+def _em3000_hint(text: str) -> str:
+    """A hint for a file that is Kongsberg EM3000 binary attitude frames rather than an NMEA log."""
+    raw = text[:20000].encode("latin-1", "replace")
+    frames, skipped = scan_frames(raw)
+    if len(frames) >= 3 and len(frames) * 10 >= 0.9 * len(raw):
+        return (
+            "; it looks like Kongsberg EM3000 binary attitude frames: read it with "
+            "formats.nmea.read_em3000(path, rate_hz=...)"
+        )
+    return ""
+
+
+def sentence_summary(meta: dict[str, Any]) -> dict[str, dict[str, int]]:
+    """What an NMEA log's reader did with its sentences, from ``meta['sentences']``: ``read`` (name → sentences
+    decoded), ``not_read`` (name → sentences imutool does not decode, e.g. ``PSXN,26``, ``VDM``), ``no_data``
+    (sentences with every field empty), ``bad`` (name → bad checksum + malformed). Empty dicts left out."""
+    out: dict[str, dict[str, int]] = {"read": {}, "not_read": {}, "no_data": {}, "bad": {}}
+    for k, c in (meta.get("sentences") or {}).items():
+        if not isinstance(c, dict):
+            continue
+        for group, n in (
+            ("read", c.get("parsed", 0)),
+            ("not_read", c.get("unsupported", 0)),
+            ("no_data", c.get("no_data", 0)),
+            ("bad", c.get("bad_checksum", 0) + c.get("malformed", 0)),
+        ):
+            if n:
+                out[group][k] = int(n)
+    return {g: dict(sorted(v.items(), key=lambda kv: (-kv[1], kv[0]))) for g, v in out.items() if v}
 
 
 def _nmea_times(
