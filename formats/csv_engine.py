@@ -116,7 +116,7 @@ _S60 = np.uint64(60)
 _S62 = np.uint64(62)
 
 
-@njit(cache=True)
+@njit
 def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     """Full 64×64 → 128-bit product (hi, lo)."""
     a0 = a & _M32
@@ -133,7 +133,7 @@ def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     return hi, lo
 
 
-@njit(cache=True)
+@njit
 def decimal_to_double(w: np.uint64, q: int) -> float:
     """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""
     if w == _U0:
@@ -223,7 +223,14 @@ _FALLBACK = 1
 _GARBAGE = 2
 
 
-@njit(cache=True)
+# the words a number field may spell, as byte arrays: a string literal would be a numba type of its own and compile
+# _match_word once per word (only the kernels called from Python are cached; they hold their helpers)
+_NAN = np.frombuffer(b"nan", np.uint8)
+_INFINITY = np.frombuffer(b"infinity", np.uint8)
+_INF = np.frombuffer(b"inf", np.uint8)
+
+
+@njit
 def _lower(c: np.uint8) -> int:
     c = int(c)
     if 65 <= c <= 90:
@@ -231,14 +238,14 @@ def _lower(c: np.uint8) -> int:
     return c
 
 
-@njit(cache=True)
-def _match_word(buf: np.ndarray, p: int, end: int, word: str) -> int:
-    """Length of ``word`` if buf[p:] starts with it (ASCII, case-insensitive), else 0."""
+@njit
+def _match_word(buf: np.ndarray, p: int, end: int, word: np.ndarray) -> int:
+    """Length of ``word`` (lower-case ASCII bytes) if buf[p:] starts with it (case-insensitive), else 0."""
     n = len(word)
     if p + n > end:
         return 0
     for k in range(n):
-        if _lower(buf[p + k]) != ord(word[k]):
+        if _lower(buf[p + k]) != word[k]:
             return 0
     return n
 
@@ -396,13 +403,13 @@ def parse_block(
             elif p != p0:  # a decimal point and no digit (".", ".nan", "-.inf"): not a number float() reads
                 fstat = _GARBAGE
             else:
-                n = _match_word(buf, p, end, "nan")
+                n = _match_word(buf, p, end, _NAN)
                 if n:
                     p += n
                 else:
-                    n = _match_word(buf, p, end, "infinity")
+                    n = _match_word(buf, p, end, _INFINITY)
                     if n == 0:
-                        n = _match_word(buf, p, end, "inf")
+                        n = _match_word(buf, p, end, _INF)
                     if n:
                         p += n
                         val = -math.inf if neg else math.inf
@@ -466,7 +473,7 @@ def parse_block(
 
 
 # -- writer -------------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit
 def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     """round((hi·2^64 + lo) / 2^s) for 1 ≤ s ≤ 127 (result assumed < 2^64)."""
     s1 = s - 1
@@ -479,7 +486,7 @@ def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     return (r + _U1) >> _U1
 
 
-@njit(cache=True)
+@njit
 def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     """≈ round(m·2^e2 · 10^(16 - e10)) (within ±1) for an integer m < 2^53."""
     k = 16 - e10
@@ -498,7 +505,7 @@ def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     return _round_shift(hi, lo, s)
 
 
-@njit(cache=True)
+@njit
 def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
     """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed.
 

@@ -94,7 +94,7 @@ class InsResult:
 # compiled kernel
 
 
-@njit(cache=True)
+@njit  # a helper of _ins_kernel: compiled into it and cached with it
 def _quat_step(q: np.ndarray, w: np.ndarray, wp: np.ndarray, T: float, order: int) -> None:
     """In place q ← M q with the paper's eq. 17 (order 2) or eq. 18 (order 3); w = ω_k, wp = ω_{k−1}."""
     # Ω(a) q = q ⊗ [0, a]  (eq. 11); apply the terms as quaternion products to avoid building 4×4 matrices
@@ -131,7 +131,7 @@ def _quat_step(q: np.ndarray, w: np.ndarray, wp: np.ndarray, T: float, order: in
     q[3] = nz / nrm
 
 
-@njit(cache=True)
+@njit  # a helper of _ins_kernel: compiled into it and cached with it
 def _apply_f(fth: np.ndarray, fvth: np.ndarray, fvba: np.ndarray, T: float, m: np.ndarray, out: np.ndarray) -> None:
     """out = F m for the block-sparse discrete F = A T (15×15) without forming F."""
     n = m.shape[1]
@@ -150,7 +150,7 @@ def _apply_f(fth: np.ndarray, fvth: np.ndarray, fvba: np.ndarray, T: float, m: n
             out[6 + i, j] = acc2
 
 
-@njit(cache=True)
+@njit  # a helper of _ins_kernel: compiled into it and cached with it
 def _spd_inverse(s: np.ndarray, out: np.ndarray, m: int) -> None:
     """out[:m,:m] = inverse of the symmetric positive-definite s[:m,:m] (Gauss-Jordan; s is overwritten)."""
     for i in range(m):
