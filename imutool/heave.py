@@ -47,6 +47,7 @@ from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
+from imutool.nmea_out import write_log
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
 
 GRAVITY = 9.80665
@@ -1210,8 +1211,6 @@ def run_heave(
     columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (in ``options`` too).
     Returns the output recording and the summary (rows, heave_positive, the estimator's figures, ``nmea``).
     """
-    from imutool.nmea_out import write_log
-
     load_options = {k: options.pop(k) for k in LOAD_OPTIONS if k in options}
     inputs: list[dict[str, Any]] = []
     if stage is not None:
