@@ -13,7 +13,7 @@ import numpy as np
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import require_channels  # noqa: F401  (re-exported for the click modules)
+from imutool.loading import load_recording, require_channels  # noqa: F401  (require_channels: re-exported)
 from imutool.routes import with_inputs
 
 T = TypeVar("T")
@@ -38,21 +38,21 @@ def input_options(f: Callable) -> Callable:
         click.option(
             "--stamp",
             type=click.Choice(["header", "record"]),
-            default="header",
+            default=default_of(load_recording, "stamp"),
             show_default=True,
             help="Bag time: message header stamp or bag record time.",
         ),
         click.option(
             "--duplicates",
             type=click.Choice(["drop", "mean", "error"]),
-            default="drop",
+            default=default_of(load_recording, "duplicates"),
             show_default=True,
             help="Policy for rows sharing a timestamp.",
         ),
         click.option(
             "--backwards",
             type=click.Choice(["error", "sort", "drop"]),
-            default="error",
+            default=default_of(load_recording, "backwards"),
             show_default=True,
             help="Policy for time going backwards.",
         ),
@@ -124,8 +124,6 @@ def load_input(
     carry the input's metadata). ``strict`` (default: the ``--strict`` option) turns the warnings into an
     ImutoolError.
     """
-    from imutool.loading import load_recording
-
     rec, report = load_recording(
         path,
         columns=columns,
