@@ -2,8 +2,10 @@
 
 A batch is a list of :class:`Job` (input path, output path from a naming template, template fields) and a
 *runner*: a picklable top-level function ``runner(job) -> dict`` that does the work of one recording and returns
-its summary (``rows`` and any key figures). The CLI's runner calls the same ``imutool <command>`` route as a single
-command; a Python user passes any function of their own. Nothing here imports the CLI.
+its summary (``rows`` and any key figures). The CLI's runner calls the command's library route (``run_heave``,
+``run_zvi``, ...; :mod:`imutool.routes`) as the single command does, or for a command without one the command
+line itself; a Python user passes any function of their own (:class:`Call` wraps a route). Nothing here imports
+the CLI.
 
 Guarantees (docs/batch.md):
 
@@ -311,10 +313,11 @@ def _write_marker(job: Job, result: JobResult, signature: str | None) -> None:
 class Call:
     """A runner calling a library function the way the commands do: ``func(job.input, job.output, **kwargs)``.
 
-    E.g. ``Call(imutool.filtering.run_filter, smooth=True)``, ``Call(imutool.convert.convert)``,
-    ``Call(imutool.calibrate.calibrate_mag, method="swing")``. The result's ``summary`` (or the dict returned)
-    is the job's summary. Picklable when ``func`` is a module-level function, so it runs in worker processes
-    and on Dask workers alike.
+    E.g. ``Call(imutool.filtering.run_filter, smooth=True)``, ``Call(imutool.heave.run_heave)``,
+    ``Call(imutool.convert.convert)``, ``Call(imutool.calibrate.calibrate_mag, method="swing")``. The result's
+    ``full_summary()`` (a :class:`imutool.routes.RouteResult`: what the command's ``--json`` prints), else its
+    ``summary`` (or the dict returned) is the job's summary. Picklable when ``func`` is a module-level function,
+    so it runs in worker processes and on Dask workers alike.
     """
 
     func: Callable[..., Any]
@@ -327,7 +330,8 @@ class Call:
     def __call__(self, job: Job) -> dict[str, Any]:
         args = (job.input,) if job.output is None else (job.input, job.output)
         res = self.func(*args, **self.kwargs)
-        summary = getattr(res, "summary", res)
+        full = getattr(res, "full_summary", None)  # a command route's RouteResult: its --json summary
+        summary = full() if callable(full) else getattr(res, "summary", res)
         return dict(summary) if isinstance(summary, dict) else {}
 
 

@@ -51,6 +51,7 @@ from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from imutool.roll import heel_of, roll_cycles
+from imutool.routes import RouteResult
 
 DEFAULTS: dict[str, Any] = {
     "threshold_deg": 20.0,
@@ -490,6 +491,36 @@ def run(
     if hourly_csv:
         write_table(res["hourly"], hourly_csv)
     return res
+
+
+def run_events(
+    path: str | os.PathLike,
+    output: str | os.PathLike | None = None,
+    *,
+    events_csv: str | os.PathLike | None = None,
+    hourly_csv: str | os.PathLike | None = None,
+    **options: Any,
+) -> RouteResult:
+    """:func:`run` as a command route: the route behind ``imutool events detect`` and ``imutool batch 'events
+    detect'``. ``options`` as :func:`analyse` (channels, ship/voyage, utc_start, path_regex, :data:`DEFAULTS`).
+    Returns the summary (input, output, ship, voyage, rows, max heel, event counts...) and the whole result
+    (``data``: events, hourly rows, notes, settings)."""
+    path = os.fspath(path)
+    res = run(
+        path,
+        None if output is None else os.fspath(output),
+        events_csv=None if events_csv is None else os.fspath(events_csv),
+        hourly_csv=None if hourly_csv is None else os.fspath(hourly_csv),
+        **options,
+    )
+    summary = {
+        "input": path,
+        "output": None if output is None else os.fspath(output),
+        "ship": res["ship"],
+        "voyage": res["voyage"],
+        **res["summary"],
+    }
+    return RouteResult(summary, data=res)
 
 
 def _json_default(o: Any) -> Any:

@@ -33,6 +33,7 @@ Methods (``estimate_heave(method=...)``):
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,10 +42,13 @@ from numba import njit
 from scipy import signal
 from scipy.linalg import expm
 
+import formats
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
+from imutool.nmea_out import write_log
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
 
 GRAVITY = 9.80665
 METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
@@ -57,6 +61,7 @@ RT_SHORT_WINDOW_S = 90.0  # s, the quick look for a change of sea,
 RT_CHANGE = 0.4  # relative disagreement of the two looks that marks a change of sea,
 RT_SPREAD = (0.08, 0.10)  # spectral spread ν: ≤ first → harmonic KF (line spectrum), ≥ second → bank,
 RT_SHAPE = "butterworth"  # and pole pattern (chosen on the whole benchmark grid, see docs/heave.md)
+ATTITUDES = ("auto", "q", "ekf", "tilt", "ref")  # where the vertical comes from (run_heave's attitude)
 AUTO_USES_EKF = False  # --attitude auto: q columns, else the tilt filter (the EKF on request: same heave, slower)
 
 
@@ -1156,6 +1161,123 @@ def heave_recording(
         }
     )
     return out, summary
+
+
+HEAVE_CHANNELS = ("heave", "heave_delayed", "heave_rate", "heave_rate_delayed", "ref_heave", "ref_heave_rate")
+NMEA_HEAVE_SENTENCES = ("PASHR", "TSS1")
+NMEA_CARRIED = ("roll", "pitch", "heading", "heading_true", "sog", "cog", "lat", "lon")  # input channels NMEA uses
+NMEA_META = ("start_utc", "utc_start", "start_time_utc", "scenario", "sensor")  # the input's clock and identity
+
+
+def heave_positive_down(out: Recording) -> None:
+    """Flip every heave column of ``out`` (m, m/s) in place to positive DOWN and say so in its metadata."""
+    for name in HEAVE_CHANNELS:
+        if name in out.channels:
+            out.add(name, -out[name], out.units.get(name))
+    out.meta["heave_positive"] = "down"
+    out.meta["heave"] = str(out.meta.get("heave", "m")).replace("positive UP", "positive DOWN")
+
+
+def run_heave(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike | None = None,
+    *,
+    method: str = "realtime",
+    vertical: list[str] | tuple[str, ...] | None = None,
+    vertical_sign: str = "up",
+    attitude: str = "auto",
+    lever_arm: Any = None,
+    tilt_gain: float = TILT_GAIN,
+    nmea: str | os.PathLike | None = None,
+    nmea_sentences: str | list[str] | tuple[str, ...] = "PASHR",
+    nmea_rate: float | None = None,
+    nmea_baud: int = 4800,
+    heave_positive: str = "up",
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **options: Any,
+) -> RouteResult:
+    """Heave of ``source`` (a path, loaded as every command loads it, or a Recording) written to ``output``: the
+    route behind ``imutool heave`` and ``imutool batch heave``.
+
+    ``method`` (:data:`METHODS`) and ``options`` (harmonics, cutoff, cutoff_ratio, order, delayed_cutoff,
+    window_s, hop_s, min_window_s, fmin, fmax, bandwidth, meas_noise, residual_noise: :func:`estimate_heave`);
+    ``vertical``: single vertical accelerometer channels (averaged; a name also matches in lower case) with
+    ``vertical_sign``; else the 3-axis accel rotated with ``attitude`` (auto, q, ekf, tilt, ref), ``lever_arm``
+    (m, body FRD) and ``tilt_gain`` (1/s). ``nmea``: also write PASHR and/or TSS1 (``nmea_sentences``) there at
+    ``nmea_rate`` Hz fitting ``nmea_baud`` (:func:`imutool.nmea_out.write_log`). ``heave_positive``: ``up``
+    (imutool) or ``down``: every heave column and sentence flips, the headers say so. ``load_options`` of a path:
+    columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (in ``options`` too).
+    Returns the output recording and the summary (rows, heave_positive, the estimator's figures, ``nmea``).
+    """
+    load_options = {k: options.pop(k) for k in LOAD_OPTIONS if k in options}
+    inputs: list[dict[str, Any]] = []
+    if stage is not None:
+        stage("reading")
+    if isinstance(source, Recording):
+        rec, name = source, str(source.meta.get("source", "<recording>"))
+    else:
+        name = os.fspath(source)
+        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    cols = None
+    if vertical:
+        cols = [c if c in rec.channels else c.lower() if c.lower() in rec.channels else c for c in vertical]
+    arm = None if lever_arm is None else np.asarray(lever_arm, dtype=float).reshape(-1)
+    if stage is not None:
+        stage(f"heave ({method})")
+    out, summary = heave_recording(
+        rec,
+        method=method,
+        vertical=cols,
+        vertical_sign=vertical_sign,
+        attitude="tiltonly" if attitude == "tilt" else attitude,
+        lever_arm=arm,
+        tilt_gain=tilt_gain,
+        **options,
+    )
+    nmea_info = None
+    if nmea:
+        names = nmea_sentences.split(",") if isinstance(nmea_sentences, str) else nmea_sentences
+        sents = [x.strip().upper() for x in names if x.strip()]
+        bad = [x for x in sents if x not in NMEA_HEAVE_SENTENCES]
+        if bad:
+            raise ImutoolError(f"--nmea-sentences: {', '.join(bad)} not heave sentences (PASHR, TSS1)")
+        nrec = out.copy()
+        for ch in NMEA_CARRIED:
+            if ch in rec.channels and ch not in nrec.channels:
+                nrec.add(ch, rec[ch], rec.units.get(ch))
+        for key in NMEA_META:
+            if rec.meta.get(key) and key not in nrec.meta:
+                nrec.meta[key] = rec.meta[key]
+        nmea_info = write_log(
+            nrec,
+            os.fspath(nmea),
+            sents,
+            rate_hz=nmea_rate,
+            baud=nmea_baud,
+            source=name,
+            heave_positive=heave_positive,
+            heading_ref="true",
+        )
+    if heave_positive == "down":  # every heave column flips; the header says so
+        heave_positive_down(out)
+    else:
+        out.meta["heave_positive"] = "up"
+    if stage is not None:
+        stage("writing")
+    if output is not None:
+        formats.write(out, output)
+    summary = {
+        "input": name,
+        "output": None if output is None else os.fspath(output),
+        "rows": len(out),
+        "heave_positive": heave_positive,
+        **summary,
+    }
+    if nmea_info is not None:
+        summary["nmea"] = nmea_info
+    return RouteResult(summary, inputs, out)
 
 
 # ------------------------------------------------------------------------------------------------------------------

@@ -22,18 +22,25 @@ error). One compiled loop does everything.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numba import njit
 
+import formats
 from formats import Recording
+from formats.atomic import atomic_path
+from formats.csv import format_array
 from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
-from imutool.loading import input_notes
+from imutool.loading import input_notes, require_channels
 from imutool.quaternion import rmat
+from imutool.routes import OnInput, RouteResult, Stage, load_input
 
+GYRO_NOISE_DEG = 0.3  # deg/s/√Hz: the gyro white-noise density of the process model (InsConfig.gyro_noise)
+ZARU_SIGMA_DEG = 1.0  # deg/s: std of the zero angular-rate pseudo-measurement (InsConfig.zaru_sigma)
 NX = 15  # error-state size: δθ 0:3, δr 3:6, δv 6:9, δb_a 9:12, δb_g 12:15
 
 
@@ -41,14 +48,14 @@ NX = 15  # error-state size: δθ 0:3, δr 3:6, δv 6:9, δb_a 9:12, δb_g 12:15
 class InsConfig:
     """Tuning of the error-state INS (SI units; defaults tuned once, see docs/ins.md)."""
 
-    gyro_noise: float = float(np.radians(0.3))  # gyro white noise density σ_g, rad/s/√Hz (process noise)
+    gyro_noise: float = float(np.radians(GYRO_NOISE_DEG))  # gyro white noise density σ_g, rad/s/√Hz (process noise)
     accel_noise: float = 0.3  # accelerometer white noise density σ_a, m/s²/√Hz
     gyro_bias_rw: float = float(np.radians(0.002))  # gyro bias random walk, rad/s/√s (0 = constant)
     accel_bias_rw: float = 1e-4  # accelerometer bias random walk, m/s²/√s
     zupt_sigma: float = 0.01  # m/s, std of the zero-velocity pseudo-measurement (v_v in eq. 45)
     height_sigma: float = 0.01  # m, std of the flat-floor height pseudo-measurement (v_r in eq. 45)
     zaru: bool = False  # zero angular-rate update at ZVI samples (observes the gyro bias, incl. heading axis)
-    zaru_sigma: float = float(np.radians(1.0))  # rad/s, std of the zero angular-rate pseudo-measurement
+    zaru_sigma: float = float(np.radians(ZARU_SIGMA_DEG))  # rad/s, std of the zero angular-rate pseudo-measurement
     order: int = 3  # quaternion Taylor order: 2 (eq. 17) or 3 (eq. 18)
     zupt: bool = True  # velocity update at ZVI samples
     height_update: bool = False  # height update r_d = 0 at ZVI samples (flat floor)
@@ -684,8 +691,6 @@ def plot_track(out: Recording, path: str, title: str = "", ref: np.ndarray | Non
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from formats.atomic import atomic_path
-
     p = out["pos"]
     t = out.time - out.time[0]
     z = out["zvi"] > 0.5 if "zvi" in out.channels else np.zeros(len(t), bool)
@@ -716,3 +721,164 @@ def plot_track(out: Recording, path: str, title: str = "", ref: np.ndarray | Non
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format=str(path).rsplit(".", 1)[-1].lower(), dpi=90)
     plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the route behind `imutool ins`
+
+STRIDE_COLUMNS = ("start_s", "end_s", "length_m", "height_change_m", "swing_s", "duration_s")
+
+
+def write_strides(table: list[dict[str, Any]], path: str | os.PathLike) -> None:
+    """The stride table of :func:`strides` as CSV (atomic): a header ``start_s,...,duration_s`` (s, m) and one
+    row a stride, 4 decimals (0.1 ms, 0.1 mm) through the imutool CSV number formatter; NaN is an empty field."""
+    data = np.array([[r[c] for c in STRIDE_COLUMNS] for r in table], dtype=float).reshape(-1, len(STRIDE_COLUMNS))
+    text = format_array(data, decimals=np.full(len(STRIDE_COLUMNS), 4, np.int64)) if len(data) else b""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes((",".join(STRIDE_COLUMNS) + "\n").encode("ascii") + text)
+
+
+def run_ins_track(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike | None = None,
+    *,
+    zupt: bool = InsConfig.zupt,
+    height_update: bool = InsConfig.height_update,
+    zaru: bool = InsConfig.zaru,
+    detector: str = "shoe",
+    gamma: float | None = None,
+    zvi_column: str | None = None,
+    order: int = InsConfig.order,
+    gyro_noise_deg: float = GYRO_NOISE_DEG,
+    accel_noise: float = InsConfig.accel_noise,
+    zupt_sigma: float = InsConfig.zupt_sigma,
+    height_sigma: float = InsConfig.height_sigma,
+    zaru_sigma_deg: float = ZARU_SIGMA_DEG,
+    bias_states: bool = InsConfig.accel_bias_states,
+    heading_deg: float = InsConfig.heading_deg,
+    align_window_s: float = InsConfig.align_window_s,
+    align_guard_s: float = InsConfig.align_guard_s,
+    plot_path: str | os.PathLike | None = None,
+    strides_path: str | os.PathLike | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> RouteResult:
+    """Dead-reckon ``source`` (gyro + accel, e.g. a foot-mounted IMU; a path or a Recording) into a track written
+    to ``output``: the route behind ``imutool ins`` and ``imutool batch ins``. (:func:`run_ins` is the INS itself
+    over arrays.)
+
+    Options as :class:`InsConfig` in user units: ``gyro_noise_deg`` deg/s/√Hz, ``accel_noise`` m/s²/√Hz,
+    ``zupt_sigma`` m/s, ``height_sigma`` m, ``zaru_sigma_deg`` deg/s, ``heading_deg`` deg, ``align_*_s`` s;
+    ``bias_states`` both bias triples. ZVIs: the 0/1 channel ``zvi_column``, else detected with ``detector``
+    (``gamma`` for the Skog detectors). Also writes ``plot_path`` (top view + height, .png/.pdf) and ``strides_path``
+    (:func:`write_strides`). A path is loaded with ``load_options`` (columns, profile, ... calibration_file).
+    Returns the track and the summary: closed-loop error, strides, final sigmas, ``vs_reference`` with ref_pos.
+    """
+    inputs: list[dict[str, Any]] = []
+    if stage is not None:
+        stage("reading")
+    report: dict[str, Any] = {}
+    if isinstance(source, Recording):
+        rec, name = source, str(source.meta.get("source", "<recording>"))
+    else:
+        name = os.fspath(source)
+        rec, report = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    require_channels(rec, ["gyro", "accel"], name)
+    for opt, v in (
+        ("--gyro-noise", gyro_noise_deg),
+        ("--accel-noise", accel_noise),
+        ("--zupt-sigma", zupt_sigma),
+        ("--height-sigma", height_sigma),
+        ("--zaru-sigma", zaru_sigma_deg),
+    ):
+        if not np.isfinite(v) or v <= 0:
+            raise ImutoolError(f"{opt} must be > 0; got {v}")
+    cfg = InsConfig(
+        gyro_noise=float(np.radians(gyro_noise_deg)),
+        accel_noise=accel_noise,
+        zupt_sigma=zupt_sigma,
+        height_sigma=height_sigma,
+        zaru=zaru,
+        zaru_sigma=float(np.radians(zaru_sigma_deg)),
+        order=int(order),
+        zupt=zupt,
+        height_update=height_update,
+        accel_bias_states=bias_states,
+        gyro_bias_states=bias_states,
+        heading_deg=heading_deg,
+        align_window_s=align_window_s,
+        align_guard_s=align_guard_s,
+    )
+    flags = None
+    if zvi_column:
+        if zvi_column not in rec.channels:
+            raise ImutoolError(f"ZVI column {zvi_column!r} not found", path=name)
+        flags = rec[zvi_column] > 0.5
+    params = {"gamma": gamma} if gamma is not None and detector != "paper" else {}
+    if gamma is not None and detector == "paper":
+        raise ImutoolError("--gamma does not apply to the paper detector (use `imutool zvi` to tune B_g, B_a)")
+    if stage is not None:
+        stage("INS + zero-velocity updates")
+    try:
+        out, res = ins(rec, zvi=flags, detector=detector, detector_params=params, config=cfg)
+    except ImutoolError as e:
+        raise ImutoolError(str(e), path=name) from None
+    out.meta["source"] = name
+    out.meta["ins_config"] = (
+        f"zupt={zupt} height_update={height_update} zaru={zaru} detector="
+        f"{zvi_column or detector} order={order} gyro_noise={gyro_noise_deg}deg/s/rtHz "
+        f"accel_noise={accel_noise}m/s2/rtHz zupt_sigma={zupt_sigma}m/s"
+    )
+    if stage is not None:
+        stage("writing")
+    if output is not None:
+        formats.write(out, output)
+    loop = evaluate_position(out)
+    st = strides(out.time, out["pos"], out["zvi"])
+    ok = np.flatnonzero(np.all(np.isfinite(out["pos"]), axis=1))
+    summary: dict[str, Any] = {
+        "input": name,
+        "output": None if output is None else os.fspath(output),
+        "samples": len(out),
+        "duration_s": round(out.duration, 3),
+        "aligned_from_s": round(res.info["alignment_start_s"], 3),
+        "gravity_m_s2": round(res.gravity, 4),
+        "distance_m": round(loop["distance_m"], 3),
+        "final_position_ned_m": np.round(out["pos"][ok[-1]], 3).tolist() if len(ok) else None,
+        "closed_loop_error_m": round(loop["final_error_m"], 4),
+        "closed_loop_error_percent": (
+            round(loop["final_error_percent_of_distance"], 3)
+            if loop["final_error_percent_of_distance"] is not None
+            else None
+        ),
+        "strides": {
+            "count": st["count"],
+            "mean_length_m": st["mean_length_m"] and round(st["mean_length_m"], 3),
+            "mean_duration_s": st["mean_duration_s"] and round(st["mean_duration_s"], 3),
+        },
+        "final_sigma_pos_m": np.round(np.sqrt(np.maximum(res.p_diag[-1, 3:6], 0)), 4).tolist(),
+        "final_sigma_heading_deg": round(float(np.degrees(np.sqrt(max(res.heading_var[-1], 0)))), 3),
+    }
+    if "ref_pos" in rec.channels:
+        ev = evaluate_position(out, rec)
+        summary["vs_reference"] = {
+            k: (round(v, 4) if isinstance(v, float) else v)
+            for k, v in ev.items()
+            if k in ("final_error_m", "rmse_m", "rmse_sum_axes_m", "distance_error_percent")
+        }
+    if strides_path:
+        write_strides(st["table"], strides_path)
+        summary["strides_file"] = os.fspath(strides_path)
+    if plot_path:
+        title = (
+            f"{name.rsplit('/', 1)[-1]}: {loop['distance_m']:.1f} m walked, "
+            f"closed-loop error {1000 * loop['final_error_m']:.0f} mm"
+        )
+        ref = rec.get("ref_pos") if "ref_pos" in rec.channels else None
+        plot_track(out, os.fspath(plot_path), title=title, ref=ref)
+        summary["plot"] = os.fspath(plot_path)
+    if report.get("actions"):
+        summary["input_fixes"] = report["actions"]
+    return RouteResult(summary, inputs, out)

@@ -30,7 +30,10 @@ Honesty rules:
 
 from __future__ import annotations
 
+import inspect
 import math
+import os
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -38,7 +41,9 @@ from typing import Any
 
 import numpy as np
 
+from calibration.file import load_calibration
 from formats import Recording
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.nmea import (
     hdg_sentence,
@@ -51,6 +56,7 @@ from formats.nmea import (
     utc_offset_s,
     xdr_roll_pitch,
 )
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input
 
 SENTENCES = ("HRM", "XDR", "HDG", "HDT", "THS", "ROT", "PASHR", "TSS1")
 HEADING_REFS = ("compass", "magnetic", "true")
@@ -534,34 +540,45 @@ def header_lines(
     return [("# " + x).translate(table).encode("ascii", "replace").decode("ascii") for x in lines]
 
 
-def write_log(
+LINE_OPTIONS: dict[str, Any] = {
+    k: p.default
+    for k, p in inspect.signature(nmea_lines).parameters.items()
+    if p.kind is inspect.Parameter.KEYWORD_ONLY
+}  # nmea_lines' keyword options and their defaults (the one place they are written)
+BAUD = 4800  # Bd: IEC 61162-1's line speed, the default an output must fit
+
+
+@dataclass
+class LogPlan:
+    """What a log will hold before a line is written: the sentences, the rate plan, the UTC it states and its
+    ``#`` header block."""
+
+    sentences: list[str]
+    rate: RatePlan
+    utc: str | None
+    header: list[str]
+
+
+def plan_log(
     rec: Recording,
-    path: str,
     sentences: list[str] | tuple[str, ...],
     *,
     rate_hz: float | None = None,
-    baud: int = 4800,
+    baud: int = BAUD,
     source: str = "",
-    header: bool = True,
-    time_prefix: bool = False,
     **kw: Any,
-) -> dict[str, Any]:
-    """Plan the rate against ``baud`` (:func:`plan_rate`), then write the '#' header block and the sentences
-    (CR/LF, atomic) to ``path``. ``kw`` as :func:`nmea_lines`. Returns counts, rate and line use."""
-    from formats.atomic import atomic_path
-
+) -> LogPlan | None:
+    """Plan a log of ``rec`` (not empty): the rate against ``baud`` (:func:`plan_rate`), the UTC of the first row
+    (``utc_start``, else the recording's clock) and the header; None when no sentence could be written (the
+    recording lacks the channels). ``kw`` as :func:`nmea_lines`, plus ``card_from`` (where the deviation card
+    came from, for the header)."""
     sents = [s.strip().upper() for s in sentences if s.strip()]
-    if len(rec) == 0:
-        raise ImutoolError("the recording has no rows", path=path)
+    opts = {**LINE_OPTIONS, **kw}
     nb = row_bytes(rec, sents, **kw)
     if nb == 0:
-        raise ImutoolError(
-            f"no sentence could be written: the recording lacks the channels for {','.join(sents)} "
-            f"(has {', '.join(rec.channels)})",
-            path=path,
-        )
+        return None
     plan = plan_rate(nb, baud, rate_hz, input_rate(rec))
-    us = kw.get("utc_start")
+    us = opts["utc_start"]
     off = us.timestamp() - float(rec.time[0]) if us is not None else utc_offset_s(rec)
     utc = (
         None
@@ -569,41 +586,213 @@ def write_log(
         else "recording time + offset, first row "
         + datetime.fromtimestamp(float(rec.time[0]) + off, tz=timezone.utc).isoformat().replace("+00:00", "Z")
     )
-    src = kw.get("heading_source", "auto")
-    talkers = {"HDG": "HC", "THS": TRUE_TALKER[src], **(kw.get("talkers") or {})}
+    src = opts["heading_source"]
+    talkers = {"HDG": "HC", "THS": TRUE_TALKER[src], **(opts["talkers"] or {})}
+    header = header_lines(
+        source=source,
+        sentences=sents,
+        plan=plan,
+        heading_ref=opts["heading_ref"],
+        heading_source=src,
+        heave_positive=opts["heave_positive"],
+        card_from=kw.get("card_from"),
+        deviation_deg=opts["deviation_deg"],
+        variation_deg=opts["variation_deg"],
+        utc=utc,
+        talkers=talkers,
+    )
+    return LogPlan(sents, plan, utc, header)
+
+
+def write_planned(
+    rec: Recording,
+    plan: LogPlan,
+    path: str | os.PathLike | None,
+    *,
+    header: bool = True,
+    time_prefix: bool = False,
+    port: Any = None,
+    realtime: bool = True,
+    **kw: Any,
+) -> dict[str, int]:
+    """Write the lines of ``plan`` (CR/LF): to ``path`` (atomic; the header block first unless ``header`` is
+    False; each line prefixed with its time in s with ``time_prefix``) and/or to ``port`` (an open serial port,
+    paced by the recording's time stamps when ``realtime``). ``kw`` as :func:`nmea_lines`. Returns the count of
+    each sentence type written, in order of first appearance."""
+    gen = nmea_lines(rec, plan.sentences, plan.rate.rate_hz, **{k: v for k, v in kw.items() if k != "card_from"})
     counts: dict[str, int] = {}
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="") as fh:
-        if header:
-            for h in header_lines(
-                source=source,
-                sentences=sents,
-                plan=plan,
-                heading_ref=kw.get("heading_ref", "magnetic"),
-                heading_source=src,
-                heave_positive=kw.get("heave_positive", "up"),
-                card_from=kw.get("card_from"),
-                deviation_deg=kw.get("deviation_deg"),
-                variation_deg=kw.get("variation_deg"),
-                utc=utc,
-                talkers=talkers,
-            ):
-                fh.write(h + "\r\n")
-        for ts, s in nmea_lines(rec, sents, plan.rate_hz, **{k: v for k, v in kw.items() if k != "card_from"}):
-            fh.write((f"{ts:.3f} " if time_prefix else "") + s + "\r\n")
+    t_wall0 = time.monotonic()
+    t_rec0 = None
+    if path is not None:
+        with atomic_path(path) as tmp, open(tmp, "w", encoding="ascii", newline="") as fh:
+            if header:
+                fh.write("".join(h + "\r\n" for h in plan.header))
+            for ts, s in gen:
+                fh.write((f"{ts:.3f} " if time_prefix else "") + s + "\r\n")
+                k = sentence_kind(s)
+                counts[k] = counts.get(k, 0) + 1
+                if port is not None:
+                    t_rec0 = ts if t_rec0 is None else t_rec0
+                    send(port, s, ts - t_rec0, t_wall0, realtime)
+    elif port is not None:
+        for ts, s in gen:
             k = sentence_kind(s)
             counts[k] = counts.get(k, 0) + 1
+            t_rec0 = ts if t_rec0 is None else t_rec0
+            send(port, s, ts - t_rec0, t_wall0, realtime)
+    return counts
+
+
+def send(port: Any, sentence: str, t_rel: float, t_wall0: float, realtime: bool) -> None:
+    """Write one sentence + CR/LF to ``port``; with ``realtime`` not before ``t_wall0 + t_rel`` (monotonic s)."""
+    if realtime:
+        wait = t_wall0 + t_rel - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+    port.write((sentence + "\r\n").encode("ascii"))
+
+
+def open_port(name: str, baud: int) -> Any:
+    """An open serial port (pyserial, imported here: an optional dependency only this output needs)."""
+    import serial
+
+    try:
+        return serial.Serial(name, baudrate=baud, timeout=1, write_timeout=5)
+    except (serial.SerialException, OSError) as e:
+        raise ImutoolError(f"cannot open serial port: {e}", path=name) from None
+
+
+def write_log(
+    rec: Recording,
+    path: str,
+    sentences: list[str] | tuple[str, ...],
+    *,
+    rate_hz: float | None = None,
+    baud: int = BAUD,
+    source: str = "",
+    header: bool = True,
+    time_prefix: bool = False,
+    **kw: Any,
+) -> dict[str, Any]:
+    """Plan the rate against ``baud`` (:func:`plan_log`), then write the '#' header block and the sentences
+    (CR/LF, atomic) to ``path`` (:func:`write_planned`). ``kw`` as :func:`nmea_lines`. Returns counts, rate and
+    line use."""
+    sents = [s.strip().upper() for s in sentences if s.strip()]
+    if len(rec) == 0:
+        raise ImutoolError("the recording has no rows", path=path)
+    plan = plan_log(rec, sents, rate_hz=rate_hz, baud=baud, source=source, **kw)
+    if plan is None:
+        raise ImutoolError(
+            f"no sentence could be written: the recording lacks the channels for {','.join(sents)} "
+            f"(has {', '.join(rec.channels)})",
+            path=path,
+        )
+    counts = write_planned(rec, plan, path, header=header, time_prefix=time_prefix, **kw)
     return {
         "path": path,
         "sentences": counts,
         "total": int(sum(counts.values())),
-        "rate_hz": plan.rate_hz,
-        "rate_chosen": plan.chosen,
-        "bytes_per_s": round(plan.bytes_per_s, 1),
-        "line_bytes_per_s": plan.capacity_bytes_per_s,
+        "rate_hz": plan.rate.rate_hz,
+        "rate_chosen": plan.rate.chosen,
+        "bytes_per_s": round(plan.rate.bytes_per_s, 1),
+        "line_bytes_per_s": plan.rate.capacity_bytes_per_s,
         "baud": baud,
-        "heave_positive": kw.get("heave_positive", "up"),
-        "utc": utc,
+        "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
+        "utc": plan.utc,
     }
+
+
+def run_nmea(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike | None = None,
+    *,
+    sentences: str | list[str] | tuple[str, ...] = "HRM,XDR",
+    rate_hz: float | None = None,
+    serial_port: str | None = None,
+    baud: int = BAUD,
+    realtime: bool = True,
+    time_prefix: bool = False,
+    header: bool = True,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> RouteResult:
+    """IEC 61162-1 sentences and TSS1 frames of ``source`` (a path or a Recording) to the log ``output`` and/or
+    the serial port ``serial_port`` (paced by the time stamps when ``realtime``): the route behind ``imutool
+    nmea`` and ``imutool batch nmea``.
+
+    ``sentences`` (a comma list or a sequence of :data:`SENTENCES`) at ``rate_hz`` (default: the highest standard
+    rate that fits ``baud``); ``header``: the '#' block of conventions first; ``time_prefix``: each line starts
+    with its time (s). ``options``: those of :func:`nmea_lines` (:data:`LINE_OPTIONS`: heading_ref,
+    heading_source, deviation_deg, variation_deg, ths_mode, heave_positive, xdr_*, talkers, roll_kw, utc_start
+    ...) and, for a path, how to load it (columns, ..., calibration_file: its [deviation] card gives HDG's
+    deviation). Returns the summary: sentences written per type, rate, line use, UTC, deviation.
+    """
+    if output is None and serial_port is None:
+        raise ImutoolError("give -o OUTPUT.nmea and/or --serial PORT")
+    kw = {k: options.pop(k) for k in list(options) if k in LINE_OPTIONS}
+    unknown = set(options) - set(LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"run_nmea() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    inputs: list[dict[str, Any]] = []
+    if isinstance(source, Recording):
+        rec, name = source, str(source.meta.get("source", "<recording>"))
+    else:
+        name = os.fspath(source)
+        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **options)
+    card = None
+    card_from = None
+    if options.get("calibration_file"):
+        card = load_calibration(options["calibration_file"]).deviation
+        card_from = options["calibration_file"] if card is not None else None
+    if card is not None and kw.get("deviation_deg") is not None:
+        raise ImutoolError("--deviation and a --calibration with a [deviation] card: give one of them")
+    if card is not None:
+        kw["card"] = card
+    names = sentences.split(",") if isinstance(sentences, str) else list(sentences)
+    listed = sentences if isinstance(sentences, str) else ",".join(sentences)
+    sents = [x.strip().upper() for x in names if x.strip()]
+    if len(rec) == 0:
+        raise ImutoolError("the recording has no rows", path=name)
+    plan = plan_log(rec, sents, rate_hz=rate_hz, baud=baud, source=name, card_from=card_from, **kw)
+    if plan is None:
+        raise ImutoolError("no sentence written: the input lacks the channels for " + listed, path=name)
+    port = open_port(serial_port, baud) if serial_port else None
+    try:
+        counts = write_planned(
+            rec,
+            plan,
+            None if output is None else os.fspath(output),
+            header=header,
+            time_prefix=time_prefix,
+            port=port,
+            realtime=realtime,
+            **kw,
+        )
+    finally:
+        if port is not None:
+            port.flush()
+            port.close()
+    if not counts:
+        raise ImutoolError("no sentence written: the input lacks the channels for " + listed, path=name)
+    deviation = kw.get("deviation_deg", LINE_OPTIONS["deviation_deg"])
+    summary = {
+        "input": name,
+        "output": None if output is None else os.fspath(output),
+        "serial": serial_port,
+        "baud": baud,
+        "sentences": counts,
+        "total": int(sum(counts.values())),
+        "rate_hz": plan.rate.rate_hz,
+        "rate_chosen": plan.rate.chosen,
+        "bytes_per_s": round(plan.rate.bytes_per_s, 1),
+        "line_bytes_per_s": plan.rate.capacity_bytes_per_s,
+        "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
+        "utc": plan.utc,
+        "deviation": card_from or deviation,
+        "generated_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
+    return RouteResult(summary, inputs, data={"plan": plan})
 
 
 def sentence_kind(s: str) -> str:

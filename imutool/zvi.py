@@ -18,14 +18,18 @@ drops intervals shorter than ``min_duration_s``. Window sums use cumulative sums
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+import formats
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.loading import input_notes, require_channels
+from imutool.routes import OnInput, RouteResult, Stage, load_input
 
 GRAVITY = 9.80665  # m/s², magnitude used by SHOE and MAG
 
@@ -340,3 +344,115 @@ def plot_zvi(
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format=path.suffix.lstrip(".").lower() or "png", dpi=90)
     plt.close(fig)
+
+
+def run_zvi(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike | None = None,
+    *,
+    detector: str = "shoe",
+    gamma: float | None = None,
+    window_s: float | None = None,
+    sigma_a: float | None = None,
+    sigma_g_deg_s: float | None = None,
+    b_g_deg_s: float | None = None,
+    b_a: float | None = None,
+    window_g_s: float | None = None,
+    window_a_s: float | None = None,
+    min_duration_s: float | None = None,
+    flags_path: str | os.PathLike | None = None,
+    plot_path: str | os.PathLike | None = None,
+    labels: str | None = None,
+    pick: bool = False,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> RouteResult:
+    """Zero-velocity intervals of ``source`` (gyro + accel; a path or a Recording) written to ``output`` (.csv
+    table or .json, :func:`write_intervals`): the route behind ``imutool zvi`` and ``imutool batch zvi``.
+
+    Detector parameters left None take :data:`DEFAULTS` (rates in deg/s here: ``sigma_g_deg_s``, ``b_g_deg_s``;
+    a parameter the detector does not take is an error). ``labels``: the column of true flags to score against
+    (default ``ref_zvi`` when present); ``pick``: grid-search the threshold maximising F1 against them
+    (:func:`pick_threshold`) and use it. Also writes ``flags_path`` (per-sample zvi, zvi_statistic) and
+    ``plot_path``. A path is loaded with ``load_options`` (columns, profile, ... calibration_file).
+    """
+    inputs: list[dict[str, Any]] = []
+    if stage is not None:
+        stage("reading")
+    report: dict[str, Any] = {}
+    if isinstance(source, Recording):
+        rec, name = source, str(source.meta.get("source", "<recording>"))
+    else:
+        name = os.fspath(source)
+        rec, report = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    require_channels(rec, ["gyro", "accel"], name)
+    given = {
+        "gamma": gamma,
+        "window_s": window_s,
+        "sigma_a": sigma_a,
+        "sigma_g": _rad(sigma_g_deg_s),
+        "b_g": _rad(b_g_deg_s),
+        "b_a": b_a,
+        "window_g_s": window_g_s,
+        "window_a_s": window_a_s,
+        "min_duration_s": min_duration_s,
+    }
+    if detector not in DEFAULTS:
+        raise ImutoolError(f"unknown ZVI detector {detector!r}; known: {', '.join(DETECTORS)}")
+    allowed = DEFAULTS[detector]
+    bad = [k for k, v in given.items() if v is not None and k not in allowed]
+    if bad:
+        opts = ", ".join("--" + b.replace("_s", "").replace("_", "-") for b in bad)
+        raise ImutoolError(f"detector {detector!r} does not take {opts}")
+    params = {k: v for k, v in given.items() if k in allowed}
+    gyro = rec.get("gyro", "rad/s")
+    accel = rec.get("accel", "m/s^2")
+    label_col = labels or ("ref_zvi" if "ref_zvi" in rec.channels else None)
+    if labels and labels not in rec.channels:
+        raise ImutoolError(f"label column {labels!r} not found", path=name)
+    truth = rec[label_col] if label_col else None
+    summary: dict[str, Any] = {"input": name}
+    if pick:
+        if truth is None:
+            raise ImutoolError("--pick-threshold needs labelled flags (--labels COLUMN or a ref_zvi column)")
+        best = pick_threshold(rec.time, gyro, accel, truth, detector, **params)
+        params[best["param"]] = best["value"]
+        summary["picked"] = {"param": best["param"], "value": best["value"], "f1": round(best["f1"], 4)}
+    if stage is not None:
+        stage(f"detecting ({detector})")
+    res = detect_zvi(rec.time, gyro, accel, detector, **params)
+    if stage is not None:
+        stage("writing")
+    if output is not None:
+        write_intervals(res, output)
+    summary.update(res.summary())
+    for k in ("b_g", "sigma_g"):  # degrees at the user surface, as the options
+        if k in summary["params"]:
+            summary["params"][f"{k}_deg_s"] = round(float(np.degrees(summary["params"].pop(k))), 6)
+    if summary.get("picked", {}).get("param") == "b_g":
+        summary["picked"] = {
+            "param": "b_g_deg_s",
+            "value": round(float(np.degrees(summary["picked"]["value"])), 6),
+            "f1": summary["picked"]["f1"],
+        }
+    summary["output"] = None if output is None else os.fspath(output)
+    if truth is not None:
+        summary["score_vs_" + label_col] = {k: round(v, 4) for k, v in flag_scores(res.flags, truth).items()}
+    out = Recording(rec.time.copy(), meta={"source": name, "zvi_detector": detector, **input_notes(rec.meta)})
+    out.add("zvi", res.flags.astype(float), "1")
+    out.add("zvi_statistic", res.statistic, "1")
+    if flags_path:
+        formats.write(out, flags_path)
+        summary["flags"] = os.fspath(flags_path)
+    if plot_path:
+        plot_zvi(res, gyro, accel, plot_path, truth=truth)
+        summary["plot"] = os.fspath(plot_path)
+    if report.get("actions"):
+        summary["input_fixes"] = report["actions"]
+    return RouteResult(summary, inputs, out)
+
+
+def _rad(v: float | None) -> float | None:
+    return None if v is None else float(np.radians(v))

@@ -1,8 +1,12 @@
 """`imutool batch COMMAND INPUTS... -o TEMPLATE`: run any imutool command over many recordings.
 
-The click layer only parses options, builds the jobs and prints; the work is :mod:`imutool.batch`. Each job runs
-``imutool COMMAND INPUT -o OUTPUT [ARGS] --json`` through :func:`imutool.cli.main` inside a worker (stdout and
-stderr captured), so a batch takes exactly the route of a single command.
+The click layer only parses options, builds the jobs and prints; the work is :mod:`imutool.batch`. Each job's
+options (``INPUT -o OUTPUT [ARGS]``) are parsed by the command itself; a command with a library route (marked by
+:func:`imutool.cli.common.route_of`: heave, ins, nmea, zvi, gyrofree, events detect, report inclinometer, report
+heading) then has that route called directly in the worker (:func:`run_route`, behind the command's own output
+checks; the summary is the route's result, no stdout read back). Any other command runs as
+``imutool COMMAND ... --json`` through :func:`imutool.cli.main` with stdout and stderr captured
+(:func:`run_command`).
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import re
 import shlex
 import sys
 import time
+import warnings
 from typing import Any
 
 import click
@@ -57,6 +62,35 @@ def run_command(argv_template: list[str], job: _batch.Job) -> dict[str, Any]:
     except ValueError:
         summary = {}
     return summary if isinstance(summary, dict) else {"result": summary}
+
+
+def run_route(words: list[str], argv_template: list[str], job: _batch.Job) -> dict[str, Any]:
+    """Run one job through the library route of ``imutool <words>``: the job's options (``argv_template`` with
+    ``{input}``, ``{output}``, ``{stem}``... filled) parsed by the command, the route called behind the command's
+    output checks (``--force`` as given), nothing printed. Returns the summary ``--json`` prints; a usage error,
+    a route's ImutoolError or a report that did not pass (exit status 1) is an ImutoolError."""
+    from imutool.cli.common import guarded, json_default
+
+    cmd = _resolve(words)
+    call, outputs, append = cmd.imutool_route  # type: ignore[attr-defined]
+    fields = {**job.fields, "input": job.input, "output": job.output or ""}
+    args = _render_args(argv_template, fields)[len(words) :]
+    where = " ".join(["imutool", *words])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # as the command line does without --debug
+        try:
+            ctx = cmd.make_context(where, args)
+        except click.ClickException as e:
+            raise ImutoolError(
+                " ".join(part.strip() for part in e.format_message().splitlines() if part.strip())
+                + (f" (see '{where} --help')" if isinstance(e, click.UsageError) else "")
+            ) from None
+        with ctx:
+            params = {k: v for k, v in ctx.params.items() if k not in ("as_json", "quiet")}
+            res = guarded(call, outputs, append)(**params)
+    if res.exit_status:
+        raise ImutoolError(f"exit status {res.exit_status}")
+    return json.loads(json.dumps(res.full_summary(), default=json_default))  # the --json text, as numbers/lists
 
 
 def _resolve(command: list[str]) -> click.Command:
@@ -203,7 +237,10 @@ def batch_cmd(
         return
     from functools import partial
 
-    runner = partial(run_command, argv)
+    if getattr(cmd, "imutool_route", None) is not None:
+        runner = partial(run_route, words, argv)
+    else:  # no library route yet: the command line, its stdout read back
+        runner = partial(run_command, argv)
     t0 = time.perf_counter()
     with bar("batch", total=len(jobs), unit="file", quiet=quiet or as_json) as b:  # done/total, rate, ETA
         results = _batch.run_batch(

@@ -13,7 +13,8 @@ import numpy as np
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import require_channels  # noqa: F401  (re-exported for the click modules)
+from imutool.loading import load_recording, require_channels  # noqa: F401  (require_channels: re-exported)
+from imutool.routes import with_inputs
 
 T = TypeVar("T")
 
@@ -37,21 +38,21 @@ def input_options(f: Callable) -> Callable:
         click.option(
             "--stamp",
             type=click.Choice(["header", "record"]),
-            default="header",
+            default=default_of(load_recording, "stamp"),
             show_default=True,
             help="Bag time: message header stamp or bag record time.",
         ),
         click.option(
             "--duplicates",
             type=click.Choice(["drop", "mean", "error"]),
-            default="drop",
+            default=default_of(load_recording, "duplicates"),
             show_default=True,
             help="Policy for rows sharing a timestamp.",
         ),
         click.option(
             "--backwards",
             type=click.Choice(["error", "sort", "drop"]),
-            default="error",
+            default=default_of(load_recording, "backwards"),
             show_default=True,
             help="Policy for time going backwards.",
         ),
@@ -123,8 +124,6 @@ def load_input(
     carry the input's metadata). ``strict`` (default: the ``--strict`` option) turns the warnings into an
     ImutoolError.
     """
-    from imutool.loading import load_recording
-
     rec, report = load_recording(
         path,
         columns=columns,
@@ -170,16 +169,11 @@ def emit_summary(summary: dict[str, Any], as_json: bool, quiet: bool, lines: Ite
     if inputs:
         if lines is None and not as_json:
             lines = list(_default_lines(summary))
-        summary = dict(summary)
-        summary.setdefault("validation", [{k: v for k, v in r.items() if k != "plausibility_figures"} for r in inputs])
-        warns = [w for r in inputs for w in r.get("warnings", [])]
-        if warns:
-            have = summary.get("warnings")
-            summary["warnings"] = (list(have) if isinstance(have, (list, tuple)) else [have] if have else []) + warns
+        summary = with_inputs(summary, inputs)
         if lines is not None and not as_json:
             lines = [*lines, *_validation_lines(inputs)]
     if as_json:
-        click.echo(json.dumps(summary, indent=2, default=_json_default))
+        click.echo(json.dumps(summary, indent=2, default=json_default))
         return
     if quiet:
         return
@@ -210,7 +204,8 @@ def _default_lines(summary: dict[str, Any], indent: str = "") -> Iterator[str]:
             yield f"{indent}{k}: {v}"
 
 
-def _json_default(o: Any) -> Any:
+def json_default(o: Any) -> Any:
+    """How ``--json`` writes what JSON has no type for: numpy scalars and arrays as numbers and lists, else text."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -305,44 +300,74 @@ def safe_outputs(*names: str, append: str | None = None) -> Callable:
     existing ``.toml`` outputs are merged into, not replaced (they must load cleanly; the command checks that).
     Writers inside the command refuse anything the check did not approve.
     """
-    import functools
-
-    from formats.atomic import check_outputs, output_guard
 
     def deco(f: Callable) -> Callable:
-        @functools.wraps(f)
-        def wrapper(*args: Any, **kwargs: Any) -> Any:
-            force = bool(kwargs.pop("force", False))
-            outs: list[str] = []
-            for n in names:
-                v = kwargs.get(n)
-                if isinstance(v, (tuple, list)):
-                    outs += [str(x) for x in v if x]
-                elif v:
-                    outs.append(str(v))
-            merging = [o for o in outs if o.lower().endswith(".toml")] if append and kwargs.get(append) else []
-            merged = {os.path.realpath(o) for o in merging}
-            ins: list[str] = []
-            for k, v in kwargs.items():
-                if k in names:
-                    continue
-                for x in v if isinstance(v, (tuple, list)) else (v,):
-                    if isinstance(x, str) and x and os.path.exists(x) and os.path.realpath(x) not in merged:
-                        ins.append(x)
-            with output_guard(force=force):
-                check_outputs(outs, ins, exists_ok=merging)
-                try:
-                    return f(*args, **kwargs)
-                except ImutoolError as e:
-                    if e.path is None and ins and ins[0] not in str(e):  # about the data: name the input
-                        raise ImutoolError(str(e), path=ins[0]) from None
-                    raise
-
         return click.option(
             "--force",
             is_flag=True,
             help="Replace existing output files (never an input, never a folder other than a ROS2 "
             "bag folder imutool wrote).",
-        )(wrapper)
+        )(guarded(f, names, append))
 
     return deco
+
+
+def guarded(f: Callable, names: tuple[str, ...], append: str | None = None) -> Callable:
+    """``f`` called with its keyword arguments (and ``force``) behind the output checks of :func:`safe_outputs`:
+    what the command runs, and what ``imutool batch`` runs around a command's library route."""
+    import functools
+
+    from formats.atomic import check_outputs, output_guard
+
+    @functools.wraps(f)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        force = bool(kwargs.pop("force", False))
+        outs: list[str] = []
+        for n in names:
+            v = kwargs.get(n)
+            if isinstance(v, (tuple, list)):
+                outs += [str(x) for x in v if x]
+            elif v:
+                outs.append(str(v))
+        merging = [o for o in outs if o.lower().endswith(".toml")] if append and kwargs.get(append) else []
+        merged = {os.path.realpath(o) for o in merging}
+        ins: list[str] = []
+        for k, v in kwargs.items():
+            if k in names:
+                continue
+            for x in v if isinstance(v, (tuple, list)) else (v,):
+                if isinstance(x, str) and x and os.path.exists(x) and os.path.realpath(x) not in merged:
+                    ins.append(x)
+        with output_guard(force=force):
+            check_outputs(outs, ins, exists_ok=merging)
+            try:
+                return f(*args, **kwargs)
+            except ImutoolError as e:
+                if e.path is None and ins and ins[0] not in str(e):  # about the data: name the input
+                    raise ImutoolError(str(e), path=ins[0]) from None
+                raise
+
+    return wrapper
+
+
+def route_of(
+    call: Callable[..., Any], outputs: tuple[str, ...] = ("output",), append: str | None = None
+) -> Callable[[click.Command], click.Command]:
+    """Mark a click command as the shell over ``call(**options) -> RouteResult``: the command's parsed options
+    (less ``as_json``; ``quiet`` given when ``call`` takes it) → its library route. ``imutool batch`` parses a job's
+    options with the command, then runs ``call`` behind the same output checks (``outputs``, ``append``: as
+    :func:`safe_outputs`) instead of the command: no stdout to read back."""
+
+    def deco(cmd: click.Command) -> click.Command:
+        cmd.imutool_route = (call, tuple(outputs), append)  # type: ignore[attr-defined]
+        return cmd
+
+    return deco
+
+
+def default_of(func: Callable[..., Any], name: str) -> Any:
+    """The default of parameter ``name`` of the library function ``func``: a click option takes its default from
+    the library route (defaults live once, there)."""
+    import inspect
+
+    return inspect.signature(func).parameters[name].default

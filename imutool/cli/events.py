@@ -1,6 +1,7 @@
 """`imutool events detect INPUT -o events.json` and `imutool events fleet RESULTS... -o fleet.csv --plot fleet.png`.
 
-Thin click layer over :mod:`imutool.events` (heavy-roll events, hourly MSC.363(92) statistics, parametric roll).
+Thin click layer over :mod:`imutool.events` (heavy-roll events, hourly MSC.363(92) statistics, parametric roll):
+`detect` calls :func:`imutool.events.run_events`, the route `imutool batch 'events detect'` and a Python user take.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ import click
 
 from formats.errors import ImutoolError
 from imutool import events as _events
-from imutool.cli.common import emit_summary, safe_outputs
+from imutool.cli.common import emit_summary, route_of, safe_outputs
+from imutool.routes import RouteResult
 
 D = _events.DEFAULTS
 
@@ -119,39 +121,10 @@ def events_group() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("output", "events_csv", "hourly_csv")
-def detect_cmd(
-    input_path: str,
-    output: str | None,
-    events_csv: str | None,
-    hourly_csv: str | None,
-    roll_channel: str | None,
-    pitch_channel: str | None,
-    heave_channel: str | None,
-    as_json: bool,
-    quiet: bool,
-    utc_start: str | None,
-    ship: str | None,
-    voyage: str | None,
-    path_regex: str | None,
-    **settings: Any,
-) -> None:
+def detect_cmd(input_path: str, output: str | None, as_json: bool, quiet: bool, **options: Any) -> None:
     """Heavy-roll events, hourly roll statistics (MSC.363(92)) and parametric-roll episodes of INPUT."""
-    res = _events.run(
-        input_path,
-        output,
-        events_csv=events_csv,
-        hourly_csv=hourly_csv,
-        roll_channel=roll_channel,
-        pitch_channel=pitch_channel,
-        heave_channel=heave_channel,
-        utc_start=utc_start,
-        ship=ship,
-        voyage=voyage,
-        path_regex=path_regex,
-        **settings,
-    )
-    s = res["summary"]
-    summary = {"input": input_path, "output": output, "ship": res["ship"], "voyage": res["voyage"], **s}
+    r = detect_route(input_path, output, **options)
+    res, s = r.data, r.summary
     para = [e for e in res["events"] if e["type"] == "parametric_roll"]
     lines = [
         f"{input_path}: ship {res['ship']}, voyage {res['voyage']}, {s['rows']} rows, {s['duration_s']:.0f} s",
@@ -172,7 +145,15 @@ def detect_cmd(
         )
     for n in res["notes"]:
         lines.append(f"note: {n}")
-    emit_summary(summary, as_json, quiet, lines=lines)
+    emit_summary(r.summary, as_json, quiet, lines=lines)
+
+
+def detect_route(input_path: str, output: str | None, quiet: bool = True, **options: Any) -> RouteResult:
+    """Parsed options → :func:`imutool.events.run_events`."""
+    return _events.run_events(input_path, output, **options)
+
+
+detect_cmd = route_of(detect_route, ("output", "events_csv", "hourly_csv"))(detect_cmd)
 
 
 @events_group.command(

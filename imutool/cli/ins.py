@@ -1,12 +1,60 @@
-"""`imutool ins IN -o track.csv`: strapdown INS + error-state EKF with zero-velocity (and height) updates."""
+"""`imutool ins IN -o track.csv`: strapdown INS + error-state EKF with zero-velocity (and height) updates.
+
+Only option parsing and printing here; the work is :func:`imutool.ins.run_ins_track`, the route `imutool batch ins`
+and a Python user take (defaults live there).
+"""
 
 from __future__ import annotations
 
-import click
-import numpy as np
+from typing import Any
 
-from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, require_channels, safe_outputs
+import click
+
+from imutool.cli.common import (
+    default_of,
+    emit_summary,
+    input_options,
+    note_input,
+    output_options,
+    route_of,
+    safe_outputs,
+    strict_requested,
+)
+from imutool.ins import run_ins_track
+from imutool.progress import stages
+from imutool.routes import OnInput
+from imutool.zvi import DETECTORS
+
+OUTPUTS = ("output", "plot_path", "strides_path")
+
+
+def ins_route(
+    input_path: str,
+    output: str,
+    order: str,
+    gyro_noise: float,
+    zaru_sigma: float,
+    align_window: float,
+    align_guard: float,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> Any:
+    """Parsed options → :func:`imutool.ins.run_ins_track` (progress stages on stderr unless ``quiet``)."""
+    with stages("ins", ["reading", "INS", "writing"], quiet) as steps:
+        return run_ins_track(
+            input_path,
+            output,
+            order=int(order),
+            gyro_noise_deg=gyro_noise,
+            zaru_sigma_deg=zaru_sigma,
+            align_window_s=align_window,
+            align_guard_s=align_guard,
+            strict=strict_requested(),
+            on_input=on_input,
+            stage=steps.stage,
+            **options,
+        )
 
 
 @click.command("ins", epilog="Example: imutool ins walk.csv -o track.csv --zupt --height-update --plot track.png")
@@ -18,23 +66,28 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
     type=click.Path(dir_okay=False),
     help="Track: pos_n/e/d (m), vel_n/e/d (m/s) NED from the start, roll/pitch/heading (deg), *_std, zvi.",
 )
-@click.option("--zupt/--no-zupt", default=True, show_default=True, help="Zero-velocity update at ZVI samples.")
+@click.option(
+    "--zupt/--no-zupt",
+    default=default_of(run_ins_track, "zupt"),
+    show_default=True,
+    help="Zero-velocity update at ZVI samples.",
+)
 @click.option(
     "--height-update/--no-height-update",
-    default=False,
+    default=default_of(run_ins_track, "height_update"),
     show_default=True,
     help="Height update (flat floor: the foot is at the start height in every stance).",
 )
 @click.option(
     "--zaru/--no-zaru",
-    default=False,
+    default=default_of(run_ins_track, "zaru"),
     show_default=True,
     help="Zero angular-rate update at ZVI samples (gyro bias; hurts when stances include foot roll).",
 )
 @click.option(
     "--detector",
-    type=click.Choice(["paper", "shoe", "are", "mv", "mag"]),
-    default="shoe",
+    type=click.Choice(DETECTORS),
+    default=default_of(run_ins_track, "detector"),
     show_default=True,
     help="ZVI detector (see `imutool zvi --help`).",
 )
@@ -48,30 +101,48 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 @click.option(
     "--order",
     type=click.Choice(["2", "3"]),
-    default="3",
+    default=str(default_of(run_ins_track, "order")),
     show_default=True,
     help="Quaternion Taylor integration order (paper eq. 17 / 18).",
 )
 @click.option(
     "--gyro-noise",
     type=float,
-    default=0.3,
+    default=default_of(run_ins_track, "gyro_noise_deg"),
     show_default=True,
     help="Gyro white-noise density of the process model, deg/s/√Hz.",
 )
 @click.option(
     "--accel-noise",
     type=float,
-    default=0.3,
+    default=default_of(run_ins_track, "accel_noise"),
     show_default=True,
     help="Accelerometer white-noise density of the process model, m/s²/√Hz.",
 )
-@click.option("--zupt-sigma", type=float, default=0.01, show_default=True, help="ZUPT measurement std, m/s.")
-@click.option("--height-sigma", type=float, default=0.01, show_default=True, help="Height update std, m.")
-@click.option("--zaru-sigma", type=float, default=1.0, show_default=True, help="ZARU measurement std, deg/s.")
+@click.option(
+    "--zupt-sigma",
+    type=float,
+    default=default_of(run_ins_track, "zupt_sigma"),
+    show_default=True,
+    help="ZUPT measurement std, m/s.",
+)
+@click.option(
+    "--height-sigma",
+    type=float,
+    default=default_of(run_ins_track, "height_sigma"),
+    show_default=True,
+    help="Height update std, m.",
+)
+@click.option(
+    "--zaru-sigma",
+    type=float,
+    default=default_of(run_ins_track, "zaru_sigma_deg"),
+    show_default=True,
+    help="ZARU measurement std, deg/s.",
+)
 @click.option(
     "--bias-states/--no-bias-states",
-    default=True,
+    default=default_of(run_ins_track, "bias_states"),
     show_default=True,
     help="Estimate accelerometer and gyro biases (15-state filter) or not (9 states, as the paper).",
 )
@@ -79,19 +150,23 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
     "--heading",
     "heading_deg",
     type=float,
-    default=0.0,
+    default=default_of(run_ins_track, "heading_deg"),
     show_default=True,
     help="Initial heading, deg clockwise from north (the track's orientation).",
 )
 @click.option(
     "--align-window",
     type=float,
-    default=4.0,
+    default=default_of(run_ins_track, "align_window_s"),
     show_default=True,
     help="Alignment uses the last this-many s of the first rest interval...",
 )
 @click.option(
-    "--align-guard", type=float, default=1.0, show_default=True, help="...ending this-many s before the interval's end."
+    "--align-guard",
+    type=float,
+    default=default_of(run_ins_track, "align_guard_s"),
+    show_default=True,
+    help="...ending this-many s before the interval's end.",
 )
 @click.option(
     "--plot",
@@ -109,143 +184,11 @@ from imutool.cli.common import emit_summary, input_options, load_input, output_o
 )
 @input_options
 @output_options
-@safe_outputs("output", "plot_path", "strides_path")
-def ins_cmd(
-    input_path: str,
-    output: str,
-    zupt: bool,
-    height_update: bool,
-    zaru: bool,
-    detector: str,
-    gamma: float | None,
-    zvi_column: str | None,
-    order: str,
-    gyro_noise: float,
-    accel_noise: float,
-    zupt_sigma: float,
-    height_sigma: float,
-    zaru_sigma: float,
-    bias_states: bool,
-    heading_deg: float,
-    align_window: float,
-    align_guard: float,
-    plot_path: str | None,
-    strides_path: str | None,
-    as_json: bool,
-    quiet: bool,
-    **input_kw,
-) -> None:
+@safe_outputs(*OUTPUTS)
+def ins_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """Dead-reckon INPUT (gyro + accel, e.g. a foot-mounted IMU) into a position track with sigmas."""
-    import formats
-    from imutool.ins import InsConfig, evaluate_position, ins, plot_track, strides
-    from imutool.progress import stages
+    res = ins_route(quiet=quiet, on_input=note_input, **options)
+    emit_summary(res.summary, as_json, quiet)
 
-    steps = stages("ins", ["reading", "INS", "writing"], quiet)
-    steps.stage("reading")
-    rec, report = load_input(input_path, **input_kw)
-    require_channels(rec, ["gyro", "accel"], input_path)
-    for name, v in (
-        ("--gyro-noise", gyro_noise),
-        ("--accel-noise", accel_noise),
-        ("--zupt-sigma", zupt_sigma),
-        ("--height-sigma", height_sigma),
-        ("--zaru-sigma", zaru_sigma),
-    ):
-        if not np.isfinite(v) or v <= 0:
-            raise ImutoolError(f"{name} must be > 0; got {v}")
-    cfg = InsConfig(
-        gyro_noise=float(np.radians(gyro_noise)),
-        accel_noise=accel_noise,
-        zupt_sigma=zupt_sigma,
-        height_sigma=height_sigma,
-        zaru=zaru,
-        zaru_sigma=float(np.radians(zaru_sigma)),
-        order=int(order),
-        zupt=zupt,
-        height_update=height_update,
-        accel_bias_states=bias_states,
-        gyro_bias_states=bias_states,
-        heading_deg=heading_deg,
-        align_window_s=align_window,
-        align_guard_s=align_guard,
-    )
-    flags = None
-    if zvi_column:
-        if zvi_column not in rec.channels:
-            raise ImutoolError(f"ZVI column {zvi_column!r} not found", path=input_path)
-        flags = rec[zvi_column] > 0.5
-    params = {"gamma": gamma} if gamma is not None and detector != "paper" else {}
-    if gamma is not None and detector == "paper":
-        raise ImutoolError("--gamma does not apply to the paper detector (use `imutool zvi` to tune B_g, B_a)")
-    steps.stage("INS + zero-velocity updates")
-    try:
-        out, res = ins(rec, zvi=flags, detector=detector, detector_params=params, config=cfg)
-    except ImutoolError as e:
-        raise ImutoolError(str(e), path=input_path) from None
-    out.meta["source"] = input_path
-    out.meta["ins_config"] = (
-        f"zupt={zupt} height_update={height_update} zaru={zaru} detector="
-        f"{zvi_column or detector} order={order} gyro_noise={gyro_noise}deg/s/rtHz "
-        f"accel_noise={accel_noise}m/s2/rtHz zupt_sigma={zupt_sigma}m/s"
-    )
-    steps.stage("writing")
-    formats.write(out, output)
-    loop = evaluate_position(out)
-    st = strides(out.time, out["pos"], out["zvi"])
-    ok = np.flatnonzero(np.all(np.isfinite(out["pos"]), axis=1))
-    summary: dict = {
-        "input": input_path,
-        "output": output,
-        "samples": len(out),
-        "duration_s": round(out.duration, 3),
-        "aligned_from_s": round(res.info["alignment_start_s"], 3),
-        "gravity_m_s2": round(res.gravity, 4),
-        "distance_m": round(loop["distance_m"], 3),
-        "final_position_ned_m": np.round(out["pos"][ok[-1]], 3).tolist() if len(ok) else None,
-        "closed_loop_error_m": round(loop["final_error_m"], 4),
-        "closed_loop_error_percent": (
-            round(loop["final_error_percent_of_distance"], 3)
-            if loop["final_error_percent_of_distance"] is not None
-            else None
-        ),
-        "strides": {
-            "count": st["count"],
-            "mean_length_m": st["mean_length_m"] and round(st["mean_length_m"], 3),
-            "mean_duration_s": st["mean_duration_s"] and round(st["mean_duration_s"], 3),
-        },
-        "final_sigma_pos_m": np.round(np.sqrt(np.maximum(res.p_diag[-1, 3:6], 0)), 4).tolist(),
-        "final_sigma_heading_deg": round(float(np.degrees(np.sqrt(max(res.heading_var[-1], 0)))), 3),
-    }
-    if "ref_pos" in rec.channels:
-        ev = evaluate_position(out, rec)
-        summary["vs_reference"] = {
-            k: (round(v, 4) if isinstance(v, float) else v)
-            for k, v in ev.items()
-            if k in ("final_error_m", "rmse_m", "rmse_sum_axes_m", "distance_error_percent")
-        }
-    if strides_path:
-        from formats.atomic import atomic_path
 
-        with atomic_path(strides_path) as tmp:
-            lines = ["start_s,end_s,length_m,height_change_m,swing_s,duration_s"]
-            lines += [
-                f"{r['start_s']:.4f},{r['end_s']:.4f},{r['length_m']:.4f},{r['height_change_m']:.4f},"
-                f"{r['swing_s']:.4f},{r['duration_s']:.4f}"
-                for r in st["table"]
-            ]
-            tmp.write_text("\n".join(lines) + "\n")
-        summary["strides_file"] = strides_path
-    if plot_path:
-        ref = None
-        if "ref_pos" in rec.channels:
-            ref = rec.get("ref_pos")
-        title = (
-            f"{input_path.rsplit('/', 1)[-1]}: {loop['distance_m']:.1f} m walked, "
-            f"closed-loop error {1000 * loop['final_error_m']:.0f} mm"
-        )
-        plot_track(out, plot_path, title=title, ref=ref)
-        summary["plot"] = plot_path
-    if report.get("actions"):
-        summary["input_fixes"] = report["actions"]
-    steps.close()
-    emit_summary(summary, as_json, quiet)
+ins_cmd = route_of(ins_route, OUTPUTS)(ins_cmd)

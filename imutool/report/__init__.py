@@ -7,4 +7,9 @@ Library use::
     from imutool.report.pdf import render_pdf, write_json
     ev, plots = inclinometer_evidence(dut_rec, ref_rec, dut_path=..., ref_path=...)
     write_json(ev, "evidence.json"); render_pdf(ev, plots, "evidence.pdf")
+
+or the whole command, from paths to the PDF and JSON with its exit status (:mod:`imutool.report.route`)::
+
+    from imutool.report.route import run_inclinometer_report
+    res = run_inclinometer_report("dut.csv", "table.csv", "evidence.pdf")   # res.exit_status, res.summary
 """

@@ -31,6 +31,10 @@ SCOPE = (
 )
 STANDARDS_FILE = "imutool/report/standards.md (shipped with imutool)"
 
+CRITERION = "max"  # max: every sample/cycle within tolerance | p95: 95 % bound (MSC.1/Circ.1575)
+ALIGN = "none"  # none: common clock, latency counts as error | xcorr: remove the measured constant lag
+MAX_LAG_S = 5.0  # s, ± lag searched by the cross-correlation
+
 CONFIDENCE = {
     "A": "seen verbatim",
     "B": "secondary source quoting the text",
@@ -136,6 +140,34 @@ def clean(v: Any) -> Any:
     if isinstance(v, (str, int, bool)) or v is None:
         return v
     return str(v)
+
+
+def item(
+    id_: str,
+    clause: str,
+    title: str,
+    status: str,
+    reason: str,
+    criterion: str | None = None,
+    stats_: dict | None = None,
+    rows: list | None = None,
+    extra: dict | None = None,
+) -> dict[str, Any]:
+    """One item of an evidence report (JSON-clean): id, clause, title, status (:data:`STATUSES`), the reason for
+    it, the criterion, its statistics, its table rows and any ``extra`` fields."""
+    return clean(
+        {
+            "id": id_,
+            "clause": clause,
+            "title": title,
+            "status": status,
+            "reason": reason,
+            "criterion": criterion,
+            "stats": stats_ or {},
+            "rows": rows or [],
+            **(extra or {}),
+        }
+    )
 
 
 def sha256_of(path: str | os.PathLike) -> str:

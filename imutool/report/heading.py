@@ -27,13 +27,17 @@ from formats.nmea import checksum
 from imutool.metrics import best_lag
 
 from .common import (
+    ALIGN,
+    CRITERION,
     FAIL,
     INSUFFICIENT,
+    MAX_LAG_S,
     NOT_TESTED,
     PASS,
     SCOPE,
     clean,
     input_record,
+    item,
     judge,
     now_utc,
     overall,
@@ -111,9 +115,9 @@ class HeadingOptions:
     turn_min_dps: float = 1.0  # |rate of turn| above this = turning
     rot_window_s: float = 1.0  # smoothing of the reference rate of turn
     follow_up_relative: bool = True  # follow-up error = error − static error at that heading (I)
-    criterion: str = "max"  # max | p95
-    align: str = "none"  # none (common clock: lag counts as follow-up error) | xcorr
-    max_lag_s: float = 5.0
+    criterion: str = CRITERION  # max | p95
+    align: str = ALIGN  # none (common clock: lag counts as follow-up error) | xcorr
+    max_lag_s: float = MAX_LAG_S
     min_headings: int = 4
     step_band_deg: float = 0.2
     step_min_s: float = 10.0
@@ -170,32 +174,6 @@ def heading_capture_check(path: str) -> dict[str, Any]:
         "checksum_pass_rate": ok / n if n else None,
         "decimals": {str(k): v for k, v in decimals.items()},
     }
-
-
-def _item(
-    id_: str,
-    clause: str,
-    title: str,
-    status: str,
-    reason: str,
-    criterion: str | None = None,
-    stats_: dict | None = None,
-    rows: list | None = None,
-    extra: dict | None = None,
-) -> dict[str, Any]:
-    return clean(
-        {
-            "id": id_,
-            "clause": clause,
-            "title": title,
-            "status": status,
-            "reason": reason,
-            "criterion": criterion,
-            "stats": stats_ or {},
-            "rows": rows or [],
-            **(extra or {}),
-        }
-    )
 
 
 def _unwrap_deg(h: np.ndarray) -> np.ndarray:
@@ -350,7 +328,7 @@ def heading_evidence(
             ),
         )
     items.append(
-        _item(
+        item(
             "static",
             "MSC.116(73) §4.3.2.2 (A); ISO 22090-2 §6.4/§5.3 (B)",
             "Static heading error",
@@ -418,7 +396,7 @@ def heading_evidence(
                     f"at ≥ {o.follow_up_test_frac * o.follow_up_test_dps:g} °/s needed ({fast_s:.1f} s)"
                 )
         items.append(
-            _item(
+            item(
                 id_,
                 "MSC.116(73) §4.3.2.4 (A); ISO 22090-2 follow-up test at 20 °/s (B)",
                 f"Follow-up error, rate of turn {lo:g}-{nominal:g} °/s",
@@ -486,7 +464,7 @@ def heading_evidence(
             if secs < o.min_dynamic_s and st != FAIL:
                 st, why = INSUFFICIENT, why + f"; ≥ {o.min_dynamic_s:g} s needed"
     items.append(
-        _item(
+        item(
             "dynamic",
             "MSC.116(73) §4.3.2.3 (A)",
             "Dynamic error (rolling at constant heading)",
@@ -512,7 +490,7 @@ def heading_evidence(
         else:
             st, why = PASS, f"{cap['heading_sentences']} sentences, checksums valid, resolution ≤ 0.1°"
         items.append(
-            _item(
+            item(
                 "interface",
                 "MSC.116(73) §4.3.2.1 (A), §4.4",
                 "Interface and resolution",
@@ -526,7 +504,7 @@ def heading_evidence(
         )
     else:
         items.append(
-            _item(
+            item(
                 "interface",
                 "MSC.116(73) §4.3.2.1",
                 "Interface and resolution",

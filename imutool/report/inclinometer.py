@@ -28,14 +28,18 @@ from imutool.metrics import best_lag, interp_to
 from imutool.roll import PORT, STBD, heel_of, pair_cycles, roll_cycles, roll_stats
 
 from .common import (
+    ALIGN,
+    CRITERION,
     FAIL,
     INSUFFICIENT,
+    MAX_LAG_S,
     NOT_TESTED,
     PASS,
     SCOPE,
     STANDARDS_FILE,
     clean,
     input_record,
+    item,
     judge,
     now_utc,
     overall,
@@ -149,9 +153,9 @@ class InclinometerOptions:
     angle_pct: float = 5.0  # 5 % of reading
     period_floor_s: float = 1.0  # ±1 s
     period_pct: float = 5.0
-    criterion: str = "max"  # max | p95 (MSC.1/Circ.1575 95 %)
-    align: str = "none"  # none (common clock; latency counts as error) | xcorr (remove the measured constant lag)
-    max_lag_s: float = 5.0
+    criterion: str = CRITERION  # max | p95 (MSC.1/Circ.1575 95 %)
+    align: str = ALIGN  # none (common clock; latency counts as error) | xcorr (remove the measured constant lag)
+    max_lag_s: float = MAX_LAG_S
     hysteresis_deg: float = 0.5  # roll cycle detection (imutool.roll)
     min_cycles: int = 3  # per side, for amplitude and period items
     min_cycle_amp_deg: float = 1.0  # reference cycles with a smaller maximum are not judged
@@ -331,32 +335,6 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
         "status_counts": status,
         "first_problems": first_bad,
     }
-
-
-def _item(
-    id_: str,
-    clause: str,
-    title: str,
-    status: str,
-    reason: str,
-    criterion: str | None = None,
-    stats_: dict | None = None,
-    rows: list | None = None,
-    extra: dict | None = None,
-) -> dict[str, Any]:
-    return clean(
-        {
-            "id": id_,
-            "clause": clause,
-            "title": title,
-            "status": status,
-            "reason": reason,
-            "criterion": criterion,
-            "stats": stats_ or {},
-            "rows": rows or [],
-            **(extra or {}),
-        }
-    )
 
 
 def _durations(t: np.ndarray) -> np.ndarray:
@@ -713,7 +691,7 @@ def inclinometer_evidence(
         )
     ee_all = np.concatenate(errs_static) if errs_static else np.array([])
     items.append(
-        _item(
+        item(
             "static_heel",
             "ISO 19697 §6.2; MSC.363(92) accuracy (P3)",
             "Static actual heel angle",
@@ -762,7 +740,7 @@ def inclinometer_evidence(
             f"{info_['worst_ratio']:.2f}, 95th percentile {info_['p95_ratio']:.2f}"
         )
     items.append(
-        _item(
+        item(
             "dynamic_heel",
             "ISO 19697 §6.3; MSC.363(92) accuracy (P3)",
             "Dynamic actual heel angle",
@@ -809,7 +787,7 @@ def inclinometer_evidence(
             why = f"{info_['n_exceed']} of {len(rows)} judged cycles outside tolerance"
         st, why, derived = _device_function(st, why, out_src)
         items.append(
-            _item(
+            item(
                 id_,
                 "ISO 19697 §6.3; MSC.363(92) accuracy (P3), display both sides (P6)",
                 title,
@@ -859,7 +837,7 @@ def inclinometer_evidence(
         )
     st, why, derived = _device_function(st, why, out_src)
     items.append(
-        _item(
+        item(
             "roll_period",
             "ISO 19697 §6.5; MSC.363(92) accuracy (P4), definition §3 (P1)",
             "Roll period",
@@ -931,7 +909,7 @@ def inclinometer_evidence(
         else:
             why = base
     items.append(
-        _item(
+        item(
             "long_term",
             "ISO 19697 §6.4 (duration/limit not confirmed, C)",
             "Long-term heel (drift)",
@@ -983,7 +961,7 @@ def inclinometer_evidence(
         why = "final peak-hold values since the reset compared with the reference maxima"
     st, why, derived = _device_function(st, why, peak_src)
     items.append(
-        _item(
+        item(
             "peak_hold",
             "ISO 19697 §6.10 (title only); IEC 61162-1 HRM (P7, C)",
             "Roll peak hold",
@@ -1003,7 +981,7 @@ def inclinometer_evidence(
     )
     if lat is None:
         items.append(
-            _item(
+            item(
                 "lateral_acceleration",
                 "ISO 19697 §5.2 (C)",
                 "Heel under lateral acceleration",
@@ -1034,7 +1012,7 @@ def inclinometer_evidence(
                 f"outside tolerance, max |error| {float(np.max(np.abs(ea))):.2f}°"
             )
         items.append(
-            _item(
+            item(
                 "lateral_acceleration",
                 "ISO 19697 §5.2 (C)",
                 "Heel under lateral acceleration",
@@ -1079,7 +1057,7 @@ def inclinometer_evidence(
                 ),
             )
         items.append(
-            _item(
+            item(
                 "interface",
                 "ISO 19697 §6.6; IEC 61162-1 HRM (standards.md §2.2)",
                 "Interface: HRM sentence capture",
@@ -1093,7 +1071,7 @@ def inclinometer_evidence(
         )
     else:
         items.append(
-            _item(
+            item(
                 "interface",
                 "ISO 19697 §6.6",
                 "Interface: HRM sentence capture",
@@ -1107,7 +1085,7 @@ def inclinometer_evidence(
         att = info["external"].get(key)
         if att:
             items.append(
-                _item(
+                item(
                     key,
                     clause,
                     title,
@@ -1123,7 +1101,7 @@ def inclinometer_evidence(
             )
         else:
             items.append(
-                _item(
+                item(
                     key,
                     clause,
                     title,

@@ -1,0 +1,207 @@
+"""The routes behind ``imutool report inclinometer`` and ``imutool report heading`` (and ``imutool batch report
+...``): load the device under test and the reference, evaluate, write the evidence JSON and PDF, return the summary
+and the exit status (0 pass; 1 fail or incomplete: the JSON and PDF are written either way).
+
+    from imutool.report.route import run_inclinometer_report
+    res = run_inclinometer_report("dut.csv", "table.csv", "evidence.pdf", test_info="test.toml")
+    res.exit_status, res.summary["overall"], res.data["evidence"]["items"]
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from formats import Recording
+from formats.errors import ImutoolError
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
+
+from .common import sha256_of
+from .heading import HeadingOptions, heading_evidence
+from .inclinometer import InclinometerOptions, inclinometer_evidence
+from .pdf import render_pdf, write_json
+from .testinfo import load_test_info
+
+
+def evidence_paths(output: str | os.PathLike, json_path: str | os.PathLike | None = None) -> tuple[str, str]:
+    """(PDF, JSON): the output must end in .pdf; the JSON defaults to the PDF's name with .json."""
+    output = os.fspath(output)
+    if not output.lower().endswith(".pdf"):
+        raise ImutoolError(f"output {output!r} must end in .pdf (the JSON is written beside it)")
+    return output, os.fspath(json_path) if json_path is not None else os.path.splitext(output)[0] + ".json"
+
+
+def identification(device: str | None, config: str | os.PathLike | None) -> dict[str, Any]:
+    """The device as declared and its configuration file by sha256 (both optional)."""
+    ident: dict[str, Any] = {}
+    if device:
+        ident["device_declared"] = device
+    if config:
+        config = os.fspath(config)
+        if not os.path.exists(config):
+            raise ImutoolError("no such configuration file", path=config)
+        ident["configuration_file"] = {"path": config, "sha256": sha256_of(config)}
+    return ident
+
+
+def evaluated_window(rec: Recording, t_start: float | None, t_end: float | None, path: str) -> Recording:
+    """``rec`` between ``t_start`` and ``t_end`` (s, recording clock; None = open); at least 10 samples."""
+    if t_start is None and t_end is None:
+        return rec
+    out = rec.slice_time(t_start, t_end)
+    if len(out) < 10:
+        raise ImutoolError(f"fewer than 10 samples between --start {t_start} and --end {t_end}", path=path)
+    out.meta["evaluated_window_s"] = [t_start, t_end]
+    return out
+
+
+def _load_pair(
+    dut: str | os.PathLike | Recording,
+    reference: str | os.PathLike | Recording,
+    t_start: float | None,
+    t_end: float | None,
+    inputs: list[dict[str, Any]],
+    strict: bool,
+    on_input: OnInput | None,
+    load_options: dict[str, Any],
+) -> tuple[Recording, Recording, str, str]:
+    """The DUT (mounting and calibration applied) and the reference (neither), windowed; with their names."""
+    unknown = set(load_options) - set(LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    recs, names = [], []
+    ref_options = {**load_options, "mounting": None, "calibration_file": None}
+    for src, opts in ((dut, load_options), (reference, ref_options)):
+        if isinstance(src, Recording):
+            recs.append(src)
+            names.append(str(src.meta.get("source", "<recording>")))
+        else:
+            name = os.fspath(src)
+            recs.append(load_input(name, inputs, strict=strict, on_input=on_input, **opts)[0])
+            names.append(name)
+    d = evaluated_window(recs[0], t_start, t_end, names[0])
+    r = evaluated_window(recs[1], t_start, t_end, names[1])
+    return d, r, names[0], names[1]
+
+
+def write_evidence(
+    ev: dict[str, Any], plots: dict[str, Any], pdf: str, jpath: str, inputs: list[dict[str, Any]]
+) -> RouteResult:
+    """Write the evidence JSON and PDF; the summary (overall status, lag, every item's status and statistics)
+    with the exit status of the evaluation."""
+    write_json(ev, jpath)
+    pages = render_pdf(ev, plots, pdf)
+    summary = {
+        "report": ev["report"],
+        "pdf": pdf,
+        "json": jpath,
+        "pages": pages,
+        "overall": ev["overall"]["status"],
+        "lag_s": ev["alignment"]["lag_s"],
+        "items": {it["id"]: {"status": it["status"], **it["stats"]} for it in ev["items"]},
+    }
+    summary["headline"] = ev["overall"]["headline"]
+    summary["exit_status"] = ev["overall"]["exit_status"]
+    return RouteResult(summary, inputs, data={"evidence": ev}, exit_status=int(ev["overall"]["exit_status"]))
+
+
+def run_inclinometer_report(
+    dut: str | os.PathLike | Recording,
+    reference: str | os.PathLike | Recording,
+    output: str | os.PathLike,
+    *,
+    json_path: str | os.PathLike | None = None,
+    options: InclinometerOptions | None = None,
+    steps_path: str | None = None,
+    dut_channel: str | None = None,
+    ref_channel: str | None = None,
+    device: str | None = None,
+    config: str | os.PathLike | None = None,
+    test_info: str | None = None,
+    t_start: float | None = None,
+    t_end: float | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> RouteResult:
+    """Electronic-inclinometer evidence (IMO MSC.363(92), ISO 19697) of ``dut`` against ``reference`` as the PDF
+    ``output`` and the JSON ``json_path`` (default beside it). ``options``: every tolerance and tuning constant
+    (:class:`InclinometerOptions`); ``steps_path``: CSV of the static heel steps (default detected);
+    ``device``, ``config`` (file identified by sha256), ``test_info`` (test record TOML) identify the test;
+    ``t_start``/``t_end`` (s) the evaluated window. Paths are loaded with ``load_options`` (the reference without
+    mounting and calibration). ``exit_status``: 0 PASS, 1 FAIL or INCOMPLETE."""
+    pdf, jpath = evidence_paths(output, json_path)
+    ident = identification(device, config)
+    info = load_test_info(test_info)
+    inputs: list[dict[str, Any]] = []
+    if stage is not None:
+        stage("reading")
+    d, r, dut_name, ref_name = _load_pair(dut, reference, t_start, t_end, inputs, strict, on_input, load_options)
+    if stage is not None:
+        stage("evaluating")
+    ev, plots = inclinometer_evidence(
+        d,
+        r,
+        dut_path=dut_name,
+        ref_path=ref_name,
+        steps_path=steps_path,
+        options=options if options is not None else InclinometerOptions(),
+        identification=ident,
+        dut_channel=dut_channel,
+        ref_channel=ref_channel,
+        test_info=info,
+    )
+    if stage is not None:
+        stage("writing JSON + PDF")
+    return write_evidence(ev, plots, pdf, jpath, inputs)
+
+
+def run_heading_report(
+    dut: str | os.PathLike | Recording,
+    reference: str | os.PathLike | Recording,
+    output: str | os.PathLike,
+    *,
+    json_path: str | os.PathLike | None = None,
+    options: HeadingOptions | None = None,
+    correction_deg: float = 0.0,
+    dut_channel: str | None = None,
+    ref_channel: str | None = None,
+    device: str | None = None,
+    config: str | os.PathLike | None = None,
+    test_info: str | None = None,
+    t_start: float | None = None,
+    t_end: float | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> RouteResult:
+    """Heading-device evidence (ISO 22090-2 / IMO MSC.116(73): static, dynamic and follow-up error) of ``dut``
+    against ``reference`` as the PDF ``output`` and the JSON ``json_path`` (default beside it).
+    ``correction_deg`` is added to the DUT heading first (e.g. variation, E +); ``options``: the limits and tuning
+    (:class:`HeadingOptions`); the rest as :func:`run_inclinometer_report`."""
+    pdf, jpath = evidence_paths(output, json_path)
+    ident = identification(device, config)
+    info = load_test_info(test_info)
+    inputs: list[dict[str, Any]] = []
+    if stage is not None:
+        stage("reading")
+    d, r, dut_name, ref_name = _load_pair(dut, reference, t_start, t_end, inputs, strict, on_input, load_options)
+    if stage is not None:
+        stage("evaluating")
+    ev, plots = heading_evidence(
+        d,
+        r,
+        dut_path=dut_name,
+        ref_path=ref_name,
+        dut_channel=dut_channel,
+        ref_channel=ref_channel,
+        dut_correction_deg=correction_deg,
+        options=options if options is not None else HeadingOptions(),
+        identification=ident,
+        test_info=info,
+    )
+    if stage is not None:
+        stage("writing JSON + PDF")
+    return write_evidence(ev, plots, pdf, jpath, inputs)

@@ -1,0 +1,292 @@
+"""Every command's library route gives the command line's output bit for bit, and the summary its --json prints.
+
+For each command the CLI (click's CliRunner, in-process) writes into one folder and the Python route (``run_*``)
+into another, under the same relative names: the output files must be byte-identical and the route's summary
+(:meth:`imutool.routes.RouteResult.full_summary`, as JSON) equal to the CLI's ``--json``. A last test runs
+``imutool batch`` over the routes and checks it writes the same files and reports the same rows.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import formats
+from formats import Recording
+from imutool.cli import cli
+from imutool.cli.common import json_default
+from imutool.events import run_events
+from imutool.gyrofree import run_gyrofree
+from imutool.heave import run_heave
+from imutool.ins import run_ins_track
+from imutool.nmea_out import run_nmea
+from imutool.report.heading import HeadingOptions
+from imutool.report.inclinometer import InclinometerOptions
+from imutool.report.route import run_heading_report, run_inclinometer_report
+from imutool.routes import RouteResult
+from imutool.sim import simulate
+from imutool.zvi import run_zvi
+
+INC_STEPS = {
+    "steps": (0.0, 5.0, 10.0, 30.0, -5.0, -10.0, -30.0, 0.0),
+    "hold_s": 15.0,
+    "dynamic": ((8.0, 10.0, 10.0, 5), (12.0, 20.0, 14.0, 4)),
+    "long_s": 0.0,
+}
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> dict[str, str]:
+    """Small inputs, one per kind of command (written once for the module)."""
+    from imutool.report.simulate import heading_test, inclinometer_test
+
+    d = tmp_path_factory.mktemp("inputs")
+    paths = {k: str(d / f"{k}.csv") for k in ("sea", "walk", "array", "pr", "att", "inc_dut", "inc_ref")}
+    paths.update({k: str(d / f"{k}.csv") for k in ("hdg_dut", "hdg_ref")})
+    formats.write(simulate("sea-state", duration=60, seed=1), paths["sea"])
+    formats.write(simulate("walk", seed=2, n_steps=4), paths["walk"])
+    formats.write(simulate("accel-array", duration=20, rate_hz=100, seed=4), paths["array"])
+    formats.write(simulate("parametric-roll", duration=400.0, rate_hz=10.0, seed=0), paths["pr"])
+    r = simulate("ship-roll", duration=60, seed=3)
+    att = Recording(r.time.copy(), meta={"scenario": "ship-roll"})
+    for name in ("roll", "pitch", "heading"):
+        att.add(name, r[f"ref_{name}"], "deg")
+    formats.write(att, paths["att"])
+    dut, ref, _ = inclinometer_test(offset_deg=0.3, noise_deg=0.05, seed=2, **INC_STEPS)
+    formats.write(dut, paths["inc_dut"])
+    formats.write(ref, paths["inc_ref"])
+    dut, ref, _ = heading_test(offset_deg=0.2, noise_deg=0.05, hold_s=15.0, rolling_s=40.0)
+    formats.write(dut, paths["hdg_dut"])
+    formats.write(ref, paths["hdg_ref"])
+    return paths
+
+
+def _cli(args: list[str]) -> tuple[int, dict[str, Any]]:
+    """`imutool ARGS --json` in-process: (exit status, the JSON summary)."""
+    res = CliRunner().invoke(cli, [*args, "--json"])
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.output
+    return res.exit_code, json.loads(res.stdout)
+
+
+def _same(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    args: list[str],
+    route: Callable[[], RouteResult],
+    outputs: list[str],
+    volatile: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """Run the CLI in tmp/cli and the route in tmp/lib (same relative output names); assert byte-identical
+    outputs and equal summaries (less the ``volatile`` keys, e.g. a wall-clock time). Returns the summary."""
+    for side in ("cli", "lib"):
+        (tmp_path / side).mkdir()
+    monkeypatch.chdir(tmp_path / "cli")
+    code, cli_summary = _cli(args)
+    monkeypatch.chdir(tmp_path / "lib")
+    res = route()
+    assert code == res.exit_status
+    lib_summary = json.loads(json.dumps(res.full_summary(), default=json_default))
+    for k in volatile:
+        assert k in cli_summary and k in lib_summary
+        cli_summary.pop(k)
+        lib_summary.pop(k)
+    assert lib_summary == cli_summary
+    for name in outputs:
+        a, b = tmp_path / "cli" / name, tmp_path / "lib" / name
+        assert a.exists() and a.read_bytes() == b.read_bytes(), name
+    return cli_summary
+
+
+def test_heave(data, tmp_path, monkeypatch):
+    args = ["heave", data["sea"], "-o", "h.csv", "--nmea", "h.nmea", "--heave-positive", "down", "--hop", "5"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_heave(data["sea"], "h.csv", nmea="h.nmea", heave_positive="down", hop_s=5),
+        ["h.csv", "h.nmea"],
+    )
+    assert s["heave_positive"] == "down" and s["nmea"]["sentences"]["PASHR"] > 0
+    # the sign flip is the library's: a Python caller gets heave positive down, the header says so
+    up = run_heave(data["sea"], hop_s=5).recording
+    down = formats.read(tmp_path / "lib" / "h.csv")
+    np.testing.assert_array_equal(down["heave"], -up["heave"])
+    assert down.meta["heave_positive"] == "down" and "positive DOWN" in down.meta["heave"]
+
+
+def test_ins(data, tmp_path, monkeypatch):
+    args = ["ins", data["walk"], "-o", "t.csv", "--strides", "s.csv", "--height-update", "--gyro-noise", "0.4"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_ins_track(data["walk"], "t.csv", strides_path="s.csv", height_update=True, gyro_noise_deg=0.4),
+        ["t.csv", "s.csv"],
+    )
+    # the stride table through the imutool CSV number formatter: a header, one row a stride, read back as numbers
+    lines = (tmp_path / "lib" / "s.csv").read_text().splitlines()
+    assert lines[0] == "start_s,end_s,length_m,height_change_m,swing_s,duration_s"
+    assert len(lines) == 1 + s["strides"]["count"] and s["strides"]["count"] >= 3
+    lengths = [float(x.split(",")[2]) for x in lines[1:]]
+    assert abs(np.mean(lengths) - s["strides"]["mean_length_m"]) < 1e-3
+    assert 1.0 < np.mean(lengths) < 1.8  # the simulated 1.4 m strides
+
+
+def test_zvi(data, tmp_path, monkeypatch):
+    args = ["zvi", data["walk"], "-o", "iv.csv", "--flags", "f.csv", "--detector", "paper", "--b-g", "30"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_zvi(data["walk"], "iv.csv", flags_path="f.csv", detector="paper", b_g_deg_s=30),
+        ["iv.csv", "f.csv"],
+    )
+    assert s["params"]["b_g_deg_s"] == 30.0 and s["score_vs_ref_zvi"]["f1"] > 0.9
+
+
+def test_nmea(data, tmp_path, monkeypatch):
+    args = ["nmea", data["att"], "-o", "a.nmea", "--sentences", "HRM,XDR,HDG,THS", "--variation", "-3.5"]
+    args += ["--talker", "HRM=YX", "--time-prefix"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_nmea(
+            data["att"],
+            "a.nmea",
+            sentences="HRM,XDR,HDG,THS",
+            variation_deg=-3.5,
+            talkers={"HRM": "YX"},
+            time_prefix=True,
+            roll_kw={
+                "hysteresis_deg": 0.5,
+                "centre": "zero",
+                "centre_window_s": 120.0,
+                "refine_frac": 0.2,
+                "max_period_s": 60.0,
+                "resets_s": [],
+                "utc_start": None,
+            },
+        ),
+        ["a.nmea"],
+        volatile=("generated_utc",),
+    )
+    assert set(s["sentences"]) == {"HRM", "XDR", "HDG", "THS"} and s["total"] == sum(s["sentences"].values())
+    text = (tmp_path / "lib" / "a.nmea").read_text()
+    assert "$YXHRM," in text and text.startswith("# imutool nmea from")
+
+
+def test_gyrofree(data, tmp_path, monkeypatch):
+    args = ["gyrofree", data["array"], "--layout", "paper", "-o", "w.csv", "--tilt-gain", "0.05"]
+    s = _same(tmp_path, monkeypatch, args, lambda: run_gyrofree(data["array"], "w.csv", tilt_gain=0.05), ["w.csv"])
+    assert s["layout"].startswith("paper") and s["rows"] == 2001
+
+
+def test_events(data, tmp_path, monkeypatch):
+    args = ["events", "detect", data["pr"], "-o", "ev.json", "--events-csv", "ev.csv", "--roll-channel", "ref_roll"]
+    args += ["--pitch-channel", "ref_pitch"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_events(
+            data["pr"], "ev.json", events_csv="ev.csv", roll_channel="ref_roll", pitch_channel="ref_pitch"
+        ),
+        ["ev.json", "ev.csv"],
+    )
+    assert s["rows"] == 4001
+
+
+@pytest.fixture
+def fixed_clock(monkeypatch):
+    """Reports stamp the time they were made (JSON and PDF): the same for both runs."""
+    import imutool.report.heading as hd
+    import imutool.report.inclinometer as inc
+
+    monkeypatch.setattr(inc, "now_utc", lambda: "2026-11-27T00:00:00Z")
+    monkeypatch.setattr(hd, "now_utc", lambda: "2026-11-27T00:00:00Z")
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # matplotlib's PDF creation date
+
+
+def test_report_inclinometer(data, tmp_path, monkeypatch, fixed_clock):
+    args = ["report", "inclinometer", data["inc_dut"], "--reference", data["inc_ref"], "-o", "inc.pdf"]
+    args += ["--align", "xcorr", "--angle-floor", "1.5"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_inclinometer_report(
+            data["inc_dut"],
+            data["inc_ref"],
+            "inc.pdf",
+            options=InclinometerOptions(align="xcorr", angle_floor_deg=1.5),
+        ),
+        ["inc.pdf", "inc.json"],
+    )
+    # a CSV heel: amplitude, period and peak hold are not the device's own values, so never PASS (exit status 1)
+    assert s["exit_status"] == 1 and s["overall"] != "pass" and "static_heel" in s["items"]
+
+
+def test_report_heading(data, tmp_path, monkeypatch, fixed_clock):
+    args = ["report", "heading", data["hdg_dut"], "--reference", data["hdg_ref"], "-o", "hdg.pdf"]
+    args += ["--static-limit", "0.9", "--device", "DUT 1"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_heading_report(
+            data["hdg_dut"], data["hdg_ref"], "hdg.pdf", options=HeadingOptions(static_limit_deg=0.9), device="DUT 1"
+        ),
+        ["hdg.pdf", "hdg.json"],
+    )
+    assert s["items"]["static"]["status"] == "pass"
+
+
+def test_route_errors_are_the_commands(data, tmp_path, monkeypatch, capsys):
+    """A bad option value is refused by the route with the command's own message (the command adds the input's
+    name), before anything is written."""
+    from formats.errors import ImutoolError
+    from imutool.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    cases = [
+        (["zvi", data["walk"], "-o", "a.csv", "--detector", "paper", "--gamma", "3"], run_zvi, "does not take --gamma"),
+        (["ins", data["walk"], "-o", "b.csv", "--zvi-column", "nosuch"], run_ins_track, "ZVI column 'nosuch' not"),
+        (["nmea", data["sea"], "-o", "c.nmea", "--sentences", "HDT"], run_nmea, "HDT need a heading channel"),
+    ]
+    kws: list[dict[str, Any]] = [{"detector": "paper", "gamma": 3.0}, {"zvi_column": "nosuch"}, {"sentences": "HDT"}]
+    for (args, route, expect), kw in zip(cases, kws, strict=True):
+        with pytest.raises(SystemExit) as e:
+            main(args)
+        cli_err = capsys.readouterr().err.strip()
+        assert e.value.code == 2 and cli_err.startswith(f"imutool {args[0]}: error: ")
+        with pytest.raises(ImutoolError) as err:
+            route(args[1], args[3], **kw)
+        assert expect in str(err.value) and cli_err.endswith(str(err.value)), (cli_err, str(err.value))
+        assert not os.path.exists(args[3])
+
+
+def test_batch_calls_the_routes(data, tmp_path, monkeypatch, capsys):
+    """`imutool batch zvi` runs the library route per input (no stdout read back): the same file as the
+    command, the key figures of its summary, a failing input listed with the command's own message."""
+    from imutool.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main(["batch", "zvi", data["walk"], data["array"], "-o", "b/{stem}.csv", "-j", "1", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert e.value.code == 1, out  # the accelerometer array has no gyro
+    res = {Path(r["input"]).stem: r for r in out["results"]}
+    assert res["walk"]["status"] == "ok" and res["array"]["status"] == "failed"
+    assert res["array"]["error"].startswith(data["array"] + ": needs channel(s) gyro")
+    code, single = _cli(["zvi", data["walk"], "-o", "single.csv"])
+    assert code == 0 and (tmp_path / "b" / "walk.csv").read_bytes() == (tmp_path / "single.csv").read_bytes()
+    assert res["walk"]["figures"]["intervals"] == single["intervals"] > 3
+    assert res["walk"]["figures"]["samples"] == single["samples"]
