@@ -63,7 +63,7 @@ from imutool.attitude.updates import _apply_correction, _vec_update
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def learn_accel_noise(st, prm, ax, ay, az, dt):
     """The accelerometer's white-noise variance (m²/s⁴) and its floor, from second differences of the raw
     sample (m/s²)."""
@@ -91,7 +91,7 @@ def learn_accel_noise(st, prm, ax, ay, az, dt):
     st[S_APREV], st[S_APREV + 1], st[S_APREV + 2] = ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def lever_rate_step(st, prm, gk0, gk1, gk2, dt):
     """The body rate low-passed (τ = lever_arm_lp_tau s) and differentiated, for the lever-arm compensation."""
     # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
@@ -107,7 +107,7 @@ def lever_rate_step(st, prm, gk0, gk1, gk2, dt):
         st[S_WLP + i] = new
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def lever_compensate(st, lever, ax, ay, az):
     """The specific force (m/s², body) less ω̇ × r + ω × (ω × r) of a sensor at ``lever`` r (m, body FRD)."""
     wx, wy, wz = st[S_WLP], st[S_WLP + 1], st[S_WLP + 2]
@@ -120,7 +120,7 @@ def lever_compensate(st, lever, ax, ay, az):
     return ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def accel_gate(st, prm, R, sog, cog, sogdot, k, use_gnss, gk0, gk1, gk2, ax, ay, az, dt):
     """GNSS kinematic compensation, then the shock gate and bias hold of a finite accelerometer sample (m/s²).
     Returns (ax, ay, az compensated, ‖a‖, | ‖a‖ − g |, rejected, forced back in)."""
@@ -151,7 +151,7 @@ def accel_gate(st, prm, R, sog, cog, sogdot, k, use_gnss, gk0, gk1, gk2, ax, ay,
     return ax, ay, az, na, dev_a, rej, force
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def accel_feed(st, prm, R, RI, ax, ay, az, acc_ok, rej, force, dt, gap, use_lp, ext_meas, keep_f, f_out, k):
     """Feed an accepted sample (m/s², body) to the tilt check's window and to the quasi-inertial Butterworth
     low-pass with its lag companion W; a skipped row still ages W. Returns whether RI = R(q_I) was computed."""
@@ -210,7 +210,7 @@ def accel_feed(st, prm, R, RI, ax, ay, az, acc_ok, rej, force, dt, gap, use_lp, 
     return ri_now
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def accel_update(
     st,
     P,

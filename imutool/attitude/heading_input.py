@@ -21,7 +21,7 @@ from imutool.attitude.updates import _apply_correction, _heading_update, _reset_
 from imutool.quaternion import fast_atan2, rmat
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def heading_input_step(st, P, prm, R, dx, tk, hk):
     """An external true heading ``hk`` (rad, NED) at ``tk`` (s): a scalar update about the world vertical, a glitch
     skipped for at most HEADING_REJECT_MAX_S, then taken outright. Returns the sample's flag bits."""

@@ -116,7 +116,7 @@ def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, si
     return True
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def mag_gate(st, P, prm, R, dip, mx, my, mz, w0, w1, w2, dt, cos_gate, sin_gate):
     """The magnetometer sample's (µT, body) norm and dip gates, its disturbance level, a new field's candidate, and
     the accepted field's direction summed in the world frame. Returns (rejected, disturbance level, flag bits)."""
@@ -178,7 +178,7 @@ def mag_gate(st, P, prm, R, dip, mx, my, mz, w0, w1, w2, dt, cos_gate, sin_gate)
     return rej, dev_m, flag
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def mag_update(st, P, prm, R, dx, dip, rej, dev_m, w0, w1, w2, dt, mag_mode, update_every, cos_gate, sin_gate):
     """The magnetometer update when due: the reference's norm and dip follow the accepted field, then the heading
     (``mag_mode`` 1) or the full 3-vector (2) update from the mean direction. Returns the sample's flag bits."""

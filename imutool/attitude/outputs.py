@@ -19,7 +19,7 @@ from imutool.attitude.layout import (
 )
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def output_step(st, P, prm, q_out, b_out, std_out, k):
     """Write sample k's quaternion, bias and roll/pitch/heading σ (rad), and run the self-check (windowed NIS, the
     tilt check). Returns whether the filter is inconsistent at this sample."""

@@ -38,7 +38,7 @@ from imutool.attitude.layout import (
 from imutool.quaternion import qmul, rotvec_quat
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def predict_step(st, P, prm, tk, gk0, gk1, gk2, use_lp, cov_every_sample):
     """Predict (paper eq. 2–6, 10) to time ``tk`` (s) with the gyro sample (rad/s; NaN: the last good one): the
     attitude, the gyro-only frame q_I, the rotation and time pending for the covariance, a gap's variance growth

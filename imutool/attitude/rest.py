@@ -24,7 +24,7 @@ from imutool.attitude.updates import _apply_correction
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy")
+@njit(fastmath=_FASTMATH, error_model="numpy", inline="always")
 def rest_step(st, P, prm, R, dx, gk0, gk1, gk2, ax, ay, az, dt, update_every):
     """Rest detection (low rate, ‖a‖ ≈ g for rest_time s) and, when due, the zero-rate pseudo-measurement of the
     gyro bias (the mean still rate since the last one, R = σ²/n). Returns the sample's flag bits."""
