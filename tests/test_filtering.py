@@ -392,3 +392,25 @@ def test_filtering_has_no_function_level_imports_but_the_slow_one():
         if isinstance(node, (ast.Import, ast.ImportFrom))
     ]
     assert inner == ["calibration"]
+
+
+def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
+    """SelfCheck carries the gyro-scale check's last complete window (and the open one) into the next chunk: where
+    that window starts is where the check's kernel cuts it (windows from the first sample, each starting at the
+    first sample `window` s or more after the last start), whatever the sample spacing, so no pair is lost or
+    counted twice at a chunk edge."""
+    from imutool.attitude.selfcheck import _last_pair_start
+
+    def kernel_cut(t, window):
+        starts = [0]
+        for k in range(1, len(t)):
+            if t[k] - t[starts[-1]] >= window:
+                starts.append(k)
+        return starts[-2] if len(starts) >= 2 else 0
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        t = 1e5 + np.cumsum(rng.uniform(0.001, 0.5, rng.integers(1, 300)))
+        for window in (0.0, 0.01, 2.0, 7.3):
+            assert _last_pair_start(t, window) == kernel_cut(t, window)
+    assert _last_pair_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12

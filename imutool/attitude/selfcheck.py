@@ -400,7 +400,7 @@ def _last_pair_start(t: np.ndarray, window: float) -> int:
     starts = [0]
     while True:
         s0 = starts[-1]
-        k = int(np.searchsorted(t, t[s0] + window, side="left"))
+        k = max(int(np.searchsorted(t, t[s0] + window, side="left")), s0 + 1)
         while k > s0 + 1 and t[k - 1] - t[s0] >= window:
             k -= 1
         while k < len(t) and t[k] - t[s0] < window:
