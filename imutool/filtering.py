@@ -23,10 +23,29 @@ import numpy as np
 
 import formats
 from formats import Recording
+from formats.csv import in_background
 from formats.errors import ImutoolError
-from imutool.convert import STREAMABLE, expected_rows
-from imutool.heading_lag import HeadingLagTrack, heading_lag_check
+from formats.parquet import parquet_info
+from imutool.attitude import (
+    EkfParams,
+    SelfCheck,
+    ekf_recording,
+    mag_interval,
+    nominal_dt,
+    output_metadata,
+    result_recording,
+    run_ekf,
+)
+from imutool.attitude.recording import heading_channel
+from imutool.baseline import lpf_attitude
+from imutool.compass import CompassParams, compass_recording
+from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
+from imutool.loading import ChunkChecks, load_recording
+from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
+
+# one import stays inside its function: calibration (its fitting code loads scipy.optimize, about 1 s) in
+# run_filter, for the compass's deviation card only
 
 METHODS = ("ekf", "lpf", "accel", "compass")
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
@@ -79,8 +98,6 @@ def streams(
         return False
     size = os.path.getsize(source)
     if kind == "parquet":
-        from formats.parquet import parquet_info
-
         try:
             info = parquet_info(source)
             size = max(size, int(info["rows"]) * len(info["columns"]) * 8)
@@ -136,8 +153,6 @@ def run_filter(
         raise ImutoolError(f"filter method {method!r}: expected one of {', '.join(METHODS)}")
     lever = _lever_arm(lever_arm)
     if method == "ekf":
-        from imutool.attitude import EkfParams
-
         params = params if params is not None else EkfParams()
     if not isinstance(source, Recording) and streams(
         source, output, method=method, smooth=smooth, gnss=gnss, stream_mb=stream_mb, heading=heading
@@ -162,16 +177,12 @@ def run_filter(
         rec = source
         name = str(rec.meta.get("source", "<recording>"))
     else:
-        from imutool.loading import load_recording
-
         name = os.fspath(source)
         rec, validation = load_recording(name, strict=strict, **load_options)
         if on_input is not None and len(rec):
             on_input(name, validation)
     summary: dict[str, Any] = {"input": name, "output": None if output is None else os.fspath(output), "rows": len(rec)}
     if method == "ekf":
-        from imutool.attitude import ekf_recording
-
         if gnss is not None and use_gnss:
             rec = attach_gnss(rec, gnss)
         if heading is not None:
@@ -184,16 +195,12 @@ def run_filter(
         if params_file:
             out.meta["filter_params_file"] = params_file
     elif method in ("lpf", "accel"):
-        from imutool.baseline import lpf_attitude
-
         out, s = lpf_attitude(rec, cutoff_hz if method == "lpf" else None, order)
         report(progress, len(rec), len(rec))
     else:
-        from imutool.compass import CompassParams, compass_recording
-
         dev = None
         if load_options.get("calibration_file"):
-            from calibration import load_calibration
+            from calibration import load_calibration  # scipy.optimize: only for a deviation card (see the top)
 
             dev = load_calibration(load_options["calibration_file"]).deviation
         out, s = compass_recording(rec, compass if compass is not None else CompassParams(), dev)
@@ -222,9 +229,6 @@ def smoother_gain(
     without truth. Runs the causal EKF once more."""
     if "ref_q" not in rec.channels and "ref_roll" not in rec.channels:
         return None
-    from imutool.attitude import ekf_recording
-    from imutool.metrics import attitude_rmse
-
     causal, _ = ekf_recording(rec, params, use_gnss=use_gnss, lever_arm=lever_arm)
     return {"causal_rmse_deg": attitude_rmse(causal, rec), "smoothed_rmse_deg": attitude_rmse(smoothed, rec)}
 
@@ -348,33 +352,8 @@ def stream_ekf(
     is the summary's ``validation``; the self-check's warnings are its ``warnings``. Both sets are written, at
     the end, into the output's metadata (``warnings``, ``validation``).
     """
-    from imutool.attitude import (
-        F_HDG_USED,
-        F_INCONSISTENT,
-        F_MAG_NEW,
-        F_MAG_REJ,
-        F_MAG_USED,
-        FlagSpans,
-        gnss_heading_check,
-        heading_check,
-        heading_source_report,
-        inconsistency_report,
-        mag_interval,
-        new_field_check,
-        nominal_dt,
-        result_recording,
-        run_ekf,
-        tilt_check,
-    )
-    from imutool.attitude.recording import _heading_channel
-    from imutool.convert import META_ROOM, chunk_writer
-    from imutool.gyro_check import GyroScaleCheck
-    from imutool.loading import ChunkChecks
-
     path, output = os.fspath(path), os.fspath(output)
     if params is None:
-        from imutool.attitude import EkfParams
-
         params = EkfParams()
     checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict)
     rows_read = duplicates = 0
@@ -388,29 +367,17 @@ def stream_ekf(
         "method": "ekf (streamed)",
         "dropped_non_increasing_rows": 0,
     }
-    totals: dict[str, float] = {}
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
     opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
-    flagged = FlagSpans(0.0)  # spans the self-check flagged (samples more than 1 s apart split a span)
-    n_flagged = 0
-    mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
-    new_fields: list[float] = []  # times the magnetometer's reference was replaced by a new field
-    gnss_used = mag_used = False  # SOG/COG used in some chunk; a heading update (mag or external) taken in some chunk
-    heading_given = mag_given = False  # a heading_true / mag column in some chunk
-    heading_updates = 0
-    lag_track = HeadingLagTrack()  # the heading input's lag against the gyro, fed chunk by chunk
-    t_first = np.nan  # time of the first row filtered
-    scale_check = None  # the gyro's scale against gravity, summed chunk by chunk
+    self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
     writer = chunk_writer(output, background=True, reserve_meta=META_ROOM)
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
-        from formats.csv import in_background
-
         chunks = in_background(chunks)
     with writer as w:
         for chunk in chunks:
@@ -432,12 +399,11 @@ def stream_ekf(
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
-                t_first = float(chunk.time[0])
+                self_checks = SelfCheck(params, dt_nom, lever_arm)
             sog = cog = None
             if use_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
                 sog = chunk.in_unit("sog", "m/s")
                 cog = chunk.in_unit("cog", "deg")
-                gnss_used = True
             if "heading_true" in chunk.channels and getattr(params, "heading_input_latency", 0.0) > 0:
                 raise ImutoolError(
                     "heading_input_latency reads the heading_true column later, past a chunk's end: "
@@ -445,7 +411,7 @@ def stream_ekf(
                     "or give the heading as a file with --heading)",
                     path=path,
                 )
-            heading = _heading_channel(chunk)  # deg, or None
+            heading = heading_channel(chunk)  # deg, or None
             if dt_mag is None:
                 dt_mag = mag_interval(chunk.time, chunk.channels.get("mag"))
             res, state = run_ekf(
@@ -463,31 +429,13 @@ def stream_ekf(
                 heading_deg=heading,
                 dt_mag=dt_mag,
             )
-            if scale_check is None:
-                scale_check = GyroScaleCheck(gap_dt=params.gap_factor * dt_nom, gravity=params.gravity)
-            scale_check.add(res.time, chunk["gyro"], res.bias, res.force)
-            mag_used = mag_used or bool(np.any(res.flags & (F_MAG_USED | F_HDG_USED)))
-            heading_given = heading_given or heading is not None
-            mag_given = mag_given or "mag" in chunk.channels
-            heading_updates += int(np.count_nonzero(res.flags & F_HDG_USED))
-            if heading is not None:  # the same columns in every chunk of a file
-                lag_track.add(res.time, heading, res.q, chunk["gyro"], res.bias)
-            bad = (res.flags & F_INCONSISTENT) > 0
-            n_flagged += int(bad.sum())
-            flagged.add(res.time, bad)
-            if params.mag_check_time > 0:
-                mag_spans.add(res.time, res.flags & F_MAG_REJ)
-            new_fields += [float(x) for x in res.time[(res.flags & F_MAG_NEW) > 0]]
-            for k, v in res.summary.items():
-                if isinstance(v, (int, float, np.number)) and not isinstance(v, bool):
-                    # the state carries cumulative counters (and the tilt check's running maximum)
-                    totals[k] = v.item() if isinstance(v, np.generic) else v
+            assert self_checks is not None  # made with the first chunk's nominal step
+            self_checks.add(
+                res, chunk["gyro"], mag_given="mag" in chunk.channels, gnss_used=sog is not None, heading_deg=heading
+            )
             est = result_recording(chunk, res, params)
-            est.meta["heading_source"] = heading_source_report(heading_given, mag_given, heading_updates, params)[0][
-                "heading_source"
-            ]  # final at the end
-            if lever_arm is not None:
-                est.meta["lever_arm_m"] = [float(x) for x in lever_arm]
+            # the metadata as far as known (the heading source is final at the end: set_final_meta below)
+            est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
             w.write(est)
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
@@ -496,45 +444,21 @@ def stream_ekf(
             rows_read, summary["rows"], duplicates=duplicates, skipped=int(summary.get("skipped_rows", 0) or 0)
         )
         validation["warnings"] = input_warnings
-        warnings: list[str] = []
-        if n_flagged:
-            check, filter_warnings = inconsistency_report(flagged.spans, n_flagged, summary["rows"])
-            summary.update(check)
-            warnings += filter_warnings
-        if params.mag_check_time > 0:
-            check, more = heading_check(mag_spans, params=params)
-            summary.update(check)
-            warnings += more
-        check, more = new_field_check(new_fields, params)
-        summary.update(check)
-        warnings += more
-        warnings += tilt_check(totals, params)
-        warnings += gnss_heading_check(gnss_used, mag_used)
-        check, more = heading_source_report(
-            heading_given, mag_given, heading_updates, params, t_last - t_first if np.isfinite(t_first) else 0.0
-        )
-        summary.update(check)
-        warnings += more
-        if heading_given:
-            check, more = heading_lag_check(lag_track.measure(), params.heading_input_latency)
-            summary.update(check)
-            warnings += more
-        if scale_check is not None:
-            check, more = scale_check.report()
-            summary.update(check)
-            warnings += more
-        if summary["rows"] == 0:
+        if summary["rows"] == 0 or self_checks is None:
             raise ImutoolError("no data rows", path=path)
+        checked = self_checks.report()
+        summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
+        summary.update(checked.summary)  # (the order of an in-memory run's summary)
+        warnings = checked.warnings
         everything = checks.meta_warnings(input_warnings, warnings)
         w.set_final_meta(
             {
                 "validation": {k: v for k, v in validation.items() if k != "warnings"},
-                "heading_source": summary["heading_source"],
-                **({"heading_input_lag_s": summary["heading_input_lag_s"]} if heading_given else {}),
+                # the keys known only at the end (the lever arm's went out with the first chunk)
+                **{k: v for k, v in checked.metadata.items() if not k.startswith("lever_arm")},
                 **({"warnings": everything} if everything else {}),
             }
         )
-    summary.update(totals)
     summary["samples"] = summary["rows"]
     summary["validation"] = validation
     if warnings:

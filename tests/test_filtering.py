@@ -322,3 +322,95 @@ def test_chunk_checks_across_chunk_edges_and_the_end_of_a_stream(roll_csv, tmp_p
     empty.write_text("".join(lines[:head]))
     code, _, err = run_main(["filter", empty, "-o", tmp_path / "e.csv", "--stream-mb", "0"], capsys)
     assert code == 2 and "no data rows" in err and not (tmp_path / "e.csv").exists()
+
+
+def test_memory_and_streamed_runs_compose_the_same_checks_and_metadata(roll_csv, tmp_path):
+    """One self-check accumulator (imutool.attitude.SelfCheck) and one metadata composition for both paths (issue
+    39): the in-memory and the streamed (--chunk-rows 2000) runs of the same file have the same output metadata keys
+    (the lever arm's frame included, which the streamed output once lacked), the same summary keys and the same
+    figures and warnings — the inconsistency spans, and the gyro-scale check's pairs across chunk edges, included.
+    The gyro's x axis is reversed so that the checks have something to say."""
+    rec = formats.read(roll_csv)
+    rec.channels["gyro"] = rec["gyro"] * [-1, 1, 1]
+    src = tmp_path / "flip.csv"
+    formats.write(rec, src)
+    got, meta = {}, {}
+    for name, extra in (("memory", {}), ("streamed", {"stream_mb": 0, "chunk_rows": 2000})):
+        out = tmp_path / f"{name}.csv"
+        res = run_filter(src, out, lever_arm=(0, 0, -2), **extra)
+        got[name], meta[name] = res.summary, formats.read(out).meta
+    assert got["streamed"]["method"] == "ekf (streamed)" and got["memory"]["method"] == "ekf"
+    assert set(meta["memory"]) == set(meta["streamed"])
+    for m in meta.values():
+        assert m["lever_arm_frame"].startswith("body FRD") and m["lever_arm_m"] == [0.0, 0.0, -2.0]
+        assert m["heading_source"] == "magnetometer"
+    assert meta["memory"]["warnings"] == meta["streamed"]["warnings"]
+    assert any("gyro axis check" in w for w in meta["memory"]["warnings"])
+    # what only a stream has (its dropped rows, the lever arm it was given), and what differs by route
+    stream_only = {"dropped_non_increasing_rows", "lever_arm_m"}
+    assert set(got["streamed"]) - set(got["memory"]) == stream_only
+    assert set(got["memory"]) <= set(got["streamed"])
+    by_route = {"method", "output", "validation"}
+    for key in set(got["memory"]) - by_route:
+        assert got["memory"][key] == got["streamed"][key], key
+    assert got["memory"]["gyro_scale_check"]["pairs"] >= 13  # 30 s in 2-s windows: none lost at the 2 chunk edges
+    assert got["memory"]["warnings"] == got["streamed"]["warnings"]
+
+
+def test_self_check_spans_across_chunks_equal_one_run():
+    """SelfCheck's runs of flagged samples fed in chunks (a run open at a chunk's end goes on) are the spans of the
+    whole run at once, and only the first ones are kept while all are counted."""
+    from imutool.attitude.selfcheck import RunSpans, self_check
+
+    t = np.arange(0.0, 50.0, 0.5)
+    bad = ((t >= 3) & (t < 7)) | ((t >= 9.5) & (t < 10)) | (t == 20) | ((t >= 30) & (t < 41)) | (t >= 49)
+    whole, _ = self_check(t, bad.astype(np.uint8) * 32)
+    for edges in ([0, 100], [0, 7, 8, 19, 60, 61, 62, 100], list(range(0, 101, 3)) + [100]):
+        spans = RunSpans(keep=20)
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            spans.add(t[a:b], bad[a:b])
+        assert [[round(a, 3), round(b, 3)] for a, b in spans.spans] == whole["inconsistent_spans_s"], edges
+        assert spans.count == 5 and spans.n_flagged == whole["inconsistent_samples"]
+    few = RunSpans(keep=2)
+    for a in range(0, 100, 7):
+        few.add(t[a : a + 7], bad[a : a + 7])
+    assert few.count == 5 and len(few.spans) == 2 and few.spans == [[3.0, 6.5], [9.5, 9.5]]
+
+
+def test_filtering_has_no_function_level_imports_but_the_slow_one():
+    """imutool.filtering imports at its top; only calibration (scipy.optimize, ~1 s) waits for a deviation card."""
+    import ast
+
+    import imutool.filtering as mod
+
+    tree = ast.parse(Path(mod.__file__).read_text(encoding="utf-8"))
+    inner = [
+        node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+        for fn in ast.walk(tree)
+        if isinstance(fn, ast.FunctionDef)
+        for node in ast.walk(fn)
+        if isinstance(node, (ast.Import, ast.ImportFrom))
+    ]
+    assert inner == ["calibration"]
+
+
+def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
+    """SelfCheck carries the gyro-scale check's last complete window (and the open one) into the next chunk: where
+    that window starts is where the check's kernel cuts it (windows from the first sample, each starting at the
+    first sample `window` s or more after the last start), whatever the sample spacing, so no pair is lost or
+    counted twice at a chunk edge."""
+    from imutool.attitude.selfcheck import _last_pair_start
+
+    def kernel_cut(t, window):
+        starts = [0]
+        for k in range(1, len(t)):
+            if t[k] - t[starts[-1]] >= window:
+                starts.append(k)
+        return starts[-2] if len(starts) >= 2 else 0
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        t = 1e5 + np.cumsum(rng.uniform(0.001, 0.5, rng.integers(1, 300)))
+        for window in (0.0, 0.01, 2.0, 7.3):
+            assert _last_pair_start(t, window) == kernel_cut(t, window)
+    assert _last_pair_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12

@@ -2,8 +2,10 @@
 
 One concept per module (docs/architecture.md, "The attitude package"):
 
-- :mod:`~imutool.attitude.params` — :class:`EkfParams` and :data:`PARAM_DOC`: every tuning constant, its unit,
-  range and meaning; TOML in and out.
+- :mod:`~imutool.attitude.param_table` — :data:`PARAMS`: every tuning constant in one table (default, unit, range,
+  meaning, how it enters the kernel); :mod:`~imutool.attitude.params` — :class:`EkfParams` (made from it),
+  :class:`EkfCoefficients` (derived once per run from the parameters and the sample interval), the versioned TOML
+  and its :data:`MIGRATIONS`.
 - :mod:`~imutool.attitude.layout` — the state vector's slots (``S_*``), the parameter vector's (``P_*``) and the
   per-sample flag bits (``F_*``).
 - :mod:`~imutool.attitude.kernel` — the per-sample loop (numba; the filter's equations are in its docstring), built
@@ -11,7 +13,9 @@ One concept per module (docs/architecture.md, "The attitude package"):
   :mod:`~imutool.attitude.magnetic` and the shared :mod:`imutool.quaternion` steps.
 - :mod:`~imutool.attitude.run` — :func:`run_ekf` over arrays (initial state, chunks, :class:`AttitudeResult`).
 - :mod:`~imutool.attitude.rts`, :mod:`~imutool.attitude.smoother` — the RTS pass and the zero-lag smoother.
-- :mod:`~imutool.attitude.selfcheck` — the self-check reports (inconsistency, heading, new field, tilt, GNSS).
+- :mod:`~imutool.attitude.selfcheck` — :class:`SelfCheck`, the one accumulator of the self-check reports
+  (inconsistency, heading, new field, tilt, GNSS, heading source and lag, gyro scale) for the memory and streamed
+  runs, :func:`output_metadata`, and the per-sample flags by name (:class:`SampleFlag`).
 - :mod:`~imutool.attitude.recording` — :func:`ekf_recording`: the filter over a Recording, output channels.
 
 Frames and units: body FRD, world NED, q = [w, x, y, z] body→NED; gyro rad/s, accel m/s², mag µT, time s.
@@ -28,7 +32,17 @@ from imutool.attitude.layout import (
     F_REST,
     STATE_SIZE,
 )
-from imutool.attitude.params import PARAM_DOC, EkfParams
+from imutool.attitude.param_table import PARAMS, Param, ToKernel, params_markdown
+from imutool.attitude.params import (
+    MIGRATIONS,
+    PARAM_DOC,
+    PARAMS_VERSION,
+    EkfCoefficients,
+    EkfParams,
+    Migration,
+    ParamsFile,
+    read_params_file,
+)
 from imutool.attitude.recording import (
     OUTPUT_DECIMALS,
     available_memory,
@@ -42,11 +56,15 @@ from imutool.attitude.rts import rts_smooth
 from imutool.attitude.run import AttitudeResult, euler_std, initial_state, mag_interval, nominal_dt, run_ekf
 from imutool.attitude.selfcheck import (
     FlagSpans,
+    SampleFlag,
+    SelfCheck,
+    SelfCheckReport,
     gnss_heading_check,
     heading_check,
     heading_source_report,
     inconsistency_report,
     new_field_check,
+    output_metadata,
     self_check,
     tilt_check,
 )
@@ -61,12 +79,23 @@ __all__ = [
     "F_MAG_REJ",
     "F_MAG_USED",
     "F_REST",
+    "MIGRATIONS",
     "OUTPUT_DECIMALS",
+    "PARAMS",
+    "PARAMS_VERSION",
     "PARAM_DOC",
     "STATE_SIZE",
     "AttitudeResult",
+    "EkfCoefficients",
     "EkfParams",
     "FlagSpans",
+    "Migration",
+    "Param",
+    "ParamsFile",
+    "SampleFlag",
+    "SelfCheck",
+    "SelfCheckReport",
+    "ToKernel",
     "available_memory",
     "carry_labels",
     "check_smoother_memory",
@@ -80,7 +109,10 @@ __all__ = [
     "mag_interval",
     "new_field_check",
     "nominal_dt",
+    "output_metadata",
+    "params_markdown",
     "quat_error_metrics",
+    "read_params_file",
     "result_recording",
     "rts_smooth",
     "run_ekf",

@@ -2,29 +2,16 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
-
 import numpy as np
 
 from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
-from imutool.attitude.layout import F_ACC_REJ, F_HDG_USED, F_INCONSISTENT, F_MAG_NEW, F_MAG_REJ, F_MAG_USED, F_REST
 from imutool.attitude.params import EkfParams
 from imutool.attitude.run import AttitudeResult, nominal_dt, run_ekf
-from imutool.attitude.selfcheck import (
-    FlagSpans,
-    gnss_heading_check,
-    heading_check,
-    heading_source_report,
-    new_field_check,
-    self_check,
-    tilt_check,
-)
+from imutool.attitude.selfcheck import SampleFlag, SelfCheck, has_flag
 from imutool.attitude.smoother import zero_lag_smooth
-from imutool.gyro_check import GyroScaleCheck
-from imutool.heading_lag import heading_lag_check, measure_heading_lag
 from imutool.loading import merged_warnings
 from imutool.progress import Progress
 
@@ -57,7 +44,7 @@ def check_smoother_memory(n: int) -> None:
         )
 
 
-def _heading_channel(rec: Recording) -> np.ndarray | None:
+def heading_channel(rec: Recording) -> np.ndarray | None:
     """The external true heading (deg) of a recording, ``heading_true`` (gyrocompass HDT/THS), or None."""
     if "heading_true" not in rec.channels:
         return None
@@ -100,7 +87,7 @@ def ekf_recording(
     gyro = rec.in_unit("gyro", "rad/s")
     accel = rec.in_unit("accel", "m/s^2")
     mag = rec["mag"] if "mag" in rec.channels else None
-    heading_raw = _heading_channel(rec)  # deg, as it came
+    heading_raw = heading_channel(rec)  # deg, as it came
     heading = None if heading_raw is None else _read_later(rec.time, heading_raw, params.heading_input_latency)
     sog = cog = None
     if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
@@ -123,48 +110,15 @@ def ekf_recording(
         heading_deg=heading,
     )
     summary = dict(res.summary)
-    check, warnings = self_check(res.time, res.flags)
-    source, more = heading_source_report(
-        heading is not None,
-        mag is not None,
-        int(np.count_nonzero(res.flags & F_HDG_USED)),
-        params,
-        float(res.time[-1] - res.time[0]) if len(res.time) else 0.0,
-    )
-    summary.update(source)
-    warnings += more
-    if heading is not None:  # how late the feed is against the gyro, measured on the feed as it came
-        lag, more = heading_lag_check(
-            measure_heading_lag(rec.time, heading_raw, res.q, gyro, res.bias), params.heading_input_latency
-        )
-        summary.update(lag)
-        warnings += more
-    summary.update(check)
-    if params.mag_check_time > 0:
-        spans = FlagSpans(params.mag_check_time)
-        spans.add(res.time, res.flags & F_MAG_REJ)
-        check, more = heading_check(spans, params=params)
-        summary.update(check)
-        warnings += more
-    check, more = new_field_check(list(res.time[(res.flags & F_MAG_NEW) > 0]), params)
-    summary.update(check)
-    warnings += more
-    warnings += tilt_check(summary, params)
-    warnings += gnss_heading_check(sog is not None, bool(np.any(res.flags & (F_MAG_USED | F_HDG_USED))))
-    scale_check = GyroScaleCheck(gap_dt=params.gap_factor * nominal_dt(res.time), gravity=params.gravity)
-    scale_check.add(res.time, gyro, res.bias, res.force)
-    check, more = scale_check.report()
-    summary.update(check)
-    warnings += more
+    checks = SelfCheck(params, nominal_dt(res.time), lever_arm)  # the same accumulator as a streamed run's
+    checks.add(res, gyro, mag_given=mag is not None, gnss_used=sog is not None, heading_deg=heading_raw)
+    report = checks.report()
+    summary.update(report.summary)
+    warnings = report.warnings
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
-    if lever_arm is not None:
-        out.meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
-        out.meta["lever_arm_frame"] = "body FRD, sensor relative to the centre of rotation"
-    out.meta["heading_source"] = summary["heading_source"]
-    if "heading_input_lag_s" in summary:
-        out.meta["heading_input_lag_s"] = summary["heading_input_lag_s"]
+    out.meta.update(report.metadata)
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
         summary["warnings"] = list(summary.get("warnings") or []) + warnings
@@ -186,14 +140,14 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     out.add("roll_std", sd[:, 0], "deg")
     out.add("pitch_std", sd[:, 1], "deg")
     out.add("heading_std", sd[:, 2], "deg")
-    out.add("accel_rejected", (res.flags & F_ACC_REJ > 0).astype(float), "1")
-    out.add("mag_rejected", (res.flags & F_MAG_REJ > 0).astype(float), "1")
-    out.add("rest", (res.flags & F_REST > 0).astype(float), "1")
-    out.add("inconsistent", (res.flags & F_INCONSISTENT > 0).astype(float), "1")
+    out.add("accel_rejected", has_flag(res.flags, SampleFlag.ACCEL_REJECTED).astype(float), "1")
+    out.add("mag_rejected", has_flag(res.flags, SampleFlag.MAG_REJECTED).astype(float), "1")
+    out.add("rest", has_flag(res.flags, SampleFlag.REST).astype(float), "1")
+    out.add("inconsistent", has_flag(res.flags, SampleFlag.INCONSISTENT).astype(float), "1")
     carry_labels(rec, out)
     out.meta[DECIMALS_KEY] = dict(OUTPUT_DECIMALS)
     if params is not None:
-        out.meta["filter"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(params).items()}
+        out.meta["filter"] = params.as_dict()
     return out
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from formats.errors import ImutoolError
-from formats.frames import quat_to_euler
+from formats.frames import euler_to_quat, quat_rotate, quat_to_euler, quat_to_matrix
 from imutool.attitude.kernel import ekf_kernel
 from imutool.attitude.layout import (
     S_B,
@@ -33,7 +33,7 @@ from imutool.attitude.layout import (
     S_TILTMAX,
     STATE_SIZE,
 )
-from imutool.attitude.params import EkfParams
+from imutool.attitude.params import EkfCoefficients, EkfParams
 from imutool.progress import Progress, chunk_ranges
 
 # ================================================ Python API ================================================
@@ -130,7 +130,6 @@ def initial_state(
             a = accel[i]
             roll = np.arctan2(-a[1], -a[2])
             pitch = np.arctan2(a[0], np.hypot(a[1], a[2]))
-            from formats.frames import euler_to_quat, quat_rotate
 
             m = mag[i]
             mw = quat_rotate(euler_to_quat(roll, pitch, 0.0), m)
@@ -141,8 +140,6 @@ def initial_state(
                 mref = np.array([hor, 0.0, mw[2]]) / mnorm
             else:  # a zero field: no heading, no reference (the updates skip a zero-norm field)
                 heading_mag, mnorm = 0.0, 0.0
-    from formats.frames import euler_to_quat
-
     st[S_Q : S_Q + 4] = euler_to_quat(roll, pitch, heading_mag if heading is None else float(heading))
     st[S_B : S_B + 3] = params.init_bias
     P = np.zeros((6, 6))
@@ -150,8 +147,6 @@ def initial_state(
     P[0, 0] = P[1, 1] = rp
     P[2, 2] = np.radians(params.init_heading_sigma_deg) ** 2  # a first fix may be a glitch: the filter stays open
     # express the NED-axis σ in body axes (heading σ is about the world vertical)
-    from formats.frames import quat_to_matrix
-
     Rm = quat_to_matrix(st[S_Q : S_Q + 4])
     P[:3, :3] = Rm.T @ P[:3, :3] @ Rm
     P[3:, 3:] = np.eye(3) * params.init_bias_sigma**2
@@ -244,7 +239,8 @@ def run_ekf(
         raise ImutoolError(f"an EKF state must have {STATE_SIZE} entries, not {st.shape} (from another release?)")
     if dt_mag is None and use_mag:
         dt_mag = mag_interval(t, m)
-    prm = params.vector(dt_nominal, dt_mag)
+    coef = EkfCoefficients.derive(params, dt_nominal, dt_mag)  # what depends on the rate, once per call
+    prm = coef.kernel_vector(params)
     st[S_BIASMAX] = params.bias_max
     sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
@@ -263,9 +259,9 @@ def run_ekf(
         meas = np.ascontiguousarray(accel_measurement, dtype=np.float64)
         if meas.shape != (n, 3):
             raise ImutoolError(f"accel_measurement must be ({n}, 3), not {meas.shape}")
-    every = params.samples_per_update(dt_nominal)
+    every = coef.samples_per_update
     cov_each = keep_cov if cov_every_sample is None else cov_every_sample
-    mode, cov_flag = params.mag_mode_code() if use_mag else 0, bool(cov_each or every == 1)
+    mode, cov_flag = coef.mag_mode_code if use_mag else 0, bool(cov_each or every == 1)
     # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
     for i0, i1 in [(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress):
         ekf_kernel(

@@ -1,11 +1,53 @@
-"""The EKF's self-check reports: inconsistency spans, heading, new field, tilt, GNSS and heading source."""
+"""The EKF's self-checks: one accumulator (:class:`SelfCheck`, fed chunk by chunk, the same in memory and streamed)
+over the reports (inconsistency spans, heading, new field, tilt, GNSS, heading source and lag, gyro scale), the
+output metadata they compose (:func:`output_metadata`), and the per-sample flags by name (:class:`SampleFlag`).
+
+To add a self-check: a report function here (summary keys, warning lines), fed from :meth:`SelfCheck.add` and
+called from :meth:`SelfCheck.report`; both the in-memory (:func:`imutool.attitude.ekf_recording`) and the streamed
+(:func:`imutool.filtering.stream_ekf`) runs then have it.
+"""
 
 from __future__ import annotations
 
+import enum
+from typing import Any, NamedTuple
+
 import numpy as np
 
-from imutool.attitude.layout import F_INCONSISTENT
+from imutool.attitude.layout import (
+    F_ACC_REJ,
+    F_ACC_USED,
+    F_HDG_USED,
+    F_INCONSISTENT,
+    F_MAG_NEW,
+    F_MAG_REJ,
+    F_MAG_USED,
+    F_REST,
+)
 from imutool.attitude.params import EkfParams
+from imutool.gyro_check import GyroScaleCheck
+from imutool.heading_lag import HeadingLagTrack, heading_lag_check
+
+
+class SampleFlag(enum.IntFlag):
+    """The bits of the filter's per-sample ``flags`` (uint8, :attr:`AttitudeResult.flags`; the kernels set them with
+    the ``F_*`` constants of :mod:`~imutool.attitude.layout`, which these name)."""
+
+    ACCEL_REJECTED = (
+        F_ACC_REJ  #: the accelerometer was not used at this sample (a gate, a shock): column accel_rejected
+    )
+    MAG_REJECTED = F_MAG_REJ  #: the magnetometer was rejected by its gates (norm, dip, NIS): column mag_rejected
+    REST = F_REST  #: the body was detected at rest (zero-rate update): column rest
+    ACCEL_USED = F_ACC_USED  #: an accelerometer update was taken at this sample
+    MAG_USED = F_MAG_USED  #: a magnetometer (heading or full) update was taken at this sample
+    INCONSISTENT = F_INCONSISTENT  #: the windowed NIS or the tilt check failed here: column inconsistent
+    HEADING_USED = F_HDG_USED  #: an external heading (heading_true) update was taken at this sample
+    MAG_NEW_FIELD = F_MAG_NEW  #: the magnetometer's reference was replaced by a new field at this sample
+
+
+def has_flag(flags: np.ndarray, flag: SampleFlag) -> np.ndarray:
+    """Per sample: is ``flag`` set in ``flags`` (uint8)? A bool array."""
+    return (np.asarray(flags) & np.uint8(flag)) > 0
 
 
 def self_check(
@@ -14,26 +56,31 @@ def self_check(
     """Summary of the innovation-consistency monitor: flagged share, time spans (s) and warnings to show.
 
     ``n_total``: number of samples the share refers to (default: len(flags)); a flag-0 row separates spans."""
-    bad = (np.asarray(flags) & F_INCONSISTENT) > 0
+    bad = has_flag(flags, SampleFlag.INCONSISTENT)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
     spans = [(float(time[a]), float(time[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
     return inconsistency_report(spans, int(bad.sum()), len(bad) if n_total is None else n_total, max_spans)
 
 
-def _spans_text(spans: list, shown: int = 5) -> str:
-    """The first ``shown`` (start, end) spans in s for a warning line, "and N more" after them."""
+def _spans_text(spans: list, shown: int = 5, n_spans: int | None = None) -> str:
+    """The first ``shown`` (start, end) spans in s for a warning line, "and N more" after them (``n_spans``: how many
+    there are, where ``spans`` holds only the first ones)."""
+    n = len(spans) if n_spans is None else n_spans
     text = ", ".join(f"{a:.1f}–{b:.1f} s" for a, b in spans[:shown])
-    return text + (f" and {len(spans) - shown} more" if len(spans) > shown else "")
+    return text + (f" and {n - shown} more" if n > shown else "")
 
 
-def inconsistency_report(spans: list, n_flagged: int, n_total: int, max_spans: int = 20) -> tuple[dict, list[str]]:
-    """The self-check's summary and warning from its flagged spans [(start, end) s] and sample counts."""
+def inconsistency_report(
+    spans: list, n_flagged: int, n_total: int, max_spans: int = 20, n_spans: int | None = None
+) -> tuple[dict, list[str]]:
+    """The self-check's summary and warning from its flagged spans [(start, end) s] and sample counts; ``n_spans``
+    the number of spans where ``spans`` holds only the first ones (default: len(spans))."""
     share = float(n_flagged) / max(1, n_total)
     info: dict = {"inconsistent_samples": int(n_flagged), "inconsistent_share": round(share, 6)}
     if not n_flagged:
         return info, []
     info["inconsistent_spans_s"] = [[round(a, 3), round(b, 3)] for a, b in spans[:max_spans]]
-    shown = _spans_text(spans)
+    shown = _spans_text(spans, n_spans=n_spans)
     warn = (
         f"the attitude filter's self-check failed on {100 * share:.1f} % of samples ({shown}): its "
         "accelerometer/magnetometer innovations are far larger than its covariance allows, so the estimate "
@@ -189,3 +236,193 @@ def heading_source_report(
             ]
         return out, []
     return {"heading_source": "magnetometer" if mag_given and params.mag_mode != "off" else "none (gyro)"}, []
+
+
+class RunSpans:
+    """Runs of consecutive flagged samples, fed chunk by chunk (a run open at a chunk's end goes on into the next):
+    the first ``keep`` (start, end) in s, and how many there are. The same spans as :func:`self_check` of the whole
+    run at once, in O(keep) memory."""
+
+    def __init__(self, keep: int = 20) -> None:
+        self.keep = keep
+        self.spans: list[list[float]] = []
+        self.count = 0
+        self.open = False  # the last sample added was flagged
+        self.n_flagged = 0
+
+    def add(self, time: np.ndarray, bad: np.ndarray) -> None:
+        bad = np.asarray(bad, bool)
+        if len(bad) == 0:
+            return
+        self.n_flagged += int(bad.sum())
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], bad.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if a == 0 and self.open:  # continues the run open at the previous chunk's end
+                if self.count <= self.keep:
+                    self.spans[-1][1] = float(time[b - 1])
+                continue
+            self.count += 1
+            if self.count <= self.keep:
+                self.spans.append([float(time[a]), float(time[b - 1])])
+        self.open = bool(bad[-1])
+
+
+class SelfCheckReport(NamedTuple):
+    """What :meth:`SelfCheck.report` gives: the summary's self-check keys, the warning lines (in this order:
+    inconsistency, heading source, heading lag, magnetometer rejection, new field, tilt, GNSS, gyro scale) and the
+    output's metadata keys (:func:`output_metadata`)."""
+
+    summary: dict[str, Any]
+    warnings: list[str]
+    metadata: dict[str, Any]
+
+
+class SelfCheck:
+    """Every self-check of one filter run, fed chunk by chunk (:meth:`add`; in memory: one chunk), reported once
+    (:meth:`report`). O(spans) memory: a streamed day keeps no per-sample array.
+
+    ``params`` the run's parameters; ``dt_nominal`` (s) the IMU's nominal step (the gyro-scale check's gap
+    threshold); ``lever_arm`` (m, body FRD) as given to the filter, or None; ``max_spans`` spans kept per report."""
+
+    def __init__(
+        self, params: EkfParams, dt_nominal: float, lever_arm: np.ndarray | None = None, max_spans: int = 20
+    ) -> None:
+        self.params, self.lever_arm, self.max_spans = params, lever_arm, max_spans
+        self.inconsistent = RunSpans(max_spans)
+        self.n_samples = 0
+        self.mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
+        self.new_fields: list[float] = []  # times the magnetometer's reference was replaced (s)
+        self.gnss_used = self.mag_used = False  # SOG/COG given; a heading update (mag or external) taken
+        self.heading_given = self.mag_given = False  # a heading_true / mag channel in the input
+        self.heading_updates = 0
+        self.lag = HeadingLagTrack()  # the heading input's lag against the gyro
+        self.scale = GyroScaleCheck(gap_dt=params.gap_factor * dt_nominal, gravity=params.gravity)
+        self._scale_tail: tuple[np.ndarray, ...] | None = None  # what the next chunk's scale check starts from
+        self.totals: dict[str, Any] = {}  # the filter's cumulative counters, from the last chunk
+        self.t_first = self.t_last = np.nan
+
+    def add(
+        self,
+        res: Any,
+        gyro: np.ndarray,
+        *,
+        mag_given: bool,
+        gnss_used: bool,
+        heading_deg: np.ndarray | None = None,
+    ) -> None:
+        """One chunk of the run, in time order: ``res`` its :class:`~imutool.attitude.AttitudeResult` (with the
+        force: ``keep_force``), ``gyro`` (N,3) rad/s as filtered, ``mag_given`` a magnetometer channel in the
+        input, ``gnss_used`` SOG/COG used, ``heading_deg`` (N,) the external heading as it came (deg), or None."""
+        flags = res.flags
+        if len(res.time):
+            if not np.isfinite(self.t_first):
+                self.t_first = float(res.time[0])
+            self.t_last = float(res.time[-1])
+        self.n_samples += len(res.time)
+        self.inconsistent.add(res.time, has_flag(flags, SampleFlag.INCONSISTENT))
+        if self.params.mag_check_time > 0:
+            self.mag_spans.add(res.time, has_flag(flags, SampleFlag.MAG_REJECTED))
+        self.new_fields += [float(x) for x in res.time[has_flag(flags, SampleFlag.MAG_NEW_FIELD)]]
+        self.mag_used = self.mag_used or bool(np.any(has_flag(flags, SampleFlag.MAG_USED | SampleFlag.HEADING_USED)))
+        self.gnss_used = self.gnss_used or gnss_used
+        self.mag_given = self.mag_given or mag_given
+        self.heading_updates += int(np.count_nonzero(has_flag(flags, SampleFlag.HEADING_USED)))
+        if heading_deg is not None:
+            self.heading_given = True
+            self.lag.add(res.time, heading_deg, res.q, gyro, res.bias)
+        self._add_scale(res.time, gyro, res.bias, res.force)
+        for k, v in res.summary.items():  # the state carries cumulative counters (and the tilt check's maximum)
+            if isinstance(v, bool):  # a switch (gnss_compensation): on if on in any chunk
+                self.totals[k] = bool(self.totals.get(k, False)) or v
+            elif isinstance(v, (int, float, np.number)):
+                self.totals[k] = v.item() if isinstance(v, np.generic) else v
+
+    def _add_scale(self, *arrays: np.ndarray) -> None:
+        """Feed the gyro-scale check (time, gyro, bias, force) so that its pairs of consecutive windows span chunk
+        edges as in one run: each chunk goes in behind the last complete window of the one before (and the window
+        that followed it, still open), which the check pairs again from there (its windows are cut from the first
+        sample of what it is given, each ``window`` s long: :func:`imutool.gyro_check.pair_discrepancy_kernel`)."""
+        overlap = 0
+        if self._scale_tail is not None:
+            overlap = len(self._scale_tail[0])
+            arrays = tuple(np.concatenate([a, b]) for a, b in zip(self._scale_tail, arrays, strict=True))
+        self.scale.add(*arrays)
+        self.scale.seen -= overlap  # the samples carried over were counted with their own chunk
+        i = _last_pair_start(np.asarray(arrays[0], float), self.scale.window)
+        self._scale_tail = tuple(np.array(a[i:]) for a in arrays)
+
+    def heading_source(self) -> str:
+        """Where the heading comes from, as far as the run has gone (final after the last chunk)."""
+        return heading_source_report(self.heading_given, self.mag_given, self.heading_updates, self.params)[0][
+            "heading_source"
+        ]
+
+    def report(self) -> SelfCheckReport:
+        """The summary keys, warnings and output metadata of every check over what was added."""
+        params, summary, warnings = self.params, {}, []
+        duration = self.t_last - self.t_first if np.isfinite(self.t_first) else 0.0
+        check, inconsistency = inconsistency_report(
+            [tuple(s) for s in self.inconsistent.spans],
+            self.inconsistent.n_flagged,
+            self.n_samples,
+            self.max_spans,
+            n_spans=self.inconsistent.count,
+        )
+        warnings += inconsistency
+        source, more = heading_source_report(self.heading_given, self.mag_given, self.heading_updates, params, duration)
+        summary.update(source)
+        warnings += more
+        if self.heading_given:  # how late the feed is against the gyro, measured on the feed as it came
+            lag, more = heading_lag_check(self.lag.measure(), params.heading_input_latency)
+            summary.update(lag)
+            warnings += more
+        summary.update(check)
+        if params.mag_check_time > 0:
+            check, more = heading_check(self.mag_spans, self.max_spans, params=params)
+            summary.update(check)
+            warnings += more
+        check, more = new_field_check(self.new_fields, params, self.max_spans)
+        summary.update(check)
+        warnings += more
+        warnings += tilt_check(self.totals, params)
+        warnings += gnss_heading_check(self.gnss_used, self.mag_used)
+        check, more = self.scale.report()
+        summary.update(check)
+        warnings += more
+        meta = output_metadata(self.lever_arm, summary)
+        return SelfCheckReport(summary, warnings, meta)
+
+
+def _last_pair_start(t: np.ndarray, window: float) -> int:
+    """The index where the last complete window starts, of those the gyro-scale check cuts from ``t[0]`` (s): each
+    starts at the first sample ``window`` s or more after the start of the one before (the same subtraction as
+    its kernel); 0 where fewer than two windows start."""
+    starts = [0]
+    while True:
+        s0 = starts[-1]
+        k = max(int(np.searchsorted(t, t[s0] + window, side="left")), s0 + 1)
+        while k > s0 + 1 and t[k - 1] - t[s0] >= window:
+            k -= 1
+        while k < len(t) and t[k] - t[s0] < window:
+            k += 1
+        if k >= len(t):
+            break
+        starts.append(k)
+    return starts[-2] if len(starts) >= 2 else 0
+
+
+LEVER_ARM_FRAME = "body FRD, sensor relative to the centre of rotation"
+
+
+def output_metadata(lever_arm: np.ndarray | None, summary: dict[str, Any]) -> dict[str, Any]:
+    """The attitude filter's own keys in an output's metadata, in the memory and streamed outputs alike: the lever
+    arm (m) and its frame where one was given, where the heading came from (``summary["heading_source"]``, as far as
+    known) and the heading input's measured lag (s; where the summary has it, None when it could not be measured)."""
+    meta: dict[str, Any] = {}
+    if lever_arm is not None:
+        meta["lever_arm_m"] = [float(x) for x in np.asarray(lever_arm, float).reshape(3)]
+        meta["lever_arm_frame"] = LEVER_ARM_FRAME
+    meta["heading_source"] = summary["heading_source"]
+    if "heading_input_lag_s" in summary:
+        meta["heading_input_lag_s"] = summary["heading_input_lag_s"]
+    return meta

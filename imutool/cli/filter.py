@@ -11,6 +11,7 @@ from typing import Any
 import click
 import numpy as np
 
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from imutool.cli.common import (
     emit_summary,
@@ -175,69 +176,17 @@ def filter_cmd(
     filter's self-check); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
     works directly. EKF tuning: --params FILE / --param NAME=VALUE (list and units: --save-params).
     """
-    from imutool.compass import CompassParams
+    from imutool.compass import CompassParams  # here, not at the top: `imutool filter --help` loads no numba
     from imutool.filtering import run_filter
 
-    params = ekf_params(params_file, param_items, update_every, mag_mode)
-    if (
-        params_file
-        and update_every is None
-        and not quiet
-        and params.update_every == 1
-        and params.pins_every_sample(params_file)
-    ):
-        click.echo(
-            f"note: {params_file} sets update_every = 1, as every parameters file saved before 2026-11-26 "
-            "does: the filter updates every sample (the same filter, about 2.3x slower than the default); "
-            "set update_every = 0 there, or --update-every 0, for updates every ⌊rate / update_rate_hz⌋ "
-            "samples",
-            err=True,
-        )
-    if params_file and not quiet and params.mag_noise_deg > 0 and params.pins_mag_sigma(params_file):
-        click.echo(
-            f"note: {params_file} sets mag_noise_deg = {params.mag_noise_deg:g}, a σ per sample at any rate "
-            "(every parameters file saved before mag_heading_density existed does), so the heading's time "
-            "constant grows as the rate falls (21 s at 286 Hz, 49 s at 50 Hz); set mag_noise_deg = 0 there, "
-            "or --param mag_noise_deg=0, for mag_heading_density (deg·√s, the same at every rate)",
-            err=True,
-        )
-        if "mag_reference_tau" not in params.keys_in_file(params_file):
-            click.echo(
-                "note: the magnetometer's gates now compare with the mean accepted field, not its first "
-                "sample (mag_reference_tau = 0: as before)",
-                err=True,
-            )
-    given = params.keys_in_file(params_file) if params_file else set()
-    given |= {item.split("=", 1)[0].strip() for item in param_items}
-    if (
-        params_file
-        and not quiet
-        and "mag_new_time" not in given
-        and ("mag_heading_density" in given or params.pins_mag_sigma(params_file))
-    ):
-        click.echo(
-            f"note: {params_file} does not set mag_new_time or mag_bias_gate (files saved before the "
-            "new-field acceptance, commit 1816144, do not): the magnetometer's new-field acceptance and the "
-            "gate on its bias learning apply with their defaults (set either to 0 for the behaviour before)",
-            err=True,
-        )
-    in_file = params.keys_in_file(params_file) if params_file else set()
-    if params_file and not quiet and "accel_lp_tau" in in_file and "smoother_lp_tau" not in in_file:
-        click.echo(
-            f"note: {params_file} sets accel_lp_tau and has no smoother_lp_tau, as every parameters file "
-            "saved before the accelerometer's low-pass became a second-order Butterworth (2026-11-27) does: "
-            "if it is such a file, its accel_lp_tau is now the Butterworth's delay (its 3 s with 0.003 and "
-            "2.8: 0.736° mean inclination on BROAD, 0.739 with the old two stages); the defaults are "
-            "accel_lp_tau 2.5, gyro_scale_noise 0.01, accel_noise_gain 4 (0.727°) — delete those three keys "
-            "to take them",
-            err=True,
-        )
+    params, notes = ekf_params_and_notes(params_file, param_items, update_every, mag_mode)
+    if not quiet:
+        for note in notes:  # what changed in meaning since an older parameters file was saved (the library's)
+            click.echo(f"note: {note}", err=True)
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
     if save_params:
-        from formats.atomic import atomic_path
-
         with atomic_path(save_params) as tmp:
             tmp.write_text(params.to_toml(), encoding="utf-8")
     with lazy_bar("filter", unit="samples", quiet=quiet) as b:
@@ -270,22 +219,36 @@ def filter_cmd(
 
 def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None, mag_mode: str | None) -> Any:
     """EkfParams from the defaults, then --params FILE, then --param NAME=VALUE, then the everyday flags."""
-    from imutool.attitude import PARAM_DOC, EkfParams
+    return ekf_params_and_notes(params_file, items, update_every, mag_mode)[0]
+
+
+def ekf_params_and_notes(
+    params_file: str | None, items: tuple[str, ...], update_every: int | None, mag_mode: str | None
+) -> tuple[Any, list[str]]:
+    """:func:`ekf_params` and the notes of the file's migrations for that run
+    (:meth:`imutool.attitude.params.ParamsFile.notes`: what changed in meaning since an older file was saved)."""
+    from imutool.attitude import PARAM_DOC, EkfParams, read_params_file
 
     values: dict[str, Any] = {}
-    if params_file:
-        values.update(vars(EkfParams.from_toml(params_file)))
+    overridden: set[str] = set()
+    pfile = read_params_file(params_file) if params_file else None
+    if pfile is not None:
+        values.update(vars(pfile.params))
     for item in items:
         name, sep, text = item.partition("=")
         name = name.strip().replace("-", "_")
         if not sep or name not in PARAM_DOC:
             raise ImutoolError(f"--param {item!r}: expected NAME=VALUE with NAME one of {', '.join(PARAM_DOC)}")
         values[name] = _param_value(name, text.strip(), getattr(EkfParams(), name))
+        overridden.add(name)
     if update_every is not None:
         values["update_every"] = update_every
+        overridden.add("update_every")
     if mag_mode is not None:
         values["mag_mode"] = mag_mode
-    return EkfParams.from_dict(values, source="--params/--param")
+        overridden.add("mag_mode")
+    params = EkfParams.from_dict(values, source="--params/--param")
+    return params, [] if pfile is None else pfile.notes(params, overridden)
 
 
 def _param_value(name: str, text: str, default: Any) -> Any:
