@@ -24,8 +24,8 @@ turn's centripetal acceleration U·r is removed along the body's y axis.
 
 Usage::
 
-    python benchmarks/attitude_ship.py --quick        # 3-minute voyages, 8 cells, 1 seed (~2 min on 2 cores)
-    python benchmarks/attitude_ship.py                # 10-minute voyages, 25 cells, seeds 0-2
+    python benchmarks/attitude_ship.py --quick        # 3-minute voyages, 7 cells, 1 seed (~30 s on 2 cores)
+    python benchmarks/attitude_ship.py                # 10-minute voyages, 22 cells, seeds 0-2 (~2 min)
     python benchmarks/attitude_ship.py --param accel_lp_tau=5 --jobs 2
 """
 
