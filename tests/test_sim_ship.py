@@ -183,3 +183,92 @@ def test_ship_at_sea_cli_lever_arm(tmp_path):
         cli, ["simulate", "ship-at-sea", "-o", str(tmp_path / "x.csv"), "--duration", "5", "--set", "lever_arm=1,2"]
     )
     assert bad.exit_code != 0 and "lever_arm" in str(bad.exception) and not (tmp_path / "x.csv").exists()
+
+
+# --- ship-at-sea for the ship grid (issue 35): surge, roll to a significant amplitude, the ship's speed sources ---
+
+
+def test_ship_at_sea_surge_is_a_translation_along_the_track_and_the_sea_stays():
+    """Surge adds u(t) along the track (peak = surge_m) and nothing else; f is still Rᵀ(a − g) of the track."""
+    kw = dict(duration=60, seed=11, noise=0, turn_rate_dps=0, lever_arm="0,0,0")
+    r0 = simulate("ship-at-sea", **kw)
+    r1 = simulate("ship-at-sea", surge_m=1.2, surge_period=7.0, **kw)
+    for k in ("ref_q", "ref_heave", "ref_gyro"):
+        assert np.array_equal(r0[k], r1[k])  # the same sea: surge draws from its own stream
+    course = np.radians(30.0)
+    e1, e2 = np.array([np.cos(course), np.sin(course), 0.0]), np.array([-np.sin(course), np.cos(course), 0.0])
+    d = r1["ref_pos"] - r0["ref_pos"]
+    along, across = d @ e1, d @ e2
+    assert np.abs(across).max() < 1e-9 and np.abs(d[:, 2]).max() < 1e-9
+    assert 1.2 <= np.ptp(along) <= 2.4 + 1e-9  # u − u(0) with max|u| = 1.2 m
+    p, h = r1["ref_pos"], 1.0 / r1.meta["rate_hz"]
+    a = (p[2:] - 2 * p[1:-1] + p[:-2]) / h**2
+    assert np.abs(_body(r1["ref_q"][1:-1], a - G_NED) - r1["accel"][1:-1]).max() < 2e-3
+    # a 7 s surge of 1.2 m is ≈ 0.97 m/s² along the track: really there
+    assert np.abs((r1["accel"] - r0["accel"])[:, 0]).max() > 0.6
+    assert r1.meta["surge_peak_m"] == 1.2 and "surge_peak_m" not in r0.meta
+
+
+def test_ship_at_sea_accelerometer_at_the_lever_arm_is_the_hull_specific_force_within_noise():
+    """Noise on: accel − Rᵀ(a_sensor − g) is the accelerometer bias plus white noise of the stated density."""
+    lever = (-12.0, 3.0, -25.0)
+    r = simulate("ship-at-sea", duration=60, seed=12, lever_arm=lever, sway_m=1.5, sway_period=6.0, surge_m=0.5)
+    p, h = r["ref_pos"], 1.0 / r.meta["rate_hz"]
+    a = (p[2:] - 2 * p[1:-1] + p[:-2]) / h**2  # the sensor's own track: hull motion and lever arm together
+    resid = r["accel"][1:-1] - _body(r["ref_q"][1:-1], a - G_NED)
+    bias = np.asarray(r.meta["accel_bias_m_s2"])
+    sigma = 400e-6 * 9.80665 * np.sqrt(100.0)  # 400 µg/√Hz at 100 Hz: 0.039 m/s² per sample
+    assert np.abs(resid.mean(axis=0) - bias).max() < 0.01
+    assert np.all(np.abs(resid.std(axis=0) - sigma) < 0.2 * sigma)
+    # and the lever arm's part is large against that noise (25 m above the roll centre)
+    assert np.linalg.norm(r["ref_lever_accel"], axis=1).max() > 1.0
+
+
+def test_ship_at_sea_smoothed_sog_has_no_sway_and_the_hull_velocity_has():
+    kw = dict(duration=120, seed=13, turn_rate_dps=0, sway_m=1.5, sway_period=6.0, surge_m=0.8, surge_period=9.0)
+    hull = simulate("ship-at-sea", **kw)
+    smooth = simulate("ship-at-sea", speed_source="smoothed", **kw)
+    # the hull's velocity: the sway's 1.57 m/s across an 8 m/s track swings the course by ±11°
+    dc = (hull["cog"] - 30.0 + 180) % 360 - 180
+    assert np.ptp(dc) > 10.0 and np.ptp(hull["sog"]) > 1.0
+    # the receiver's track: the course and the speed, fix noise only (0.05 m/s on 8 m/s: 0.36°)
+    dc = (smooth["cog"] - 30.0 + 180) % 360 - 180
+    assert np.abs(dc).max() < 2.0 and np.abs(smooth["sog"] - 8.0).max() < 0.25
+    assert np.std(smooth["sog"]) < 0.06
+    assert smooth.meta["speed_source"] == "smoothed" and "speed_source" not in hull.meta
+    for k in ("ref_q", "accel", "gyro", "ref_sog"):  # the same voyage and sensors: only the GNSS columns differ
+        assert np.array_equal(hull[k], smooth[k])
+
+
+def test_ship_at_sea_gnss_velocity_columns_at_the_antenna_and_no_speed_sources():
+    arm = "-12,0,-23"
+    kw = dict(duration=30, seed=14, noise=0, lever_arm=arm, turn_start=5)
+    r = simulate("ship-at-sea", gnss_columns="both", antenna_arm=arm, **kw)
+    assert {"sog", "cog", "vel_n", "vel_e"} <= set(r.channels)
+    fixes = np.flatnonzero(np.diff(r.time % 1.0) < 0) + 1  # the rows where a new 1 Hz fix starts
+    # antenna at the sensor's place: its fixes are the sensor's own velocity (roll-induced velocity included)
+    assert np.abs(r["vel_n"][fixes] - r["ref_vel"][fixes, 0]).max() < 1e-9
+    assert np.abs(r["vel_e"][fixes] - r["ref_vel"][fixes, 1]).max() < 1e-9
+    assert np.allclose(np.hypot(r["vel_n"], r["vel_e"]), r["sog"])
+    assert r.meta["antenna_arm_m"] == [-12.0, 0.0, -23.0]
+    only = simulate("ship-at-sea", gnss_columns="vel", **kw)
+    assert "sog" not in only.channels and "vel_n" in only.channels
+    for src in ("log", "none"):
+        x = simulate("ship-at-sea", speed_source=src, **kw)
+        assert not {"sog", "cog", "vel_n", "vel_e"} & set(x.channels)
+        assert x.meta["speed_source"] == src and np.array_equal(x["accel"], r["accel"])
+    assert simulate("ship-at-sea", speed_source="log", **kw).meta["log_speed_mps"] == 8.0
+
+
+def test_ship_at_sea_roll_to_a_significant_amplitude_and_refusals():
+    import pytest
+
+    from formats.errors import ImutoolError
+
+    r = simulate("ship-at-sea", duration=300, seed=15, noise=0, turn_rate_dps=0, roll_significant_deg=25.0)
+    assert abs(2 * np.std(r["ref_roll"]) - 25.0) < 0.05  # 2σ, no turn heel here
+    assert r.meta["roll_significant_amplitude_deg"] == pytest.approx(25.0, abs=0.01)
+    assert r.meta["roll_peak_deg"] > 25.0
+    for bad in (dict(speed_source="radar"), dict(gnss_columns="nmea"), dict(antenna_arm="1,2"), dict(sway_period=0)):
+        with pytest.raises(ImutoolError):
+            simulate("ship-at-sea", duration=5, **bad)

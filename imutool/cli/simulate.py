@@ -96,10 +96,12 @@ def simulate_cmd(
     as_json: bool,
     quiet: bool,
 ) -> None:
-    """Simulate SCENARIO (ship-roll, sea-state, turn, compass-swing, mag-sphere, static, six-position, walk, ...).
+    """Simulate SCENARIO (ship-roll, ship-at-sea, sea-state, turn, compass-swing, mag-sphere, static, walk, ...).
 
     Scenario options (--set NAME=VALUE) are the keyword arguments of the scenario functions in imutool.sim; an
-    unknown name is refused with the list of valid ones."""
+    unknown name is refused with the list of valid ones. A bridge sensor on a ship with its speed sources:
+    ship-at-sea --set lever_arm=-12,0,-20 --set sway_m=1 --set speed_source=smoothed (gnss|smoothed|log|none;
+    lengths m, periods s, angles deg, lever arms body FRD from the roll centre; docs/attitude.md)."""
     if serve:
         from imutool.capture.serve import serve as serve_pty
 

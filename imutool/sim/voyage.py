@@ -1,4 +1,4 @@
-"""A ship at sea with a bridge-mounted IMU: irregular roll, pitch, heave, sway, yaw, a 360° turn, GNSS SOG/COG.
+"""A ship at sea with a bridge-mounted IMU: irregular roll, pitch, heave, sway, surge, yaw, a 360° turn, GNSS.
 
 Frames (DESIGN.md): body FRD (x bow, y starboard, z down), world NED, quaternions scalar-first body→NED,
 gravity g = +9.80665 m/s² along NED +z (down); the accelerometer measures the specific force
@@ -47,9 +47,11 @@ from imutool.sim.sensor import (
 BRIDGE_LEVER_ARM = (-30.0, 0.0, -20.0)  # m, body FRD: 30 m aft of and 20 m above the roll centre
 _BROAD_DAMPING = 0.3  # ζ of the pitch, heave, sway and yaw response spectra
 _BAND = (0.5, 1.8)  # spectral band, multiples of the natural frequency
+SPEED_SOURCES = ("gnss", "smoothed", "log", "none")  # what the ship knows of its own velocity (ship_at_sea)
+GNSS_COLUMNS = ("sog_cog", "vel", "both")  # how a GNSS velocity is written: sog/cog, vel_n/vel_e, or both
 
 
-def parse_lever_arm(value: object) -> np.ndarray:
+def parse_lever_arm(value: object, name: str = "lever_arm") -> np.ndarray:
     """A lever arm (3,) m from a sequence or a string ``"x,y,z"`` (brackets/parentheses allowed)."""
     if isinstance(value, str):
         parts = value.strip().strip("()[]").replace(";", ",").split(",")
@@ -63,7 +65,7 @@ def parse_lever_arm(value: object) -> np.ndarray:
         except (TypeError, ValueError):
             vals = []
     if len(vals) != 3 or not np.all(np.isfinite(vals)):
-        raise ImutoolError(f"lever_arm: expected three numbers x,y,z in metres (body FRD), got {value!r}")
+        raise ImutoolError(f"{name}: expected three numbers x,y,z in metres (body FRD), got {value!r}")
     return np.array(vals, dtype=float)
 
 
@@ -127,7 +129,7 @@ class VoyageMotion:
     ``omega``/``omega_dot`` (N,3) body rate rad/s and its derivative rad/s²; ``pos``/``vel``/``acc`` (N,3)
     NED position (m, origin: O at t = 0), velocity and acceleration of the hull reference point O;
     ``heave`` (N,) m positive up at O; ``course_rate`` (N,) rad/s, the turn's rate of turn; ``heel`` (N,) rad,
-    the steady-turn heel component of the roll.
+    the steady-turn heel component of the roll; ``course`` (N,) rad, the track's direction (NED, from north).
     """
 
     t: np.ndarray
@@ -141,6 +143,7 @@ class VoyageMotion:
     heave: np.ndarray
     course_rate: np.ndarray
     heel: np.ndarray
+    course: np.ndarray | None = None
 
     def lever_accel(self, lever_arm: np.ndarray) -> np.ndarray:
         """ω̇ × r + ω × (ω × r) (N,3), body FRD m/s², for a sensor at ``lever_arm`` (m, FRD) from O."""
@@ -176,6 +179,9 @@ def voyage_motion(
     heave_period: float = 8.0,
     sway_m: float = 0.5,
     sway_period: float = 10.0,
+    surge_m: float = 0.0,
+    surge_period: float = 10.0,
+    roll_significant_deg: float = 0.0,
     yaw_deg: float = 1.5,
     yaw_period: float = 12.0,
     severity: float = 1.0,
@@ -193,7 +199,9 @@ def voyage_motion(
     """The vessel's noise-free motion at times ``t`` (s); options as in :func:`ship_at_sea`.
 
     The random phases are drawn first from ``rng`` (or ``default_rng(seed)``), in a fixed order that does not
-    depend on the option values, so runs that differ only in lever arm, turn or noise share the same sea.
+    depend on the option values, so runs that differ only in lever arm, turn or noise share the same sea. The
+    surge's phases come from a second stream, ``default_rng([seed, 1])`` (``seed`` is then the scenario's), so a
+    run with surge has the same roll, pitch, heave and sway as one without.
     """
     t = np.asarray(t, dtype=float)
     rng = np.random.default_rng(seed) if rng is None else rng
@@ -209,6 +217,15 @@ def voyage_motion(
     k = float(severity)
     peaks = [k * np.radians(roll_deg), k * np.radians(pitch_deg), k * np.radians(yaw_deg), k * heave_m, k * sway_m]
     wave = _synthesise(t, parts, peaks)  # (deriv, dof, N)
+    if roll_significant_deg > 0:  # the roll scaled to a significant amplitude 2σ instead of a peak
+        sd = float(np.std(wave[0, 0]))
+        wave[:, 0] *= (k * np.radians(roll_significant_deg) / (2 * sd)) if sd > 0 else 0.0
+    if surge_m != 0:
+        extra = np.random.default_rng([int(seed), 1])
+        surge = _synthesise(t, [_spectrum_components(extra, surge_period, _BROAD_DAMPING, n_other)], [k * surge_m])
+        u, du, ddu = surge[:, 0]
+    else:
+        u = du = ddu = None
 
     # the turn: rate of turn r·(S(u1) − S(u2)), quintic ramps of turn_ramp s, total heading change turn_angle_deg
     r = np.radians(turn_rate_dps)
@@ -267,7 +284,11 @@ def voyage_motion(
         + (speed_mps * chi_d + dds - s * chi_d**2)[:, None] * e2
         + ddh[:, None] * up
     )
-    return VoyageMotion(t, euler, q, omega, omega_dot, pos, vel, acc, h, chi_d, heel)
+    if u is not None:  # surge u along the track: d(u e1)/dt = u̇ e1 + u χ̇ e2, and again
+        pos = pos + u[:, None] * e1 - u[0] * e1[0]
+        vel = vel + du[:, None] * e1 + (u * chi_d)[:, None] * e2
+        acc = acc + (ddu - u * chi_d**2)[:, None] * e1 + (2 * du * chi_d + u * chi_dd)[:, None] * e2
+    return VoyageMotion(t, euler, q, omega, omega_dot, pos, vel, acc, h, chi_d, heel, course)
 
 
 def ship_at_sea(
@@ -285,6 +306,9 @@ def ship_at_sea(
     heave_period: float = 8.0,
     sway_m: float = 0.5,
     sway_period: float = 10.0,
+    surge_m: float = 0.0,
+    surge_period: float = 10.0,
+    roll_significant_deg: float = 0.0,
     yaw_deg: float = 1.5,
     yaw_period: float = 12.0,
     severity: float = 1.0,
@@ -309,6 +333,9 @@ def ship_at_sea(
     mag_declination_deg: float = 0.0,
     gnss_rate_hz: float = 1.0,
     gnss_vel_noise_mps: float = 0.05,
+    speed_source: str = "gnss",
+    gnss_columns: str = "sog_cog",
+    antenna_arm: object = None,
 ) -> Recording:
     """A vessel at sea with the IMU on the bridge: the MSC.363(92) inclinometer's hard case, with truth.
 
@@ -337,6 +364,17 @@ def ship_at_sea(
     a receiver with lever-arm compensation), fixes at ``gnss_rate_hz`` 1 Hz held until the next fix, with
     white noise of ``gnss_vel_noise_mps`` 0.05 m/s on the north and east velocity.
 
+    More of the sea (all off by default; the defaults' output is unchanged): ``surge_m`` (peak, m) at
+    ``surge_period`` (s), a translation of O along the track (its phases from a second random stream, so the
+    rest of the sea stays the same); ``roll_significant_deg`` > 0 scales the wave roll to that significant
+    amplitude 2σ (deg) instead of the peak ``roll_deg`` (``meta["roll_peak_deg"]`` then gives the peak).
+    The ship's own speed, ``speed_source``: ``gnss`` (above), ``smoothed`` (the receiver's track: the ship's
+    speed ``speed_mps`` along the course, no sway, surge or yaw in it, same fix rate and noise), ``log`` (no
+    GNSS columns; ``meta["log_speed_mps"]`` is the log's constant speed through the water) or ``none``.
+    ``gnss_columns``: ``sog_cog`` (default), ``vel`` (``vel_n``, ``vel_e`` m/s, NED, held like sog/cog) or
+    ``both``. ``antenna_arm`` "x,y,z" (m, body FRD from O): the GNSS velocity is the antenna's, O's plus
+    R (ω × r_a) — what a receiver without lever-arm compensation reports; default: O's.
+
     Truth: ``ref_roll/ref_pitch/ref_heading`` (deg), ``ref_q`` (body→NED), ``ref_gyro`` (rad/s),
     ``ref_gyro_bias``, ``ref_accel`` (error-free specific force at the sensor), ``ref_mag``, ``ref_sog``
     (m/s), ``ref_cog`` (deg), ``ref_rate_of_turn`` (deg/s, heading rate), ``ref_heave`` (m, up, at O),
@@ -350,10 +388,23 @@ def ship_at_sea(
     if gm_m <= 0:
         raise ImutoolError(f"ship-at-sea: gm_m must be positive (metacentric height, m), got {gm_m}")
     lever = parse_lever_arm(lever_arm)
+    if speed_source not in SPEED_SOURCES:
+        raise ImutoolError(f"ship-at-sea: speed_source {speed_source!r}: expected one of {', '.join(SPEED_SOURCES)}")
+    if gnss_columns not in GNSS_COLUMNS:
+        raise ImutoolError(f"ship-at-sea: gnss_columns {gnss_columns!r}: expected one of {', '.join(GNSS_COLUMNS)}")
+    antenna = None if antenna_arm is None or antenna_arm == "" else parse_lever_arm(antenna_arm, "antenna_arm")
+    for name, period in (("sway_period", sway_period), ("surge_period", surge_period)):
+        if not period > 0:
+            raise ImutoolError(f"ship-at-sea: {name} must be positive (s), got {period}")
+    if not (np.isfinite(roll_significant_deg) and roll_significant_deg >= 0):
+        raise ImutoolError(
+            f"ship-at-sea: roll_significant_deg must be ≥ 0 (deg; 0 = use roll_deg), got {roll_significant_deg}"
+        )
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
     mo = voyage_motion(
         t,
+        seed,
         rng=rng,
         roll_deg=roll_deg,
         roll_period=roll_period,
@@ -364,6 +415,9 @@ def ship_at_sea(
         heave_period=heave_period,
         sway_m=sway_m,
         sway_period=sway_period,
+        surge_m=surge_m,
+        surge_period=surge_period,
+        roll_significant_deg=roll_significant_deg,
         yaw_deg=yaw_deg,
         yaw_period=yaw_period,
         severity=severity,
@@ -422,6 +476,27 @@ def ship_at_sea(
         "gnss": f"sog/cog of the hull reference point at {gnss_rate_hz} Hz, held between fixes",
         "ref_pos_origin": "hull reference point at t=0 (NED, m); ref_pos/ref_vel are the sensor's",
     }
+    # options away from their defaults are recorded; the defaults' metadata stays as it was
+    if surge_m != 0:
+        meta["surge_peak_m"] = surge_m * severity
+        meta["surge_period_s"] = surge_period
+    if roll_significant_deg > 0:
+        meta["roll_significant_target_deg"] = roll_significant_deg * severity
+        meta["roll_peak_deg"] = round(float(np.degrees(np.abs(mo.euler[0, 0] - mo.heel).max())), 3)
+    if speed_source != "gnss" or gnss_columns != "sog_cog" or antenna is not None:
+        meta["speed_source"] = speed_source
+        meta["gnss"] = {
+            "gnss": f"velocity of the {'antenna' if antenna is not None else 'hull reference point'} at "
+            f"{gnss_rate_hz} Hz, held between fixes, columns {gnss_columns}",
+            "smoothed": f"the receiver's track (speed_mps along the course, no sway or surge) at {gnss_rate_hz} Hz, "
+            f"held between fixes, columns {gnss_columns}",
+            "log": f"no GNSS; the log's constant speed through the water, log_speed_mps = {speed_mps}",
+            "none": "no GNSS and no log: the ship's velocity is unknown",
+        }[speed_source]
+        if antenna is not None:
+            meta["antenna_arm_m"] = antenna.tolist()
+        if speed_source == "log":
+            meta["log_speed_mps"] = speed_mps
     rec = imu_recording(
         t,
         mo.q,
@@ -436,14 +511,24 @@ def ship_at_sea(
     )
 
     # GNSS: fixes at k / gnss_rate_hz, zero-order hold until the next fix
-    vh = mo.vel[:, :2]
+    vh = mo.vel[:, :2]  # O's horizontal velocity: ref_sog / ref_cog
     if gnss_rate_hz > 0:
         fix = np.searchsorted(t, np.floor(t * gnss_rate_hz + 1e-9) / gnss_rate_hz - 1e-9, side="left")
     else:
         fix = np.zeros(len(t), dtype=int)
-    vf = vh + (rng.normal(0.0, gnss_vel_noise_mps, vh.shape) if noise and gnss_vel_noise_mps > 0 else 0.0)
-    rec.add("sog", np.hypot(vf[:, 0], vf[:, 1])[fix], "m/s")
-    rec.add("cog", np.mod(np.degrees(np.arctan2(vf[:, 1], vf[:, 0])), 360.0)[fix], "deg")
+    if speed_source == "smoothed":  # the receiver's track: along the course at the ship's speed, no sway or surge
+        va = speed_mps * np.stack([np.cos(mo.course), np.sin(mo.course)], axis=1)
+    elif antenna is not None:  # the antenna's own velocity, O's plus R (ω × r_a)
+        va = mo.sensor_track(antenna)[1][:, :2]
+    else:
+        va = vh
+    vf = va + (rng.normal(0.0, gnss_vel_noise_mps, va.shape) if noise and gnss_vel_noise_mps > 0 else 0.0)
+    if speed_source in ("gnss", "smoothed") and gnss_columns in ("sog_cog", "both"):
+        rec.add("sog", np.hypot(vf[:, 0], vf[:, 1])[fix], "m/s")
+        rec.add("cog", np.mod(np.degrees(np.arctan2(vf[:, 1], vf[:, 0])), 360.0)[fix], "deg")
+    if speed_source in ("gnss", "smoothed") and gnss_columns in ("vel", "both"):
+        rec.add("vel_n", vf[fix, 0], "m/s")
+        rec.add("vel_e", vf[fix, 1], "m/s")
     rec.add("ref_sog", np.hypot(vh[:, 0], vh[:, 1]), "m/s")
     rec.add("ref_cog", np.mod(np.degrees(np.arctan2(vh[:, 1], vh[:, 0])), 360.0), "deg")
     rec.add("ref_rate_of_turn", np.degrees(mo.euler[2, 1]), "deg/s")
