@@ -48,9 +48,10 @@ def data(tmp_path_factory) -> dict[str, str]:
     from imutool.report.simulate import heading_test, inclinometer_test
 
     d = tmp_path_factory.mktemp("inputs")
-    paths = {k: str(d / f"{k}.csv") for k in ("sea", "walk", "array", "pr", "att", "inc_dut", "inc_ref")}
+    paths = {k: str(d / f"{k}.csv") for k in ("sea", "walk", "array", "pr", "att", "inc_dut", "inc_ref", "roll")}
     paths.update({k: str(d / f"{k}.csv") for k in ("hdg_dut", "hdg_ref")})
     formats.write(simulate("sea-state", duration=60, seed=1), paths["sea"])
+    formats.write(simulate("ship-roll", duration=30, seed=5), paths["roll"])
     formats.write(simulate("walk", seed=2, n_steps=4), paths["walk"])
     formats.write(simulate("accel-array", duration=20, rate_hz=100, seed=4), paths["array"])
     formats.write(simulate("parametric-roll", duration=400.0, rate_hz=10.0, seed=0), paths["pr"])
@@ -290,3 +291,42 @@ def test_batch_calls_the_routes(data, tmp_path, monkeypatch, capsys):
     assert code == 0 and (tmp_path / "b" / "walk.csv").read_bytes() == (tmp_path / "single.csv").read_bytes()
     assert res["walk"]["figures"]["intervals"] == single["intervals"] > 3
     assert res["walk"]["figures"]["samples"] == single["samples"]
+
+
+def test_filter(data, tmp_path, monkeypatch):
+    """filter: the library's run_filter writes the command's file byte for byte, and its summary with what
+    loading did (``validation``) is the command's --json."""
+    from imutool.filtering import run_filter
+    from imutool.routes import with_inputs
+
+    args = ["filter", data["roll"], "-o", "est.csv", "--lever-arm", "0,0,-3"]
+
+    def route() -> RouteResult:
+        res = run_filter(data["roll"], "est.csv", lever_arm=[0.0, 0.0, -3.0])
+        inputs = [{"input": data["roll"], **res.validation}]
+        return RouteResult(with_inputs(res.summary, inputs), inputs, res.recording)
+
+    s = _same(tmp_path, monkeypatch, args, route, ["est.csv"])
+    assert s["method"] == "ekf" and s["rows"] == 6001
+
+
+def test_batch_filter_calls_the_route(data, tmp_path, monkeypatch, capsys):
+    """`imutool batch filter` runs the command's library route in the worker (the command line is never run):
+    the same file as `imutool filter`, the same rows."""
+    import imutool.cli.batch as cli_batch
+    from imutool.cli import main
+
+    def no_cli(*a, **k):
+        raise AssertionError("batch ran the command line, not the route")
+
+    monkeypatch.setattr(cli_batch, "run_command", no_cli)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main(
+            ["batch", "filter", data["roll"], "-o", "b/{stem}.csv", "-j", "1", "--json", "--args", "--lever-arm 0,0,-3"]
+        )
+    out = json.loads(capsys.readouterr().out)
+    assert e.value.code == 0, out
+    code, single = _cli(["filter", data["roll"], "-o", "single.csv", "--lever-arm", "0,0,-3"])
+    assert code == 0 and (tmp_path / "b" / "roll.csv").read_bytes() == (tmp_path / "single.csv").read_bytes()
+    assert out["results"][0]["rows"] == single["rows"] == 6001

@@ -1,7 +1,8 @@
 """`imutool filter INPUT -o OUTPUT`: roll/pitch/heading by quaternion EKF, compass KF or low-pass baseline.
 
-Only option parsing and printing here; the work (loading, streaming, GNSS, smoother summary) is
-:func:`imutool.filtering.run_filter`, the same route `imutool batch filter` and a Python user take.
+Option parsing and printing here; :func:`filter_route` maps the parsed options onto
+:func:`imutool.filtering.run_filter` (the work: loading, streaming, GNSS, smoother summary), and is what
+`imutool batch filter` calls; a Python user calls ``run_filter`` directly.
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ from imutool.cli.common import (
     note_input,
     output_options,
     parse_vector,
+    route_of,
     safe_outputs,
     strict_requested,
 )
+from imutool.routes import OnInput, RouteResult
 
 
 @click.command(
@@ -142,7 +145,21 @@ from imutool.cli.common import (
 @input_options
 @output_options
 @safe_outputs("output", "save_params")
-def filter_cmd(
+def filter_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
+    """Estimate roll, pitch and heading (deg) from INPUT (gyro/accel/mag, or an NMEA heading for compass).
+
+    Output columns: roll, pitch, heading (deg), qw..qz (body→NED), gyro_bias_x..z (rad/s), roll_std,
+    pitch_std, heading_std (deg, one sigma), accel_rejected, mag_rejected, rest, inconsistent (0/1: the
+    filter's self-check); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
+    works directly. EKF tuning: --params FILE / --param NAME=VALUE (list and units: --save-params).
+    """
+    with lazy_bar("filter", unit="samples", quiet=quiet) as b:
+        res = filter_route(quiet=quiet, on_input=note_input, progress=b, **options)
+    _warn(res.summary)
+    emit_summary(res.summary, as_json, quiet)
+
+
+def filter_route(
     input_path: str,
     output: str,
     method: str,
@@ -165,17 +182,14 @@ def filter_cmd(
     paper_init: bool,
     chunk_rows: int,
     stream_mb: float,
-    as_json: bool,
-    quiet: bool,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    progress: Any = None,
     **io: Any,
-) -> None:
-    """Estimate roll, pitch and heading (deg) from INPUT (gyro/accel/mag, or an NMEA heading for compass).
-
-    Output columns: roll, pitch, heading (deg), qw..qz (body→NED), gyro_bias_x..z (rad/s), roll_std,
-    pitch_std, heading_std (deg, one sigma), accel_rejected, mag_rejected, rest, inconsistent (0/1: the
-    filter's self-check); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
-    works directly. EKF tuning: --params FILE / --param NAME=VALUE (list and units: --save-params).
-    """
+) -> RouteResult:
+    """Parsed options → :func:`imutool.filtering.run_filter` (the same for the command and ``imutool batch``):
+    the EKF's parameters from --params/--param (the file's migration notes on stderr unless ``quiet``), the
+    lever arm, the compass model, --save-params written."""
     from imutool.compass import CompassParams  # here, not at the top: `imutool filter --help` loads no numba
     from imutool.filtering import run_filter
 
@@ -189,32 +203,38 @@ def filter_cmd(
     if save_params:
         with atomic_path(save_params) as tmp:
             tmp.write_text(params.to_toml(), encoding="utf-8")
-    with lazy_bar("filter", unit="samples", quiet=quiet) as b:
-        res = run_filter(
-            input_path,
-            output,
-            method=method,
-            params=params,
-            smooth=smooth,
-            lever_arm=lever,
-            gnss=gnss_path if gnss_path and not no_gnss else None,
-            use_gnss=not no_gnss,
-            heading=heading_path,
-            cutoff_hz=cutoff,
-            order=order,
-            compass=CompassParams(
-                q=comp_q, r=comp_r, model=compass_model, variation_deg=variation, paper_init=paper_init
-            ),
-            params_file=params_file,
-            chunk_rows=chunk_rows,
-            stream_mb=stream_mb,
-            progress=b,
-            strict=strict_requested(),
-            on_input=note_input,
-            **io,
-        )
-    _warn(res.summary)
-    emit_summary(res.summary, as_json, quiet)
+    inputs: list[dict[str, Any]] = []
+
+    def seen(path: str, report: dict[str, Any]) -> None:
+        if on_input is not None:
+            on_input(path, report)
+        inputs.append({"input": path, **report})
+
+    res = run_filter(
+        input_path,
+        output,
+        method=method,
+        params=params,
+        smooth=smooth,
+        lever_arm=lever,
+        gnss=gnss_path if gnss_path and not no_gnss else None,
+        use_gnss=not no_gnss,
+        heading=heading_path,
+        cutoff_hz=cutoff,
+        order=order,
+        compass=CompassParams(q=comp_q, r=comp_r, model=compass_model, variation_deg=variation, paper_init=paper_init),
+        params_file=params_file,
+        chunk_rows=chunk_rows,
+        stream_mb=stream_mb,
+        progress=progress,
+        strict=strict_requested(),
+        on_input=seen,
+        **io,
+    )
+    return RouteResult(res.summary, inputs, res.recording)
+
+
+filter_cmd = route_of(filter_route, ("output", "save_params"))(filter_cmd)
 
 
 def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None, mag_mode: str | None) -> Any:
