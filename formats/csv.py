@@ -33,6 +33,7 @@ from .atomic import AtomicChunkWriter, atomic_path
 from .columns import Mapping, infer_mapping, load_profile, mapping_from_profile, parse_mapping_option
 from .errors import ImutoolError
 from .recording import Recording, canonical_unit, group_columns
+from .threads import thread_budget
 
 MAGIC = "# imutool-csv: 1"
 
@@ -571,12 +572,9 @@ def column_decimals(rec: Recording) -> np.ndarray | None:
 
 
 def _threads() -> int:
-    """Worker threads for the compiled kernels (they release the GIL): the usable cores, at most 4."""
-    try:
-        n = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        n = os.cpu_count() or 1
-    return max(1, min(4, n))
+    """Worker threads for the compiled kernels (they release the GIL): this process's thread budget
+    (:func:`formats.threads.thread_budget`: the usable cores, or a batch worker's share), at most 4."""
+    return max(1, min(4, thread_budget()))
 
 
 def _write_rows(f: Any, rec: Recording) -> None:

@@ -41,6 +41,7 @@ from typing import Any
 
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.threads import limit_threads, usable_cores
 
 # what a directory walk picks up by default (a folder holding metadata.yaml is one ROS2 bag)
 DATA_PATTERNS = ("*.csv", "*.parquet", "*.pq", "*.bag", "*.mcap", "*.db3", "*.nmea")
@@ -406,11 +407,27 @@ def execute(
     return res
 
 
-def usable_cores() -> int:
+@dataclass(frozen=True)
+class ThreadCapped:
+    """A job function run under a thread budget (:func:`formats.threads.limit_threads`) in its worker: N jobs
+    at once on C cores get C ÷ N threads each, so their CSV, pyarrow, numba and BLAS pools never oversubscribe.
+    ``threads`` None: the Dask worker's usable cores ÷ its threads (a remote cluster's machines are not ours)."""
+
+    fn: Callable[[Job], JobResult]
+    threads: int | None
+
+    def __call__(self, job: Job) -> JobResult:
+        limit_threads(self.threads or _dask_worker_share())
+        return self.fn(job)
+
+
+def _dask_worker_share() -> int:
     try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
+        from dask.distributed import get_worker
+
+        return max(1, usable_cores() // max(1, get_worker().state.nthreads))
+    except (ImportError, ValueError, AttributeError):
+        return 1
 
 
 def run_batch(
@@ -476,13 +493,16 @@ def _dispatch(
         return
     n = workers or usable_cores()
     if scheduler:
-        yield from _dispatch_dask(fn, jobs, index, n, scheduler, threads)
+        share = max(1, usable_cores() // (n * max(1, threads))) if scheduler == "local" else None
+        yield from _dispatch_dask(ThreadCapped(fn, share), jobs, index, n, scheduler, threads)
         return
     if n <= 1:
         for i, job in zip(index, jobs, strict=True):
             yield i, fn(job)
         return
-    with ProcessPoolExecutor(max_workers=min(n, len(jobs))) as pool:
+    n = min(n, len(jobs))
+    fn = ThreadCapped(fn, max(1, usable_cores() // n))
+    with ProcessPoolExecutor(max_workers=n) as pool:
         pending = {pool.submit(fn, job): i for i, job in zip(index, jobs, strict=True)}
         try:
             while pending:

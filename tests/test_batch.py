@@ -295,3 +295,36 @@ def test_progress_is_the_shared_bar_and_respects_quiet(tmp_path):
     assert "batch:" in term and "/3 [" in term and "file/s" in term, term  # done/total, elapsed<ETA, rate
     rc, term = _on_pty(["batch", "convert", "in", "-o", "b/{stem}.parquet", "-j", "1", "--quiet"], tmp_path)
     assert rc == 0 and "batch:" not in term and "file" not in term, term
+
+
+def _threads_seen(job: batch.Job) -> dict:
+    """A job that reports the thread budget it ran under (in its worker process)."""
+    from formats.csv import _threads
+    from formats.threads import thread_budget
+
+    return {
+        "rows": 1,
+        "budget": thread_budget(),
+        "csv_threads": _threads(),
+        "omp": int(os.environ.get("OMP_NUM_THREADS", "0")),
+    }
+
+
+@pytest.mark.parametrize("scheduler", [None, "local"])
+def test_workers_share_the_cores_and_no_job_takes_more(tmp_path, scheduler):
+    """N workers on C cores: each job's thread pools (CSV parser/writer, pyarrow, numba, BLAS) get C ÷ N threads,
+    so N workers never oversubscribe; one worker (no pool) leaves a job the whole machine."""
+    from formats.threads import usable_cores
+
+    if scheduler:
+        pytest.importorskip("dask.distributed", reason="dask[distributed] not installed (the [dask] extra)")
+    cores = usable_cores()
+    jobs = [batch.Job(str(tmp_path / f"in{k}.csv")) for k in range(4)]
+    share = max(1, cores // 2)
+    res = batch.run_batch(jobs, _threads_seen, workers=2, scheduler=scheduler, figures=("budget", "csv_threads", "omp"))
+    assert [r.status for r in res] == ["ok"] * 4, [r.error for r in res]
+    for r in res:
+        assert r.figures == {"budget": share, "csv_threads": min(4, share), "omp": share}, r.figures
+    if scheduler is None:
+        (one,) = batch.run_batch(jobs[:1], _threads_seen, workers=1, figures=("budget",))
+        assert one.figures["budget"] == cores  # in this process: not capped
