@@ -76,6 +76,7 @@ class JobResult:
     summary: dict[str, Any] = field(default_factory=dict)
     fields: dict[str, str] = field(default_factory=dict)
     worker: str = ""
+    cpu_s: float = 0.0  # CPU time of the job in its worker (all its threads); with duration_s: its parallelism
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -365,7 +366,7 @@ def execute(
     signature: str | None = None,
 ) -> JobResult:
     """Run one job in the current process: time it, turn any exception into a one-line error, write the marker."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     try:
         if job.output:
@@ -385,6 +386,7 @@ def execute(
             summary,
             dict(job.fields),
             worker,
+            time.process_time() - c0,
         )
     except Exception as e:  # one job's failure never stops the batch
         msg = str(e) if isinstance(e, ImutoolError) else f"{type(e).__name__}: {e}"
@@ -663,5 +665,6 @@ def totals(results: list[JobResult], wall_s: float) -> dict[str, Any]:
         **c,
         "rows": sum(r.rows or 0 for r in results if r.status == "ok"),
         "job_seconds": round(sum(r.duration_s for r in ran), 3),
+        "job_cpu_seconds": round(sum(r.cpu_s for r in ran), 3),
         "wall_seconds": round(wall_s, 3),
     }
