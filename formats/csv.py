@@ -1,6 +1,6 @@
 """imutool CSV and foreign CSV: read (whole or streamed in chunks) and write (atomic).
 
-imutool CSV (DESIGN.md)::
+imutool CSV (docs/formats.md)::
 
     # imutool-csv: 1
     # key: value                   (metadata: sensor, rate_hz, frame, mounting, source, units, ...)

@@ -1,6 +1,6 @@
 """Rotations, Euler angles and frame conventions (vectorised numpy).
 
-Conventions (DESIGN.md): body frame FRD (x bow, y starboard, z down), world frame NED. Quaternions are
+Conventions (docs/architecture.md): body frame FRD (x bow, y starboard, z down), world frame NED. Quaternions are
 scalar-first ``[w, x, y, z]`` and rotate body vectors into NED: ``v_ned = q ⊗ v_body ⊗ q*``.
 Euler angles are the aerospace ZYX sequence: heading ψ about z (clockwise from north seen from above),
 pitch θ about y (bow up positive), roll φ about x (starboard down positive); all in radians here.

@@ -1,4 +1,4 @@
-"""The recording: one in-memory model for every reader, writer and algorithm (DESIGN.md).
+"""The recording: one in-memory model for every reader, writer and algorithm (docs/architecture.md).
 
 A :class:`Recording` is ``time`` (float64 s), named channels of shape (N,) or (N, k), per-channel units and
 a metadata dict. Vector channels remember the CSV column names they came from (``gyro`` ← ``gyro_x,
@@ -18,7 +18,7 @@ from . import units as _units
 from .errors import ImutoolError
 from .frames import matrix_to_quat, parse_axis_remap, quat_conjugate, quat_multiply, rotation_about_axes
 
-# Canonical channels and the unit they carry in an imutool CSV (DESIGN.md).
+# Canonical channels and the unit they carry in an imutool CSV (docs/formats.md).
 CANONICAL_UNITS = {
     "gyro": "rad/s",
     "accel": "m/s^2",

@@ -1,6 +1,6 @@
 """Units: names users write, the quantity they measure and the factor to SI.
 
-SI inside (DESIGN.md): s, rad/s, m/s², µT (the magnetometer's SI-prefixed working unit), rad, m, m/s, °C.
+SI inside (docs/architecture.md): s, rad/s, m/s², µT (the magnetometer's SI-prefixed working unit), rad, m, m/s, °C.
 Angle channels are degrees at every user-facing surface; :data:`ANGLE_UNITS` converts both ways.
 """
 

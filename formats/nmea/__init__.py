@@ -5,7 +5,7 @@ The package: :mod:`.framing` (the checksum — imutool's one implementation — 
 binary attitude frames), and this module (standard sentences, writers, whole logs). Every public name is
 importable from ``formats.nmea``.
 
-Units and signs at this surface (DESIGN.md, standards.md §2):
+Units and signs at this surface (docs/nmea.md, standards.md §2):
 
 - angles in degrees; heading clockwise from north in [0, 360); rate of turn in deg/min (+ = bow to starboard);
 - roll (= heel) positive **starboard down**, pitch positive **bow up**, heave in metres positive **up**;

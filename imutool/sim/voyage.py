@@ -1,6 +1,6 @@
 """A ship at sea with a bridge-mounted IMU: irregular roll, pitch, heave, sway, surge, yaw, a 360° turn, GNSS.
 
-Frames (DESIGN.md): body FRD (x bow, y starboard, z down), world NED, quaternions scalar-first body→NED,
+Frames (docs/architecture.md): body FRD (x bow, y starboard, z down), world NED, quaternions scalar-first body→NED,
 gravity g = +9.80665 m/s² along NED +z (down); the accelerometer measures the specific force
 f = Rᵀ(a − g_ned), so it reads −g on z at rest. Angles in the options are degrees, everything inside SI.
 
