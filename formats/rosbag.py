@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from . import kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from .atomic import atomic_path
 from .errors import ImutoolError
 from .frames import Q_ENU_TO_NED, Q_FLU_TO_FRD, euler_to_quat, quat_conjugate, quat_multiply

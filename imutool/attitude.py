@@ -68,6 +68,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from numba import njit
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError

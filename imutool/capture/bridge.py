@@ -27,6 +27,7 @@ from functools import reduce
 import numpy as np
 from numba import njit
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
 from formats.units import STANDARD_GRAVITY
 
