@@ -49,7 +49,7 @@ _SITE = Path(__file__).resolve().parent.parent  # the folder holding the three p
 # single-threaded on a 2-core machine with an empty cache). First match wins, so longer prefixes come first.
 KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("imutool.attitude", "the filter's kernels", 90.0),
-    ("imutool.gyro_check", "the filter's gyro check", 3.0),
+    ("imutool.gyro_check", "the filter's kernels", 3.0),
     ("imutool.compass", "the compass filter's kernel", 2.0),
     ("imutool.heave", "the heave filter's kernels", 8.0),
     ("imutool.ins", "the INS kernels", 10.0),
@@ -58,7 +58,7 @@ KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("imutool.capture", "the bridge-frame decoder", 3.0),
     ("calibration.magnetometer", "the magnetometer calibration kernel", 2.0),
     ("calibration.allan", "the Allan deviation kernel", 2.0),
-    ("formats.csv_engine", "the CSV reader and writer", 10.0),
+    ("formats.csv_engine", "the CSV reader and writer", 12.0),
     ("formats.rosbag", "the ROS bag kernels", 6.0),
 )
 
@@ -171,6 +171,11 @@ def cache_folder() -> Path | None:
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
     _State.folder, _State.persistent = folder, False
     return folder
+
+
+def cache_is_persistent() -> bool:
+    """False when no folder that outlives the process could be written: every run compiles again."""
+    return _State.persistent
 
 
 def _our_subfolder(py_file: str) -> str | None:

@@ -43,7 +43,8 @@ def test_cold_cache_says_it_compiles_once_and_caches_in_the_user_folder(tmp_path
     first = _cli(["allan", "s.parquet", "-o", "a.yaml"], tmp_path, env)
     assert first.returncode == 0, first.stderr
     said = [line for line in first.stderr.splitlines() if line.startswith("imutool: compiling")]
-    assert said == ["imutool: compiling the Allan deviation kernel (first run only, ~2 s)"], first.stderr
+    assert len(said) == 1, first.stderr  # once, for the one kernel group the command compiles
+    assert said[0].startswith("imutool: compiling the Allan deviation kernel (first run only"), said
     second = _cli(["allan", "s.parquet", "-o", "b.yaml"], tmp_path, env)
     assert second.returncode == 0, second.stderr
     assert "compiling" not in second.stderr, second.stderr
