@@ -45,8 +45,9 @@ KEEP_VERSIONS = 3  # version folders kept (the current one included)
 _VERSION_DIR = re.compile(r"^kernels-[0-9a-f]{12}$")
 _SITE = Path(__file__).resolve().parent.parent  # the folder holding the three packages (site-packages or a clone)
 
-# kernel groups: module-name prefix -> (what the user is told is compiling, about how long it takes, s, measured
-# single-threaded on a 2-core machine with an empty cache). First match wins, so longer prefixes come first.
+# kernel groups: module-name prefix -> (what the user is told is compiling, about how long an empty cache takes to
+# compile it on this project's 2-core machine without other load, s; twice that and more under load). A module of
+# the three packages not listed here is announced by its own name. Kernels moved or re-timed: update this table.
 KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("imutool.attitude", "the filter's kernels", 90.0),
     ("imutool.gyro_check", "the filter's kernels", 3.0),

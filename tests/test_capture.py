@@ -311,6 +311,7 @@ def test_modbus_profile_errors_name_the_register(tmp_path):
 
 
 # -- soak (one-minute CI version; the 10-minute run is benchmarks/capture_soak.py) ------------------------------
+@pytest.mark.slow
 def test_soak_zero_silent_loss(tmp_path):
     sys.path.insert(0, str(ROOT / "benchmarks"))
     try:
