@@ -122,6 +122,7 @@ def test_console_script_declared(wheel, wheel_names):
     assert re.search(r"^imutool\s*=\s*imutool\.cli:main\s*$", text, flags=re.M), text
 
 
+@pytest.mark.slow
 def test_uninstall_leaves_nothing_behind_after_kernels_compiled(wheel, tmp_path):
     """A user's lifecycle in a fresh venv: install the wheel, run a compiled kernel (cold per-user cache, no
     NUMBA_CACHE_DIR), uninstall — nothing of imutool is left in site-packages (numba once cached kernels in the
