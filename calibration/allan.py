@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import nnls
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
 
 BI_FACTOR = 0.6643  # √(2 ln 2 / π)

@@ -41,6 +41,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
 
 KINDS = ("offset", "diag", "full", "auto")

@@ -35,6 +35,7 @@ import numpy as np
 from numba import njit
 
 import formats
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import input_notes

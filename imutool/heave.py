@@ -43,6 +43,7 @@ from scipy import signal
 from scipy.linalg import expm
 
 import formats
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import input_notes

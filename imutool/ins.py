@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 import formats
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.csv import format_array

@@ -310,6 +310,7 @@ def test_initialisation_skips_leading_nan_rows_and_heading_stays_below_360():
     assert np.all((h >= 0) & (h < 360)) and np.all(h == 0.0)
 
 
+@pytest.mark.slow
 def test_cli_streamed_filter_equals_in_memory(tmp_path):
     """Large CSVs are filtered in chunks (parse, EKF and write overlapping in threads): the output must equal the
     in-memory run value for value (mounting applied in both), and a malformed row is counted, not fatal."""
@@ -851,6 +852,7 @@ BROAD_VQF = {  # VQF 2.1.2 causal 9D, default parameters, total / inclination RM
 }
 
 
+@pytest.mark.slow
 def test_broad_all_16_trials_no_divergence(shared):
     """All 16 shared BROAD trials, one default parameter set (chosen on all of them and on the simulator, never on
     one file; benchmarks/attitude_broad.py). Issue 13's acceptance: no trial above the ceiling max(2 × VQF,
@@ -1380,6 +1382,7 @@ def test_projected_accel_update_is_the_joseph_form_of_its_gain():
         assert np.allclose(dx, Kp @ y, rtol=1e-9, atol=1e-14)
 
 
+@pytest.mark.slow
 def test_streamed_filter_on_parquet_equals_in_memory(tmp_path):
     """A Parquet input streams through `filter` by row groups (bounded memory) into a Parquet or CSV output, value
     for value the same estimate as the in-memory run."""

@@ -160,6 +160,7 @@ def _stamp(p: Path) -> tuple[int, int]:
     return st.st_ino, st.st_mtime_ns
 
 
+@pytest.mark.slow
 def test_resume_after_sigkill(tmp_path):
     n_files = 8
     src = tmp_path / "in"
@@ -214,6 +215,7 @@ def test_resume_after_sigkill(tmp_path):
     assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_identical_outputs(tmp_path, capsys):
     pytest.importorskip("dask.distributed", reason="dask[distributed] not installed (the [dask] extra)")
     _mixed_dir(tmp_path / "in")

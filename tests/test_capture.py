@@ -126,6 +126,7 @@ def _serve_in_thread(tmp_path, **kw):
     return link, th, box
 
 
+@pytest.mark.slow
 def test_serial_bridge_capture_accounts_for_every_frame(tmp_path):
     link, th, box = _serve_in_thread(
         tmp_path, protocol="bridge-binary", rate_hz=400, duration=4.0, corrupt_fraction=0.01, replug_every=1.5
@@ -147,6 +148,7 @@ def test_serial_bridge_capture_accounts_for_every_frame(tmp_path):
     assert sum(e["event"] == "sequence_gap" for e in events) == len(summary["sequence_gaps"])
 
 
+@pytest.mark.slow
 def test_serial_nmea_capture_keeps_raw_log_and_counts_bad_lines(tmp_path):
     pytest.importorskip("formats.nmea")
     link, th, box = _serve_in_thread(tmp_path, protocol="nmea", rate_hz=100, duration=2.0, corrupt_fraction=0.05)
@@ -311,6 +313,7 @@ def test_modbus_profile_errors_name_the_register(tmp_path):
 
 
 # -- soak (one-minute CI version; the 10-minute run is benchmarks/capture_soak.py) ------------------------------
+@pytest.mark.slow
 def test_soak_zero_silent_loss(tmp_path):
     sys.path.insert(0, str(ROOT / "benchmarks"))
     try:

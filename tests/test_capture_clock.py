@@ -9,6 +9,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 import formats
 from imutool.capture.clock import FrameClock, spread_by_baud, strictly_increasing
@@ -70,6 +71,7 @@ def test_nmea_lines_of_one_read_are_spread_by_the_baud_rate():
     assert np.all(np.diff(strictly_increasing(np.array([3.0, 3.0, 2.0, 5.0]), 2.5)) > 0)
 
 
+@pytest.mark.slow
 def test_capture_from_simulate_serve_then_info_keeps_every_frame(tmp_path):
     """`imutool simulate --serve` into a pseudo-terminal, `imutool capture serial`, `imutool info`: rows in = out."""
     link = str(tmp_path / "port")

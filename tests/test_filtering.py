@@ -191,6 +191,7 @@ _FILTER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_parquet_filter_streams_with_bounded_memory(tmp_path):
     """`imutool filter` on a Parquet input streams row group by row group into a Parquet output: peak memory does
     not grow with the file. 0.4 M vs 2 M rows: a whole-file run would hold ≥ 1.6 M × 27 float64 columns

@@ -109,6 +109,7 @@ def test_a_recording_that_hardly_turns_gives_no_verdict():
     assert entry["gyro_scale_check"]["discrepancy_deg"] < 0.5
 
 
+@pytest.mark.slow
 def test_broad_intact_trials_are_not_flagged_and_a_doubled_gyro_is(shared):
     """All 16 shared BROAD trials, intact: no warning, and ŝ within 4 % of 1 on every trial that turns (E ≥ 0.2°;
     the slow-translation trial 10 hardly turns: its J is flat, ŝ 0.71 with 0.7° to explain, no verdict). Four

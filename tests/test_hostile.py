@@ -826,7 +826,9 @@ def test_unwritable_targets(corpus, tmp_path, cmd, target):
     assert os.path.isfile("/dev/full") is False
 
 
-@pytest.mark.parametrize("cmd", ["convert", "filter", "cal-gyro", "report", "simulate", "heave"])
+@pytest.mark.parametrize(
+    "cmd", ["convert", "filter", "cal-gyro", pytest.param("report", marks=pytest.mark.slow), "simulate", "heave"]
+)
 def test_existing_output_needs_force(corpus, tmp_path, cmd):
     out = tmp_path / ("existing" + EXT[cmd])
     out.write_text("an older result\n")

@@ -250,6 +250,7 @@ _MAKE_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_large_parquet_streams_with_bounded_memory(tmp_path):
     """Peak memory of a streamed Parquet → Parquet conversion does not grow with the file: 0.5 M vs 2 M rows
     (17 columns: 65 vs 260 MiB as float64). A whole-file read would need ≥ 195 MiB more for the larger file."""

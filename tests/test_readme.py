@@ -101,6 +101,7 @@ def _imutool_on_path(bin_dir: Path) -> dict:
     return env
 
 
+@pytest.mark.slow
 def test_every_readme_command_runs(tmp_path):
     cmds = runnable(readme_commands(README.read_text(encoding="utf-8")))
     clone = tmp_path / "clone"

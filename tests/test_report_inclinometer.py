@@ -204,6 +204,7 @@ def test_hrm_capture_interface(tmp_path):
     assert items(ev)["interface"]["status"] == "fail"
 
 
+@pytest.mark.slow
 def test_cli_pdf_and_json(tmp_path):
     files = write_sample_data(str(tmp_path / "sample"), rate_hz=5.0)
     pdf = tmp_path / "out" / "evidence.pdf"

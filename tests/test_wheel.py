@@ -6,10 +6,12 @@ who runs ``pip install``; this test builds the wheel from a copy of the source p
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
 import sys
+import sysconfig
 import zipfile
 from pathlib import Path
 
@@ -118,3 +120,53 @@ def test_console_script_declared(wheel, wheel_names):
     with zipfile.ZipFile(wheel) as z:
         text = z.read(ep[0]).decode()
     assert re.search(r"^imutool\s*=\s*imutool\.cli:main\s*$", text, flags=re.M), text
+
+
+@pytest.mark.slow
+def test_uninstall_leaves_nothing_behind_after_kernels_compiled(wheel, tmp_path):
+    """A user's lifecycle in a fresh venv: install the wheel, run a compiled kernel (cold per-user cache, no
+    NUMBA_CACHE_DIR), uninstall — nothing of imutool is left in site-packages (numba once cached kernels in the
+    installed package's __pycache__, which pip does not own: a folder without __init__.py stayed behind and was
+    imported as a namespace package by the next install)."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    py = venv / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+    site = Path(
+        subprocess.run(
+            [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=60,
+        ).stdout.strip()
+    )
+    # the dependencies (numpy, numba ...) are read from this environment; imutool comes from the wheel alone
+    here = sysconfig.get_paths()
+    (site / "_deps_of_the_test.pth").write_text("\n".join(dict.fromkeys([here["purelib"], here["platlib"]])) + "\n")
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "--python", str(py)]
+    r = subprocess.run(
+        [*pip, "install", "--quiet", "--no-deps", "--no-index", str(wheel)], capture_output=True, text=True, timeout=300
+    )
+    if r.returncode != 0 and "no such option: --python" in r.stderr:
+        pytest.skip("pip < 22.3 has no --python option")
+    assert r.returncode == 0, r.stderr[-2000:]
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR")}
+    cache = str(tmp_path / "cache")  # a cold per-user cache (the platform's default place, no NUMBA_CACHE_DIR)
+    env.update(HOME=str(tmp_path / "home"), XDG_CACHE_HOME=cache, LOCALAPPDATA=cache)
+    code = (
+        "import numpy as np, imutool\n"
+        "from calibration.allan import allan_deviation\n"
+        "allan_deviation(np.random.default_rng(0).normal(size=2000), 100.0)\n"
+        "print(imutool.__file__)\n"
+    )
+    r = subprocess.run([str(py), "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert Path(r.stdout.strip()).is_relative_to(site), f"imutool imported from {r.stdout.strip()}, not the wheel"
+    assert "imutool: compiling the Allan deviation kernel" in r.stderr, "the run compiled nothing: a warm cache?"
+    assert list((tmp_path / "cache").rglob("allan._adev_axis-*.nbi")), "the kernel was not cached in the user's folder"
+    in_package = [p for pkg in PACKAGES for p in (site / pkg).rglob("*.nb[ic]")]
+    assert not in_package, f"kernels cached inside the installed package: {in_package[:3]}"
+    r = subprocess.run([*pip, "uninstall", "--quiet", "-y", "imutool"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    left = [p.name for p in site.iterdir() if p.name.split("-")[0] in (*PACKAGES, "imutool")]
+    assert not left, f"left in site-packages after pip uninstall: {left}"

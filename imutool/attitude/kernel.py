@@ -66,6 +66,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from imutool.attitude.accel import (
     accel_feed,
     accel_gate,

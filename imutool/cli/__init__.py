@@ -34,6 +34,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "capture": ("capture", "capture_group", "Record serial NMEA, bridge frames, I2C or Modbus sensors."),
     "events": ("events", "events_group", "Heavy-roll events, hourly roll statistics, parametric roll; fleet table."),
     "batch": ("batch", "batch_cmd", "Run any command over many files on local cores or a Dask cluster."),
+    "selfcheck": ("selfcheck", "selfcheck_cmd", "Compile every kernel once and check a tiny end-to-end run."),
 }
 
 

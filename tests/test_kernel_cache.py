@@ -1,0 +1,184 @@
+"""Compiled kernels are cached per user and per source version, never inside the installed package.
+
+The cold-cache test runs a command whose one kernel compiles in seconds (``allan`` on a Parquet file: no CSV
+kernels) twice with an empty ``NUMBA_CACHE_DIR``: the first run says it compiles, the second does not, and the
+kernel's cache files are in the user's folder.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import formats.kernel_cache as kc
+
+ROOT = Path(__file__).resolve().parents[1]
+KERNEL_PACKAGES = ("imutool", "calibration", "formats")
+
+
+def _cli(args: list[str], cwd: Path, env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", "from imutool.cli import main; main()", *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        stdin=subprocess.DEVNULL,
+    )
+
+
+def test_cold_cache_says_it_compiles_once_and_caches_in_the_user_folder(tmp_path):
+    pytest.importorskip("pyarrow")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "IMUTOOL_KERNEL_TIMES")}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba")
+    r = _cli(["simulate", "static", "--duration", "30", "-o", "s.parquet"], tmp_path, env)
+    assert r.returncode == 0, r.stderr
+    first = _cli(["allan", "s.parquet", "-o", "a.yaml"], tmp_path, env)
+    assert first.returncode == 0, first.stderr
+    said = [line for line in first.stderr.splitlines() if line.startswith("imutool: compiling")]
+    assert len(said) == 1, first.stderr  # once, for the one kernel group the command compiles
+    assert said[0].startswith("imutool: compiling the Allan deviation kernel (first run only"), said
+    second = _cli(["allan", "s.parquet", "-o", "b.yaml"], tmp_path, env)
+    assert second.returncode == 0, second.stderr
+    assert "compiling" not in second.stderr, second.stderr
+    index = list((tmp_path / "numba" / "imutool").glob("kernels-*/calibration/allan._adev_axis-*.nbi"))
+    assert len(index) == 1, sorted(p.as_posix() for p in (tmp_path / "numba").rglob("*"))
+
+
+def test_every_kernel_module_imports_the_cache_before_its_first_kernel():
+    """A module whose kernels were decorated before formats.kernel_cache was imported would cache in the package."""
+    missing = []
+    for pkg in KERNEL_PACKAGES:
+        for py in sorted((ROOT / pkg).rglob("*.py")):
+            text = py.read_text(encoding="utf-8")
+            if "cache=True" not in text or py.name == "kernel_cache.py":
+                continue
+            tree = ast.parse(text)
+            first_kernel = min(
+                (n.lineno for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and n.decorator_list),
+                default=10**9,
+            )
+            imports = [
+                n.lineno
+                for n in ast.walk(tree)
+                if (isinstance(n, ast.Import) and any(a.name == "formats.kernel_cache" for a in n.names))
+                or (
+                    isinstance(n, ast.ImportFrom)
+                    and any(a.name == "kernel_cache" for a in n.names)
+                    and (n.module == "formats" or (n.level == 1 and n.module is None and pkg == "formats"))
+                )
+            ]
+            if not imports or min(imports) > first_kernel:
+                missing.append(py.relative_to(ROOT).as_posix())
+    assert not missing, f"modules with cache=True kernels that do not import formats.kernel_cache first: {missing}"
+
+
+def test_locator_claims_our_files_only():
+    assert kc._our_subfolder(str(ROOT / "imutool" / "attitude.py")) == "imutool"
+    assert kc._our_subfolder(str(ROOT / "imutool" / "capture" / "bridge.py")) == "imutool/capture"
+    assert kc._our_subfolder(str(ROOT / "formats" / "csv_engine.py")) == "formats"
+    import numba
+
+    assert kc._our_subfolder(numba.__file__) is None
+    assert kc._our_subfolder(str(ROOT / "tests" / "test_kernel_cache.py")) is None
+    # the running kernels of this process are cached in the versioned user folder, not next to their source
+    from formats import csv_engine
+
+    paths = {obj.stats.cache_path for obj in vars(csv_engine).values() if hasattr(obj, "stats") and obj._cache}
+    assert paths and all(Path(p).parent.name.startswith("kernels-") for p in paths), paths
+    assert all(not Path(p).is_relative_to(ROOT / "formats") for p in paths), paths
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+    assert impl._locator_classes[0] is kc.KernelCacheLocator
+
+
+def test_user_cache_root_per_platform(monkeypatch, tmp_path):
+    monkeypatch.setattr(kc.config, "CACHE_DIR", "")
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setattr(kc.Path, "home", classmethod(lambda cls: tmp_path / "home"))
+    monkeypatch.setattr(sys, "platform", "linux")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert kc.user_cache_root() == tmp_path / "xdg" / "imutool"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/ignored")
+    assert kc.user_cache_root() == tmp_path / "home" / ".cache" / "imutool"
+    monkeypatch.setattr(sys, "platform", "darwin")
+    assert kc.user_cache_root() == tmp_path / "home" / "Library" / "Caches" / "imutool"
+    monkeypatch.setattr(sys, "platform", "win32")
+    monkeypatch.setenv("LOCALAPPDATA", str(tmp_path / "local"))
+    assert kc.user_cache_root() == tmp_path / "local" / "imutool" / "Cache"
+    monkeypatch.setattr(kc.config, "CACHE_DIR", str(tmp_path / "nc"))  # NUMBA_CACHE_DIR wins as the root
+    assert kc.user_cache_root() == tmp_path / "nc" / "imutool"
+
+
+def _tree(site: Path) -> None:
+    for rel, text in {
+        "imutool/__init__.py": "",
+        "imutool/kern.py": "X = 1\n",
+        "imutool/cli/__init__.py": "",
+        "calibration/__init__.py": "",
+        "formats/__init__.py": "",
+        "formats/helper.py": "def h(): return 1\n",
+    }.items():
+        (site / rel).parent.mkdir(parents=True, exist_ok=True)
+        (site / rel).write_text(text)
+
+
+def test_version_follows_every_library_source_file(monkeypatch, tmp_path):
+    _tree(tmp_path)
+    monkeypatch.setattr(kc, "_SITE", tmp_path)
+    v0 = kc.source_version()
+    assert len(v0) == 12 and int(v0, 16) >= 0
+    os.utime(tmp_path / "formats" / "helper.py", (time.time() + 100, time.time() + 100))
+    assert kc.source_version() == v0, "a touched file with the same content is the same version"
+    (tmp_path / "imutool" / "cli" / "__init__.py").write_text("# the CLI: no kernel reaches it\n")
+    assert kc.source_version() == v0
+    (tmp_path / "formats" / "helper.py").write_text("def h(): return 2\n")  # a helper another file's kernel calls
+    v1 = kc.source_version()
+    assert v1 != v0
+    (tmp_path / "calibration" / "new.py").write_text("")
+    assert kc.source_version() not in (v0, v1)
+
+
+def test_old_versions_are_pruned(tmp_path):
+    now = time.time()
+    names = [f"kernels-{i:012x}" for i in range(6)]
+    for age, name in enumerate(names):
+        (tmp_path / name).mkdir()
+        os.utime(tmp_path / name, (now - 100 * age, now - 100 * age))
+    (tmp_path / "not-ours").mkdir()
+    current = tmp_path / names[5]  # the oldest by date, but the one in use
+    kc._prune(tmp_path, current)
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == sorted([*names[: kc.KEEP_VERSIONS - 1], names[5], "not-ours"])
+
+
+def test_unwritable_root_falls_back_without_a_crash(monkeypatch, tmp_path):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setattr(kc, "user_cache_root", lambda: blocker / "imutool")  # cannot be made, even by root
+    monkeypatch.setattr(kc.tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(kc._State, "folder", None)
+    monkeypatch.setattr(kc._State, "persistent", True)
+    folder = kc.cache_folder()
+    assert folder is not None and folder.parent.parent == tmp_path / "tmp" and kc._State.persistent
+    assert folder.parent.name.startswith("imutool-cache-") and folder.name.startswith("kernels-")
+    if hasattr(os, "getuid"):
+        assert (folder.parent.stat().st_mode & 0o077) == 0, "the shared temporary folder is private"
+    # the temporary directory's folder is not usable either (another user's, or a file): a folder for this run
+    for p in sorted(folder.parent.rglob("*"), reverse=True):
+        p.rmdir()
+    folder.parent.rmdir()
+    folder.parent.write_text("squatted")
+    monkeypatch.setattr(kc._State, "folder", None)
+    folder = kc.cache_folder()
+    assert folder is not None and folder.is_dir() and not kc._State.persistent
+    assert folder.parent == tmp_path / "tmp" and folder.name.startswith("imutool-kernels-")
