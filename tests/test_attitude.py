@@ -1875,3 +1875,28 @@ def _roll(tmp_path):
     if not src.exists():
         formats.write(simulate("ship-roll", duration=20, seed=1), src)
     return src
+
+
+def test_a_long_low_pass_does_not_diverge_on_a_bridge_sensor():
+    """issue 35, item 1: accel_lp_tau 10 s on a bridge sensor 30 m above the roll centre in a seaway (sway 1.5 m at
+    6 s, roll to 30°, GNSS speed, lever arm given) diverged to ~200° of roll error when the start-up running mean
+    lasted τ/10 (1 s): it read the change of the sway's acceleration as gyro bias. With the mean capped at
+    LP_MEAN_MAX (0.25 s, the same as before at τ ≤ 2.5 s) the roll stays within a few degrees."""
+    from imutool.filtering import run_filter
+
+    rec = simulate(
+        "ship-at-sea",
+        duration=180.0,
+        seed=0,
+        lever_arm=(-12.0, 0.0, -30.0),
+        roll_significant_deg=30.0,
+        sway_m=1.5,
+        sway_period=6.0,
+        turn_start=40.0,
+        speed_source="gnss",
+    )
+    after = rec.time - rec.time[0] >= 120.0
+    for tau, bound in ((2.5, 2.0), (10.0, 5.0)):
+        est = run_filter(rec, params=EkfParams(accel_lp_tau=tau), lever_arm=np.array(rec.meta["lever_arm_m"]))
+        err = np.abs(est.recording["roll"] - rec["ref_roll"])[after]
+        assert err.max() < bound, (tau, err.max())

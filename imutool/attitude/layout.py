@@ -7,6 +7,10 @@ import numpy as np
 # the accelerometer low-pass starts as the running mean of its samples for this fraction of τ (its first samples
 # averaged: 0.25 s at τ = 2.5 s), then runs as the Butterworth from that mean (docs/attitude.md, "The low-pass")
 LP_MEAN_START = 0.1
+# ... for at most LP_MEAN_MAX s (the same at τ ≤ 2.5 s): while the mean's memory grows (its lag t/2) the filter reads
+# how a ship's translational acceleration changes as gyro bias; at τ 20–60 s a 2–6 s mean taught 1–2 °/s of wrong
+# bias and the filter diverged (issue 35: τ 10 s on a bridge sensor, 200° of roll error; 2.8° with the cap)
+LP_MEAN_MAX = 0.25  # s
 
 # ---- state vector layout (float64, carried between chunks) -------------------------------------------------
 S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from imutool.attitude.layout import LP_MEAN_START
+from imutool.attitude.layout import LP_MEAN_MAX, LP_MEAN_START
 
 
 @njit
@@ -33,10 +33,10 @@ def _butterworth_gains(dt, tau, count):
     ω_c = √2/τ, damping ζ = 1/√2), so that its delay at low frequency is τ (s) and it attenuates translational
     acceleration between 0.2 and 1 Hz up to 2× more than two first-order stages of τ/2 of the same delay (the two
     cross near 0.12 Hz). Discretised by backward Euler (stable at any step, DC gain exactly 1). Returns (m, a, e):
-    while the low-pass has seen less than ≈ LP_MEAN_START·τ s (``count`` samples; also at dt = 0) it is their
-    running mean, m = 1/count; after, m = 0, e = 1/(1 + 2ζω_c·dt + ω_c²·dt²) and a = ω_c²·dt·e (see
-    :func:`_butterworth_step`)."""
-    if dt > 0 and 1.0 / count <= dt / (LP_MEAN_START * tau + dt):
+    while the low-pass has seen less than ≈ min(LP_MEAN_START·τ, LP_MEAN_MAX) s (``count`` samples; also at
+    dt = 0) it is their running mean, m = 1/count; after, m = 0, e = 1/(1 + 2ζω_c·dt + ω_c²·dt²) and
+    a = ω_c²·dt·e (see :func:`_butterworth_step`)."""
+    if dt > 0 and 1.0 / count <= dt / (min(LP_MEAN_START * tau, LP_MEAN_MAX) + dt):
         k2dt = 2.0 * dt / (tau * tau)
         e = 1.0 / (1.0 + 2.0 * dt / tau + k2dt * dt)
         return 0.0, k2dt * e, e
