@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     return (
         a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
@@ -16,7 +16,7 @@ def qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     )
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def rotvec_quat(x, y, z):
     """Unit quaternion of the rotation vector (x, y, z) rad (exact exponential)."""
     a2 = x * x + y * y + z * z
@@ -28,7 +28,7 @@ def rotvec_quat(x, y, z):
     return np.cos(0.5 * a), s * x, s * y, s * z
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def qturn(a0, a1, a2, a3, x, y, z):
     """The unit quaternion a ⊗ exp(x, y, z) (a rotation vector in rad, body axes), renormalised: one step of a
     gyro integration."""
@@ -38,13 +38,13 @@ def qturn(a0, a1, a2, a3, x, y, z):
     return a0 / nq, a1 / nq, a2 / nq, a3 / nq
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def vertical_in_body(q0, q1, q2, q3):
     """The world vertical (NED down) in body axes for q body→NED: the third row of R(q)."""
     return 2 * (q1 * q3 - q0 * q2), 2 * (q2 * q3 + q0 * q1), 1 - 2 * (q1 * q1 + q2 * q2)
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def atan_series(t):
     """atan(t) for |t| ≤ 0.1: odd Taylor series to t¹⁷ (truncation < |t|¹⁹/19 ≈ 5e-21, below 1 ulp)."""
     u = t * t
@@ -66,7 +66,7 @@ def atan_series(t):
     )
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def fast_atan2(y, x):
     """atan2(y, x) in [−π, π] (≈ 1 ulp) with no library call: a libm call inside the EKF loop costs ~150 ns per
     sample in register spills, the call itself ~40 ns. Hot path (small heading innovation): x > 0, |y| ≤ 0.1 x →
@@ -87,7 +87,7 @@ def fast_atan2(y, x):
     return -a if np.signbit(y) else a
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def rmat(q0, q1, q2, q3, r):
     r[0, 0] = 1 - 2 * (q2 * q2 + q3 * q3)
     r[0, 1] = 2 * (q1 * q2 - q0 * q3)

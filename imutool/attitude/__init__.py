@@ -8,7 +8,7 @@ One concept per module (docs/architecture.md, "The attitude package"):
   and its :data:`MIGRATIONS`.
 - :mod:`~imutool.attitude.layout` — the state vector's slots (``S_*``), the parameter vector's (``P_*``) and the
   per-sample flag bits (``F_*``).
-- :mod:`~imutool.attitude.kernel` — the per-sample loop (numba; the filter's equations are in its docstring), built
+- :mod:`~imutool.attitude.kernel` — the per-sample loop (numba; the filter's equations are in its docstring), using
   from :mod:`~imutool.attitude.covariance`, :mod:`~imutool.attitude.updates`, :mod:`~imutool.attitude.lowpass`,
   :mod:`~imutool.attitude.magnetic` and the shared :mod:`imutool.quaternion` steps.
 - :mod:`~imutool.attitude.run` — :func:`run_ekf` over arrays (initial state, chunks, :class:`AttitudeResult`).

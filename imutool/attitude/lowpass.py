@@ -7,14 +7,14 @@ from numba import njit
 from imutool.attitude.layout import LP_MEAN_MAX, LP_MEAN_START
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def _low_pass_gain(dt, half_tau, count):
     """Gain of one first-order stage of time constant ``half_tau`` (s) over a step dt (s): dt / (τ/2 + dt), and
     at least 1/count, so that a low-pass that has seen ``count`` samples starts as their running mean."""
     return max(dt / (half_tau + dt) if dt > 0 else 0.0, 1.0 / count)
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
     """Two first-order low-pass stages of one 3-vector, in place in an array (the filter state, or a local
     buffer): st[s1:s1+3] follows x with the gain al (:func:`_low_pass_gain`), st[s2:s2+3] follows st[s1:s1+3]
@@ -27,7 +27,7 @@ def _low_pass_two_stages(st, s1, s2, x0, x1, x2, al):
     st[s2 + 2] += al * (st[s1 + 2] - st[s2 + 2])
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def _butterworth_gains(dt, tau, count):
     """Gains of one step dt (s) of the accelerometer's low-pass: second order, Butterworth (VQF's; cut-off
     ω_c = √2/τ, damping ζ = 1/√2), so that its delay at low frequency is τ (s) and it attenuates translational
@@ -43,7 +43,7 @@ def _butterworth_gains(dt, tau, count):
     return 1.0 / count, 0.0, 1.0
 
 
-@njit
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def _butterworth_step(v, y, x, m, a, e, dt):
     """One element of the low-pass of :func:`_butterworth_gains`: its output y follows the input x, v is y's rate
     (per s). Returns the new (v, y): v ← e·v + a·(x − y), y ← y + dt·v."""
