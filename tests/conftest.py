@@ -6,6 +6,13 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# property tests: reproducible in CI (the same examples every run, so a change cannot fail or pass by chance);
+# free exploration on a developer's machine. Examples that once failed are kept as explicit @example cases.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("IMUTOOL_SHARED_DATA", ROOT.parent / "shared" / "data"))

@@ -55,7 +55,7 @@ def test_info_text_and_json(messy_csv):
     assert "malformed rows skipped: 1" in r.output
     assert "[deg/s]" in r.output and "movement" in r.output  # rates in degrees at the user surface
     r = _run("info", messy_csv, "--json")
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["rows"] == 352 and s["rows_after_validation"] == 350
     assert s["duplicate_timestamps"] == 2 and s["rows_with_nan"] == 3
     assert s["gaps"]["count"] == 1 and s["gaps"]["first"][0]["length_s"] == pytest.approx(0.51)
@@ -73,7 +73,7 @@ def test_info_backwards_is_reported_not_fatal(tmp_path):
     p = tmp_path / "back.csv"
     p.write_text("time,temp\n0,1\n1,2\n0.5,3\n2,4\n")
     r = _run("info", str(p), "--json")
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["backwards_steps"] == 1
     assert any("backwards" in a for a in s["validation_actions"])
 
@@ -91,7 +91,7 @@ def test_info_foreign_csv_prints_mapping(tmp_path):
     assert s["channels"]["gyro"]["max"][0] == pytest.approx(180.0)  # read as rad/s, shown in deg/s
     assert s["channels"]["accel"]["mean"][2] == pytest.approx(9.80665)
     r = _run("info", str(p), "--columns", "acc_z_g=accel_z:m/s^2", "--json")
-    assert json.loads(r.output)["channels"]["accel"]["mean"][2] == pytest.approx(1.0)
+    assert json.loads(r.stdout)["channels"]["accel"]["mean"][2] == pytest.approx(1.0)
 
 
 def test_info_real_fusion(shared):
@@ -116,7 +116,7 @@ def test_plot_png_and_pdf(messy_csv, tmp_path):
     out = tmp_path / "p.png"
     r = _run("plot", messy_csv, "gyro", "move", "-o", str(out), "--json")
     assert r.exit_code == 0, r.output
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["channels"] == ["gyro", "movement"]
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     pdf = tmp_path / "p.pdf"

@@ -161,7 +161,7 @@ def test_cli_track_plot_and_summary(tmp_path):
         ],
     )
     assert res.exit_code == 0, res.output
-    s = json.loads(res.output)
+    s = json.loads(res.stdout)
     assert s["strides"]["count"] == 4
     assert s["vs_reference"]["final_error_m"] < 0.05
     back = formats.read(out)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pynmea2
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -206,6 +206,14 @@ def test_decode_pashr_attitude_and_heave():
 
 
 # -- writers: round trips ----------------------------------------------------------------------------------------
+def test_a_heading_is_wrapped_at_the_resolution_it_is_printed_with():
+    """Wrap after rounding: −0.03125° is 359.97 with PASHR's two decimals and 0.0 with HDT's one (359.97 → 360.0)."""
+    assert ",359.97,T," in pashr_sentence(None, -0.03125, 0.0, 0.0, 0.0)
+    assert ",0.00,T," in pashr_sentence(None, 359.996, 0.0, 0.0, 0.0)
+    assert hdt_sentence(-0.03125).startswith("$HEHDT,0.0,T")
+    assert hdt_sentence(359.94).startswith("$HEHDT,359.9,T")
+
+
 @settings(max_examples=150, deadline=None)
 @given(
     h=st.floats(-720, 720),
@@ -220,6 +228,8 @@ def test_decode_pashr_attitude_and_heave():
     asb=st.floats(0, 90),
     tod=st.floats(0, 86399.9),
 )
+# examples that once failed, kept explicit: PASHR wrapped −0.03125° to 0.00 (it is 359.97 at two decimals)
+@example(h=-0.03125, r=0.0, p=0.0, hv=0.0, dev=0.0, var=0.0, rot=0.0, per=0.0, ap=0.0, asb=0.0, tod=0.0)
 def test_every_writer_round_trips(h, r, p, hv, dev, var, rot, per, ap, asb, tod):
     wrapped = h % 360.0
 

@@ -300,7 +300,7 @@ def test_info_names_and_counts_unknown_sentences(tmp_path):
     assert "NMEA sentences not read (imutool does not decode them): PSXN,26 1" in r.output
     assert "NMEA sentences bad (checksum or format): PHLIN 1" in r.output
     r = CliRunner().invoke(cli, ["info", str(p), "--json"], catch_exceptions=False)
-    s = json.loads(r.output)["nmea_sentences"]
+    s = json.loads(r.stdout)["nmea_sentences"]
     assert s["read"] == {"PSXN,23": 2, "PSXN,20": 1} and s["not_read"] == {"PSXN,26": 1} and s["bad"] == {"PHLIN": 1}
 
 

@@ -287,7 +287,7 @@ def test_cli_file_header_rate_and_stamp_roundtrip(tmp_path):
         cli, ["nmea", str(src), "-o", str(out), "--sentences", "HRM,XDR", "--rate", "2", "--time-prefix", "--json"]
     )
     assert r.exit_code == 0, r.output
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["sentences"] == {"HRM": 120, "XDR": 120} and s["rate_hz"] == 2.0 and not s["rate_chosen"]
     text = out.read_bytes().decode("ascii")
     head = [ln for ln in text.split("\r\n") if ln.startswith("#")]
@@ -308,7 +308,7 @@ def test_cli_file_header_rate_and_stamp_roundtrip(tmp_path):
     )
     assert r.exit_code != 0 and "does not fit" in str(r.exception) and not (tmp_path / "y.nmea").exists()
     r = CliRunner().invoke(cli, ["nmea", str(src), "-o", str(tmp_path / "z.nmea"), "--sentences", "HRM,XDR", "--json"])
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["rate_chosen"] and s["rate_hz"] <= 5.0 and s["bytes_per_s"] <= 432
 
 
@@ -404,7 +404,7 @@ def test_write_log_and_heave_nmea_cli(tmp_path):
         ],
     )
     assert r.exit_code == 0, r.output
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["heave_positive"] == "down" and s["nmea"]["sentences"]["PASHR"] > 0
     h = formats.read(tmp_path / "h.csv")
     assert h.meta["heave_positive"] == "down" and "positive DOWN" in h.meta["heave"]

@@ -227,7 +227,7 @@ def test_cli_pdf_and_json(tmp_path):
         ],
     )
     assert r.exit_code == 1, r.output
-    summary = json.loads(r.output)
+    summary = json.loads(r.stdout)
     ev = json.loads((tmp_path / "out" / "evidence.json").read_text())
     jsonschema.validate(ev, load_schema())
     assert summary["overall"] == ev["overall"]["status"] == "incomplete"
@@ -257,7 +257,7 @@ def test_cli_pdf_and_json(tmp_path):
         ],
     )
     assert r.exit_code == 0, r.output
-    summary = json.loads(r.output)
+    summary = json.loads(r.stdout)
     assert summary["overall"] == "pass" and summary["exit_status"] == 0
     if shutil.which("pdftoppm") is None:
         pytest.skip("pdftoppm (poppler-utils) not installed: PDF pages not rasterised")

@@ -148,7 +148,7 @@ def test_roll_cli(tmp_path):
     out, cyc = tmp_path / "roll_stats.csv", tmp_path / "cycles.csv"
     r = CliRunner().invoke(cli, ["roll", str(src), "-o", str(out), "--cycles", str(cyc), "--json"])
     assert r.exit_code == 0, r.output
-    s = json.loads(r.output)
+    s = json.loads(r.stdout)
     assert s["starboard"]["excursions"] >= 10 and s["port"]["excursions"] >= 10
     assert abs(s["starboard"]["amplitude_mean_deg"] - 12.0) < 0.1
     back = formats.read(out)

@@ -104,7 +104,7 @@ def test_cli_writes_interval_table_and_plot(tmp_path):
     png = tmp_path / "zvi.png"
     r = CliRunner().invoke(cli, ["zvi", str(src), "-o", str(out), "--detector", "paper", "--plot", str(png), "--json"])
     assert r.exit_code == 0, r.output
-    summary = json.loads(r.output)
+    summary = json.loads(r.stdout)
     assert summary["score_vs_ref_zvi"]["f1"] >= 0.95
     lines = out.read_text().splitlines()
     assert lines[0] == "start_s,end_s,duration_s"

@@ -567,12 +567,14 @@ def format_sentence(
     return out
 
 
-def _wrap360(h: float | None) -> float | None:
+def _wrap360(h: float | None, decimals: int = 1) -> float | None:
+    """A heading (deg) in [0, 360) as it will be printed with ``decimals``: wrapped, and 0 where it would print as
+    360 (359.96 with one decimal; 359.996 with two — not 359.97, which prints as itself)."""
     if h is None or not math.isfinite(h):
         return None
     w = math.fmod(h, 360.0)
     w = w + 360.0 if w < 0 else w
-    return 0.0 if round(w, 1) >= 360.0 else w
+    return 0.0 if round(w, decimals) >= 360.0 else w
 
 
 def _absnone(v: float | None) -> float | None:
@@ -714,7 +716,7 @@ def pashr_sentence(
         ts = f"{hh:02d}{mm:02d}{rem / 1000.0:06.3f}"
     else:
         ts = None
-    h = _wrap360(heading_deg)
+    h = _wrap360(heading_deg, 2)  # printed with two decimals
     fields = [
         ts,
         h,
