@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_main
 
 from imutool.cli import main
 
@@ -83,8 +84,9 @@ def check(
     assert "internal error" not in text, text
     assert code in ((0, 2) if ok else (2,)), f"exit {code}: {err or out}"
     if code != 0:
-        # input warnings (formats.plausibility, validation) may precede the error: one error line, last
-        lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("warning: ")]
+        # input warnings (formats.plausibility, validation) and a cold kernel cache's "compiling" note may precede
+        # the error: one error line, last
+        lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith(("warning: ", "imutool: compiling"))]
         assert len(lines) == 1, f"expected one line on stderr, got {len(lines)}:\n{err}"
         assert err.strip().splitlines()[-1] == lines[0]
         named = [str(n) for n in (names if names is not None else [*inputs, *outputs])]
@@ -970,3 +972,20 @@ def test_numbers_in_the_corpus_are_what_they_claim(corpus):
     assert corpus["bom.csv"].read_bytes()[:3] == b"\xef\xbb\xbf"
     assert b"\r\n" in corpus["crlf.csv"].read_bytes()
     assert math.isinf(float(corpus["inf.csv"].read_text().splitlines()[1].split(",")[1]))
+
+
+@pytest.mark.parametrize(
+    "option,says",
+    [
+        ("roll_period_s=0", "option roll_period_s=0 must be > 0"),  # was ZeroDivisionError
+        ("roll_amplitude_deg=abc", "option roll_amplitude_deg='abc' must be a number"),  # was TypeError
+        ("roll_amplitude_deg=1e999", "option roll_amplitude_deg=inf must be finite"),
+    ],
+)
+def test_simulate_refuses_an_option_its_scenario_cannot_take(tmp_path, capsys, option, says):
+    """One line naming the option and why, exit 2, nothing written (issue 39)."""
+    out = tmp_path / "x.csv"
+    code, _, err = run_main(["simulate", "ship-roll", "--set", option, "-o", str(out)], capsys)
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("imutool: compiling")]
+    assert code == 2 and len(lines) == 1 and says in lines[0], err
+    assert not out.exists()

@@ -10,6 +10,8 @@ import importlib
 import importlib.util
 from collections.abc import Callable
 
+import numpy as np
+
 from formats import Recording
 from formats.errors import ImutoolError
 
@@ -80,7 +82,27 @@ def simulate(name: str, **options_) -> Recording:
         rows = 0.0
     if not rows < MAX_ROWS:  # also NaN: an array that size cannot be allocated
         raise ImutoolError(f"scenario {name!r}: --duration {dur} s gives {rows:.3g} samples; at most {MAX_ROWS:.0e}")
-    return scenario(name)(**options_)
+    for key, value in options_.items():
+        _check_option(name, key, value, defaults.get(key))
+    try:
+        return scenario(name)(**options_)
+    except (ZeroDivisionError, FloatingPointError, OverflowError) as e:  # a value the scenario's physics cannot take
+        given = ", ".join(f"{k}={v!r}" for k, v in options_.items()) or "its defaults"
+        raise ImutoolError(f"scenario {name!r} cannot run with {given}: {e}") from None
+
+
+def _check_option(name: str, key: str, value: object, default: object) -> None:
+    """A scenario option's value against its default's kind: a number where the default is one (finite; > 0 for a
+    period, a rate or a duration), one line naming the option otherwise."""
+    if isinstance(default, bool) or not isinstance(default, (int, float)) or default is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be a number (default {default!r})")
+    if not np.isfinite(float(value)):
+        raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be finite")
+    positive = "period" in key or key.endswith(("_hz", "_s")) or key in ("duration", "rate_hz")
+    if positive and default > 0 and not float(value) > 0:
+        raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be > 0 (default {default!r})")
 
 
 MAX_ROWS = 2e8  # samples one simulation may produce (≈ 11.6 days at 200 Hz; 10 columns of float64 = 16 GB)
