@@ -8,6 +8,8 @@ from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
+from formats.saturation import clipped
+from imutool.attitude.layout import F_ACC_REJ
 from imutool.attitude.params import EkfParams
 from imutool.attitude.run import AttitudeResult, nominal_dt, run_ekf
 from imutool.attitude.selfcheck import SampleFlag, SelfCheck, has_flag
@@ -66,6 +68,45 @@ def _read_later(t: np.ndarray, h: np.ndarray, latency_s: float) -> np.ndarray:
     return np.where(both, val, np.nan)
 
 
+def gnss_inputs(rec: Recording, use_gnss: bool = True) -> tuple[np.ndarray | None, ...]:
+    """(sog m/s, cog deg, velocity (N,2) m/s north/east) of a recording, each None where it has none.
+
+    The velocity is ``vel_n``/``vel_e`` when present, else sog·(cos cog, sin cog); the EKF's velocity aiding
+    uses it (:func:`imutool.attitude.run.run_ekf`), the turn's compensation sog/cog."""
+    if not use_gnss:
+        return None, None, None
+    sog = rec.in_unit("sog", "m/s") if "sog" in rec.channels and "cog" in rec.channels else None
+    cog = rec.in_unit("cog", "deg") if sog is not None else None
+    if "vel_n" in rec.channels and "vel_e" in rec.channels:
+        vel = np.stack([rec.in_unit("vel_n", "m/s"), rec.in_unit("vel_e", "m/s")], axis=1)
+    elif sog is not None:
+        c = np.radians(np.asarray(cog, dtype=np.float64))
+        vel = np.stack([sog * np.cos(c), sog * np.sin(c)], axis=1)
+    else:
+        vel = None
+    return sog, cog, vel
+
+
+def drop_clipped(
+    gyro: np.ndarray, accel: np.ndarray, checks: SelfCheck, time: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(accel with its clipped samples NaN, the clipped rows): a sample at the accelerometer's range limit is not
+    gravity plus the motion, so the filter does not use it; both channels' clipping goes to ``checks``
+    (:mod:`formats.saturation`)."""
+    clip_a, clip_g = clipped(accel, "accel"), clipped(gyro, "gyro")
+    checks.add_clipping(time, clip_a, clip_g)
+    if clip_a.count:
+        accel = np.array(accel, dtype=np.float64)
+        accel[clip_a.mask] = np.nan
+    return accel, clip_a.mask
+
+
+def flag_clipped(res: AttitudeResult, rows: np.ndarray) -> None:
+    """The clipped accelerometer rows are flagged as rejected (the output's accel_rejected = 1)."""
+    if rows.any():
+        res.flags[rows] |= F_ACC_REJ
+
+
 def ekf_recording(
     rec: Recording,
     params: EkfParams | None = None,
@@ -73,6 +114,7 @@ def ekf_recording(
     use_gnss: bool = True,
     lever_arm: np.ndarray | None = None,
     progress: Progress | None = None,
+    antenna_arm: np.ndarray | None = None,
 ) -> tuple[Recording, dict]:
     """Run the EKF (and optionally the smoother) on a recording; returns (estimate recording, summary).
 
@@ -89,12 +131,11 @@ def ekf_recording(
     mag = rec["mag"] if "mag" in rec.channels else None
     heading_raw = heading_channel(rec)  # deg, as it came
     heading = None if heading_raw is None else _read_later(rec.time, heading_raw, params.heading_input_latency)
-    sog = cog = None
-    if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
-        sog = rec.in_unit("sog", "m/s")
-        cog = rec.in_unit("cog", "deg")
+    sog, cog, vel = gnss_inputs(rec, use_gnss)
     if smooth:
         check_smoother_memory(len(rec))
+    checks = SelfCheck(params, nominal_dt(rec.time), lever_arm)  # the same accumulator as a streamed run's
+    accel, clipped_rows = drop_clipped(gyro, accel, checks, rec.time)
     res, _ = run_ekf(
         rec.time,
         gyro,
@@ -108,10 +149,12 @@ def ekf_recording(
         progress=progress,
         keep_force=True,
         heading_deg=heading,
+        velocity_ne=vel,
+        antenna_arm=antenna_arm,
     )
+    flag_clipped(res, clipped_rows)
     summary = dict(res.summary)
-    checks = SelfCheck(params, nominal_dt(res.time), lever_arm)  # the same accumulator as a streamed run's
-    checks.add(res, gyro, mag_given=mag is not None, gnss_used=sog is not None, heading_deg=heading_raw)
+    checks.add(res, gyro, mag_given=mag is not None, gnss_used=vel is not None, heading_deg=heading_raw)
     report = checks.report()
     summary.update(report.summary)
     warnings = report.warnings

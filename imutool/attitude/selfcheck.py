@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from formats.saturation import Clipping, clipping_warning
 from imutool.attitude.layout import (
     F_ACC_REJ,
     F_ACC_USED,
@@ -300,6 +301,17 @@ class SelfCheck:
         self._scale_tail: tuple[np.ndarray, ...] | None = None  # what the next chunk's scale check starts from
         self.totals: dict[str, Any] = {}  # the filter's cumulative counters, from the last chunk
         self.t_first = self.t_last = np.nan
+        self.clipped: dict[str, int] = {"accel": 0, "gyro": 0}  # samples at a range limit (formats.saturation)
+        self.clip_limits: dict[str, set[float]] = {"accel": set(), "gyro": set()}
+        self.clip_first: dict[str, float] = {}  # the time of the first clipped sample (s)
+
+    def add_clipping(self, time: np.ndarray, accel: Clipping, gyro: Clipping) -> None:
+        """One chunk's clipped samples (:func:`formats.saturation.clipped`), accelerometer and gyro."""
+        for name, clip in (("accel", accel), ("gyro", gyro)):
+            if clip.count:
+                self.clipped[name] += clip.count
+                self.clip_limits[name].update(round(v, 4) for axis in clip.limits for v in axis)
+                self.clip_first.setdefault(name, float(time[np.argmax(clip.mask)]))
 
     def add(
         self,
@@ -389,6 +401,11 @@ class SelfCheck:
         check, more = self.scale.report()
         summary.update(check)
         warnings += more
+        for name, unit in (("accel", "m/s^2"), ("gyro", "rad/s")):
+            if self.clipped[name]:
+                summary[f"{name}_clipped_samples"] = self.clipped[name]
+                clip = Clipping(np.ones(self.clipped[name], dtype=bool), [tuple(sorted(self.clip_limits[name]))])
+                warnings.append(clipping_warning(name, clip, unit) + f", the first at {self.clip_first[name]:.2f} s")
         meta = output_metadata(self.lever_arm, summary)
         return SelfCheckReport(summary, warnings, meta)
 
