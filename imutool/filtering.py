@@ -36,6 +36,7 @@ from imutool.attitude import (
     result_recording,
     run_ekf,
 )
+from imutool.attitude.motion import choose_motion, params_for_motion
 from imutool.attitude.recording import drop_clipped, flag_clipped, gnss_inputs, heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
@@ -412,7 +413,11 @@ def stream_ekf(
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
-                self_checks = SelfCheck(params, dt_nom, lever_arm)
+                motion = choose_motion(params, chunk.time, chunk["gyro"])  # from the first chunk
+                run_params = params_for_motion(params, motion)
+                summary["motion"] = motion.summary()
+                self_checks = SelfCheck(run_params, dt_nom, lever_arm)
+                self_checks.motion = motion.kind
             sog, cog, vel = gnss_inputs(chunk, use_gnss)
             if "heading_true" in chunk.channels and getattr(params, "heading_input_latency", 0.0) > 0:
                 raise ImutoolError(
@@ -431,7 +436,7 @@ def stream_ekf(
                 chunk["gyro"],
                 accel,
                 chunk.channels.get("mag"),
-                params,
+                run_params,
                 sog,
                 cog,
                 state=state,
@@ -448,6 +453,7 @@ def stream_ekf(
                 res, chunk["gyro"], mag_given="mag" in chunk.channels, gnss_used=vel is not None, heading_deg=heading
             )
             est = result_recording(chunk, res, params)
+            est.meta["motion"] = summary["motion"]
             # the metadata as far as known (the heading source is final at the end: set_final_meta below)
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
             w.write(est)

@@ -351,7 +351,8 @@ def test_memory_and_streamed_runs_compose_the_same_checks_and_metadata(roll_csv,
     stream_only = {"dropped_non_increasing_rows", "lever_arm_m"}
     assert set(got["streamed"]) - set(got["memory"]) == stream_only
     assert set(got["memory"]) <= set(got["streamed"])
-    by_route = {"method", "output", "validation"}
+    by_route = {"method", "output", "validation", "motion"}  # a stream judges its motion on its first chunk
+    assert got["memory"]["motion"]["kind"] == got["streamed"]["motion"]["kind"]
     for key in set(got["memory"]) - by_route:
         assert got["memory"][key] == got["streamed"][key], key
     assert got["memory"]["gyro_scale_check"]["pairs"] >= 13  # 30 s in 2-s windows: none lost at the 2 chunk edges

@@ -133,6 +133,6 @@ def test_no_low_pass_setting_diverges_on_a_ship(speed):
     rec = voyage(speed)
     bound = 3.0 if speed == "gnss" else 6.0  # without a speed the 9° of false tilt at 6 s passes a short low-pass
     for tau in (0.5, 2.5, 10.0, 20.0, 40.0, 60.0):
-        rms, mx, alarm = roll_errors(rec, params=EkfParams(accel_lp_tau=tau))
+        rms, mx, alarm = roll_errors(rec, params=EkfParams(accel_lp_tau=tau, ship_lp_tau=tau))
         assert mx < bound and rms < bound / 2, (tau, rms, mx)
         assert alarm == 0.0, (tau, alarm)

@@ -72,6 +72,7 @@ from imutool.attitude.layout import (
     _FASTMATH,
     F_ACC_REJ,
     F_ACC_USED,
+    F_HDG_INCONSISTENT,
     F_HDG_USED,
     F_INCONSISTENT,
     F_MAG_NEW,
@@ -161,6 +162,7 @@ from imutool.attitude.layout import (
     S_NAVAR,
     S_NGAPS,
     S_NGNAN,
+    S_NHINC,
     S_NHREJ,
     S_NINC,
     S_NIS_A,
@@ -809,7 +811,12 @@ def ekf_kernel(
         std_out[k, 0] = np.sqrt(max(v0, 0.0))
         std_out[k, 1] = np.sqrt(max(v1, 0.0))
         std_out[k, 2] = np.sqrt(max(v2, 0.0))
-        bad = prm[P_NIS_LIMIT] > 0 and (st[S_NIS_A] > prm[P_NIS_LIMIT] or st[S_NIS_M] > prm[P_NIS_LIMIT])
+        # the attitude's check (the accelerometer's NIS, the tilt check) and the heading's (the magnetometer's or the
+        # external heading's NIS: a magnetic disturbance distrusts the heading, not roll and pitch)
+        bad = prm[P_NIS_LIMIT] > 0 and st[S_NIS_A] > prm[P_NIS_LIMIT]
+        if prm[P_NIS_LIMIT] > 0 and st[S_NIS_M] > prm[P_NIS_LIMIT]:
+            flag |= F_HDG_INCONSISTENT
+            st[S_NHINC] += 1
         if prm[P_TILT_WIN] > 0 and st[S_GWT] >= prm[P_TILT_WIN]:
             # the low-passed world force against the estimate's vertical: flagged beyond √(limit² + (3 σ)²), σ² the
             # estimate's roll + pitch variance; tan x ≥ x keeps the arctangent off the common path

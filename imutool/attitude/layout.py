@@ -62,7 +62,8 @@ S_VA_PREV, S_VA_HAVE, S_VA_TFIX = 158, 160, 161
 S_VA_IN, S_VA_OK = 162, 165
 S_LPT = 166  # the time (s) the accelerometer low-pass has run since it started (or restarted after a gap)
 S_VA_LAST = 167  # the GNSS velocity of the previous row as given (2, m/s; NaN: none): a fix is where it changes
-STATE_SIZE = 169
+S_NHINC = 169  # samples flagged heading-inconsistent (the magnetometer's NIS: roll and pitch not involved)
+STATE_SIZE = 170
 # the longest interval between two velocity fixes that is still used (s): longer, the low-pass takes the force;
 # the shortest (an interpolated velocity changes every row: one fix per VA_MIN_SPACING s)
 VA_MAX_INTERVAL, VA_MIN_SPACING = 3.0, 0.2
@@ -85,7 +86,8 @@ N_PARAMS = 47
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
-F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample (the last bit of uint8)
+F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample
+F_HDG_INCONSISTENT = 256  # the heading's windowed NIS failed (the flags are uint16)
 
 # external heading (gyrocompass): a fix whose innovation is beyond this many σ is a glitch and skipped, for at most
 # this many seconds running; beyond, the heading that stayed away is taken outright

@@ -10,6 +10,7 @@ from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
 from formats.saturation import clipped
 from imutool.attitude.layout import F_ACC_REJ
+from imutool.attitude.motion import choose_motion, params_for_motion
 from imutool.attitude.params import EkfParams
 from imutool.attitude.run import AttitudeResult, nominal_dt, run_ekf
 from imutool.attitude.selfcheck import SampleFlag, SelfCheck, has_flag
@@ -134,14 +135,17 @@ def ekf_recording(
     sog, cog, vel = gnss_inputs(rec, use_gnss)
     if smooth:
         check_smoother_memory(len(rec))
-    checks = SelfCheck(params, nominal_dt(rec.time), lever_arm)  # the same accumulator as a streamed run's
+    motion = choose_motion(params, rec.time, gyro)
+    run_params = params_for_motion(params, motion)  # the low-pass of the platform's motion
+    checks = SelfCheck(run_params, nominal_dt(rec.time), lever_arm)  # the same accumulator as a streamed run's
+    checks.motion = motion.kind
     accel, clipped_rows = drop_clipped(gyro, accel, checks, rec.time)
     res, _ = run_ekf(
         rec.time,
         gyro,
         accel,
         mag,
-        params,
+        run_params,
         sog,
         cog,
         keep_cov=smooth,
@@ -159,8 +163,9 @@ def ekf_recording(
     summary.update(report.summary)
     warnings = report.warnings
     if smooth:
-        res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm, heading_deg=heading)
+        res = zero_lag_smooth(res, gyro, accel, mag, run_params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
+    out.meta["motion"] = summary["motion"] = motion.summary()
     out.meta.update(report.metadata)
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
@@ -187,6 +192,7 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     out.add("mag_rejected", has_flag(res.flags, SampleFlag.MAG_REJECTED).astype(float), "1")
     out.add("rest", has_flag(res.flags, SampleFlag.REST).astype(float), "1")
     out.add("inconsistent", has_flag(res.flags, SampleFlag.INCONSISTENT).astype(float), "1")
+    out.add("heading_inconsistent", has_flag(res.flags, SampleFlag.HEADING_INCONSISTENT).astype(float), "1")
     carry_labels(rec, out)
     out.meta[DECIMALS_KEY] = dict(OUTPUT_DECIMALS)
     if params is not None:
@@ -210,6 +216,7 @@ OUTPUT_DECIMALS = {
     "mag_rejected": 0,
     "rest": 0,
     "inconsistent": 0,
+    "heading_inconsistent": 0,
 }
 
 

@@ -20,6 +20,7 @@ from imutool.attitude.layout import (
     S_NAREJ,
     S_NGAPS,
     S_NGNAN,
+    S_NHINC,
     S_NHREJ,
     S_NINC,
     S_NMNEW,
@@ -268,7 +269,7 @@ def run_ekf(
     q_out = np.empty((n, 4))
     b_out = np.empty((n, 3))
     std_out = np.empty((n, 3))
-    flags = np.zeros(n, dtype=np.uint8)
+    flags = np.zeros(n, dtype=np.uint16)
     p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
     keep_f = keep_cov or keep_force
     f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
@@ -322,6 +323,7 @@ def run_ekf(
         "gnss_compensation": bool(use_gnss),
         "velocity_aiding": bool(len(vel)),
         "inconsistent_samples": int(st[S_NINC]),
+        "heading_inconsistent_samples": int(st[S_NHINC]),
         "tilt_check_samples": int(st[S_NTILT]),
         "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
     }
