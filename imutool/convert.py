@@ -1,13 +1,13 @@
 """Conversion between every format imutool reads and writes: the one route behind ``imutool convert``,
 ``imutool batch convert`` and a Python user.
 
-:func:`convert` picks the route. CSV/Parquet → CSV/Parquet streams (:func:`stream_convert`): the input is read
+:func:`run_convert` picks the way. CSV/Parquet → CSV/Parquet streams (:func:`stream_convert`): the input is read
 chunk by chunk (:func:`formats.iter_chunks`, Parquet by row groups), each chunk validated (plus a check across chunk
 boundaries), calibrated and mounted if asked, and appended to an atomic writer — bounded memory. Anything else
 (bags, NMEA, or a policy that needs the whole file: ``backwards='sort'``, ``duplicates='mean'``) is read whole,
 validated, calibrated, mounted and written; bags convert REP-103 FLU/ENU ↔ FRD/NED at the boundary
-(:mod:`formats.bags`). Returns the summary (rows in/out, channels, conversions applied, what the output format
-could not carry).
+(:mod:`formats.bags`). Returns a :class:`imutool.routes.RouteResult` whose summary says rows in/out, channels,
+conversions applied and what the output format could not carry.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 import formats
 from formats.errors import ImutoolError
 from imutool.progress import Progress, report
+from imutool.routes import RouteResult
 
 STREAMABLE = ("csv", "parquet")
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
@@ -158,7 +159,7 @@ def streams(
     duplicates: str = "drop",
     backwards: str = "error",
 ) -> bool:
-    """Whether :func:`convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
+    """Whether :func:`run_convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
     whole file (``backwards='sort'``, ``duplicates='mean'``)."""
     return (
         stream
@@ -169,13 +170,13 @@ def streams(
     )
 
 
-def convert(
+def run_convert(
     src: str | os.PathLike,
     dst: str | os.PathLike,
     *,
     stream: bool = True,
     chunk_rows: int = 500_000,
-    sentences: str | tuple[str, ...] = ("HDT", "XDR"),
+    sentences: str | tuple[str, ...] = "HDT,XDR",
     nmea_rate: float | None = None,
     talker: str | None = None,
     imu_topic: str = "/imu/data",
@@ -189,9 +190,10 @@ def convert(
     stage: Callable[[str], None] | None = None,
     on_input: Callable[[str, dict[str, Any]], None] | None = None,
     **load_options: Any,
-) -> dict[str, Any]:
+) -> RouteResult:
     """Convert ``src`` to ``dst`` (format from each name's extension: .csv, .parquet, .bag, .db3/.mcap or a folder,
-    .nmea/.log); returns the summary.
+    .nmea/.log): the route behind ``imutool convert`` and ``imutool batch convert``. Returns its summary and what
+    loading the input did (``inputs``); nothing is printed.
 
     load_options: columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (as
     :func:`imutool.loading.load_recording`; a bag input is read with topic/stamp/``vector3_mag_unit`` and gets
@@ -205,8 +207,15 @@ def convert(
 
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
-        raise TypeError(f"convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+        raise TypeError(f"run_convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
     src, dst = os.fspath(src), os.fspath(dst)
+    inputs: list[dict[str, Any]] = []
+
+    def noted(path: str, rep: dict[str, Any]) -> None:
+        inputs.append({"input": path, **rep})
+        if on_input is not None:
+            on_input(path, rep)
+
     opt = {k: load_options.get(k) for k in LOAD_OPTIONS}
     duplicates = opt["duplicates"] or "drop"
     backwards = opt["backwards"] or "error"
@@ -232,10 +241,8 @@ def convert(
             )
         )
         summary["conversions"] = ["none (same frames and units)"]
-        validation = summary.pop("validation")
-        if on_input is not None:
-            on_input(src, validation)
-        return summary
+        noted(src, summary.pop("validation"))
+        return RouteResult(summary, inputs)
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
@@ -261,14 +268,14 @@ def convert(
         rec.meta["validation"] = report
         if warns:
             rec.meta["warnings"] = merged_warnings(rec.meta, warns)
-        if on_input is not None and len(rec):
-            on_input(src, {**report, "warnings": warns})
+        if len(rec):
+            noted(src, {**report, "warnings": warns})
     else:
         from imutool.loading import load_recording
 
         rec, rep2 = load_recording(src, strict=strict, **{k: v for k, v in opt.items() if v is not None})
-        if on_input is not None and len(rec):
-            on_input(src, rep2)
+        if len(rec):
+            noted(src, rep2)
         rows_in = int(rep2.get("rows", len(rec)))
         summary["validation_actions"] = rep2.get("actions", [])
     if mounting:
@@ -312,4 +319,4 @@ def convert(
     else:
         summary["rows_out"] = len(rec)
     summary["conversions"] = conversions or ["none (same frames and units)"]
-    return summary
+    return RouteResult(summary, inputs, rec)
