@@ -69,12 +69,12 @@ def stream_convert(
     report is the summary's ``validation``, and it and the warnings go into the output's metadata at the end.
     ``progress(rows_read, rows_expected)`` after each chunk (expected: Parquet footer count, CSV estimate).
     """
-    from imutool.loading import ChunkChecks
+    from imutool.loading import ChunkChecks, mapping_options
 
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
+    opts: dict[str, Any] = mapping_options(src, columns, profile)
     checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
-    opts: dict[str, Any] = {"columns": columns, "profile": profile} if formats.kind_of(src) == "csv" else {}
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
     rows_in = 0
@@ -201,7 +201,7 @@ def convert(
     (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
     ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
     """
-    from imutool.loading import ChunkChecks, merged_warnings
+    from imutool.loading import ChunkChecks, mapping_options, merged_warnings
 
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
@@ -239,7 +239,13 @@ def convert(
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
-        rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header", vector3_mag_unit=vector3_mag_unit)
+        rec = formats.read(
+            src,
+            topic=opt["topic"],
+            stamp=opt["stamp"] or "header",
+            vector3_mag_unit=vector3_mag_unit,
+            **mapping_options(src, opt["columns"], opt["profile"]),
+        )
         rows_in = len(rec)
         bag = rec.meta.get("bag", {})
         conversions += [f"in: {c}" for c in bag.get("conversions", [])]

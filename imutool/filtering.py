@@ -40,7 +40,7 @@ from imutool.attitude.recording import heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import ChunkChecks, load_recording
+from imutool.loading import ChunkChecks, load_recording, mapping_options
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -370,7 +370,7 @@ def stream_ekf(
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
-    opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
+    opts = {**mapping_options(path, columns, profile), **({"prefetch": True} if kind == "csv" else {})}
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
