@@ -26,18 +26,15 @@ STREAMABLE = ("csv", "parquet")
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
-META_ROOM = 8192  # bytes left in a streamed CSV output's header for the warnings known only at the end
-
-
-def chunk_writer(path: str | os.PathLike, background: bool = False, reserve_meta: int = 0) -> Any:
+def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
     """An atomic incremental writer (``with w: w.write(chunk)``; ``w.rows``) for a .csv or .parquet output;
-    ``background``: each chunk is written by a worker thread while the caller prepares the next;
-    ``reserve_meta``: header room (bytes) a CSV keeps for :meth:`set_final_meta` (Parquet needs none)."""
+    ``background``: each chunk is written by a worker thread while the caller prepares the next. Metadata given
+    to ``set_final_meta`` go into the CSV's header (the rows copied once behind it) or the Parquet footer."""
     kind = formats.kind_of(path, for_output=True)
     if kind == "csv":
         from formats.csv import CsvWriter
 
-        return CsvWriter(os.fspath(path), background=background, reserve_meta=reserve_meta)
+        return CsvWriter(os.fspath(path), background=background)
     if kind == "parquet":
         from formats.parquet import ParquetWriter
 
@@ -83,7 +80,7 @@ def stream_convert(
     channels: list[str] = []
     last_t = -np.inf
     skipped = 0
-    with chunk_writer(dst, reserve_meta=META_ROOM) as w:
+    with chunk_writer(dst) as w:
         for chunk in chunks:
             rows_in += len(chunk)
             report(progress, rows_in, total)

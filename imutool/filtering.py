@@ -39,7 +39,7 @@ from imutool.attitude import (
 from imutool.attitude.recording import heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
-from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
+from imutool.convert import STREAMABLE, chunk_writer, expected_rows
 from imutool.loading import ChunkChecks, load_recording, mapping_options
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
@@ -375,7 +375,7 @@ def stream_ekf(
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
-    writer = chunk_writer(output, background=True, reserve_meta=META_ROOM)
+    writer = chunk_writer(output, background=True)
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         chunks = in_background(chunks)
