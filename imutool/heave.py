@@ -160,6 +160,13 @@ def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.n
                 + " — not an orientation; use --attitude auto (the tilt filter) or ekf"
             )
     if attitude == "q":
+        bag = rec.meta.get("bag")
+        notes = bag.get("notes") or [] if isinstance(bag, dict) else []
+        if any("[0, 0, 0, 0]" in str(n) and "not read" in str(n) for n in notes):
+            raise ImutoolError(
+                "--attitude q: the bag's orientation field is all zeros (not filled by the driver) — not an "
+                "orientation; use --attitude auto (the tilt filter) or ekf"
+            )
         raise ImutoolError("--attitude q needs qw..qz columns")
     if "gyro" not in rec:
         raise ImutoolError("the vertical needs an attitude: give q columns, gyro_x..z, or --vertical COLUMN")

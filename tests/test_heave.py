@@ -262,6 +262,8 @@ def test_a_bag_whose_orientation_is_all_zeros_takes_the_tilt_filter(tmp_path, ca
     code, out, err = run_main(["heave", bag, "-o", tmp_path / "h.csv", "--json"], capsys)
     assert code == 0, err
     assert "tilt filter" in out and "no finite vertical" not in err
+    code, out, err = run_main(["heave", bag, "-o", tmp_path / "hq.csv", "--attitude", "q"], capsys)
+    assert code == 2 and "orientation field is all zeros" in err
     h = formats.read(tmp_path / "h.csv")
     assert np.isfinite(h["heave"]).mean() > 0.9
     csv = tmp_path / "zq.csv"

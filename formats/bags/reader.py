@@ -76,10 +76,7 @@ def read_bag(
         raise ImutoolError(f"unknown stamp choice {stamp!r} (header, record)")
     vscale = factor_to_si(vector3_mag_unit, "magnetic")  # a bad unit is reported before the bag is opened
     with open_bag(path) as bag:
-        rec = _recording(bag, path, topic, stamp, vscale, fast)
-    for kind, t in rec.meta["bag"]["topics"].items():
-        if kind != "imu":
-            rec.meta["bag"]["units"]["mag"] = "T" if t.get("type") == MAG else vector3_mag_unit
+        rec = _recording(bag, path, topic, stamp, vscale, fast, vector3_mag_unit)
     if columns or profile:
         rec = apply_columns(rec, columns, profile, path)
     return rec
@@ -144,11 +141,14 @@ def recording_of(
     """
     if stamp not in ("header", "record"):
         raise ImutoolError(f"unknown stamp choice {stamp!r} (header, record)")
-    return _recording(bag, os.fspath(path), topic, stamp, factor_to_si(vector3_mag_unit, "magnetic"), fast)
+    vscale = factor_to_si(vector3_mag_unit, "magnetic")
+    return _recording(bag, os.fspath(path), topic, stamp, vscale, fast, vector3_mag_unit)
 
 
-def _recording(bag: BagReader, path: str, topic: str | None, stamp: str, vscale: float, fast: bool) -> Recording:
-    """read_bag's work on an open bag; vscale: Vector3Stamped magnetometer unit → µT."""
+def _recording(
+    bag: BagReader, path: str, topic: str | None, stamp: str, vscale: float, fast: bool, vunit: str = "T"
+) -> Recording:
+    """read_bag's work on an open bag; vscale: Vector3Stamped magnetometer unit ``vunit`` → µT."""
     topics = bag.topics()
     if bag.truncated and not any(t.count for t in topics.values()):
         raise ImutoolError("bag is truncated: no complete chunk of messages to read", path=path)
@@ -200,7 +200,10 @@ def _recording(bag: BagReader, path: str, topic: str | None, stamp: str, vscale:
             "topics": info,
             "frame_id": sorted(set(frame_ids)),
             "conversions": conv,
-            "units": {k: u for k, u in IMU_UNITS.items() if k in rec.channels},
+            "units": {
+                **{k: u for k, u in IMU_UNITS.items() if k in rec.channels},
+                **({"mag": "T" if mag_t.msgtype == MAG else vunit} if mag_t is not None and "mag" in rec else {}),
+            },
             "truncated": bool(bag.truncated),
             "notes": notes + list(bag.notes),
         },
