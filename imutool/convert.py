@@ -27,18 +27,15 @@ STREAMABLE = ("csv", "parquet")
 LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
-META_ROOM = 8192  # bytes left in a streamed CSV output's header for the warnings known only at the end
-
-
-def chunk_writer(path: str | os.PathLike, background: bool = False, reserve_meta: int = 0) -> Any:
+def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
     """An atomic incremental writer (``with w: w.write(chunk)``; ``w.rows``) for a .csv or .parquet output;
-    ``background``: each chunk is written by a worker thread while the caller prepares the next;
-    ``reserve_meta``: header room (bytes) a CSV keeps for :meth:`set_final_meta` (Parquet needs none)."""
+    ``background``: each chunk is written by a worker thread while the caller prepares the next. Metadata given
+    to ``set_final_meta`` go into the CSV's header (the rows copied once behind it) or the Parquet footer."""
     kind = formats.kind_of(path, for_output=True)
     if kind == "csv":
         from formats.csv import CsvWriter
 
-        return CsvWriter(os.fspath(path), background=background, reserve_meta=reserve_meta)
+        return CsvWriter(os.fspath(path), background=background)
     if kind == "parquet":
         from formats.parquet import ParquetWriter
 
@@ -70,12 +67,12 @@ def stream_convert(
     report is the summary's ``validation``, and it and the warnings go into the output's metadata at the end.
     ``progress(rows_read, rows_expected)`` after each chunk (expected: Parquet footer count, CSV estimate).
     """
-    from imutool.loading import ChunkChecks
+    from imutool.loading import ChunkChecks, mapping_options
 
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
+    opts: dict[str, Any] = mapping_options(src, columns, profile)
     checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
-    opts: dict[str, Any] = {"columns": columns, "profile": profile} if formats.kind_of(src) == "csv" else {}
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
     rows_in = 0
@@ -84,7 +81,7 @@ def stream_convert(
     channels: list[str] = []
     last_t = -np.inf
     skipped = 0
-    with chunk_writer(dst, reserve_meta=META_ROOM) as w:
+    with chunk_writer(dst) as w:
         for chunk in chunks:
             rows_in += len(chunk)
             report(progress, rows_in, total)
@@ -203,7 +200,7 @@ def run_convert(
     (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
     ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
     """
-    from imutool.loading import ChunkChecks, merged_warnings
+    from imutool.loading import ChunkChecks, mapping_options, merged_warnings
 
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
@@ -246,7 +243,13 @@ def run_convert(
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
-        rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header", vector3_mag_unit=vector3_mag_unit)
+        rec = formats.read(
+            src,
+            topic=opt["topic"],
+            stamp=opt["stamp"] or "header",
+            vector3_mag_unit=vector3_mag_unit,
+            **mapping_options(src, opt["columns"], opt["profile"]),
+        )
         rows_in = len(rec)
         bag = rec.meta.get("bag", {})
         conversions += [f"in: {c}" for c in bag.get("conversions", [])]

@@ -40,8 +40,8 @@ from imutool.attitude.motion import choose_motion, params_for_motion
 from imutool.attitude.recording import drop_clipped, flag_clipped, gnss_inputs, heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
-from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import ChunkChecks, load_recording
+from imutool.convert import STREAMABLE, chunk_writer, expected_rows
+from imutool.loading import ChunkChecks, load_recording, mapping_options
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -384,12 +384,12 @@ def stream_ekf(
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
-    opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
+    opts = {**mapping_options(path, columns, profile), **({"prefetch": True} if kind == "csv" else {})}
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
-    writer = chunk_writer(output, background=True, reserve_meta=META_ROOM)
+    writer = chunk_writer(output, background=True)
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         chunks = in_background(chunks)

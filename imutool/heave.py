@@ -133,14 +133,40 @@ def complementary_attitude(
     )
 
 
+def usable_orientation(q: np.ndarray) -> np.ndarray:
+    """Rows of q (N, 4) that are an orientation: finite and of unit norm within 10 % (four zeros, the value of a
+    driver that has none, are not)."""
+    q = np.asarray(q, float)
+    with np.errstate(invalid="ignore"):
+        n = np.sqrt(np.sum(q * q, axis=1))
+        return np.isfinite(n) & (np.abs(n - 1.0) < 0.1)
+
+
 def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.ndarray, str]:
     if attitude == "ref":
         if "ref_q" not in rec:
             raise ImutoolError("--attitude ref needs ref_qw..ref_qz columns")
         return rec["ref_q"], "ref_q (truth channel)"
-    if attitude in ("auto", "q") and "q" in rec and not (isinstance(rec["q"], np.ndarray) and rec["q"].ndim == 1):
-        return rec["q"], "q channel of the input"
+    has_q = "q" in rec and isinstance(rec["q"], np.ndarray) and rec["q"].ndim == 2 and rec["q"].shape[1] == 4
+    if attitude in ("auto", "q") and has_q:
+        ok = usable_orientation(rec["q"])
+        if ok.any():
+            return rec["q"], "q channel of the input"
+        if attitude == "q":  # all zeros (or NaN): not an orientation, whatever the columns are called
+            zero = bool(np.all(np.nan_to_num(rec["q"]) == 0))
+            raise ImutoolError(
+                "--attitude q: the orientation (qw..qz) is "
+                + ("all zeros" if zero else "nowhere a unit quaternion")
+                + " — not an orientation; use --attitude auto (the tilt filter) or ekf"
+            )
     if attitude == "q":
+        bag = rec.meta.get("bag")
+        notes = bag.get("notes") or [] if isinstance(bag, dict) else []
+        if any("[0, 0, 0, 0]" in str(n) and "not read" in str(n) for n in notes):
+            raise ImutoolError(
+                "--attitude q: the bag's orientation field is all zeros (not filled by the driver) — not an "
+                "orientation; use --attitude auto (the tilt filter) or ekf"
+            )
         raise ImutoolError("--attitude q needs qw..qz columns")
     if "gyro" not in rec:
         raise ImutoolError("the vertical needs an attitude: give q columns, gyro_x..z, or --vertical COLUMN")
@@ -1136,7 +1162,7 @@ def heave_recording(
     a, vinfo = vertical_acceleration(rec, vertical, vertical_sign, attitude, lever_arm, tilt_gain)
     if not np.isfinite(a).any():
         raise ImutoolError(
-            "no finite vertical acceleration sample (all accelerometer values missing)",
+            f"no finite vertical acceleration sample ({_why_no_vertical(rec, vertical, vinfo)})",
             path=str(rec.meta.get("source") or "") or None,
         )
     res = estimate_heave(rec.time, a, method=method, **options)
@@ -1162,6 +1188,15 @@ def heave_recording(
         }
     )
     return out, summary
+
+
+def _why_no_vertical(rec: Recording, vertical: list[str] | None, vinfo: dict[str, Any]) -> str:
+    """What made every vertical acceleration sample NaN: the accelerometer, or the attitude that rotated it."""
+    if vertical:
+        return f"every value of {', '.join(vertical)} is missing"
+    if "accel" in rec and not np.any(np.all(np.isfinite(rec["accel"]), axis=1)):
+        return "all accelerometer values missing"
+    return f"the accelerometer has values; the attitude has none: {vinfo.get('vertical', 'attitude')}"
 
 
 HEAVE_CHANNELS = ("heave", "heave_delayed", "heave_rate", "heave_rate_delayed", "ref_heave", "ref_heave_rate")

@@ -44,11 +44,9 @@ def load_recording(
 
     path = os.fspath(path)
     kind = formats.kind_of(path)
-    opts: dict[str, Any] = {}
-    if kind == "csv":
-        opts = {"columns": columns, "profile": profile}
-    elif kind in ("ros1", "ros2"):
-        opts = {"topic": topic, "stamp": stamp}
+    opts: dict[str, Any] = mapping_options(path, columns, profile)
+    if kind in ("ros1", "ros2"):
+        opts.update(topic=topic, stamp=stamp)
     rec = formats.read(path, **opts)
     report: dict[str, Any] = {}
     checks = plausibility.PlausibilityReport()
@@ -72,7 +70,9 @@ def load_recording(
         rec = rec.mounted(remap, mis)
     if len(rec):  # also for commands that read without validating (info, plot): they show the warnings
         ok = np.all(np.diff(rec.time) > 0) if len(rec) > 1 else True
-        found = plausibility.check_recording(rec if ok else rec.select(np.argsort(rec.time, kind="stable")), mounting)
+        found = plausibility.check_recording(
+            rec if ok else rec.select(np.argsort(rec.time, kind="stable")), mounting, kind
+        )
         checks.warnings += found.warnings
         checks.figures.update(found.figures)
         report.update({k: v for k, v in checks.as_dict().items() if k != "figures"})
@@ -86,6 +86,26 @@ def load_recording(
         if strict and checks.warnings:
             raise ImutoolError(strict_message(checks.warnings), path=path)
     return rec, report
+
+
+MAPPED_KINDS = ("csv", "ros1", "ros2")  # inputs whose columns' units --columns/--profile can state
+
+
+def mapping_options(path: str, columns: str | None, profile: str | None) -> dict[str, Any]:
+    """The reader options of a column mapping (``--columns``/``--profile``) for ``path``: a foreign CSV's mapping,
+    or a bag's unit and scale overrides; refused (ImutoolError) for an input that states its own units (Parquet,
+    NMEA) rather than ignored."""
+    if not columns and not profile:
+        return {}
+    kind = formats.kind_of(path)
+    if kind not in MAPPED_KINDS:
+        what = "--columns" if columns else "--profile"
+        raise ImutoolError(
+            f"{what} applies to a CSV or a ROS bag; a {kind.capitalize() if kind == 'parquet' else 'NMEA'} file "
+            "states its own columns and units",
+            path=path,
+        )
+    return {"columns": columns, "profile": profile}
 
 
 def merged_warnings(meta: dict[str, Any], *more: list[str]) -> list[str]:
@@ -129,6 +149,7 @@ class ChunkChecks:
         from formats import plausibility
 
         self.path = path
+        self.kind = formats.kind_of(path)
         self.mounting = mounting
         self.strict = strict
         self.cal = None
@@ -156,7 +177,7 @@ class ChunkChecks:
         if not self._checked and len(chunk):
             self._checked = True
             self.earlier = merged_warnings(chunk.meta)
-            found = plausibility.check_recording(chunk, self.mounting)
+            found = plausibility.check_recording(chunk, self.mounting, self.kind)
             self.warnings += found.warnings
             self._refuse(found.warnings)
         return chunk

@@ -246,6 +246,9 @@ def test_streamed_filter_checks_its_input_like_an_in_memory_run(roll_csv, tmp_pa
         assert "3 absurd gyro sample(s)" in run.stderr, name
     a, b = formats.read(outs["memory"]), formats.read(outs["stream"])
     assert any("3 absurd gyro" in w for w in b.meta["warnings"])
+    head = outs["stream"].read_text().split("\ntime,")[0].splitlines()  # what a person opening the file sees
+    assert all(ln.strip("# ") for ln in head), "a blank line (room kept for metadata) in the streamed header"
+    assert sum(ln.startswith("# warnings:") for ln in head) == 1
     assert b.meta["validation"]["absurd_samples_interpolated"] == {"gyro": 3}
     for ch in ("roll", "pitch", "heading", "gyro_bias"):
         assert np.array_equal(a[ch], b[ch]), ch
