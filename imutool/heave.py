@@ -53,6 +53,8 @@ from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
 
 GRAVITY = 9.80665
 METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
+GNSS_METHOD = "gnss"  # run_heave only: the detrended GNSS height (imutool.gnss_heave), no accelerometer
+ROUTE_METHODS = METHODS + (GNSS_METHOD,)
 TILT_GAIN = 0.07  # 1/s: tilt-filter gain (+ integral gyro-bias term gain²/4: a critically damped PI loop)
 RT_ORDER = 6  # real-time corrected integrator: order,
 RT_RATIO = 0.3  # corner as a fraction of the tracked dominant frequency,
@@ -1194,6 +1196,10 @@ def run_heave(
     nmea_rate: float | None = None,
     nmea_baud: int = 4800,
     heave_positive: str = "up",
+    height_window_s: float | None = None,
+    gnss_fix: str = "rtk",
+    gnss_lever_arm: Any = None,
+    gnss_reference: bool = True,
     strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
@@ -1208,7 +1214,14 @@ def run_heave(
     ``vertical_sign``; else the 3-axis accel rotated with ``attitude`` (auto, q, ekf, tilt, ref), ``lever_arm``
     (m, body FRD) and ``tilt_gain`` (1/s). ``nmea``: also write PASHR and/or TSS1 (``nmea_sentences``) there at
     ``nmea_rate`` Hz fitting ``nmea_baud`` (:func:`imutool.nmea_out.write_log`). ``heave_positive``: ``up``
-    (imutool) or ``down``: every heave column and sentence flips, the headers say so. ``load_options`` of a path:
+    (imutool) or ``down``: every heave column and sentence flips, the headers say so.
+
+    GNSS height (a ``gnss_height`` channel: GGA, PTNL,GGK/PJK; :mod:`imutool.gnss_heave`): with ``method``
+    ``gnss``, or when the input has no accelerometer, the heave is the detrended height (``height_window_s``,
+    None = 10 dominant periods within 60–600 s; ``gnss_fix`` rtk/fixed/any; ``gnss_lever_arm`` the monitoring
+    point relative to the antenna, m body FRD, applied with the input's roll/pitch). With an accelerometer and
+    ``gnss_reference``, the height heave becomes ``ref_heave`` (where the input has none) and the summary's
+    ``gnss_reference`` compares the two. ``load_options`` of a path:
     columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (in ``options`` too).
     Returns the output recording and the summary (rows, heave_positive, the estimator's figures, ``nmea``).
     """
@@ -1225,18 +1238,31 @@ def run_heave(
     if vertical:
         cols = [c if c in rec.channels else c.lower() if c.lower() in rec.channels else c for c in vertical]
     arm = None if lever_arm is None else np.asarray(lever_arm, dtype=float).reshape(-1)
+    has_accel = bool(cols) or "accel" in rec.channels
+    height_only = method == GNSS_METHOD or (not has_accel and "gnss_height" in rec.channels)
     if stage is not None:
-        stage(f"heave ({method})")
-    out, summary = heave_recording(
-        rec,
-        method=method,
-        vertical=cols,
-        vertical_sign=vertical_sign,
-        attitude="tiltonly" if attitude == "tilt" else attitude,
-        lever_arm=arm,
-        tilt_gain=tilt_gain,
-        **options,
-    )
+        stage(f"heave ({GNSS_METHOD if height_only else method})")
+    if height_only:
+        from imutool.gnss_heave import height_heave  # noqa: PLC0415
+
+        if lever_arm is not None:
+            raise ImutoolError("--lever-arm is the IMU's; for a heave from GNSS height give --gnss-lever-arm")
+        out, summary = height_heave(rec, window_s=height_window_s, fix=gnss_fix, lever_arm=gnss_lever_arm)
+        if method != GNSS_METHOD:
+            summary["method_note"] = f"no accelerometer in the input: heave from gnss_height (not {method})"
+    else:
+        out, summary = heave_recording(
+            rec,
+            method=method,
+            vertical=cols,
+            vertical_sign=vertical_sign,
+            attitude="tiltonly" if attitude == "tilt" else attitude,
+            lever_arm=arm,
+            tilt_gain=tilt_gain,
+            **options,
+        )
+        if gnss_reference and "gnss_height" in rec.channels:
+            summary["gnss_reference"] = _gnss_reference(out, rec, height_window_s, gnss_fix, gnss_lever_arm)
     nmea_info = None
     if nmea:
         names = nmea_sentences.split(",") if isinstance(nmea_sentences, str) else nmea_sentences
@@ -1281,22 +1307,50 @@ def run_heave(
     return RouteResult(summary, inputs, out)
 
 
+def _gnss_reference(out: Recording, rec: Recording, window_s: float | None, fix: str, lever_arm: Any) -> dict[str, Any]:
+    """The heave from ``rec``'s gnss_height as ``out``'s ``ref_heave`` (unless it has one) and the comparison."""
+    from imutool.gnss_heave import height_heave  # noqa: PLC0415
+
+    href, hs = height_heave(rec, window_s=window_s, fix=fix, lever_arm=lever_arm)
+    hv = np.where(href["settled"] > 0, href["heave"], np.nan)
+    info: dict[str, Any] = {"window_s": hs["window_s"], "fix_filter": hs["fix_filter"]}
+    if "ref_heave" not in out.channels:
+        out.add("ref_heave", interp_to(out.time, href.time, hv), "m")
+        out.meta["ref_heave"] = f"heave from gnss_height (detrended over {hs['window_s']:g} s, {hs['fix_filter']})"
+        info["ref_heave"] = "added"
+    ref = Recording(href.time, {"ref_heave": hv}, {"ref_heave": "m"})
+    try:
+        info.update(evaluate_heave(out, ref, max_lag_s=0.0))
+    except ImutoolError as e:
+        info["not_compared"] = str(e)
+    return info
+
+
 # ------------------------------------------------------------------------------------------------------------------
 # Evaluation
 # ------------------------------------------------------------------------------------------------------------------
-def _ref_heave(ref: Recording) -> np.ndarray:
+
+
+def _ref_heave(ref: Recording) -> tuple[np.ndarray, np.ndarray, str]:
+    """(times, heave m + up, what it is) of a reference: ref_heave or heave, else the detrended gnss_height."""
     for name in ("ref_heave", "heave", "Heave"):
         if name in ref:
-            return np.asarray(ref[name], float)
-    raise ImutoolError(f"reference has no heave channel (ref_heave or heave); has {', '.join(ref.channels)}")
+            return ref.time, np.asarray(ref[name], float), name
+    if "gnss_height" in ref.channels:
+        from imutool.gnss_heave import reference_heave  # noqa: PLC0415
+
+        return reference_heave(ref)
+    raise ImutoolError(
+        f"reference has no heave channel (ref_heave, heave or gnss_height); has {', '.join(ref.channels)}"
+    )
 
 
 def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> dict[str, Any]:
     """Heave error statistics (m) of ``est`` (channels heave and, if present, heave_delayed) against the
     reference heave (``ref_heave`` or ``heave``; positive up), after the best constant lag within ±max_lag_s.
     Samples with ``settled`` = 0 are excluded (counted). Positive lag: the estimate lags the reference."""
-    rh = _ref_heave(ref)
-    out: dict[str, Any] = {"unit": "m", "max_lag_s": max_lag_s}
+    ref_t, rh, what = _ref_heave(ref)
+    out: dict[str, Any] = {"unit": "m", "max_lag_s": max_lag_s, "reference_heave": what}
     sig = 4 * np.nanstd(rh)
     out["significant_heave_ref_m"] = float(sig)
     for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
@@ -1312,10 +1366,10 @@ def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> di
         if max_lag_s > 0:
             # a lag grid finer than the sample interval (at 10 Hz a ±0.1 s search would have three points)
             step = min(float(np.median(np.diff(tt))), max_lag_s / 10)
-            lag, _ = best_lag(tt, xx, ref.time, rh, max_lag_s, step_s=step)
+            lag, _ = best_lag(tt, xx, ref_t, rh, max_lag_s, step_s=step)
         else:
             lag = 0.0
-        r = interp_to(tt - lag, ref.time, rh)
+        r = interp_to(tt - lag, ref_t, rh)
         st = error_stats(xx - r)
         st["lag_s"] = float(lag)
         st["excluded_unsettled"] = int((~mask).sum())
