@@ -13,12 +13,20 @@ import formats
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.nmea import sentence_summary
+from formats.timing import describe, stream_timing
 from imutool.cli.common import emit_summary, input_options, load_input
 
 # units shown in degrees (DESIGN: degrees at every user-facing surface); the file keeps what its header says
 _DEG_UNITS = {"rad/s": "deg/s", "rad": "deg", "rad/s^2": "deg/s^2"}
 
-_HIDDEN_META = {"validation", "column_mapping", "column_mapping_origin", "skipped_rows", "skipped_rows_first"}
+_HIDDEN_META = {
+    "validation",
+    "column_mapping",
+    "column_mapping_origin",
+    "skipped_rows",
+    "skipped_rows_first",
+    "sentence_timing",  # shown as the summary's own sentence_timing
+}
 
 
 def _num(v: float) -> float | None:
@@ -100,6 +108,7 @@ def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards
     }
     if rec_raw.meta.get("sentences"):  # an NMEA log: every sentence named and counted, read or not
         summary["nmea_sentences"] = sentence_summary(rec_raw.meta)
+    _own_timing(rec, rec_raw.meta, summary)
     cm = rec_raw.meta.get("column_mapping")
     if cm:
         summary["column_mapping"] = {
@@ -107,6 +116,36 @@ def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards
             "columns": [s.strip() for s in str(cm).split(";") if s.strip()],
         }
     return summary
+
+
+def _own_timing(rec: Recording, meta: dict[str, Any], summary: dict[str, Any]) -> None:
+    """Rates and gaps on each stream's own times: per NMEA sentence type (the reader's ``sentence_timing``), per
+    channel whose samples sit on rows of their own (fewer than 90 % of the rows), and the rows themselves when
+    they come in bursts (then ``rate_hz`` and ``gaps`` are the burst-aware ones; formats/timing.py)."""
+    st = meta.get("sentence_timing")
+    if isinstance(st, dict) and st:
+        summary["sentence_timing"] = st
+    if len(rec) < 2:
+        return
+    per_channel: dict[str, Any] = {}
+    for name, a in rec.channels.items():
+        if st or a.dtype.kind != "f":  # an NMEA log: its sentence types say it
+            continue
+        ok = np.isfinite(a.reshape(len(a), -1)).any(axis=1)
+        if 2 <= ok.sum() < 0.9 * len(rec):
+            per_channel[name] = stream_timing(rec.time[ok])
+    if per_channel:
+        summary["channel_timing"] = per_channel
+    rows = stream_timing(rec.time)
+    if rows["bursty"] and not st:
+        summary["rate_hz"] = rows["rate_hz"]
+        summary["bursts"] = rows["burst"]
+        summary["gaps"] = {
+            "count": rows["gaps"],
+            "missing_s": rows["missing_s"],
+            "first": [{"start_s": a, "length_s": b} for a, b in rows["first_gaps"]],
+            "rule": "time between burst starts longer than 3 burst periods",
+        }
 
 
 def _fmt(v: Any) -> str:
@@ -126,21 +165,41 @@ def _fmt_t(v: Any) -> str:
 
 def _lines(s: dict[str, Any]) -> list[str]:
     st = s["step_s"]
+    sentence_timing = s.get("sentence_timing") or {}
+    multi = len(sentence_timing) > 1
+    rate = f"rate:      {_fmt(s['rate_hz'])} Hz"
+    if s.get("bursts"):
+        b = s["bursts"]
+        rate += f" in bursts of {_fmt(b['samples'])} every {_fmt(b['period_s'])} s"
+    rate += f" (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, max {_fmt(st['max'])} s)"
+    gaps = f"gaps:      {s['gaps']['count']}" + (
+        f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
+        f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
+        f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
+        if s["gaps"]["count"]
+        else ""
+    )
+    if multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
+        rate = f"rate:      per sentence type ({len(sentence_timing)} types, rows merged; each on its own times):"
+        gaps = ""
     out = [
         f"file:      {s['file']} ({s['format']})",
         f"rows:      {s['rows']}"
         + (f" ({s['rows_after_validation']} after validation)" if s["rows_after_validation"] != s["rows"] else ""),
         f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
-        f"rate:      {_fmt(s['rate_hz'])} Hz (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, "
-        f"max {_fmt(st['max'])} s)",
-        f"gaps:      {s['gaps']['count']}"
-        + (
-            f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
-            f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
-            f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
-            if s["gaps"]["count"]
-            else ""
-        ),
+        rate,
+    ]
+    if multi:
+        out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
+    else:
+        out.append(gaps)
+        if sentence_timing:
+            k, v = next(iter(sentence_timing.items()))
+            out.append(f"sentence:  {k} {describe(v)}")
+    if s.get("channel_timing"):
+        out.append("channels on rows of their own (rate and gaps on their own samples):")
+        out += [f"  {k:<14} {describe(v)}" for k, v in s["channel_timing"].items()]
+    out += [
         f"duplicate timestamps: {s['duplicate_timestamps']} "
         f"({s['duplicate_timestamps_with_different_data']} with different data)",
         f"time going backwards: {s['backwards_steps']}",
