@@ -1318,9 +1318,8 @@ def _gnss_reference(out: Recording, rec: Recording, window_s: float | None, fix:
         out.add("ref_heave", interp_to(out.time, href.time, hv), "m")
         out.meta["ref_heave"] = f"heave from gnss_height (detrended over {hs['window_s']:g} s, {hs['fix_filter']})"
         info["ref_heave"] = "added"
-    ref = Recording(href.time, {"ref_heave": hv}, {"ref_heave": "m"})
     try:
-        info.update(evaluate_heave(out, ref, max_lag_s=0.0))
+        info.update(_evaluate_at_reference(out, href.time, hv, f"gnss_height detrended over {hs['window_s']:g} s", 0.0))
     except ImutoolError as e:
         info["not_compared"] = str(e)
     return info
@@ -1329,6 +1328,37 @@ def _gnss_reference(out: Recording, rec: Recording, window_s: float | None, fix:
 # ------------------------------------------------------------------------------------------------------------------
 # Evaluation
 # ------------------------------------------------------------------------------------------------------------------
+def _evaluate_at_reference(
+    est: Recording, ref_t: np.ndarray, rh: np.ndarray, what: str, max_lag_s: float
+) -> dict[str, Any]:
+    """evaluate_heave at the reference's own times: error = est(τ + lag) − ref(τ), the estimate (unsettled rows
+    NaN) interpolated onto the reference times τ."""
+    sig = 4 * np.nanstd(rh)
+    out: dict[str, Any] = {
+        "unit": "m",
+        "max_lag_s": max_lag_s,
+        "reference_heave": what,
+        "compared_at": "the reference's own times",
+        "significant_heave_ref_m": float(sig),
+    }
+    for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
+        if ch not in est:
+            continue
+        mask = np.asarray(est[flag]) > 0.5 if flag in est else np.ones(len(est), bool)
+        x = np.where(mask, np.asarray(est[ch], float), np.nan)
+        if mask.sum() < 10:
+            raise ImutoolError("too few settled samples to evaluate heave")
+        lag = 0.0
+        if max_lag_s > 0:
+            step = min(float(np.median(np.diff(est.time))), max_lag_s / 10)
+            lag, _ = best_lag(ref_t, rh, est.time, x, max_lag_s, step_s=step)
+            lag = -lag  # best_lag moved the estimate against the reference: the estimate's lag is the opposite
+        st = error_stats(interp_to(ref_t + lag, est.time, x) - rh)
+        st["lag_s"] = float(lag)
+        st["excluded_unsettled"] = int((~mask).sum())
+        st["rmse_pct_of_significant"] = float(100 * st["rmse"] / sig) if sig > 0 else float("nan")
+        out[ch] = st
+    return out
 
 
 def _ref_heave(ref: Recording) -> tuple[np.ndarray, np.ndarray, str]:
@@ -1347,9 +1377,14 @@ def _ref_heave(ref: Recording) -> tuple[np.ndarray, np.ndarray, str]:
 
 def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> dict[str, Any]:
     """Heave error statistics (m) of ``est`` (channels heave and, if present, heave_delayed) against the
-    reference heave (``ref_heave`` or ``heave``; positive up), after the best constant lag within ±max_lag_s.
-    Samples with ``settled`` = 0 are excluded (counted). Positive lag: the estimate lags the reference."""
+    reference heave (``ref_heave`` or ``heave``; positive up; else the detrended ``gnss_height``), after the best
+    constant lag within ±max_lag_s. Samples with ``settled`` = 0 are excluded (counted). Positive lag: the
+    estimate lags the reference. A reference sampled more sparsely than the estimate (a 1 Hz GNSS height
+    against a 50 Hz estimate) is compared at its own times, the estimate interpolated there."""
     ref_t, rh, what = _ref_heave(ref)
+    sparse = len(est) > 1 and len(ref_t) > 1 and np.median(np.diff(ref_t)) > 1.5 * np.median(np.diff(est.time))
+    if sparse and what not in ("ref_heave", "heave", "Heave"):
+        return _evaluate_at_reference(est, ref_t, rh, what, max_lag_s)
     out: dict[str, Any] = {"unit": "m", "max_lag_s": max_lag_s, "reference_heave": what}
     sig = 4 * np.nanstd(rh)
     out["significant_heave_ref_m"] = float(sig)

@@ -186,3 +186,23 @@ def test_evaluate_heave_against_gnss_height_and_cli(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["heave", str(log), "-o", str(tmp_path / "h2.csv"), "--lever-arm", "0,0,1"])
     assert e.value.code == 2 and "--gnss-lever-arm" in capsys.readouterr().err
+
+
+def test_accelerometer_heave_checked_against_the_gnss_height():
+    """With an accelerometer and a 1 Hz RTK height on rows of its own, the height heave becomes ref_heave and the
+    summary compares the two at the height's own times (the delayed heave agrees to about the height noise)."""
+    from imutool.sim.sea import sea_state
+
+    rec = sea_state(duration=600, rate_hz=10, hs=2.0, tp=9.0, seed=3)
+    truth = np.asarray(rec["ref_heave"], float)
+    del rec.channels["ref_heave"]
+    rng = np.random.default_rng(5)
+    gh = np.full(len(rec), np.nan)
+    gh[::10] = 3.4 + truth[::10] + 0.01 * rng.standard_normal(len(gh[::10]))
+    rec.add("gnss_height", gh, "m")
+    rec.add("gnss_fix_quality", np.where(np.isfinite(gh), 4.0, np.nan), "1")
+    res = run_heave(rec, None, method="bandpass")
+    g = res.summary["gnss_reference"]
+    assert g["ref_heave"] == "added" and g["compared_at"] == "the reference's own times"
+    assert g["heave_delayed"]["rmse"] < 0.03 and g["heave_delayed"]["n"] > 400
+    assert "gnss_height" in res.recording.meta["ref_heave"]
