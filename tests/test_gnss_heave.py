@@ -58,6 +58,10 @@ def test_gga_height_is_altitude_plus_geoid_separation():
     d = decode("$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47")
     assert d["gnss_height"] == pytest.approx(592.3) and d["gnss_fix_quality"] == 1
     assert chr(int(d["gnss_height_datum"])) == "E" and d["gnss_geoid_separation"] == 46.9
+    # Trimble's manuals print a GGA and a GGK of the same epoch (172814): orthometric 18.893 m, separation
+    # −25.669 m (the geoid below the ellipsoid) and the GGK's ellipsoidal height EHT−6.777 m: H + N = −6.776 m
+    d = decode("$GPGGA,172814.0,3723.46587704,N,12202.26957864,W,2,6,1.2,18.893,M,-25.669,M,2.0,0031*4F")
+    assert d["gnss_height"] == pytest.approx(-6.777, abs=0.0015) and d["gnss_fix_quality"] == 2
     # a negative separation (geoid below the ellipsoid) lowers the ellipsoidal height
     d = decode(_gga(0.0, 3.4, sep="-25.300"))
     assert d["gnss_height"] == pytest.approx(3.4 - 25.3)

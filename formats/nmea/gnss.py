@@ -44,8 +44,9 @@ _GST = {f[1]: i for i, f in enumerate(GST.fields)}
 _GGK = {f[1]: i - 1 for i, f in enumerate(TNLGGK.fields)}  # proprietary: index 0 is the message id "GGK"
 _PJK = {"timestamp": 1, "datestamp": 2, "quality": 7, "num_sats": 8, "dop": 9, "height": 10, "meters": 11}
 
-# Trimble's GGK/PJK quality → GGA's scale (Trimble's GGA help: RTK float, OmniSTAR HP/XP, Location RTK and RTX are
-# sent as 5, RTK fixed as 4, code differential as 2). 2-D network solutions carry no height of their own: 2.
+# Trimble's GGK/PJK quality → GGA's scale, as Trimble's own GGA sends the same solutions (SPSx51 manual: 2 DGPS and
+# OmniSTAR VBS, 4 RTK fixed, 5 RTK float, OmniSTAR XP/HP, Location RTK). 2-D network solutions carry no height of
+# their own: 2. RTX (14) and xFill (15) → 5 is an assumption (no public mapping found).
 TRIMBLE_TO_GGA = {0: 0, 1: 1, 2: 5, 3: 4, 4: 2, 5: 2, 6: 5, 7: 4, 8: 2, 9: 2, 10: 5, 11: 2, 12: 5, 13: 2, 14: 5, 15: 5}
 _HEIGHT_RE = re.compile(r"^(EHT|GHT)?\s*([+-]?\s*\d+(?:\.\d*)?|[+-]?\.\d+)$")
 
