@@ -10,6 +10,7 @@ between 10 Hz rows of other sentences). :func:`stream_timing` looks at one strea
 - **bursty** (the median step is under half the mean step): samples are grouped into bursts (a step longer than
   the geometric mean of the median and the mean step starts a new burst); the burst period is the median time
   between burst starts; a gap is a time between burst starts longer than ``gap_factor`` × the burst period.
+- never shorter than ``min_gap_s`` (the resolution of times that are estimates).
 
 Times in s; rates in Hz. Used by the NMEA reader (per sentence type, ``meta['sentence_timing']``) and by
 ``imutool info`` (per channel with samples of its own).
@@ -29,8 +30,13 @@ def _r(v: float, nd: int = 6) -> float | None:
     return round(float(v), nd) if math.isfinite(v) else None
 
 
-def stream_timing(t: np.ndarray, gap_factor: float = GAP_FACTOR, max_gaps: int = 5) -> dict[str, Any]:
+def stream_timing(
+    t: np.ndarray, gap_factor: float = GAP_FACTOR, max_gaps: int = 5, min_gap_s: float = 0.0
+) -> dict[str, Any]:
     """Rate, burst pattern and gaps of one stream's sample times ``t`` (s, non-decreasing; NaN dropped).
+
+    ``min_gap_s``: no step shorter than this is a gap — for times known only to that resolution (an NMEA
+    sentence without a time field, placed by its position between fixes 1 s apart, is a gap only beyond 2 s).
 
     Returns ``count``, ``span_s``, ``rate_hz`` ((count − 1)/span), ``step_s`` (nominal step: median step of a
     steady stream, burst period / samples per burst of a bursty one), ``bursty`` and, when bursty,
@@ -70,7 +76,9 @@ def stream_timing(t: np.ndarray, gap_factor: float = GAP_FACTOR, max_gaps: int =
     else:
         out["step_s"] = _r(med)
         steps, at, nominal = d, t[:-1], med
-    gi = np.flatnonzero(steps > gap_factor * nominal) if nominal > 0 else np.empty(0, int)
+    limit = max(gap_factor * nominal, min_gap_s)
+    out["gap_longer_than_s"] = _r(limit)
+    gi = np.flatnonzero(steps > limit) if nominal > 0 else np.empty(0, int)
     out["gaps"] = int(len(gi))
     out["missing_s"] = _r(float(np.sum(steps[gi]) - len(gi) * nominal)) or 0.0
     out["first_gaps"] = [(_r(float(at[i])), _r(float(steps[i]))) for i in gi[:max_gaps]]

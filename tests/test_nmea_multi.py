@@ -141,3 +141,16 @@ def test_evaluate_against_a_reference_on_rows_of_its_own():
     ref = Recording(t.copy(), {"ref_roll": ref_roll}, {"ref_roll": "deg"})
     s = evaluate(est, ref, channel="angles")
     assert s["angles"]["roll"]["rmse"] == pytest.approx(0.05, abs=0.02)
+
+
+def test_real_chartplotter_log_rates_per_sentence_type():
+    """Signal K's GoFree log (no stamps, 1 Hz GGA/RMC/ZDA among AIS and 10 Hz HDG): HDG is ~9.7 Hz without the
+    gaps its position-placed times would fake (a sentence without a time field is known only to the fix interval)."""
+    from pathlib import Path
+
+    p = Path(__file__).resolve().parents[2] / "shared" / "data" / "nmea_signalk" / "gofree-merrimac.log"
+    if not p.exists():
+        pytest.skip("../shared/data/nmea_signalk is absent")
+    timing = read_nmea(p).meta["sentence_timing"]
+    assert timing["HDG"]["rate_hz"] == pytest.approx(9.74, abs=0.05) and timing["HDG"]["gaps"] == 0
+    assert timing["HDG"]["gap_longer_than_s"] == pytest.approx(2.0) and timing["RMC"]["rate_hz"] == pytest.approx(1.0)

@@ -1113,7 +1113,11 @@ def read_nmea(
                 if not math.isnan(col[r]):
                     overwritten[key] += 1
                 col[r] = x
-    timing = _sentence_timing(t, keys_sorted)
+    # a sentence without a time field placed between fixes is known in time only to the fix interval
+    own_utc = {rows_key[i] for i, p in enumerate(rows_pos) if t_meta.get("_own", {}).get(p) is not None}
+    fix_dt = float(t_meta.pop("_fix_interval_s", 0.0) or 0.0) if src == "nmea" else 0.0
+    t_meta.pop("_own", None)
+    timing = _sentence_timing(t, keys_sorted, {k: 0.0 if k in own_utc else 2.0 * fix_dt for k in set(keys_sorted)})
     for k, n in overwritten.items():
         timing[k]["values_overwritten_at_same_time"] = int(n)
     units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
@@ -1244,6 +1248,8 @@ def _nmea_times(
         "origin": "unix seconds (UTC)" if first_date is not None else "seconds of the UTC day (no date in log)",
         "seconds_per_sentence_between_fixes": slope,
         "rows_at_their_own_utc": n_own,
+        "_own": own,  # for the reader (removed there)
+        "_fix_interval_s": float(np.median(np.diff(ta))) if len(ta) > 1 else 0.0,
     }
     _start_utc(meta, t, first_date is not None)
     return t, meta
@@ -1313,10 +1319,12 @@ def _stamp_times(
     return t, meta
 
 
-def _sentence_timing(t: np.ndarray, keys: list[str]) -> dict[str, dict[str, Any]]:
-    """Rate, bursts and gaps of each sentence type on its own times (:func:`formats.timing.stream_timing`)."""
+def _sentence_timing(t: np.ndarray, keys: list[str], min_gap_s: dict[str, float]) -> dict[str, dict[str, Any]]:
+    """Rate, bursts and gaps of each sentence type on its own times (:func:`formats.timing.stream_timing`);
+    ``min_gap_s`` per type: the resolution of its times (twice the fix interval for a sentence placed between
+    fixes, 0 for one at its own UTC or arrival stamp)."""
     karr = np.array(keys, dtype=object)
-    return {k: stream_timing(t[karr == k]) for k in sorted(set(keys))}
+    return {k: stream_timing(t[karr == k], min_gap_s=min_gap_s.get(k, 0.0)) for k in sorted(set(keys))}
 
 
 # -- writing logs -------------------------------------------------------------------------------------------------
