@@ -19,12 +19,20 @@ import formats
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.nmea import sentence_summary
+from formats.timing import stream_timing
 from imutool.routes import OnInput, RouteResult, load_input
 
 # units shown in degrees (DESIGN: degrees at every user-facing surface); the file keeps what its header says
 _DEG_UNITS = {"rad/s": "deg/s", "rad": "deg", "rad/s^2": "deg/s^2"}
 
-_HIDDEN_META = {"validation", "column_mapping", "column_mapping_origin", "skipped_rows", "skipped_rows_first"}
+_HIDDEN_META = {
+    "validation",
+    "column_mapping",
+    "column_mapping_origin",
+    "skipped_rows",
+    "skipped_rows_first",
+    "sentence_timing",  # shown as the summary's own sentence_timing
+}
 
 
 def _num(v: float) -> float | None:
@@ -108,6 +116,7 @@ def summarize(
     }
     if rec_raw.meta.get("sentences"):  # an NMEA log: every sentence named and counted, read or not
         summary["nmea_sentences"] = sentence_summary(rec_raw.meta)
+    _own_timing(rec, rec_raw.meta, summary)
     cm = rec_raw.meta.get("column_mapping")
     if cm:
         summary["column_mapping"] = {
@@ -115,6 +124,36 @@ def summarize(
             "columns": [s.strip() for s in str(cm).split(";") if s.strip()],
         }
     return summary
+
+
+def _own_timing(rec: Recording, meta: dict[str, Any], summary: dict[str, Any]) -> None:
+    """Rates and gaps on each stream's own times: per NMEA sentence type (the reader's ``sentence_timing``), per
+    channel whose samples sit on rows of their own (fewer than 90 % of the rows), and the rows themselves when
+    they come in bursts (then ``rate_hz`` and ``gaps`` are the burst-aware ones; formats/timing.py)."""
+    st = meta.get("sentence_timing")
+    if isinstance(st, dict) and st:
+        summary["sentence_timing"] = st
+    if len(rec) < 2:
+        return
+    per_channel: dict[str, Any] = {}
+    for name, a in rec.channels.items():
+        if st or a.dtype.kind != "f":  # an NMEA log: its sentence types say it
+            continue
+        ok = np.isfinite(a.reshape(len(a), -1)).any(axis=1)
+        if 2 <= ok.sum() < 0.9 * len(rec):
+            per_channel[name] = stream_timing(rec.time[ok])
+    if per_channel:
+        summary["channel_timing"] = per_channel
+    rows = stream_timing(rec.time)
+    if rows["bursty"] and not st:
+        summary["rate_hz"] = rows["rate_hz"]
+        summary["bursts"] = rows["burst"]
+        summary["gaps"] = {
+            "count": rows["gaps"],
+            "missing_s": rows["missing_s"],
+            "first": [{"start_s": a, "length_s": b} for a, b in rows["first_gaps"]],
+            "rule": "time between burst starts longer than 3 burst periods",
+        }
 
 
 def run_info(

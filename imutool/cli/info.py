@@ -10,6 +10,7 @@ from typing import Any
 
 import click
 
+from formats.timing import describe
 from imutool.cli.common import emit_summary, input_options, note_input, route_of, strict_requested
 from imutool.info import run_info
 from imutool.routes import OnInput, RouteResult
@@ -37,21 +38,41 @@ def _fmt_t(v: Any) -> str:
 
 def _lines(s: dict[str, Any]) -> list[str]:
     st = s["step_s"]
+    sentence_timing = s.get("sentence_timing") or {}
+    multi = len(sentence_timing) > 1
+    rate = f"rate:      {_fmt(s['rate_hz'])} Hz"
+    if s.get("bursts"):
+        b = s["bursts"]
+        rate += f" in bursts of {_fmt(b['samples'])} every {_fmt(b['period_s'])} s"
+    rate += f" (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, max {_fmt(st['max'])} s)"
+    gaps = f"gaps:      {s['gaps']['count']}" + (
+        f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
+        f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
+        f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
+        if s["gaps"]["count"]
+        else ""
+    )
+    if multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
+        rate = f"rate:      per sentence type ({len(sentence_timing)} types, rows merged; each on its own times):"
+        gaps = ""
     out = [
         f"file:      {s['file']} ({s['format']})",
         f"rows:      {s['rows']}"
         + (f" ({s['rows_after_validation']} after validation)" if s["rows_after_validation"] != s["rows"] else ""),
         f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
-        f"rate:      {_fmt(s['rate_hz'])} Hz (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, "
-        f"max {_fmt(st['max'])} s)",
-        f"gaps:      {s['gaps']['count']}"
-        + (
-            f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
-            f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
-            f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
-            if s["gaps"]["count"]
-            else ""
-        ),
+        rate,
+    ]
+    if multi:
+        out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
+    else:
+        out.append(gaps)
+        if sentence_timing:
+            k, v = next(iter(sentence_timing.items()))
+            out.append(f"sentence:  {k} {describe(v)}")
+    if s.get("channel_timing"):
+        out.append("channels on rows of their own (rate and gaps on their own samples):")
+        out += [f"  {k:<14} {describe(v)}" for k, v in s["channel_timing"].items()]
+    out += [
         f"duplicate timestamps: {s['duplicate_timestamps']} "
         f"({s['duplicate_timestamps_with_different_data']} with different data)",
         f"time going backwards: {s['backwards_steps']}",

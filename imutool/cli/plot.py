@@ -58,7 +58,9 @@ def plot_route(
 @safe_outputs("output")
 def plot_cmd(path: str, channels: tuple[str, ...], output: str, as_json: bool, quiet: bool, **options: Any) -> None:
     """Plot CHANNEL... of FILE (names or prefixes: `gyro accel`, `ref`) to a PNG/PDF, one subplot each,
-    units in the axis labels (angular rates in deg/s, angles in deg), time in seconds from the first sample."""
+    units in the axis labels (angular rates in deg/s, angles in deg), time in seconds from the first sample.
+    Each channel is drawn through its own samples (rows where it has no value are skipped; a real gap stays
+    open), so channels of a multi-sentence NMEA log that arrive at different times all show."""
     res = plot_route(path, channels, output, on_input=note_input, **options)
     emit_summary(res.summary, as_json, quiet)
 
