@@ -235,7 +235,8 @@ def ekf_kernel(
 ):
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
 
-    t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
+    t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (use_gnss: 0 not used, 1 the turn's
+    centripetal term along the course, 2 along the bow, where no heading is held);
     vel (N,2), when it has N rows: the GNSS antenna's north/east velocity (m/s; held between fixes, NaN between
     fixes, or interpolated) for velocity aiding: a fix is a row where it changes, at most one per VA_MIN_SPACING
     s (a held value is the velocity of its first row only); arm_sa (3,) m body FRD: the sensor's position from
@@ -466,9 +467,15 @@ def ekf_kernel(
             ay -= (ez * rx - ex * rz) + (wz * cx - wx * cz)
             az -= (ex * ry - ey * rx) + (wx * cy - wy * cx)
         if acc_ok:
-            if use_gnss and not use_va and np.isfinite(sog[k]) and np.isfinite(cog[k]):  # the turn alone
+            if use_gnss > 0 and not use_va and np.isfinite(sog[k]) and (use_gnss == 2 or np.isfinite(cog[k])):
+                # the turn alone: along the course (1), or along the bow (2: no heading is held, so the course
+                # cannot be turned into body axes; the bow's direction can, whatever the heading's error)
                 wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
-                c, s = np.cos(cog[k]), np.sin(cog[k])
+                if use_gnss == 2:
+                    hn = max(np.sqrt(R[0, 0] * R[0, 0] + R[1, 0] * R[1, 0]), 1e-9)
+                    c, s = R[0, 0] / hn, R[1, 0] / hn
+                else:
+                    c, s = np.cos(cog[k]), np.sin(cog[k])
                 sd = sogdot[k] if np.isfinite(sogdot[k]) else 0.0
                 an0 = sd * c - sog[k] * wr * s
                 an1 = sd * s + sog[k] * wr * c

@@ -80,6 +80,9 @@ def gnss_inputs(rec: Recording, use_gnss: bool = True) -> tuple[np.ndarray | Non
     cog = rec.in_unit("cog", "deg") if sog is not None else None
     if "vel_n" in rec.channels and "vel_e" in rec.channels:
         vel = np.stack([rec.in_unit("vel_n", "m/s"), rec.in_unit("vel_e", "m/s")], axis=1)
+        if sog is None:  # the speed and course of the same velocity (the turn's term where no heading is held)
+            sog = np.hypot(vel[:, 0], vel[:, 1])
+            cog = np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360.0
     elif sog is not None:
         c = np.radians(np.asarray(cog, dtype=np.float64))
         vel = np.stack([sog * np.cos(c), sog * np.sin(c)], axis=1)

@@ -253,10 +253,14 @@ def run_ekf(
     prm = coef.kernel_vector(params)
     st[S_BIASMAX] = params.bias_max
     sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
+    # a heading held (magnetometer or external): the velocity can be turned into body axes; without one only the
+    # speed along the bow is used (the turn's centripetal term), and no velocity aiding
+    heading_held = bool(len(hdg) and np.isfinite(hdg).any()) or bool(use_mag and np.isfinite(m).all(axis=1).any())
+    gnss_code = np.int64(0 if not use_gnss else (1 if heading_held else 2))
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
     if not np.all(np.isfinite(lever)):
         raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")
-    if velocity_ne is None:
+    if velocity_ne is None or not heading_held:
         vel = np.empty((0, 2))
     else:
         vel = np.ascontiguousarray(velocity_ne, dtype=np.float64)
@@ -297,7 +301,7 @@ def run_ekf(
             every,
             mode,
             cov_flag,
-            use_gnss,
+            gnss_code,
             lever,
             arm_sa,
             st,
@@ -320,7 +324,7 @@ def run_ekf(
         "rest_samples": int(st[S_NREST]),
         "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]),
-        "gnss_compensation": bool(use_gnss),
+        "gnss_compensation": bool(use_gnss or len(vel)),
         "velocity_aiding": bool(len(vel)),
         "inconsistent_samples": int(st[S_NINC]),
         "heading_inconsistent_samples": int(st[S_NHINC]),

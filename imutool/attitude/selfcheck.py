@@ -198,21 +198,21 @@ def tilt_check(summary: dict, params: EkfParams) -> list[str]:
 
 
 def gnss_heading_check(used_gnss: bool, mag_used: bool) -> list[str]:
-    """The SOG/COG turn compensation turns the course into body axes with the filter's heading. Without a
-    magnetometer nothing holds that heading (it starts at 0° and drifts with the gyro bias), so the compensation
-    can add the error it is there to remove: one warning line then, none otherwise. Measured on `imutool simulate
-    ship-at-sea` seeds 0 / 1 / 3 (lever arm + SOG/COG, roll RMS after the first minute): 0.19° with the
-    magnetometer; without it 1.75 / 1.16 / 0.21° (max 4.9°), right only where the ship happened to head near 0°
-    at the start; lever arm alone without a magnetometer 1.20 / 1.15 / 1.19°. ``mag_used``: any magnetometer
-    update taken in the run (a `mag` column that is all NaN, or ``mag_mode = "off"``, holds no heading either)."""
+    """Velocity aiding turns the GNSS velocity into body axes with the filter's heading. Without a magnetometer or
+    gyrocompass nothing holds that heading (it starts at 0° and drifts with the gyro bias), so the filter then uses
+    only the speed, along the bow: the turn's centripetal term, not the sway or surge (:func:`run_ekf`). One
+    warning line then, none otherwise. Measured on `imutool simulate ship-at-sea` seeds 0 / 1 / 3 (lever arm +
+    SOG/COG, roll RMS after the first minute): 0.09–0.11° with the magnetometer; without it, the velocity turned
+    with the unheld heading gave 2.99 / 2.36 / 0.19° (max 5.8°); along the bow (now), see docs/attitude.md.
+    ``mag_used``: any heading update taken in the run (a `mag` column that is all NaN, or ``mag_mode = "off"``,
+    holds no heading either)."""
     if not used_gnss or mag_used:
         return []
     return [
-        "SOG/COG turn compensation without a magnetometer heading: the course is turned into body axes with a "
-        "heading nothing holds (starts at 0°, drifts with the gyro bias), so the compensation can add roll "
-        "error instead of removing it (simulated bridge sensor: 0.2–1.8° roll RMS, max 4.9°, against 0.19° "
-        "with a magnetometer); give the magnetometer or a gyrocompass heading (--heading, channel heading_true), "
-        "or drop SOG/COG (--no-gnss)"
+        "GNSS velocity without a heading (no magnetometer heading, no gyrocompass): the velocity cannot be turned "
+        "into body axes, so only the speed is used, along the bow (the turn's centripetal acceleration); the "
+        "sway and surge in it are not removed — give the magnetometer or a gyrocompass heading (--heading, "
+        "channel heading_true) for full velocity aiding"
     ]
 
 
