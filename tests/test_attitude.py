@@ -778,7 +778,7 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
         ["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0", "--json"], capsys
     )
     assert code == 0 and json.loads(out)["update_every"] == 4  # 200 Hz: every 4th
-    assert "update_every = 1" not in err and err.count("note:") == 3 and "mag_noise_deg = 20" in err
+    assert "update_every = 1" not in err and err.count("note:") == 4 and "mag_noise_deg = 20" in err
     code, out, err = run_main(
         [
             "filter",
@@ -794,18 +794,18 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
         ],
         capsys,
     )
-    assert code == 0 and err.count("note:") == 1 and "mag_new_time" in err
+    assert code == 0 and err.count("note:") == 2 and "mag_new_time" in err
     last_release = tmp_path / "last_release.toml"  # saved with mag_heading_density, before mag_new_time
     last_release.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2c.csv", "--params", last_release], capsys)
-    assert code == 0 and err.count("note:") == 1 and "mag_new_time" in err
+    assert code == 0 and err.count("note:") == 2 and "mag_new_time" in err
     two_stage = tmp_path / "two_stage.toml"  # saved before the Butterworth: every key of its day, no smoother_lp_tau
     two_stage.write_text(
         "[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
         "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n"
     )
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2d.csv", "--params", two_stage], capsys)
-    assert code == 0 and err.count("note:") == 1 and "Butterworth" in err and "has no smoother_lp_tau" in err
+    assert code == 0 and err.count("note:") == 2 and "Butterworth" in err and "has no smoother_lp_tau" in err
     code, out, err = run_main(
         ["filter", src, "-o", tmp_path / "o2e.csv", "--params", f.with_name("used.toml"), "--param", "accel_lp_tau=2"],
         capsys,
@@ -1136,9 +1136,10 @@ def test_heading_follows_the_magnetometer_at_the_same_pace_at_any_rate():
     m = np.full_like(rec["mag"], np.nan)
     m[::100] = rec["mag"][::100] + np.random.default_rng(0).normal(0.0, 2.0, m[::100].shape)
     res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], m)
-    assert res.summary["inconsistent_samples"] == 0
+    assert res.summary["inconsistent_samples"] == 0 and res.summary["heading_inconsistent_samples"] == 0
     res, _ = run_ekf(rec.time, rec["gyro"], rec["accel"], m, EkfParams(mag_heading_floor_deg=0.0))
-    assert res.summary["inconsistent_samples"] > 0  # the density alone over-trusts it
+    assert res.summary["heading_inconsistent_samples"] > 0  # the density alone over-trusts it: the heading's check
+    assert res.summary["inconsistent_samples"] == 0  # roll and pitch are not the magnetometer's (mag_mode heading)
 
 
 def test_the_magnetometer_interval_and_its_sigma_per_sample():
@@ -1446,9 +1447,10 @@ def _gyrocompass(rec, seed=0):
 
 @pytest.mark.parametrize("streamed", [False, True])
 def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
-    """A bridge sensor without a magnetometer, SOG/COG and its lever arm: nothing holds the heading, so the turn
-    compensation adds roll error (warned). A gyrocompass heading (channel heading_true, or `--heading` HDT
-    sentences) is taken as the heading measurement: roll within MSC.363's 1°, heading within 0.5°, no warning;
+    """A bridge sensor without a magnetometer, SOG/COG and its lever arm: nothing holds the heading, so only the
+    speed along the bow is used (warned; the sway and surge stay in the roll). A gyrocompass heading (channel
+    heading_true, or `--heading` HDT sentences) is taken as the heading measurement: roll within MSC.363's 1°,
+    heading within 0.5°, no warning;
     the summary says where the heading came from, in memory and streamed. The magnetometer is not used then."""
     from formats.nmea import checksum
     from imutool.cli import cli
@@ -1482,9 +1484,9 @@ def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
         roll = np.abs(est["roll"] - rec["ref_roll"])[late]
         head = np.abs(wrap_deg180(est["heading"] - rec["ref_heading"]))[late]
         if name == "no_heading":
-            assert "SOG/COG turn compensation" in run.stderr and s["heading_source"] == "none (gyro)"
+            assert "GNSS velocity without a heading" in run.stderr and s["heading_source"] == "none (gyro)"
             assert est.meta["heading_source"] == "none (gyro)"
-            assert roll.max() > 2.0, roll.max()  # measured 4.7°
+            assert roll.max() > 1.0, roll.max()  # measured 1.3° (the velocity turned with the unheld heading: 5.8°)
             continue
         duration = rec.time[-1] - rec.time[0]  # one update a second (heading_input_interval)
         assert s["heading_source"].startswith("heading_true") and s["heading_input_updates"] > 0.9 * duration
@@ -1492,7 +1494,7 @@ def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
         assert abs(s["heading_input_lag_s"]) <= 0.2 and "lags the gyro" not in run.stderr, s
         assert float(est.meta["heading_input_lag_s"]) == s["heading_input_lag_s"]
         assert est.meta["heading_source"] == s["heading_source"]
-        assert "SOG/COG" not in run.stderr, run.stderr
+        assert "GNSS velocity without a heading" not in run.stderr, run.stderr
         assert np.sqrt(np.mean(roll**2)) <= 0.5 and roll.max() <= 1.0, (name, roll.max())  # 0.14 / 0.42
         assert np.sqrt(np.mean(head**2)) <= 0.5, name  # 0.14
 
@@ -1617,7 +1619,8 @@ def test_attach_gnss_keeps_the_courses_after_an_empty_one(tmp_path):
     for n, i in enumerate(np.flatnonzero(np.diff(np.floor(rec.time), prepend=-1) > 0)):
         kn, cog = rec["ref_sog"][i] / (1852 / 3600), rec["ref_cog"][i] % 360
         course = "" if n == 10 else f"{cog:.2f}"
-        body = f"GPRMC,000000,A,,,,,{kn:.2f},{course},010125,,,A"
+        utc = f"{int(rec.time[i] // 3600):02d}{int(rec.time[i] % 3600 // 60):02d}{rec.time[i] % 60:05.2f}"
+        body = f"GPRMC,{utc},A,,,,,{kn:.2f},{course},010125,,,A"
         lines.append(f"{rec.time[i]:.3f};A;${body}*{checksum(body)}")
     gnss = tmp_path / "gnss.nmea"
     gnss.write_text("\n".join(lines) + "\n")

@@ -1274,10 +1274,11 @@ def _stamp_times(
     anchor_stamp: dict[int, float],
     nominal_rate_hz: float,
 ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Stamped log with UTC fields: each sentence with a UTC field at that time; the others at their arrival
-    stamp minus the logger clock's offset from UTC (stamp − UTC of the fixes, running median over
-    ``_OFFSET_RUN`` fixes, interpolated along the stamps), so both sit on one UTC axis. Without a date in the
-    log, the date comes from the stamps when they are Unix seconds. Returns (times, meta)."""
+    """Stamped log with UTC fields, on the logger's clock (the stamps' axis, which other files stamped by the same
+    logger share): each sentence with a UTC field at that UTC plus the logger clock's offset from UTC (stamp − UTC
+    of the fixes, running median over ``_OFFSET_RUN`` fixes, interpolated along the stamps), so a fix logged late
+    sits at its own instant; the others at their arrival stamp. Without a date in the log, the date comes from the
+    stamps when they are Unix seconds. Returns (times, meta)."""
     first = next(((p, tod) for p, tod, _ in anchors if p in anchor_stamp), None)
     meta: dict[str, Any] = {"utc_fields": "not used"}
     if first is None:
@@ -1299,23 +1300,24 @@ def _stamp_times(
     if not np.isfinite(spread) or np.ptp(smooth) > _OFFSET_MAX_SPREAD_S:
         return stamps, {"utc_fields": f"not used: the logger clock's offset from UTC varies by {np.ptp(smooth):.0f} s"}
     srt = np.argsort(st, kind="stable")
-    t = stamps - np.interp(stamps, st[srt], smooth[srt])
+    offset = np.interp(stamps, st[srt], smooth[srt])  # the logger clock's offset from UTC at each line
+    t = np.array(stamps, dtype=float)
     n_own = 0
     for i, p in enumerate(pos):
         x = own.get(int(p))
         if x is not None:
-            t[i] = x
+            t[i] = x + offset[i]
             n_own += 1
     meta = {
-        "utc_fields": "sentences with a UTC field at that time; the others at their arrival stamp minus the "
-        "logger clock's offset from UTC",
+        "utc_fields": "on the logger's clock (the stamps): sentences with a UTC field at that UTC plus the logger "
+        "clock's offset from UTC; the others at their arrival stamp",
         "rows_at_their_own_utc": n_own,
         "stamp_offset_s": round(float(np.median(off)), 6),
         "stamp_offset_spread_s": round(spread, 6),
         "anchors_rejected_going_backwards": rejected,
-        "origin": "unix seconds (UTC)" if first_date is not None else "seconds of the UTC day (no date in log)",
+        "origin": "the log's stamps (the logger's clock)",
     }
-    _start_utc(meta, t, first_date is not None)
+    _start_utc(meta, t - offset, first_date is not None)
     return t, meta
 
 
