@@ -20,10 +20,10 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
+from imutool.loading import LOAD_OPTIONS
 from imutool.progress import Progress, report
 
 STREAMABLE = ("csv", "parquet")
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
 META_ROOM = 8192  # bytes left in a streamed CSV output's header for the warnings known only at the end
@@ -60,6 +60,9 @@ def stream_convert(
     calibration_file: str | None = None,
     strict: bool = False,
     progress: Progress | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
 ) -> dict[str, Any]:
     """Convert ``src`` to ``dst`` (CSV or Parquet each) chunk by chunk; returns the summary dict.
 
@@ -74,7 +77,15 @@ def stream_convert(
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
     checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
-    opts: dict[str, Any] = {"columns": columns, "profile": profile} if formats.kind_of(src) == "csv" else {}
+    time_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
+    if formats.kind_of(src) == "csv":
+        opts: dict[str, Any] = {"columns": columns, "profile": profile, **time_opts}
+    else:
+        from imutool.loading import read_input
+
+        opts = {}
+        if any(v is not None for v in time_opts.values()):
+            read_input(src, **time_opts)  # the one-line refusal of a CSV-only option
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
     rows_in = 0
@@ -157,11 +168,13 @@ def streams(
     stream: bool = True,
     duplicates: str = "drop",
     backwards: str = "error",
+    merging: bool = False,
 ) -> bool:
     """Whether :func:`convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
-    whole file (``backwards='sort'``, ``duplicates='mean'``)."""
+    whole file (``backwards='sort'``, ``duplicates='mean'``, ``merging`` other files with ``--with``)."""
     return (
         stream
+        and not merging
         and formats.kind_of(src) in STREAMABLE
         and formats.kind_of(dst, for_output=True) in STREAMABLE
         and backwards != "sort"
@@ -215,7 +228,7 @@ def convert(
     kout = formats.kind_of(dst, for_output=True)
     summary: dict[str, Any] = {"input": src, "output": dst, "from": kin, "to": kout}
     conversions: list[str] = []
-    if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards):
+    if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards, merging=bool(opt["with_files"])):
         summary.update(
             stream_convert(
                 src,
@@ -229,6 +242,9 @@ def convert(
                 calibration_file=calibration_file,
                 strict=strict,
                 progress=progress,
+                rate_hz=opt["rate_hz"],
+                time_column=opt["time_column"],
+                header_rows=opt["header_rows"],
             )
         )
         summary["conversions"] = ["none (same frames and units)"]
@@ -239,6 +255,10 @@ def convert(
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
+        from imutool.loading import read_input
+
+        if any(opt[k] is not None for k in ("rate_hz", "time_column", "header_rows")):
+            read_input(src, **{k: opt[k] for k in ("rate_hz", "time_column", "header_rows")})  # refused: CSV only
         rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header", vector3_mag_unit=vector3_mag_unit)
         rows_in = len(rec)
         bag = rec.meta.get("bag", {})
@@ -255,9 +275,23 @@ def convert(
             summary["notes"] = bag["notes"]
         rec, rep = rec.validated(duplicates=duplicates, backwards=backwards, source=src)
         summary["validation_actions"] = rep.actions
+        merged_notes: list[str] = []
+        if opt["with_files"]:
+            from imutool.loading import merge_with
+
+            rec, merged = merge_with(
+                rec,
+                src,
+                list(opt["with_files"]),
+                list(opt["with_offsets"] or ()),
+                duplicates=duplicates,
+                backwards=backwards,
+            )
+            merged_notes = merged["warnings"]
         checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
         rec = checks.prepare(rec)  # the bag whole, as one chunk: the checks of any other input
         report, warns = checks.finish(rows_in, len(rec), duplicates=rep.duplicates, reader_meta=rec.meta)
+        warns = warns + merged_notes
         rec.meta["validation"] = report
         if warns:
             rec.meta["warnings"] = merged_warnings(rec.meta, warns)

@@ -40,7 +40,7 @@ from imutool.attitude.recording import heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import ChunkChecks, load_recording
+from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -48,7 +48,6 @@ from imutool.progress import Progress, report
 # run_filter, for the compass's deviation card only
 
 METHODS = ("ekf", "lpf", "accel", "compass")
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
 @dataclass
@@ -154,8 +153,10 @@ def run_filter(
     lever = _lever_arm(lever_arm)
     if method == "ekf":
         params = params if params is not None else EkfParams()
-    if not isinstance(source, Recording) and streams(
-        source, output, method=method, smooth=smooth, gnss=gnss, stream_mb=stream_mb, heading=heading
+    if (
+        not isinstance(source, Recording)
+        and not load_options.get("with_files")  # merged in memory
+        and streams(source, output, method=method, smooth=smooth, gnss=gnss, stream_mb=stream_mb, heading=heading)
     ):
         summary = stream_ekf(
             source,
@@ -166,7 +167,7 @@ def run_filter(
             lever_arm=lever,
             strict=strict,
             progress=progress,
-            **{k: load_options.get(k) for k in ("columns", "profile", "mounting", "calibration_file")},
+            **{k: load_options.get(k) for k in STREAM_OPTIONS},
         )
         validation = summary.pop("validation")
         if on_input is not None:
@@ -327,6 +328,10 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     return out
 
 
+STREAM_OPTIONS = ("columns", "profile", "mounting", "calibration_file", "rate_hz", "time_column", "header_rows")
+"""The load options a streamed run takes (the others have their defaults there: no --with, no sorting)."""
+
+
 def stream_ekf(
     path: str | os.PathLike,
     output: str | os.PathLike,
@@ -341,6 +346,9 @@ def stream_ekf(
     calibration_file: str | None = None,
     strict: bool = False,
     progress: Progress | None = None,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
 ) -> dict[str, Any]:
     """Bounded-memory causal EKF over a large CSV/Parquet file: chunks streamed (Parquet by row groups), the
     filter state carried from chunk to chunk, rows appended to a .csv or .parquet output; returns the summary.
@@ -370,7 +378,12 @@ def stream_ekf(
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
-    opts = {"columns": columns, "profile": profile, "prefetch": True} if kind == "csv" else {}
+    time_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
+    opts = {"columns": columns, "profile": profile, "prefetch": True, **time_opts} if kind == "csv" else {}
+    if kind != "csv" and any(v is not None for v in time_opts.values()):
+        from imutool.loading import read_input
+
+        read_input(path, **time_opts)  # the one-line refusal of a CSV-only option
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read

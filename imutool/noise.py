@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ImutoolError
+from imutool.loading import LOAD_OPTIONS
 
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 SI = {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT"}
 
 

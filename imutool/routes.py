@@ -19,10 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from formats import Recording
-from imutool.loading import load_recording
-
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
-"""How a path is loaded (:func:`imutool.loading.load_recording`): the ``--columns ... --calibration`` options."""
+from imutool.loading import LOAD_OPTIONS, load_recording  # noqa: F401  (LOAD_OPTIONS: re-exported)
 
 OnInput = Callable[[str, dict[str, Any]], None]
 """``on_input(path, report)``: called right after an input is loaded (report from :func:`load_recording`)."""

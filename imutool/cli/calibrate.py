@@ -16,17 +16,6 @@ from imutool.calibrate import REF_NAMES
 from imutool.cli.common import emit_summary, input_options, note_input, output_options, safe_outputs
 
 
-def _with_option(f):
-    return click.option(
-        "--with",
-        "with_files",
-        multiple=True,
-        type=click.Path(exists=True),
-        help="Another file of the same run (e.g. the accelerometer CSV when each sensor has its "
-        "own file), merged onto INPUT's clock. Repeatable.",
-    )(f)
-
-
 @click.group("calibrate", epilog="Example: imutool calibrate mag sphere.csv -o cal.toml --plot cal.png")
 def calibrate_group() -> None:
     """Calibrate magnetometer (sphere or ship swing), deviation card, gyro and accelerometer.
@@ -97,7 +86,6 @@ def calibrate_group() -> None:
 @click.option("--plot", default=None, help="Before/after plot (.png/.pdf).")
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance (default: from the input metadata).")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("output", "plot", append="append")
@@ -275,7 +263,6 @@ def mag_cmd(
     help="Merge [deviation] into an existing .toml (or write a new one).",
 )
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("outputs", append="append")
@@ -440,7 +427,6 @@ def _rest_options(f):
 @_rest_options
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("output", append="append")
@@ -521,7 +507,6 @@ def gyro_cmd(
 @_rest_options
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("output", append="append")

@@ -83,14 +83,8 @@ def convert_cmd(
     input_path: str,
     output_arg: str | None,
     output: str | None,
-    columns: str | None,
-    profile: str | None,
-    topic: str | None,
-    stamp: str,
     duplicates: str,
     backwards: str,
-    mounting: str | None,
-    calibration_file: str | None,
     sentences: str,
     nmea_rate: float | None,
     talker: str | None,
@@ -104,6 +98,7 @@ def convert_cmd(
     no_stream: bool,
     as_json: bool,
     quiet: bool,
+    **io: Any,
 ) -> None:
     """Convert IN to OUT: .csv, .parquet, .bag (ROS1), .db3/.mcap or a folder (ROS2), .nmea/.log (NMEA 0183)."""
     out = output or output_arg
@@ -113,7 +108,8 @@ def convert_cmd(
         raise click.UsageError("give the output once (OUT or -o)")
     from imutool.convert import convert, streams
 
-    if streams(input_path, out, stream=not no_stream, duplicates=duplicates, backwards=backwards):
+    merging = bool(io.get("with_files"))
+    if streams(input_path, out, stream=not no_stream, duplicates=duplicates, backwards=backwards, merging=merging):
         bar = lazy_bar("converting", unit="rows", quiet=quiet)
         stage = None
     else:
@@ -138,14 +134,9 @@ def convert_cmd(
             stage=stage,
             strict=strict_requested(),
             on_input=note_input,
-            columns=columns,
-            profile=profile,
-            topic=topic,
-            stamp=stamp,
             duplicates=duplicates,
             backwards=backwards,
-            mounting=mounting,
-            calibration_file=calibration_file,
+            **io,
         )
     emit_summary(summary, as_json, quiet, lines=_lines(summary))
 

@@ -185,34 +185,12 @@ def _lines(s: dict[str, Any]) -> list[str]:
 @click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=True))
 @input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def info_cmd(
-    path: str,
-    columns: str | None,
-    profile: str | None,
-    topic: str | None,
-    stamp: str,
-    duplicates: str,
-    backwards: str,
-    mounting: str | None,
-    calibration_file: str | None,
-    as_json: bool,
-) -> None:
+def info_cmd(path: str, duplicates: str, backwards: str, as_json: bool, **io: Any) -> None:
     """Summarise FILE (CSV, ROS1/ROS2 bag, NMEA log): duration, rows, rate (median, min/max step), gaps,
     duplicate timestamps, NaN rows, channels with units and min/mean/max per axis, metadata, the foreign-CSV
     column mapping used, and what the time-base validation would do. Units are SI except angles and angular
     rates, shown in degrees (deg, deg/s) whatever the file holds (the JSON names the unit in the file)."""
-    rec, _ = load_input(
-        path,
-        columns=columns,
-        profile=profile,
-        topic=topic,
-        stamp=stamp,
-        duplicates=duplicates,
-        backwards=backwards,
-        mounting=mounting,
-        calibration_file=calibration_file,
-        validate=False,
-    )
+    rec, _ = load_input(path, duplicates=duplicates, backwards=backwards, validate=False, **io)
     if len(rec) == 0:
         raise ImutoolError("no samples", path=path)
     summary = summarize(path, rec, duplicates=duplicates, backwards=backwards)

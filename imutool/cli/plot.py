@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import click
 import numpy as np
@@ -63,7 +64,9 @@ def _collect(
     path: str, wanted: tuple[str, ...], start: float | None, end: float | None, max_points: int, io: dict
 ) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Recording, int]:
     """Decimated (t, y) per matched channel; streams CSV files, reads others whole."""
-    plain_csv = formats.kind_of(path) == "csv" and not io.get("mounting") and not io.get("calibration_file")
+    plain_csv = formats.kind_of(path) == "csv" and not any(
+        io.get(k) for k in ("mounting", "calibration_file", "with_files")
+    )
     if plain_csv:
         from formats.csv import iter_csv
 
@@ -73,7 +76,8 @@ def _collect(
         t0 = None
         bucket = 1
         total = 0
-        for chunk in iter_csv(path, chunk_rows=250_000, columns=io.get("columns"), profile=io.get("profile")):
+        csv_opts = {k: io.get(k) for k in ("columns", "profile", "rate_hz", "time_column", "header_rows")}
+        for chunk in iter_csv(path, chunk_rows=250_000, **csv_opts):
             if template is None:
                 template = chunk
                 names = match_channels(list(chunk.channels), wanted, path)
@@ -147,16 +151,9 @@ def plot_cmd(
     max_points: int,
     title: str | None,
     dpi: int,
-    columns: str | None,
-    profile: str | None,
-    topic: str | None,
-    stamp: str,
-    duplicates: str,
-    backwards: str,
-    mounting: str | None,
-    calibration_file: str | None,
     as_json: bool,
     quiet: bool,
+    **io: Any,
 ) -> None:
     """Plot CHANNEL... of FILE (names or prefixes: `gyro accel`, `ref`) to a PNG/PDF, one subplot each,
     units in the axis labels (angular rates in deg/s, angles in deg), time in seconds from the first sample."""
@@ -165,16 +162,6 @@ def plot_cmd(
         raise ImutoolError(f"plot output must end in {', '.join(_FORMATS)} (got {output!r})")
     if max_points < 10:
         raise ImutoolError("--max-points must be at least 10")
-    io = {
-        "columns": columns,
-        "profile": profile,
-        "topic": topic,
-        "stamp": stamp,
-        "duplicates": duplicates,
-        "backwards": backwards,
-        "mounting": mounting,
-        "calibration_file": calibration_file,
-    }
     series, rec, total = _collect(path, channels, start, end, max_points, io)
     if not series:
         raise ImutoolError("no samples in the requested time window", path=path)
