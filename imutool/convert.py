@@ -60,7 +60,7 @@ def stream_convert(
     calibration_file: str | None = None,
     strict: bool = False,
     progress: Progress | None = None,
-    rate_hz: float | None = None,
+    input_rate_hz: float | None = None,
     time_column: str | None = None,
     header_rows: int | None = None,
 ) -> dict[str, Any]:
@@ -77,7 +77,7 @@ def stream_convert(
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
     checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
-    time_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
+    time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     if formats.kind_of(src) == "csv":
         opts: dict[str, Any] = {"columns": columns, "profile": profile, **time_opts}
     else:
@@ -242,7 +242,7 @@ def convert(
                 calibration_file=calibration_file,
                 strict=strict,
                 progress=progress,
-                rate_hz=opt["rate_hz"],
+                input_rate_hz=opt["input_rate_hz"],
                 time_column=opt["time_column"],
                 header_rows=opt["header_rows"],
             )
@@ -257,8 +257,10 @@ def convert(
     if kin in ("ros1", "ros2"):
         from imutool.loading import read_input
 
-        if any(opt[k] is not None for k in ("rate_hz", "time_column", "header_rows")):
-            read_input(src, **{k: opt[k] for k in ("rate_hz", "time_column", "header_rows")})  # refused: CSV only
+        if any(opt[k] is not None for k in ("input_rate_hz", "time_column", "header_rows")):  # refused: CSV only
+            read_input(
+                src, rate_hz=opt["input_rate_hz"], time_column=opt["time_column"], header_rows=opt["header_rows"]
+            )
         rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header", vector3_mag_unit=vector3_mag_unit)
         rows_in = len(rec)
         bag = rec.meta.get("bag", {})

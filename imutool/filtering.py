@@ -328,7 +328,7 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     return out
 
 
-STREAM_OPTIONS = ("columns", "profile", "mounting", "calibration_file", "rate_hz", "time_column", "header_rows")
+STREAM_OPTIONS = ("columns", "profile", "mounting", "calibration_file", "input_rate_hz", "time_column", "header_rows")
 """The load options a streamed run takes (the others have their defaults there: no --with, no sorting)."""
 
 
@@ -346,7 +346,7 @@ def stream_ekf(
     calibration_file: str | None = None,
     strict: bool = False,
     progress: Progress | None = None,
-    rate_hz: float | None = None,
+    input_rate_hz: float | None = None,
     time_column: str | None = None,
     header_rows: int | None = None,
 ) -> dict[str, Any]:
@@ -378,7 +378,7 @@ def stream_ekf(
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
-    time_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
+    time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     opts = {"columns": columns, "profile": profile, "prefetch": True, **time_opts} if kind == "csv" else {}
     if kind != "csv" and any(v is not None for v in time_opts.values()):
         from imutool.loading import read_input

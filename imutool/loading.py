@@ -26,7 +26,7 @@ LOAD_OPTIONS = (
     "backwards",
     "mounting",
     "calibration_file",
-    "rate_hz",
+    "input_rate_hz",
     "time_column",
     "header_rows",
     "with_files",
@@ -51,7 +51,7 @@ def load_recording(
     calibration_file: str | None = None,
     validate: bool = True,
     strict: bool = False,
-    rate_hz: float | None = None,
+    input_rate_hz: float | None = None,
     time_column: str | None = None,
     header_rows: int | None = None,
     with_files: tuple[str, ...] | list[str] = (),
@@ -59,8 +59,8 @@ def load_recording(
 ) -> tuple[Recording, dict[str, Any]]:
     """Read ``path`` (any format imutool reads) → (recording, validation report dict).
 
-    columns/profile: foreign CSV column mapping; rate_hz (Hz: a CSV without a time column gets t = n / rate),
-    time_column (``NAME[:UNIT]``, unit s/ms/us/ns), header_rows (a CSV's header rows: names, then units): how a
+    columns/profile: foreign CSV column mapping; input_rate_hz (``--rate``, Hz: a CSV without a time column gets
+    t = n / rate), time_column (``NAME[:UNIT]``, unit s/ms/us/ns), header_rows (a CSV's header rows: names, then units): how a
     CSV's time and header are read (:func:`formats.csv.read_header`); with_files: other recordings (sensors on
     other clocks) merged onto this one's times (:func:`merge_with`; with_offsets: seconds added to each one's
     times, in order); topic/stamp: bag topic and time source; duplicates/backwards:
@@ -72,7 +72,7 @@ def load_recording(
     from formats import plausibility
 
     path = os.fspath(path)
-    csv_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
+    csv_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     rec = read_input(path, columns=columns, profile=profile, topic=topic, stamp=stamp, **csv_opts)
     report: dict[str, Any] = {}
     checks = plausibility.PlausibilityReport()

@@ -19,8 +19,16 @@ from imutool.routes import with_inputs
 T = TypeVar("T")
 
 
-def input_options(f: Callable) -> Callable:
-    """The options every command that reads sensor data accepts."""
+def input_options(f: Callable | None = None, *, rate_flag: str = "--rate") -> Callable:
+    """The options every command that reads sensor data accepts (``@input_options``). ``rate_flag``: the name of
+    the input's sample-rate option where the command has a ``--rate`` of its own (``@input_options(rate_flag=
+    "--input-rate")``)."""
+    if f is None:
+        return lambda g: _input_options(g, rate_flag)
+    return _input_options(f, rate_flag)
+
+
+def _input_options(f: Callable, rate_flag: str) -> Callable:
     opts = [
         click.option(
             "--columns",
@@ -70,8 +78,8 @@ def input_options(f: Callable) -> Callable:
             help="Calibration TOML to apply.",
         ),
         click.option(
-            "--rate",
-            "rate_hz",
+            rate_flag,
+            "input_rate_hz",
             type=FiniteFloat(min=0, min_open=True),
             default=None,
             metavar="HZ",
@@ -155,7 +163,7 @@ def load_input(
     calibration_file: str | None = None,
     validate: bool = True,
     strict: bool | None = None,
-    rate_hz: float | None = None,
+    input_rate_hz: float | None = None,
     time_column: str | None = None,
     header_rows: int | None = None,
     with_files: tuple[str, ...] = (),
@@ -181,7 +189,7 @@ def load_input(
         mounting=mounting,
         calibration_file=calibration_file,
         validate=validate,
-        rate_hz=rate_hz,
+        input_rate_hz=input_rate_hz,
         time_column=time_column,
         header_rows=header_rows,
         with_files=with_files,

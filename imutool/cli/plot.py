@@ -76,7 +76,8 @@ def _collect(
         t0 = None
         bucket = 1
         total = 0
-        csv_opts = {k: io.get(k) for k in ("columns", "profile", "rate_hz", "time_column", "header_rows")}
+        csv_opts = {k: io.get(k) for k in ("columns", "profile", "time_column", "header_rows")}
+        csv_opts["rate_hz"] = io.get("input_rate_hz")
         for chunk in iter_csv(path, chunk_rows=250_000, **csv_opts):
             if template is None:
                 template = chunk

@@ -71,7 +71,15 @@ def _load_pair(
     if unknown:
         raise TypeError(f"unexpected keyword argument(s) {', '.join(sorted(unknown))}")
     recs, names = [], []
-    dut_only = ("mounting", "calibration_file", "rate_hz", "time_column", "header_rows", "with_files", "with_offsets")
+    dut_only = (
+        "mounting",
+        "calibration_file",
+        "input_rate_hz",
+        "time_column",
+        "header_rows",
+        "with_files",
+        "with_offsets",
+    )
     ref_options = {k: v for k, v in load_options.items() if k not in dut_only}
     for src, opts in ((dut, load_options), (reference, ref_options)):
         if isinstance(src, Recording):
