@@ -63,7 +63,8 @@ def load_recording(
     t = n / rate), time_column (``NAME[:UNIT]``, unit s/ms/us/ns), header_rows (a CSV's header rows: names, then
     units): how a CSV's time and header are read (:func:`formats.csv.read_header`); with_files: other recordings
     (sensors on other clocks) merged onto this one's times (:func:`merge_with`; with_offsets: seconds added to
-    each one's times, in order); topic/stamp: bag topic and time source; duplicates/backwards: validation policies (:meth:`formats.Recording.validated`); mounting: sensor→body ``'x,-y,-z[;r,p,y]'`` (deg);
+    each one's times, in order); topic/stamp: bag topic and time source; duplicates/backwards: validation policies
+    (:meth:`formats.Recording.validated`); mounting: sensor→body ``'x,-y,-z[;r,p,y]'`` (deg);
     calibration_file: calibration TOML applied before mounting. The report holds rows read/kept/dropped and why,
     samples bridged, ``warnings`` (implausible units or axes, rows dropped...) and ``plausibility_figures``; what
     validation did and the warnings also go into ``rec.meta``. ``strict``: warnings raise an ImutoolError.
