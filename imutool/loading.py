@@ -87,6 +87,8 @@ def load_recording(
     else:  # what the reader itself could not read is reported all the same
         report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
         checks.warnings += warns
+    if with_offsets and not with_files:
+        raise ImutoolError("--with-offset is the clock offset of a --with FILE: give the file too")
     if with_files:
         rec, merged = merge_with(
             rec, path, list(with_files), list(with_offsets), duplicates=duplicates, backwards=backwards
@@ -169,7 +171,7 @@ def merge_with(
     offsets = offsets or [0.0] * len(with_files)
     owner = {name: path for name in rec.channels}
     others: list[Recording] = []
-    files: list[dict[str, Any]] = [{"input": path, "channels": list(rec.channels), "offset_s": 0.0}]
+    files: list[dict[str, Any]] = [{"input": path, "channels": list(rec.channels), "offset_s": 0.0, "rows": len(rec)}]
     warnings: list[str] = []
     for p, off in zip(with_files, offsets, strict=True):
         p = os.fspath(p)

@@ -121,7 +121,7 @@ def test_with_merges_sensors_on_other_clocks(tmp_path, run):
     assert rec.time[0] >= 0.05 and rec.time[-1] <= 2.0  # only the span both cover
     np.testing.assert_allclose(rec["mag"][:, 1], (rec.time - 0.05) / 0.25, atol=1e-9)  # interpolated onto gyro
     merged = rec.meta["merged"]
-    assert merged["files"][0] == {"input": str(g), "channels": ["gyro"], "offset_s": 0.0}
+    assert merged["files"][0] == {"input": str(g), "channels": ["gyro"], "offset_s": 0.0, "rows": 21}
     assert merged["files"][1]["channels"] == ["mag"] and merged["files"][1]["offset_s"] == -100.0
     assert str(g) in merged["time_base"] and report["with"][0]["input"] == str(m)
     out_csv = tmp_path / "merged.csv"
@@ -133,3 +133,7 @@ def test_with_merges_sensors_on_other_clocks(tmp_path, run):
     assert code == 2 and "channel(s) gyro also in" in out
     code, out = run("info", str(g), "--with", str(m), "--with-offset", "1", "--with-offset", "2")
     assert code == 2 and "one per file" in out
+    code, out = run("info", str(g), "--with-offset", "1")
+    assert code == 2 and "give the file too" in out
+    code, out = run("convert", str(g), str(tmp_path / "m2.csv"), "--with", str(m), "--with-offset", "-100")
+    assert code == 0 and f"merged onto its times: {m} (mag)" in out

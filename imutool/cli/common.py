@@ -250,6 +250,11 @@ def _validation_lines(inputs: list[dict[str, Any]]) -> Iterator[str]:
             f"validation: {r['input']}: {r.get('rows_read', r.get('rows'))} rows read, {r.get('rows_kept')} kept"
             + (f" (dropped: {why})" if why else "")
             + (f"; {bridged} absurd samples bridged" if bridged else "")
+            + (
+                "; merged onto its times: " + ", ".join(f"{w['input']} ({', '.join(w['channels'])})" for w in r["with"])
+                if r.get("with")
+                else ""
+            )
             + (f"; {len(r['warnings'])} warning(s) on stderr" if r.get("warnings") else "")
         )
 
