@@ -24,7 +24,7 @@ from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
 from imutool.clock import Clock
-from imutool.routes import RouteResult
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input
 
 CHANNELS = ("angles", "quaternion", "heave", "position")
 ANGLES = ("roll", "pitch", "heading")
@@ -126,12 +126,27 @@ def run_evaluate(
     max_lag_s: float = 0.0,
     plot: str | os.PathLike | None = None,
     align_heading: float | str | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **load_options: Any,
 ) -> RouteResult:
     """The route of ``imutool evaluate`` (and ``imutool batch evaluate``): :func:`evaluate` → its summary as a
-    :class:`imutool.routes.RouteResult` (what ``--json`` prints)."""
-    return RouteResult(
-        evaluate(estimate, reference, channel=channel, max_lag_s=max_lag_s, plot=plot, align_heading=align_heading)
+    :class:`imutool.routes.RouteResult` (what ``--json`` prints, with ``validation``).
+
+    A path ``estimate`` is loaded as every command's input (:func:`imutool.loading.load_recording` with
+    ``load_options``: ``--columns ... --rate --time-column --header-rows --with``; ``strict``; ``on_input(path,
+    report)`` after it); the reference is read as it is (:func:`load_for_evaluation`)."""
+    unknown = set(load_options) - set(LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"run_evaluate() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    inputs: list[dict[str, Any]] = []
+    if not isinstance(estimate, Recording):
+        opts = {k: v for k, v in load_options.items() if v is not None}
+        estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, **opts)[0]
+    summary = evaluate(
+        estimate, reference, channel=channel, max_lag_s=max_lag_s, plot=plot, align_heading=align_heading
     )
+    return RouteResult(summary, inputs)
 
 
 def parse_align_heading(value: float | str | None) -> float | str | None:

@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from imutool.cli.common import emit_summary, route_of, safe_outputs
+from imutool.cli.common import emit_summary, input_options, note_input, route_of, safe_outputs, strict_requested
 
 
 def _align(value: str | None) -> str | None:
@@ -33,12 +33,22 @@ def evaluate_route(
     plot_path: str | None = None,
     align_heading: str | None = None,
     quiet: bool = True,
+    on_input: Any = None,
+    **load_options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.evaluation.run_evaluate`."""
+    """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST)."""
     from imutool.evaluation import run_evaluate
 
     return run_evaluate(
-        est_path, ref_path, channel=channel, max_lag_s=max_lag, plot=plot_path, align_heading=align_heading
+        est_path,
+        ref_path,
+        channel=channel,
+        max_lag_s=max_lag,
+        plot=plot_path,
+        align_heading=align_heading,
+        strict=strict_requested(),
+        on_input=on_input,
+        **load_options,
     )
 
 
@@ -73,6 +83,7 @@ def evaluate_route(
     help="Add a constant heading offset (deg) to the reference (a motion-capture frame's x axis is not north); "
     "'auto' estimates it as the circular mean of estimate − reference heading and reports it.",
 )
+@input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("plot_path")
@@ -85,10 +96,13 @@ def evaluate_cmd(
     align_heading: str | None,
     as_json: bool,
     quiet: bool,
+    **load_options: Any,
 ) -> None:
     """Compare the estimate EST with a reference: per angle RMSE, max, p95, MAE, lag and SNR_dB (deg; heading
     errors wrapped), quaternion errors with the BROAD metrics (total, heading, inclination), heave, position."""
-    summary = evaluate_route(est_path, ref_path, channel, max_lag, plot_path, align_heading).summary
+    summary = evaluate_route(
+        est_path, ref_path, channel, max_lag, plot_path, align_heading, on_input=note_input, **load_options
+    ).summary
     lines = None
     if "angles" in summary:
         lines = [f"{'angle':8s} {'RMSE':>7s} {'max':>7s} {'p95':>7s} {'MAE':>7s} {'lag s':>7s} {'SNR dB':>7s}"]
