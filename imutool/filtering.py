@@ -40,7 +40,7 @@ from imutool.attitude.recording import heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording
+from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, read_input
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -381,8 +381,6 @@ def stream_ekf(
     time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     opts = {"columns": columns, "profile": profile, "prefetch": True, **time_opts} if kind == "csv" else {}
     if kind != "csv" and any(v is not None for v in time_opts.values()):
-        from imutool.loading import read_input
-
         read_input(path, **time_opts)  # the one-line refusal of a CSV-only option
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
