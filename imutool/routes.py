@@ -3,7 +3,8 @@ command's summary carries, and that summary exactly as ``imutool <command> --jso
 
 A library route (:func:`imutool.heave.run_heave`, :func:`imutool.ins.run_ins_track`,
 :func:`imutool.nmea_out.run_nmea`, :func:`imutool.zvi.run_zvi`, :func:`imutool.gyrofree.run_gyrofree`,
-:func:`imutool.events.run_events`, :func:`imutool.report.route.run_inclinometer_report` and
+:func:`imutool.events.run_events`, :func:`imutool.evaluation.run_evaluate`,
+:func:`imutool.report.route.run_inclinometer_report` and
 ``run_heading_report``; ``run_filter`` returns its own :class:`imutool.filtering.FilterResult`) takes an input
 path and the command's options with their defaults, reads, computes, writes its outputs atomically and returns a
 :class:`RouteResult`. The click command only parses options, calls the route and prints; ``imutool batch`` calls
