@@ -105,7 +105,11 @@ def _source_columns(rec: Recording, channel: str) -> list[str]:
     return list(targets)
 
 
-def _columns_fix(rec: Recording, channel: str, unit: str) -> str:
+def _columns_fix(rec: Recording, channel: str, unit: str, kind: str | None = None) -> str:
+    """The option that states the unit: --columns for a CSV or a bag (``kind``); a file that carries its own
+    units (Parquet, NMEA) has to be fixed where it was written."""
+    if kind in ("parquet", "nmea"):
+        return f"the file states its own units: fix the {channel} values ({unit}) where it was written"
     cols = _source_columns(rec, channel)
     targets = rec.columns.get(channel, [])
     if not cols or len(cols) != len(targets):
@@ -140,14 +144,37 @@ def _moving_mean(a: np.ndarray, w: int) -> np.ndarray:
 
 
 # -- unit checks ---------------------------------------------------------------------------------------------
-def _unit_note(rec: Recording, channel: str, declared: str) -> str:
+BAG_KINDS = ("ros1", "ros2")  # formats.kind_of of a bag: its fields' units are the ROS messages', not a header's
+
+
+def _mapped(rec: Recording, channel: str) -> bool:
+    """Whether ``meta['column_mapping']`` names the unit of the channel's first column."""
+    cm = rec.meta.get("column_mapping")
+    targets = rec.columns.get(channel, [])
+    if not isinstance(cm, str) or not targets:
+        return False
+    return any(item.rpartition("->")[2].split("[", 1)[0] == targets[0] for item in cm.split("; "))
+
+
+def _unit_note(rec: Recording, channel: str, declared: str, kind: str | None = None) -> str:
+    if kind in BAG_KINDS:
+        if _mapped(rec, channel):
+            return f"--columns gives the bag's {channel} in {declared}"
+        msg = "magnetometer message" if channel == "mag" else "sensor_msgs/Imu"
+        return f"the bag's {msg} carries {channel} in {declared} (ROS units)"
     if channel in _assumed(rec):
         return f"the header gives no unit for {channel}, so {declared} was assumed"
     return f"the header declares {channel} in {declared}"
 
 
-def _declared(rec: Recording, channel: str) -> tuple[str, float]:
-    """The unit the channel's source columns were read in and its factor to SI (from the column mapping)."""
+def _declared(rec: Recording, channel: str, kind: str | None = None) -> tuple[str, float]:
+    """The unit the channel's source columns were read in and its factor to SI (from the column mapping; for a
+    bag, ``kind`` ros1/ros2, the unit of its message fields as read: ``meta['bag']['units']``)."""
+    if kind in BAG_KINDS and not _mapped(rec, channel):
+        bag = rec.meta.get("bag")
+        u = (bag.get("units") or {}).get(channel) if isinstance(bag, dict) else None
+        if isinstance(u, str) and _units.is_known(u):
+            return u, _units.lookup(u)[1]
     cm = rec.meta.get("column_mapping")
     targets = rec.columns.get(channel, [])
     if isinstance(cm, str) and targets:
@@ -176,6 +203,7 @@ def _magnitude_check(
     candidates: tuple[str, ...],
     what: str,
     expected: str,
+    kind: str | None = None,
 ) -> None:
     a = _finite_xyz(rec, channel)
     if a is None:
@@ -188,8 +216,8 @@ def _magnitude_check(
     if med < 1e-9 * hi:
         rep.warnings.append(f"{what} reads ≈ 0 in every sample (not connected?); expected {expected}")
         return
-    unit, factor = _declared(rec, channel)
-    note = _unit_note(rec, channel, unit)
+    unit, factor = _declared(rec, channel, kind)
+    note = _unit_note(rec, channel, unit, kind)
     raw = med / factor  # the median magnitude in the file's own numbers
     for cand in candidates:
         f = _units.lookup(cand)[1]
@@ -197,22 +225,24 @@ def _magnitude_check(
             extra = " (or raw counts)" if cand in ("mgauss", "mg") else ""
             rep.warnings.append(
                 f"UNITS: {what} median magnitude is {med:.4g} {si} (expected {expected}): {note}, but the values "
-                f"look like {cand}{extra} — {_columns_fix(rec, channel, cand)}"
+                f"look like {cand}{extra} — {_columns_fix(rec, channel, cand, kind)}"
             )
             return
     rep.warnings.append(
         f"UNITS: {what} median magnitude is {med:.4g} {si} (expected {expected}): {note}; raw counts? — "
-        f"{_columns_fix(rec, channel, candidates[0] + '*SCALE')} with the sensor's scale per count"
+        f"{_columns_fix(rec, channel, candidates[0] + '*SCALE', kind)} with the sensor's scale per count"
     )
 
 
-def check_accel_units(rec: Recording, rep: PlausibilityReport) -> None:
+def check_accel_units(rec: Recording, rep: PlausibilityReport, kind: str | None = None) -> None:
     """Median |accel| ≈ g (a walk, a ship or a rotation keep the median near g)."""
     g = STANDARD_GRAVITY
-    _magnitude_check(rec, rep, "accel", 0.6 * g, 1.6 * g, ("g", "m/s^2", "mg"), "accelerometer", "≈ 9.81 m/s² at rest")
+    _magnitude_check(
+        rec, rep, "accel", 0.6 * g, 1.6 * g, ("g", "m/s^2", "mg"), "accelerometer", "≈ 9.81 m/s² at rest", kind
+    )
 
 
-def check_mag_units(rec: Recording, rep: PlausibilityReport) -> None:
+def check_mag_units(rec: Recording, rep: PlausibilityReport, kind: str | None = None) -> None:
     """Median |mag| within 10–150 µT (Earth 20–70 µT; a ship's own field and hard iron widen it)."""
     _magnitude_check(
         rec,
@@ -223,6 +253,7 @@ def check_mag_units(rec: Recording, rep: PlausibilityReport) -> None:
         ("gauss", "uT", "mgauss", "nT", "T"),
         "magnetometer",
         "the Earth's field, 20–70 µT",
+        kind,
     )
 
 
@@ -293,42 +324,192 @@ def _tilt_ratio_one(rec: Recording, step_s: float) -> dict[str, float] | None:
     }
 
 
-def check_gyro_units(rec: Recording, rep: PlausibilityReport) -> None:
-    """Gyro scale against the accelerometer's tilting (:func:`gyro_tilt_ratio`), else against any gyro's range."""
+# the units a gyro is written in by mistake (deg/s ↔ rad/s is 57.3×, milli-units 1000×): the tilt slope proposes those
+# within GYRO_UNIT_MATCH of its factor, the window-pair test chooses (a lever arm or an acceleration the body feels
+# while it rolls multiplies the short-step slope by 1 + hω²/g: 5–12 on a mast, no unit's factor)
+GYRO_UNITS = ("deg/s", "rad/s", "mrad/s", "mdps")
+GYRO_UNIT_MATCH = 7.5  # the geometric midpoint of deg/s and rad/s
+GYRO_COUNTS_SLOPE = 30.0  # a slope this far from 1 and near no unit: raw counts or a scale, if confirmed
+UNIT_EXPLAINS = 0.75  # share of the mean-square discrepancy the best candidate removes that a unit must remove
+PAIR_WINDOW_S = 2.0  # s, windows of the confirmation (imutool.gyro_check.WINDOW_S)
+PAIR_MIN_REMOVED_DEG = 1.5  # RMS tilt discrepancy a unit must remove (imutool.gyro_check.MIN_DISCREPANCY_DEG)
+
+
+def _rotvec_quat(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4) of rotation vectors r (..., 3) rad."""
+    ang = np.linalg.norm(r, axis=-1)
+    half = 0.5 * ang
+    k = np.where(ang > 1e-12, np.sin(half) / np.where(ang > 1e-12, ang, 1.0), 0.5)
+    return np.concatenate([np.cos(half)[..., None], r * k[..., None]], axis=-1)
+
+
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    a0, a1, a2, a3 = np.moveaxis(a, -1, 0)
+    b0, b1, b2, b3 = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+        ],
+        axis=-1,
+    )
+
+
+def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R(q) v for unit quaternions q (..., 4) and vectors v (..., 3)."""
+    u = q[..., 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + q[..., :1] * t + np.cross(u, t)
+
+
+def window_pair_discrepancy(
+    rec: Recording, factors: tuple[float, ...], window: float = PAIR_WINDOW_S, max_rate_hz: float = 50.0
+) -> tuple[np.ndarray, int] | None:
+    """RMS tilt discrepancy J(s) (rad) between consecutive ``window``-s windows for each factor s on the gyro's rates:
+    the physics of the attitude filter's own gyro check (:mod:`imutool.gyro_check`), without the filter.
+
+    The gyro (median removed as its bias, rates × s) is integrated from the start of each pair of windows; the mean
+    specific force of each window in that frame is −g·ẑ for both when s is right, whatever the motion, since a
+    bounded velocity averages the acceleration out. Samples are block-averaged to at most ``max_rate_hz``. Returns
+    (J per factor, pairs), or None when fewer than two pairs fit (the window shrinks to a third of a short span,
+    not below 0.25 s)."""
+    w, a = rec.channels.get("gyro"), rec.channels.get("accel")
+    if w is None or a is None or w.shape[1:] != (3,) or a.shape[1:] != (3,):
+        return None
+    ok = _finite_rows(w) & _finite_rows(a)
+    t, w, a = rec.time[ok], w[ok], a[ok]
+    if len(t) < 20:
+        return None
+    dt = float(np.median(np.diff(t)))
+    if not np.isfinite(dt) or dt <= 0:
+        return None
+    window = min(window, (t[-1] - t[0]) / 3.0)
+    if window < 0.25:
+        return None
+    m = max(1, int(round(1.0 / (max_rate_hz * dt))))
+    nb = len(t) // m
+    tb = t[: nb * m].reshape(nb, m).mean(axis=1)
+    span = t[m - 1 : nb * m : m] - t[: nb * m : m]
+    wb = w[: nb * m].reshape(nb, m, 3).mean(axis=1)
+    fb = a[: nb * m].reshape(nb, m, 3).mean(axis=1)
+    n_win = max(1, int(round(window / (m * dt))))  # blocks per window
+    n_pairs = nb // n_win - 1
+    if n_pairs < 2:
+        return None
+    idx = (np.arange(n_pairs) * n_win)[:, None] + np.arange(2 * n_win)[None, :]  # (pairs, 2 windows of blocks)
+    step = np.diff(tb[idx], axis=1)
+    good = np.all((step > 0) & (step <= 3 * m * dt), axis=1) & np.all(span[idx] <= 2 * m * dt, axis=1)
+    idx, step = idx[good], step[good]
+    if len(idx) < 2:
+        return None
+    rate = wb - np.median(wb, axis=0)
+    s = np.asarray(factors, float)[:, None, None]
+    q = np.zeros((len(s), len(idx), 4))
+    q[..., 0] = 1.0
+    sums = np.zeros((2, len(s), len(idx), 3))
+    for j in range(2 * n_win):
+        if j:
+            r = 0.5 * (rate[idx[:, j - 1]] + rate[idx[:, j]]) * step[:, j - 1, None]
+            q = _qmul(q, _rotvec_quat(s * r[None]))
+            q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        sums[int(j >= n_win)] += _rotate(q, np.broadcast_to(fb[idx[:, j]], q.shape[:-1] + (3,)))
+    g = float(np.median(np.linalg.norm(fb, axis=1)))
+    d = (sums[0] - sums[1]) / n_win
+    j2 = np.mean(np.sum(d * d, axis=-1), axis=-1) / (g * g if g > 0 else 1.0)
+    return np.sqrt(j2), len(idx)
+
+
+def _gyro_unit_claim(
+    rec: Recording, rep: PlausibilityReport, k: float, factor: float
+) -> tuple[str | None, float] | None:
+    """What the tilt slope ``k`` may claim: (the unit the values look like, or None for a bare scale; the factor the
+    SI values need), or None.
+
+    Candidates are the units of :data:`GYRO_UNITS` within ``GYRO_UNIT_MATCH`` of the slope's factor (the slope on
+    hand motion is off by up to ~2.5×: it only proposes), and the slope itself where it is ≥ 30× off (raw counts).
+    The window-pair test (:func:`window_pair_discrepancy`, the physics of the filter's own check) chooses among
+    them, and must find the best candidate better than the gyro as it is by ``PAIR_MIN_REMOVED_DEG``. A slope near
+    no unit and < 30× off is an acceleration the body feels (a lever arm, a turn): no claim."""
+    true_factor = factor * k  # rad/s per value, as the accelerometer's tilting says
+    cands: list[tuple[str | None, float]] = []
+    for unit in GYRO_UNITS:
+        f = _units.lookup(unit)[1]
+        if 1 / GYRO_UNIT_MATCH <= true_factor / f <= GYRO_UNIT_MATCH and not math.isclose(f, factor, rel_tol=1e-6):
+            cands.append((unit, f / factor))
+    if not (1 / GYRO_COUNTS_SLOPE < k < GYRO_COUNTS_SLOPE):
+        cands.append((None, k))
+    if not cands:
+        rep.figures["gyro_tilt_verdict"] = "slope near no unit's factor: an acceleration, not a unit (no claim)"
+        return None
+    conf = window_pair_discrepancy(rec, (1.0, *(s for _, s in cands)))
+    if conf is None:  # too short for the filter's check: a unit's factor alone is enough, a bare scale is not
+        rep.figures["gyro_tilt_verdict"] = "too short to confirm"
+        named = [c for c in cands if c[0] is not None]
+        return min(named, key=lambda c: abs(math.log(c[1] / k))) if named else None
+    j, pairs = conf
+    i = int(np.argmin(j[1:]))
+    named = [n for n, c in enumerate(cands) if c[0] is not None]
+    if named:  # a unit that removes most of what the best candidate removes is the answer (a slope is not exact)
+        u = min(named, key=lambda n: j[1 + n])
+        if j[0] ** 2 - j[1 + u] ** 2 >= UNIT_EXPLAINS * (j[0] ** 2 - j[1 + i] ** 2):
+            i = u
+    best, j1, jb = cands[i], float(j[0]), float(j[1 + i])
+    rep.figures["gyro_window_check"] = {
+        "factor": best[1],
+        "discrepancy_as_is_deg": math.degrees(j1),
+        "discrepancy_rescaled_deg": math.degrees(jb),
+        "pairs": pairs,
+    }
+    if jb < j1 and math.degrees(math.sqrt(max(j1 * j1 - jb * jb, 0.0))) >= PAIR_MIN_REMOVED_DEG:
+        return best
+    rep.figures["gyro_tilt_verdict"] = "not confirmed by the window-pair test: no claim"
+    return None
+
+
+def check_gyro_units(rec: Recording, rep: PlausibilityReport, kind: str | None = None) -> None:
+    """Gyro unit against the accelerometer's tilting (:func:`gyro_tilt_ratio`), else against any gyro's range.
+
+    A unit is claimed only where the tilt slope lands near a unit's factor (:data:`GYRO_UNITS`; or ≥ 30× off:
+    raw counts) **and** the window-pair test of the attitude filter's gyro check agrees
+    (:func:`window_pair_discrepancy`): a slope that is a lever arm's or a turn's acceleration is not a unit."""
     wf = _finite_xyz(rec, "gyro")
     if wf is None:
         return
-    unit, factor = _declared(rec, "gyro")
-    note = _unit_note(rec, "gyro", unit)
+    unit, factor = _declared(rec, "gyro", kind)
+    note = _unit_note(rec, "gyro", unit, kind)
     p99 = float(np.percentile(np.linalg.norm(wf, axis=1), 99))
     rep.figures["gyro_p99_norm_rad_s"] = p99
     r = gyro_tilt_ratio(rec)
     if r is not None:
         rep.figures["gyro_tilt_slope"] = r["k"]
         rep.figures["gyro_tilt_correlation"] = r["correlation"]
-    # deg/s and rad/s differ by 57.3×: decide at the geometric midpoint (7.5×) when the two agree in shape
+    # deg/s and rad/s differ by 57.3×: no verdict within 7.5× (the geometric midpoint) of 1
     if r is not None and r["correlation"] > 0.4 and r["k"] > 0:
         k = r["k"]  # SI values × k = what the accelerometer's tilting says
         if 1 / 7.5 <= k <= 7.5:
             return
-        true_factor = factor * k
-        for cand in ("deg/s", "rad/s"):
-            f = _units.lookup(cand)[1]
-            if 1 / 7.5 <= true_factor / f <= 7.5:
-                rep.warnings.append(
-                    f"UNITS: gyro rates are {1 / k:.3g}× the tilting the accelerometer shows: {note}, but the "
-                    f"values look like {cand} — {_columns_fix(rec, 'gyro', cand)}"
-                )
-                return
-        rep.warnings.append(
-            f"UNITS: gyro rates disagree with the tilting the accelerometer shows by a factor {1 / k:.3g} "
-            f"(expected 1): {note}; wrong unit or scale? — {_columns_fix(rec, 'gyro', 'UNIT*SCALE')}"
-        )
+        claim = _gyro_unit_claim(rec, rep, k, factor)
+        if claim is None:
+            return
+        cand, _s = claim
+        if cand is not None:
+            rep.warnings.append(
+                f"UNITS: gyro rates are {1 / k:.3g}× the tilting the accelerometer shows: {note}, but the "
+                f"values look like {cand} — {_columns_fix(rec, 'gyro', cand, kind)}"
+            )
+        else:
+            rep.warnings.append(
+                f"UNITS: gyro rates disagree with the tilting the accelerometer shows by a factor {1 / k:.3g} "
+                f"(expected 1): {note}; raw counts or a wrong scale? — "
+                f"{_columns_fix(rec, 'gyro', 'UNIT*SCALE', kind)}"
+            )
         return
     if p99 > PHYSICAL_LIMITS["gyro"] / 2 and not math.isclose(factor, _DEG, rel_tol=1e-6):
         rep.warnings.append(
             f"UNITS: gyro reads up to {p99:.3g} rad/s ({p99 / _DEG:.3g} °/s), beyond any gyro's range: {note}, "
-            f"but the values look like deg/s — {_columns_fix(rec, 'gyro', 'deg/s')}"
+            f"but the values look like deg/s — {_columns_fix(rec, 'gyro', 'deg/s', kind)}"
         )
         return
     if (
@@ -341,7 +522,7 @@ def check_gyro_units(rec: Recording, rep: PlausibilityReport) -> None:
         rep.warnings.append(
             f"UNITS: gyro reads a median {h:.3g} rad/s about horizontal axes while the accelerometer shows no "
             f"tilting: {note}, but the values look like deg/s (or carry a huge bias) — "
-            f"{_columns_fix(rec, 'gyro', 'deg/s')}"
+            f"{_columns_fix(rec, 'gyro', 'deg/s', kind)}"
         )
 
 
@@ -374,7 +555,12 @@ def _remap_for_up_axis(axis: int, sign: float) -> str:
     return "x,y,z"  # pragma: no cover
 
 
-def check_gravity_direction(rec: Recording, rep: PlausibilityReport, mounting: str | None = None) -> None:
+def check_gravity_direction(
+    rec: Recording, rep: PlausibilityReport, mounting: str | None = None, kind: str | None = None
+) -> None:
+    """The mean specific force should point along body −z (FRD, at rest): otherwise name the mounting that fixes
+    it. For a bag (``kind`` ros1/ros2) the data are already converted from REP-103 FLU to FRD, so a z axis up is
+    the sensor's own mounting, not the FLU convention."""
     a = _finite_xyz(rec, "accel")
     if a is None:
         return
@@ -396,11 +582,15 @@ def check_gravity_direction(rec: Recording, rep: PlausibilityReport, mounting: s
     axis = int(np.argmax(np.abs(d)))
     sign = float(np.sign(d[axis]))
     fix = _remap_for_up_axis(axis, sign)
-    what = (
-        "+z: the sensor's z axis points up (FLU/ENU-style sensor, e.g. x-io, ROS REP-103)"
-        if axis == 2 and sign > 0
-        else f"{'+' if sign > 0 else '-'}{_AX[axis]}: that sensor axis points up"
-    )
+    if axis == 2 and sign > 0 and kind in BAG_KINDS:
+        what = (
+            "+z after the bag's REP-103 (FLU) → FRD conversion: the sensor itself is mounted with that z axis up "
+            "(its ROS z axis points down: mounted upside down, or a driver that publishes z-down axes as FLU)"
+        )
+    elif axis == 2 and sign > 0:
+        what = "+z: the sensor's z axis points up (FLU/ENU-style axes, e.g. x-io, or ROS data not converted)"
+    else:
+        what = f"{'+' if sign > 0 else '-'}{_AX[axis]}: that sensor axis points up"
     given = f" even after --mounting {mounting!r}" if mounting else ""
     rep.warnings.append(
         f"AXES: the mean specific force points along {what}{given}; imutool's body frame is FRD (z down, so "
@@ -428,16 +618,17 @@ def sample_rows(rec: Recording, max_rows: int = 60_000, pieces: int = 6) -> Reco
     )
 
 
-def check_recording(rec: Recording, mounting: str | None = None) -> PlausibilityReport:
+def check_recording(rec: Recording, mounting: str | None = None, kind: str | None = None) -> PlausibilityReport:
     """Run every plausibility check on the sensor channels of ``rec`` (working units, after mounting).
 
-    Long recordings are checked on :func:`sample_rows` (about 60 000 rows in six stretches)."""
+    ``kind``: the input's format (:func:`formats.kind_of`); a bag's units and axes are named as the bag's. Long
+    recordings are checked on :func:`sample_rows` (about 60 000 rows in six stretches)."""
     rep = PlausibilityReport()
     rec = sample_rows(rec)
-    check_accel_units(rec, rep)
-    check_gyro_units(rec, rep)
-    check_mag_units(rec, rep)
-    check_gravity_direction(rec, rep, mounting)
+    check_accel_units(rec, rep, kind)
+    check_gyro_units(rec, rep, kind)
+    check_mag_units(rec, rep, kind)
+    check_gravity_direction(rec, rep, mounting, kind)
     return rep
 
 

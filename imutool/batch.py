@@ -316,7 +316,7 @@ class Call:
     """A runner calling a library function the way the commands do: ``func(job.input, job.output, **kwargs)``.
 
     E.g. ``Call(imutool.filtering.run_filter, smooth=True)``, ``Call(imutool.heave.run_heave)``,
-    ``Call(imutool.convert.convert)``, ``Call(imutool.calibrate.calibrate_mag, method="swing")``. The result's
+    ``Call(imutool.convert.run_convert)``, ``Call(imutool.calibrate.calibrate_mag, method="swing")``. The result's
     ``full_summary()`` (a :class:`imutool.routes.RouteResult`: what the command's ``--json`` prints), else its
     ``summary`` (or the dict returned) is the job's summary. Picklable when ``func`` is a module-level function,
     so it runs in worker processes and on Dask workers alike.

@@ -4,7 +4,9 @@ Python user.
 Each function takes a path (loaded by :func:`imutool.loading.load_recording`; ``with_files`` — other files of
 the same run, e.g. one CSV per sensor — are merged onto its clock) or a :class:`formats.Recording`, runs the fit
 of :mod:`calibration`, writes the section (with provenance) into a calibration TOML and any plot or card, and
-returns the fit with the summary dict. Nothing is printed. Units: magnetic field µT, rates rad/s (deg/s in
+returns a :class:`CalibrationRun` (a :class:`imutool.routes.RouteResult`: the summary ``imutool calibrate ... --json``
+prints, what loading each input did, and the fit). Nothing is printed; ``imutool batch 'calibrate mag'`` calls the
+same functions. Units: magnetic field µT, rates rad/s (deg/s in
 the summaries where named so), specific force m/s², headings and deviation deg.
 
     from imutool.calibrate import calibrate_mag
@@ -15,7 +17,6 @@ the summaries where named so), specific force m/s², headings and deviation deg.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,21 +25,29 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import LOAD_OPTIONS, require_channels
-
-OnInput = Callable[[str, dict[str, Any]], None]
-Stage = Callable[[str], None]
+from imutool.loading import require_channels
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
 
 
 @dataclass
-class CalibrationRun:
-    """What a calibration run produced: ``fit`` (the :mod:`calibration` result object), ``summary`` (JSON-able
-    figures), the ``recording`` it was fitted on, and for a deviation card the names of what was compared."""
+class CalibrationRun(RouteResult):
+    """What a calibration run produced: the :class:`imutool.routes.RouteResult` (``summary``: JSON-able figures;
+    ``inputs``: what loading each file did; ``recording``: what was fitted), ``fit`` (the :mod:`calibration`
+    result object) and for a deviation card the names of what was compared (``details``)."""
 
-    fit: Any
-    summary: dict[str, Any]
-    recording: Recording
+    fit: Any = None
     details: dict[str, Any] = field(default_factory=dict)
+
+
+def _noting(inputs: list[dict[str, Any]], on_input: OnInput | None) -> OnInput:
+    """An ``on_input`` that also keeps each input's report in ``inputs`` (the run's :attr:`RouteResult.inputs`)."""
+
+    def noted(path: str, report: dict[str, Any]) -> None:
+        inputs.append({"input": path, **report})
+        if on_input is not None:
+            on_input(path, report)
+
+    return noted
 
 
 def _check_load_options(load_options: dict[str, Any]) -> None:
@@ -64,9 +73,11 @@ def load_for_fit(
     with_files: tuple[str, ...] | list[str] = (),
     fitting: str | None = None,
     on_input: OnInput | None = None,
+    strict: bool = False,
 ) -> Recording:
     """Read ``source`` (and ``with_files``, e.g. one CSV per sensor, merged onto its clock:
-    :func:`imutool.loading.merge_with`). ``on_input(path, report)`` is called after the file is loaded.
+    :func:`imutool.loading.merge_with`). ``on_input(path, report)`` is called after the file is loaded; ``strict``: an
+    input's warnings are an ImutoolError.
 
     ``fitting``: the section being estimated. Its parameters are in sensor axes and relative to raw data, so
     a ``mounting`` and a ``calibration_file`` that already holds that section are refused."""
@@ -99,7 +110,7 @@ def load_for_fit(
             return rec
         return source
     path = os.fspath(source)
-    rec, report = load_recording(path, **opts)
+    rec, report = load_recording(path, strict=strict, **opts)
     if on_input is not None and len(rec):
         on_input(path, report)
     return rec
@@ -116,10 +127,11 @@ def _read_for_fit(
     with_files: tuple[str, ...] | list[str],
     on_input: OnInput | None,
     stage: Stage | None,
+    strict: bool = False,
 ) -> Recording:
     """The reading stage of a calibration run: load (with the --with files), then require the ``kind`` channel."""
     _stage(stage, "reading")
-    rec = load_for_fit(source, load_options, with_files, fitting=kind, on_input=on_input)
+    rec = load_for_fit(source, load_options, with_files, fitting=kind, on_input=on_input, strict=strict)
     _stage(stage, "fitting")
     require_channels(rec, [kind], _source_name(source))
     return rec
@@ -147,6 +159,7 @@ def calibrate_mag(
     append: bool = False,
     sensor: str | None = None,
     with_files: tuple[str, ...] = (),
+    strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
     **load_options: Any,
@@ -159,7 +172,8 @@ def calibrate_mag(
 
     input_path = _source_name(source)
     check_toml_output(output, append)
-    rec = _read_for_fit(source, "mag", load_options, with_files, on_input, stage)
+    inputs: list[dict[str, Any]] = []
+    rec = _read_for_fit(source, "mag", load_options, with_files, _noting(inputs, on_input), stage, strict)
     m = rec.get("mag", "uT")
     if method == "sphere":
         from calibration.magnetometer import calibrate_sphere
@@ -204,7 +218,7 @@ def calibrate_mag(
     }
     if method == "swing":
         summary["unobservable"] = fit.extra["section"]["unobservable"]
-    return CalibrationRun(fit, summary, rec)
+    return CalibrationRun(summary, inputs, rec, fit=fit)
 
 
 # -- gyro and accelerometer ----------------------------------------------------------------------------------------
@@ -231,6 +245,7 @@ def calibrate_gyro(
     append: bool = False,
     sensor: str | None = None,
     with_files: tuple[str, ...] = (),
+    strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
     **load_options: Any,
@@ -243,7 +258,8 @@ def calibrate_gyro(
 
     input_path = _source_name(source)
     check_toml_output(output, append)
-    rec = _read_for_fit(source, "gyro", load_options, with_files, on_input, stage)
+    inputs: list[dict[str, Any]] = []
+    rec = _read_for_fit(source, "gyro", load_options, with_files, _noting(inputs, on_input), stage, strict)
     acc = rec.get("accel", "m/s^2") if "accel" in rec.channels else None
     temp = rec["temp"] if "temp" in rec.channels else None
     cal = fit_gyro(
@@ -273,7 +289,7 @@ def calibrate_gyro(
         "scale": None if cal.scale is None else cal.scale.tolist(),
         **cal.quality,
     }
-    return CalibrationRun(cal, summary, rec)
+    return CalibrationRun(summary, inputs, rec, fit=cal)
 
 
 def calibrate_accel(
@@ -289,6 +305,7 @@ def calibrate_accel(
     append: bool = False,
     sensor: str | None = None,
     with_files: tuple[str, ...] = (),
+    strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
     **load_options: Any,
@@ -302,7 +319,8 @@ def calibrate_accel(
 
     input_path = _source_name(source)
     check_toml_output(output, append)
-    rec = _read_for_fit(source, "accel", load_options, with_files, on_input, stage)
+    inputs: list[dict[str, Any]] = []
+    rec = _read_for_fit(source, "accel", load_options, with_files, _noting(inputs, on_input), stage, strict)
     if gravity is None:
         gravity = normal_gravity(latitude, height) if latitude is not None else 9.80665
     gyro = rec.get("gyro", "rad/s") if "gyro" in rec.channels else None
@@ -333,7 +351,7 @@ def calibrate_accel(
         "T": cal.T.tolist(),
         **cal.quality,
     }
-    return CalibrationRun(cal, summary, rec)
+    return CalibrationRun(summary, inputs, rec, fit=cal)
 
 
 # -- deviation card --------------------------------------------------------------------------------------------
@@ -426,6 +444,7 @@ def deviation_card(
     append: bool = True,
     sensor: str | None = None,
     with_files: tuple[str, ...] = (),
+    strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
     **load_options: Any,
@@ -461,7 +480,9 @@ def deviation_card(
             )
     info = dict(info) if isinstance(info, dict) else card_info(info)
     _stage(stage, "reading")
-    rec = load_for_fit(source, load_options, with_files, on_input=on_input)  # mounting and a mag calibration ok
+    inputs: list[dict[str, Any]] = []
+    noted = _noting(inputs, on_input)
+    rec = load_for_fit(source, load_options, with_files, on_input=noted, strict=strict)  # mounting, mag cal. ok
     _stage(stage, "fitting")
     # compass heading
     if heading_column or "heading" in rec.channels:
@@ -626,4 +647,47 @@ def deviation_card(
         "variation": variation,
         "variation_source": var_src,
     }
-    return CalibrationRun(card, summary, rec, details)
+    return CalibrationRun(summary, inputs, rec, fit=card, details=details)
+
+
+# -- show ----------------------------------------------------------------------------------------------------------
+SHOW_FORMS = ("text", "c", "fusion", "matlab", "python", "json", "magneto")
+
+
+def show_calibration(path: str | os.PathLike, form: str = "text") -> str:
+    """A calibration file as text (``form='text'``: every section with its provenance, then the deviation card)
+    or as paste-ready code (:data:`SHOW_FORMS`: C for x-io Fusion, MATLAB, Python/numpy, JSON, Magneto's
+    printout); what ``imutool calibrate show`` prints."""
+    from calibration.crosswalk import render
+    from calibration.deviation import card_text
+    from calibration.file import load_calibration
+
+    path = os.fspath(path)
+    cal = load_calibration(path)
+    if form == "magneto":
+        from calibration.magnetometer import crosswalk
+
+        mg = cal.mag()
+        if mg is None:
+            raise ImutoolError("no [mag] section to convert", path=path)
+        return crosswalk(mg[0], mg[1], form)
+    if form != "text":
+        return render(cal, form)
+    lines = [f"calibration file {path}: sections {', '.join(cal.sections)}"]
+    for name, sec in cal.sections.items():
+        prov = sec.get("provenance", {})
+        lines.append(f"[{name}] {sec.get('model', '')}")
+        for k, v in sec.items():
+            if k in ("provenance", "model", "card_15deg", "magnetic_to_compass_15deg", "header", "warnings"):
+                continue
+            lines.append(f"  {k} = {v}")
+        if prov:
+            lines.append(
+                f"  provenance: {prov.get('method', '')}; {prov.get('input', '')} "
+                f"sha256 {str(prov.get('input_sha256', ''))[:12]}…; {prov.get('date_utc', '')}; "
+                f"sensor {prov.get('sensor', '') or '?'}"
+            )
+    dev = cal.deviation
+    if dev is not None:
+        lines += ["", card_text(dev)]
+    return "\n".join(lines) + "\n"

@@ -1,13 +1,13 @@
 """Conversion between every format imutool reads and writes: the one route behind ``imutool convert``,
 ``imutool batch convert`` and a Python user.
 
-:func:`convert` picks the route. CSV/Parquet → CSV/Parquet streams (:func:`stream_convert`): the input is read
+:func:`run_convert` picks the way. CSV/Parquet → CSV/Parquet streams (:func:`stream_convert`): the input is read
 chunk by chunk (:func:`formats.iter_chunks`, Parquet by row groups), each chunk validated (plus a check across chunk
 boundaries), calibrated and mounted if asked, and appended to an atomic writer — bounded memory. Anything else
 (bags, NMEA, or a policy that needs the whole file: ``backwards='sort'``, ``duplicates='mean'``) is read whole,
 validated, calibrated, mounted and written; bags convert REP-103 FLU/ENU ↔ FRD/NED at the boundary
-(:mod:`formats.bags`). Returns the summary (rows in/out, channels, conversions applied, what the output format
-could not carry).
+(:mod:`formats.bags`). Returns a :class:`imutool.routes.RouteResult` whose summary says rows in/out, channels,
+conversions applied and what the output format could not carry.
 """
 
 from __future__ import annotations
@@ -22,22 +22,20 @@ import formats
 from formats.errors import ImutoolError
 from imutool.loading import LOAD_OPTIONS
 from imutool.progress import Progress, report
+from imutool.routes import RouteResult
 
 STREAMABLE = ("csv", "parquet")
 
 
-META_ROOM = 8192  # bytes left in a streamed CSV output's header for the warnings known only at the end
-
-
-def chunk_writer(path: str | os.PathLike, background: bool = False, reserve_meta: int = 0) -> Any:
+def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
     """An atomic incremental writer (``with w: w.write(chunk)``; ``w.rows``) for a .csv or .parquet output;
-    ``background``: each chunk is written by a worker thread while the caller prepares the next;
-    ``reserve_meta``: header room (bytes) a CSV keeps for :meth:`set_final_meta` (Parquet needs none)."""
+    ``background``: each chunk is written by a worker thread while the caller prepares the next. Metadata given
+    to ``set_final_meta`` go into the CSV's header (the rows copied once behind it) or the Parquet footer."""
     kind = formats.kind_of(path, for_output=True)
     if kind == "csv":
         from formats.csv import CsvWriter
 
-        return CsvWriter(os.fspath(path), background=background, reserve_meta=reserve_meta)
+        return CsvWriter(os.fspath(path), background=background)
     if kind == "parquet":
         from formats.parquet import ParquetWriter
 
@@ -72,20 +70,19 @@ def stream_convert(
     report is the summary's ``validation``, and it and the warnings go into the output's metadata at the end.
     ``progress(rows_read, rows_expected)`` after each chunk (expected: Parquet footer count, CSV estimate).
     """
-    from imutool.loading import ChunkChecks
+    from imutool.loading import ChunkChecks, mapping_options
 
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
+    opts: dict[str, Any] = mapping_options(src, columns, profile)
     checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
     time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     if formats.kind_of(src) == "csv":
-        opts: dict[str, Any] = {"columns": columns, "profile": profile, **time_opts}
-    else:
+        opts.update(time_opts)
+    elif any(v is not None for v in time_opts.values()):
         from imutool.loading import read_input
 
-        opts = {}
-        if any(v is not None for v in time_opts.values()):
-            read_input(src, **time_opts)  # the one-line refusal of a CSV-only option
+        read_input(src, **time_opts)  # the one-line refusal of a CSV-only option
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
     rows_in = 0
@@ -94,7 +91,7 @@ def stream_convert(
     channels: list[str] = []
     last_t = -np.inf
     skipped = 0
-    with chunk_writer(dst, reserve_meta=META_ROOM) as w:
+    with chunk_writer(dst) as w:
         for chunk in chunks:
             rows_in += len(chunk)
             report(progress, rows_in, total)
@@ -170,8 +167,9 @@ def streams(
     backwards: str = "error",
     merging: bool = False,
 ) -> bool:
-    """Whether :func:`convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
-    whole file (``backwards='sort'``, ``duplicates='mean'``, ``merging`` other files with ``--with``)."""
+    """Whether :func:`run_convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
+    whole file (``backwards='sort'``, ``duplicates='mean'``, ``merging``
+    other files with ``--with``)."""
     return (
         stream
         and not merging
@@ -182,13 +180,13 @@ def streams(
     )
 
 
-def convert(
+def run_convert(
     src: str | os.PathLike,
     dst: str | os.PathLike,
     *,
     stream: bool = True,
     chunk_rows: int = 500_000,
-    sentences: str | tuple[str, ...] = ("HDT", "XDR"),
+    sentences: str | tuple[str, ...] = "HDT,XDR",
     nmea_rate: float | None = None,
     talker: str | None = None,
     imu_topic: str = "/imu/data",
@@ -202,9 +200,10 @@ def convert(
     stage: Callable[[str], None] | None = None,
     on_input: Callable[[str, dict[str, Any]], None] | None = None,
     **load_options: Any,
-) -> dict[str, Any]:
+) -> RouteResult:
     """Convert ``src`` to ``dst`` (format from each name's extension: .csv, .parquet, .bag, .db3/.mcap or a folder,
-    .nmea/.log); returns the summary.
+    .nmea/.log): the route behind ``imutool convert`` and ``imutool batch convert``. Returns its summary and what
+    loading the input did (``inputs``); nothing is printed.
 
     load_options: columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (as
     :func:`imutool.loading.load_recording`; a bag input is read with topic/stamp/``vector3_mag_unit`` and gets
@@ -214,12 +213,19 @@ def convert(
     (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
     ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
     """
-    from imutool.loading import ChunkChecks, merged_warnings
+    from imutool.loading import ChunkChecks, mapping_options, merged_warnings
 
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
-        raise TypeError(f"convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+        raise TypeError(f"run_convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
     src, dst = os.fspath(src), os.fspath(dst)
+    inputs: list[dict[str, Any]] = []
+
+    def noted(path: str, rep: dict[str, Any]) -> None:
+        inputs.append({"input": path, **rep})
+        if on_input is not None:
+            on_input(path, rep)
+
     opt = {k: load_options.get(k) for k in LOAD_OPTIONS}
     duplicates = opt["duplicates"] or "drop"
     backwards = opt["backwards"] or "error"
@@ -248,10 +254,8 @@ def convert(
             )
         )
         summary["conversions"] = ["none (same frames and units)"]
-        validation = summary.pop("validation")
-        if on_input is not None:
-            on_input(src, validation)
-        return summary
+        noted(src, summary.pop("validation"))
+        return RouteResult(summary, inputs)
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
@@ -261,7 +265,13 @@ def convert(
             read_input(
                 src, rate_hz=opt["input_rate_hz"], time_column=opt["time_column"], header_rows=opt["header_rows"]
             )
-        rec = formats.read(src, topic=opt["topic"], stamp=opt["stamp"] or "header", vector3_mag_unit=vector3_mag_unit)
+        rec = formats.read(
+            src,
+            topic=opt["topic"],
+            stamp=opt["stamp"] or "header",
+            vector3_mag_unit=vector3_mag_unit,
+            **mapping_options(src, opt["columns"], opt["profile"]),
+        )
         rows_in = len(rec)
         bag = rec.meta.get("bag", {})
         conversions += [f"in: {c}" for c in bag.get("conversions", [])]
@@ -297,14 +307,14 @@ def convert(
         rec.meta["validation"] = report
         if warns:
             rec.meta["warnings"] = merged_warnings(rec.meta, warns)
-        if on_input is not None and len(rec):
-            on_input(src, {**report, "warnings": warns})
+        if len(rec):
+            noted(src, {**report, "warnings": warns})
     else:
         from imutool.loading import load_recording
 
         rec, rep2 = load_recording(src, strict=strict, **{k: v for k, v in opt.items() if v is not None})
-        if on_input is not None and len(rec):
-            on_input(src, rep2)
+        if len(rec):
+            noted(src, rep2)
         rows_in = int(rep2.get("rows", len(rec)))
         summary["validation_actions"] = rep2.get("actions", [])
     if mounting:
@@ -348,4 +358,4 @@ def convert(
     else:
         summary["rows_out"] = len(rec)
     summary["conversions"] = conversions or ["none (same frames and units)"]
-    return summary
+    return RouteResult(summary, inputs, rec)

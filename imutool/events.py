@@ -50,6 +50,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from imutool.batch import expand_inputs
 from imutool.roll import heel_of, roll_cycles
 from imutool.routes import RouteResult
 
@@ -661,3 +662,36 @@ def write_fleet(rows: list[dict[str, Any]], path: str) -> None:
             pq.write_table(pa.Table.from_pylist(rows) if rows else pa.table({"ship": pa.array([], pa.string())}), tmp)
         return
     write_table(rows, path)
+
+
+def run_fleet(
+    sources: str | os.PathLike | list[str] | tuple[str, ...],
+    output: str | os.PathLike,
+    *,
+    voyages_path: str | os.PathLike | None = None,
+    plot_path: str | os.PathLike | None = None,
+) -> RouteResult:
+    """One table across many :func:`run_events` results (``sources``: JSON files, folders walked for ``*.json``,
+    glob patterns): the route behind ``imutool events fleet``. Writes the fleet event table ``output`` (.csv or
+    .parquet), the per-voyage table ``voyages_path`` (.csv) and the ``plot_path`` figure; ``data``: the event rows
+    and the voyage rows."""
+    sources = [os.fspath(sources)] if isinstance(sources, (str, os.PathLike)) else [os.fspath(p) for p in sources]
+    output = os.fspath(output)
+    paths = [p for p, _ in expand_inputs(sources, ("*.json",))]
+    if not paths:
+        raise ImutoolError("no events results given")
+    rows, voyages = fleet_table(load_results(paths))
+    write_fleet(rows, output)
+    if voyages_path:
+        write_table(voyages, os.fspath(voyages_path))
+    if plot_path:
+        fleet_plot(rows, voyages, os.fspath(plot_path))
+    summary = {
+        "results": len(paths),
+        "events": len(rows),
+        "ships": len({v["ship"] for v in voyages}),
+        "voyages": len(voyages),
+        "parametric_roll_episodes": sum(r["type"] == "parametric_roll" for r in rows),
+        "output": output,
+    }
+    return RouteResult(summary, data={"events": rows, "voyages": voyages})

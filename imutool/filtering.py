@@ -36,11 +36,12 @@ from imutool.attitude import (
     result_recording,
     run_ekf,
 )
-from imutool.attitude.recording import heading_channel
+from imutool.attitude.motion import choose_motion, params_for_motion
+from imutool.attitude.recording import drop_clipped, flag_clipped, gnss_inputs, heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
-from imutool.convert import META_ROOM, STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, read_input
+from imutool.convert import STREAMABLE, chunk_writer, expected_rows
+from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, mapping_options, read_input
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -113,6 +114,7 @@ def run_filter(
     params: Any = None,
     smooth: bool = False,
     lever_arm: Any = None,
+    antenna_arm: Any = None,
     gnss: str | os.PathLike | None = None,
     use_gnss: bool = True,
     heading: str | os.PathLike | None = None,
@@ -131,7 +133,8 @@ def run_filter(
 
     method: ``ekf`` (quaternion EKF with gyro-bias states; ``params`` an :class:`imutool.attitude.EkfParams`,
     ``smooth`` adds the zero-lag smoother (:func:`imutool.attitude.zero_lag_smooth`), ``lever_arm`` the sensor
-    position from the centre of rotation, m, body FRD, ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg),
+    position from the centre of rotation, m, body FRD, ``antenna_arm`` the GNSS antenna's (default: the velocity
+    is the centre's), ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg),
     ``use_gnss=False`` ignores sog/cog, ``heading`` an NMEA (HDT/THS) or CSV file with heading_true (deg), a
     gyrocompass heading used instead of the magnetometer), ``lpf`` (Butterworth low-passed accelerometer tilt +
     magnetic heading, ``cutoff_hz``, ``order``), ``accel`` (unfiltered accelerometer tilt) or ``compass``
@@ -151,6 +154,7 @@ def run_filter(
     if method not in METHODS:
         raise ImutoolError(f"filter method {method!r}: expected one of {', '.join(METHODS)}")
     lever = _lever_arm(lever_arm)
+    antenna = _lever_arm(antenna_arm, "antenna arm")
     if method == "ekf":
         params = params if params is not None else EkfParams()
     if (
@@ -165,6 +169,7 @@ def run_filter(
             chunk_rows=chunk_rows,  # type: ignore[arg-type]
             use_gnss=use_gnss,
             lever_arm=lever,
+            antenna_arm=antenna,
             strict=strict,
             progress=progress,
             **{k: load_options.get(k) for k in STREAM_OPTIONS},
@@ -188,9 +193,11 @@ def run_filter(
             rec = attach_gnss(rec, gnss)
         if heading is not None:
             rec = attach_heading(rec, heading)
-        out, s = ekf_recording(rec, params, smooth=smooth, use_gnss=use_gnss, lever_arm=lever, progress=progress)
+        out, s = ekf_recording(
+            rec, params, smooth=smooth, use_gnss=use_gnss, lever_arm=lever, progress=progress, antenna_arm=antenna
+        )
         if smooth:
-            gain = smoother_gain(rec, out, params, use_gnss=use_gnss, lever_arm=lever)
+            gain = smoother_gain(rec, out, params, use_gnss=use_gnss, lever_arm=lever, antenna_arm=antenna)
             if gain is not None:
                 s["smoother_gain"] = gain
         if params_file:
@@ -214,23 +221,29 @@ def run_filter(
     return FilterResult(out, summary, validation)
 
 
-def _lever_arm(lever_arm: Any) -> np.ndarray | None:
+def _lever_arm(lever_arm: Any, what: str = "lever arm") -> np.ndarray | None:
     if lever_arm is None:
         return None
     v = np.asarray(lever_arm, dtype=float).reshape(-1)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ImutoolError(f"lever arm {lever_arm!r}: expected three finite numbers (m)")
+        raise ImutoolError(f"{what} {lever_arm!r}: expected three finite numbers (m)")
     return v
 
 
 def smoother_gain(
-    rec: Recording, smoothed: Recording, params: Any, *, use_gnss: bool = True, lever_arm: np.ndarray | None = None
+    rec: Recording,
+    smoothed: Recording,
+    params: Any,
+    *,
+    use_gnss: bool = True,
+    lever_arm: np.ndarray | None = None,
+    antenna_arm: np.ndarray | None = None,
 ) -> dict[str, Any] | None:
     """Causal vs smoothed attitude RMSE (deg) against the truth in ``rec`` (``ref_q`` or ``ref_roll``...); None
     without truth. Runs the causal EKF once more."""
     if "ref_q" not in rec.channels and "ref_roll" not in rec.channels:
         return None
-    causal, _ = ekf_recording(rec, params, use_gnss=use_gnss, lever_arm=lever_arm)
+    causal, _ = ekf_recording(rec, params, use_gnss=use_gnss, lever_arm=lever_arm, antenna_arm=antenna_arm)
     return {"causal_rmse_deg": attitude_rmse(causal, rec), "smoothed_rmse_deg": attitude_rmse(smoothed, rec)}
 
 
@@ -340,6 +353,7 @@ def stream_ekf(
     chunk_rows: int = 1_000_000,
     use_gnss: bool = True,
     lever_arm: np.ndarray | None = None,
+    antenna_arm: np.ndarray | None = None,
     columns: str | None = None,
     profile: str | None = None,
     mounting: str | None = None,
@@ -379,14 +393,14 @@ def stream_ekf(
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
     time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
-    opts = {"columns": columns, "profile": profile, "prefetch": True, **time_opts} if kind == "csv" else {}
     if kind != "csv" and any(v is not None for v in time_opts.values()):
         read_input(path, **time_opts)  # the one-line refusal of a CSV-only option
+    opts = {**mapping_options(path, columns, profile), **({"prefetch": True, **time_opts} if kind == "csv" else {})}
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
-    writer = chunk_writer(output, background=True, reserve_meta=META_ROOM)
+    writer = chunk_writer(output, background=True)
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         chunks = in_background(chunks)
@@ -410,11 +424,12 @@ def stream_ekf(
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
-                self_checks = SelfCheck(params, dt_nom, lever_arm)
-            sog = cog = None
-            if use_gnss and "sog" in chunk.channels and "cog" in chunk.channels:
-                sog = chunk.in_unit("sog", "m/s")
-                cog = chunk.in_unit("cog", "deg")
+                motion = choose_motion(params, chunk.time, chunk["gyro"])  # from the first chunk
+                run_params = params_for_motion(params, motion)
+                summary["motion"] = motion.summary()
+                self_checks = SelfCheck(run_params, dt_nom, lever_arm)
+                self_checks.motion = motion.kind
+            sog, cog, vel = gnss_inputs(chunk, use_gnss)
             if "heading_true" in chunk.channels and getattr(params, "heading_input_latency", 0.0) > 0:
                 raise ImutoolError(
                     "heading_input_latency reads the heading_true column later, past a chunk's end: "
@@ -425,12 +440,14 @@ def stream_ekf(
             heading = heading_channel(chunk)  # deg, or None
             if dt_mag is None:
                 dt_mag = mag_interval(chunk.time, chunk.channels.get("mag"))
+            assert self_checks is not None  # made with the first chunk's nominal step
+            accel, clipped_rows = drop_clipped(chunk["gyro"], chunk["accel"], self_checks, chunk.time)
             res, state = run_ekf(
                 chunk.time,
                 chunk["gyro"],
-                chunk["accel"],
+                accel,
                 chunk.channels.get("mag"),
-                params,
+                run_params,
                 sog,
                 cog,
                 state=state,
@@ -439,12 +456,15 @@ def stream_ekf(
                 keep_force=True,
                 heading_deg=heading,
                 dt_mag=dt_mag,
+                velocity_ne=vel,
+                antenna_arm=antenna_arm,
             )
-            assert self_checks is not None  # made with the first chunk's nominal step
+            flag_clipped(res, clipped_rows)
             self_checks.add(
-                res, chunk["gyro"], mag_given="mag" in chunk.channels, gnss_used=sog is not None, heading_deg=heading
+                res, chunk["gyro"], mag_given="mag" in chunk.channels, gnss_used=vel is not None, heading_deg=heading
             )
             est = result_recording(chunk, res, params)
+            est.meta["motion"] = summary["motion"]
             # the metadata as far as known (the heading source is final at the end: set_final_meta below)
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
             w.write(est)

@@ -53,6 +53,8 @@ from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
 
 GRAVITY = 9.80665
 METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
+GNSS_METHOD = "gnss"  # run_heave only: the detrended GNSS height (imutool.gnss_heave), no accelerometer
+ROUTE_METHODS = METHODS + (GNSS_METHOD,)
 TILT_GAIN = 0.07  # 1/s: tilt-filter gain (+ integral gyro-bias term gain²/4: a critically damped PI loop)
 RT_ORDER = 6  # real-time corrected integrator: order,
 RT_RATIO = 0.3  # corner as a fraction of the tracked dominant frequency,
@@ -133,14 +135,40 @@ def complementary_attitude(
     )
 
 
+def usable_orientation(q: np.ndarray) -> np.ndarray:
+    """Rows of q (N, 4) that are an orientation: finite and of unit norm within 10 % (four zeros, the value of a
+    driver that has none, are not)."""
+    q = np.asarray(q, float)
+    with np.errstate(invalid="ignore"):
+        n = np.sqrt(np.sum(q * q, axis=1))
+        return np.isfinite(n) & (np.abs(n - 1.0) < 0.1)
+
+
 def _attitude_for(rec: Recording, attitude: str, tilt_gain: float) -> tuple[np.ndarray, str]:
     if attitude == "ref":
         if "ref_q" not in rec:
             raise ImutoolError("--attitude ref needs ref_qw..ref_qz columns")
         return rec["ref_q"], "ref_q (truth channel)"
-    if attitude in ("auto", "q") and "q" in rec and not (isinstance(rec["q"], np.ndarray) and rec["q"].ndim == 1):
-        return rec["q"], "q channel of the input"
+    has_q = "q" in rec and isinstance(rec["q"], np.ndarray) and rec["q"].ndim == 2 and rec["q"].shape[1] == 4
+    if attitude in ("auto", "q") and has_q:
+        ok = usable_orientation(rec["q"])
+        if ok.any():
+            return rec["q"], "q channel of the input"
+        if attitude == "q":  # all zeros (or NaN): not an orientation, whatever the columns are called
+            zero = bool(np.all(np.nan_to_num(rec["q"]) == 0))
+            raise ImutoolError(
+                "--attitude q: the orientation (qw..qz) is "
+                + ("all zeros" if zero else "nowhere a unit quaternion")
+                + " — not an orientation; use --attitude auto (the tilt filter) or ekf"
+            )
     if attitude == "q":
+        bag = rec.meta.get("bag")
+        notes = bag.get("notes") or [] if isinstance(bag, dict) else []
+        if any("[0, 0, 0, 0]" in str(n) and "not read" in str(n) for n in notes):
+            raise ImutoolError(
+                "--attitude q: the bag's orientation field is all zeros (not filled by the driver) — not an "
+                "orientation; use --attitude auto (the tilt filter) or ekf"
+            )
         raise ImutoolError("--attitude q needs qw..qz columns")
     if "gyro" not in rec:
         raise ImutoolError("the vertical needs an attitude: give q columns, gyro_x..z, or --vertical COLUMN")
@@ -1136,7 +1164,7 @@ def heave_recording(
     a, vinfo = vertical_acceleration(rec, vertical, vertical_sign, attitude, lever_arm, tilt_gain)
     if not np.isfinite(a).any():
         raise ImutoolError(
-            "no finite vertical acceleration sample (all accelerometer values missing)",
+            f"no finite vertical acceleration sample ({_why_no_vertical(rec, vertical, vinfo)})",
             path=str(rec.meta.get("source") or "") or None,
         )
     res = estimate_heave(rec.time, a, method=method, **options)
@@ -1162,6 +1190,15 @@ def heave_recording(
         }
     )
     return out, summary
+
+
+def _why_no_vertical(rec: Recording, vertical: list[str] | None, vinfo: dict[str, Any]) -> str:
+    """What made every vertical acceleration sample NaN: the accelerometer, or the attitude that rotated it."""
+    if vertical:
+        return f"every value of {', '.join(vertical)} is missing"
+    if "accel" in rec and not np.any(np.all(np.isfinite(rec["accel"]), axis=1)):
+        return "all accelerometer values missing"
+    return f"the accelerometer has values; the attitude has none: {vinfo.get('vertical', 'attitude')}"
 
 
 HEAVE_CHANNELS = ("heave", "heave_delayed", "heave_rate", "heave_rate_delayed", "ref_heave", "ref_heave_rate")
@@ -1194,6 +1231,10 @@ def run_heave(
     nmea_rate: float | None = None,
     nmea_baud: int = 4800,
     heave_positive: str = "up",
+    height_window_s: float | None = None,
+    gnss_fix: str = "rtk",
+    gnss_lever_arm: Any = None,
+    gnss_reference: bool = True,
     strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
@@ -1208,7 +1249,14 @@ def run_heave(
     ``vertical_sign``; else the 3-axis accel rotated with ``attitude`` (auto, q, ekf, tilt, ref), ``lever_arm``
     (m, body FRD) and ``tilt_gain`` (1/s). ``nmea``: also write PASHR and/or TSS1 (``nmea_sentences``) there at
     ``nmea_rate`` Hz fitting ``nmea_baud`` (:func:`imutool.nmea_out.write_log`). ``heave_positive``: ``up``
-    (imutool) or ``down``: every heave column and sentence flips, the headers say so. ``load_options`` of a path:
+    (imutool) or ``down``: every heave column and sentence flips, the headers say so.
+
+    GNSS height (a ``gnss_height`` channel: GGA, PTNL,GGK/PJK; :mod:`imutool.gnss_heave`): with ``method``
+    ``gnss``, or when the input has no accelerometer, the heave is the detrended height (``height_window_s``,
+    None = 10 dominant periods within 60–600 s; ``gnss_fix`` rtk/fixed/any; ``gnss_lever_arm`` the monitoring
+    point relative to the antenna, m body FRD, applied with the input's roll/pitch). With an accelerometer and
+    ``gnss_reference``, the height heave becomes ``ref_heave`` (where the input has none) and the summary's
+    ``gnss_reference`` compares the two. ``load_options`` of a path:
     columns, profile, topic, stamp, duplicates, backwards, mounting, calibration_file (in ``options`` too).
     Returns the output recording and the summary (rows, heave_positive, the estimator's figures, ``nmea``).
     """
@@ -1225,18 +1273,31 @@ def run_heave(
     if vertical:
         cols = [c if c in rec.channels else c.lower() if c.lower() in rec.channels else c for c in vertical]
     arm = None if lever_arm is None else np.asarray(lever_arm, dtype=float).reshape(-1)
+    has_accel = bool(cols) or "accel" in rec.channels
+    height_only = method == GNSS_METHOD or (not has_accel and "gnss_height" in rec.channels)
     if stage is not None:
-        stage(f"heave ({method})")
-    out, summary = heave_recording(
-        rec,
-        method=method,
-        vertical=cols,
-        vertical_sign=vertical_sign,
-        attitude="tiltonly" if attitude == "tilt" else attitude,
-        lever_arm=arm,
-        tilt_gain=tilt_gain,
-        **options,
-    )
+        stage(f"heave ({GNSS_METHOD if height_only else method})")
+    if height_only:
+        from imutool.gnss_heave import height_heave  # noqa: PLC0415
+
+        if lever_arm is not None:
+            raise ImutoolError("--lever-arm is the IMU's; for a heave from GNSS height give --gnss-lever-arm")
+        out, summary = height_heave(rec, window_s=height_window_s, fix=gnss_fix, lever_arm=gnss_lever_arm)
+        if method != GNSS_METHOD:
+            summary["method_note"] = f"no accelerometer in the input: heave from gnss_height (not {method})"
+    else:
+        out, summary = heave_recording(
+            rec,
+            method=method,
+            vertical=cols,
+            vertical_sign=vertical_sign,
+            attitude="tiltonly" if attitude == "tilt" else attitude,
+            lever_arm=arm,
+            tilt_gain=tilt_gain,
+            **options,
+        )
+        if gnss_reference and "gnss_height" in rec.channels:
+            summary["gnss_reference"] = _gnss_reference(out, rec, height_window_s, gnss_fix, gnss_lever_arm)
     nmea_info = None
     if nmea:
         names = nmea_sentences.split(",") if isinstance(nmea_sentences, str) else nmea_sentences
@@ -1281,22 +1342,85 @@ def run_heave(
     return RouteResult(summary, inputs, out)
 
 
+def _gnss_reference(out: Recording, rec: Recording, window_s: float | None, fix: str, lever_arm: Any) -> dict[str, Any]:
+    """The heave from ``rec``'s gnss_height as ``out``'s ``ref_heave`` (unless it has one) and the comparison."""
+    from imutool.gnss_heave import height_heave  # noqa: PLC0415
+
+    href, hs = height_heave(rec, window_s=window_s, fix=fix, lever_arm=lever_arm)
+    hv = np.where(href["settled"] > 0, href["heave"], np.nan)
+    info: dict[str, Any] = {"window_s": hs["window_s"], "fix_filter": hs["fix_filter"]}
+    if "ref_heave" not in out.channels:
+        out.add("ref_heave", interp_to(out.time, href.time, hv), "m")
+        out.meta["ref_heave"] = f"heave from gnss_height (detrended over {hs['window_s']:g} s, {hs['fix_filter']})"
+        info["ref_heave"] = "added"
+    try:
+        info.update(_evaluate_at_reference(out, href.time, hv, f"gnss_height detrended over {hs['window_s']:g} s", 0.0))
+    except ImutoolError as e:
+        info["not_compared"] = str(e)
+    return info
+
+
 # ------------------------------------------------------------------------------------------------------------------
 # Evaluation
 # ------------------------------------------------------------------------------------------------------------------
-def _ref_heave(ref: Recording) -> np.ndarray:
+def _evaluate_at_reference(
+    est: Recording, ref_t: np.ndarray, rh: np.ndarray, what: str, max_lag_s: float
+) -> dict[str, Any]:
+    """evaluate_heave at the reference's own times: error = est(τ + lag) − ref(τ), the estimate (unsettled rows
+    NaN) interpolated onto the reference times τ."""
+    sig = 4 * np.nanstd(rh)
+    out: dict[str, Any] = {
+        "unit": "m",
+        "max_lag_s": max_lag_s,
+        "reference_heave": what,
+        "compared_at": "the reference's own times",
+        "significant_heave_ref_m": float(sig),
+    }
+    for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
+        if ch not in est:
+            continue
+        mask = np.asarray(est[flag]) > 0.5 if flag in est else np.ones(len(est), bool)
+        x = np.where(mask, np.asarray(est[ch], float), np.nan)
+        if mask.sum() < 10:
+            raise ImutoolError("too few settled samples to evaluate heave")
+        lag = 0.0
+        if max_lag_s > 0:
+            step = min(float(np.median(np.diff(est.time))), max_lag_s / 10)
+            lag, _ = best_lag(ref_t, rh, est.time, x, max_lag_s, step_s=step)
+            lag = -lag  # best_lag moved the estimate against the reference: the estimate's lag is the opposite
+        st = error_stats(interp_to(ref_t + lag, est.time, x) - rh)
+        st["lag_s"] = float(lag)
+        st["excluded_unsettled"] = int((~mask).sum())
+        st["rmse_pct_of_significant"] = float(100 * st["rmse"] / sig) if sig > 0 else float("nan")
+        out[ch] = st
+    return out
+
+
+def _ref_heave(ref: Recording) -> tuple[np.ndarray, np.ndarray, str]:
+    """(times, heave m + up, what it is) of a reference: ref_heave or heave, else the detrended gnss_height."""
     for name in ("ref_heave", "heave", "Heave"):
         if name in ref:
-            return np.asarray(ref[name], float)
-    raise ImutoolError(f"reference has no heave channel (ref_heave or heave); has {', '.join(ref.channels)}")
+            return ref.time, np.asarray(ref[name], float), name
+    if "gnss_height" in ref.channels:
+        from imutool.gnss_heave import reference_heave  # noqa: PLC0415
+
+        return reference_heave(ref)
+    raise ImutoolError(
+        f"reference has no heave channel (ref_heave, heave or gnss_height); has {', '.join(ref.channels)}"
+    )
 
 
 def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> dict[str, Any]:
     """Heave error statistics (m) of ``est`` (channels heave and, if present, heave_delayed) against the
-    reference heave (``ref_heave`` or ``heave``; positive up), after the best constant lag within ±max_lag_s.
-    Samples with ``settled`` = 0 are excluded (counted). Positive lag: the estimate lags the reference."""
-    rh = _ref_heave(ref)
-    out: dict[str, Any] = {"unit": "m", "max_lag_s": max_lag_s}
+    reference heave (``ref_heave`` or ``heave``; positive up; else the detrended ``gnss_height``), after the best
+    constant lag within ±max_lag_s. Samples with ``settled`` = 0 are excluded (counted). Positive lag: the
+    estimate lags the reference. A reference sampled more sparsely than the estimate (a 1 Hz GNSS height
+    against a 50 Hz estimate) is compared at its own times, the estimate interpolated there."""
+    ref_t, rh, what = _ref_heave(ref)
+    sparse = len(est) > 1 and len(ref_t) > 1 and np.median(np.diff(ref_t)) > 1.5 * np.median(np.diff(est.time))
+    if sparse and what not in ("ref_heave", "heave", "Heave"):
+        return _evaluate_at_reference(est, ref_t, rh, what, max_lag_s)
+    out: dict[str, Any] = {"unit": "m", "max_lag_s": max_lag_s, "reference_heave": what}
     sig = 4 * np.nanstd(rh)
     out["significant_heave_ref_m"] = float(sig)
     for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
@@ -1312,10 +1436,10 @@ def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> di
         if max_lag_s > 0:
             # a lag grid finer than the sample interval (at 10 Hz a ±0.1 s search would have three points)
             step = min(float(np.median(np.diff(tt))), max_lag_s / 10)
-            lag, _ = best_lag(tt, xx, ref.time, rh, max_lag_s, step_s=step)
+            lag, _ = best_lag(tt, xx, ref_t, rh, max_lag_s, step_s=step)
         else:
             lag = 0.0
-        r = interp_to(tt - lag, ref.time, rh)
+        r = interp_to(tt - lag, ref_t, rh)
         st = error_stats(xx - r)
         st["lag_s"] = float(lag)
         st["excluded_unsettled"] = int((~mask).sum())

@@ -624,14 +624,26 @@ def _position_of(rec: Recording, prefer_ref: bool) -> np.ndarray | None:
     return None
 
 
-def evaluate_position(est: Recording, ref: Recording | None = None) -> dict[str, Any]:
+LOOP_GAP_M = 5.0  # m: a walk whose end is within max(LOOP_GAP_M, LOOP_GAP_SHARE of its path) of its start …
+LOOP_GAP_SHARE = 0.05
+LOOP_MAX_SHARE = 0.25  # … and within this share of its path (a short straight walk is no loop) is taken for a loop
+
+
+def looks_like_loop(gap_m: float, distance_m: float) -> bool:
+    """Whether a walk whose end is ``gap_m`` (m) from its start after ``distance_m`` (m) of path is a closed loop:
+    gap ≤ max(LOOP_GAP_M, LOOP_GAP_SHARE·distance) and ≤ LOOP_MAX_SHARE·distance."""
+    return gap_m <= max(LOOP_GAP_M, LOOP_GAP_SHARE * distance_m) and gap_m <= LOOP_MAX_SHARE * distance_m
+
+
+def evaluate_position(est: Recording, ref: Recording | None = None, loop: bool | None = None) -> dict[str, Any]:
     """Position accuracy of an INS track (``pos``, m NED) against a reference (``ref_pos`` or ``pos``).
 
     The reference is interpolated to the estimate's times and both are referred to their first common sample.
     Returns final-position error (3D and horizontal, m), position RMSE (3D, per axis, and the paper's "total"
     = sum of the axis RMSEs), horizontal path lengths (0.1 s resampling) and the distance error (m and % of the
-    reference distance). Without a reference (or when it has no position) the track is treated as a closed
-    loop: the final-position error is the distance from the start to the end.
+    reference distance). Without a reference (or when it has no position) the start-to-end distance is returned
+    (``start_to_end_m``), and it is a closed-loop error (``final_error_m``, mode "closed-loop") only for a loop:
+    ``loop`` True (the user says so), False (not a loop), None (:func:`looks_like_loop` decides).
     """
     from imutool.metrics import interp_to
 
@@ -649,14 +661,27 @@ def evaluate_position(est: Recording, ref: Recording | None = None) -> dict[str,
     if rp is None:
         pv = p[ok]
         e = pv[-1] - pv[0]
-        return {
-            "mode": "closed-loop",
-            "final_error_m": float(np.linalg.norm(e)),
-            "final_error_horizontal_m": float(np.hypot(e[0], e[1])),
-            "final_error_ned_m": e.tolist(),
+        gap = float(np.linalg.norm(e))
+        is_loop = looks_like_loop(gap, dist_est) if loop is None else bool(loop)
+        out: dict[str, Any] = {
+            "mode": "closed-loop" if is_loop else "start-to-end",
+            "loop": is_loop,
+            "loop_decided": "auto" if loop is None else "given",
+            "start_to_end_m": gap,
+            "start_to_end_ned_m": e.tolist(),
             "distance_m": dist_est,
-            "final_error_percent_of_distance": 100 * float(np.linalg.norm(e)) / dist_est if dist_est > 0 else None,
+            "start_to_end_percent_of_distance": 100 * gap / dist_est if dist_est > 0 else None,
         }
+        if is_loop:  # the foot came back to where it started: the gap is the dead reckoning's error
+            out.update(
+                {
+                    "final_error_m": gap,
+                    "final_error_horizontal_m": float(np.hypot(e[0], e[1])),
+                    "final_error_ned_m": e.tolist(),
+                    "final_error_percent_of_distance": out["start_to_end_percent_of_distance"],
+                }
+            )
+        return out
     r = interp_to(t, ref.time, rp)
     both = ok & np.all(np.isfinite(r), axis=1)
     if both.sum() < 2:
@@ -682,6 +707,23 @@ def evaluate_position(est: Recording, ref: Recording | None = None) -> dict[str,
         "reference_distance_m": dist_ref,
         "distance_error_m": dist_e - dist_ref,
         "distance_error_percent": 100 * (dist_e - dist_ref) / dist_ref if dist_ref > 0 else None,
+    }
+
+
+def _loop_entries(ends: dict[str, Any]) -> dict[str, Any]:
+    """The summary's loop figures: a closed-loop error for a loop, else why none is claimed."""
+    share = ends["start_to_end_percent_of_distance"]
+    if ends["loop"]:
+        return {
+            "closed_loop_error_m": round(ends["final_error_m"], 4),
+            "closed_loop_error_percent": round(share, 3) if share is not None else None,
+        }
+    if ends["loop_decided"] == "given":
+        return {"loop_note": "not a loop (--no-loop): the start-to-end distance is no error"}
+    pct = f" ({share:.1f} % of the path)" if share is not None else ""
+    return {
+        "loop_note": f"start and end {ends['start_to_end_m']:.2f} m apart{pct}: not a loop, so no loop-closure "
+        "error is claimed (--loop if the walk did end where it started)"
     }
 
 
@@ -762,6 +804,7 @@ def run_ins_track(
     plot_path: str | os.PathLike | None = None,
     strides_path: str | os.PathLike | None = None,
     strict: bool = False,
+    loop: bool | None = None,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
     **load_options: Any,
@@ -775,7 +818,9 @@ def run_ins_track(
     ``bias_states`` both bias triples. ZVIs: the 0/1 channel ``zvi_column``, else detected with ``detector``
     (``gamma`` for the Skog detectors). Also writes ``plot_path`` (top view + height, .png/.pdf) and ``strides_path``
     (:func:`write_strides`). A path is loaded with ``load_options`` (columns, profile, ... calibration_file).
-    Returns the track and the summary: closed-loop error, strides, final sigmas, ``vs_reference`` with ref_pos.
+    Returns the track and the summary: start-to-end distance (a closed-loop error only for a loop: ``loop`` True,
+    False, or None to decide from the track, :func:`looks_like_loop`), strides, final sigmas, ``vs_reference``
+    with ref_pos.
     """
     inputs: list[dict[str, Any]] = []
     if stage is not None:
@@ -836,7 +881,7 @@ def run_ins_track(
         stage("writing")
     if output is not None:
         formats.write(out, output)
-    loop = evaluate_position(out)
+    ends = evaluate_position(out, loop=loop)
     st = strides(out.time, out["pos"], out["zvi"])
     ok = np.flatnonzero(np.all(np.isfinite(out["pos"]), axis=1))
     summary: dict[str, Any] = {
@@ -846,14 +891,11 @@ def run_ins_track(
         "duration_s": round(out.duration, 3),
         "aligned_from_s": round(res.info["alignment_start_s"], 3),
         "gravity_m_s2": round(res.gravity, 4),
-        "distance_m": round(loop["distance_m"], 3),
+        "distance_m": round(ends["distance_m"], 3),
         "final_position_ned_m": np.round(out["pos"][ok[-1]], 3).tolist() if len(ok) else None,
-        "closed_loop_error_m": round(loop["final_error_m"], 4),
-        "closed_loop_error_percent": (
-            round(loop["final_error_percent_of_distance"], 3)
-            if loop["final_error_percent_of_distance"] is not None
-            else None
-        ),
+        "start_to_end_m": round(ends["start_to_end_m"], 4),
+        "loop": ends["loop"],
+        **_loop_entries(ends),
         "strides": {
             "count": st["count"],
             "mean_length_m": st["mean_length_m"] and round(st["mean_length_m"], 3),
@@ -873,9 +915,10 @@ def run_ins_track(
         write_strides(st["table"], strides_path)
         summary["strides_file"] = os.fspath(strides_path)
     if plot_path:
-        title = (
-            f"{name.rsplit('/', 1)[-1]}: {loop['distance_m']:.1f} m walked, "
-            f"closed-loop error {1000 * loop['final_error_m']:.0f} mm"
+        title = f"{name.rsplit('/', 1)[-1]}: {ends['distance_m']:.1f} m walked, " + (
+            f"closed-loop error {1000 * ends['final_error_m']:.0f} mm"
+            if ends["loop"]
+            else f"end {ends['start_to_end_m']:.2f} m from the start"
         )
         ref = rec.get("ref_pos") if "ref_pos" in rec.channels else None
         plot_track(out, os.fspath(plot_path), title=title, ref=ref)

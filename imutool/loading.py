@@ -73,6 +73,7 @@ def load_recording(
 
     path = os.fspath(path)
     csv_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
+    kind = formats.kind_of(path)
     rec = read_input(path, columns=columns, profile=profile, topic=topic, stamp=stamp, **csv_opts)
     report: dict[str, Any] = {}
     checks = plausibility.PlausibilityReport()
@@ -104,7 +105,9 @@ def load_recording(
         rec = rec.mounted(remap, mis)
     if len(rec):  # also for commands that read without validating (info, plot): they show the warnings
         ok = np.all(np.diff(rec.time) > 0) if len(rec) > 1 else True
-        found = plausibility.check_recording(rec if ok else rec.select(np.argsort(rec.time, kind="stable")), mounting)
+        found = plausibility.check_recording(
+            rec if ok else rec.select(np.argsort(rec.time, kind="stable")), mounting, kind
+        )
         checks.warnings += found.warnings
         checks.figures.update(found.figures)
         report.update({k: v for k, v in checks.as_dict().items() if k != "figures"})
@@ -120,6 +123,26 @@ def load_recording(
     return rec, report
 
 
+MAPPED_KINDS = ("csv", "ros1", "ros2")  # inputs whose columns' units --columns/--profile can state
+
+
+def mapping_options(path: str, columns: str | None, profile: str | None) -> dict[str, Any]:
+    """The reader options of a column mapping (``--columns``/``--profile``) for ``path``: a foreign CSV's mapping,
+    or a bag's unit and scale overrides; refused (ImutoolError) for an input that states its own units (Parquet,
+    NMEA) rather than ignored."""
+    if not columns and not profile:
+        return {}
+    kind = formats.kind_of(path)
+    if kind not in MAPPED_KINDS:
+        what = "--columns" if columns else "--profile"
+        raise ImutoolError(
+            f"{what} applies to a CSV or a ROS bag; a {kind.capitalize() if kind == 'parquet' else 'NMEA'} file "
+            "states its own columns and units",
+            path=path,
+        )
+    return {"columns": columns, "profile": profile}
+
+
 def read_input(
     path: str,
     *,
@@ -132,17 +155,19 @@ def read_input(
     header_rows: int | None = None,
 ) -> Recording:
     """:func:`formats.read` of ``path`` with the options its format takes (CSV: columns, profile and the time
-    and header options; bags: topic, stamp); a CSV-only option given for another format is an ImutoolError."""
+    and header options; bags: topic, stamp and a column mapping, :func:`mapping_options`); a CSV-only option given
+    for another format is an ImutoolError."""
     kind = formats.kind_of(path)
     csv_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
-    if kind == "csv":
-        return formats.read(path, columns=columns, profile=profile, **csv_opts)
     given = [CSV_ONLY[k] for k, v in csv_opts.items() if v is not None]
-    if given:
+    if given and kind != "csv":
         raise ImutoolError(f"{', '.join(given)}: only for a CSV file (this is {kind})", path=path)
-    if kind in ("ros1", "ros2"):
-        return formats.read(path, topic=topic, stamp=stamp)
-    return formats.read(path)
+    opts: dict[str, Any] = mapping_options(path, columns, profile)
+    if kind == "csv":
+        opts.update(csv_opts)
+    elif kind in ("ros1", "ros2"):
+        opts.update(topic=topic, stamp=stamp)
+    return formats.read(path, **opts)
 
 
 def merge_with(
@@ -266,6 +291,7 @@ class ChunkChecks:
         from formats import plausibility
 
         self.path = path
+        self.kind = formats.kind_of(path)
         self.mounting = mounting
         self.strict = strict
         self.cal = None
@@ -293,7 +319,7 @@ class ChunkChecks:
         if not self._checked and len(chunk):
             self._checked = True
             self.earlier = merged_warnings(chunk.meta)
-            found = plausibility.check_recording(chunk, self.mounting)
+            found = plausibility.check_recording(chunk, self.mounting, self.kind)
             self.warnings += found.warnings
             self._refuse(found.warnings)
         return chunk

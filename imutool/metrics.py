@@ -32,13 +32,38 @@ def error_stats(err: np.ndarray) -> dict[str, float]:
 
 
 def interp_to(t_target: np.ndarray, t_src: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Linear interpolation of (N,) or (N,k) values onto t_target; NaN outside the source span."""
+    """Linear interpolation of (N,) or (N,k) values onto t_target; NaN outside the source span.
+
+    Each column is interpolated from its own finite samples: a channel whose samples sit on rows of their own
+    between NaN rows (an NMEA log's 1 Hz HDT among 10 Hz sentences) is not lost. Between two finite samples
+    farther apart than :data:`BRIDGE_STEPS` × the column's median finite step (a real gap, or a NaN run in a
+    regularly sampled channel) with NaN rows between them the result is NaN, as it was before."""
     v = np.asarray(values, dtype=float)
     v2 = v.reshape(len(v), -1)
-    out = np.stack(
-        [np.interp(t_target, t_src, v2[:, j], left=np.nan, right=np.nan) for j in range(v2.shape[1])], axis=1
-    )
+    t_src = np.asarray(t_src, dtype=float)
+    t_target = np.asarray(t_target, dtype=float)
+    cols = []
+    for j in range(v2.shape[1]):
+        c = v2[:, j]
+        ok = np.isfinite(c)
+        if ok.all() or ok.sum() < 2:
+            cols.append(np.interp(t_target, t_src, c, left=np.nan, right=np.nan))
+            continue
+        idx = np.flatnonzero(ok)
+        ts, cs = t_src[idx], c[idx]
+        r = np.interp(t_target, ts, cs, left=np.nan, right=np.nan)
+        steps = np.diff(ts)
+        limit = BRIDGE_STEPS * float(np.median(steps))
+        k = np.clip(np.searchsorted(ts, t_target, side="right") - 1, 0, len(ts) - 2)
+        missing = (steps > limit) & (np.diff(idx) > 1)  # NaN rows inside a long step: samples are missing there
+        on_sample = np.isin(t_target, ts)
+        r[missing[k] & ~on_sample] = np.nan
+        cols.append(r)
+    out = np.stack(cols, axis=1)
     return out[:, 0] if v.ndim == 1 else out
+
+
+BRIDGE_STEPS = 1.5  # interp_to bridges NaN rows between finite samples at most this many median finite steps apart
 
 
 def best_lag(

@@ -1,36 +1,37 @@
-"""Sensor noise from a static recording: the one route behind ``imutool allan`` (and a Python user).
+"""Sensor noise from a static recording: the one route behind ``imutool allan``, ``imutool batch allan`` and a
+Python user.
 
 :func:`allan_noise` reads one or more files (one per sensor, each on its own clock), computes the overlapping
 Allan deviation per channel (:mod:`calibration.allan`), reads white noise N, bias instability B and random walk
 K off it, and writes the noise file (.yaml, SI: rad/s/√Hz, m/s²/√Hz, µT/√Hz), optionally a kalibr imu.yaml and a
-plot. Nothing is printed; the summary carries the gyro terms in degrees too (ARW °/√h, B °/h, K °/h/√h).
+plot. Nothing is printed; it returns a :class:`NoiseRun` (a :class:`imutool.routes.RouteResult`); the summary
+carries the gyro terms in degrees too (ARW °/√h, B °/h, K °/h/√h).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from formats.errors import ImutoolError
-from imutool.loading import LOAD_OPTIONS
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
 
 SI = {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT"}
 
 
 @dataclass
-class NoiseRun:
-    """``results``: the :mod:`calibration.allan` result per channel analysed; ``values``: what the noise file
-    holds; ``info``: per channel the file, rate, samples, timing, N/B/K and their labels; ``summary``: outputs,
-    ``channels`` (= info) and ``warnings`` (kalibr fallbacks)."""
+class NoiseRun(RouteResult):
+    """What :func:`allan_noise` produced: the :class:`imutool.routes.RouteResult` (``summary``: outputs,
+    ``channels`` (= info) and ``warnings`` (kalibr fallbacks); ``inputs``: what loading each file did), and
+    ``results``: the :mod:`calibration.allan` result per channel analysed; ``values``: what the noise file holds;
+    ``info``: per channel the file, rate, samples, timing, N/B/K and their labels."""
 
-    results: list[Any]
-    values: dict[str, Any]
-    info: dict[str, Any]
-    summary: dict[str, Any] = field(default_factory=dict)
+    results: list[Any] = field(default_factory=list)
+    values: dict[str, Any] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)
 
 
 def sample_rate(t: np.ndarray) -> tuple[float, str]:
@@ -56,21 +57,23 @@ def allan_noise(
     kalibr: str | os.PathLike | None = None,
     topic_name: str = "/imu0",
     kalibr_fallback: str = "refuse",
-    channels: str | tuple[str, ...] = ("gyro", "accel", "mag"),
+    channels: str | tuple[str, ...] = "gyro,accel,mag",
     per_decade: int = 10,
     start: float | None = None,
     end: float | None = None,
-    stage: Callable[[str], None] | None = None,
-    on_input: Callable[[str, dict[str, Any]], None] | None = None,
+    strict: bool = False,
+    stage: Stage | None = None,
+    on_input: OnInput | None = None,
     **load_options: Any,
 ) -> NoiseRun:
     """Allan deviation of the static recording(s) ``inputs`` → noise file ``output`` (.yaml).
 
-    channels: which of gyro, accel, mag to analyse (the first input holding each is used); per_decade: cluster
-    times per decade of τ; start/end: time window (s). kalibr: also a kalibr-style imu.yaml (``topic_name``); an
-    unresolved random walk is refused there (``kalibr_fallback='refuse'``) or written as its labelled upper
-    bound (``'upper-bound'``, with a warning). load_options as :func:`imutool.loading.load_recording`;
-    ``on_input(path, report)`` after each file is read, ``stage(name)`` as each step starts.
+        channels: which of gyro, accel, mag to analyse (the first input holding each is used); per_decade: cluster
+        times per decade of τ; start/end: time window (s). kalibr: also a kalibr-style imu.yaml (``topic_name``); an
+        unresolved random walk is refused there (``kalibr_fallback='refuse'``) or written as its labelled upper
+        bound (``'upper-bound'``, with a warning). load_options as :func:`imutool.loading.load_recording` (``strict``:
+    an input's warnings are an error);
+        ``on_input(path, report)`` after each file is read, ``stage(name)`` as each step starts.
     """
     from imutool.loading import load_recording
 
@@ -97,14 +100,17 @@ def allan_noise(
         if c not in SI:
             raise ImutoolError(f"--channels: unknown channel {c!r} (gyro, accel, mag)")
     results = []
+    loaded: list[dict[str, Any]] = []
     values: dict[str, Any] = {}
     info: dict[str, Any] = {}
     rates = []
     for path in inputs:
         _stage(f"reading {os.path.basename(path)}")
-        rec, rep = load_recording(path, **io)
-        if on_input is not None and len(rec):
-            on_input(path, rep)
+        rec, rep = load_recording(path, strict=strict, **io)
+        if len(rec):
+            loaded.append({"input": path, **rep})
+            if on_input is not None:
+                on_input(path, rep)
         if start is not None or end is not None:
             rec = rec.slice_time(start, end)
         for name in wanted:
@@ -172,4 +178,4 @@ def allan_noise(
     if plot:
         plot_allan(results, plot, title=f"Allan deviation — {', '.join(os.path.basename(p) for p in inputs)}")
     summary = {"output": output, "kalibr": kalibr, "plot": plot, "channels": info, "warnings": warnings}
-    return NoiseRun(results, values, info, summary)
+    return NoiseRun(summary, loaded, results=results, values=values, info=info)

@@ -28,6 +28,7 @@ Method (documented in docs/report.md):
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 from typing import Any
@@ -35,12 +36,25 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+import formats
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.loading import input_notes
+from imutool.routes import OnInput, RouteResult, load_input
 
 STBD = 1
 PORT = -1
+
+ROLL_DEFAULTS: dict[str, Any] = {
+    "hysteresis_deg": 0.5,
+    "centre": "zero",
+    "centre_window_s": 120.0,
+    "refine_frac": 0.2,
+    "max_period_s": 60.0,
+}
+"""The detector's settings (deg, s, fraction of an excursion): the defaults of :func:`roll_stats` and :func:`run_roll`
+(and of the ``imutool roll`` / ``imutool nmea`` options)."""
 
 
 @njit(cache=True)
@@ -379,11 +393,11 @@ def _utc_of(t: float, utc_start: datetime | None) -> str | None:
 def roll_stats(
     t: np.ndarray,
     heel_deg: np.ndarray,
-    hysteresis_deg: float = 0.5,
-    centre: str = "zero",
-    centre_window_s: float = 120.0,
-    refine_frac: float = 0.2,
-    max_period_s: float = 60.0,
+    hysteresis_deg: float = ROLL_DEFAULTS["hysteresis_deg"],
+    centre: str = ROLL_DEFAULTS["centre"],
+    centre_window_s: float = ROLL_DEFAULTS["centre_window_s"],
+    refine_frac: float = ROLL_DEFAULTS["refine_frac"],
+    max_period_s: float = ROLL_DEFAULTS["max_period_s"],
     resets_s: list[float] | tuple[float, ...] = (),
     utc_start: datetime | None = None,
 ) -> RollStats:
@@ -476,3 +490,57 @@ def heel_of(rec: Recording, path: str = "recording", channel: str | None = None)
     raise ImutoolError(
         f"needs a 'roll' or 'heel' channel (deg, + starboard down); has {', '.join(rec.channels) or 'none'}", path=path
     )
+
+
+def run_roll(
+    source: str | os.PathLike,
+    output: str | os.PathLike | None = None,
+    *,
+    cycles_path: str | os.PathLike | None = None,
+    hysteresis_deg: float = ROLL_DEFAULTS["hysteresis_deg"],
+    centre: str = ROLL_DEFAULTS["centre"],
+    centre_window_s: float = ROLL_DEFAULTS["centre_window_s"],
+    refine_frac: float = ROLL_DEFAULTS["refine_frac"],
+    max_period_s: float = ROLL_DEFAULTS["max_period_s"],
+    resets_s: list[float] | tuple[float, ...] = (),
+    utc_start: datetime | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **load_options: Any,
+) -> RouteResult:
+    """Roll statistics of the heel (``heel`` or ``roll`` channel, deg, + starboard down) of ``source``: the route
+    behind ``imutool roll`` and ``imutool batch roll``. Writes the per-sample statistics to ``output`` and the
+    per-cycle table to ``cycles_path`` (when given); settings as :func:`roll_stats`. A path is loaded with
+    ``load_options`` (columns, profile, ... calibration_file; ``strict``: its warnings are an error). The
+    result's ``data["stats"]`` is the :class:`RollStats`, ``recording`` the per-sample statistics."""
+    name = os.fspath(source)
+    inputs: list[dict[str, Any]] = []
+    rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    heel = heel_of(rec, name)
+    rs = roll_stats(
+        rec.time,
+        heel,
+        hysteresis_deg=hysteresis_deg,
+        centre=centre,
+        centre_window_s=centre_window_s,
+        refine_frac=refine_frac,
+        max_period_s=max_period_s,
+        resets_s=list(resets_s),
+        utc_start=utc_start,
+    )
+    meta = {k: v for k, v in rec.meta.items() if k in ("sensor", "device", "frame", "mounting", "calibration")}
+    meta["source"] = name
+    meta.update(input_notes(rec.meta))
+    out = rs.as_recording(meta)
+    if output is not None:
+        formats.write(out, output)
+    if cycles_path:
+        formats.write(rs.cycles.as_recording(), cycles_path)
+    summary = {
+        "input": name,
+        "output": None if output is None else os.fspath(output),
+        "cycles_output": None if cycles_path is None else os.fspath(cycles_path),
+        **rs.summary(),
+        "settings": rs.settings,
+    }
+    return RouteResult(summary, inputs, out, {"stats": rs})

@@ -3,13 +3,15 @@ command's summary carries, and that summary exactly as ``imutool <command> --jso
 
 A library route (:func:`imutool.heave.run_heave`, :func:`imutool.ins.run_ins_track`,
 :func:`imutool.nmea_out.run_nmea`, :func:`imutool.zvi.run_zvi`, :func:`imutool.gyrofree.run_gyrofree`,
-:func:`imutool.events.run_events`, :func:`imutool.evaluation.run_evaluate`,
-:func:`imutool.report.route.run_inclinometer_report` and
-``run_heading_report``; ``run_filter`` returns its own :class:`imutool.filtering.FilterResult`) takes an input
-path and the command's options with their defaults, reads, computes, writes its outputs atomically and returns a
-:class:`RouteResult`. The click command only parses options, calls the route and prints; ``imutool batch`` calls
-the same route. Nothing here prints: an input's warnings go to ``on_input(path, report)`` (the CLI prints them
-there) and into the result.
+:func:`imutool.events.run_events` and ``run_fleet``, :func:`imutool.evaluation.run_evaluate`,
+:func:`imutool.report.route.run_inclinometer_report` and ``run_heading_report``,
+:func:`imutool.convert.run_convert`, :func:`imutool.roll.run_roll`,
+:func:`imutool.noise.allan_noise`, :func:`imutool.info.run_info`, :func:`imutool.plot.run_plot`,
+:func:`imutool.sim.run_simulate`, the calibration runs of :mod:`imutool.calibrate`; ``run_filter`` returns its own
+:class:`imutool.filtering.FilterResult`) takes an input path and the command's options with their defaults, reads,
+computes, writes its outputs atomically and returns a :class:`RouteResult`. The click command only parses options,
+calls the route and prints; ``imutool batch`` calls the same route. Nothing here prints: an input's warnings go to
+``on_input(path, report)`` (the CLI prints them there) and into the result.
 """
 
 from __future__ import annotations

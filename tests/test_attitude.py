@@ -299,7 +299,7 @@ def test_initialisation_skips_leading_nan_rows_and_heading_stays_below_360():
     mag[:2000, 1] = np.nan
     st = initial_state(acc, mag, EkfParams())
     ref = initial_state(rec["accel"][2000:], rec["mag"][2000:], EkfParams())
-    assert np.array_equal(st, ref)
+    assert np.array_equal(st, ref, equal_nan=True)  # the last GNSS velocity: NaN, none yet
     with pytest.raises(Exception, match="no valid accelerometer"):
         initial_state(np.full((5000, 3), np.nan), None, EkfParams())
     from imutool.attitude import result_recording
@@ -771,7 +771,7 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     assert "note:" in err and "update_every = 1" in err and "--update-every 0" in err
     assert "mag_noise_deg = 20" in err and "--param mag_noise_deg=0" in err and "mag_reference_tau = 0" in err
     assert "mag_new_time" in err and "mag_bias_gate" in err  # saved before the new-field acceptance and the gate
-    assert err.count("note:") == 4
+    assert err.count("note:") == 5  # and the motion model's (a file without `motion`)
     code, out, err = run_main(
         ["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0", "--json"], capsys
     )
@@ -1843,17 +1843,18 @@ def test_params_file_version_and_migrations(tmp_path, capsys):
         "mag_sigma_density",
         "mag_new_field",
         "butterworth_lowpass",
+        "motion_model",
     ]
     notes = v0.notes()
-    assert len(notes) == 5 and "before 2026-11-26" in notes[0] and "commit 1816144" in notes[3]
+    assert len(notes) == 6 and "before 2026-11-26" in notes[0] and "commit 1816144" in notes[3]
     later = v0.notes(EkfParams(update_every=0, mag_noise_deg=20.0), {"update_every"})  # --update-every 0 given
-    assert len(later) == 4 and later[0].startswith(f"{old} sets mag_noise_deg = 20")
+    assert len(later) == 5 and later[0].startswith(f"{old} sets mag_noise_deg = 20")
     run = CliRunner().invoke(cli, ["filter", str(_roll(tmp_path)), "-o", str(tmp_path / "e.csv"), "--params", str(old)])
     assert run.exit_code == 0, run.output
     assert [line for line in run.stderr.splitlines() if line.startswith("note: ")] == [f"note: {n}" for n in notes]
     partial = tmp_path / "partial.toml"  # saved with the density, before the new-field acceptance
     partial.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
-    assert [m.name for m in read_params_file(str(partial)).migrations] == ["mag_new_field"]
+    assert [m.name for m in read_params_file(str(partial)).migrations] == ["mag_new_field", "motion_model"]
 
     for text, needle in (
         (f"version = {PARAMS_VERSION + 1}\n[ekf]\ngyro_noise = 0.001\n", "newer than this imutool"),
@@ -1897,6 +1898,8 @@ def test_a_long_low_pass_does_not_diverge_on_a_bridge_sensor():
     )
     after = rec.time - rec.time[0] >= 120.0
     for tau, bound in ((2.5, 2.0), (10.0, 5.0)):
-        est = run_filter(rec, params=EkfParams(accel_lp_tau=tau), lever_arm=np.array(rec.meta["lever_arm_m"]))
+        est = run_filter(
+            rec, params=EkfParams(accel_lp_tau=tau, ship_lp_tau=tau), lever_arm=np.array(rec.meta["lever_arm_m"])
+        )
         err = np.abs(est.recording["roll"] - rec["ref_roll"])[after]
         assert err.max() < bound, (tau, err.max())

@@ -126,7 +126,7 @@ def test_plot_png_and_pdf(messy_csv, tmp_path):
 
 
 def test_plot_decimates_long_series(tmp_path):
-    from imutool.cli.plot import envelope
+    from imutool.plot import envelope
 
     n = 200_000
     t = np.arange(n) / 1000.0

@@ -174,9 +174,9 @@ def test_bag_to_nmea_derives_heading_from_q(shared, tmp_path, capsys):
     ],
 )
 def test_python_convert_equals_cli(tmp_path, csv_in, capsys, ext, extra):
-    """imutool.convert.convert (the library route) writes what `imutool convert` writes and returns its summary."""
+    """imutool.convert.run_convert (the library route) writes what `imutool convert` writes and returns its summary."""
     import formats
-    from imutool.convert import convert
+    from imutool.convert import run_convert
 
     a, b = tmp_path / f"cli{ext}", tmp_path / f"lib{ext}"
     code, out, err = run(["convert", csv_in, a, "--json", *extra], capsys)
@@ -184,7 +184,7 @@ def test_python_convert_equals_cli(tmp_path, csv_in, capsys, ext, extra):
     kw = {"stream": "--no-stream" not in extra, "sentences": "HDT,XDR"}
     if "--mounting" in extra:
         kw["mounting"] = "x,-y,-z"
-    s = convert(csv_in, b, **kw)
+    s = run_convert(csv_in, b, **kw).summary
     cli = json.loads(out)
     assert {k: v for k, v in s.items() if k != "output"} == {k: cli[k] for k in s if k != "output"}
     if ext == ".nmea":
@@ -200,22 +200,22 @@ def test_python_convert_equals_cli(tmp_path, csv_in, capsys, ext, extra):
 
 def test_python_convert_progress_and_refusals(tmp_path, csv_in):
     from formats.errors import ImutoolError
-    from imutool.convert import convert, streams
+    from imutool.convert import run_convert, streams
 
     calls: list[tuple[int, int | None]] = []
     stages: list[str] = []
-    s = convert(
+    s = run_convert(
         csv_in, tmp_path / "o.parquet", chunk_rows=100, progress=lambda d, t: calls.append((d, t)), stage=stages.append
-    )
+    ).summary
     assert s["streamed"] and [d for d, _ in calls] == [100, 200, 300] and not stages
-    s = convert(tmp_path / "o.parquet", tmp_path / "o.bag", stage=stages.append)
+    s = run_convert(tmp_path / "o.parquet", tmp_path / "o.bag", stage=stages.append).summary
     assert stages == ["reading", "writing"] and s["rows_in"] == 300
     assert streams(csv_in, "x.parquet") and not streams(csv_in, "x.parquet", backwards="sort")
     assert not streams(csv_in, "x.bag") and not streams(csv_in, "x.csv", stream=False)
     with pytest.raises(ImutoolError, match="overwrite"):
-        convert(csv_in, csv_in)
+        run_convert(csv_in, csv_in)
     with pytest.raises(TypeError, match="colums"):
-        convert(csv_in, tmp_path / "z.csv", colums="a=b")
+        run_convert(csv_in, tmp_path / "z.csv", colums="a=b")
 
 
 def test_streamed_and_bag_conversions_check_their_input(tmp_path, capsys):

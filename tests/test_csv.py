@@ -598,40 +598,42 @@ def test_latin1_header_with_degree_sign(tmp_path):
 
 
 @pytest.mark.parametrize("n_warnings", [2, 400])
-def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings):
-    """Metadata known only after the last row (a streamed run's warnings) are written into the header: into the
-    room reserved for them when they fit (the rows are not moved: same file size), else by one rewrite of the
-    file with a longer header. Readers take the later line of a key, so they replace the first chunk's."""
+def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings, monkeypatch):
+    """Metadata known only after the last row (a streamed run's warnings) replace the first chunk's keys in the
+    header: one clean header — no line of spaces kept for them (a person opening the file saw thousands), no key
+    twice — and the rows behind it unchanged, copied by the kernel or, without it, in blocks."""
     t = np.arange(1000) * 0.01
-    rec = Recording(t, {"gyro": np.sin(t)[:, None] * [1.0, 2.0, 3.0]}, meta={"warnings": ["first chunk"]})
-    room = 2048
+    rec = Recording(t, {"gyro": np.sin(t)[:, None] * [1.0, 2.0, 3.0]}, meta={"warnings": ["first chunk"], "a": 1})
     p = tmp_path / "s.csv"
-    with CsvWriter(str(p), reserve_meta=room) as w:
+    with CsvWriter(str(p)) as w:
         w.write(rec.select(slice(0, 400)))
         w.write(rec.select(slice(400, 1000)))
-    plain = p.stat().st_size
+    plain = p.read_bytes()
     assert read_csv(str(p)).meta["warnings"] == ["first chunk"]
     p.unlink()
     final = {
         "warnings": ["first chunk"] + [f"warning {i}: ≈ {'x' * 30}" for i in range(n_warnings)],
         "validation": {"rows_read": 1000, "absurd_samples_interpolated": {"gyro": 3}},
     }
-    with CsvWriter(str(p), reserve_meta=room) as w:
-        w.write(rec.select(slice(0, 400)))
-        w.write(rec.select(slice(400, 1000)))
-        w.set_final_meta(final)
-    back = read_csv(str(p))
-    assert back.meta["warnings"] == final["warnings"] and back.meta["validation"] == final["validation"]
-    assert np.array_equal(back.time, rec.time) and np.array_equal(back["gyro"], rec["gyro"])
-    fits = n_warnings == 2
-    assert (p.stat().st_size == plain) == fits  # in place, or rewritten with the longer header
-    assert not [f for f in tmp_path.iterdir() if f.name != "s.csv"]  # no temporary file left
-    # a writer with no room reserved rewrites the file just the same
-    q = tmp_path / "q.csv"
-    with CsvWriter(str(q)) as w:
-        w.write(rec)
-        w.set_final_meta(final)
-    assert read_csv(str(q)).meta["warnings"] == final["warnings"]
+    for kernel in (True, False):
+        if not kernel:
+            monkeypatch.delattr("os.copy_file_range", raising=False)
+        with CsvWriter(str(p)) as w:
+            w.write(rec.select(slice(0, 400)))
+            w.write(rec.select(slice(400, 1000)))
+            w.set_final_meta(final)
+        back = read_csv(str(p))
+        assert back.meta["warnings"] == final["warnings"] and back.meta["validation"] == final["validation"]
+        assert np.array_equal(back.time, rec.time) and np.array_equal(back["gyro"], rec["gyro"])
+        text = p.read_text(encoding="utf-8")
+        head = text.split("time,")[0].splitlines()
+        assert all(ln.strip(" #") for ln in head) and max(len(ln) for ln in head) < 200 * n_warnings
+        assert not any("   " in ln for ln in head)  # no padding anywhere in the header
+        keys = [ln.split(":")[0] for ln in head[1:]]
+        assert len(keys) == len(set(keys)) and keys[:2] == ["# warnings", "# a"]  # replaced in place
+        assert text.encode("utf-8").endswith(plain.split(b"time,", 1)[1])  # the rows, byte for byte
+        assert not [f for f in tmp_path.iterdir() if f.name != "s.csv"]  # no temporary file left
+        p.unlink()
 
 
 def test_a_decimal_point_without_digits_is_not_a_number(tmp_path):

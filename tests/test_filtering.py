@@ -246,6 +246,9 @@ def test_streamed_filter_checks_its_input_like_an_in_memory_run(roll_csv, tmp_pa
         assert "3 absurd gyro sample(s)" in run.stderr, name
     a, b = formats.read(outs["memory"]), formats.read(outs["stream"])
     assert any("3 absurd gyro" in w for w in b.meta["warnings"])
+    head = outs["stream"].read_text().split("\ntime,")[0].splitlines()  # what a person opening the file sees
+    assert all(ln.strip("# ") for ln in head), "a blank line (room kept for metadata) in the streamed header"
+    assert sum(ln.startswith("# warnings:") for ln in head) == 1
     assert b.meta["validation"]["absurd_samples_interpolated"] == {"gyro": 3}
     for ch in ("roll", "pitch", "heading", "gyro_bias"):
         assert np.array_equal(a[ch], b[ch]), ch
@@ -351,7 +354,8 @@ def test_memory_and_streamed_runs_compose_the_same_checks_and_metadata(roll_csv,
     stream_only = {"dropped_non_increasing_rows", "lever_arm_m"}
     assert set(got["streamed"]) - set(got["memory"]) == stream_only
     assert set(got["memory"]) <= set(got["streamed"])
-    by_route = {"method", "output", "validation"}
+    by_route = {"method", "output", "validation", "motion"}  # a stream judges its motion on its first chunk
+    assert got["memory"]["motion"]["kind"] == got["streamed"]["motion"]["kind"]
     for key in set(got["memory"]) - by_route:
         assert got["memory"][key] == got["streamed"][key], key
     assert got["memory"]["gyro_scale_check"]["pairs"] >= 13  # 30 s in 2-s windows: none lost at the 2 chunk edges

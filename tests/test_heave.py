@@ -245,3 +245,31 @@ def test_ntnu_realtime_no_worse_than_before(shared, name, today):
     e = float(np.sqrt(np.nanmean((out["heave"][m] - interp_to(rec.time[m] - lag, rec.time, cam)) ** 2)))
     # the real-time RMSE measured before issue 17 (1.65 / 4.13 mm, same evaluation), 2 % slack for rounding
     assert e <= 1.02 * today
+
+
+def test_a_bag_whose_orientation_is_all_zeros_takes_the_tilt_filter(tmp_path, capsys):
+    """A boat's bag whose driver leaves the orientation at [0, 0, 0, 0]: not an orientation, so the default
+    attitude falls back to the tilt filter (the old message blamed a complete accelerometer); asking for the q
+    channel names the zeros."""
+    pytest.importorskip("rosbags", reason="bags need rosbags")
+    from conftest import run_main
+
+    rec = heave_platform(duration=120, rate_hz=20, seed=2)
+    rec.add("gyro", np.zeros((len(rec), 3)))
+    rec.add("q", np.zeros((len(rec), 4)))
+    bag = tmp_path / "boat.bag"
+    formats.write(rec, bag)
+    code, out, err = run_main(["heave", bag, "-o", tmp_path / "h.csv", "--json"], capsys)
+    assert code == 0, err
+    assert "tilt filter" in out and "no finite vertical" not in err
+    code, out, err = run_main(["heave", bag, "-o", tmp_path / "hq.csv", "--attitude", "q"], capsys)
+    assert code == 2 and "orientation field is all zeros" in err
+    h = formats.read(tmp_path / "h.csv")
+    assert np.isfinite(h["heave"]).mean() > 0.9
+    csv = tmp_path / "zq.csv"
+    formats.write(rec, csv)  # the same zeros in a CSV's qw..qz
+    code, out, err = run_main(["heave", csv, "-o", tmp_path / "h2.csv", "--json"], capsys)
+    assert code == 0 and "tilt filter" in out, err
+    code, out, err = run_main(["heave", csv, "-o", tmp_path / "h3.csv", "--attitude", "q"], capsys)
+    assert code == 2 and "all zeros" in err and "accelerometer values missing" not in err
+    assert len(err.strip().splitlines()) == 1

@@ -122,7 +122,10 @@ def test_evaluate_position_known_errors():
     ev = evaluate_position(est, ref)
     assert ev["distance_error_percent"] == pytest.approx(2.0, rel=1e-6)
     assert ev["final_error_m"] == pytest.approx(0.2, rel=1e-6)
-    loop = evaluate_position(est)
+    line = evaluate_position(est)  # a straight line: its end is 10.2 m away, and that is no error
+    assert line["mode"] == "start-to-end" and "final_error_m" not in line
+    assert line["start_to_end_m"] == pytest.approx(10.2, rel=1e-6)
+    loop = evaluate_position(est, loop=True)  # the user says it should have come back
     assert loop["mode"] == "closed-loop"
     assert loop["final_error_m"] == pytest.approx(10.2, rel=1e-6)
     with pytest.raises(ImutoolError, match="pos"):
@@ -182,3 +185,27 @@ def test_real_closed_loops(shared, name, limit, detector):
     ev = evaluate_position(out)
     assert ev["final_error_m"] <= limit, ev
     assert ev["distance_m"] > (20.0 if name.startswith("short") else 50.0)
+
+
+def test_a_loop_closure_is_claimed_only_for_a_loop(tmp_path):
+    """A straight walk's end is ~20 m from its start: that is the walk, not an error (it was reported as a
+    closed-loop error of 98 %). A closed polygon is a loop; --loop / --no-loop override the decision."""
+    straight = tmp_path / "straight.csv"
+    formats.write(walk(seed=1, n_steps=14), straight)
+    square = tmp_path / "loop.csv"
+    formats.write(walk(seed=1, n_steps=12, turn_deg=30.0), square)
+
+    def summary(src, *extra):
+        res = CliRunner().invoke(cli, ["ins", str(src), "-o", str(tmp_path / "t.csv"), "--force", "--json", *extra])
+        assert res.exit_code == 0, res.output
+        return json.loads(res.stdout)
+
+    s = summary(straight)
+    assert s["loop"] is False and "closed_loop_error_m" not in s and "closed_loop_error_percent" not in s
+    assert 17.0 < s["start_to_end_m"] < 21.0 and "not a loop" in s["loop_note"]
+    s = summary(straight, "--loop")  # the user's word: the end should be at the start
+    assert s["loop"] is True and s["closed_loop_error_m"] == pytest.approx(s["start_to_end_m"], abs=1e-3)
+    s = summary(square)
+    assert s["loop"] is True and s["closed_loop_error_m"] < 0.5 and s["closed_loop_error_percent"] < 3.0
+    s = summary(square, "--no-loop")
+    assert s["loop"] is False and "closed_loop_error_m" not in s

@@ -164,8 +164,9 @@ def test_decode_heading_sentences():
         decode(_s("GNTHS,244.28,Q"))
     assert decode(_s("APROT,-0.008,A")) == {"rot": -0.008}
     assert decode(_s("TIROT,12.0,V")) == {}
+    assert decode(_s("GPGGA,,,,,,0,,,,M,,M,,")) == {}  # no fix: no height (the sentence gives its time only)
     with pytest.raises(NmeaUnsupportedError):
-        decode(_s("GPGGA,,,,,,0,,,,M,,M,,"))
+        decode(_s("GPGSV,1,1,00"))
 
 
 def test_decode_xdr_mapping_signs_and_misalignment():

@@ -235,3 +235,65 @@ def test_every_estimate_says_what_was_wrong_with_its_input(roll, tmp_path, capsy
         assert any(w.startswith("UNITS: gyro") for w in meta.get("warnings", [])), name
         assert any("2 absurd gyro sample(s)" in w for w in meta["warnings"]), name
         assert meta["validation"]["rows_kept"] == len(roll), name
+
+
+UPSIDE_DOWN = np.array([1.0, -1.0, -1.0])  # body vectors rotated 180° about x
+
+
+def _upside_down(rec):
+    out = rec.copy()
+    for c in ("gyro", "accel", "mag"):
+        out.channels[c] = rec[c] * UPSIDE_DOWN
+    return out
+
+
+def test_a_mast_sensor_upside_down_is_not_a_gyro_unit_error(tmp_path, capsys):
+    """A Phidgets-style bag: the IMU upside down, the gyro right, the sensor high above a fast roll. The
+    accelerometer's direction swings by 1 + hω²/g of the roll (≈ 9 here): no unit's factor, and the window-pair
+    test of the filter's own gyro check finds the gyro right — no UNITS claim, and --strict takes the file."""
+    pytest.importorskip("rosbags", reason="bags need rosbags")
+    rec = simulate("ship-roll", duration=60, seed=1, lever_z_m=-5.0, roll_period_s=1.6, roll_amplitude_deg=2.0)
+    up = _upside_down(rec)
+    rep = check_recording(up)
+    assert rep.figures["gyro_tilt_slope"] > 7.5  # the short-step slope that the old check took for a unit error
+    assert not any(w.startswith("UNITS") for w in rep.warnings), rep.warnings
+    bag = tmp_path / "phidgets.bag"
+    formats.write(up, bag)
+    code, out, err = run(["info", bag], capsys)
+    assert code == 0 and "UNITS" not in err and "AXES" in err
+    code, out, err = run(["filter", bag, "-o", tmp_path / "est.csv", "--mounting", "x,-y,-z", "--strict"], capsys)
+    assert code == 0, err
+    assert "UNITS" not in err and "gyro scale check" not in err  # and the filter's own check agrees
+
+
+def test_a_real_gyro_unit_error_in_a_bag_is_still_caught(roll, tmp_path, capsys):
+    """deg/s written into a bag's angular_velocity (rad/s): named, with the --columns fix that works on a bag."""
+    pytest.importorskip("rosbags", reason="bags need rosbags")
+    bad = roll.copy()
+    bad.channels["gyro"] = np.degrees(roll["gyro"])
+    bag = tmp_path / "dps.bag"
+    formats.write(bad, bag)
+    code, out, err = run(["info", bag], capsys)
+    assert code == 0 and "UNITS: gyro" in err and "look like deg/s" in err
+    assert "the bag's sensor_msgs/Imu carries gyro in rad/s" in err and "header" not in err
+    fix = err.split("--columns ")[1].split()[0].strip("'")
+    assert fix == "gyro_x=gyro_x:deg/s,gyro_y=gyro_y:deg/s,gyro_z=gyro_z:deg/s"
+    code, out, err = run(["info", bag, "--columns", fix, "--json"], capsys)
+    assert code == 0 and "UNITS" not in err
+    rep = check_recording(formats.read(bag))  # the library: a unit error at sea is confirmed, not only guessed
+    assert rep.figures["gyro_window_check"]["discrepancy_rescaled_deg"] < 3.0
+
+
+def test_z_up_after_a_bags_rep103_conversion_names_the_sensors_mounting(roll, tmp_path, capsys):
+    """A bag is converted from REP-103 FLU at the reader: +z up afterwards is the sensor's own mounting (upside
+    down by ROS), not the FLU convention; the fix named stays --mounting x,-y,-z."""
+    pytest.importorskip("rosbags", reason="bags need rosbags")
+    bag = tmp_path / "updown.bag"
+    formats.write(_upside_down(roll), bag)
+    code, out, err = run(["info", bag], capsys)
+    axes = next(ln for ln in err.splitlines() if "AXES" in ln)
+    assert "FLU/ENU-style" not in axes and "e.g. x-io" not in axes
+    assert "already" in axes or "after the bag's REP-103" in axes
+    assert "mounted" in axes and "--mounting x,-y,-z" in axes
+    code, out, err = run(["info", bag, "--mounting", "x,-y,-z"], capsys)
+    assert code == 0 and "AXES" not in err

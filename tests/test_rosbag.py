@@ -550,3 +550,53 @@ def test_every_backend_gives_the_same_recording(tmp_path, sim_rec):
     # and that Recording is the one written (a back-end that mixed up messages or topics would fail here)
     assert np.array_equal(ref["gyro"], sim_rec["gyro"]) and np.array_equal(ref["accel"], sim_rec["accel"])
     assert np.allclose(ref["q"], sim_rec["q"], rtol=0, atol=5e-16)
+
+
+def test_zero_orientation_is_missing_not_an_attitude(tmp_path, sim_rec):
+    """Four zeros without the covariance flag: every message → no q (and a note), some → NaN there."""
+    rec = sim_rec.copy()
+    rec.add("q", np.zeros((len(rec), 4)))
+    p = tmp_path / "zq.bag"
+    write_bag(rec, p)
+    back = read_bag(p)
+    assert "q" not in back and "gyro" in back
+    assert any("[0, 0, 0, 0]" in n and "not read" in n for n in back.meta["bag"]["notes"])
+    rec.channels["q"][:] = euler_to_quat(np.zeros(len(rec)), np.zeros(len(rec)), np.zeros(len(rec)))
+    rec.channels["q"][5:9] = 0.0
+    p2 = tmp_path / "zq2.bag"
+    write_bag(rec, p2)
+    back = read_bag(p2)
+    assert np.isnan(back["q"][5:9]).all() and np.isfinite(back["q"][:5]).all()
+
+
+def test_columns_state_a_bags_units_and_are_refused_where_they_cannot_apply(tmp_path, sim_rec, capsys):
+    """A driver that wrote µT into MagneticField (tesla): the warning names --columns, and --columns works on a
+    bag (it was ignored); a renaming or a Parquet input is refused in one line."""
+    from conftest import run_main as run
+
+    rec = sim_rec.copy()
+    rec.channels["mag"] = rec["mag"] * 1e6  # µT numbers in the tesla field
+    bag = tmp_path / "magT.bag"
+    write_bag(rec, bag)
+    code, out, err = run(["info", bag], capsys)
+    assert code == 0 and "UNITS: magnetometer" in err and "look like uT" in err and "header" not in err
+    fix = "mag_x=mag_x:uT,mag_y=mag_y:uT,mag_z=mag_z:uT"
+    assert f"--columns '{fix}'" in err
+    back = read_bag(bag, columns=fix)
+    np.testing.assert_allclose(back["mag"], sim_rec["mag"], rtol=1e-6)
+    assert back.meta["column_mapping"].startswith("mag_x->mag_x[uT]")
+    code, out, err = run(["info", bag, "--columns", fix], capsys)
+    assert code == 0 and "UNITS" not in err
+    code, out, err = run(["convert", bag, tmp_path / "m.csv", "--columns", fix], capsys)
+    assert code == 0 and "UNITS" not in err
+    np.testing.assert_allclose(read_csv(tmp_path / "m.csv")["mag"], sim_rec["mag"], rtol=1e-6)
+    scaled = read_bag(bag, columns="gyro_x=gyro_x*2")  # a scale alone, in the field's own unit
+    np.testing.assert_allclose(scaled["gyro"][:, 0], 2 * read_bag(bag)["gyro"][:, 0])
+    code, out, err = run(["info", bag, "--columns", "mag_x=mag_y:uT"], capsys)
+    assert code == 2 and "keep their names" in err and len(err.strip().splitlines()) == 1
+    pytest.importorskip("pyarrow", reason="Parquet needs the [parquet] extra (pyarrow)")
+    pq = tmp_path / "m.parquet"
+    code, out, err = run(["convert", tmp_path / "m.csv", pq], capsys)
+    assert code == 0, err
+    code, out, err = run(["info", pq, "--columns", fix], capsys)
+    assert code == 2 and "--columns applies to a CSV or a ROS bag" in err and len(err.strip().splitlines()) == 1

@@ -332,6 +332,197 @@ def test_batch_filter_calls_the_route(data, tmp_path, monkeypatch, capsys):
     assert out["results"][0]["rows"] == single["rows"] == 6001
 
 
+# -- the other commands: convert, calibrate, roll, allan, info, plot, simulate, events fleet ---------------------
+@pytest.fixture(scope="module")
+def more(tmp_path_factory, data) -> dict[str, str]:
+    """Inputs of the calibration, noise and fleet commands (written once for the module)."""
+    d = tmp_path_factory.mktemp("more")
+    paths = {k: str(d / f"{k}.csv") for k in ("sphere", "swing", "sixpos", "static")}
+    formats.write(simulate("mag-sphere", duration=60, seed=7), paths["sphere"])
+    formats.write(simulate("compass-swing", duration=200, rate_hz=5, seed=9), paths["swing"])
+    formats.write(simulate("six-position", seed=3), paths["sixpos"])
+    formats.write(simulate("static", duration=200, rate_hz=50, seed=1), paths["static"])
+    (d / "ev").mkdir()
+    run_events(data["pr"], d / "ev" / "pr.json", roll_channel="ref_roll", pitch_channel="ref_pitch")
+    run_events(data["att"], d / "ev" / "att.json")
+    paths["ev"] = str(d / "ev")
+    paths["ev_pr"] = str(d / "ev" / "pr.json")
+    return paths
+
+
+def _same_toml(tmp_path: Path, name: str) -> None:
+    """The calibration files of both runs are the same but for the time stamp of the provenance."""
+    import re
+
+    a, b = ((tmp_path / side / name).read_text() for side in ("cli", "lib"))
+    assert re.sub(r"date_utc = .*", "", a) == re.sub(r"date_utc = .*", "", b) and "[" in a
+
+
+@pytest.mark.parametrize("ext", [".parquet", ".nmea"])
+def test_convert(data, tmp_path, monkeypatch, ext):
+    from imutool.convert import run_convert
+
+    args = ["convert", data["att"], f"o{ext}"] + (["--sentences", "HDT,XDR"] if ext == ".nmea" else [])
+    s = _same(tmp_path, monkeypatch, args, lambda: run_convert(data["att"], f"o{ext}"), [f"o{ext}"])
+    assert s["rows_in"] == 12001 and s["validation"][0]["rows_kept"] == 12001
+
+
+def test_calibrate_mag(more, tmp_path, monkeypatch):
+    from imutool.calibrate import calibrate_mag
+
+    args = ["calibrate", "mag", more["sphere"], "-o", "cal.toml", "--kind", "diag", "--plot", "p.png"]
+    route = lambda: calibrate_mag(more["sphere"], "cal.toml", kind="diag", plot="p.png")  # noqa: E731
+    s = _same(tmp_path, monkeypatch, args, route, ["p.png"])
+    _same_toml(tmp_path, "cal.toml")
+    assert s["kind"] == "diag" and s["validation"][0]["input"] == more["sphere"]
+
+
+def test_calibrate_gyro_and_accel(more, tmp_path, monkeypatch):
+    from imutool.calibrate import calibrate_accel, calibrate_gyro, rest_options
+
+    (tmp_path / "g").mkdir()
+    args = ["calibrate", "gyro", more["sixpos"], "-o", "g.toml", "--min-rest", "1.5"]
+    route = lambda: calibrate_gyro(more["sixpos"], "g.toml", rest=rest_options(min_rest_s=1.5))  # noqa: E731
+    _same(tmp_path / "g", monkeypatch, args, route, [])
+    _same_toml(tmp_path / "g", "g.toml")
+    (tmp_path / "a").mkdir()
+    args = ["calibrate", "accel", more["sixpos"], "-o", "a.toml", "--latitude", "59.4"]
+    route = lambda: calibrate_accel(more["sixpos"], "a.toml", latitude=59.4)  # noqa: E731
+    s = _same(tmp_path / "a", monkeypatch, args, route, [])
+    _same_toml(tmp_path / "a", "a.toml")
+    assert s["gravity_m_s2"] > 9.81
+
+
+def test_calibrate_deviation_and_show(more, tmp_path, monkeypatch):
+    from imutool.calibrate import deviation_card, show_calibration
+
+    args = ["calibrate", "deviation", more["swing"], "-o", "card.txt", "-o", "cal.toml", "--vessel", "MV T", "--new"]
+    route = lambda: deviation_card(more["swing"], ["card.txt", "cal.toml"], vessel="MV T", append=False)  # noqa: E731
+    s = _same(tmp_path, monkeypatch, args, route, ["card.txt"])
+    _same_toml(tmp_path, "cal.toml")
+    assert s["header"]["vessel"] == "MV T"
+    for form in ("text", "json"):  # `calibrate show` prints the library's text as it is
+        res = CliRunner().invoke(cli, ["calibrate", "show", "cal.toml", "--as", form])
+        assert res.exit_code == 0 and res.stdout == show_calibration("cal.toml", form) and "deviation" in res.stdout
+
+
+def test_roll(data, tmp_path, monkeypatch):
+    from imutool.roll import run_roll
+
+    args = ["roll", data["att"], "-o", "rs.csv", "--cycles", "cy.csv", "--hysteresis", "0.7", "--reset", "30"]
+    route = lambda: run_roll(data["att"], "rs.csv", cycles_path="cy.csv", hysteresis_deg=0.7, resets_s=[30.0])  # noqa: E731
+    s = _same(tmp_path, monkeypatch, args, route, ["rs.csv", "cy.csv"])
+    assert s["settings"]["hysteresis_deg"] == 0.7 and s["starboard"]["excursions"] > 3
+
+
+def test_allan(more, tmp_path, monkeypatch):
+    from imutool.noise import allan_noise
+
+    args = ["allan", more["static"], "-o", "n.yaml", "--kalibr", "k.yaml", "--kalibr-fallback", "upper-bound"]
+    route = lambda: allan_noise(more["static"], "n.yaml", kalibr="k.yaml", kalibr_fallback="upper-bound")  # noqa: E731
+    s = _same(tmp_path, monkeypatch, args, route, ["n.yaml", "k.yaml"])
+    assert set(s["channels"]) == {"gyro", "accel", "mag"}
+
+
+def test_info_plot_simulate(data, tmp_path, monkeypatch):
+    from imutool.info import run_info
+    from imutool.plot import run_plot
+    from imutool.sim import run_simulate
+
+    for sub in "ips":
+        (tmp_path / sub).mkdir()
+    s = _same(tmp_path / "i", monkeypatch, ["info", data["roll"]], lambda: run_info(data["roll"]), [])
+    assert s["rows"] == 6001 and s["channels"]["gyro"]["unit"] == "deg/s"
+    args = ["plot", data["roll"], "gyro", "ref_roll", "-o", "p.png", "--max-points", "500"]
+    route = lambda: run_plot(data["roll"], ["gyro", "ref_roll"], "p.png", max_points=500)  # noqa: E731
+    s = _same(tmp_path / "p", monkeypatch, args, route, ["p.png"])
+    assert s["channels"] == ["gyro", "ref_roll"] and s["points_per_line"] <= 502
+    args = ["simulate", "static", "-o", "s.csv", "--duration", "5", "--seed", "2", "--set", "rate_hz=50"]
+    route = lambda: run_simulate("static", "s.csv", duration=5, seed=2, settings={"rate_hz": 50})  # noqa: E731
+    s = _same(tmp_path / "s", monkeypatch, args, route, ["s.csv"])
+    assert s["rows"] == 251
+
+
+def test_events_fleet(more, tmp_path, monkeypatch):
+    from imutool.events import run_fleet
+
+    args = ["events", "fleet", more["ev"], "-o", "fleet.csv", "--voyages", "v.csv"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_fleet(more["ev"], "fleet.csv", voyages_path="v.csv"),
+        ["fleet.csv", "v.csv"],
+    )
+    assert s["results"] == 2 and s["parametric_roll_episodes"] >= 1
+
+
+BATCH_CASES = {
+    "convert": (["convert"], "att", ".parquet", ""),
+    "roll": (["roll"], "att", ".csv", "--hysteresis 0.7"),
+    "info": (["info"], "roll", None, ""),
+    "plot": (["plot"], "roll", ".png", "gyro"),
+    "allan": (["allan"], "static", ".yaml", "--channels gyro"),  # no top-level figure: --figure below
+    "calibrate mag": (["calibrate", "mag"], "sphere", ".toml", ""),
+    "calibrate gyro": (["calibrate", "gyro"], "sixpos", ".toml", "--min-rest 1.5"),
+    "calibrate accel": (["calibrate", "accel"], "sixpos", ".toml", ""),
+    "calibrate deviation": (["calibrate", "deviation"], "swing", ".txt", "--new"),
+    "events fleet": (["events", "fleet"], "ev_pr", ".csv", ""),  # a folder input is walked for data files
+}
+
+
+@pytest.mark.parametrize("case", list(BATCH_CASES))
+def test_batch_calls_the_route_of_each_command(data, more, tmp_path, monkeypatch, capsys, case):
+    """`imutool batch COMMAND` runs the command's library route in the worker (the command line is never run):
+    the job succeeds with the summary the command's --json prints."""
+    import shlex
+
+    import imutool.cli.batch as cli_batch
+    from imutool.cli import main
+
+    def no_cli(*a, **k):
+        raise AssertionError("batch ran the command line, not the route")
+
+    monkeypatch.setattr(cli_batch, "run_command", no_cli)
+    monkeypatch.chdir(tmp_path)
+    words, key, ext, extra = BATCH_CASES[case]
+    src = {**data, **more}[key]
+    argv = ["batch", " ".join(words), src, "-j", "1", "--json", "--args", extra]
+    if ext:
+        argv += ["-o", f"b/{{stem}}{ext}"]
+    if case == "allan":
+        argv += ["--figure", "channels.gyro.samples"]
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    out = json.loads(capsys.readouterr().out)
+    assert e.value.code == 0 and out["results"][0]["status"] == "ok", out
+    single = [*words, src, *shlex.split(extra)] + (["-o", f"single{ext}"] if ext else [])
+    code, summary = _cli(single)
+    assert code == 0
+    figures = out["results"][0]["figures"]
+    assert figures
+    for k, v in figures.items():  # the batch's key figures are the command's
+        got: Any = summary
+        for part in k.split("."):
+            got = got[part]
+        assert got == v, (k, v, got)
+
+
+def test_batch_simulate_calls_the_route(tmp_path, monkeypatch, capsys):
+    """Batch inputs are files, so `imutool batch simulate` runs only where a file carries the scenario's name;
+    then it is the route that runs."""
+    import imutool.cli.batch as cli_batch
+    from imutool.cli import main
+
+    monkeypatch.setattr(cli_batch, "run_command", lambda *a, **k: pytest.fail("batch ran the command line"))
+    monkeypatch.chdir(tmp_path)
+    Path("static").write_text("")
+    with pytest.raises(SystemExit) as e:
+        main(["batch", "simulate", "static", "-o", "b/{stem}.csv", "-j", "1", "--json", "--args", "--duration 2"])
+    out = json.loads(capsys.readouterr().out)
+    assert e.value.code == 0 and out["results"][0]["rows"] == len(formats.read("b/static.csv"))
+
+
 def test_evaluate(data, tmp_path, monkeypatch, capsys):
     """`imutool evaluate` is its route `run_evaluate` (the same --json and plot), and `imutool batch evaluate`
     calls that route (the command line is never run)."""

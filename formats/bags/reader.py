@@ -16,6 +16,12 @@ The bag is opened through the one protocol (:func:`formats.bags.backends.open_ba
   float64 resolves ≈ 0.24 µs; within 1 ns for times below ~4e6 s).
 * With an IMU and a magnetometer topic, the magnetometer is interpolated onto the IMU clock
   (:func:`formats.recording.merge`; only the common time span is kept).
+* An orientation of four zeros is not an orientation (drivers without one leave it so, without the covariance
+  flag): such messages get NaN in ``q``, and a topic whose every orientation is zero gets no ``q`` (a note says so).
+* The units of the fields as read are ``meta['bag']['units']``. ``columns``/``profile`` (as for a foreign CSV,
+  :mod:`formats.columns`, naming the bag's columns ``gyro_x`` … ``mag_z``) state another unit or a scale for a
+  field whose driver did not follow ROS: ``--columns 'mag_x=mag_x:uT,mag_y=mag_y:uT,mag_z=mag_z:uT'``. Names stay
+  (axes are the mounting's business); recorded as ``column_mapping``.
 """
 
 from __future__ import annotations
@@ -27,13 +33,14 @@ import numpy as np
 
 from ..errors import ImutoolError
 from ..recording import Recording, merge
-from ..units import factor_to_si
+from ..units import CHANNEL_QUANTITY, factor_to_si
 from .backends import open_bag
 from .decode import Decoded, decode, decode_slow, std_md5
 from .protocol import IMU, KIND, MAG, VEC3, BagReader, Topic
 from .rep103 import AXES, COV_SIGN, FLIP, READ_Q, READ_VECTOR, STD_NAMES, ros_to_frd_quat
 
 COV_UNITS = {"gyro": "rad^2/s^2", "accel": "m^2/s^4", "mag": "uT^2", "q": "rad^2"}
+IMU_UNITS = {"gyro": "rad/s", "accel": "m/s^2"}  # sensor_msgs/Imu's fields (REP-103 units)
 
 
 def list_topics(path: str | os.PathLike) -> list[dict[str, Any]]:
@@ -51,6 +58,8 @@ def read_bag(
     stamp: str = "header",
     vector3_mag_unit: str = "T",
     fast: bool = True,
+    columns: str | None = None,
+    profile: str | None = None,
 ) -> Recording:
     """Read IMU (+ magnetometer) messages from a ROS1 .bag or a ROS2 bag (folder, .db3 or .mcap).
 
@@ -59,14 +68,62 @@ def read_bag(
     vector3_mag_unit: unit of a Vector3Stamped magnetometer (T, gauss, uT, nT...). fast=False forces rosbags
     per-message deserialisation (reference path). Output: FRD body / NED world, SI (mag µT), see the module doc.
     With an IMU and a magnetometer topic the magnetometer is interpolated onto the IMU clock
-    (formats.recording.merge; only the common time span is kept).
+    (formats.recording.merge; only the common time span is kept). columns/profile: unit and scale overrides of
+    the bag's fields (see the module doc).
     """
     path = os.fspath(path)
     if stamp not in ("header", "record"):
         raise ImutoolError(f"unknown stamp choice {stamp!r} (header, record)")
     vscale = factor_to_si(vector3_mag_unit, "magnetic")  # a bad unit is reported before the bag is opened
     with open_bag(path) as bag:
-        return _recording(bag, path, topic, stamp, vscale, fast)
+        rec = _recording(bag, path, topic, stamp, vscale, fast, vector3_mag_unit)
+    if columns or profile:
+        rec = apply_columns(rec, columns, profile, path)
+    return rec
+
+
+def apply_columns(rec: Recording, columns: str | None, profile: str | None, path: str) -> Recording:
+    """The bag's recording with the units and scales of ``columns`` ('gyro_x=gyro_x:deg/s,...', the CSV syntax)
+    or of a TOML ``profile``'s [columns] applied to its fields (and their *_std / *_cov channels); the mapping is
+    recorded as ``column_mapping``. A field named to another name is refused: axes are --mounting's."""
+    from ..columns import load_profile, mapping_from_profile, parse_mapping_option
+
+    heads = [c for ch in ("gyro", "accel", "mag") if ch in rec.channels for c in rec.columns[ch]]
+    if columns:
+        mapping = parse_mapping_option(columns, heads)
+    else:
+        mapping = mapping_from_profile(load_profile(str(profile)), heads, str(profile))
+    units = rec.meta["bag"]["units"]
+    out = rec.copy()
+    done = []
+    for c in mapping.columns:
+        if c.inferred:
+            continue
+        if c.target != c.source:
+            raise ImutoolError(
+                f"--columns {c.source}={c.target}: a bag's fields keep their names; give their unit and scale "
+                f"({c.source}={c.source}:UNIT*SCALE), and the axes with --mounting",
+                path=path,
+            )
+        ch = c.source.split("_")[0]
+        q = CHANNEL_QUANTITY[ch]
+        unit = c.unit or units[ch]
+        try:
+            f = factor_to_si(unit, q) * c.scale / factor_to_si(units[ch], q)
+        except ImutoolError as e:
+            raise ImutoolError(f"--columns {c.source}: {e}", path=path) from None
+        j = rec.columns[ch].index(c.source)
+        out.channels[ch][:, j] *= f
+        if f"{ch}_std" in out.channels:
+            out.channels[f"{ch}_std"][:, j] *= abs(f)
+        if f"{ch}_cov" in out.channels:  # row-major 3×3: row j and column j
+            out.channels[f"{ch}_cov"][:, 3 * j : 3 * j + 3] *= f
+            out.channels[f"{ch}_cov"][:, j::3] *= f
+        done.append(f"{c.source}->{c.target}[{unit}{'' if c.scale == 1 else f'x{c.scale:g}'}]")
+    if done:
+        out.meta["column_mapping"] = "; ".join(done)
+        out.meta["column_mapping_origin"] = mapping.origin
+    return out
 
 
 def recording_of(
@@ -84,11 +141,14 @@ def recording_of(
     """
     if stamp not in ("header", "record"):
         raise ImutoolError(f"unknown stamp choice {stamp!r} (header, record)")
-    return _recording(bag, os.fspath(path), topic, stamp, factor_to_si(vector3_mag_unit, "magnetic"), fast)
+    vscale = factor_to_si(vector3_mag_unit, "magnetic")
+    return _recording(bag, os.fspath(path), topic, stamp, vscale, fast, vector3_mag_unit)
 
 
-def _recording(bag: BagReader, path: str, topic: str | None, stamp: str, vscale: float, fast: bool) -> Recording:
-    """read_bag's work on an open bag; vscale: Vector3Stamped magnetometer unit → µT."""
+def _recording(
+    bag: BagReader, path: str, topic: str | None, stamp: str, vscale: float, fast: bool, vunit: str = "T"
+) -> Recording:
+    """read_bag's work on an open bag; vscale: Vector3Stamped magnetometer unit ``vunit`` → µT."""
     topics = bag.topics()
     if bag.truncated and not any(t.count for t in topics.values()):
         raise ImutoolError("bag is truncated: no complete chunk of messages to read", path=path)
@@ -121,6 +181,7 @@ def _recording(bag: BagReader, path: str, topic: str | None, stamp: str, vscale:
         frame_ids += dec.frame_ids
         recs.append(r)
     conv = [c for r in recs for c in r.meta.pop("_conv", [])]
+    notes += [n for r in recs for n in r.meta.pop("_notes", [])]
     if len(recs) == 2:
         n_imu = len(recs[0])
         rec = merge(recs, clock=recs[0])
@@ -139,6 +200,10 @@ def _recording(bag: BagReader, path: str, topic: str | None, stamp: str, vscale:
             "topics": info,
             "frame_id": sorted(set(frame_ids)),
             "conversions": conv,
+            "units": {
+                **{k: u for k, u in IMU_UNITS.items() if k in rec.channels},
+                **({"mag": "T" if mag_t.msgtype == MAG else vunit} if mag_t is not None and "mag" in rec else {}),
+            },
             "truncated": bool(bag.truncated),
             "notes": notes + list(bag.notes),
         },
@@ -198,15 +263,21 @@ def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag
     rec = Recording(ns_to_seconds(ns))
     f = dec.floats
     conv: list[str] = []
+    notes: list[str] = []
     if kind == "imu":
         q_abs = f[:, 4] == -1
         g_abs = f[:, 17] == -1
         a_abs = f[:, 28] == -1
-        if not q_abs.all():
+        zero_q = np.all(f[:, 0:4] == 0, axis=1)  # not an orientation: a driver that has none
+        if zero_q.all() and not q_abs.all():
+            notes.append(f"{topic}: every orientation is [0, 0, 0, 0] (not filled by the driver): not read")
+        elif not q_abs.all():
             q = ros_to_frd_quat(f[:, 0:4])
-            q[q_abs] = np.nan
+            q[q_abs | zero_q] = np.nan
             rec.add("q", q)
             conv.append(READ_Q)
+            if zero_q.any():
+                notes.append(f"{topic}: {int(zero_q.sum())} orientation(s) of [0, 0, 0, 0] read as missing")
         if not g_abs.all():
             g = f[:, 13:16] * FLIP
             g[g_abs] = np.nan
@@ -234,6 +305,7 @@ def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag
         if kind == "mag":
             _cov_channels(rec, f[:, 3:12], absent, "mag", mag_unit_scale**2)
     rec.meta["_conv"] = conv
+    rec.meta["_notes"] = notes
     return rec
 
 

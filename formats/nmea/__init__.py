@@ -36,7 +36,8 @@ from ..atomic import atomic_path
 from ..columns import load_profile
 from ..errors import ImutoolError
 from ..recording import Recording
-from . import motion
+from ..timing import stream_timing
+from . import gnss, motion
 from .em3000 import em3000_frame, read_em3000, scan_frames
 from .framing import (
     _ADDR_RE,
@@ -408,7 +409,9 @@ _DECODERS: dict[str, Callable[[NmeaSentence, dict[str, XdrMapping], list[str]], 
     "RMC": _dec_rmc,
     "VTG": _dec_vtg,
 }
-SUPPORTED_TYPES = tuple(_DECODERS) + tuple(motion.DECODERS)
+# decoders that take the per-device settings: the motion sensors' sentences and the GNSS heights (GGA, GST)
+_OPT_DECODERS = {**motion.DECODERS, **gnss.DECODERS}
+SUPPORTED_TYPES = tuple(_DECODERS) + tuple(_OPT_DECODERS)
 
 
 def decode(
@@ -447,7 +450,7 @@ def _decode_with(
     fn = _DECODERS.get(sentence.type)
     if fn is not None:
         return fn(sentence, xmap, problems), problems
-    mfn = motion.DECODERS.get(sentence.type)
+    mfn = _OPT_DECODERS.get(sentence.type)
     if mfn is None:
         key = motion.count_key(sentence)
         raise NmeaUnsupportedError(f"sentence type {key} is not decoded", sentence_type=key)
@@ -500,7 +503,7 @@ def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, f
     if stype is None:
         return None
     fn = _DECODERS.get(stype)
-    mfn = motion.DECODERS.get(stype) if fn is None else None
+    mfn = _OPT_DECODERS.get(stype) if fn is None else None
     if fn is None and mfn is None:
         return None
     xmap = DEFAULT_XDR_MAP if xdr_map is None else _normalise_xdr_map(xdr_map)
@@ -850,7 +853,7 @@ def _nmea_time(s: NmeaSentence) -> tuple[float | None, float | None]:
         if t == "PSTI" and len(f) >= 3 and f[0] == "036" and re.fullmatch(r"\d{6}", f[2].strip()):
             d = f[2].strip()
             return _tod(f[1]), _date_epoch(int(d[:2]), int(d[2:4]), 2000 + int(d[4:6]))
-        if t in motion.DECODERS:
+        if t in _OPT_DECODERS:
             u = motion.utc_field(s)
             return (_tod(u), None) if u else (None, None)
     except ValueError:
@@ -879,6 +882,7 @@ _CHANNELS: dict[str, tuple[str, str]] = {
     "sog": ("sog", "m/s"),
     "cog": ("cog", "deg"),
     **motion.CHANNELS,
+    **gnss.CHANNELS,
 }
 _MAX_BAD_LINES = 10
 
@@ -897,6 +901,7 @@ def read_nmea(
     pashr_heave_positive: str | None = None,
     tss_roll: Iterable[str] | None = None,
     profile: str | os.PathLike | dict[str, Any] | None = None,
+    gga_altitude: str | None = None,
 ) -> Recording:
     """Read an NMEA 0183 log into a Recording of decoded channels (see :func:`decode`; HRM heel → ``roll``).
 
@@ -908,17 +913,22 @@ def read_nmea(
 
     Per-device settings of the motion sentences (:class:`MotionOptions`): ``pashr_heave_positive`` (``up``,
     the default, or ``down``), ``tss_roll`` (sentence types whose roll is a TSS roll, converted to Euler roll;
-    default ``("TSS1",)``); or a ``profile`` (TOML path or dict) whose ``[nmea]`` table holds those keys (the
-    keyword arguments win). The settings and each sentence's source convention are in ``meta``.
+    default ``("TSS1",)``), ``gga_altitude`` (``msl``, the default, or ``ellipsoid`` for a receiver that writes
+    the ellipsoidal height into GGA's altitude field; see :mod:`formats.nmea.gnss`); or a ``profile`` (TOML path
+    or dict) whose ``[nmea]`` table holds those keys (the keyword arguments win). The settings and each
+    sentence's source convention are in ``meta``.
 
-    Time base (``time_source``; ``auto`` takes the first available): ``stamp`` = the per-line prefixes (s);
-    ``nmea`` = UTC from RMC/GGA/GLL/ZDA/PASHR/PSTI,036: sentences between two time fixes are placed linearly by their
-    position in the log (so every sentence gets its own, increasing time), extrapolated at the ends with the
-    mean spacing; Unix seconds when a date (RMC/ZDA) is known, else seconds of the UTC day;
-    ``index`` = sentence position / ``nominal_rate_hz``. The choice is in ``meta['time_source']``.
+    Time base (``time_source``; ``auto`` takes the first available): ``stamp`` = the per-line prefixes (s; with
+    ``auto``, a sentence with a UTC field sits at that time and the others at their stamp minus the logger
+    clock's offset from UTC); ``nmea`` = a sentence with a UTC field (RMC/GGA/GST/GLL/ZDA/PASHR/PSTI,036/GGK/PJK,
+    motion sentences with a valid one) at that time, the others placed linearly by their position in the log
+    between the fixes around them, extrapolated at the ends with the mean spacing; Unix seconds when a date
+    (RMC/ZDA) is known, else seconds of the UTC day; ``index`` = sentence position / ``nominal_rate_hz``. The
+    choice is in ``meta['time_source']``, each sentence type's rate, bursts and gaps on its own times in
+    ``meta['sentence_timing']``.
 
-    Rows: one per decoded sentence carrying a value (NaN in the channels that sentence does not supply);
-    sentences sharing an identical timestamp are merged into one row (later values win).
+    Rows: one per decoded sentence carrying a value (NaN in the channels that sentence does not supply), in
+    time order; sentences sharing an identical timestamp are merged into one row (later values win; counted).
     Raises ImutoolError when the file cannot be read or holds no usable sentence.
     """
     if time_source not in TIME_SOURCES:
@@ -932,7 +942,7 @@ def read_nmea(
     prof = profile
     if prof is not None and not isinstance(prof, dict):
         prof = load_profile(os.fspath(prof))
-    opts = motion.options_from(prof, pashr_heave_positive, tss_roll)
+    opts = motion.options_from(prof, pashr_heave_positive, tss_roll, gga_altitude=gga_altitude)
     try:
         with open(spath, encoding=encoding, errors="replace", newline="") as fh:
             text = fh.read()
@@ -948,7 +958,9 @@ def read_nmea(
     rows_vals: list[dict[str, float]] = []
     rows_pos: list[int] = []
     rows_stamp: list[float | None] = []
+    rows_key: list[str] = []  # the count key (sentence type) of each row
     anchors: list[tuple[int, float, float | None]] = []  # (position, tod, date epoch)
+    anchor_stamp: dict[int, float] = {}  # position → arrival stamp of a sentence with a UTC field
     stamps_seen = 0
     pos = -1
 
@@ -977,6 +989,7 @@ def read_nmea(
             counts.setdefault("TSS1", _empty_counts())["parsed"] += 1
             stamps_seen += stamp is not None
             rows_vals.append(vals)
+            rows_key.append("TSS1")
             rows_pos.append(pos)
             rows_stamp.append(stamp)
             continue
@@ -1003,6 +1016,8 @@ def read_nmea(
         tod, de = _nmea_time(s)
         if tod is not None:
             anchors.append((pos, tod, de))
+            if stamp is not None:
+                anchor_stamp[pos] = stamp
         if stype == "XDR":
             if len(s.fields) % 4:
                 xdr_ids["(misaligned sentence)"] += 1
@@ -1037,6 +1052,7 @@ def read_nmea(
             if len(bad_lines) < _MAX_BAD_LINES:
                 bad_lines.append({"line": lineno, "type": ckey, "problem": "partial", "detail": problems[0][:120]})
         rows_vals.append(vals)
+        rows_key.append(ckey)
         rows_pos.append(pos)
         rows_stamp.append(stamp)
 
@@ -1048,27 +1064,36 @@ def read_nmea(
             path=spath,
         )
 
-    # -- time base
+    # -- time base: each sentence at its own time — its UTC field where it has one, else its arrival stamp (on
+    # the UTC axis, see _stamp_times) or its place between the UTC fixes around it
     src = time_source
     have_stamps = stamps_seen > 0 and all(x is not None for x in rows_stamp)
     if src == "auto":
         src = "stamp" if have_stamps else ("nmea" if anchors else "index")
     t_meta: dict[str, Any] = {}
+    pos_arr = np.array(rows_pos, dtype=float)
     if src == "stamp":
         if not have_stamps:
             raise ImutoolError("time source 'stamp' asked for, but not every sentence line has a timestamp", path=spath)
         t = np.array(rows_stamp, dtype=float)
+        if anchors and time_source == "auto":
+            t, t_meta = _stamp_times(t, pos_arr, anchors, anchor_stamp, nominal_rate_hz)
     elif src == "nmea":
         if not anchors:
             raise ImutoolError(
                 "time source 'nmea' asked for, but the log has no RMC/GGA/GLL/ZDA/PASHR time", path=spath
             )
-        t, t_meta = _nmea_times(np.array(rows_pos, dtype=float), anchors, nominal_rate_hz)
+        t, t_meta = _nmea_times(pos_arr, anchors, nominal_rate_hz)
     else:
         t = np.array(rows_pos, dtype=float) / nominal_rate_hz
         t_meta = {"nominal_rate_hz": nominal_rate_hz}
 
-    # -- rows: merge identical times, build channels
+    # -- rows in time order (a sentence at its own UTC may come before one logged ahead of it); identical times
+    # merged into one row (a value a later sentence of the same time overwrites is counted per sentence type)
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    rows_vals = [rows_vals[i] for i in order]
+    keys_sorted = [rows_key[i] for i in order]
     order_keys: list[str] = []
     for v in rows_vals:
         for k in v:
@@ -1079,11 +1104,22 @@ def read_nmea(
     row_of = np.cumsum(grp) - 1
     n_rows = int(row_of[-1]) + 1
     data = {name: np.full(n_rows, np.nan) for name in order_keys}
-    for r, v in zip(row_of, rows_vals, strict=True):
+    overwritten: Counter[str] = Counter()
+    for r, v, key in zip(row_of, rows_vals, keys_sorted, strict=True):
         for k, x in v.items():
             ch = _CHANNELS.get(k)
             if ch:
-                data[ch[0]][r] = x
+                col = data[ch[0]]
+                if not math.isnan(col[r]):
+                    overwritten[key] += 1
+                col[r] = x
+    # a sentence without a time field placed between fixes is known in time only to the fix interval
+    own_utc = {rows_key[i] for i, p in enumerate(rows_pos) if t_meta.get("_own", {}).get(p) is not None}
+    fix_dt = float(t_meta.pop("_fix_interval_s", 0.0) or 0.0) if src == "nmea" else 0.0
+    t_meta.pop("_own", None)
+    timing = _sentence_timing(t, keys_sorted, {k: 0.0 if k in own_utc else 2.0 * fix_dt for k in set(keys_sorted)})
+    for k, n in overwritten.items():
+        timing[k]["values_overwritten_at_same_time"] = int(n)
     units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
     rec = Recording(t[grp], data, units)
     rec.meta.update(
@@ -1099,17 +1135,23 @@ def read_nmea(
             "xdr_map": {k: (("-" if m.sign < 0 else "") + m.quantity) for k, m in xmap.items()},
             "xdr_ids_seen": dict(xdr_ids),
             "signs": "roll + starboard down, pitch + bow up, heave + up (m), heading deg true, rot deg/min",
-            "rows": "one per sentence carrying a value; identical timestamps merged",
+            "rows": "one per sentence carrying a value, each at its own time; identical timestamps merged",
+            "sentence_timing": timing,
         }
     )
     if "ths_mode" in data:
         rec.meta["ths_mode_codes"] = {str(float(ord(c))): c for c in THS_MODES}
     seen = [k for k, v in counts.items() if v["parsed"]]
-    conv = motion.conventions_for(seen, opts)
+    conv = {**motion.conventions_for(seen, opts), **gnss.conventions_for(seen, opts)}
     if conv:
         rec.meta["conventions"] = conv
         rec.meta["motion_options"] = opts.as_meta()
-    codes = {k: motion.LETTER_CODES[k] for k in data if k in motion.LETTER_CODES}
+    letters = {**motion.LETTER_CODES, **gnss.LETTER_CODES}
+    codes = {k: letters[k] for k in data if k in letters}
+    if "gnss_height" in data:
+        rec.meta["gnss_height"] = gnss.height_meta(
+            data.get("gnss_height_datum", []), data.get("gnss_geoid_separation"), opts
+        )
     if codes:
         rec.meta["status_codes"] = codes
     return rec
@@ -1146,13 +1188,16 @@ def sentence_summary(meta: dict[str, Any]) -> dict[str, dict[str, int]]:
     return {g: dict(sorted(v.items(), key=lambda kv: (-kv[1], kv[0]))) for g, v in out.items() if v}
 
 
-def _nmea_times(
-    pos: np.ndarray, anchors: list[tuple[int, float, float | None]], nominal_rate_hz: float
-) -> tuple[np.ndarray, dict[str, Any]]:
-    """Place sentences in time from the UTC fixes (see read_nmea). Returns (times, meta)."""
-    first_date = next((d for _, _, d in anchors if d is not None), None)
-    ap: list[float] = []
-    at: list[float] = []
+def _anchor_times(
+    anchors: list[tuple[int, float, float | None]], default_date: float | None = None
+) -> tuple[list[tuple[int, float]], dict[int, float], int, float | None]:
+    """The UTC fixes on one time axis: (interpolation anchors [(position, t)] — the first sentence of each new
+    time —, every accepted sentence's own time {position: t}, fixes rejected for going backwards, first date).
+    Unix seconds where a date is known (RMC/ZDA, else ``default_date``), seconds of the UTC day otherwise; a
+    midnight roll-over before the next date is handled."""
+    first_date = next((d for _, _, d in anchors if d is not None), default_date)
+    interp: list[tuple[int, float]] = []
+    own: dict[int, float] = {}
     date = first_date
     prev = -math.inf
     rejected = 0
@@ -1163,15 +1208,26 @@ def _nmea_times(
         tt = base + tod
         if prev - 86400.0 < tt < prev - 43200.0:  # midnight roll-over before a new date arrives
             tt += 86400.0
-        if ap and tt == at[-1]:
-            continue  # several sentences of one burst carry the same time: the first one anchors it
-        if tt < prev:
-            rejected += 1  # a time that goes backwards is not used as an anchor
+        if interp and tt == interp[-1][1]:
+            own[p] = tt  # several sentences of one epoch carry the same time: the first one anchors it
             continue
-        ap.append(float(p))
-        at.append(tt)
+        if tt < prev:
+            rejected += 1  # a time that goes backwards is not used
+            continue
+        interp.append((p, tt))
+        own[p] = tt
         prev = tt
-    pa, ta = np.array(ap), np.array(at)
+    return interp, own, rejected, first_date
+
+
+def _nmea_times(
+    pos: np.ndarray, anchors: list[tuple[int, float, float | None]], nominal_rate_hz: float
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Place sentences in time from the UTC fixes (see read_nmea): a sentence with a UTC field at that time, the
+    others linearly by position between the fixes around them. Returns (times, meta)."""
+    interp, own, rejected, first_date = _anchor_times(anchors)
+    pa = np.array([p for p, _ in interp], dtype=float)
+    ta = np.array([x for _, x in interp])
     if len(pa) >= 2:
         slope = float((ta[-1] - ta[0]) / (pa[-1] - pa[0])) if pa[-1] > pa[0] else 1.0 / nominal_rate_hz
     else:
@@ -1180,18 +1236,95 @@ def _nmea_times(
     lo, hi = pos < pa[0], pos > pa[-1]
     t[lo] = ta[0] + (pos[lo] - pa[0]) * slope
     t[hi] = ta[-1] + (pos[hi] - pa[-1]) * slope
+    n_own = 0
+    for i, p in enumerate(pos):
+        x = own.get(int(p))
+        if x is not None:
+            t[i] = x
+            n_own += 1
     meta = {
         "anchors": len(pa),
         "anchors_rejected_going_backwards": rejected,
         "origin": "unix seconds (UTC)" if first_date is not None else "seconds of the UTC day (no date in log)",
         "seconds_per_sentence_between_fixes": slope,
+        "rows_at_their_own_utc": n_own,
+        "_own": own,  # for the reader (removed there)
+        "_fix_interval_s": float(np.median(np.diff(ta))) if len(ta) > 1 else 0.0,
     }
-    if first_date is not None:
+    _start_utc(meta, t, first_date is not None)
+    return t, meta
+
+
+def _start_utc(meta: dict[str, Any], t: np.ndarray, dated: bool) -> None:
+    if dated and len(t):
         try:
-            meta["start_utc"] = datetime.fromtimestamp(float(t[0]), tz=timezone.utc).isoformat()
+            meta["start_utc"] = datetime.fromtimestamp(float(np.min(t)), tz=timezone.utc).isoformat()
         except (ValueError, OverflowError, OSError):
             meta["start_utc"] = None  # a date outside what datetime can show (corrupted ZDA/RMC)
+
+
+_OFFSET_RUN = 15  # UTC fixes in the running median of the logger clock's offset from UTC
+_OFFSET_MAX_SPREAD_S = 3600.0  # beyond this the UTC fields are not trusted: arrival stamps only
+
+
+def _stamp_times(
+    stamps: np.ndarray,
+    pos: np.ndarray,
+    anchors: list[tuple[int, float, float | None]],
+    anchor_stamp: dict[int, float],
+    nominal_rate_hz: float,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Stamped log with UTC fields: each sentence with a UTC field at that time; the others at their arrival
+    stamp minus the logger clock's offset from UTC (stamp − UTC of the fixes, running median over
+    ``_OFFSET_RUN`` fixes, interpolated along the stamps), so both sit on one UTC axis. Without a date in the
+    log, the date comes from the stamps when they are Unix seconds. Returns (times, meta)."""
+    first = next(((p, tod) for p, tod, _ in anchors if p in anchor_stamp), None)
+    meta: dict[str, Any] = {"utc_fields": "not used"}
+    if first is None:
+        return stamps, meta
+    default_date = None
+    s0 = anchor_stamp[first[0]]
+    if s0 > 946_684_800.0:  # Unix seconds after 2000: the day the stamps say, nearest to the fix's time of day
+        default_date = math.floor((s0 - first[1]) / 86400.0 + 0.5) * 86400.0
+    _, own, rejected, first_date = _anchor_times(anchors, default_date)
+    ps = sorted(p for p in own if p in anchor_stamp)
+    if not ps:
+        return stamps, meta
+    st = np.array([anchor_stamp[p] for p in ps])
+    off = st - np.array([own[p] for p in ps])
+    k = min(_OFFSET_RUN, len(off))
+    pad = np.pad(off, (k // 2, k - 1 - k // 2), mode="edge")
+    smooth = np.median(np.lib.stride_tricks.sliding_window_view(pad, k), axis=1)
+    spread = float(np.percentile(off, 95) - np.percentile(off, 5))
+    if not np.isfinite(spread) or np.ptp(smooth) > _OFFSET_MAX_SPREAD_S:
+        return stamps, {"utc_fields": f"not used: the logger clock's offset from UTC varies by {np.ptp(smooth):.0f} s"}
+    srt = np.argsort(st, kind="stable")
+    t = stamps - np.interp(stamps, st[srt], smooth[srt])
+    n_own = 0
+    for i, p in enumerate(pos):
+        x = own.get(int(p))
+        if x is not None:
+            t[i] = x
+            n_own += 1
+    meta = {
+        "utc_fields": "sentences with a UTC field at that time; the others at their arrival stamp minus the "
+        "logger clock's offset from UTC",
+        "rows_at_their_own_utc": n_own,
+        "stamp_offset_s": round(float(np.median(off)), 6),
+        "stamp_offset_spread_s": round(spread, 6),
+        "anchors_rejected_going_backwards": rejected,
+        "origin": "unix seconds (UTC)" if first_date is not None else "seconds of the UTC day (no date in log)",
+    }
+    _start_utc(meta, t, first_date is not None)
     return t, meta
+
+
+def _sentence_timing(t: np.ndarray, keys: list[str], min_gap_s: dict[str, float]) -> dict[str, dict[str, Any]]:
+    """Rate, bursts and gaps of each sentence type on its own times (:func:`formats.timing.stream_timing`);
+    ``min_gap_s`` per type: the resolution of its times (twice the fix interval for a sentence placed between
+    fixes, 0 for one at its own UTC or arrival stamp)."""
+    karr = np.array(keys, dtype=object)
+    return {k: stream_timing(t[karr == k], min_gap_s=min_gap_s.get(k, 0.0)) for k in sorted(set(keys))}
 
 
 # -- writing logs -------------------------------------------------------------------------------------------------

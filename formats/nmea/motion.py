@@ -59,7 +59,9 @@ from pynmea2.types.proprietary.sxn import SXN20, SXN22, SXN23, SXN24
 from pynmea2.types.proprietary.tnl import TNLAVR
 
 from ..errors import ImutoolError
+from . import gnss
 from .framing import _HHMMSS_RE, NmeaFieldError, NmeaParseError, NmeaSentence, NmeaUnsupportedError, _num
+from .gnss import GGA_ALTITUDES
 
 HEAVE_SIGNS = ("up", "down")
 
@@ -70,19 +72,28 @@ class MotionOptions:
 
     pashr_heave_positive: ``up`` (default: Applanix, SBG's WASSP variant, imutool's own writer) or ``down``
     (SBG's PASHR); tss_roll: sentence types whose roll is a TSS (horizontal-plane) roll, converted to Euler
-    roll (``TSS1`` by default; add ``PRDID`` or ``EM3000`` where the sender is set to TSS angles).
+    roll (``TSS1`` by default; add ``PRDID`` or ``EM3000`` where the sender is set to TSS angles); gga_altitude:
+    ``msl`` (default, NMEA's definition: GGA's altitude is above the geoid, the ellipsoidal height is altitude +
+    separation) or ``ellipsoid`` (a receiver that writes the ellipsoidal height into the altitude field).
     """
 
     pashr_heave_positive: str = "up"
     tss_roll: frozenset[str] = frozenset({"TSS1"})
+    gga_altitude: str = "msl"
 
     def __post_init__(self) -> None:
         if self.pashr_heave_positive not in HEAVE_SIGNS:
             raise ImutoolError(f"pashr_heave_positive must be 'up' or 'down', not {self.pashr_heave_positive!r}")
+        if self.gga_altitude not in GGA_ALTITUDES:
+            raise ImutoolError(f"gga_altitude must be 'msl' or 'ellipsoid', not {self.gga_altitude!r}")
         object.__setattr__(self, "tss_roll", frozenset(str(t).strip().upper() for t in self.tss_roll))
 
     def as_meta(self) -> dict[str, Any]:
-        return {"pashr_heave_positive": self.pashr_heave_positive, "tss_roll": sorted(self.tss_roll)}
+        return {
+            "pashr_heave_positive": self.pashr_heave_positive,
+            "tss_roll": sorted(self.tss_roll),
+            "gga_altitude": self.gga_altitude,
+        }
 
 
 DEFAULT_OPTIONS = MotionOptions()
@@ -93,20 +104,22 @@ def options_from(
     pashr_heave_positive: str | None = None,
     tss_roll: Iterable[str] | None = None,
     source: str = "profile",
+    gga_altitude: str | None = None,
 ) -> MotionOptions:
     """MotionOptions from a profile's ``[nmea]`` table (keys ``pashr_heave_positive``, ``tss_roll``), then the
     keyword arguments (which win). Unknown keys in ``[nmea]`` are refused (a typo must not pass silently)."""
     table = (profile or {}).get("nmea", {})
     if not isinstance(table, dict):
         raise ImutoolError(f"{source}: [nmea] must be a table")
-    unknown = set(table) - {"pashr_heave_positive", "tss_roll"}
+    unknown = set(table) - {"pashr_heave_positive", "tss_roll", "gga_altitude"}
     if unknown:
         raise ImutoolError(f"{source}: unknown [nmea] key(s) {', '.join(sorted(unknown))}")
     heave = pashr_heave_positive or table.get("pashr_heave_positive", DEFAULT_OPTIONS.pashr_heave_positive)
     tss = tss_roll if tss_roll is not None else table.get("tss_roll", DEFAULT_OPTIONS.tss_roll)
     if isinstance(tss, str):
         tss = [t for t in tss.split(",") if t.strip()]
-    return MotionOptions(str(heave), frozenset(tss))
+    alt = gga_altitude or table.get("gga_altitude", DEFAULT_OPTIONS.gga_altitude)
+    return MotionOptions(str(heave), frozenset(tss), str(alt))
 
 
 # -- conversions ---------------------------------------------------------------------------------------------------
@@ -320,8 +333,10 @@ def _dec_ptnl(s: NmeaSentence, opts: MotionOptions, problems: list[str]) -> dict
     """$PTNL,AVR,time,yaw,Yaw,tilt,Tilt,roll,Roll,range,quality,PDOP,satellites: the moving-baseline vector.
     Quality 0 (no fix) drops the angles; the label after a value says what it is (some senders put a roll in
     the tilt slot, labelled ``Roll``)."""
+    if _field(s, 0) in gnss.PTNL_MESSAGES:
+        return gnss.dec_ptnl(s, opts, problems)
     if _field(s, 0) != "AVR":
-        raise _unsupported(s, "only PTNL,AVR is decoded")
+        raise _unsupported(s, "only PTNL,AVR, PTNL,GGK and PTNL,PJK are decoded")
     out: dict[str, float] = {}
     q = _int_status(out, "avr_quality", s, _AVR["gps_quality"], range(10))
     _put(out, "avr_baseline", _val(s, _AVR["baseline"], "range"))
@@ -591,7 +606,7 @@ def utc_field(s: NmeaSentence) -> str | None:
         return _field(s, 1)
     if t == "PTNL" and _field(s, 0) == "AVR":
         return _field(s, 1)
-    return None
+    return gnss.utc_field(s)
 
 
 # Recording channels of the motion sentences: decode key → (channel, unit)

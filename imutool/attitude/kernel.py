@@ -72,6 +72,7 @@ from imutool.attitude.layout import (
     _FASTMATH,
     F_ACC_REJ,
     F_ACC_USED,
+    F_HDG_INCONSISTENT,
     F_HDG_USED,
     F_INCONSISTENT,
     F_MAG_NEW,
@@ -81,6 +82,8 @@ from imutool.attitude.layout import (
     FALSE,
     HEADING_GATE_SIGMA,
     HEADING_REJECT_MAX_S,
+    LP_TAU_GROWTH,
+    LP_TAU_START,
     P_ACC_ADAPT,
     P_ACC_BIAS_DEV,
     P_ACC_GATE,
@@ -142,6 +145,7 @@ from imutool.attitude.layout import (
     S_HREJ_T,
     S_INIT,
     S_LPINIT,
+    S_LPT,
     S_LPV,
     S_LPY,
     S_MCCNT,
@@ -158,6 +162,7 @@ from imutool.attitude.layout import (
     S_NAVAR,
     S_NGAPS,
     S_NGNAN,
+    S_NHINC,
     S_NHREJ,
     S_NINC,
     S_NIS_A,
@@ -177,12 +182,23 @@ from imutool.attitude.layout import (
     S_USE_A,
     S_USE_M,
     S_USE_R,
+    S_VA_BAD,
+    S_VA_HAVE,
+    S_VA_IN,
+    S_VA_LAST,
+    S_VA_OK,
+    S_VA_PREV,
+    S_VA_SUM,
+    S_VA_T,
+    S_VA_TFIX,
     S_WDOT,
     S_WINIT,
     S_WLP,
     S_WV,
     S_WY,
     TRUE,
+    VA_MAX_INTERVAL,
+    VA_MIN_SPACING,
 )
 from imutool.attitude.lowpass import _butterworth_gains, _butterworth_step, _low_pass_gain, _low_pass_two_stages
 from imutool.attitude.magnetic import _dip_gate, _new_field
@@ -199,12 +215,14 @@ def ekf_kernel(
     sog,
     cog,
     sogdot,
+    vel,
     prm,
     update_every,
     mag_mode,
     cov_every_sample,
     use_gnss,
     lever,
+    arm_sa,
     st,
     q_out,
     b_out,
@@ -218,6 +236,10 @@ def ekf_kernel(
     """Run the EKF over one chunk (state ``st`` carried in place; see the module docstring).
 
     t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (ignored unless use_gnss);
+    vel (N,2), when it has N rows: the GNSS antenna's north/east velocity (m/s; held between fixes, NaN between
+    fixes, or interpolated) for velocity aiding: a fix is a row where it changes, at most one per VA_MIN_SPACING
+    s (a held value is the velocity of its first row only); arm_sa (3,) m body FRD: the sensor's position from
+    the antenna's;
     outputs: q_out (N,4), b_out (N,3), std_out (N,3) roll/pitch/heading σ rad, flags_out (N,) bit mask,
     p_store (N,6,6) posterior P per sample when it has N rows (for the smoother), else unused.
     acc_meas (N,3), when it has N rows: the accelerometer measurement (m/s², body), already compensated and
@@ -244,6 +266,7 @@ def ekf_kernel(
     cos_gate, sin_gate = np.cos(prm[P_MAG_DIP_GATE]), np.sin(prm[P_MAG_DIP_GATE])
     dip_ref, dip_lo, dip_hi = _dip_gate(st[S_MREF + 2], cos_gate, sin_gate)
     use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0  # once per chunk, not per sample
+    use_va = vel.shape[0] == n and use_lp and not ext_meas
     for k in range(n):
         flag = 0
         gk0, gk1, gk2 = gyro[k, 0], gyro[k, 1], gyro[k, 2]
@@ -371,6 +394,57 @@ def ekf_kernel(
         dev_a = 0.0
         ri_now = False  # RI = R(q_I) computed for this sample
         fed = False  # this sample went into the accelerometer low-pass
+        if use_va:
+            # velocity aiding: ∫ R_I f dt between two velocity fixes is R_I·(Δv − g Δt) whatever the translation
+            # (sway, surge, turn, at any frequency), so the mean force of an interval less Δv/Δt is gravity in I;
+            # the low-pass takes it, one interval late, while the fixes keep coming (docs/attitude.md)
+            if gap:  # the frame I restarted: no interval across a gap
+                st[S_VA_HAVE], st[S_VA_OK] = 0.0, 0.0
+            elif dt > 0:
+                if acc_ok:
+                    rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                    ri_now = True
+                    for i in range(3):
+                        st[S_VA_SUM + i] += (RI[i, 0] * ax + RI[i, 1] * ay + RI[i, 2] * az) * dt
+                else:
+                    st[S_VA_BAD] = 1.0
+                st[S_VA_T] += dt
+            vn_k, ve_k = vel[k, 0], vel[k, 1]
+            is_fix = (
+                np.isfinite(vn_k)
+                and np.isfinite(ve_k)
+                and not (vn_k == st[S_VA_LAST] and ve_k == st[S_VA_LAST + 1])
+                and not (st[S_VA_HAVE] > 0 and t[k] - st[S_VA_TFIX] < VA_MIN_SPACING)
+            )
+            st[S_VA_LAST], st[S_VA_LAST + 1] = vn_k, ve_k
+            if is_fix:
+                # the sensor's horizontal velocity: the antenna's plus R (ω × r), r from the antenna to the sensor
+                cx = w1 * arm_sa[2] - w2 * arm_sa[1]
+                cy = w2 * arm_sa[0] - w0 * arm_sa[2]
+                cz = w0 * arm_sa[1] - w1 * arm_sa[0]
+                vel_n = vn_k + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
+                vel_e = ve_k + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
+                span = st[S_VA_T]
+                if st[S_VA_HAVE] > 0 and st[S_VA_BAD] == 0.0 and 0.0 < span <= VA_MAX_INTERVAL:
+                    acc_n = (vel_n - st[S_VA_PREV]) / span
+                    acc_e = (vel_e - st[S_VA_PREV + 1]) / span
+                    if not ri_now:
+                        rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                        ri_now = True
+                    bx = R[0, 0] * acc_n + R[1, 0] * acc_e  # body: Rᵀ (acc_n, acc_e, 0)
+                    by = R[0, 1] * acc_n + R[1, 1] * acc_e
+                    bz = R[0, 2] * acc_n + R[1, 2] * acc_e
+                    for i in range(3):
+                        st[S_VA_IN + i] = st[S_VA_SUM + i] / span - (RI[i, 0] * bx + RI[i, 1] * by + RI[i, 2] * bz)
+                    st[S_VA_OK] = 1.0
+                else:
+                    st[S_VA_OK] = 0.0
+                st[S_VA_PREV], st[S_VA_PREV + 1] = vel_n, vel_e
+                st[S_VA_HAVE], st[S_VA_TFIX] = 1.0, t[k]
+                st[S_VA_SUM], st[S_VA_SUM + 1], st[S_VA_SUM + 2] = 0.0, 0.0, 0.0
+                st[S_VA_T], st[S_VA_BAD] = 0.0, 0.0
+            elif st[S_VA_OK] > 0 and t[k] - st[S_VA_TFIX] > VA_MAX_INTERVAL:
+                st[S_VA_OK] = 0.0  # the fixes stopped: the low-pass takes the force again
         if use_lever and dt > 0:
             # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
             # differentiated (bias-free rate; the bias cancels in ω̇ and is negligible in ω × (ω × r))
@@ -392,7 +466,7 @@ def ekf_kernel(
             ay -= (ez * rx - ex * rz) + (wz * cx - wx * cz)
             az -= (ex * ry - ey * rx) + (wx * cy - wy * cx)
         if acc_ok:
-            if use_gnss and np.isfinite(sog[k]) and np.isfinite(cog[k]):
+            if use_gnss and not use_va and np.isfinite(sog[k]) and np.isfinite(cog[k]):  # the turn alone
                 wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
                 c, s = np.cos(cog[k]), np.sin(cog[k])
                 sd = sogdot[k] if np.isfinite(sogdot[k]) else 0.0
@@ -429,22 +503,35 @@ def ekf_kernel(
                 _low_pass_two_stages(st, S_GW1, S_GW2, fw0, fw1, fw2, al)
                 if not gap:  # the time the window has seen (a gap restarts it, above)
                     st[S_GWT] += max(dt, 0.0)
-            if use_lp and not ext_meas and (not rej or force):
+            aided = use_va and st[S_VA_OK] > 0  # the last interval's force less the GNSS velocity's change
+            if use_lp and not ext_meas and (aided or not rej or force):
                 # VQF's idea: low-pass the specific force in the gyro-integrated frame I, where gravity is
                 # (nearly) constant and translational acceleration averages out; second-order Butterworth, delay τ.
-                rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                if not ri_now:
+                    rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
                 ri_now = fed = True
-                i0 = RI[0, 0] * ax + RI[0, 1] * ay + RI[0, 2] * az
-                i1 = RI[1, 0] * ax + RI[1, 1] * ay + RI[1, 2] * az
-                i2 = RI[2, 0] * ax + RI[2, 1] * ay + RI[2, 2] * az
+                if aided:
+                    i0, i1, i2 = st[S_VA_IN], st[S_VA_IN + 1], st[S_VA_IN + 2]
+                    if keep_f:  # the compensated force the smoother and the gyro check read: this one, in the body
+                        f_out[k, 0] = RI[0, 0] * i0 + RI[1, 0] * i1 + RI[2, 0] * i2
+                        f_out[k, 1] = RI[0, 1] * i0 + RI[1, 1] * i1 + RI[2, 1] * i2
+                        f_out[k, 2] = RI[0, 2] * i0 + RI[1, 2] * i1 + RI[2, 2] * i2
+                else:
+                    i0 = RI[0, 0] * ax + RI[0, 1] * ay + RI[0, 2] * az
+                    i1 = RI[1, 0] * ax + RI[1, 1] * ay + RI[1, 2] * az
+                    i2 = RI[2, 0] * ax + RI[2, 1] * ay + RI[2, 2] * az
                 if st[S_LPINIT] == 0.0:
                     st[S_LPV], st[S_LPV + 1], st[S_LPV + 2] = 0.0, 0.0, 0.0
                     st[S_LPY], st[S_LPY + 1], st[S_LPY + 2] = i0, i1, i2
+                    st[S_LPT] = 0.0
                     for m in range(18):
                         st[S_WV + m] = 0.0
                 st[S_LPINIT] += 1.0
                 st[S_USE_A] += 1.0
+                st[S_LPT] += max(dt, 0.0)
                 tau = prm[P_ACC_TAU]
+                if tau > LP_TAU_START:  # a long low-pass starts short (its lag is learned while it is short)
+                    tau = min(tau, max(LP_TAU_START, LP_TAU_GROWTH * st[S_LPT]))
                 lm, la, le = _butterworth_gains(dt, tau, st[S_LPINIT])  # running mean at start-up
                 st[S_LPV], st[S_LPY] = _butterworth_step(st[S_LPV], st[S_LPY], i0, lm, la, le, dt)
                 st[S_LPV + 1], st[S_LPY + 1] = _butterworth_step(st[S_LPV + 1], st[S_LPY + 1], i1, lm, la, le, dt)
@@ -724,7 +811,12 @@ def ekf_kernel(
         std_out[k, 0] = np.sqrt(max(v0, 0.0))
         std_out[k, 1] = np.sqrt(max(v1, 0.0))
         std_out[k, 2] = np.sqrt(max(v2, 0.0))
-        bad = prm[P_NIS_LIMIT] > 0 and (st[S_NIS_A] > prm[P_NIS_LIMIT] or st[S_NIS_M] > prm[P_NIS_LIMIT])
+        # the attitude's check (the accelerometer's NIS, the tilt check) and the heading's (the magnetometer's or the
+        # external heading's NIS: a magnetic disturbance distrusts the heading, not roll and pitch)
+        bad = prm[P_NIS_LIMIT] > 0 and st[S_NIS_A] > prm[P_NIS_LIMIT]
+        if prm[P_NIS_LIMIT] > 0 and st[S_NIS_M] > prm[P_NIS_LIMIT]:
+            flag |= F_HDG_INCONSISTENT
+            st[S_NHINC] += 1
         if prm[P_TILT_WIN] > 0 and st[S_GWT] >= prm[P_TILT_WIN]:
             # the low-passed world force against the estimate's vertical: flagged beyond √(limit² + (3 σ)²), σ² the
             # estimate's roll + pitch variance; tan x ≥ x keeps the arctangent off the common path

@@ -11,6 +11,10 @@ LP_MEAN_START = 0.1
 # how a ship's translational acceleration changes as gyro bias; at τ 20–60 s a 2–6 s mean taught 1–2 °/s of wrong
 # bias and the filter diverged (issue 35: τ 10 s on a bridge sensor, 200° of roll error; 2.8° with the cap)
 LP_MEAN_MAX = 0.25  # s
+# a low-pass longer than LP_TAU_START starts at that τ and lengthens by LP_TAU_GROWTH s per s it has run: its lag
+# (τ × the gyro-bias error) is then learned while it is short — started at τ 40 s, a bridge sensor's 0.3 °/s of
+# unknown bias put 13° into the roll for two minutes (issue 35); the same at τ ≤ 2.5 s
+LP_TAU_START, LP_TAU_GROWTH = 2.5, 0.25  # s, s/s
 
 # ---- state vector layout (float64, carried between chunks) -------------------------------------------------
 S_Q, S_B, S_P = 0, 4, 7  # q (4), b (3), P (36, row-major 6×6)
@@ -49,7 +53,20 @@ S_MREF_T = 149  # the time the reference's own field has held while the body tur
 # the candidate's mean horizontal field direction in the world frame: the means of the unit field's north and east
 # components (only their angle is used); the time since the last magnetometer sample (s, gaps counted at gap_dt)
 S_MCX, S_MCY, S_MDT = 150, 151, 152
-STATE_SIZE = 153
+# GNSS velocity aiding (docs/attitude.md, "Velocity aiding"): the specific force integrated in the frame I since the
+# last velocity fix (3, m/s) and the time it spans (s); whether a sample in it was missing; the previous fix's
+# sensor velocity, NED horizontal (2, m/s), whether there is one, and its time (s); the corrected mean force of the
+# last whole interval, in I (3, m/s²), which the low-pass takes while it is valid
+S_VA_SUM, S_VA_T, S_VA_BAD = 153, 156, 157
+S_VA_PREV, S_VA_HAVE, S_VA_TFIX = 158, 160, 161
+S_VA_IN, S_VA_OK = 162, 165
+S_LPT = 166  # the time (s) the accelerometer low-pass has run since it started (or restarted after a gap)
+S_VA_LAST = 167  # the GNSS velocity of the previous row as given (2, m/s; NaN: none): a fix is where it changes
+S_NHINC = 169  # samples flagged heading-inconsistent (the magnetometer's NIS: roll and pitch not involved)
+STATE_SIZE = 170
+# the longest interval between two velocity fixes that is still used (s): longer, the low-pass takes the force;
+# the shortest (an interpolated velocity changes every row: one fix per VA_MIN_SPACING s)
+VA_MAX_INTERVAL, VA_MIN_SPACING = 3.0, 0.2
 
 # ---- parameter vector layout ---------------------------------------------------------------------------------
 P_GYRO_NOISE, P_BIAS_RW, P_ACC_NOISE, P_MAG_NOISE = 0, 1, 2, 3
@@ -69,7 +86,8 @@ N_PARAMS = 47
 
 # ---- flag bits in the per-sample output -------------------------------------------------------------------
 F_ACC_REJ, F_MAG_REJ, F_REST, F_ACC_USED, F_MAG_USED, F_INCONSISTENT, F_HDG_USED = 1, 2, 4, 8, 16, 32, 64
-F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample (the last bit of uint8)
+F_MAG_NEW = 128  # the magnetometer's reference was replaced by a new field at this sample
+F_HDG_INCONSISTENT = 256  # the heading's windowed NIS failed (the flags are uint16)
 
 # external heading (gyrocompass): a fix whose innovation is beyond this many σ is a glitch and skipped, for at most
 # this many seconds running; beyond, the heading that stayed away is taken outright

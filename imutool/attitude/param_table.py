@@ -115,6 +115,13 @@ PARAMS: tuple[Param, ...] = (
     Param("accel_lp_tau", 2.5, "s", (0.0, 100.0), VALUE, P_ACC_TAU,
           "delay of the specific force's low-pass in the quasi-inertial frame (second-order Butterworth, cut-off "
           "√2/τ rad/s; 0: raw accelerometer, as in the paper)"),
+    Param("motion", "auto", "auto|ship|handheld", (0, 0), UNUSED, None,
+          "the platform's motion (imutool/attitude/motion.py): ship takes ship_lp_tau as the low-pass, handheld "
+          "accel_lp_tau; auto tells them apart from the gyro (a ship: rates below 30 °/s, 90 % of the motion below "
+          "0.5 Hz)"),
+    Param("ship_lp_tau", 5.0, "s", (0.0, 100.0), UNUSED, None,
+          "the low-pass's delay on ship motion (motion ship, or auto on a ship): long against the wave band — "
+          "a sway at 6 s attenuated 14×, at 10 s 5× — and short against the gyro bias's drift"),
     Param("smoother_lp_tau", 3.0, "s", (0.0, 100.0), UNUSED, None,
           "delay of the smoother's low-pass of the specific force, run forwards and backwards (no lag: a longer τ "
           "costs it no delay; offline VQF's 3 s) (0: accel_lp_tau)"),

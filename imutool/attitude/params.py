@@ -76,6 +76,10 @@ class EkfParams:
             if name == "mag_mode":
                 self.mag_mode_code()
                 continue
+            if name == "motion":
+                if self.motion not in MOTIONS:
+                    raise ImutoolError(f"motion {self.motion!r}: expected {', '.join(MOTIONS)}")
+                continue
             vals = v if name == "init_bias" else (v,)
             try:
                 arr = np.asarray(vals, dtype=float)
@@ -238,7 +242,8 @@ class EkfCoefficients:
 # The format's version, written by EkfParams.to_toml as `version = N` above the [ekf] table. A file without one is
 # version 0: every file saved before versions existed (2026-11-27). Raise it when a parameter's meaning changes,
 # with a Migration below saying what changed.
-PARAMS_VERSION = 1
+PARAMS_VERSION = 2
+MOTIONS = ("auto", "ship", "handheld")  # EkfParams.motion (imutool/attitude/motion.py)
 
 
 @dataclass(frozen=True)
@@ -314,6 +319,16 @@ def _butterworth_notes(path: str, keys: frozenset[str], used: Any, overridden: f
     ]
 
 
+def _motion_notes(path: str, keys: frozenset[str], used: Any, overridden: frozenset[str]) -> list[str]:
+    if "motion" in overridden or used.motion == "handheld":
+        return []
+    return [
+        f"{path} was saved before the motion model (version < 2, 2026-11-27): with motion = 'auto' a recording "
+        f"whose gyro shows ship motion takes ship_lp_tau ({used.ship_lp_tau:g} s) as its low-pass, not the file's "
+        "accel_lp_tau; --param motion=handheld for the behaviour before"
+    ]
+
+
 # Every change of a parameter's meaning since files were first saved, oldest first. Version 0 had no version key,
 # so which of its changes a file predates is guessed from the keys it gives (every file is saved with every
 # parameter of its day) and the values the old defaults wrote.
@@ -352,6 +367,14 @@ MIGRATIONS: tuple[Migration, ...] = (
         1,
         lambda t: "accel_lp_tau" in t and "smoother_lp_tau" not in t,
         _butterworth_notes,
+    ),
+    Migration(
+        "motion_model",
+        "2026-11-27",
+        "motion auto: on ship motion the low-pass is ship_lp_tau, not accel_lp_tau",
+        2,
+        None,
+        _motion_notes,
     ),
 )
 

@@ -8,6 +8,9 @@ from formats import Recording
 from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
+from formats.saturation import clipped
+from imutool.attitude.layout import F_ACC_REJ
+from imutool.attitude.motion import choose_motion, params_for_motion
 from imutool.attitude.params import EkfParams
 from imutool.attitude.run import AttitudeResult, nominal_dt, run_ekf
 from imutool.attitude.selfcheck import SampleFlag, SelfCheck, has_flag
@@ -66,6 +69,45 @@ def _read_later(t: np.ndarray, h: np.ndarray, latency_s: float) -> np.ndarray:
     return np.where(both, val, np.nan)
 
 
+def gnss_inputs(rec: Recording, use_gnss: bool = True) -> tuple[np.ndarray | None, ...]:
+    """(sog m/s, cog deg, velocity (N,2) m/s north/east) of a recording, each None where it has none.
+
+    The velocity is ``vel_n``/``vel_e`` when present, else sog·(cos cog, sin cog); the EKF's velocity aiding
+    uses it (:func:`imutool.attitude.run.run_ekf`), the turn's compensation sog/cog."""
+    if not use_gnss:
+        return None, None, None
+    sog = rec.in_unit("sog", "m/s") if "sog" in rec.channels and "cog" in rec.channels else None
+    cog = rec.in_unit("cog", "deg") if sog is not None else None
+    if "vel_n" in rec.channels and "vel_e" in rec.channels:
+        vel = np.stack([rec.in_unit("vel_n", "m/s"), rec.in_unit("vel_e", "m/s")], axis=1)
+    elif sog is not None:
+        c = np.radians(np.asarray(cog, dtype=np.float64))
+        vel = np.stack([sog * np.cos(c), sog * np.sin(c)], axis=1)
+    else:
+        vel = None
+    return sog, cog, vel
+
+
+def drop_clipped(
+    gyro: np.ndarray, accel: np.ndarray, checks: SelfCheck, time: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(accel with its clipped samples NaN, the clipped rows): a sample at the accelerometer's range limit is not
+    gravity plus the motion, so the filter does not use it; both channels' clipping goes to ``checks``
+    (:mod:`formats.saturation`)."""
+    clip_a, clip_g = clipped(accel, "accel"), clipped(gyro, "gyro")
+    checks.add_clipping(time, clip_a, clip_g)
+    if clip_a.count:
+        accel = np.array(accel, dtype=np.float64)
+        accel[clip_a.mask] = np.nan
+    return accel, clip_a.mask
+
+
+def flag_clipped(res: AttitudeResult, rows: np.ndarray) -> None:
+    """The clipped accelerometer rows are flagged as rejected (the output's accel_rejected = 1)."""
+    if rows.any():
+        res.flags[rows] |= F_ACC_REJ
+
+
 def ekf_recording(
     rec: Recording,
     params: EkfParams | None = None,
@@ -73,6 +115,7 @@ def ekf_recording(
     use_gnss: bool = True,
     lever_arm: np.ndarray | None = None,
     progress: Progress | None = None,
+    antenna_arm: np.ndarray | None = None,
 ) -> tuple[Recording, dict]:
     """Run the EKF (and optionally the smoother) on a recording; returns (estimate recording, summary).
 
@@ -89,18 +132,20 @@ def ekf_recording(
     mag = rec["mag"] if "mag" in rec.channels else None
     heading_raw = heading_channel(rec)  # deg, as it came
     heading = None if heading_raw is None else _read_later(rec.time, heading_raw, params.heading_input_latency)
-    sog = cog = None
-    if use_gnss and "sog" in rec.channels and "cog" in rec.channels:
-        sog = rec.in_unit("sog", "m/s")
-        cog = rec.in_unit("cog", "deg")
+    sog, cog, vel = gnss_inputs(rec, use_gnss)
     if smooth:
         check_smoother_memory(len(rec))
+    motion = choose_motion(params, rec.time, gyro)
+    run_params = params_for_motion(params, motion)  # the low-pass of the platform's motion
+    checks = SelfCheck(run_params, nominal_dt(rec.time), lever_arm)  # the same accumulator as a streamed run's
+    checks.motion = motion.kind
+    accel, clipped_rows = drop_clipped(gyro, accel, checks, rec.time)
     res, _ = run_ekf(
         rec.time,
         gyro,
         accel,
         mag,
-        params,
+        run_params,
         sog,
         cog,
         keep_cov=smooth,
@@ -108,16 +153,19 @@ def ekf_recording(
         progress=progress,
         keep_force=True,
         heading_deg=heading,
+        velocity_ne=vel,
+        antenna_arm=antenna_arm,
     )
+    flag_clipped(res, clipped_rows)
     summary = dict(res.summary)
-    checks = SelfCheck(params, nominal_dt(res.time), lever_arm)  # the same accumulator as a streamed run's
-    checks.add(res, gyro, mag_given=mag is not None, gnss_used=sog is not None, heading_deg=heading_raw)
+    checks.add(res, gyro, mag_given=mag is not None, gnss_used=vel is not None, heading_deg=heading_raw)
     report = checks.report()
     summary.update(report.summary)
     warnings = report.warnings
     if smooth:
-        res = zero_lag_smooth(res, gyro, accel, mag, params, sog, cog, lever_arm, heading_deg=heading)
+        res = zero_lag_smooth(res, gyro, accel, mag, run_params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
+    out.meta["motion"] = summary["motion"] = motion.summary()
     out.meta.update(report.metadata)
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
@@ -144,6 +192,7 @@ def result_recording(rec: Recording, res: AttitudeResult, params: EkfParams | No
     out.add("mag_rejected", has_flag(res.flags, SampleFlag.MAG_REJECTED).astype(float), "1")
     out.add("rest", has_flag(res.flags, SampleFlag.REST).astype(float), "1")
     out.add("inconsistent", has_flag(res.flags, SampleFlag.INCONSISTENT).astype(float), "1")
+    out.add("heading_inconsistent", has_flag(res.flags, SampleFlag.HEADING_INCONSISTENT).astype(float), "1")
     carry_labels(rec, out)
     out.meta[DECIMALS_KEY] = dict(OUTPUT_DECIMALS)
     if params is not None:
@@ -167,6 +216,7 @@ OUTPUT_DECIMALS = {
     "mag_rejected": 0,
     "rest": 0,
     "inconsistent": 0,
+    "heading_inconsistent": 0,
 }
 
 

@@ -20,6 +20,7 @@ from imutool.attitude.layout import (
     S_NAREJ,
     S_NGAPS,
     S_NGNAN,
+    S_NHINC,
     S_NHREJ,
     S_NINC,
     S_NMNEW,
@@ -31,6 +32,7 @@ from imutool.attitude.layout import (
     S_Q,
     S_QI,
     S_TILTMAX,
+    S_VA_LAST,
     STATE_SIZE,
 )
 from imutool.attitude.params import EkfCoefficients, EkfParams
@@ -157,6 +159,7 @@ def initial_state(
     st[S_DQ] = 1.0
     st[S_QI] = 1.0
     st[S_HLAST] = -np.inf
+    st[S_VA_LAST], st[S_VA_LAST + 1] = np.nan, np.nan  # the first finite velocity is a fix
     return st
 
 
@@ -198,6 +201,8 @@ def run_ekf(
     keep_force: bool = False,
     heading_deg: np.ndarray | None = None,
     dt_mag: float | None = None,
+    velocity_ne: np.ndarray | None = None,
+    antenna_arm: np.ndarray | None = None,
 ) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
 
@@ -209,6 +214,11 @@ def run_ekf(
     (:func:`zero_lag_smooth`'s second pass).
     ``heading_deg`` (N,) an external true heading (gyrocompass; deg, NaN where none): when given, it is the
     heading measurement and the magnetometer is not used.
+    ``velocity_ne`` (N,2) m/s: the GNSS antenna's north/east velocity (held, interpolated or NaN between fixes;
+    a fix is a row where it changes), for velocity aiding: the low-pass then takes the force of each interval
+    between fixes less the velocity's change, which removes sway, surge and turn alike; ``antenna_arm`` (3,) m
+    body FRD, the antenna's position from the centre of rotation (default: the velocity is the centre's, as a
+    receiver with lever-arm compensation gives it).
     ``dt_mag`` (s) the magnetometer's own sample interval, which sets its σ per sample from
     ``mag_heading_density`` (default: :func:`mag_interval` of these rows; a stream passes its first chunk's).
     """
@@ -246,10 +256,20 @@ def run_ekf(
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
     if not np.all(np.isfinite(lever)):
         raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")
+    if velocity_ne is None:
+        vel = np.empty((0, 2))
+    else:
+        vel = np.ascontiguousarray(velocity_ne, dtype=np.float64)
+        if vel.shape != (n, 2):
+            raise ImutoolError(f"velocity_ne must be ({n}, 2), not {vel.shape}")
+    ant = np.zeros(3) if antenna_arm is None else np.asarray(antenna_arm, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(ant)):
+        raise ImutoolError("the antenna arm must be three finite numbers (m, body FRD)")
+    arm_sa = lever - ant
     q_out = np.empty((n, 4))
     b_out = np.empty((n, 3))
     std_out = np.empty((n, 3))
-    flags = np.zeros(n, dtype=np.uint8)
+    flags = np.zeros(n, dtype=np.uint16)
     p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
     keep_f = keep_cov or keep_force
     f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
@@ -272,12 +292,14 @@ def run_ekf(
             sg[i0:i1],
             cg[i0:i1],
             sd[i0:i1],
+            vel[i0:i1] if len(vel) else vel,
             prm,
             every,
             mode,
             cov_flag,
             use_gnss,
             lever,
+            arm_sa,
             st,
             q_out[i0:i1],
             b_out[i0:i1],
@@ -299,7 +321,9 @@ def run_ekf(
         "gaps": int(st[S_NGAPS]),
         "gyro_nan_samples": int(st[S_NGNAN]),
         "gnss_compensation": bool(use_gnss),
+        "velocity_aiding": bool(len(vel)),
         "inconsistent_samples": int(st[S_NINC]),
+        "heading_inconsistent_samples": int(st[S_NHINC]),
         "tilt_check_samples": int(st[S_NTILT]),
         "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
     }

@@ -14,9 +14,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from formats.saturation import Clipping, clipping_warning
 from imutool.attitude.layout import (
     F_ACC_REJ,
     F_ACC_USED,
+    F_HDG_INCONSISTENT,
     F_HDG_USED,
     F_INCONSISTENT,
     F_MAG_NEW,
@@ -30,7 +32,7 @@ from imutool.heading_lag import HeadingLagTrack, heading_lag_check
 
 
 class SampleFlag(enum.IntFlag):
-    """The bits of the filter's per-sample ``flags`` (uint8, :attr:`AttitudeResult.flags`; the kernels set them with
+    """The bits of the filter's per-sample ``flags`` (uint16, :attr:`AttitudeResult.flags`; the kernels set them with
     the ``F_*`` constants of :mod:`~imutool.attitude.layout`, which these name)."""
 
     ACCEL_REJECTED = (
@@ -40,14 +42,15 @@ class SampleFlag(enum.IntFlag):
     REST = F_REST  #: the body was detected at rest (zero-rate update): column rest
     ACCEL_USED = F_ACC_USED  #: an accelerometer update was taken at this sample
     MAG_USED = F_MAG_USED  #: a magnetometer (heading or full) update was taken at this sample
-    INCONSISTENT = F_INCONSISTENT  #: the windowed NIS or the tilt check failed here: column inconsistent
+    INCONSISTENT = F_INCONSISTENT  #: the accelerometer's windowed NIS or the tilt check failed: column inconsistent
     HEADING_USED = F_HDG_USED  #: an external heading (heading_true) update was taken at this sample
     MAG_NEW_FIELD = F_MAG_NEW  #: the magnetometer's reference was replaced by a new field at this sample
+    HEADING_INCONSISTENT = F_HDG_INCONSISTENT  #: the heading's NIS failed here: column heading_inconsistent
 
 
 def has_flag(flags: np.ndarray, flag: SampleFlag) -> np.ndarray:
-    """Per sample: is ``flag`` set in ``flags`` (uint8)? A bool array."""
-    return (np.asarray(flags) & np.uint8(flag)) > 0
+    """Per sample: is ``flag`` set in ``flags`` (uint16)? A bool array."""
+    return (np.asarray(flags).astype(np.uint16, copy=False) & np.uint16(flag)) > 0
 
 
 def self_check(
@@ -83,11 +86,16 @@ def inconsistency_report(
     shown = _spans_text(spans, n_spans=n_spans)
     warn = (
         f"the attitude filter's self-check failed on {100 * share:.1f} % of samples ({shown}): its "
-        "accelerometer/magnetometer innovations are far larger than its covariance allows, so the estimate "
-        "is not trustworthy there (column 'inconsistent' = 1); sustained acceleration, a wrong mounting or "
-        "units, or a diverging filter"
+        "accelerometer innovations (or the tilt check) are far larger than its covariance allows, so roll and "
+        "pitch are not trustworthy there (column 'inconsistent' = 1); sustained acceleration, a wrong mounting "
+        "or units, or a diverging filter"
     )
     return info, [warn]
+
+
+# a ship's sustained turn, said when no speed is given: the heading's rate over TURN_SMOOTH_S s beyond TURN_RATE
+# deg/s for at least TURN_MIN_S s (a seaway's yaw, ±1.5° at 12 s, stays below; a course change at 1 °/s is a turn)
+TURN_RATE, TURN_SMOOTH_S, TURN_MIN_S = 0.5, 20.0, 30.0
 
 
 class FlagSpans:
@@ -289,6 +297,7 @@ class SelfCheck:
     ) -> None:
         self.params, self.lever_arm, self.max_spans = params, lever_arm, max_spans
         self.inconsistent = RunSpans(max_spans)
+        self.heading_inconsistent = RunSpans(max_spans)  # the heading's own check (magnetometer / heading input)
         self.n_samples = 0
         self.mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
         self.new_fields: list[float] = []  # times the magnetometer's reference was replaced (s)
@@ -300,6 +309,50 @@ class SelfCheck:
         self._scale_tail: tuple[np.ndarray, ...] | None = None  # what the next chunk's scale check starts from
         self.totals: dict[str, Any] = {}  # the filter's cumulative counters, from the last chunk
         self.t_first = self.t_last = np.nan
+        self.motion = "handheld"  # the motion model's choice (imutool/attitude/motion.py): set by the caller
+        self.turns = FlagSpans(TURN_MIN_S)  # sustained turns of a ship (the heading's rate, smoothed)
+        self.turn_rate_max = 0.0  # deg/s, the largest smoothed rate of turn within them
+        self._turn_tail: tuple[np.ndarray, np.ndarray] | None = None  # the last TURN_SMOOTH_S of headings
+        self.clipped: dict[str, int] = {"accel": 0, "gyro": 0}  # samples at a range limit (formats.saturation)
+        self.clip_limits: dict[str, set[float]] = {"accel": set(), "gyro": set()}
+        self.clip_first: dict[str, float] = {}  # the time of the first clipped sample (s)
+
+    def _add_turns(self, time: np.ndarray, q: np.ndarray, gyro: np.ndarray, bias: np.ndarray) -> None:
+        """The rate of turn (deg/s): the bias-corrected gyro about the world vertical (a magnetic disturbance that
+        drags the heading is no turn), averaged over TURN_SMOOTH_S; beyond TURN_RATE it is a turn (kept as spans;
+        chunks joined by the last TURN_SMOOTH_S of the integrated angle)."""
+        t = np.asarray(time, dtype=np.float64)
+        w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+        r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)  # R's third row
+        om = np.nan_to_num(np.asarray(gyro, dtype=np.float64) - bias)
+        wz = r20 * om[:, 0] + r21 * om[:, 1] + r22 * om[:, 2]  # rad/s about the world vertical (NED: + clockwise)
+        step = np.diff(t, prepend=t[0] if self._turn_tail is None else self._turn_tail[0][-1])
+        psi = np.cumsum(np.degrees(wz) * np.clip(step, 0.0, None))
+        if self._turn_tail is not None:
+            psi += self._turn_tail[1][-1]
+            t = np.concatenate([self._turn_tail[0], t])
+            psi = np.concatenate([self._turn_tail[1], psi])
+        n_tail = 0 if self._turn_tail is None else len(self._turn_tail[0])
+        if len(t) < 2:
+            return
+        j = np.searchsorted(t, t - TURN_SMOOTH_S, side="left")  # the rate over the last TURN_SMOOTH_S
+        span = t - t[j]
+        full = span >= 0.9 * TURN_SMOOTH_S  # the first seconds have no rate yet
+        rate = np.where(full, (psi - psi[j]) / np.where(full, span, 1.0), 0.0)
+        turning = np.abs(rate) >= TURN_RATE
+        if turning[n_tail:].any():
+            self.turn_rate_max = max(self.turn_rate_max, float(np.abs(rate[n_tail:][turning[n_tail:]]).max()))
+        self.turns.add(t[n_tail:], turning[n_tail:])
+        keep = t >= t[-1] - TURN_SMOOTH_S
+        self._turn_tail = (t[keep], psi[keep])
+
+    def add_clipping(self, time: np.ndarray, accel: Clipping, gyro: Clipping) -> None:
+        """One chunk's clipped samples (:func:`formats.saturation.clipped`), accelerometer and gyro."""
+        for name, clip in (("accel", accel), ("gyro", gyro)):
+            if clip.count:
+                self.clipped[name] += clip.count
+                self.clip_limits[name].update(round(v, 4) for axis in clip.limits for v in axis)
+                self.clip_first.setdefault(name, float(time[np.argmax(clip.mask)]))
 
     def add(
         self,
@@ -320,6 +373,7 @@ class SelfCheck:
             self.t_last = float(res.time[-1])
         self.n_samples += len(res.time)
         self.inconsistent.add(res.time, has_flag(flags, SampleFlag.INCONSISTENT))
+        self.heading_inconsistent.add(res.time, has_flag(flags, SampleFlag.HEADING_INCONSISTENT))
         if self.params.mag_check_time > 0:
             self.mag_spans.add(res.time, has_flag(flags, SampleFlag.MAG_REJECTED))
         self.new_fields += [float(x) for x in res.time[has_flag(flags, SampleFlag.MAG_NEW_FIELD)]]
@@ -331,6 +385,8 @@ class SelfCheck:
             self.heading_given = True
             self.lag.add(res.time, heading_deg, res.q, gyro, res.bias)
         self._add_scale(res.time, gyro, res.bias, res.force)
+        if self.motion == "ship" and not gnss_used and len(res.time):
+            self._add_turns(res.time, res.q, gyro, res.bias)
         for k, v in res.summary.items():  # the state carries cumulative counters (and the tilt check's maximum)
             if isinstance(v, bool):  # a switch (gnss_compensation): on if on in any chunk
                 self.totals[k] = bool(self.totals.get(k, False)) or v
@@ -369,6 +425,18 @@ class SelfCheck:
             n_spans=self.inconsistent.count,
         )
         warnings += inconsistency
+        hdg = self.heading_inconsistent
+        if hdg.n_flagged:
+            share = hdg.n_flagged / max(1, self.n_samples)
+            summary["heading_inconsistent_share"] = round(share, 6)
+            summary["heading_inconsistent_spans_s"] = [[round(a, 3), round(b, 3)] for a, b in hdg.spans]
+            warnings.append(
+                f"the heading's self-check failed on {100 * share:.1f} % of samples "
+                f"({_spans_text([tuple(s) for s in hdg.spans], n_spans=hdg.count)}): the magnetometer's (or the "
+                "heading input's) innovations are far larger than its σ allows — a magnetic disturbance or an "
+                "uncalibrated magnetometer; the heading is not trustworthy there (column 'heading_inconsistent' = 1)"
+                + ("" if params.mag_mode == "full" else ", roll and pitch are not affected (mag_mode heading)")
+            )
         source, more = heading_source_report(self.heading_given, self.mag_given, self.heading_updates, params, duration)
         summary.update(source)
         warnings += more
@@ -386,9 +454,23 @@ class SelfCheck:
         warnings += more
         warnings += tilt_check(self.totals, params)
         warnings += gnss_heading_check(self.gnss_used, self.mag_used)
+        turns = [sp for sp in self.turns.spans if sp[1] - sp[0] >= TURN_MIN_S]  # the last one may still be short
+        if turns and not self.gnss_used:
+            summary["turns_without_speed_s"] = [[round(a, 1), round(b, 1)] for a, b in turns[:20]]
+            warnings.append(
+                f"{len(turns)} turn(s) without any speed input ({_spans_text(turns)}, up to "
+                f"{self.turn_rate_max:.1f} °/s): a turn's centripetal acceleration (speed × rate of turn) reads as "
+                "roll, 0.1° per m/s of speed per °/s of turn (8 m/s at 3 °/s: 2.4°); give the ship's velocity "
+                "(sog/cog or vel_n/vel_e columns, --gnss FILE)"
+            )
         check, more = self.scale.report()
         summary.update(check)
         warnings += more
+        for name, unit in (("accel", "m/s^2"), ("gyro", "rad/s")):
+            if self.clipped[name]:
+                summary[f"{name}_clipped_samples"] = self.clipped[name]
+                clip = Clipping(np.ones(self.clipped[name], dtype=bool), [tuple(sorted(self.clip_limits[name]))])
+                warnings.append(clipping_warning(name, clip, unit) + f", the first at {self.clip_first[name]:.2f} s")
         meta = output_metadata(self.lever_arm, summary)
         return SelfCheckReport(summary, warnings, meta)
 

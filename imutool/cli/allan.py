@@ -1,6 +1,7 @@
 """``imutool allan``: overlapping Allan deviation → ARW/VRW, bias instability, RRW; noise.yaml and kalibr imu.yaml.
 
-Options and printing only; the analysis and the files are :func:`imutool.noise.allan_noise`.
+Options and printing only; the analysis and the files are :func:`imutool.noise.allan_noise`, the route
+`imutool batch allan` and a Python user take (its defaults are the options').
 """
 
 from __future__ import annotations
@@ -10,9 +11,45 @@ from typing import Any
 import click
 import numpy as np
 
-from imutool.cli.common import emit_summary, input_options, note_input, output_options, safe_outputs
+from imutool.cli.common import (
+    default_of,
+    emit_summary,
+    input_options,
+    note_input,
+    output_options,
+    route_of,
+    safe_outputs,
+    strict_requested,
+)
 from imutool.noise import SI as _SI
+from imutool.noise import NoiseRun, allan_noise
 from imutool.progress import stages
+from imutool.routes import OnInput
+
+OUTPUTS = ("output", "plot", "kalibr")
+
+
+def allan_route(
+    inputs: tuple[str, ...],
+    output: str,
+    channels: str = default_of(allan_noise, "channels"),
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> NoiseRun:
+    """Parsed options → :func:`imutool.noise.allan_noise` (progress on stderr unless ``quiet``)."""
+    wanted = [c.strip() for c in channels.split(",") if c.strip()]
+    with stages("allan", [*inputs, *wanted, "writing"], quiet) as steps:
+        return allan_noise(
+            inputs,
+            output,
+            channels=channels,
+            strict=strict_requested(),
+            stage=steps.stage,
+            on_input=on_input,
+            **options,
+        )
+
 
 _LABEL = {"gyro": ("ARW", "rad/s/√Hz"), "accel": ("VRW", "m/s²/√Hz"), "mag": ("white", "µT/√Hz")}
 
@@ -28,39 +65,39 @@ _LABEL = {"gyro": ("ARW", "rad/s/√Hz"), "accel": ("VRW", "m/s²/√Hz"), "mag"
 )
 @click.option("--plot", default=None, help="Log-log Allan deviation plot with the fitted lines (.png/.pdf).")
 @click.option("--kalibr", default=None, help="Also write a kalibr-style imu.yaml here.")
-@click.option("--topic-name", default="/imu0", show_default=True, help="rostopic written into the kalibr file.")
+@click.option(
+    "--topic-name",
+    default=default_of(allan_noise, "topic_name"),
+    show_default=True,
+    help="rostopic written into the kalibr file.",
+)
 @click.option(
     "--kalibr-fallback",
     type=click.Choice(["refuse", "upper-bound"]),
-    default="refuse",
+    default=default_of(allan_noise, "kalibr_fallback"),
     show_default=True,
     help="A random walk the recording does not resolve: refuse the kalibr file, or write its upper bound "
     "(labelled in the file, with a warning). Never a silent 0.",
 )
 @click.option(
-    "--channels", default="gyro,accel,mag", show_default=True, help="Channels to analyse (those present in the inputs)."
+    "--channels",
+    default=default_of(allan_noise, "channels"),
+    show_default=True,
+    help="Channels to analyse (those present in the inputs).",
 )
-@click.option("--per-decade", type=int, default=10, show_default=True, help="Cluster times per decade of τ.")
+@click.option(
+    "--per-decade",
+    type=int,
+    default=default_of(allan_noise, "per_decade"),
+    show_default=True,
+    help="Cluster times per decade of τ.",
+)
 @click.option("--start", type=float, default=None, help="Use data from this time (s) on.")
 @click.option("--end", type=float, default=None, help="Use data before this time (s).")
 @input_options
 @output_options
-@safe_outputs("output", "plot", "kalibr")
-def allan_cmd(
-    inputs: tuple[str, ...],
-    output: str,
-    plot: str | None,
-    kalibr: str | None,
-    topic_name: str,
-    kalibr_fallback: str,
-    channels: str,
-    per_decade: int,
-    start: float | None,
-    end: float | None,
-    as_json: bool,
-    quiet: bool,
-    **io: Any,
-) -> None:
+@safe_outputs(*OUTPUTS)
+def allan_cmd(output: str, plot: str | None, kalibr: str | None, as_json: bool, quiet: bool, **options: Any) -> None:
     """Allan deviation of a static recording (several INPUT files: one per sensor, each on its own clock).
 
     For each axis: N (ARW/VRW) read at τ = 1 s on the slope −½ line, bias instability B = min σ / 0.664 when a
@@ -69,25 +106,7 @@ def allan_cmd(
     The summary gives the gyro in
     degrees (ARW °/√h, B °/h, K °/h/√h), accelerometer and magnetometer in SI; the noise file is SI throughout.
     """
-    from imutool.noise import allan_noise
-
-    wanted = [c.strip() for c in channels.split(",") if c.strip()]
-    steps = stages("allan", [*inputs, *wanted, "writing"], quiet)
-    run = allan_noise(
-        inputs,
-        output,
-        plot=plot,
-        kalibr=kalibr,
-        topic_name=topic_name,
-        kalibr_fallback=kalibr_fallback,
-        channels=channels,
-        per_decade=per_decade,
-        start=start,
-        end=end,
-        stage=steps.stage,
-        on_input=note_input,
-        **io,
-    )
+    run = allan_route(output=output, plot=plot, kalibr=kalibr, quiet=quiet, on_input=note_input, **options)
     results, info, warnings = run.results, run.info, run.summary["warnings"]
     lines = [f"Allan deviation → {output}" + (f", {kalibr}" if kalibr else "") + (f", {plot}" if plot else "")]
     for r in results:
@@ -125,7 +144,9 @@ def allan_cmd(
                 "    note: σ(τ) still falls at the longest τ on some axes: B there is an upper bound and K is "
                 "not resolved (record longer)"
             )
-    steps.close()
     for w in warnings:
         click.echo(f"warning: {w}", err=True)
     emit_summary(run.summary, as_json, quiet, lines)
+
+
+allan_cmd = route_of(allan_route, OUTPUTS)(allan_cmd)

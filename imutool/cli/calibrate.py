@@ -1,7 +1,8 @@
 """``imutool calibrate``: magnetometer (sphere or heading swing), deviation card, gyro, accelerometer, show.
 
 Options and printing only; the runs (loading, fit, provenance, writing the calibration file, plots and cards) are
-:mod:`imutool.calibrate`, the same route `imutool batch` and a Python user take.
+:mod:`imutool.calibrate`, the same routes `imutool batch 'calibrate mag'` (gyro, accel, deviation, show) and a Python
+user take; the defaults live there.
 """
 
 from __future__ import annotations
@@ -11,9 +12,27 @@ from typing import Any
 import click
 import numpy as np
 
-from formats.errors import ImutoolError
-from imutool.calibrate import REF_NAMES
-from imutool.cli.common import emit_summary, input_options, note_input, output_options, safe_outputs
+from imutool.calibrate import (
+    REF_NAMES,
+    CalibrationRun,
+    calibrate_accel,
+    calibrate_gyro,
+    calibrate_mag,
+    deviation_card,
+    rest_options,
+    show_calibration,
+)
+from imutool.cli.common import (
+    default_of,
+    emit_summary,
+    input_options,
+    note_input,
+    output_options,
+    route_of,
+    safe_outputs,
+    strict_requested,
+)
+from imutool.routes import OnInput, RouteResult
 
 
 @click.group("calibrate", epilog="Example: imutool calibrate mag sphere.csv -o cal.toml --plot cal.png")
@@ -24,6 +43,9 @@ def calibrate_group() -> None:
     provenance). Every command that reads sensor data applies it with --calibration cal.toml.
     Magnetometer model: m_true = A (m_meas − b), b hard iron (µT), A soft iron (symmetric).
     """
+
+
+MAG_OUTPUTS = ("output", "plot")
 
 
 # -- mag -------------------------------------------------------------------------------------------------------
@@ -37,14 +59,14 @@ def calibrate_group() -> None:
 @click.option(
     "--method",
     type=click.Choice(["sphere", "swing"]),
-    default="sphere",
+    default=default_of(calibrate_mag, "method"),
     show_default=True,
     help="sphere: full 3-D rotations (bench); swing: the vessel turns in heading only (2-D fit).",
 )
 @click.option(
     "--kind",
     type=click.Choice(["auto", "offset", "diag", "full"]),
-    default="auto",
+    default=default_of(calibrate_mag, "kind"),
     show_default=True,
     help="Sphere fit: offset = hard iron only; diag = + axis scale; full = + symmetric soft iron; auto "
     "= simplest within 5% of the best residual.",
@@ -65,7 +87,7 @@ def calibrate_group() -> None:
 @click.option(
     "--grid-bands",
     type=int,
-    default=8,
+    default=default_of(calibrate_mag, "grid_bands"),
     show_default=True,
     help="Equal-area coverage grid: bands in z (× twice as many longitude sectors).",
 )
@@ -78,7 +100,7 @@ def calibrate_group() -> None:
 @click.option(
     "--bz-prior",
     type=float,
-    default=0.0,
+    default=default_of(calibrate_mag, "bz_prior"),
     show_default=True,
     help="Swing: vertical hard iron (µT), unobservable in a swing.",
 )
@@ -88,52 +110,13 @@ def calibrate_group() -> None:
 @click.option("--sensor", default=None, help="Sensor id for the provenance (default: from the input metadata).")
 @input_options
 @output_options
-@safe_outputs("output", "plot", append="append")
-def mag_cmd(
-    input_path: str,
-    output: str,
-    method: str,
-    kind: str,
-    field_ut: float | None,
-    min_coverage: float | None,
-    grid_bands: int,
-    horizontal_field: float | None,
-    bz_prior: float,
-    a33_prior: float | None,
-    plot: str | None,
-    append: bool,
-    sensor: str | None,
-    with_files: tuple[str, ...],
-    as_json: bool,
-    quiet: bool,
-    **io: Any,
-) -> None:
+@safe_outputs(*MAG_OUTPUTS, append="append")
+def mag_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """Hard/soft-iron calibration of the magnetometer in INPUT."""
-    from imutool.calibrate import calibrate_mag
-
-    steps = _steps(quiet)
-    run = calibrate_mag(
-        input_path,
-        output,
-        method=method,
-        kind=kind,
-        field_ut=field_ut,
-        min_coverage=min_coverage,
-        grid_bands=grid_bands,
-        horizontal_field=horizontal_field,
-        bz_prior=bz_prior,
-        a33_prior=a33_prior,
-        plot=plot,
-        append=append,
-        sensor=sensor,
-        with_files=with_files,
-        on_input=note_input,
-        stage=steps.stage,
-        **io,
-    )
-    fit, summary = run.fit, run.summary
+    run = mag_route(quiet=quiet, on_input=note_input, **options)
+    fit, summary, method = run.fit, run.summary, options["method"]
     lines = [
-        f"mag calibration ({method}, kind {fit.kind}) → {output}",
+        f"mag calibration ({method}, kind {fit.kind}) → {options['output']}",
         f"  {fit.reason}",
         "  model  m_true = A (m_meas − b)",
         f"  b (µT) = {np.array2string(fit.b, precision=3)} ± {np.array2string(fit.b_std, precision=3)}",
@@ -145,8 +128,20 @@ def mag_cmd(
     if method == "swing":
         lines.append(f"  not observable in a swing: {summary['unobservable']}")
     lines += [f"  warning: {w}" for w in fit.warnings]
-    steps.close()
     emit_summary(summary, as_json, quiet, lines)
+
+
+def mag_route(
+    input_path: str, output: str, quiet: bool = True, on_input: OnInput | None = None, **options: Any
+) -> CalibrationRun:
+    """Parsed options → :func:`imutool.calibrate.calibrate_mag` (progress on stderr unless ``quiet``)."""
+    with _steps(quiet) as steps:
+        return calibrate_mag(
+            input_path, output, strict=strict_requested(), on_input=on_input, stage=steps.stage, **options
+        )
+
+
+mag_cmd = route_of(mag_route, MAG_OUTPUTS, append="append")(mag_cmd)
 
 
 # -- deviation -------------------------------------------------------------------------------------------------
@@ -180,7 +175,7 @@ def mag_cmd(
 @click.option(
     "--reference-kind",
     type=click.Choice(["auto", "true", "magnetic"]),
-    default="auto",
+    default=default_of(deviation_card, "reference_kind"),
     show_default=True,
     help="Whether the reference is true or magnetic heading (auto: magnetic for "
     "heading_mag / ref_heading_mag, else true).",
@@ -224,14 +219,14 @@ def mag_cmd(
 @click.option(
     "--max-deviation",
     type=float,
-    default=5.0,
+    default=default_of(deviation_card, "max_deviation"),
     show_default=True,
     help="Warn above this |deviation| (deg): compass to be adjusted (ISO 25862 as quoted: 5° in service).",
 )
 @click.option(
     "--time-offset",
     type=float,
-    default=0.0,
+    default=default_of(deviation_card, "time_offset"),
     show_default=True,
     help="Seconds added to the reference times to align them with INPUT.",
 )
@@ -244,21 +239,21 @@ def mag_cmd(
 @click.option(
     "--min-speed",
     type=float,
-    default=2.0,
+    default=default_of(deviation_card, "min_speed"),
     show_default=True,
     help="With a GNSS course-over-ground reference and a 'sog' column (kn): use rows at or above this.",
 )
 @click.option(
     "--min-span",
     type=float,
-    default=270.0,
+    default=default_of(deviation_card, "min_span"),
     show_default=True,
     help="Refuse if the compass headings cover less of the circle (deg). Whatever it says, headings "
     "that cannot separate the A–E harmonics are refused.",
 )
 @click.option(
     "--append/--new",
-    default=True,
+    default=default_of(deviation_card, "append"),
     show_default=True,
     help="Merge [deviation] into an existing .toml (or write a new one).",
 )
@@ -266,33 +261,7 @@ def mag_cmd(
 @input_options
 @output_options
 @safe_outputs("outputs", append="append")
-def deviation_cmd(
-    input_path: str,
-    outputs: tuple[str, ...],
-    reference: str | None,
-    reference_column: str | None,
-    reference_kind: str,
-    variation: float | None,
-    position: str | None,
-    date_opt: str | None,
-    vessel: str | None,
-    compass_name: str | None,
-    place: str | None,
-    conditions: str | None,
-    adjuster: str | None,
-    card_info: str | None,
-    max_deviation: float,
-    time_offset: float,
-    heading_column: str | None,
-    min_speed: float,
-    min_span: float,
-    append: bool,
-    sensor: str | None,
-    with_files: tuple[str, ...],
-    as_json: bool,
-    quiet: bool,
-    **io: Any,
-) -> None:
+def deviation_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ from compass vs reference headings.
 
     The card: header (vessel, compass, place, date, latitude, variation, reference, conditions), coefficients
@@ -300,36 +269,8 @@ def deviation_cmd(
     residuals per heading, warnings, adjuster's signature line.
     """
     from calibration.deviation import ew
-    from imutool.calibrate import deviation_card
 
-    steps = _steps(quiet)
-    run = deviation_card(
-        input_path,
-        outputs,
-        reference=reference,
-        reference_column=reference_column,
-        reference_kind=reference_kind,
-        variation=variation,
-        position=position,
-        date=date_opt,
-        vessel=vessel,
-        compass=compass_name,
-        place=place,
-        conditions=conditions,
-        adjuster=adjuster,
-        info=card_info,
-        max_deviation=max_deviation,
-        time_offset=time_offset,
-        heading_column=heading_column,
-        min_speed=min_speed,
-        min_span=min_span,
-        append=append,
-        sensor=sensor,
-        with_files=with_files,
-        on_input=note_input,
-        stage=steps.stage,
-        **io,
-    )
+    run = deviation_route(quiet=quiet, on_input=note_input, **options)
     card, summary, d = run.fit, run.summary, run.details
     src, rsrc, rname, kind = d["compass_source"], d["reference_source"], d["reference_column"], d["reference_kind"]
     variation, var_src = d["variation"], d["variation_source"]
@@ -353,11 +294,38 @@ def deviation_cmd(
         tm = card.table_magnetic(15.0)
         for i in range(0, len(tm), 6):
             lines.append("   " + "  ".join(f"{m:03.0f}°→{p:05.1f}°" for m, _, p in tm[i : i + 6]))
-    lines.append(f"  written: {', '.join(outputs)}")
+    lines.append(f"  written: {', '.join(options['outputs'])}")
     for w in card.warnings:
         click.echo(f"warning: {w}", err=True)
-    steps.close()
     emit_summary(summary, as_json, quiet, lines)
+
+
+def deviation_route(
+    input_path: str,
+    outputs: tuple[str, ...],
+    date_opt: str | None = None,
+    compass_name: str | None = None,
+    card_info: str | None = None,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> CalibrationRun:
+    """Parsed options → :func:`imutool.calibrate.deviation_card` (progress on stderr unless ``quiet``)."""
+    with _steps(quiet) as steps:
+        return deviation_card(
+            input_path,
+            outputs,
+            date=date_opt,
+            compass=compass_name,
+            info=card_info,
+            strict=strict_requested(),
+            on_input=on_input,
+            stage=steps.stage,
+            **options,
+        )
+
+
+deviation_cmd = route_of(deviation_route, ("outputs",), append="append")(deviation_cmd)
 
 
 def _steps(quiet: bool):
@@ -374,7 +342,7 @@ def _rest_options(f):
             "--window",
             "window_s",
             type=float,
-            default=1.0,
+            default=default_of(rest_options, "window_s"),
             show_default=True,
             help="Rest detection: moving-std window (s).",
         ),
@@ -382,14 +350,14 @@ def _rest_options(f):
             "--gyro-std",
             "gyro_std_deg",
             type=float,
-            default=0.5,
+            default=default_of(rest_options, "gyro_std_deg"),
             show_default=True,
             help="Rest detection: gyro moving std below this (deg/s).",
         ),
         click.option(
             "--accel-std",
             type=float,
-            default=0.1,
+            default=default_of(rest_options, "accel_std"),
             show_default=True,
             help="Rest detection: accel moving std below this (m/s²).",
         ),
@@ -397,7 +365,7 @@ def _rest_options(f):
             "--min-rest",
             "min_rest_s",
             type=float,
-            default=2.0,
+            default=default_of(rest_options, "min_rest_s"),
             show_default=True,
             help="Rest detection: shortest rest interval kept (s).",
         ),
@@ -420,7 +388,7 @@ def _rest_options(f):
 @click.option(
     "--min-temp-range",
     type=float,
-    default=1.0,
+    default=default_of(calibrate_gyro, "min_temp_range"),
     show_default=True,
     help="Fit a temperature slope only if the rest samples span this many °C.",
 )
@@ -430,42 +398,12 @@ def _rest_options(f):
 @input_options
 @output_options
 @safe_outputs("output", append="append")
-def gyro_cmd(
-    input_path: str,
-    output: str,
-    turns_deg: float | None,
-    min_temp_range: float,
-    window_s: float,
-    gyro_std_deg: float,
-    accel_std: float,
-    min_rest_s: float,
-    append: bool,
-    sensor: str | None,
-    with_files: tuple[str, ...],
-    as_json: bool,
-    quiet: bool,
-    **io: Any,
-) -> None:
+def gyro_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """Gyro bias over automatically detected rest intervals (+ temperature slope, + scale from known turns)."""
-    from imutool.calibrate import calibrate_gyro, rest_options
-
-    steps = _steps(quiet)
-    run = calibrate_gyro(
-        input_path,
-        output,
-        turns_deg=turns_deg,
-        min_temp_range=min_temp_range,
-        rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
-        append=append,
-        sensor=sensor,
-        with_files=with_files,
-        on_input=note_input,
-        stage=steps.stage,
-        **io,
-    )
+    run = gyro_route(quiet=quiet, on_input=note_input, **options)
     cal, summary = run.fit, run.summary
     lines = [
-        f"gyro calibration → {output}",
+        f"gyro calibration → {options['output']}",
         f"  rest: {cal.n_rest} intervals, {cal.rest_s:.1f} s",
         f"  bias (deg/s) = {np.array2string(np.degrees(cal.bias), precision=4)}",
     ]
@@ -478,8 +416,34 @@ def gyro_cmd(
         lines.append(f"  {cal.quality['temp_note']}")
     if cal.scale is not None:
         lines.append("  S = " + np.array2string(cal.scale, precision=5).replace("\n", "\n      "))
-    steps.close()
     emit_summary(summary, as_json, quiet, lines)
+
+
+def gyro_route(
+    input_path: str,
+    output: str,
+    window_s: float,
+    gyro_std_deg: float,
+    accel_std: float,
+    min_rest_s: float,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> CalibrationRun:
+    """Parsed options → :func:`imutool.calibrate.calibrate_gyro` (progress on stderr unless ``quiet``)."""
+    with _steps(quiet) as steps:
+        return calibrate_gyro(
+            input_path,
+            output,
+            rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
+            strict=strict_requested(),
+            on_input=on_input,
+            stage=steps.stage,
+            **options,
+        )
+
+
+gyro_cmd = route_of(gyro_route, ("output",), append="append")(gyro_cmd)
 
 
 # -- accel -----------------------------------------------------------------------------------------------------
@@ -491,7 +455,7 @@ def gyro_cmd(
 @click.option(
     "--kind",
     type=click.Choice(["auto", "offset", "diag", "full"]),
-    default="auto",
+    default=default_of(calibrate_accel, "kind"),
     show_default=True,
     help="offset: bias; diag: + scale; full: + misalignment (≥ 9 poses); auto by pose count.",
 )
@@ -502,57 +466,33 @@ def gyro_cmd(
     default=None,
     help="Latitude (deg) for WGS-84 normal gravity; default: standard gravity 9.80665.",
 )
-@click.option("--height", type=float, default=0.0, show_default=True, help="Height (m) for the gravity formula.")
-@click.option("--min-poses", type=int, default=6, show_default=True, help="Fewest distinct static poses accepted.")
+@click.option(
+    "--height",
+    type=float,
+    default=default_of(calibrate_accel, "height"),
+    show_default=True,
+    help="Height (m) for the gravity formula.",
+)
+@click.option(
+    "--min-poses",
+    type=int,
+    default=default_of(calibrate_accel, "min_poses"),
+    show_default=True,
+    help="Fewest distinct static poses accepted.",
+)
 @_rest_options
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
 @input_options
 @output_options
 @safe_outputs("output", append="append")
-def accel_cmd(
-    input_path: str,
-    output: str,
-    kind: str,
-    gravity: float | None,
-    latitude: float | None,
-    height: float,
-    min_poses: int,
-    window_s: float,
-    gyro_std_deg: float,
-    accel_std: float,
-    min_rest_s: float,
-    append: bool,
-    sensor: str | None,
-    with_files: tuple[str, ...],
-    as_json: bool,
-    quiet: bool,
-    **io: Any,
-) -> None:
+def accel_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """Accelerometer bias, scale and misalignment from six or more static poses (detected automatically)."""
-    from imutool.calibrate import calibrate_accel, rest_options
-
-    steps = _steps(quiet)
-    run = calibrate_accel(
-        input_path,
-        output,
-        kind=kind,
-        gravity=gravity,
-        latitude=latitude,
-        height=height,
-        min_poses=min_poses,
-        rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
-        append=append,
-        sensor=sensor,
-        with_files=with_files,
-        on_input=note_input,
-        stage=steps.stage,
-        **io,
-    )
+    run = accel_route(quiet=quiet, on_input=note_input, **options)
     cal, summary = run.fit, run.summary
     gravity = summary["gravity_m_s2"]
     lines = [
-        f"accel calibration ({cal.kind}, {cal.quality['poses']} poses, g = {gravity:.5f} m/s²) → {output}",
+        f"accel calibration ({cal.kind}, {cal.quality['poses']} poses, g = {gravity:.5f} m/s²) → {options['output']}",
         "  model f = T (f_meas − b)",
         f"  b (m/s²) = {np.array2string(cal.bias, precision=4)} ± {np.array2string(cal.bias_std, precision=4)}",
         "  T = " + np.array2string(cal.T, precision=5).replace("\n", "\n      "),
@@ -560,8 +500,34 @@ def accel_cmd(
     ]
     if "note" in cal.quality:
         lines.append(f"  note: {cal.quality['note']}")
-    steps.close()
     emit_summary(summary, as_json, quiet, lines)
+
+
+def accel_route(
+    input_path: str,
+    output: str,
+    window_s: float,
+    gyro_std_deg: float,
+    accel_std: float,
+    min_rest_s: float,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> CalibrationRun:
+    """Parsed options → :func:`imutool.calibrate.calibrate_accel` (progress on stderr unless ``quiet``)."""
+    with _steps(quiet) as steps:
+        return calibrate_accel(
+            input_path,
+            output,
+            rest=rest_options(window_s, gyro_std_deg, accel_std, min_rest_s),
+            strict=strict_requested(),
+            on_input=on_input,
+            stage=steps.stage,
+            **options,
+        )
+
+
+accel_cmd = route_of(accel_route, ("output",), append="append")(accel_cmd)
 
 
 # -- show ------------------------------------------------------------------------------------------------------
@@ -571,7 +537,7 @@ def accel_cmd(
     "--as",
     "form",
     type=click.Choice(["text", "c", "fusion", "matlab", "python", "json", "magneto"]),
-    default="text",
+    default=default_of(show_calibration, "form"),
     show_default=True,
     help="text: the file and the deviation card; c (= fusion): x-io Fusion C; matlab: magcal A, b, "
     "expmfs; python: numpy; json: every section; magneto: Magneto's printout. Code forms paste and "
@@ -579,37 +545,12 @@ def accel_cmd(
 )
 def show_cmd(path: str, form: str) -> None:
     """Print a calibration file, or paste-ready code: C (x-io Fusion), MATLAB, Python/numpy, JSON, Magneto."""
-    from calibration.crosswalk import render
-    from calibration.deviation import card_text
-    from calibration.file import load_calibration
+    click.echo(show_route(path, form).summary["text"], nl=False)
 
-    cal = load_calibration(path)
-    if form == "magneto":
-        from calibration.magnetometer import crosswalk
 
-        mg = cal.mag()
-        if mg is None:
-            raise ImutoolError("no [mag] section to convert", path=path)
-        click.echo(crosswalk(mg[0], mg[1], form), nl=False)
-        return
-    if form != "text":
-        click.echo(render(cal, form), nl=False)
-        return
-    click.echo(f"calibration file {path}: sections {', '.join(cal.sections)}")
-    for name, sec in cal.sections.items():
-        prov = sec.get("provenance", {})
-        click.echo(f"[{name}] {sec.get('model', '')}")
-        for k, v in sec.items():
-            if k in ("provenance", "model", "card_15deg", "magnetic_to_compass_15deg", "header", "warnings"):
-                continue
-            click.echo(f"  {k} = {v}")
-        if prov:
-            click.echo(
-                f"  provenance: {prov.get('method', '')}; {prov.get('input', '')} "
-                f"sha256 {str(prov.get('input_sha256', ''))[:12]}…; {prov.get('date_utc', '')}; "
-                f"sensor {prov.get('sensor', '') or '?'}"
-            )
-    dev = cal.deviation
-    if dev is not None:
-        click.echo("")
-        click.echo(card_text(dev))
+def show_route(path: str, form: str = "text") -> RouteResult:
+    """Parsed options → :func:`imutool.calibrate.show_calibration`; the text is the summary's ``text``."""
+    return RouteResult({"input": path, "form": form, "text": show_calibration(path, form)})
+
+
+show_cmd = route_of(show_route, ())(show_cmd)

@@ -2,7 +2,8 @@
 
 Bags are converted REP-103 FLU/ENU ↔ FRD/NED at the boundary (formats.bags). CSV/Parquet → CSV/Parquet streams in
 chunks (bounded memory). The summary says rows in/out, channels, frame conversions applied and any channel the output
-format cannot carry. Options and printing only; the conversion is :func:`imutool.convert.convert`.
+format cannot carry. Options and printing only; the conversion is :func:`imutool.convert.run_convert`, the route
+`imutool batch convert` and a Python user take.
 """
 
 from __future__ import annotations
@@ -12,15 +13,57 @@ from typing import Any
 import click
 
 from imutool.cli.common import (
+    default_of,
     emit_summary,
     input_options,
     lazy_bar,
     note_input,
     output_options,
+    route_of,
     safe_outputs,
     strict_requested,
 )
+from imutool.convert import run_convert, streams
 from imutool.progress import stages
+from imutool.routes import OnInput, RouteResult
+
+OUTPUTS = ("output_arg", "output")
+
+
+def convert_route(
+    input_path: str,
+    output_arg: str | None,
+    output: str | None,
+    no_stream: bool = False,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> RouteResult:
+    """Parsed options → :func:`imutool.convert.run_convert` (a progress bar on stderr unless ``quiet``)."""
+    out = output or output_arg
+    if not out:
+        raise click.UsageError("give the output as OUT or -o OUTPUT")
+    if output and output_arg:
+        raise click.UsageError("give the output once (OUT or -o)")
+    dup, back = options.get("duplicates", "drop"), options.get("backwards", "error")
+    merging = bool(options.get("with_files"))
+    if streams(input_path, out, stream=not no_stream, duplicates=dup, backwards=back, merging=merging):
+        bar: Any = lazy_bar("converting", unit="rows", quiet=quiet)
+        stage = None
+    else:
+        bar = stages("convert", ["reading", "writing"], quiet)
+        stage = bar.stage
+    with bar:
+        return run_convert(
+            input_path,
+            out,
+            stream=not no_stream,
+            progress=None if stage else bar,
+            stage=stage,
+            strict=strict_requested(),
+            on_input=on_input,
+            **options,
+        )
 
 
 @click.command(
@@ -34,16 +77,21 @@ from imutool.progress import stages
 @input_options
 @click.option(
     "--sentences",
-    default="HDT,XDR",
+    default=default_of(run_convert, "sentences"),
     show_default=True,
     help="NMEA output: sentence types, comma-separated (HDT, HDG, THS, ROT, XDR, PASHR, HRM...).",
 )
 @click.option("--nmea-rate", type=float, default=None, help="NMEA output: sentence rate in Hz (default: input).")
 @click.option("--talker", default=None, help="NMEA output: talker ID (default per sentence).")
-@click.option("--imu-topic", default="/imu/data", show_default=True, help="Bag output: sensor_msgs/Imu topic.")
+@click.option(
+    "--imu-topic",
+    default=default_of(run_convert, "imu_topic"),
+    show_default=True,
+    help="Bag output: sensor_msgs/Imu topic.",
+)
 @click.option(
     "--mag-topic",
-    default="/imu/mag",
+    default=default_of(run_convert, "mag_topic"),
     show_default=True,
     help="Bag output: sensor_msgs/MagneticField topic (written when the input has mag).",
 )
@@ -57,20 +105,20 @@ from imutool.progress import stages
 @click.option(
     "--compression",
     type=click.Choice(["none", "bz2", "lz4"]),
-    default="none",
+    default=default_of(run_convert, "compression"),
     show_default=True,
     help="ROS1 output chunk compression.",
 )
 @click.option(
     "--vector3-mag-unit",
-    default="T",
+    default=default_of(run_convert, "vector3_mag_unit"),
     show_default=True,
     help="Bag input: unit of a geometry_msgs/Vector3Stamped magnetometer topic.",
 )
 @click.option(
     "--chunk-rows",
     type=int,
-    default=500_000,
+    default=default_of(run_convert, "chunk_rows"),
     show_default=True,
     help="CSV/Parquet → CSV/Parquet: rows per streamed chunk (bounds memory).",
 )
@@ -78,67 +126,16 @@ from imutool.progress import stages
     "--no-stream", is_flag=True, help="CSV/Parquet → CSV/Parquet: read the whole file (allows --backwards sort)."
 )
 @output_options
-@safe_outputs("output_arg", "output")
+@safe_outputs(*OUTPUTS)
 def convert_cmd(
-    input_path: str,
-    output_arg: str | None,
-    output: str | None,
-    duplicates: str,
-    backwards: str,
-    sentences: str,
-    nmea_rate: float | None,
-    talker: str | None,
-    imu_topic: str,
-    mag_topic: str,
-    frame_id: str | None,
-    storage: str | None,
-    compression: str,
-    vector3_mag_unit: str,
-    chunk_rows: int,
-    no_stream: bool,
-    as_json: bool,
-    quiet: bool,
-    **io: Any,
+    input_path: str, output_arg: str | None, output: str | None, as_json: bool, quiet: bool, **options: Any
 ) -> None:
     """Convert IN to OUT: .csv, .parquet, .bag (ROS1), .db3/.mcap or a folder (ROS2), .nmea/.log (NMEA 0183)."""
-    out = output or output_arg
-    if not out:
-        raise click.UsageError("give the output as OUT or -o OUTPUT")
-    if output and output_arg:
-        raise click.UsageError("give the output once (OUT or -o)")
-    from imutool.convert import convert, streams
+    res = convert_route(input_path, output_arg, output, quiet=quiet, on_input=note_input, **options)
+    emit_summary(res.summary, as_json, quiet, lines=_lines(res.summary))
 
-    merging = bool(io.get("with_files"))
-    if streams(input_path, out, stream=not no_stream, duplicates=duplicates, backwards=backwards, merging=merging):
-        bar = lazy_bar("converting", unit="rows", quiet=quiet)
-        stage = None
-    else:
-        bar = stages("convert", ["reading", "writing"], quiet)
-        stage = bar.stage
-    with bar:
-        summary = convert(
-            input_path,
-            out,
-            stream=not no_stream,
-            chunk_rows=chunk_rows,
-            sentences=sentences,
-            nmea_rate=nmea_rate,
-            talker=talker,
-            imu_topic=imu_topic,
-            mag_topic=mag_topic,
-            frame_id=frame_id,
-            storage=storage,
-            compression=compression,
-            vector3_mag_unit=vector3_mag_unit,
-            progress=None if stage else bar,
-            stage=stage,
-            strict=strict_requested(),
-            on_input=note_input,
-            duplicates=duplicates,
-            backwards=backwards,
-            **io,
-        )
-    emit_summary(summary, as_json, quiet, lines=_lines(summary))
+
+convert_cmd = route_of(convert_route, OUTPUTS)(convert_cmd)
 
 
 def _lines(s: dict[str, Any]) -> list[str]:

@@ -1,7 +1,8 @@
 """`imutool events detect INPUT -o events.json` and `imutool events fleet RESULTS... -o fleet.csv --plot fleet.png`.
 
 Thin click layer over :mod:`imutool.events` (heavy-roll events, hourly MSC.363(92) statistics, parametric roll):
-`detect` calls :func:`imutool.events.run_events`, the route `imutool batch 'events detect'` and a Python user take.
+`detect` calls :func:`imutool.events.run_events` and `fleet` :func:`imutool.events.run_fleet`, the routes `imutool
+batch` and a Python user take.
 """
 
 from __future__ import annotations
@@ -10,12 +11,12 @@ from typing import Any
 
 import click
 
-from formats.errors import ImutoolError
 from imutool import events as _events
 from imutool.cli.common import emit_summary, route_of, safe_outputs
 from imutool.routes import RouteResult
 
 D = _events.DEFAULTS
+FLEET_OUTPUTS = ("output", "voyages_path", "plot_path")
 
 
 @click.group(
@@ -165,32 +166,16 @@ detect_cmd = route_of(detect_route, ("output", "events_csv", "hourly_csv"))(dete
 @click.option("--plot", "plot_path", default=None, type=click.Path(), help="Plot (.png/.pdf/.svg).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
-@safe_outputs("output", "voyages_path", "plot_path")
+@safe_outputs(*FLEET_OUTPUTS)
 def fleet_cmd(
     inputs: tuple[str, ...], output: str, voyages_path: str | None, plot_path: str | None, as_json: bool, quiet: bool
 ) -> None:
     """One table across many `events detect` results (JSON files, folders or globs): events per ship/voyage."""
-    from imutool.batch import expand_inputs
-
-    paths = [p for p, _ in expand_inputs(inputs, ("*.json",))]
-    if not paths:
-        raise ImutoolError("no events results given")
-    rows, voyages = _events.fleet_table(_events.load_results(paths))
-    _events.write_fleet(rows, output)
-    if voyages_path:
-        _events.write_table(voyages, voyages_path)
-    if plot_path:
-        _events.fleet_plot(rows, voyages, plot_path)
-    summary = {
-        "results": len(paths),
-        "events": len(rows),
-        "ships": len({v["ship"] for v in voyages}),
-        "voyages": len(voyages),
-        "parametric_roll_episodes": sum(r["type"] == "parametric_roll" for r in rows),
-        "output": output,
-    }
+    res = fleet_route(inputs, output, voyages_path, plot_path)
+    summary, voyages = res.summary, res.data["voyages"]
     lines = [
-        f"{len(paths)} recordings, {summary['ships']} ships, {len(voyages)} voyages, {len(rows)} events "
+        f"{summary['results']} recordings, {summary['ships']} ships, {len(voyages)} voyages, "
+        f"{summary['events']} events "
         f"({summary['parametric_roll_episodes']} parametric roll) → {output}"
     ]
     for v in voyages:
@@ -200,3 +185,13 @@ def fleet_cmd(
             f"{v['heavy_roll_events']}  parametric {v['parametric_roll_episodes']}"
         )
     emit_summary(summary, as_json, quiet, lines=lines)
+
+
+def fleet_route(
+    inputs: tuple[str, ...], output: str, voyages_path: str | None, plot_path: str | None, quiet: bool = True
+) -> RouteResult:
+    """Parsed options → :func:`imutool.events.run_fleet`."""
+    return _events.run_fleet(inputs, output, voyages_path=voyages_path, plot_path=plot_path)
+
+
+fleet_cmd = route_of(fleet_route, FLEET_OUTPUTS)(fleet_cmd)

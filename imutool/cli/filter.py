@@ -91,14 +91,22 @@ from imutool.routes import OnInput, RouteResult
     "centripetal accelerations ω̇×r + ω×(ω×r) are removed before the accelerometer update.",
 )
 @click.option(
+    "--antenna-arm",
+    default=None,
+    metavar="X,Y,Z",
+    help="EKF: the GNSS antenna's position relative to the centre of rotation, m, body FRD, when its velocity "
+    "(sog/cog or vel_n/vel_e) is the antenna's own; default: the receiver gives the centre's velocity.",
+)
+@click.option(
     "--gnss",
     "gnss_path",
     type=click.Path(exists=True, dir_okay=False),
     default=None,
-    help="EKF: NMEA or CSV file with sog (m/s) and cog (deg) for centripetal compensation "
-    "(sog/cog columns of INPUT are used automatically).",
+    help="EKF: NMEA or CSV file with sog (m/s) and cog (deg): velocity aiding (the velocity's change between "
+    "fixes removes turn, surge and sway from the accelerometer). sog/cog or vel_n/vel_e (m/s) columns of INPUT "
+    "are used automatically.",
 )
-@click.option("--no-gnss", is_flag=True, help="EKF: ignore sog/cog even when present.")
+@click.option("--no-gnss", is_flag=True, help="EKF: ignore sog/cog and vel_n/vel_e even when present.")
 @click.option(
     "--heading",
     "heading_path",
@@ -170,6 +178,7 @@ def filter_route(
     mag_mode: str | None,
     smooth: bool,
     lever_arm: str | None,
+    antenna_arm: str | None,
     gnss_path: str | None,
     no_gnss: bool,
     heading_path: str | None,
@@ -200,6 +209,9 @@ def filter_route(
     lever = parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None
     if lever is not None and not np.all(np.isfinite(lever)):
         raise ImutoolError(f"--lever-arm {lever_arm!r}: expected three finite numbers (m)")
+    antenna = parse_vector(antenna_arm, 3, "--antenna-arm") if antenna_arm else None
+    if antenna is not None and not np.all(np.isfinite(antenna)):
+        raise ImutoolError(f"--antenna-arm {antenna_arm!r}: expected three finite numbers (m)")
     if save_params:
         with atomic_path(save_params) as tmp:
             tmp.write_text(params.to_toml(), encoding="utf-8")
@@ -217,6 +229,7 @@ def filter_route(
         params=params,
         smooth=smooth,
         lever_arm=lever,
+        antenna_arm=antenna,
         gnss=gnss_path if gnss_path and not no_gnss else None,
         use_gnss=not no_gnss,
         heading=heading_path,

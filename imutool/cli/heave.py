@@ -21,7 +21,7 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.heave import ATTITUDES, METHODS, estimate_heave, run_heave
+from imutool.heave import ATTITUDES, ROUTE_METHODS, estimate_heave, run_heave
 from imutool.progress import stages
 from imutool.routes import OnInput
 
@@ -34,6 +34,7 @@ def heave_route(
     vertical: str | None,
     lever_arm: str | None,
     nmea_path: str | None,
+    gnss_lever_arm: str | None = None,
     quiet: bool = True,
     on_input: OnInput | None = None,
     **options: Any,
@@ -45,6 +46,7 @@ def heave_route(
             output,
             vertical=[c.strip() for c in vertical.split(",")] if vertical else None,
             lever_arm=parse_vector(lever_arm, 3, "--lever-arm") if lever_arm else None,
+            gnss_lever_arm=parse_vector(gnss_lever_arm, 3, "--gnss-lever-arm") if gnss_lever_arm else None,
             nmea=nmea_path,
             strict=strict_requested(),
             on_input=on_input,
@@ -58,12 +60,40 @@ def heave_route(
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output (.csv, ...): heave m positive UP.")
 @click.option(
     "--method",
-    type=click.Choice(METHODS),
+    type=click.Choice(ROUTE_METHODS),
     default=default_of(run_heave, "method"),
     show_default=True,
     help="realtime: phase-corrected double-integrator bank (harmonic KF on line spectra); harmonic: KF "
     "observer with per-harmonic phase cancellation; paper: the heave paper's KF multi-step observer; "
-    "bandpass: causal HPₙ/s² baseline; envelope: the 'traditional' envelope detrend (offline).",
+    "bandpass: causal HPₙ/s² baseline; envelope: the 'traditional' envelope detrend (offline); gnss: the "
+    "detrended gnss_height of an RTK receiver (offline; taken whenever INPUT has no accelerometer).",
+)
+@click.option(
+    "--height-window",
+    "height_window_s",
+    type=float,
+    default=None,
+    help="GNSS height heave: centred detrend window (s) [default 10 × the dominant period, 60–600 s].",
+)
+@click.option(
+    "--gnss-fix",
+    type=click.Choice(["rtk", "fixed", "any"]),
+    default=default_of(run_heave, "gnss_fix"),
+    show_default=True,
+    help="GNSS heights used: rtk = GGA quality 4 (fixed) and 5 (float); fixed = 4 only; any = every fix.",
+)
+@click.option(
+    "--gnss-lever-arm",
+    default=None,
+    metavar="X,Y,Z",
+    help="Monitoring point relative to the GNSS antenna, m body FRD (antenna 12 m above it: 0,0,12); "
+    "applied with INPUT's roll/pitch.",
+)
+@click.option(
+    "--gnss-reference/--no-gnss-reference",
+    default=default_of(run_heave, "gnss_reference"),
+    show_default=True,
+    help="With an accelerometer and a gnss_height channel: the height heave as ref_heave, compared in the summary.",
 )
 @click.option("--harmonics", type=int, default=None, help="Oscillators in the KF model [default 3 paper, 5 realtime].")
 @click.option(

@@ -1,112 +1,24 @@
-"""`imutool info FILE`: what a recording holds — duration, rate, time-base problems, channels, units, ranges."""
+"""`imutool info FILE`: what a recording holds — duration, rate, time-base problems, channels, units, ranges.
+
+Only option parsing and printing here; the work is :func:`imutool.info.run_info`, the route `imutool batch info` and
+a Python user take.
+"""
 
 from __future__ import annotations
 
-import math
-import os
 from typing import Any
 
 import click
-import numpy as np
 
-import formats
-from formats import Recording
-from formats.errors import ImutoolError
-from formats.nmea import sentence_summary
-from imutool.cli.common import emit_summary, input_options, load_input
-
-# units shown in degrees (DESIGN: degrees at every user-facing surface); the file keeps what its header says
-_DEG_UNITS = {"rad/s": "deg/s", "rad": "deg", "rad/s^2": "deg/s^2"}
-
-_HIDDEN_META = {"validation", "column_mapping", "column_mapping_origin", "skipped_rows", "skipped_rows_first"}
+from formats.timing import describe
+from imutool.cli.common import emit_summary, input_options, note_input, route_of, strict_requested
+from imutool.info import run_info
+from imutool.routes import OnInput, RouteResult
 
 
-def _num(v: float) -> float | None:
-    v = float(v)
-    return v if math.isfinite(v) else None
-
-
-def _channel_stats(rec: Recording) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for name, a in rec.channels.items():
-        a2 = a.reshape(len(a), -1).astype(float)
-        unit = rec.units.get(name)
-        if unit in _DEG_UNITS:
-            a2 = np.degrees(a2)
-        with np.errstate(all="ignore"):
-            ok = ~np.isnan(a2)
-            any_ok = ok.any(axis=0)
-            mn = np.where(any_ok, np.nanmin(np.where(ok, a2, np.inf), axis=0), np.nan) if len(a2) else []
-            mx = np.where(any_ok, np.nanmax(np.where(ok, a2, -np.inf), axis=0), np.nan) if len(a2) else []
-            mean = np.where(any_ok, np.nansum(a2, axis=0) / np.maximum(ok.sum(axis=0), 1), np.nan) if len(a2) else []
-        out[name] = {
-            "unit": _DEG_UNITS.get(unit, unit),
-            "columns": list(rec.columns.get(name, [name])),
-            "min": [_num(v) for v in mn],
-            "max": [_num(v) for v in mx],
-            "mean": [_num(v) for v in mean],
-        }
-        if unit in _DEG_UNITS:
-            out[name]["unit_in_file"] = unit
-    return out
-
-
-def summarize(path: str, rec_raw: Recording, duplicates: str = "drop", backwards: str = "error") -> dict[str, Any]:
-    """The summary dict of ``imutool info`` for a recording read from ``path`` (not yet validated)."""
-    t = rec_raw.time
-    steps = np.diff(t) if len(t) > 1 else np.empty(0)
-    n_back = int(np.count_nonzero(steps < 0))
-    notes = []
-    policy = backwards
-    if n_back and backwards == "error":
-        policy = "sort"
-        notes.append(
-            f"time goes backwards {n_back} times: other commands refuse this file unless given "
-            "--backwards sort|drop (summarised here after sorting)"
-        )
-    rec, rep = rec_raw.validated(duplicates=duplicates, backwards=policy, source=path)
-    pos = np.diff(rec.time) if len(rec) > 1 else np.empty(0)
-    gaps = rep.gaps
-    summary: dict[str, Any] = {
-        "file": os.fspath(path),
-        "format": formats.kind_of(path),
-        "rows": len(rec_raw),
-        "rows_after_validation": len(rec),
-        "start_s": _num(rec.time[0]) if len(rec) else None,
-        "end_s": _num(rec.time[-1]) if len(rec) else None,
-        "duration_s": _num(rec.duration),
-        "rate_hz": _num(rec.rate_hz),
-        "step_s": {
-            "median": _num(np.median(pos)) if pos.size else None,
-            "min": _num(pos.min()) if pos.size else None,
-            "max": _num(pos.max()) if pos.size else None,
-        },
-        "gaps": {
-            "count": len(gaps),
-            "missing_s": _num(sum(g[1] for g in gaps) - len(gaps) * rep.median_dt) if gaps else 0.0,
-            "first": [{"start_s": a, "length_s": b} for a, b in gaps[:10]],
-        },
-        "duplicate_timestamps": rep.duplicates,
-        "duplicate_timestamps_with_different_data": rep.duplicates_conflicting,
-        "backwards_steps": n_back,
-        "rows_with_nan": rep.nan_rows,
-        "nan_by_channel": dict(rep.nan_by_channel),
-        "skipped_rows": int(rec_raw.meta.get("skipped_rows", 0)),
-        "skipped_rows_first": list(rec_raw.meta.get("skipped_rows_first", [])),
-        "channels": _channel_stats(rec),
-        "metadata": {k: v for k, v in rec_raw.meta.items() if k not in _HIDDEN_META},
-        "column_mapping": None,
-        "validation_actions": list(rep.actions) + notes,
-    }
-    if rec_raw.meta.get("sentences"):  # an NMEA log: every sentence named and counted, read or not
-        summary["nmea_sentences"] = sentence_summary(rec_raw.meta)
-    cm = rec_raw.meta.get("column_mapping")
-    if cm:
-        summary["column_mapping"] = {
-            "origin": rec_raw.meta.get("column_mapping_origin", "inferred"),
-            "columns": [s.strip() for s in str(cm).split(";") if s.strip()],
-        }
-    return summary
+def info_route(path: str, quiet: bool = True, on_input: OnInput | None = None, **options: Any) -> RouteResult:
+    """Parsed options → :func:`imutool.info.run_info`."""
+    return run_info(path, strict=strict_requested(), on_input=on_input, **options)
 
 
 def _fmt(v: Any) -> str:
@@ -126,21 +38,41 @@ def _fmt_t(v: Any) -> str:
 
 def _lines(s: dict[str, Any]) -> list[str]:
     st = s["step_s"]
+    sentence_timing = s.get("sentence_timing") or {}
+    multi = len(sentence_timing) > 1
+    rate = f"rate:      {_fmt(s['rate_hz'])} Hz"
+    if s.get("bursts"):
+        b = s["bursts"]
+        rate += f" in bursts of {_fmt(b['samples'])} every {_fmt(b['period_s'])} s"
+    rate += f" (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, max {_fmt(st['max'])} s)"
+    gaps = f"gaps:      {s['gaps']['count']}" + (
+        f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
+        f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
+        f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
+        if s["gaps"]["count"]
+        else ""
+    )
+    if multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
+        rate = f"rate:      per sentence type ({len(sentence_timing)} types, rows merged; each on its own times):"
+        gaps = ""
     out = [
         f"file:      {s['file']} ({s['format']})",
         f"rows:      {s['rows']}"
         + (f" ({s['rows_after_validation']} after validation)" if s["rows_after_validation"] != s["rows"] else ""),
         f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
-        f"rate:      {_fmt(s['rate_hz'])} Hz (step median {_fmt(st['median'])} s, min {_fmt(st['min'])} s, "
-        f"max {_fmt(st['max'])} s)",
-        f"gaps:      {s['gaps']['count']}"
-        + (
-            f" (≈{_fmt(s['gaps']['missing_s'])} s missing; first at "
-            f"{_fmt_t(s['gaps']['first'][0]['start_s'])} s, "
-            f"{_fmt(s['gaps']['first'][0]['length_s'])} s long)"
-            if s["gaps"]["count"]
-            else ""
-        ),
+        rate,
+    ]
+    if multi:
+        out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
+    else:
+        out.append(gaps)
+        if sentence_timing:
+            k, v = next(iter(sentence_timing.items()))
+            out.append(f"sentence:  {k} {describe(v)}")
+    if s.get("channel_timing"):
+        out.append("channels on rows of their own (rate and gaps on their own samples):")
+        out += [f"  {k:<14} {describe(v)}" for k, v in s["channel_timing"].items()]
+    out += [
         f"duplicate timestamps: {s['duplicate_timestamps']} "
         f"({s['duplicate_timestamps_with_different_data']} with different data)",
         f"time going backwards: {s['backwards_steps']}",
@@ -185,13 +117,13 @@ def _lines(s: dict[str, Any]) -> list[str]:
 @click.argument("path", metavar="FILE", type=click.Path(exists=True, dir_okay=True))
 @input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
-def info_cmd(path: str, duplicates: str, backwards: str, as_json: bool, **io: Any) -> None:
+def info_cmd(path: str, as_json: bool, **options: Any) -> None:
     """Summarise FILE (CSV, ROS1/ROS2 bag, NMEA log): duration, rows, rate (median, min/max step), gaps,
     duplicate timestamps, NaN rows, channels with units and min/mean/max per axis, metadata, the foreign-CSV
     column mapping used, and what the time-base validation would do. Units are SI except angles and angular
     rates, shown in degrees (deg, deg/s) whatever the file holds (the JSON names the unit in the file)."""
-    rec, _ = load_input(path, duplicates=duplicates, backwards=backwards, validate=False, **io)
-    if len(rec) == 0:
-        raise ImutoolError("no samples", path=path)
-    summary = summarize(path, rec, duplicates=duplicates, backwards=backwards)
+    summary = info_route(path, on_input=note_input, **options).summary
     emit_summary(summary, as_json, False, None if as_json else _lines(summary))
+
+
+info_cmd = route_of(info_route, ())(info_cmd)

@@ -85,6 +85,12 @@ def ins_route(
     help="Zero angular-rate update at ZVI samples (gyro bias; hurts when stances include foot roll).",
 )
 @click.option(
+    "--loop/--no-loop",
+    default=None,
+    help="The walk ends where it started: report the end's distance from the start as the closed-loop error "
+    "[default: decided from the track: end within max(5 m, 5 % of the path) and 25 % of it].",
+)
+@click.option(
     "--detector",
     type=click.Choice(DETECTORS),
     default=default_of(run_ins_track, "detector"),

@@ -1,15 +1,31 @@
-"""`imutool roll INPUT -o roll_stats.csv`: MSC.363(92) roll statistics (heel, period, amplitudes, peak hold)."""
+"""`imutool roll INPUT -o roll_stats.csv`: MSC.363(92) roll statistics (heel, period, amplitudes, peak hold).
+
+Only option parsing and printing here; the work is :func:`imutool.roll.run_roll`, the route `imutool batch roll` and
+a Python user take (the detector's defaults live in :data:`imutool.roll.ROLL_DEFAULTS`).
+"""
 
 from __future__ import annotations
 
 from datetime import datetime, timezone
+from typing import Any
 
 import click
 
-import formats
 from formats.errors import ImutoolError
-from imutool.cli.common import emit_summary, input_options, load_input, output_options, safe_outputs
-from imutool.loading import input_notes
+from imutool.cli.common import (
+    default_of,
+    emit_summary,
+    input_options,
+    note_input,
+    output_options,
+    route_of,
+    safe_outputs,
+    strict_requested,
+)
+from imutool.roll import run_roll
+from imutool.routes import OnInput, RouteResult
+
+OUTPUTS = ("output", "cycles_path")
 
 
 def parse_utc(text: str | None) -> datetime | None:
@@ -39,14 +55,14 @@ def roll_options(f):
             "--hysteresis",
             "hysteresis_deg",
             type=float,
-            default=0.5,
+            default=default_of(run_roll, "hysteresis_deg"),
             show_default=True,
             help="Hysteresis (deg) around the centre: oscillations smaller than ± this are ignored.",
         ),
         click.option(
             "--centre",
             type=click.Choice(["zero", "running"]),
-            default="zero",
+            default=default_of(run_roll, "centre"),
             show_default=True,
             help="Centre of the port/starboard split: 0 (level ship) or a running mean (listing ship).",
         ),
@@ -54,7 +70,7 @@ def roll_options(f):
             "--centre-window",
             "centre_window_s",
             type=float,
-            default=120.0,
+            default=default_of(run_roll, "centre_window_s"),
             show_default=True,
             help="Running-mean window (s) for --centre running.",
         ),
@@ -62,7 +78,7 @@ def roll_options(f):
             "--refine",
             "refine_frac",
             type=float,
-            default=0.2,
+            default=default_of(run_roll, "refine_frac"),
             show_default=True,
             help="Peak refinement: parabola over ± this fraction of the excursion duration.",
         ),
@@ -70,7 +86,7 @@ def roll_options(f):
             "--max-period",
             "max_period_s",
             type=float,
-            default=60.0,
+            default=default_of(run_roll, "max_period_s"),
             show_default=True,
             help="Longest roll period accepted (s); longer gaps are not periods.",
         ),
@@ -93,6 +109,27 @@ def roll_options(f):
     return f
 
 
+def roll_route(
+    input_path: str,
+    output: str,
+    resets: str | None = None,
+    utc_start: str | None = None,
+    quiet: bool = True,
+    on_input: OnInput | None = None,
+    **options: Any,
+) -> RouteResult:
+    """Parsed options → :func:`imutool.roll.run_roll` (``--reset`` and ``--utc-start`` parsed here)."""
+    return run_roll(
+        input_path,
+        output,
+        resets_s=parse_resets(resets),
+        utc_start=parse_utc(utc_start),
+        strict=strict_requested(),
+        on_input=on_input,
+        **options,
+    )
+
+
 @click.command("roll", epilog="Example: imutool roll est.csv -o roll_stats.csv --cycles cycles.csv")
 @click.argument("input_path", metavar="INPUT", type=click.Path(exists=True))
 @click.option("-o", "--output", required=True, type=click.Path(), help="Per-sample statistics (.csv).")
@@ -106,57 +143,17 @@ def roll_options(f):
 @roll_options
 @input_options
 @output_options
-@safe_outputs("output", "cycles_path")
-def roll_cmd(
-    input_path: str,
-    output: str,
-    cycles_path: str | None,
-    hysteresis_deg: float,
-    centre: str,
-    centre_window_s: float,
-    refine_frac: float,
-    max_period_s: float,
-    resets: str | None,
-    utc_start: str | None,
-    as_json: bool,
-    quiet: bool,
-    **io,
-) -> None:
+@safe_outputs(*OUTPUTS)
+def roll_cmd(input_path: str, output: str, as_json: bool, quiet: bool, **options: Any) -> None:
     """Roll statistics per IMO MSC.363(92) §3 from the `roll` (or HRM `heel`) channel of INPUT.
 
     Heel is in degrees, + starboard down. Roll period = time between successive maxima on the same side
     (port and starboard tracked separately); amplitudes per side (port reported positive, as HRM); peak hold
     since the last reset. Per-sample values are causal: a cycle's values appear when it completes.
     """
-    from imutool.roll import heel_of, roll_stats
-
-    rec, _val = load_input(input_path, **io)
-    heel = heel_of(rec, input_path)
-    rs = roll_stats(
-        rec.time,
-        heel,
-        hysteresis_deg=hysteresis_deg,
-        centre=centre,
-        centre_window_s=centre_window_s,
-        refine_frac=refine_frac,
-        max_period_s=max_period_s,
-        resets_s=parse_resets(resets),
-        utc_start=parse_utc(utc_start),
-    )
-    meta = {k: v for k, v in rec.meta.items() if k in ("sensor", "device", "frame", "mounting", "calibration")}
-    meta["source"] = input_path
-    meta.update(input_notes(rec.meta))
-    formats.write(rs.as_recording(meta), output)
-    if cycles_path:
-        formats.write(rs.cycles.as_recording(), cycles_path)
-    summary = {
-        "input": input_path,
-        "output": output,
-        "cycles_output": cycles_path,
-        **rs.summary(),
-        "settings": rs.settings,
-    }
-    lines = [f"{input_path}: {len(rec)} samples, {len(rs.cycles)} half-cycles → {output}"]
+    res = roll_route(input_path, output, quiet=quiet, on_input=note_input, **options)
+    rs = res.data["stats"]
+    lines = [f"{input_path}: {len(res.recording)} samples, {len(rs.cycles)} half-cycles → {output}"]
     s = rs.summary()
     for side in ("starboard", "port"):
         d = s[side]
@@ -168,4 +165,7 @@ def roll_cmd(
         f"  peak hold since reset: port {pp if pp is None else round(pp, 2)}°, "
         f"starboard {ps if ps is None else round(ps, 2)}° (reset {s['last_reset_utc'] or 'at start'})"
     )
-    emit_summary(summary, as_json, quiet, lines)
+    emit_summary(res.summary, as_json, quiet, lines)
+
+
+roll_cmd = route_of(roll_route, OUTPUTS)(roll_cmd)

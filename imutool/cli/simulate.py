@@ -1,12 +1,19 @@
-"""`imutool simulate SCENARIO -o OUT`: a recording with truth columns from the simulator."""
+"""`imutool simulate SCENARIO -o OUT`: a recording with truth columns from the simulator.
+
+Only option parsing and printing here; the file is written by :func:`imutool.sim.run_simulate` (the route a Python
+user takes); ``--serve`` streams live frames through :func:`imutool.capture.serve.serve`.
+"""
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
-import formats
 from imutool import sim
-from imutool.cli.common import emit_summary, safe_outputs
+from imutool.cli.common import default_of, emit_summary, route_of, safe_outputs
+from imutool.progress import stages
+from imutool.routes import RouteResult
 
 
 def _parse_set(items: tuple[str, ...]) -> dict:
@@ -68,7 +75,13 @@ def _parse_set(items: tuple[str, ...]) -> dict:
 )
 @click.option("--duration", type=float, default=None, help="Length in s (scenario default if omitted).")
 @click.option("--rate", "rate_hz", type=float, default=None, help="Sample rate in Hz (scenario default).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (deterministic output).")
+@click.option(
+    "--seed",
+    type=int,
+    default=default_of(sim.run_simulate, "seed"),
+    show_default=True,
+    help="Random seed (deterministic output).",
+)
 @click.option(
     "--set",
     "settings",
@@ -120,29 +133,32 @@ def simulate_cmd(
         )
         emit_summary({"protocol": protocol, **log.as_dict(), "corrupted": len(log.corrupted)}, as_json, quiet)
         return
+    res = simulate_route(scenario, output, duration, rate_hz, seed, settings, quiet=quiet)
+    emit_summary(res.summary, as_json, quiet)
+
+
+def simulate_route(
+    scenario: str | None,
+    output: str | None,
+    duration: float | None,
+    rate_hz: float | None,
+    seed: int,
+    settings: tuple[str, ...],
+    quiet: bool = True,
+    serve: str | None = None,
+    **serve_options: Any,
+) -> RouteResult:
+    """Parsed options → :func:`imutool.sim.run_simulate` (progress on stderr unless ``quiet``); ``--serve`` (a
+    live stream, never a file) is not a route."""
+    if serve:
+        raise click.UsageError("--serve streams live frames: run it as its own command")
     if not scenario or not output:
         raise click.UsageError("give SCENARIO and -o OUTPUT (or --serve)")
     opts = _parse_set(settings)
-    if duration is not None:
-        opts["duration"] = duration
-    if rate_hz is not None:
-        opts["rate_hz"] = rate_hz
-    from imutool.progress import stages
+    with stages("simulate", ["simulating", "writing"], quiet) as steps:
+        return sim.run_simulate(
+            scenario, output, seed=seed, duration=duration, rate_hz=rate_hz, settings=opts, stage=steps.stage
+        )
 
-    steps = stages("simulate", ["simulating", "writing"], quiet)
-    steps.stage(f"simulating {scenario}")
-    rec = sim.simulate(scenario, seed=seed, **opts)
-    rec.meta["scenario"] = scenario
-    rec.meta["seed"] = seed
-    steps.stage(f"writing {output}")
-    formats.write(rec, output)
-    steps.close()
-    summary = {
-        "scenario": scenario,
-        "output": output,
-        "rows": len(rec),
-        "duration_s": round(rec.duration, 3),
-        "rate_hz": round(rec.rate_hz, 3),
-        "channels": list(rec.channels),
-    }
-    emit_summary(summary, as_json, quiet)
+
+simulate_cmd = route_of(simulate_route, ("output", "serve_log"))(simulate_cmd)

@@ -2,18 +2,23 @@
 
 Scenarios are functions ``f(duration=None, rate_hz=None, seed=0, **options) -> Recording`` registered by name
 in :data:`SCENARIOS` (module path, function) and imported on use. Every scenario is deterministic for a seed.
+:func:`run_simulate` (a scenario written to a file) is the route behind ``imutool simulate SCENARIO -o OUT``.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
+import formats
 from formats import Recording
 from formats.errors import ImutoolError
+from imutool.routes import RouteResult, Stage
 
 # scenario name -> (module, function)
 SCENARIOS: dict[str, tuple[str, str]] = {
@@ -89,6 +94,44 @@ def simulate(name: str, **options_) -> Recording:
     except (ZeroDivisionError, FloatingPointError, OverflowError) as e:  # a value the scenario's physics cannot take
         given = ", ".join(f"{k}={v!r}" for k, v in options_.items()) or "its defaults"
         raise ImutoolError(f"scenario {name!r} cannot run with {given}: {e}") from None
+
+
+def run_simulate(
+    name: str,
+    output: str | os.PathLike,
+    *,
+    seed: int = 0,
+    duration: float | None = None,
+    rate_hz: float | None = None,
+    settings: dict[str, Any] | None = None,
+    stage: Stage | None = None,
+) -> RouteResult:
+    """Scenario ``name`` (:data:`SCENARIOS`) with ``seed``, ``duration`` s and ``rate_hz`` (None: the scenario's
+    default) and its own options ``settings`` (:func:`options`), written to ``output`` (format from the
+    extension) with the scenario and seed in its metadata. ``stage(label)`` as it simulates, then writes."""
+    output = os.fspath(output)
+    opts = dict(settings or {})
+    if duration is not None:
+        opts["duration"] = duration
+    if rate_hz is not None:
+        opts["rate_hz"] = rate_hz
+    if stage is not None:
+        stage(f"simulating {name}")
+    rec = simulate(name, seed=seed, **opts)
+    rec.meta["scenario"] = name
+    rec.meta["seed"] = seed
+    if stage is not None:
+        stage(f"writing {output}")
+    formats.write(rec, output)
+    summary = {
+        "scenario": name,
+        "output": output,
+        "rows": len(rec),
+        "duration_s": round(rec.duration, 3),
+        "rate_hz": round(rec.rate_hz, 3),
+        "channels": list(rec.channels),
+    }
+    return RouteResult(summary, recording=rec)
 
 
 def _check_option(name: str, key: str, value: object, default: object) -> None:

@@ -1,0 +1,107 @@
+"""The motion model (issue 35, item 3): a ship told from hand-held motion by the gyro, and its low-pass."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import formats
+from imutool.attitude import EkfParams
+from imutool.attitude.motion import choose_motion
+from imutool.attitude.params import read_params_file
+from imutool.filtering import run_filter
+from imutool.sim import simulate
+
+
+@pytest.mark.parametrize(
+    "scenario, options, kind",
+    [
+        ("ship-roll", {}, "ship"),
+        ("ship-at-sea", {"roll_significant_deg": 30.0, "sway_m": 1.5, "sway_period": 6.0}, "ship"),
+        ("turn", {}, "ship"),
+        ("walk", {}, "handheld"),
+        ("static", {}, "handheld"),  # still: nothing to tell a ship by
+    ],
+)
+def test_auto_tells_a_ship_from_a_hand(scenario, options, kind):
+    rec = simulate(scenario, duration=120.0, seed=0, **options)
+    choice = choose_motion(EkfParams(), rec.time, rec.in_unit("gyro", "rad/s"))
+    assert choice.kind == kind, choice
+    assert choice.lp_tau_s == (EkfParams().ship_lp_tau if kind == "ship" else EkfParams().accel_lp_tau)
+
+
+def test_every_broad_trial_is_hand_held(shared):
+    """The 16 BROAD trials (82–1074 °/s, low-frequency share ≤ 0.79): auto keeps the hand-held low-pass, so their
+    figures are the hand-held filter's, unchanged."""
+    files = sorted(shared("broad").glob("*.csv"))
+    assert len(files) >= 16
+    for f in files:
+        rec = formats.read(f)
+        choice = choose_motion(EkfParams(), rec.time, rec.in_unit("gyro", "rad/s"))
+        assert choice.kind == "handheld", (f, choice)
+
+
+def test_a_ship_without_its_full_velocity_gets_the_ship_low_pass():
+    """A receiver's smoothed track (no sway in it) on a bridge sensor: with the hand-held low-pass the sway's false
+    tilt passes (0.39° RMS, 1.4° max on this corner); with the ship's, the roll meets the bound."""
+    rec = simulate(
+        "ship-at-sea",
+        duration=180.0,
+        seed=0,
+        lever_arm=(-12.0, 0.0, -30.0),
+        roll_significant_deg=30.0,
+        sway_m=1.5,
+        sway_period=6.0,
+        turn_start=40.0,
+        speed_source="smoothed",
+    )
+    after = rec.time - rec.time[0] >= 120.0
+    lever = np.array(rec.meta["lever_arm_m"])
+    errs = {}
+    for motion in ("auto", "handheld"):
+        res = run_filter(rec, params=EkfParams(motion=motion), lever_arm=lever)
+        e = (res.recording["roll"] - rec["ref_roll"])[after]
+        errs[motion] = (np.sqrt(np.mean(e**2)), np.abs(e).max())
+        assert res.summary["motion"]["kind"] == ("ship" if motion == "auto" else "handheld")
+        assert res.recording.meta["motion"] == res.summary["motion"]
+    assert errs["auto"][0] < 0.25 and errs["auto"][1] < 1.0, errs
+    assert errs["handheld"][0] > 1.5 * errs["auto"][0], errs
+
+
+def test_the_motion_is_asked_recorded_and_streamed_alike(tmp_path):
+    rec = simulate("ship-roll", duration=60.0, seed=1)
+    src = tmp_path / "roll.csv"
+    formats.write(rec, src)
+    mem = run_filter(src).summary["motion"]
+    assert mem["kind"] == "ship" and mem["asked"] == "auto" and 5 < mem["dominant_period_s"] < 20
+    streamed = run_filter(src, tmp_path / "s.csv", stream_mb=0.0, chunk_rows=3000).summary["motion"]
+    assert streamed["kind"] == "ship"
+    assert formats.read(tmp_path / "s.csv").meta["motion"]["kind"] == "ship"
+    forced = run_filter(src, params=EkfParams(motion="handheld")).summary["motion"]
+    assert forced == {"kind": "handheld", "asked": "handheld", "accel_lp_tau_s": 2.5}
+    with pytest.raises(formats.ImutoolError, match="motion 'boat'"):
+        EkfParams(motion="boat")
+
+
+def test_a_parameters_file_from_before_the_motion_model_is_told(tmp_path):
+    old = tmp_path / "old.toml"
+    old.write_text("version = 1\n[ekf]\naccel_lp_tau = 3.0\n", encoding="utf-8")
+    notes = read_params_file(str(old)).notes()
+    assert any("motion" in n and "ship_lp_tau" in n for n in notes), notes
+    new = tmp_path / "new.toml"
+    new.write_text(EkfParams().to_toml(), encoding="utf-8")
+    assert read_params_file(str(new)).notes() == []
+
+
+def test_a_turn_without_any_speed_is_said_and_with_one_is_not():
+    """Without a speed a sustained turn's centripetal acceleration reads as roll: said on stderr with its span."""
+    for speed in ("none", "gnss"):
+        rec = simulate("ship-at-sea", duration=300.0, seed=0, turn_start=60.0, speed_source=speed)
+        s = run_filter(rec, lever_arm=np.array(rec.meta["lever_arm_m"])).summary
+        said = [w for w in s.get("warnings", []) if "without any speed input" in w]
+        if speed == "none":
+            assert len(said) == 1 and "0.1° per m/s" in said[0], s.get("warnings")
+            (a, b), *_ = s["turns_without_speed_s"]
+            assert 55 < a < 90 and 170 < b < 220, (a, b)  # the turn: 60 s + 120 s at 3 °/s + its ramps
+        else:
+            assert not said and "turns_without_speed_s" not in s
