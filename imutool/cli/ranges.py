@@ -58,6 +58,7 @@ RANGES: dict[str, Bound] = {
     "fmax": POS,
     "bandwidth": POS,
     "window_s": POS,
+    "height_window_s": POS,  # heave from a GNSS height: the detrending window (main had no entry)
     "hop_s": POS,
     "min_window_s": POS,
     "window_g_s": POS,
