@@ -30,7 +30,15 @@ import numpy as np
 from . import csv_engine as _eng
 from . import units as _units
 from .atomic import AtomicChunkWriter, atomic_path
-from .columns import Mapping, infer_mapping, load_profile, mapping_from_profile, parse_mapping_option
+from .columns import (
+    Mapping,
+    clean_name,
+    infer_mapping,
+    load_profile,
+    mapping_from_profile,
+    parse_mapping_option,
+    resolve_unit,
+)
 from .errors import ImutoolError
 from .recording import Recording, canonical_unit, group_columns
 from .threads import thread_budget
@@ -51,6 +59,7 @@ class CsvHeader:
     data_offset: int = 0  # byte offset of the first data row
     sep: str = ","
     decimal: str = "."
+    rate_hz: float | None = None  # a file without a time column: time = n / rate_hz
 
 
 @dataclass
@@ -78,12 +87,40 @@ def _split_header(line: str, sep: str) -> list[str]:
     return [h.strip().strip('"').strip() for h in row]
 
 
-def read_header(path: str, columns: str | None = None, profile: str | None = None) -> CsvHeader:
+def read_header(
+    path: str,
+    columns: str | None = None,
+    profile: str | None = None,
+    *,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
+) -> CsvHeader:
     """Read metadata and column names; infer or apply the column mapping for a foreign CSV.
 
     Handles a UTF-8 BOM, CRLF line ends, ``,``/``;``/tab separators (``;`` with decimal commas too) and
     quoted header names. Records the byte offset of the first data row for the compiled reader.
+
+    ``header_rows`` (default 1, or the profile's ``header_rows``): rows of column headings; the first names the
+    columns, a later one may give their units (RepoIMU: ``s;;;;;m/s^2;...``) — a cell that is a known unit is
+    used where the name states none. ``time_column`` ``NAME[:UNIT]`` (s, ms, us, ns; default the unit in the
+    name, else s; or the profile's ``time_column``/``time_unit``): the column that holds the time.
+    ``rate_hz`` (or the profile's ``rate_hz``): a file without a time column gets ``time = n / rate`` (n the data
+    row from 0), recorded in the metadata.
     """
+    prof = load_profile(profile) if profile else {}
+    header_rows = _header_rows(header_rows if header_rows is not None else prof.get("header_rows", 1), profile)
+    if rate_hz is None and prof.get("rate_hz") is not None:
+        rate_hz = prof["rate_hz"]
+    if rate_hz is not None:
+        try:
+            rate_hz = float(rate_hz)
+        except (TypeError, ValueError):
+            rate_hz = float("nan")
+        if not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise ImutoolError(f"the sample rate must be a positive number of Hz, got {rate_hz!r}", path=path)
+    if time_column is None and prof.get("time_column"):
+        time_column = str(prof["time_column"]) + (f":{prof['time_unit']}" if prof.get("time_unit") else "")
     try:
         f = open(path, "rb")
     except OSError as e:
@@ -93,7 +130,7 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
         is_imutool = False
         lineno = 0
         comments = 0
-        header_line = None
+        heading: list[tuple[str, int]] = []  # (text, line number) of the header rows
         offset = 0
         first_data = b""
         for raw in f:
@@ -108,6 +145,8 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
             if not line:
                 continue
             if line.startswith("#"):
+                if heading:  # a comment between header rows
+                    continue
                 comments += 1
                 if line.startswith("# imutool-csv:"):
                     is_imutool = True
@@ -117,14 +156,19 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
                     k, _, v = body.partition(":")
                     meta[k.strip()] = _parse_meta_value(v)
                 continue
-            header_line = line
+            heading.append((line, lineno))
+            if len(heading) < header_rows:
+                continue
             for nxt in f:
                 if nxt.strip() and not nxt.lstrip().startswith(b"#"):
                     first_data = nxt
                     break
             break
-    if header_line is None:
+    if not heading:
         raise ImutoolError("no header row (the file is empty or has only comments)", path=path)
+    if len(heading) < header_rows:
+        raise ImutoolError(f"--header-rows {header_rows}: the file has only {len(heading)} row(s)", path=path)
+    header_line, lineno = heading[0]
     printable = sum(ch.isprintable() or ch == "\t" for ch in header_line)
     if "\x00" in header_line or printable < 0.9 * len(header_line):
         raise ImutoolError("the header row is not text (binary file?)", path=path, line=lineno)
@@ -144,19 +188,115 @@ def read_header(path: str, columns: str | None = None, profile: str | None = Non
         raise ImutoolError("the header row has an empty column name", path=path, line=lineno)
     if _looks_numeric(names):
         raise ImutoolError("the first row is numbers, not column names; add a header row", path=path, line=lineno)
+    unit_row = _unit_row(heading[1:], names, sep, path)
+    lineno = heading[-1][1]
     mapping = None
-    if not is_imutool or columns or profile:
+    if not is_imutool or columns or profile or time_column or unit_row:
         if profile:
-            mapping = mapping_from_profile(load_profile(profile), names, profile)
+            mapping = mapping_from_profile(prof, names, profile)
         elif columns:
             mapping = parse_mapping_option(columns, names)
         else:
             mapping = infer_mapping(names)
-    elif "time" not in names:
+        if unit_row:
+            _apply_unit_row(mapping, unit_row, path)
+        if time_column:
+            _apply_time_column(mapping, time_column, names, path)
+    elif "time" not in names and rate_hz is None:
         raise ImutoolError("imutool CSV without a 'time' column", path=path, line=lineno)
     hdr = CsvHeader(is_imutool, meta, names, lineno + 1, mapping, comments, offset, sep, decimal)
     hdr.meta["_sep"] = sep
+    hdr.rate_hz = rate_hz
+    if header_rows > 1:
+        hdr.meta["source_header_rows"] = header_rows
+    targets = [c.target for c in mapping.columns] if mapping is not None else names
+    if rate_hz is not None and "time" in targets:
+        src = mapping.columns[targets.index("time")].source if mapping is not None else "time"
+        raise ImutoolError(
+            f"--rate is for a file without a time column; this one has {src!r} (name another with --time-column)",
+            path=path,
+        )
     return hdr
+
+
+def _header_rows(n: Any, profile: str | None) -> int:
+    """The number of header rows, checked (an integer ≥ 1)."""
+    try:
+        k = int(n)
+    except (TypeError, ValueError):
+        k = 0
+    if k < 1 or k != n:
+        where = f" (profile {profile})" if profile else ""
+        raise ImutoolError(f"header rows{where}: expected a whole number ≥ 1, got {n!r}")
+    return k
+
+
+def _unit_row(rows: list[tuple[str, int]], names: list[str], sep: str, path: str) -> list[str | None]:
+    """Per column, the first cell of the header rows after the names that is a known unit (None: none)."""
+    if not rows:
+        return []
+    out: list[str | None] = [None] * len(names)
+    for text, ln in rows:
+        cells = _split_header(text, sep)
+        if _looks_numeric([c for c in cells if c] or ["x"]):
+            raise ImutoolError(
+                f"header row {ln} is numbers: the file has fewer header rows than --header-rows says",
+                path=path,
+                line=ln,
+            )
+        for j, c in enumerate(cells[: len(names)]):
+            if out[j] is None and c and _units.is_known(c):
+                out[j] = c
+    return out
+
+
+def _apply_unit_row(mapping: Mapping, units: list[str | None], path: str) -> None:
+    """Units from a header's units row, for the columns whose unit was inferred (not one the user gave)."""
+    for cm, u in zip(mapping.columns, units, strict=False):
+        if u is None or not cm.inferred or (cm.unit and not cm.unit_assumed):
+            continue
+        q = _expected_quantity_of(cm.target)
+        u = resolve_unit(u, q)
+        if q:
+            try:
+                _units.factor_to_si(u, q)
+            except ImutoolError:
+                continue  # a unit of another quantity: not this column's (kept as it was)
+        cm.unit, cm.unit_assumed = u, False
+
+
+def _apply_time_column(mapping: Mapping, spec: str, names: list[str], path: str) -> None:
+    """``NAME[:UNIT]`` becomes the time column (unit s, ms, us or ns; default: the one inferred, else s); a
+    column the inference had taken for the time keeps its own name."""
+    name, _, unit = spec.rpartition(":") if spec.rpartition(":")[0] in names else (spec, "", "")
+    name, unit = name.strip(), unit.strip()
+    if name not in names:
+        raise ImutoolError(f"--time-column: no column {name!r} in the file (has: {', '.join(names)})", path=path)
+    for cm in mapping.columns:
+        if cm.target == "time" and cm.source != name:
+            cm.target = "file_time" if clean_name(cm.source) == "time" else clean_name(cm.source)
+    cm = mapping.columns[names.index(name)]
+    if unit:
+        if unit not in ("s", "ms", "us", "µs", "ns"):
+            raise ImutoolError(f"--time-column {spec!r}: the unit must be s, ms, us or ns", path=path)
+    else:
+        guess = _infer_time_unit(name)
+        unit = guess or "s"
+    cm.target, cm.unit, cm.unit_assumed, cm.inferred, cm.scale = "time", unit, False, False, 1.0
+
+
+def _infer_time_unit(header: str) -> str | None:
+    """A time unit stated in the column name (``Time (ms)``, ``t_us``), if any."""
+    from .columns import _unit_in
+
+    u = _unit_in(header) or (clean_name(header).rsplit("_", 1)[-1] if "_" in clean_name(header) else None)
+    if u and _units.is_known(u):
+        try:
+            _units.factor_to_si(u, "time")
+            return u
+        except ImutoolError:
+            return None
+    return None
 
 
 def _looks_numeric(names: list[str]) -> bool:
@@ -288,7 +428,9 @@ def _rows_hint(buf: np.ndarray, end: int) -> int:
     return int(end / (head.size / n) * 1.05) + 16
 
 
-def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) -> Recording:
+def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport, first_row: int = 0) -> Recording:
+    """The parsed rows as a Recording (``first_row``: the index of the first of them in the file, for the times
+    of a file read at ``--rate``)."""
     names = hdr.names
     if hdr.mapping is not None:
         targets = []
@@ -313,13 +455,17 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) 
                 k, _, v = item.partition("=")
                 if k.strip():
                     unit_of[k.strip()] = v.strip()
-    if "time" not in names:
+    if "time" in names:
+        ti = names.index("time")
+        rec = Recording(data[:, ti].copy())
+    elif hdr.rate_hz is not None:
+        rec = Recording((first_row + np.arange(data.shape[0], dtype=np.float64)) / hdr.rate_hz)
+    else:
         raise ImutoolError(
-            "no time column found (looked for time/timestamp/t headers); name it with --columns 'YourTime=time:s'",
+            "no time column found (looked for time/timestamp/t headers): give the sample rate with --rate HZ, "
+            "or name the time column with --time-column NAME[:UNIT]",
             path=path,
         )
-    ti = names.index("time")
-    rec = Recording(data[:, ti].copy())
     groups = group_columns([n for n in names if n != "time"])
     idx = {n: j for j, n in enumerate(names)}
     for ch, cols in groups:
@@ -347,9 +493,14 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport) 
         )
         if assumed:  # no unit in the header: formats.plausibility checks these against their values
             meta["units_assumed"] = ",".join(assumed)
+    if "time" not in names:
+        meta["time_source"] = f"time from --rate {hdr.rate_hz:g} Hz (t = n / {hdr.rate_hz:g} s, n the data row from 0)"
+        meta["rate_hz"] = hdr.rate_hz
     if rep.bad_rows:
         meta["skipped_rows"] = rep.bad_rows
         meta["skipped_rows_first"] = rep.first_bad
+        if "time" not in names:
+            meta["time_source"] += "; the malformed rows skipped took no time slot: later rows are early"
     rec.meta.update(meta)
     return rec
 
@@ -373,15 +524,21 @@ def iter_csv(
     strict: bool = False,
     block_bytes: int = 16 << 20,
     prefetch: bool = False,
+    *,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
 ) -> Iterator[Recording]:
     """Stream a CSV as successive Recordings of at most ``chunk_rows`` rows (bounded memory).
 
     The file is read in blocks of ``block_bytes`` cut at line ends; memory is O(block + chunk), not O(file).
     Skipped-row counts in each chunk's meta are running totals. ``prefetch``: the next chunk is parsed in a
     background thread while the caller works on the current one (one chunk more in memory); errors are raised
-    in the caller at the chunk where they occur.
+    in the caller at the chunk where they occur. ``rate_hz``, ``time_column``, ``header_rows``: as
+    :func:`read_header`.
     """
-    chunks = _iter_csv(path, chunk_rows, columns, profile, strict, block_bytes)
+    hdr = read_header(path, columns, profile, rate_hz=rate_hz, time_column=time_column, header_rows=header_rows)
+    chunks = _iter_csv(path, hdr, chunk_rows, strict, block_bytes)
     return in_background(chunks) if prefetch else chunks
 
 
@@ -422,10 +579,8 @@ def in_background(items: Iterator[Any], depth: int = 1) -> Iterator[Any]:
         quit_.set()
 
 
-def _iter_csv(
-    path: str, chunk_rows: int, columns: str | None, profile: str | None, strict: bool, block_bytes: int
-) -> Iterator[Recording]:
-    hdr = read_header(path, columns, profile)
+def _iter_csv(path: str, hdr: CsvHeader, chunk_rows: int, strict: bool, block_bytes: int) -> Iterator[Recording]:
+    done = 0  # rows yielded so far
     rep = ReadReport()
     parser = _BlockParser(hdr, path, strict, rep)
     pending: list[np.ndarray] = []
@@ -458,7 +613,8 @@ def _iter_csv(
             while npending >= chunk_rows or (eof and npending):
                 allrows = pending[0] if len(pending) == 1 else np.concatenate(pending)
                 take = min(chunk_rows, allrows.shape[0])
-                yield _to_recording(hdr, allrows[:take], path, rep)
+                yield _to_recording(hdr, allrows[:take], path, rep, done)
+                done += take
                 rest = allrows[take:]
                 pending = [rest] if rest.shape[0] else []
                 npending = rest.shape[0]
@@ -466,13 +622,25 @@ def _iter_csv(
                 break
 
 
-def read_csv(path: str, columns: str | None = None, profile: str | None = None, strict: bool = False) -> Recording:
+def read_csv(
+    path: str,
+    columns: str | None = None,
+    profile: str | None = None,
+    strict: bool = False,
+    *,
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
+) -> Recording:
     """Read a whole CSV (imutool or foreign) into a Recording (SI units for sensor channels).
+
+    ``rate_hz`` (a file without a time column), ``time_column`` (``NAME[:UNIT]``), ``header_rows`` (names, then
+    units): as :func:`read_header`.
 
     Malformed rows are counted and skipped (``meta['skipped_rows']``, first ones with line numbers in
     ``meta['skipped_rows_first']``); ``strict=True`` raises ImutoolError at the first one instead.
     """
-    hdr = read_header(path, columns, profile)
+    hdr = read_header(path, columns, profile, rate_hz=rate_hz, time_column=time_column, header_rows=header_rows)
     rep = ReadReport()
     try:
         buf = np.fromfile(path, dtype=np.uint8, offset=hdr.data_offset)

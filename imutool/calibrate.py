@@ -75,13 +75,13 @@ def load_for_fit(
     on_input: OnInput | None = None,
     strict: bool = False,
 ) -> Recording:
-    """Read ``source`` (and ``with_files`` merged onto its clock; each read with the same options except the
-    foreign-CSV ``columns``). ``on_input(path, report)`` is called after each file is loaded; ``strict``: an
+    """Read ``source`` (and ``with_files``, e.g. one CSV per sensor, merged onto its clock:
+    :func:`imutool.loading.merge_with`). ``on_input(path, report)`` is called after the file is loaded; ``strict``: an
     input's warnings are an ImutoolError.
 
     ``fitting``: the section being estimated. Its parameters are in sensor axes and relative to raw data, so
     a ``mounting`` and a ``calibration_file`` that already holds that section are refused."""
-    from imutool.loading import load_recording
+    from imutool.loading import load_recording, merge_with
 
     opts = {k: v for k, v in (load_options or {}).items() if v is not None}
     _check_load_options(opts)
@@ -100,22 +100,19 @@ def load_for_fit(
                 path=opts["calibration_file"],
             )
 
-    def load(p: str, o: dict[str, Any]) -> Recording:
-        r, report = load_recording(p, strict=strict, **o)
-        if on_input is not None and len(r):
-            on_input(p, report)
-        return r
-
-    if isinstance(source, Recording):
-        rec, path = source, str(source.meta.get("source", "<recording>"))
-    else:
-        path = os.fspath(source)
-        rec = load(path, opts)
     if with_files:
-        others = [load(os.fspath(p), {k: v for k, v in opts.items() if k != "columns"}) for p in with_files]
-        src = rec.meta.get("source", path)
-        rec = formats.merge([rec, *others], rec)
-        rec.meta["source"] = src
+        opts["with_files"] = tuple(opts.get("with_files") or ()) + tuple(os.fspath(p) for p in with_files)
+    if isinstance(source, Recording):
+        if opts.get("with_files"):
+            src = str(source.meta.get("source", "<recording>"))
+            rec, _ = merge_with(source, src, list(opts["with_files"]), list(opts.get("with_offsets") or ()))
+            rec.meta["source"] = src
+            return rec
+        return source
+    path = os.fspath(source)
+    rec, report = load_recording(path, strict=strict, **opts)
+    if on_input is not None and len(rec):
+        on_input(path, report)
     return rec
 
 

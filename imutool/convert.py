@@ -20,11 +20,11 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
+from imutool.loading import LOAD_OPTIONS
 from imutool.progress import Progress, report
 from imutool.routes import RouteResult
 
 STREAMABLE = ("csv", "parquet")
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
 def chunk_writer(path: str | os.PathLike, background: bool = False) -> Any:
@@ -58,6 +58,9 @@ def stream_convert(
     calibration_file: str | None = None,
     strict: bool = False,
     progress: Progress | None = None,
+    input_rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
 ) -> dict[str, Any]:
     """Convert ``src`` to ``dst`` (CSV or Parquet each) chunk by chunk; returns the summary dict.
 
@@ -73,6 +76,13 @@ def stream_convert(
         raise ImutoolError("output would overwrite the input", path=dst)
     opts: dict[str, Any] = mapping_options(src, columns, profile)
     checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
+    time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
+    if formats.kind_of(src) == "csv":
+        opts.update(time_opts)
+    elif any(v is not None for v in time_opts.values()):
+        from imutool.loading import read_input
+
+        read_input(src, **time_opts)  # the one-line refusal of a CSV-only option
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
     rows_in = 0
@@ -155,11 +165,14 @@ def streams(
     stream: bool = True,
     duplicates: str = "drop",
     backwards: str = "error",
+    merging: bool = False,
 ) -> bool:
     """Whether :func:`run_convert` streams: CSV/Parquet → CSV/Parquet, streaming allowed, and no policy that needs the
-    whole file (``backwards='sort'``, ``duplicates='mean'``)."""
+    whole file (``backwards='sort'``, ``duplicates='mean'``, ``merging``
+    other files with ``--with``)."""
     return (
         stream
+        and not merging
         and formats.kind_of(src) in STREAMABLE
         and formats.kind_of(dst, for_output=True) in STREAMABLE
         and backwards != "sort"
@@ -221,7 +234,7 @@ def run_convert(
     kout = formats.kind_of(dst, for_output=True)
     summary: dict[str, Any] = {"input": src, "output": dst, "from": kin, "to": kout}
     conversions: list[str] = []
-    if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards):
+    if streams(src, dst, stream=stream, duplicates=duplicates, backwards=backwards, merging=bool(opt["with_files"])):
         summary.update(
             stream_convert(
                 src,
@@ -235,6 +248,9 @@ def run_convert(
                 calibration_file=calibration_file,
                 strict=strict,
                 progress=progress,
+                input_rate_hz=opt["input_rate_hz"],
+                time_column=opt["time_column"],
+                header_rows=opt["header_rows"],
             )
         )
         summary["conversions"] = ["none (same frames and units)"]
@@ -243,6 +259,12 @@ def run_convert(
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
+        from imutool.loading import read_input
+
+        if any(opt[k] is not None for k in ("input_rate_hz", "time_column", "header_rows")):  # refused: CSV only
+            read_input(
+                src, rate_hz=opt["input_rate_hz"], time_column=opt["time_column"], header_rows=opt["header_rows"]
+            )
         rec = formats.read(
             src,
             topic=opt["topic"],
@@ -265,9 +287,23 @@ def run_convert(
             summary["notes"] = bag["notes"]
         rec, rep = rec.validated(duplicates=duplicates, backwards=backwards, source=src)
         summary["validation_actions"] = rep.actions
+        merged_notes: list[str] = []
+        if opt["with_files"]:
+            from imutool.loading import merge_with
+
+            rec, merged = merge_with(
+                rec,
+                src,
+                list(opt["with_files"]),
+                list(opt["with_offsets"] or ()),
+                duplicates=duplicates,
+                backwards=backwards,
+            )
+            merged_notes = merged["warnings"]
         checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
         rec = checks.prepare(rec)  # the bag whole, as one chunk: the checks of any other input
         report, warns = checks.finish(rows_in, len(rec), duplicates=rep.duplicates, reader_meta=rec.meta)
+        warns = warns + merged_notes
         rec.meta["validation"] = report
         if warns:
             rec.meta["warnings"] = merged_warnings(rec.meta, warns)

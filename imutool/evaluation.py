@@ -1,9 +1,14 @@
-"""Estimate vs truth: the one route behind ``imutool evaluate`` (and a Python user).
+"""Estimate vs truth: the one route behind ``imutool evaluate``, ``imutool batch evaluate`` and a Python user.
 
 :func:`evaluate` compares an estimate recording with a reference (``ref_*`` truth columns; the estimate itself
 by default): per angle RMSE, max, p95, MAE, lag and SNR (deg; heading errors wrapped to ±180°), quaternion
 errors with the BROAD metrics (total, heading, inclination), heave (positive up, with the three "5 cm or 5 %"
-readings) or position; optionally an error plot. Nothing is printed.
+readings) or position; optionally an error plot. A reference with only a quaternion gets its roll, pitch and
+heading derived from it; a reference file without ``ref_*`` columns (another instrument's output, a
+motion-capture log) is read as the reference as it is; ``align_heading`` removes a constant heading offset of
+the reference frame (given, or estimated by the circular mean of the differences). :func:`run_evaluate` is the
+route (a :class:`imutool.routes.RouteResult`). Times are shown as UTC clock time where the estimate has a date
+(:mod:`imutool.clock`). Nothing is printed.
 """
 
 from __future__ import annotations
@@ -17,9 +22,12 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from formats.frames import wrap_deg180
+from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
+from imutool.clock import Clock
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input
 
 CHANNELS = ("angles", "quaternion", "heave", "position")
+ANGLES = ("roll", "pitch", "heading")
 
 
 def load_for_evaluation(path: str | os.PathLike) -> Recording:
@@ -37,15 +45,22 @@ def evaluate(
     channel: str | None = None,
     max_lag_s: float = 0.0,
     plot: str | os.PathLike | None = None,
+    align_heading: float | str | None = None,
 ) -> dict[str, Any]:
     """Compare ``estimate`` with ``reference`` (paths or Recordings; default: the estimate's own ``ref_*``).
 
     channel: ``angles`` (roll/pitch/heading vs ref_roll/ref_pitch/ref_heading, deg), ``quaternion`` (q vs
-    ref_q), ``heave`` or ``position``; default angles plus quaternion when both have one. ``max_lag_s``: search a
-    constant lag up to ± this many seconds. ``plot``: error plot (.png/.pdf). Returns the summary dict.
+    ref_q), ``heave`` or ``position``; default angles plus quaternion when both have one. A reference file
+    without any ``ref_*`` angle or quaternion is read as the reference as it is (its roll/pitch/heading/q);
+    angles missing where a quaternion is there are derived from it (ZYX, body→NED). ``max_lag_s``: search a
+    constant lag up to ± this many seconds. ``align_heading``: a constant heading offset (deg) added to the
+    reference's heading (and its quaternion turned about down by it), or ``'auto'`` (the circular mean of
+    estimate − reference heading, reported) — a motion-capture frame's x axis is not north. ``plot``: error plot
+    (.png/.pdf). Returns the summary dict (``span``: the compared times, with ISO UTC where dated).
     """
     if channel is not None and channel not in CHANNELS:
         raise ImutoolError(f"evaluate channel {channel!r}: expected one of {', '.join(CHANNELS)}")
+    align = parse_align_heading(align_heading)
     est_path = _name(estimate)
     est = estimate if isinstance(estimate, Recording) else load_for_evaluation(estimate)
     if reference is None:
@@ -54,6 +69,17 @@ def evaluate(
         ref = reference if isinstance(reference, Recording) else load_for_evaluation(reference)
         ref_path = _name(reference)
     summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
+    notes: list[str] = []
+    if channel not in ("heave", "position"):
+        same = ref is est
+        if not same:
+            ref = as_reference(ref, notes)
+        est = with_angles(est, "", notes)
+        ref = with_angles(est if same else ref, "ref_", notes)
+        if same:
+            est = ref
+        if align is not None:
+            est, ref, summary["align_heading"] = align_reference_heading(est, ref, align)
     if channel == "heave":
         signs = {
             "estimate": str(est.meta.get("heave_positive", "up")),
@@ -81,12 +107,147 @@ def evaluate(
                 )
         if channel == "quaternion" or (channel is None and "q" in est.channels and "ref_q" in ref.channels):
             summary["quaternion"] = evaluate_quaternion_rec(est, ref)
-        if len(summary) == 2:
+        if len(summary) - ("align_heading" in summary) == 2:
             raise ImutoolError("nothing to compare: no matching estimate/ref_* channels", path=est_path)
+    if notes:
+        summary["derived"] = notes
+    summary["span"] = compared_span(est, ref)
     if plot:
         plot_errors(est, ref, os.fspath(plot))
         summary["plot"] = os.fspath(plot)
     return summary
+
+
+def run_evaluate(
+    estimate: str | os.PathLike | Recording,
+    reference: str | os.PathLike | Recording | None = None,
+    *,
+    channel: str | None = None,
+    max_lag_s: float = 0.0,
+    plot: str | os.PathLike | None = None,
+    align_heading: float | str | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **load_options: Any,
+) -> RouteResult:
+    """The route of ``imutool evaluate`` (and ``imutool batch evaluate``): :func:`evaluate` → its summary as a
+    :class:`imutool.routes.RouteResult` (what ``--json`` prints, with ``validation``).
+
+    A path ``estimate`` is loaded as every command's input (:func:`imutool.loading.load_recording` with
+    ``load_options``: ``--columns ... --rate --time-column --header-rows --with``; ``strict``; ``on_input(path,
+    report)`` after it); the reference is read as it is (:func:`load_for_evaluation`)."""
+    unknown = set(load_options) - set(LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"run_evaluate() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    inputs: list[dict[str, Any]] = []
+    if not isinstance(estimate, Recording):
+        opts = {k: v for k, v in load_options.items() if v is not None}
+        estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, **opts)[0]
+    summary = evaluate(
+        estimate, reference, channel=channel, max_lag_s=max_lag_s, plot=plot, align_heading=align_heading
+    )
+    return RouteResult(summary, inputs)
+
+
+def parse_align_heading(value: float | str | None) -> float | str | None:
+    """``--align-heading``: None, ``'auto'`` or a finite number of degrees."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return None
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = float("nan")
+    if not np.isfinite(v):
+        raise ImutoolError(f"--align-heading {value!r}: expected a heading offset in degrees or 'auto'")
+    return v
+
+
+def as_reference(ref: Recording, notes: list[str]) -> Recording:
+    """A reference file that has no ``ref_*`` angle or quaternion (another instrument's output, a motion-capture
+    log): its roll/pitch/heading/q read as ref_roll/ref_pitch/ref_heading/ref_q."""
+    names = (*ANGLES, "q")
+    if any(f"ref_{n}" in ref.channels for n in names) or not any(n in ref.channels for n in names):
+        return ref
+    out = ref.copy()
+    used = [n for n in names if n in ref.channels]
+    for n in used:
+        out.add(f"ref_{n}", ref[n], ref.units.get(n))
+    notes.append(f"the reference file has no ref_* columns: its {', '.join(used)} used as the reference")
+    return out
+
+
+def with_angles(rec: Recording, prefix: str, notes: list[str]) -> Recording:
+    """``rec`` with the roll/pitch/heading (deg) it lacks derived from its quaternion ``<prefix>q`` (ZYX Euler of
+    body→NED; heading in [0, 360)). ``prefix``: ``''`` (estimate) or ``'ref_'`` (reference)."""
+    q = f"{prefix}q"
+    missing = [n for n in ANGLES if f"{prefix}{n}" not in rec.channels]
+    if q not in rec.channels or not missing or np.shape(rec[q])[1:] != (4,):
+        return rec
+    out = rec.copy()
+    angles = dict(zip(ANGLES, (np.degrees(a) for a in quat_to_euler(rec[q])), strict=True))
+    for n in missing:
+        out.add(f"{prefix}{n}", angles[n], "deg")
+    notes.append(f"{', '.join(prefix + n for n in missing)} derived from {q} (ZYX Euler of body→NED, deg)")
+    return out
+
+
+def align_reference_heading(
+    est: Recording, ref: Recording, offset: float | str
+) -> tuple[Recording, Recording, dict[str, Any]]:
+    """The reference with a constant heading offset (deg) added to ref_heading and ref_q turned about down by it;
+    ``'auto'``: the offset is the circular mean of estimate heading − reference heading (on the estimate's
+    times). Returns (estimate, reference, what was done). The estimate is the reference when they are one."""
+    from imutool.metrics import interp_to, unwrap_deg
+
+    if "ref_heading" not in ref.channels and "ref_q" not in ref.channels:
+        raise ImutoolError("--align-heading: the reference has no heading (ref_heading or ref_q)")
+    info: dict[str, Any] = {}
+    if offset == "auto":
+        if "heading" not in est.channels or "ref_heading" not in ref.channels:
+            raise ImutoolError("--align-heading auto: needs a heading in the estimate and in the reference")
+        r = interp_to(est.time, ref.time, unwrap_deg(ref["ref_heading"]))
+        d = np.radians(wrap_deg180(np.asarray(est["heading"], float) - r))
+        d = d[np.isfinite(d)]
+        if d.size == 0:
+            raise ImutoolError("--align-heading auto: the estimate and the reference headings do not overlap")
+        c, s = float(np.mean(np.cos(d))), float(np.mean(np.sin(d)))
+        value = float(np.degrees(np.arctan2(s, c)))
+        info = {
+            "offset_deg": round(value, 4),
+            "how": f"auto: circular mean of estimate − reference heading over {d.size} samples",
+            "resultant_length": round(float(np.hypot(c, s)), 4),  # 1: a constant offset; near 0: no common one
+            "circular_std_deg": round(
+                float(np.degrees(np.sqrt(max(0.0, -2.0 * np.log(max(np.hypot(c, s), 1e-12)))))), 3
+            ),
+        }
+    else:
+        value = float(offset)
+        info = {"offset_deg": value, "how": "given (--align-heading)"}
+    info["applied_to"] = "reference heading + offset; reference quaternion turned about down by the offset"
+    same = ref is est
+    out = ref.copy()
+    if "ref_heading" in out.channels:
+        out.add("ref_heading", (np.asarray(ref["ref_heading"], float) + value) % 360.0, "deg")
+    if "ref_q" in out.channels:
+        h = np.radians(value) / 2.0
+        qz = np.array([np.cos(h), 0.0, 0.0, np.sin(h)])
+        out.channels["ref_q"] = quat_multiply(qz, np.asarray(ref["ref_q"], float))
+    out.meta["heading_alignment"] = info
+    return (out if same else est), out, info
+
+
+def compared_span(est: Recording, ref: Recording) -> dict[str, Any]:
+    """The times both recordings cover (recording s; ISO UTC beside them where the estimate has a date)."""
+    clock = Clock.of(est)
+    t0 = max(float(est.time[0]), float(ref.time[0])) if len(est) and len(ref) else float("nan")
+    t1 = min(float(est.time[-1]), float(ref.time[-1])) if len(est) and len(ref) else float("nan")
+    out: dict[str, Any] = {"start_s": t0, "end_s": t1, "duration_s": t1 - t0, "shown_as": clock.unit}
+    if clock.dated:
+        out["start_utc"], out["end_utc"] = clock.iso(t0), clock.iso(t1)
+    out["text"] = f"{clock.text(t0)} … {clock.text(t1)} {clock.unit}" + (f" ({clock.date()})" if clock.dated else "")
+    return out
 
 
 def _name(x: str | os.PathLike | Recording) -> str:
@@ -209,7 +370,9 @@ def plot_errors(est: Recording, ref: Recording, path: str) -> None:
     names = [n for n in ("roll", "pitch", "heading") if n in est.channels and f"ref_{n}" in ref.channels]
     if not names:
         raise ImutoolError("nothing to plot: no roll/pitch/heading with ref_* columns")
-    fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.8 * len(names)), squeeze=False)
+    clock = Clock.of(est)
+    x = clock.x(est.time)  # seconds from the start; dated: UTC clock ticks
+    fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.8 * len(names)), squeeze=False, sharex=True)
     for i, n in enumerate(names):
         wrap = n == "heading"
         r = interp_to(est.time, ref.time, unwrap_deg(ref[f"ref_{n}"]) if wrap else ref[f"ref_{n}"])
@@ -217,18 +380,18 @@ def plot_errors(est: Recording, ref: Recording, path: str) -> None:
         if wrap:
             e = wrap_deg180(e)
             r = r % 360
-        axes[i, 0].plot(est.time, r, "k-", lw=1, label="reference")
-        axes[i, 0].plot(est.time, est[n], "C0-", lw=0.8, label="estimate")
+        axes[i, 0].plot(x, r, "k-", lw=1, label="reference")
+        axes[i, 0].plot(x, est[n], "C0-", lw=0.8, label="estimate")
         axes[i, 0].set_ylabel(f"{n} (deg)")
         axes[i, 0].legend(loc="upper right", fontsize=8)
-        axes[i, 1].plot(est.time, e, "C3-", lw=0.8)
+        axes[i, 1].plot(x, e, "C3-", lw=0.8)
         if f"{n}_std" in est.channels:
             s = est[f"{n}_std"]
-            axes[i, 1].fill_between(est.time, -2 * s, 2 * s, color="0.8", label="±2σ (filter)")
+            axes[i, 1].fill_between(x, -2 * s, 2 * s, color="0.8", label="±2σ (filter)")
             axes[i, 1].legend(loc="upper right", fontsize=8)
         axes[i, 1].set_ylabel(f"{n} error (deg)")
     for ax in axes[-1]:
-        ax.set_xlabel("time (s)")
+        clock.axis(ax)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format=path.rsplit(".", 1)[-1].lower() if "." in path else "png", dpi=100)

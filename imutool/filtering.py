@@ -41,7 +41,7 @@ from imutool.attitude.recording import drop_clipped, flag_clipped, gnss_inputs, 
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import ChunkChecks, load_recording, mapping_options
+from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, mapping_options, read_input
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -49,7 +49,6 @@ from imutool.progress import Progress, report
 # run_filter, for the compass's deviation card only
 
 METHODS = ("ekf", "lpf", "accel", "compass")
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
 
 
 @dataclass
@@ -158,8 +157,10 @@ def run_filter(
     antenna = _lever_arm(antenna_arm, "antenna arm")
     if method == "ekf":
         params = params if params is not None else EkfParams()
-    if not isinstance(source, Recording) and streams(
-        source, output, method=method, smooth=smooth, gnss=gnss, stream_mb=stream_mb, heading=heading
+    if (
+        not isinstance(source, Recording)
+        and not load_options.get("with_files")  # merged in memory
+        and streams(source, output, method=method, smooth=smooth, gnss=gnss, stream_mb=stream_mb, heading=heading)
     ):
         summary = stream_ekf(
             source,
@@ -171,7 +172,7 @@ def run_filter(
             antenna_arm=antenna,
             strict=strict,
             progress=progress,
-            **{k: load_options.get(k) for k in ("columns", "profile", "mounting", "calibration_file")},
+            **{k: load_options.get(k) for k in STREAM_OPTIONS},
         )
         validation = summary.pop("validation")
         if on_input is not None:
@@ -340,6 +341,10 @@ def attach_heading(rec: Recording, path: str | os.PathLike, max_gap_s: float = H
     return out
 
 
+STREAM_OPTIONS = ("columns", "profile", "mounting", "calibration_file", "input_rate_hz", "time_column", "header_rows")
+"""The load options a streamed run takes (the others have their defaults there: no --with, no sorting)."""
+
+
 def stream_ekf(
     path: str | os.PathLike,
     output: str | os.PathLike,
@@ -355,6 +360,9 @@ def stream_ekf(
     calibration_file: str | None = None,
     strict: bool = False,
     progress: Progress | None = None,
+    input_rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
 ) -> dict[str, Any]:
     """Bounded-memory causal EKF over a large CSV/Parquet file: chunks streamed (Parquet by row groups), the
     filter state carried from chunk to chunk, rows appended to a .csv or .parquet output; returns the summary.
@@ -384,7 +392,10 @@ def stream_ekf(
     # three stages overlap: the next chunk is parsed and the previous one formatted/written in background threads
     # while the EKF runs on this one (the compiled kernels release the GIL)
     kind = formats.kind_of(path)
-    opts = {**mapping_options(path, columns, profile), **({"prefetch": True} if kind == "csv" else {})}
+    time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
+    if kind != "csv" and any(v is not None for v in time_opts.values()):
+        read_input(path, **time_opts)  # the one-line refusal of a CSV-only option
+    opts = {**mapping_options(path, columns, profile), **({"prefetch": True, **time_opts} if kind == "csv" else {})}
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
     total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read

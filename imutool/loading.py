@@ -17,6 +17,26 @@ import formats
 from formats import Recording
 from formats.errors import ImutoolError
 
+LOAD_OPTIONS = (
+    "columns",
+    "profile",
+    "topic",
+    "stamp",
+    "duplicates",
+    "backwards",
+    "mounting",
+    "calibration_file",
+    "input_rate_hz",
+    "time_column",
+    "header_rows",
+    "with_files",
+    "with_offsets",
+)
+"""How a path is loaded (:func:`load_recording`): the ``--columns ... --with`` options every command that reads a
+recording takes."""
+
+CSV_ONLY = {"rate_hz": "--rate", "time_column": "--time-column", "header_rows": "--header-rows"}
+
 
 def load_recording(
     path: str | os.PathLike,
@@ -31,11 +51,20 @@ def load_recording(
     calibration_file: str | None = None,
     validate: bool = True,
     strict: bool = False,
+    input_rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
+    with_files: tuple[str, ...] | list[str] = (),
+    with_offsets: tuple[float, ...] | list[float] = (),
 ) -> tuple[Recording, dict[str, Any]]:
     """Read ``path`` (any format imutool reads) → (recording, validation report dict).
 
-    columns/profile: foreign CSV column mapping; topic/stamp: bag topic and time source; duplicates/backwards:
-    validation policies (:meth:`formats.Recording.validated`); mounting: sensor→body ``'x,-y,-z[;r,p,y]'`` (deg);
+    columns/profile: foreign CSV column mapping; input_rate_hz (``--rate``, Hz: a CSV without a time column gets
+    t = n / rate), time_column (``NAME[:UNIT]``, unit s/ms/us/ns), header_rows (a CSV's header rows: names, then
+    units): how a CSV's time and header are read (:func:`formats.csv.read_header`); with_files: other recordings
+    (sensors on other clocks) merged onto this one's times (:func:`merge_with`; with_offsets: seconds added to
+    each one's times, in order); topic/stamp: bag topic and time source; duplicates/backwards: validation policies
+    (:meth:`formats.Recording.validated`); mounting: sensor→body ``'x,-y,-z[;r,p,y]'`` (deg);
     calibration_file: calibration TOML applied before mounting. The report holds rows read/kept/dropped and why,
     samples bridged, ``warnings`` (implausible units or axes, rows dropped...) and ``plausibility_figures``; what
     validation did and the warnings also go into ``rec.meta``. ``strict``: warnings raise an ImutoolError.
@@ -43,11 +72,9 @@ def load_recording(
     from formats import plausibility
 
     path = os.fspath(path)
+    csv_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     kind = formats.kind_of(path)
-    opts: dict[str, Any] = mapping_options(path, columns, profile)
-    if kind in ("ros1", "ros2"):
-        opts.update(topic=topic, stamp=stamp)
-    rec = formats.read(path, **opts)
+    rec = read_input(path, columns=columns, profile=profile, topic=topic, stamp=stamp, **csv_opts)
     report: dict[str, Any] = {}
     checks = plausibility.PlausibilityReport()
     if validate:
@@ -61,6 +88,14 @@ def load_recording(
     else:  # what the reader itself could not read is reported all the same
         report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
         checks.warnings += warns
+    if with_offsets and not with_files:
+        raise ImutoolError("--with-offset is the clock offset of a --with FILE: give the file too")
+    if with_files:
+        rec, merged = merge_with(
+            rec, path, list(with_files), list(with_offsets), duplicates=duplicates, backwards=backwards
+        )
+        report["with"] = merged["files"]
+        checks.warnings += merged["warnings"]
     if calibration_file:
         from calibration import load_calibration
 
@@ -106,6 +141,113 @@ def mapping_options(path: str, columns: str | None, profile: str | None) -> dict
             path=path,
         )
     return {"columns": columns, "profile": profile}
+
+
+def read_input(
+    path: str,
+    *,
+    columns: str | None = None,
+    profile: str | None = None,
+    topic: str | None = None,
+    stamp: str = "header",
+    rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
+) -> Recording:
+    """:func:`formats.read` of ``path`` with the options its format takes (CSV: columns, profile and the time
+    and header options; bags: topic, stamp and a column mapping, :func:`mapping_options`); a CSV-only option given
+    for another format is an ImutoolError."""
+    kind = formats.kind_of(path)
+    csv_opts = {"rate_hz": rate_hz, "time_column": time_column, "header_rows": header_rows}
+    given = [CSV_ONLY[k] for k, v in csv_opts.items() if v is not None]
+    if given and kind != "csv":
+        raise ImutoolError(f"{', '.join(given)}: only for a CSV file (this is {kind})", path=path)
+    opts: dict[str, Any] = mapping_options(path, columns, profile)
+    if kind == "csv":
+        opts.update(csv_opts)
+    elif kind in ("ros1", "ros2"):
+        opts.update(topic=topic, stamp=stamp)
+    return formats.read(path, **opts)
+
+
+def merge_with(
+    rec: Recording,
+    path: str,
+    with_files: list[str],
+    with_offsets: list[float] | None = None,
+    *,
+    duplicates: str = "drop",
+    backwards: str = "error",
+) -> tuple[Recording, dict[str, Any]]:
+    """``rec`` (read from ``path``) with the channels of ``with_files`` (sensors on other clocks) interpolated onto
+    its times by :func:`formats.merge` → (merged recording, {"files": per file, "warnings": [...]}).
+
+    Each file is read as it is (a CSV's columns inferred), put in time order with the ``duplicates``/``backwards``
+    policies, and its times shifted by its offset (``with_offsets``, s, in order; none: 0). Only the span every
+    file covers is kept. A channel name two files share is refused (which one would be meant is not clear). The
+    metadata's ``merged`` says which file gave which channels, the time base and each offset.
+    """
+    offsets = [float(v) for v in (with_offsets or [])]
+    if offsets and len(offsets) != len(with_files):
+        raise ImutoolError(
+            f"--with-offset given {len(offsets)} time(s) for {len(with_files)} --with file(s): give one per file, "
+            "in order (0 for none)"
+        )
+    offsets = offsets or [0.0] * len(with_files)
+    owner = {name: path for name in rec.channels}
+    others: list[Recording] = []
+    files: list[dict[str, Any]] = [{"input": path, "channels": list(rec.channels), "offset_s": 0.0, "rows": len(rec)}]
+    warnings: list[str] = []
+    for p, off in zip(with_files, offsets, strict=True):
+        p = os.fspath(p)
+        if not np.isfinite(off):
+            raise ImutoolError(f"--with-offset {off}: not a finite number of seconds", path=p)
+        r = read_input(p)
+        n_in = len(r)
+        r, rep = r.validated(duplicates=duplicates, backwards=backwards, source=p)
+        if not len(r):
+            raise ImutoolError("no samples to merge (--with)", path=p)
+        clash = [n for n in r.channels if n in owner]
+        if clash:
+            raise ImutoolError(
+                f"--with: channel(s) {', '.join(clash)} also in {owner[clash[0]]}; which one to use is not clear "
+                "(merge only files whose channels differ, e.g. one sensor per file)",
+                path=p,
+            )
+        owner.update({n: p for n in r.channels})
+        if off:
+            r = r.copy()
+            r.time = r.time + off
+        dropped = n_in - len(r)
+        if dropped:
+            warnings.append(f"--with {p}: {dropped} of {n_in} rows dropped by validation")
+        files.append({"input": p, "channels": list(r.channels), "offset_s": off, "rows": len(r)})
+        others.append(r)
+    t0 = max(float(r.time[0]) for r in (rec, *others))
+    t1 = min(float(r.time[-1]) for r in (rec, *others))
+    if t1 <= t0:
+        spans = "; ".join(
+            f"{f['input']} {r.time[0]:.6g}…{r.time[-1]:.6g} s" for f, r in zip(files, (rec, *others), strict=True)
+        )
+        raise ImutoolError(
+            f"--with: the files do not overlap in time ({spans}); give each one's clock offset with --with-offset",
+            path=path,
+        )
+    merged = formats.merge([rec, *others], rec)
+    kept = len(merged)
+    meta = dict(rec.meta)
+    meta["merged"] = {
+        "time_base": f"{path} (its {len(rec)} sample times; the others interpolated linearly onto them)",
+        "files": files,
+        "span_s": [t0, t1],
+        "rows_outside_common_span_dropped": len(rec) - kept,
+    }
+    merged.meta = meta
+    if len(rec) - kept > 0.01 * len(rec):  # a few rows at the ends are what merging clocks costs
+        warnings.append(
+            f"--with: {len(rec) - kept} of {len(rec)} rows of {path} outside the span every file covers dropped"
+        )
+    return merged, {"files": files[1:], "warnings": warnings}
 
 
 def merged_warnings(meta: dict[str, Any], *more: list[str]) -> list[str]:

@@ -90,7 +90,8 @@ def _collect(
 ) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], Recording, int]:
     """Decimated (t, y) per matched channel; streams CSV files, reads others whole (their report into
     ``inputs``)."""
-    plain_csv = formats.kind_of(path) == "csv" and not io.get("mounting") and not io.get("calibration_file")
+    in_memory = ("mounting", "calibration_file", "with_files")
+    plain_csv = formats.kind_of(path) == "csv" and not any(io.get(k) for k in in_memory)
     if plain_csv:
         from formats.csv import iter_csv
 
@@ -100,7 +101,9 @@ def _collect(
         t0 = None
         bucket = 1
         total = 0
-        for chunk in iter_csv(path, chunk_rows=250_000, columns=io.get("columns"), profile=io.get("profile")):
+        csv_opts = {k: io.get(k) for k in ("columns", "profile", "time_column", "header_rows")}
+        csv_opts["rate_hz"] = io.get("input_rate_hz")
+        for chunk in iter_csv(path, chunk_rows=250_000, **csv_opts):
             if template is None:
                 template = chunk
                 names = match_channels(list(chunk.channels), wanted, path)

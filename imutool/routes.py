@@ -3,8 +3,9 @@ command's summary carries, and that summary exactly as ``imutool <command> --jso
 
 A library route (:func:`imutool.heave.run_heave`, :func:`imutool.ins.run_ins_track`,
 :func:`imutool.nmea_out.run_nmea`, :func:`imutool.zvi.run_zvi`, :func:`imutool.gyrofree.run_gyrofree`,
-:func:`imutool.events.run_events` and ``run_fleet``, :func:`imutool.report.route.run_inclinometer_report` and
-``run_heading_report``, :func:`imutool.convert.run_convert`, :func:`imutool.roll.run_roll`,
+:func:`imutool.events.run_events` and ``run_fleet``, :func:`imutool.evaluation.run_evaluate`,
+:func:`imutool.report.route.run_inclinometer_report` and ``run_heading_report``,
+:func:`imutool.convert.run_convert`, :func:`imutool.roll.run_roll`,
 :func:`imutool.noise.allan_noise`, :func:`imutool.info.run_info`, :func:`imutool.plot.run_plot`,
 :func:`imutool.sim.run_simulate`, the calibration runs of :mod:`imutool.calibrate`; ``run_filter`` returns its own
 :class:`imutool.filtering.FilterResult`) takes an input path and the command's options with their defaults, reads,
@@ -21,10 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from formats import Recording
-from imutool.loading import load_recording
-
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
-"""How a path is loaded (:func:`imutool.loading.load_recording`): the ``--columns ... --calibration`` options."""
+from imutool.loading import LOAD_OPTIONS, load_recording  # noqa: F401  (LOAD_OPTIONS: re-exported)
 
 OnInput = Callable[[str, dict[str, Any]], None]
 """``on_input(path, report)``: called right after an input is loaded (report from :func:`load_recording`)."""

@@ -41,3 +41,68 @@ def test_evaluate_missing_heave_module_is_one_line(tmp_path):
     formats.write(rec, p)
     r = CliRunner().invoke(cli, ["evaluate", str(p), "--json"])
     assert r.exit_code == 0 and '"rmse": 1.0' in r.output
+
+
+def _mocap(tmp_path, t0=0.0, frame_offset_deg=-90.0):
+    """An estimate (roll/pitch/heading + q) and a motion-capture reference holding only a quaternion whose frame's
+    x axis is ``frame_offset_deg`` off north; the estimate has a constant 0.2° heading error."""
+    t = t0 + np.arange(0, 60, 0.1)
+    s = t - t0
+    roll, pitch, hdg = (
+        5 * np.sin(2 * np.pi * s / 8),
+        2 * np.sin(2 * np.pi * s / 6),
+        30 + 10 * np.sin(2 * np.pi * s / 30),
+    )
+    est = Recording(t.copy())
+    for n, v in (("roll", roll), ("pitch", pitch), ("heading", (hdg + 0.2) % 360)):
+        est.add(n, v, "deg")
+    est.add("q", euler_to_quat(np.radians(roll), np.radians(pitch), np.radians(hdg + 0.2)))
+    ref = Recording(t.copy())
+    ref.add("q", euler_to_quat(np.radians(roll), np.radians(pitch), np.radians((hdg + frame_offset_deg) % 360)))
+    paths = (tmp_path / "est.csv", tmp_path / "mocap.csv")
+    formats.write(est, paths[0])
+    formats.write(ref, paths[1])
+    return paths
+
+
+def test_reference_with_only_a_quaternion_and_align_heading(tmp_path):
+    from imutool.evaluation import run_evaluate
+
+    est, mocap = _mocap(tmp_path)
+    plain = run_evaluate(est, mocap).summary  # roll/pitch from the reference's quaternion; heading 90° off
+    assert plain["angles"]["roll"]["rmse"] < 1e-6 and plain["angles"]["pitch"]["rmse"] < 1e-6
+    assert abs(plain["angles"]["heading"]["mae"] - 90.2) < 1e-3
+    assert any("derived from ref_q" in n for n in plain["derived"])
+    auto = run_evaluate(est, mocap, align_heading="auto").summary  # the offset found and reported
+    assert abs(auto["align_heading"]["offset_deg"] - 90.2) < 1e-3 and auto["align_heading"]["resultant_length"] > 0.999
+    assert auto["angles"]["heading"]["rmse"] < 1e-3 and auto["quaternion"]["heading"]["rmse"] < 1e-3
+    given = run_evaluate(est, mocap, align_heading=90).summary  # a given offset: the 0.2° estimate error remains
+    assert (
+        abs(given["angles"]["heading"]["mae"] - 0.2) < 1e-6 and abs(given["quaternion"]["total"]["rmse"] - 0.2) < 1e-3
+    )
+    assert given["align_heading"]["how"].startswith("given")
+
+
+def test_evaluate_cli_is_the_route_and_prints_utc(tmp_path, capsys):
+    import json
+
+    from imutool.cli import main
+
+    def run(*args: str) -> int:
+        try:
+            main(list(args))
+        except SystemExit as e:
+            return int(e.code or 0)
+        return 0
+
+    est, mocap = _mocap(tmp_path, t0=1406851200.0)  # Unix times: the recording has a date (2014-08-01)
+    png = str(tmp_path / "e.png")
+    assert run("evaluate", str(est), "--reference", str(mocap), "--align-heading", "auto", "--plot", png) == 0
+    out = capsys.readouterr().out
+    assert "heading alignment: +90.200°" in out and "compared: 00:00:00.0 … 00:00:59.9 UTC (2014-08-01)" in out
+    assert run("evaluate", str(est), "--reference", str(mocap), "--align-heading", "auto", "--json") == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["span"]["start_utc"] == "2014-08-01T00:00:00.000Z" and s["span"]["start_s"] == 1406851200.0
+    assert (tmp_path / "e.png").stat().st_size > 0
+    assert run("evaluate", str(est), "--align-heading", "north") == 2
+    assert "--align-heading" in capsys.readouterr().err

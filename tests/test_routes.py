@@ -521,3 +521,32 @@ def test_batch_simulate_calls_the_route(tmp_path, monkeypatch, capsys):
         main(["batch", "simulate", "static", "-o", "b/{stem}.csv", "-j", "1", "--json", "--args", "--duration 2"])
     out = json.loads(capsys.readouterr().out)
     assert e.value.code == 0 and out["results"][0]["rows"] == len(formats.read("b/static.csv"))
+
+
+def test_evaluate(data, tmp_path, monkeypatch, capsys):
+    """`imutool evaluate` is its route `run_evaluate` (the same --json and plot), and `imutool batch evaluate`
+    calls that route (the command line is never run)."""
+    import imutool.cli.batch as cli_batch
+    from imutool.cli import main
+    from imutool.evaluation import run_evaluate
+
+    args = ["evaluate", data["att"], "--reference", data["roll"], "--align-heading", "auto", "--plot", "e.png"]
+    s = _same(
+        tmp_path,
+        monkeypatch,
+        args,
+        lambda: run_evaluate(data["att"], data["roll"], align_heading="auto", plot="e.png"),
+        [],
+    )
+    assert s["align_heading"]["how"].startswith("auto") and set(s["angles"]) == {"roll", "pitch", "heading"}
+    assert (tmp_path / "cli" / "e.png").exists() and (tmp_path / "lib" / "e.png").exists()
+
+    def no_cli(*a, **k):
+        raise AssertionError("batch ran the command line, not the route")
+
+    monkeypatch.setattr(cli_batch, "run_command", no_cli)
+    with pytest.raises(SystemExit) as e:
+        main(["batch", "evaluate", data["att"], "-j", "1", "--json", "--args", f"--reference {data['roll']}"])
+    out = json.loads(capsys.readouterr().out)
+    assert e.value.code == 0, out
+    assert out["results"][0]["status"] == "ok" and out["results"][0]["error"] is None

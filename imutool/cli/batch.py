@@ -2,7 +2,7 @@
 
 The click layer only parses options, builds the jobs and prints; the work is :mod:`imutool.batch`. Each job's
 options (``INPUT -o OUTPUT [ARGS]``) are parsed by the command itself; a command with a library route (marked by
-:func:`imutool.cli.common.route_of`: every command but evaluate, capture, selfcheck and batch) then has that route
+:func:`imutool.cli.common.route_of`: every command but capture, selfcheck and batch) then has that route
 called directly in the worker (:func:`run_route`, behind the command's own output checks; the summary is the
 route's result, no stdout read back). Any other command runs as ``imutool COMMAND ... --json`` through
 :func:`imutool.cli.main` with stdout and stderr captured (:func:`run_command`).

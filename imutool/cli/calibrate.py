@@ -35,17 +35,6 @@ from imutool.cli.common import (
 from imutool.routes import OnInput, RouteResult
 
 
-def _with_option(f):
-    return click.option(
-        "--with",
-        "with_files",
-        multiple=True,
-        type=click.Path(exists=True),
-        help="Another file of the same run (e.g. the accelerometer CSV when each sensor has its "
-        "own file), merged onto INPUT's clock. Repeatable.",
-    )(f)
-
-
 @click.group("calibrate", epilog="Example: imutool calibrate mag sphere.csv -o cal.toml --plot cal.png")
 def calibrate_group() -> None:
     """Calibrate magnetometer (sphere or ship swing), deviation card, gyro and accelerometer.
@@ -119,7 +108,6 @@ MAG_OUTPUTS = ("output", "plot")
 @click.option("--plot", default=None, help="Before/after plot (.png/.pdf).")
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance (default: from the input metadata).")
-@_with_option
 @input_options
 @output_options
 @safe_outputs(*MAG_OUTPUTS, append="append")
@@ -270,7 +258,6 @@ mag_cmd = route_of(mag_route, MAG_OUTPUTS, append="append")(mag_cmd)
     help="Merge [deviation] into an existing .toml (or write a new one).",
 )
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("outputs", append="append")
@@ -408,7 +395,6 @@ def _rest_options(f):
 @_rest_options
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("output", append="append")
@@ -497,7 +483,6 @@ gyro_cmd = route_of(gyro_route, ("output",), append="append")(gyro_cmd)
 @_rest_options
 @click.option("--append", is_flag=True, help="Merge into an existing calibration file (else a new file).")
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
-@_with_option
 @input_options
 @output_options
 @safe_outputs("output", append="append")

@@ -19,8 +19,16 @@ from imutool.routes import with_inputs
 T = TypeVar("T")
 
 
-def input_options(f: Callable) -> Callable:
-    """The options every command that reads sensor data accepts."""
+def input_options(f: Callable | None = None, *, rate_flag: str = "--rate") -> Callable:
+    """The options every command that reads sensor data accepts (``@input_options``). ``rate_flag``: the name of
+    the input's sample-rate option where the command has a ``--rate`` of its own (``@input_options(rate_flag=
+    "--input-rate")``)."""
+    if f is None:
+        return lambda g: _input_options(g, rate_flag)
+    return _input_options(f, rate_flag)
+
+
+def _input_options(f: Callable, rate_flag: str) -> Callable:
     opts = [
         click.option(
             "--columns",
@@ -70,6 +78,47 @@ def input_options(f: Callable) -> Callable:
             help="Calibration TOML to apply.",
         ),
         click.option(
+            rate_flag,
+            "input_rate_hz",
+            type=FiniteFloat(min=0, min_open=True),
+            default=None,
+            metavar="HZ",
+            help="A CSV without a time column: its sample rate; time = n / HZ (n the row from 0), recorded in "
+            "the metadata.",
+        ),
+        click.option(
+            "--time-column",
+            default=None,
+            metavar="NAME[:UNIT]",
+            help="The CSV column holding the time, its unit s, ms, us or ns (default: the unit in its name, else "
+            "s), e.g. 'Packet time:ms'.",
+        ),
+        click.option(
+            "--header-rows",
+            type=click.IntRange(min=1),
+            default=None,
+            metavar="N",
+            help="CSV header rows: the first names the columns, a later one may give units (e.g. RepoIMU: 2). "
+            "Default 1, or the profile's header_rows.",
+        ),
+        click.option(
+            "--with",
+            "with_files",
+            multiple=True,
+            type=click.Path(exists=True),
+            help="Another recording (a sensor on another clock, e.g. one file per sensor) merged onto INPUT's "
+            "times by linear interpolation, over the span both cover; which file gave which channels is "
+            "recorded in the metadata. Repeatable; channel names must differ.",
+        ),
+        click.option(
+            "--with-offset",
+            "with_offsets",
+            multiple=True,
+            type=FiniteFloat(),
+            metavar="S",
+            help="Seconds added to a --with file's times (its clock's offset from INPUT's): one per --with, in order.",
+        ),
+        click.option(
             "--strict",
             is_flag=True,
             expose_value=False,
@@ -114,6 +163,11 @@ def load_input(
     calibration_file: str | None = None,
     validate: bool = True,
     strict: bool | None = None,
+    input_rate_hz: float | None = None,
+    time_column: str | None = None,
+    header_rows: int | None = None,
+    with_files: tuple[str, ...] = (),
+    with_offsets: tuple[float, ...] = (),
 ) -> tuple[Recording, dict[str, Any]]:
     """Read, validate, bridge absurd samples, apply calibration and mounting, check plausibility.
 
@@ -135,6 +189,11 @@ def load_input(
         mounting=mounting,
         calibration_file=calibration_file,
         validate=validate,
+        input_rate_hz=input_rate_hz,
+        time_column=time_column,
+        header_rows=header_rows,
+        with_files=with_files,
+        with_offsets=with_offsets,
     )
     if len(rec):
         note_input(path, report, strict)
@@ -191,6 +250,11 @@ def _validation_lines(inputs: list[dict[str, Any]]) -> Iterator[str]:
             f"validation: {r['input']}: {r.get('rows_read', r.get('rows'))} rows read, {r.get('rows_kept')} kept"
             + (f" (dropped: {why})" if why else "")
             + (f"; {bridged} absurd samples bridged" if bridged else "")
+            + (
+                "; merged onto its times: " + ", ".join(f"{w['input']} ({', '.join(w['channels'])})" for w in r["with"])
+                if r.get("with")
+                else ""
+            )
             + (f"; {len(r['warnings'])} warning(s) on stderr" if r.get("warnings") else "")
         )
 

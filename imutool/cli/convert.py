@@ -46,7 +46,8 @@ def convert_route(
     if output and output_arg:
         raise click.UsageError("give the output once (OUT or -o)")
     dup, back = options.get("duplicates", "drop"), options.get("backwards", "error")
-    if streams(input_path, out, stream=not no_stream, duplicates=dup, backwards=back):
+    merging = bool(options.get("with_files"))
+    if streams(input_path, out, stream=not no_stream, duplicates=dup, backwards=back, merging=merging):
         bar: Any = lazy_bar("converting", unit="rows", quiet=quiet)
         stage = None
     else:

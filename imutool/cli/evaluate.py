@@ -1,13 +1,55 @@
 """`imutool evaluate EST --reference REF`: estimate vs truth — RMSE, max, p95, MAE, lag, SNR, BROAD metrics.
 
-Options and printing only; the comparison is :func:`imutool.evaluation.evaluate`.
+Options and printing only; the comparison is :func:`imutool.evaluation.run_evaluate` (the route `imutool batch
+evaluate` and a Python user take).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
-from imutool.cli.common import emit_summary, safe_outputs
+from imutool.cli.common import emit_summary, input_options, note_input, route_of, safe_outputs, strict_requested
+
+
+def _align(value: str | None) -> str | None:
+    """``--align-heading`` checked at parsing (a usage error names the option)."""
+    from formats.errors import ImutoolError
+    from imutool.evaluation import parse_align_heading
+
+    try:
+        parse_align_heading(value)
+    except ImutoolError as e:
+        raise click.BadParameter(str(e).split(": ", 1)[-1]) from None
+    return value
+
+
+def evaluate_route(
+    est_path: str,
+    ref_path: str | None = None,
+    channel: str | None = None,
+    max_lag: float = 0.0,
+    plot_path: str | None = None,
+    align_heading: str | None = None,
+    quiet: bool = True,
+    on_input: Any = None,
+    **load_options: Any,
+) -> Any:
+    """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST)."""
+    from imutool.evaluation import run_evaluate
+
+    return run_evaluate(
+        est_path,
+        ref_path,
+        channel=channel,
+        max_lag_s=max_lag,
+        plot=plot_path,
+        align_heading=align_heading,
+        strict=strict_requested(),
+        on_input=on_input,
+        **load_options,
+    )
 
 
 @click.command("evaluate", epilog="Example: imutool evaluate est.csv --reference roll.csv --max-lag 1 --plot err.png")
@@ -33,6 +75,15 @@ from imutool.cli.common import emit_summary, safe_outputs
     help="Search a constant lag up to ± this many seconds (response time / phase lag).",
 )
 @click.option("--plot", "plot_path", type=click.Path(), default=None, help="Error plot (.png/.pdf).")
+@click.option(
+    "--align-heading",
+    default=None,
+    metavar="DEG|auto",
+    callback=lambda ctx, param, v: _align(v),
+    help="Add a constant heading offset (deg) to the reference (a motion-capture frame's x axis is not north); "
+    "'auto' estimates it as the circular mean of estimate − reference heading and reports it.",
+)
+@input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("plot_path")
@@ -42,14 +93,16 @@ def evaluate_cmd(
     channel: str | None,
     max_lag: float,
     plot_path: str | None,
+    align_heading: str | None,
     as_json: bool,
     quiet: bool,
+    **load_options: Any,
 ) -> None:
     """Compare the estimate EST with a reference: per angle RMSE, max, p95, MAE, lag and SNR_dB (deg; heading
     errors wrapped), quaternion errors with the BROAD metrics (total, heading, inclination), heave, position."""
-    from imutool.evaluation import evaluate
-
-    summary = evaluate(est_path, ref_path, channel=channel, max_lag_s=max_lag, plot=plot_path)
+    summary = evaluate_route(
+        est_path, ref_path, channel, max_lag, plot_path, align_heading, on_input=note_input, **load_options
+    ).summary
     lines = None
     if "angles" in summary:
         lines = [f"{'angle':8s} {'RMSE':>7s} {'max':>7s} {'p95':>7s} {'MAE':>7s} {'lag s':>7s} {'SNR dB':>7s}"]
@@ -64,4 +117,14 @@ def evaluate_cmd(
                 f"BROAD ({qv['rows']}): total {qv['total']['rmse']:.3f}°, heading "
                 f"{qv['heading']['rmse']:.3f}°, inclination {qv['inclination']['rmse']:.3f}° RMSE"
             )
+    if lines is not None:
+        al = summary.get("align_heading")
+        if al:
+            lines.append(f"heading alignment: {al['offset_deg']:+.3f}° added to the reference ({al['how']})")
+        for note in summary.get("derived", []):
+            lines.append(f"note: {note}")
+        lines.append(f"compared: {summary['span']['text']}")
     emit_summary(summary, as_json, quiet, lines)
+
+
+evaluate_cmd = route_of(evaluate_route, ("plot_path",))(evaluate_cmd)

@@ -195,7 +195,7 @@ def nmea_route(
     "HDT/THS/ROT from --heading-source).",
 )
 @roll_options
-@input_options
+@input_options(rate_flag="--input-rate")
 @output_options
 @safe_outputs("output")
 def nmea_cmd(as_json: bool, quiet: bool, **options: Any) -> None:

@@ -29,8 +29,10 @@ RANGES: dict[str, Bound] = {
     "t_start": ANY,
     "t_end": ANY,
     "time_offset": ANY,
+    "with_offsets": ANY,  # --with-offset: a --with file's clock offset (s)
     # sizes and counts
     "chunk_rows": COUNT1,
+    "header_rows": (1, 1000, False, False),
     "update_every": (0, None, False, False),
     "per_decade": (1, 1000, False, False),
     "grid_bands": (2, 90, False, False),
@@ -47,6 +49,7 @@ RANGES: dict[str, Bound] = {
     "mag_gain": (0, 8, False, False),
     # rates, durations, cut-offs (zero is meaningless)
     "rate_hz": (0, 100_000, True, False),
+    "input_rate_hz": (0, 100_000, True, False),  # --rate of a CSV without a time column
     "nmea_rate": (0, 100_000, True, False),
     "cutoff": POS,
     "delayed_cutoff": POS,
@@ -55,6 +58,7 @@ RANGES: dict[str, Bound] = {
     "fmax": POS,
     "bandwidth": POS,
     "window_s": POS,
+    "height_window_s": POS,  # heave from a GNSS height: the detrending window (main had no entry)
     "hop_s": POS,
     "min_window_s": POS,
     "window_g_s": POS,

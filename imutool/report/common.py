@@ -290,3 +290,15 @@ def overall(items: list[dict[str, Any]], required: tuple[str, ...]) -> dict[str,
         "rule": "fail if any item fails; pass only if every required item was tested and passed; otherwise "
         "incomplete. Exit status 0 pass, 1 fail or incomplete, 2 usage error",
     }
+
+
+def set_clock(ev: dict[str, Any], plots: dict[str, Any], ref: Any) -> None:
+    """State the reference's clock in the evidence (``conventions.clock``; :class:`imutool.clock.Clock`): every
+    row time gets an ISO ``*_utc`` beside its seconds when the recording has a date; the PDF prints those times
+    as UTC clock time, else as seconds from the start. ``plots['clock']`` is the same clock."""
+    from imutool.clock import Clock, stamp_times
+
+    clock = Clock.of(ref)
+    ev.setdefault("conventions", {})["clock"] = clock.as_json()
+    stamp_times(ev.get("items"), clock)
+    plots["clock"] = clock

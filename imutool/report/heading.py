@@ -42,6 +42,7 @@ from .common import (
     now_utc,
     overall,
     plateaus,
+    set_clock,
     stats,
     tool_identity,
 )
@@ -611,4 +612,5 @@ def heading_evidence(
         "band_split_dps": o.band_split_dps,
         "band_max_dps": o.band_max_dps,
     }
+    set_clock(ev, plots, ref)
     return ev, plots

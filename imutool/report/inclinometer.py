@@ -44,6 +44,7 @@ from .common import (
     now_utc,
     overall,
     plateaus,
+    set_clock,
     standards_cited,
     stats,
     tol_angle,
@@ -1233,4 +1234,5 @@ def inclinometer_evidence(
         "dut_peak_stbd": outs_al.get("peak_stbd"),
         "dut_peak_port": outs_al.get("peak_port"),
     }
+    set_clock(ev, plots, ref)
     return ev, plots

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from formats.atomic import atomic_path
+from imutool.clock import TIME_KEYS, Clock
 
 A4 = (8.27, 11.69)
 PW, PH = 595.0, 842.0  # page size (pt)
@@ -43,8 +44,11 @@ def _fmt(v: Any, nd: int = 3) -> str:
     return str(v)
 
 
-def key_label(key: str) -> tuple[str, str]:
-    """Column label and unit of a row key: 'reference_deg' → ('reference', 'deg'), 't_peak_s' → ('t peak', 's')."""
+def key_label(key: str, clock: Clock | None = None) -> tuple[str, str]:
+    """Column label and unit of a row key: 'reference_deg' → ('reference', 'deg'), 't_peak_s' → ('t peak', 's');
+    with a ``clock`` a time's unit is that clock's ('UTC' or 's from start')."""
+    if clock is not None and key in TIME_KEYS:
+        return key[:-2].replace("_", " "), clock.unit
     for suffix, unit in (("_deg", "deg"), ("_s", "s"), ("_ms2", "m/s²"), ("_hz", "Hz")):
         if key.endswith(suffix):
             return key[: -len(suffix)].replace("_", " "), unit
@@ -60,16 +64,22 @@ def key_decimals(key: str) -> int:
     return 3
 
 
-def row_cells(keys: list[str], row: dict[str, Any]) -> list[str]:
-    """The formatted cells of one detail row (the same text the PDF prints; tests compare it with the JSON)."""
-    return [_fmt(row.get(k), key_decimals(k)) for k in keys]
+def row_cells(keys: list[str], row: dict[str, Any], clock: Clock | None = None) -> list[str]:
+    """The formatted cells of one detail row (the same text the PDF prints; tests compare it with the JSON); with
+    a ``clock`` its times are UTC clock time (dated) or seconds from the start."""
+    return [
+        clock.text(row.get(k), key_decimals(k))
+        if clock is not None and k in TIME_KEYS and isinstance(row.get(k), (int, float))
+        else _fmt(row.get(k), key_decimals(k))
+        for k in keys
+    ]
 
 
 def row_keys(rows: list[dict[str, Any]]) -> list[str]:
     keys: list[str] = []
     for r in rows:
         for k in r:
-            if k not in keys:
+            if k not in keys and not k.endswith("_utc"):  # a time's ISO UTC: printed in its time column
                 keys.append(k)
     if "side" in keys:
         keys.remove("side")
@@ -467,7 +477,7 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
             )
         L.kv(pairs)
     L.heading("Units, frames and sign conventions")
-    L.kv([(k.replace("_", " "), str(v)) for k, v in ev["conventions"].items()])
+    L.kv([(k.replace("_", " "), _convention_text(k, v)) for k, v in ev["conventions"].items()])
     L.heading("Editions applied (confidence: A verbatim, B secondary quote, C partial, R recalled, I inference)")
     L.table(
         ["document", "edition", "role", "conf."],
@@ -509,6 +519,7 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
 def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
     """Per-item row tables (every row of the JSON), not tested, standards cited, unconfirmed, warnings, settings,
     signatures."""
+    clock = clock_of(ev)
     for it in ev["items"]:
         L.heading(f"{it['title']} — {it['clause']}", 11)
         pairs = [("status", it["status"]), ("criterion", it["criterion"] or "-"), ("result", it["reason"])]
@@ -545,10 +556,10 @@ def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
         rows = it.get("rows") or []
         if rows:
             keys = row_keys(rows)
-            labels = [key_label(k) for k in keys]
+            labels = [key_label(k, clock) for k in keys]
             L.table(
                 [lb for lb, _ in labels],
-                [row_cells(keys, r) for r in rows],
+                [row_cells(keys, r, clock) for r in rows],
                 units=[u for _, u in labels],
                 caption=f"{it['id']}: {len(rows)} rows",
                 numeric=[k not in ("side", "status") for k in keys],
@@ -585,6 +596,23 @@ def detail_blocks(L: Layout, ev: dict[str, Any]) -> None:
     L.signatures(
         ["Operator (test house)", "Witness (surveyor / recognised organisation)", "Approved for the test house"]
     )
+
+
+def _convention_text(key: str, value: Any) -> str:
+    if key == "clock" and isinstance(value, dict):
+        if value.get("start_utc"):
+            return f"times in UTC clock time; the reference's first sample at {value.get('start_utc')}"
+        return "times in seconds from the reference's first sample (the recording has no date)"
+    return str(value)
+
+
+def clock_of(ev: dict[str, Any], plots: dict[str, Any] | None = None) -> Clock:
+    """The evidence's clock (``conventions.clock``; an evidence without one: undated, from the first time)."""
+    if plots is not None and isinstance(plots.get("clock"), Clock):
+        return plots["clock"]
+    t = (plots or {}).get("t")
+    start = float(t[0]) if t is not None and len(t) else 0.0
+    return Clock.from_json(ev.get("conventions", {}).get("clock"), start)
 
 
 def _shade_static(ax: Any, t: np.ndarray, mask: np.ndarray | None, color: str = "0.9") -> None:
@@ -632,7 +660,8 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     import matplotlib.pyplot as plt
 
     figs = []
-    t = p["t"]
+    clock = clock_of(ev, p)
+    t = clock.x(p["t"])  # seconds from the start: no "+1.4e9" axis offset; dated ticks read as UTC
     fig, axs = plt.subplots(3, 1, figsize=A4, sharex=True)
     fig.suptitle("Heel: DUT vs reference (grey = static steps, blue = lateral acceleration)", fontsize=11)
     _shade_static(axs[0], t, p["static_mask"])
@@ -651,15 +680,14 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     axs[2].plot(t, ratio, "C0-", lw=0.5)
     axs[2].axhline(1.0, color="C3", lw=1, ls="--", label="limit")
     axs[2].set_ylabel("|error| / tolerance")
-    axs[2].set_xlabel("time (s, reference clock)")
+    clock.axis(axs[2], "reference time")
     axs[2].legend(loc="upper right", fontsize=7)
     lt = next((it for it in ev["items"] if it["id"] == "long_term"), None)
     if lt and lt.get("start_s") is not None and t.size and lt["end_s"] - lt["start_s"] > 0.5 * (t[-1] - t[0]):
         # the long hold has its own plot: show the programme before it at a readable scale
-        axs[2].set_xlim(t[0], lt["start_s"] + 30.0)
-        axs[0].set_title(
-            f"programme before the long-term hold (from {lt['start_s']:.0f} s: see the long-term plot)", fontsize=8
-        )
+        axs[2].set_xlim(t[0], clock.x(lt["start_s"]) + 30.0)
+        at = clock.text(lt["start_s"], 0) + (" UTC" if clock.dated else " s")
+        axs[0].set_title(f"programme before the long-term hold (from {at}: see the long-term plot)", fontsize=8)
     for ax in axs:
         ax.grid(alpha=0.3)
     figs.append(fig)
@@ -720,19 +748,20 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
         axs[0].plot(t, p["dut_peak_stbd"], "C0-", lw=0.8, label="DUT stbd")
         axs[0].plot(t, p["dut_peak_port"], "C4--", lw=0.8, label="DUT port")
     axs[0].set_ylabel("peak hold (deg, positive)")
-    axs[0].set_xlabel("time (s)")
+    clock.axis(axs[0])
     axs[0].legend(fontsize=7)
     lt = next((it for it in ev["items"] if it["id"] == "long_term"), None)
     if lt and lt["status"] in ("pass", "fail"):
-        m = (t >= lt["start_s"]) & (t <= lt["end_s"])
+        m = (t >= clock.x(lt["start_s"])) & (t <= clock.x(lt["end_s"]))
         axs[1].plot(t[m], p["err"][m], "C3-", lw=0.5, label="DUT − reference")
         tl = p["tol"][m]
         axs[1].fill_between(t[m], -tl, tl, color="C2", alpha=0.25, lw=0, label="tolerance")
         axs[1].set_title(f"long-term hold: drift {lt['drift_deg_per_h']:.3f} °/h", fontsize=9)
         axs[1].legend(fontsize=7)
+        clock.axis(axs[1])
     else:
         axs[1].text(0.5, 0.5, "long-term test: not tested", ha="center", transform=axs[1].transAxes)
-    axs[1].set_xlabel("time (s)")
+        axs[1].set_xlabel(clock.axis_label())
     axs[1].set_ylabel("error (deg)")
     for ax in axs:
         ax.grid(alpha=0.3)
@@ -744,7 +773,8 @@ def _inclinometer_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
 def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     import matplotlib.pyplot as plt
 
-    t = p["t"]
+    clock = clock_of(ev, p)
+    t = clock.x(p["t"])  # seconds from the start: no "+1.4e9" axis offset; dated ticks read as UTC
     fig, axs = plt.subplots(3, 1, figsize=A4, sharex=True)
     fig.suptitle("Heading: DUT vs reference (grey = static headings)", fontsize=11)
     _shade_static(axs[0], t, p["static_mask"])
@@ -772,7 +802,7 @@ def _heading_figures(ev: dict[str, Any], p: dict[str, Any]) -> list[Any]:
     for v in (p["band_split_dps"], p["band_max_dps"], -p["band_split_dps"], -p["band_max_dps"]):
         axs[2].axhline(v, color="0.5", ls=":", lw=0.8)
     axs[2].set_ylabel("reference rate of turn (°/s)")
-    axs[2].set_xlabel("time (s)")
+    clock.axis(axs[2])
     for ax in axs:
         ax.grid(alpha=0.3)
     figs = [fig]

@@ -65,12 +65,22 @@ def _load_pair(
     on_input: OnInput | None,
     load_options: dict[str, Any],
 ) -> tuple[Recording, Recording, str, str]:
-    """The DUT (mounting and calibration applied) and the reference (neither), windowed; with their names."""
+    """The DUT (mounting, calibration, the CSV time options and ``--with`` files applied) and the reference (none
+    of these: its own clock and header), windowed; with their names."""
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"unexpected keyword argument(s) {', '.join(sorted(unknown))}")
     recs, names = [], []
-    ref_options = {**load_options, "mounting": None, "calibration_file": None}
+    dut_only = (
+        "mounting",
+        "calibration_file",
+        "input_rate_hz",
+        "time_column",
+        "header_rows",
+        "with_files",
+        "with_offsets",
+    )
+    ref_options = {k: v for k, v in load_options.items() if k not in dut_only}
     for src, opts in ((dut, load_options), (reference, ref_options)):
         if isinstance(src, Recording):
             recs.append(src)
