@@ -143,9 +143,7 @@ def _position(v: Any, where: str) -> np.ndarray:
     if not np.all(np.isfinite(pos)):
         raise ImutoolError(f"{where}: position must be [x, y, z], finite numbers in metres")
     if np.max(np.abs(pos)) > MAX_POSITION_M:
-        raise ImutoolError(
-            f"{where}: position {v!r} is more than {MAX_POSITION_M:g} m from the origin: not metres?"
-        )
+        raise ImutoolError(f"{where}: position {v!r} is more than {MAX_POSITION_M:g} m from the origin: not metres?")
     return pos
 
 
@@ -154,7 +152,7 @@ def _accel_unit(v: Any, where: str) -> str:
     from formats.units import lookup  # noqa: PLC0415
 
     if not isinstance(v, str):
-        raise ImutoolError(f"{where}: unit must be a string such as \"m/s^2\" or \"g\", got {v!r}")
+        raise ImutoolError(f'{where}: unit must be a string such as "m/s^2" or "g", got {v!r}')
     try:
         quantity, _ = lookup(v)
     except ImutoolError:
