@@ -16,6 +16,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
+from formats.recording import SENSOR_CHANNELS, all_nan_sensors, refuse_without_sensor_data, require_samples
 
 
 def load_recording(
@@ -61,6 +62,9 @@ def load_recording(
         checks.warnings += warns
         rec, checks = plausibility.bridge_absurd(rec, rep=checks)
     else:  # what the reader itself could not read is reported all the same
+        t = rec.time[np.isfinite(rec.time)]
+        distinct = 0 if not len(t) else (1 if np.ptp(t) == 0 else 2)  # rows at different times, up to two
+        require_samples(len(rec), distinct, path, len(t) - distinct if distinct == 1 else 0)
         report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
         checks.warnings += warns
     if calibration_file:
@@ -142,12 +146,16 @@ class ChunkChecks:
         self._absurd = plausibility.PlausibilityReport()
         self._checked = False
         self._rows = 0
+        self._sensors: dict[str, bool] = {}  # sensor channel → some value seen (not NaN)
 
     def prepare(self, chunk: Recording) -> Recording:
         """The chunk to use: absurd samples bridged, calibrated, mounted (its times must already increase)."""
         from formats import plausibility
 
         self._rows += len(chunk)
+        for k in SENSOR_CHANNELS:
+            if k in chunk.channels and not self._sensors.get(k):
+                self._sensors[k] = k not in all_nan_sensors(chunk)
         chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd, out_of=self._rows)
         if self.cal is not None:
             chunk = self.cal.apply(chunk)
@@ -175,6 +183,8 @@ class ChunkChecks:
         rows the reader skipped (or ``reader_meta``: the reader's metadata, e.g. a bag's, which hold them)."""
         from formats import plausibility
 
+        require_samples(rows_read, rows_kept, self.path, duplicates)
+        refuse_without_sensor_data([k for k, seen in self._sensors.items() if not seen], list(self._sensors), self.path)
         report, dropped = plausibility.dropped_rows(
             rows_read,
             rows_kept,
