@@ -460,7 +460,6 @@ def calibrate_sphere(
         raise ImutoolError(f"magnetometer calibration needs at least 20 valid samples; got {len(m)}")
     if max_samples and len(m) > max_samples:
         m = m[np.linspace(0, len(m) - 1, max_samples).astype(int)]
-    require_three_dimensions(m)  # whatever min_coverage says
     # coverage of field directions from a first fit (noise averaged out, see field_direction_coverage)
     li = None
     c0, r0 = sphere_fit_linear(m)
@@ -486,6 +485,7 @@ def calibrate_sphere(
             "the sensor through many orientations (tumble it through every side up, or turn it about several axes), "
             "use --method swing for a sensor that only turns in heading, or lower --min-coverage at your own risk"
         )
+    require_three_dimensions(m)  # whatever min_coverage allowed
     results = {}
     refused = {}
     for k in allowed:
