@@ -105,6 +105,8 @@ def require_samples(rows_read: int, rows_kept: int, source: str, duplicates: int
     streamed runs (chunk by chunk, at the end)."""
     if rows_kept >= 2:
         return
+    if rows_read == 0:
+        raise ImutoolError("no data rows", path=source)
     why = f"; {duplicates} dropped with a repeated time stamp" if duplicates else ""
     raise ImutoolError(
         f"{rows_kept} row(s) left of {rows_read} read{why}: a recording needs at least two rows at different "
