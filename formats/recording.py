@@ -120,6 +120,11 @@ def all_nan_sensors(rec: Recording) -> list[str]:
     return [k for k in SENSOR_CHANNELS if k in rec.channels and len(rec) and bool(np.all(np.isnan(rec[k])))]
 
 
+def missing_sensor_warnings(names: list[str]) -> list[str]:
+    """One warning per sensor channel that is NaN in every row (the others carry the recording)."""
+    return [f"MISSING: every value of {k} is NaN or empty: the channel carries nothing" for k in names]
+
+
 def refuse_without_sensor_data(names: list[str], present: list[str], source: str) -> None:
     """Refuse a recording whose every sensor channel (``present``) is missing in every row (``names``)."""
     if names and set(names) >= set(present):

@@ -16,7 +16,13 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from formats.recording import SENSOR_CHANNELS, all_nan_sensors, refuse_without_sensor_data, require_samples
+from formats.recording import (
+    SENSOR_CHANNELS,
+    all_nan_sensors,
+    missing_sensor_warnings,
+    refuse_without_sensor_data,
+    require_samples,
+)
 
 
 def load_recording(
@@ -59,7 +65,7 @@ def load_recording(
         report = rep.as_dict()
         drops, warns = plausibility.dropped_rows(n_in, len(rec), report, rec.meta, duplicates)
         report.update(drops)
-        checks.warnings += warns
+        checks.warnings += warns + missing_sensor_warnings(all_nan_sensors(rec))
         rec, checks = plausibility.bridge_absurd(rec, rep=checks)
     else:  # what the reader itself could not read is reported all the same
         t = rec.time[np.isfinite(rec.time)]
@@ -184,7 +190,9 @@ class ChunkChecks:
         from formats import plausibility
 
         require_samples(rows_read, rows_kept, self.path, duplicates)
-        refuse_without_sensor_data([k for k, seen in self._sensors.items() if not seen], list(self._sensors), self.path)
+        empty = [k for k, seen in self._sensors.items() if not seen]
+        refuse_without_sensor_data(empty, list(self._sensors), self.path)
+        missing = missing_sensor_warnings(empty)
         report, dropped = plausibility.dropped_rows(
             rows_read,
             rows_kept,
@@ -195,8 +203,8 @@ class ChunkChecks:
             counts[1] = rows_read  # the share of a unit error is over the whole run
         absurd = self._absurd.absurd_warnings()
         report.update({k: v for k, v in self._absurd.as_dict().items() if k.startswith("absurd_")})
-        self._refuse(absurd + dropped)
-        return report, self.warnings + absurd + dropped
+        self._refuse(missing + absurd + dropped)
+        return report, self.warnings + missing + absurd + dropped
 
     def meta_warnings(self, *more: list[str]) -> list[str]:
         """The output's ``warnings``: the input's own, then these (each once)."""

@@ -435,6 +435,28 @@ def test_every_sensor_value_missing_is_refused(files, tmp_path, case):
         assert "gyro, accel, mag" in err, err
 
 
+@pytest.mark.parametrize("stream", [[], ["--chunk-rows", "100"]])
+def test_one_sensor_channel_missing_is_a_warning(files, tmp_path, stream):
+    """gyro and accel present, mag empty in every row: written with a warning naming mag; --strict refuses."""
+    text = files["roll.csv"].read_text().splitlines()
+    header = next(ln for ln in text if not ln.startswith("#")).split(",")
+    cols = [j for j, c in enumerate(header) if c.startswith("mag_")]
+    rows = []
+    for ln in text:
+        v = ln.split(",")
+        if not ln.startswith("#") and v != header:
+            v = ["" if j in cols else x for j, x in enumerate(v)]
+        rows.append(",".join(v))
+    src = tmp_path / "no_mag.csv"
+    src.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "o.csv"
+    code, _, err = run(["convert", src, out, "-q", *stream])
+    assert code == 0 and "every value of mag" in err, err
+    out.unlink()
+    _, _, err = check(["convert", src, out, "-q", "--strict", *stream], inputs=[src], outputs=[out])
+    assert "every value of mag" in err
+
+
 @pytest.mark.parametrize("cmd", [["info"], ["convert", "OUT.csv", "-q"], ["filter", "-o", "OUT.csv", "-q"]])
 def test_duplicate_column_names_are_refused(files, tmp_path, cmd):
     args, inputs, outputs = _args([cmd[0], "@dup_cols.csv", *cmd[1:]], files, tmp_path)
