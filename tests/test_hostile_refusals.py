@@ -485,12 +485,13 @@ def test_evaluate_still_compares_an_overlapping_reference(files):
     [
         ["filter", "@roll.csv", "-o", "OUT.csv", "--method", "lpf", "--cutoff", "25"],  # 50 Hz: the Nyquist frequency
         ["filter", "@roll.csv", "-o", "OUT.csv", "--method", "lpf", "--cutoff", "30"],
+        ["heave", "@roll.csv", "-o", "OUT.csv", "--delayed-cutoff", "1e6"],  # a high-pass above Nyquist: all gone
         ["simulate", "sea-state", "-o", "OUT.csv", "--duration", "5", "--set", "hs=-2"],
         ["simulate", "sea-state", "-o", "OUT.csv", "--duration", "5", "--set", "components=0"],
         ["simulate", "sea-state", "-o", "OUT.csv", "--duration", "5", "--set", "gamma=0.5"],
         ["simulate", "sea-state", "-o", "OUT.csv", "--duration", "5", "--set", "accel_noise_ug=-1"],
     ],
-    ids=["lpf-nyquist", "lpf-above", "hs-neg", "components0", "gamma", "noise-neg"],
+    ids=["lpf-nyquist", "lpf-above", "heave-delayed-cutoff", "hs-neg", "components0", "gamma", "noise-neg"],
 )
 def test_option_no_result_can_take(files, tmp_path, case):
     args, inputs, outputs = _args(case, files, tmp_path)
@@ -514,3 +515,15 @@ def test_valid_ros_topic_names_are_written(files, tmp_path, topic):
     from formats.bags.writer import check_topic_name
 
     assert check_topic_name(topic) == topic
+
+
+def test_full_disk_with_a_cold_kernel_cache_is_one_line(files, tmp_path, monkeypatch):
+    """After an upgrade the kernels compile again; a cache entry the full disk cannot take is skipped (was: internal
+    error OSError 'File too large' from numba's cache), and the output's own error is the one line."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cold-cache"))
+    out = tmp_path / "full.csv"
+    p = _limited(["convert", files["roll.csv"], out, "-q"], tmp_path, 20_000)
+    assert p.returncode == 2, p.stderr
+    lines = [ln for ln in p.stderr.strip().splitlines() if not ln.startswith("imutool: compiling")]
+    assert len(lines) == 1 and out.name in lines[0] and "internal error" not in p.stderr, p.stderr
+    assert not leftovers(out)
