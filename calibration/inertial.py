@@ -145,17 +145,20 @@ def calibrate_gyro(
     if temp is not None:
         tc = np.asarray(temp, dtype=float)[idx]
         good = np.isfinite(tc)
-        if good.sum() > 10 and np.ptp(tc[good]) >= min_temp_range:
+        # a slope needs a temperature that varies, whatever min_temp_range allows (0 °C: a constant temperature
+        # would give a singular fit); the span must also exceed the float rounding of the values
+        span = float(np.ptp(tc[good])) if good.any() else 0.0
+        varies = span > 1e-6 * max(1.0, float(np.max(np.abs(tc[good])))) if good.any() else False
+        if good.sum() > 10 and span >= min_temp_range and varies:
             tref = float(np.mean(tc[good]))
             x = np.column_stack([np.ones(good.sum()), tc[good] - tref])
             coef, *_ = np.linalg.lstsq(x, gr[good], rcond=None)
             cal.bias, cal.temp_slope, cal.temp_ref = coef[0], coef[1], tref
             cal.quality["temp_range_degC"] = float(np.ptp(tc[good]))
+        elif not varies:
+            cal.quality["temp_note"] = "temperature constant over the rests: no slope fitted (not determined)"
         else:
-            cal.quality["temp_note"] = (
-                f"temperature range {np.ptp(tc[good]) if good.any() else 0:.2f} °C "
-                f"< {min_temp_range} °C: no slope fitted"
-            )
+            cal.quality["temp_note"] = f"temperature range {span:.2f} °C < {min_temp_range} °C: no slope fitted"
     if turns_deg is not None:
         cal.scale, info = _gyro_scale(t, g - cal.bias, rests, np.radians(turns_deg))
         cal.quality.update(info)
@@ -220,6 +223,19 @@ class AccelCal:
 
 
 _UT = ((0, 1), (0, 2), (1, 2))
+MAX_FIT_CONDITION = 1e6  # largest/smallest singular value of a fit's column-scaled Jacobian; above: not determined
+
+
+def _jacobian_rank(jac: np.ndarray) -> tuple[int, float]:
+    """(numerical rank, condition number) of a least-squares Jacobian with its columns scaled to unit norm (so
+    parameters of different units compare); a column of zeros is a parameter the data do not touch."""
+    j = np.asarray(jac, dtype=float)
+    norms = np.linalg.norm(j, axis=0)
+    if not np.all(np.isfinite(j)) or np.any(norms == 0):
+        return int(np.count_nonzero(norms > 0)), float("inf")
+    sv = np.linalg.svd(j / norms, compute_uv=False)
+    rank = int(np.count_nonzero(sv > 1e-10 * sv[0]))
+    return rank, float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
 
 
 def calibrate_accel(
@@ -267,6 +283,12 @@ def calibrate_accel(
     if kind not in ("offset", "diag", "full"):
         raise ImutoolError(f"unknown accel fit kind {kind!r} (offset, diag, full, auto)")
     npar = {"offset": 3, "diag": 6, "full": 9}[kind]
+    if len(pz) < npar:  # whatever --min-poses says: fewer equations than unknowns determine nothing
+        raise ImutoolError(
+            f"found {len(pz)} distinct static pose(s) for a '{kind}' fit of {npar} parameters: the data cannot "
+            f"determine it (rank ≤ {len(pz)} < {npar}); hold the sensor still in at least {npar} orientations "
+            "(six-position: each axis up and down)"
+        )
 
     def unpack(p):
         tm = np.eye(3)
@@ -287,6 +309,13 @@ def calibrate_accel(
     sol = least_squares(fun, p0, method="trf" if len(pz) <= npar else "lm", x_scale="jac")
     b, tm = unpack(sol.x)
     res = fun(sol.x)
+    rank, cond = _jacobian_rank(sol.jac)
+    if rank < npar or cond > MAX_FIT_CONDITION:
+        raise ImutoolError(
+            f"the {len(pz)} static poses do not determine a '{kind}' accelerometer fit (Jacobian rank {rank} of "
+            f"{npar}, condition {cond:.3g}): the poses point in too few directions; add poses with each axis "
+            "up and down"
+        )
     dof = len(pz) - npar
     if dof > 0:
         s2 = float(res @ res) / dof

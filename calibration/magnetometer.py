@@ -405,6 +405,34 @@ def fit_one(
     return b, a * s, s, res * s, b_std, a_std
 
 
+SPREAD_OVER_NOISE = 5.0  # a principal direction counts when the averaged field spreads this many noise σ along it
+SPREAD_MIN_FRACTION = 0.005  # ... and by this fraction of the mean raw magnitude at least
+
+
+def require_three_dimensions(m: np.ndarray) -> None:
+    """Refuse samples (N,3) µT whose field does not move in three dimensions above the noise: a sphere or an
+    ellipsoid through a point cloud, a line or a circle is not determined (its centre is free along the
+    directions the data do not span), whatever coverage floor the user gave.
+
+    The spread is taken on means of :data:`COVERAGE_WINDOW` consecutive samples (principal axes of their
+    scatter, RMS µT) against the noise of such a mean (first differences of the samples, σ/√window)."""
+    w = COVERAGE_WINDOW
+    n = len(m) // w
+    means = m[: n * w].reshape(n, w, 3).mean(axis=1) if n >= 4 else m
+    sv = np.linalg.svd((means - means.mean(axis=0)) / np.sqrt(len(means)), compute_uv=False)
+    sigma = float(np.max(np.std(np.diff(m, axis=0), axis=0))) / np.sqrt(2.0)
+    noise = sigma / np.sqrt(w) if n >= 4 else sigma
+    floor = max(SPREAD_OVER_NOISE * noise, SPREAD_MIN_FRACTION * float(np.mean(np.linalg.norm(m, axis=1))))
+    rank = int(np.count_nonzero(sv > floor))
+    if rank < 3:
+        raise ImutoolError(
+            f"the magnetometer field moves in only {rank} of 3 dimensions above the noise (spread "
+            f"{', '.join(f'{v:.3g}' for v in sv)} µT RMS along its principal axes; needed > {floor:.3g} µT): "
+            f"a hard/soft-iron fit is not determined (rank {rank} < 3), whatever --min-coverage says; rotate the "
+            "sensor about several axes, or use --method swing for a sensor that only turns in heading"
+        )
+
+
 def calibrate_sphere(
     mag_ut: np.ndarray,
     kind: str = "auto",
@@ -457,6 +485,7 @@ def calibrate_sphere(
             "the sensor through many orientations (tumble it through every side up, or turn it about several axes), "
             "use --method swing for a sensor that only turns in heading, or lower --min-coverage at your own risk"
         )
+    require_three_dimensions(m)  # whatever min_coverage allowed
     results = {}
     refused = {}
     for k in allowed:

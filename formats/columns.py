@@ -8,6 +8,7 @@ cleaned name (``Heave [m]`` → ``heave`` in m), so labels such as ``movement`` 
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 
@@ -200,6 +201,7 @@ def parse_mapping_option(spec: str, headers: list[str]) -> Mapping:
                 scale = float(sc)
             except ValueError:
                 raise ImutoolError(f"--columns item {item!r}: scale {sc!r} is not a number") from None
+            _scale(scale, f"--columns item {item!r}: scale")
         target, _, unit = rhs.partition(":")
         if src not in headers:
             raise ImutoolError(f"--columns: no column {src!r} in the file (has: {', '.join(headers)})")
@@ -225,8 +227,15 @@ def load_profile(path: str) -> dict:
             return tomllib.load(f)
     except OSError as e:
         raise ImutoolError(f"cannot read profile: {e.strerror}", path=path) from None
-    except tomllib.TOMLDecodeError as e:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise ImutoolError(f"not valid TOML: {e}", path=path) from None
+
+
+def _scale(v: object, what: str, path: str | None = None) -> float:
+    """A mapping's scale factor: a finite non-zero number (a zero scale would erase the channel)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v == 0:
+        raise ImutoolError(f"{what} = {v!r} must be a finite non-zero number", path=path)
+    return float(v)
 
 
 def mapping_from_profile(profile: dict, headers: list[str], path: str = "profile") -> Mapping:
@@ -239,14 +248,24 @@ def mapping_from_profile(profile: dict, headers: list[str], path: str = "profile
             spec = {"to": spec}
         if not isinstance(spec, dict) or "to" not in spec:
             raise ImutoolError(f"column {src!r}: expected {{ to = ..., unit = ... }}", path=path)
+        unknown = sorted(set(spec) - {"to", "unit", "scale"})
+        if unknown:
+            raise ImutoolError(f"column {src!r}: unknown key(s) {', '.join(unknown)} (to, unit, scale)", path=path)
+        if not isinstance(spec["to"], str) or not spec["to"].strip():
+            raise ImutoolError(f"column {src!r}: to = {spec['to']!r} must be a column name (a string)", path=path)
         unit = spec.get("unit")
-        scale = float(spec.get("scale", 1.0))
+        if unit is not None and not isinstance(unit, str):
+            raise ImutoolError(f'column {src!r}: unit = {unit!r} must be a string such as "deg/s"', path=path)
+        scale = _scale(spec.get("scale", 1.0), f"column {src!r}: scale", path)
         if unit in ("counts", "count", "lsb"):
             q = _expected_quantity(spec["to"])
             unit = _DEFAULT_UNIT.get(spec["to"].split("_")[0]) if q else None
         elif unit:
             unit = resolve_unit(unit, _expected_quantity(spec["to"]))
-            _units.lookup(unit)
+            try:
+                _units.lookup(unit)
+            except ImutoolError as e:
+                raise ImutoolError(f"column {src!r}: {e}", path=path) from None
         if src not in headers:
             raise ImutoolError(f"column {src!r} named in the profile is not in the file", path=path)
         given[src] = ColumnMap(src, spec["to"], unit, inferred=False, scale=scale)

@@ -186,6 +186,14 @@ def read_header(
     names = _split_header(header_line, sep)
     if any(not n for n in names):
         raise ImutoolError("the header row has an empty column name", path=path, line=lineno)
+    if len(set(names)) < len(names):
+        twice = sorted({n for n in names if names.count(n) > 1})
+        raise ImutoolError(
+            f"the header row names {', '.join(map(repr, twice))} more than once: which one is meant? "
+            "rename or remove the extra column",
+            path=path,
+            line=lineno,
+        )
     if _looks_numeric(names):
         raise ImutoolError("the first row is numbers, not column names; add a header row", path=path, line=lineno)
     unit_row = _unit_row(heading[1:], names, sep, path)

@@ -274,7 +274,28 @@ class _CompileAnnouncer(event.Listener):
             print(f"imutool: compiled {start[0]} in {time.perf_counter() - start[1]:.1f} s", file=sys.stderr)
 
 
+def _tolerant_save(numba_save):
+    """numba's ``Cache.save_overload``, except that for our kernels a cache entry that cannot be written (a full
+    disk, a file-size limit, a folder gone read-only) is skipped: the kernel is compiled and runs; the next run
+    compiles it again. Another library's cache behaves as numba decides."""
+
+    def save_overload(self, sig, data):
+        try:
+            numba_save(self, sig, data)
+        except OSError:
+            locator = getattr(getattr(self, "_impl", None), "locator", None)
+            if not isinstance(locator, KernelCacheLocator):
+                raise
+
+    save_overload._imutool_tolerant = True  # type: ignore[attr-defined]
+    return save_overload
+
+
 def _install() -> None:
+    cache_cls = getattr(caching, "Cache", None)
+    save = getattr(cache_cls, "save_overload", None)
+    if save is not None and not getattr(save, "_imutool_tolerant", False):
+        cache_cls.save_overload = _tolerant_save(save)  # type: ignore[union-attr]
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     locators = getattr(impl, "_locator_classes", None)
     if isinstance(locators, list):

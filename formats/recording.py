@@ -96,6 +96,41 @@ def default_columns(name: str, width: int) -> list[str]:
 
 
 MAX_TIME_S = 1e11  # |time| beyond this (s) is refused by validation: a unit error, not a clock
+SENSOR_CHANNELS = ("gyro", "accel", "mag")
+
+
+def require_samples(rows_read: int, rows_kept: int, source: str, duplicates: int = 0) -> None:
+    """A recording with fewer than two rows (two distinct times) has no duration and no rate: refused, one line
+    saying how many rows were read and why they went. The one check behind validation (a whole file) and the
+    streamed runs (chunk by chunk, at the end)."""
+    if rows_kept >= 2:
+        return
+    if rows_read == 0:
+        raise ImutoolError("no data rows", path=source)
+    why = f"; {duplicates} dropped with a repeated time stamp" if duplicates else ""
+    raise ImutoolError(
+        f"{rows_kept} row(s) left of {rows_read} read{why}: a recording needs at least two rows at different "
+        "times (it has no duration)",
+        path=source,
+    )
+
+
+def all_nan_sensors(rec: Recording) -> list[str]:
+    """The sensor channels (gyro, accel, mag) of ``rec`` whose every value is missing (NaN)."""
+    return [k for k in SENSOR_CHANNELS if k in rec.channels and len(rec) and bool(np.all(np.isnan(rec[k])))]
+
+
+def missing_sensor_warnings(names: list[str]) -> list[str]:
+    """One warning per sensor channel that is NaN in every row (the others carry the recording)."""
+    return [f"MISSING: every value of {k} is NaN or empty: the channel carries nothing" for k in names]
+
+
+def refuse_without_sensor_data(names: list[str], present: list[str], source: str) -> None:
+    """Refuse a recording whose every sensor channel (``present``) is missing in every row (``names``)."""
+    if names and set(names) >= set(present):
+        raise ImutoolError(
+            f"every value of {', '.join(names)} is missing (NaN or empty): no sensor data to use", path=source
+        )
 
 
 @dataclass
@@ -268,6 +303,7 @@ class Recording:
         backwards: str = "error",
         gap_factor: float = 3.0,
         source: str | None = None,
+        min_rows: int = 2,
     ) -> tuple[Recording, TimeReport]:
         """Check the time base and return (clean recording, report).
 
@@ -277,6 +313,9 @@ class Recording:
         ``drop`` drops rows earlier than the latest time seen.
         gap_factor: a step longer than gap_factor × median step is reported as a gap (never filled here).
         NaN values are counted per channel and kept (estimators skip them sample by sample).
+        min_rows: fewer rows left than this (2: a recording needs a duration; 0 for a chunk of a stream, checked
+        as a whole at its end) is an ImutoolError (:func:`require_samples`); so is a recording whose every sensor
+        channel (gyro, accel, mag) is NaN in every row.
         """
         src = source or self.meta.get("source", "recording")
         rep = TimeReport(n_rows=len(self))
@@ -376,6 +415,10 @@ class Recording:
                 rep.nan_by_channel[k] = c
             nan_any |= m
         rep.nan_rows = int(np.count_nonzero(nan_any))
+        if min_rows and len(rec) < min_rows:
+            require_samples(len(self), len(rec), src, rep.duplicates)
+        if min_rows:
+            refuse_without_sensor_data(all_nan_sensors(rec), [k for k in SENSOR_CHANNELS if k in rec.channels], src)
         rec.meta["validation"] = rep.as_dict()
         return rec, rep
 

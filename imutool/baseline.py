@@ -54,8 +54,10 @@ def butter_lowpass(x: np.ndarray, cutoff_hz: float, rate_hz: float, order: int =
     transient). NaN samples are held for filtering and returned as NaN."""
     from scipy.signal import butter, lfilter, lfilter_zi
 
-    if not (0 < cutoff_hz < rate_hz / 2):
-        raise ImutoolError(f"cutoff {cutoff_hz} Hz must be between 0 and the Nyquist frequency {rate_hz / 2:.3g} Hz")
+    nyquist = rate_hz / 2
+    # below the Nyquist frequency by more than the rounding of a rate measured from time steps (50.000000001 Hz)
+    if not (0 < cutoff_hz < nyquist * (1 - 1e-6)):
+        raise ImutoolError(f"cutoff {cutoff_hz} Hz must be between 0 and the Nyquist frequency {nyquist:.6g} Hz")
     xf, bad = _hold_nan(x)
     b, a = butter(order, cutoff_hz / (rate_hz / 2))
     zi = lfilter_zi(b, a)

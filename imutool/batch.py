@@ -131,10 +131,14 @@ def read_manifest(path: str | os.PathLike) -> list[dict[str, str]]:
         except tomllib.TOMLDecodeError as e:
             raise ImutoolError(f"manifest is not valid TOML: {e}", path=os.fspath(p)) from None
         jobs = doc.get("job", doc.get("jobs"))
-        if not isinstance(jobs, list):
+        if not isinstance(jobs, list) or not all(isinstance(j, dict) for j in jobs):
             raise ImutoolError(
                 "TOML manifest needs [[job]] tables (input = '...', other fields optional)", path=os.fspath(p)
             )
+        for i, j in enumerate(jobs):
+            bad = [k for k, v in j.items() if not isinstance(v, (str, int, float)) or isinstance(v, bool)]
+            if bad:
+                raise ImutoolError(f"[[job]] {i + 1}: {', '.join(bad)} must be a string or a number", path=os.fspath(p))
         rows = [{str(k): str(v) for k, v in j.items()} for j in jobs]
     else:
         with open(p, newline="", encoding="utf-8-sig") as f:

@@ -68,6 +68,7 @@ def evaluate(
     else:
         ref = reference if isinstance(reference, Recording) else load_for_evaluation(reference)
         ref_path = _name(reference)
+        check_overlap(est, ref, est_path, ref_path)
     summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
     notes: list[str] = []
     if channel not in ("heave", "position"):
@@ -248,6 +249,23 @@ def compared_span(est: Recording, ref: Recording) -> dict[str, Any]:
         out["start_utc"], out["end_utc"] = clock.iso(t0), clock.iso(t1)
     out["text"] = f"{clock.text(t0)} … {clock.text(t1)} {clock.unit}" + (f" ({clock.date()})" if clock.dated else "")
     return out
+
+
+def check_overlap(est: Recording, ref: Recording, est_path: str, ref_path: str) -> None:
+    """A reference that can be compared with the estimate: two rows or more, and a time span that overlaps
+    the estimate's by more than one sample interval (an ImutoolError naming the reference otherwise)."""
+    if len(ref) < 2:
+        raise ImutoolError(f"the reference has {len(ref)} row(s): nothing to compare with", path=ref_path)
+    if len(est) < 2:
+        raise ImutoolError(f"the estimate has {len(est)} row(s): nothing to compare", path=est_path)
+    start = max(float(est.time[0]), float(ref.time[0]))
+    end = min(float(est.time[-1]), float(ref.time[-1]))
+    if not end > start:
+        raise ImutoolError(
+            f"the reference ({ref.time[0]:.6g} … {ref.time[-1]:.6g} s) does not overlap the estimate "
+            f"{os.path.basename(est_path)} ({est.time[0]:.6g} … {est.time[-1]:.6g} s) in time: same clock?",
+            path=ref_path,
+        )
 
 
 def _name(x: str | os.PathLike | Recording) -> str:

@@ -133,32 +133,61 @@ def _noise_density(doc: dict[str, Any], source: str) -> float | None:
     return float(v)
 
 
+MAX_POSITION_M = 1000.0  # an accelerometer array larger than a kilometre is a unit error, not a vessel
+
+
+def _position(v: Any, where: str) -> np.ndarray:
+    """A sensor position [x, y, z] in metres: three finite numbers within ±MAX_POSITION_M."""
+    ok = isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    pos = np.asarray(v, float) if ok else np.full(3, np.nan)
+    if not np.all(np.isfinite(pos)):
+        raise ImutoolError(f"{where}: position must be [x, y, z], finite numbers in metres")
+    if np.max(np.abs(pos)) > MAX_POSITION_M:
+        raise ImutoolError(f"{where}: position {v!r} is more than {MAX_POSITION_M:g} m from the origin: not metres?")
+    return pos
+
+
+def _accel_unit(v: Any, where: str) -> str:
+    """A sensor's unit: a string naming an acceleration unit imutool knows (g, mg, m/s^2 ...)."""
+    from formats.units import lookup  # noqa: PLC0415
+
+    if not isinstance(v, str):
+        raise ImutoolError(f'{where}: unit must be a string such as "m/s^2" or "g", got {v!r}')
+    try:
+        quantity, _ = lookup(v)
+    except ImutoolError:
+        raise ImutoolError(f"{where}: unknown unit {v!r} (an acceleration unit: m/s^2, g, mg ...)") from None
+    if quantity != "acceleration":
+        raise ImutoolError(f"{where}: unit {v!r} measures {quantity}, not acceleration")
+    return v
+
+
 def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
     """Build a layout from a parsed TOML document (see docs/gyrofree.md for the format)."""
     if "preset" in doc:
         if doc["preset"] != "paper":
             raise ImutoolError(f"{source}: unknown preset {doc['preset']!r} (known: paper)")
-        lay = paper_layout(float(doc.get("r", 0.1)), str(doc.get("prefix", "a")))
+        r = doc.get("r", 0.1)
+        if isinstance(r, bool) or not isinstance(r, (int, float)) or not 0 < r <= MAX_POSITION_M:
+            raise ImutoolError(f"{source}: r must be a distance in metres, 0 < r ≤ {MAX_POSITION_M:g}, got {r!r}")
+        if not isinstance(doc.get("prefix", "a"), str):
+            raise ImutoolError(f"{source}: prefix must be a string, got {doc['prefix']!r}")
+        lay = paper_layout(float(r), doc.get("prefix", "a"))
         lay.noise_density = _noise_density(doc, source)
         return lay
-    default_unit = str(doc.get("unit", "m/s^2"))
+    default_unit = _accel_unit(doc.get("unit", "m/s^2"), source)
     items = doc.get("sensor")
-    if not isinstance(items, list) or not items:
+    if not isinstance(items, list) or not items or not all(isinstance(it, dict) for it in items):
         raise ImutoolError(f'{source}: needs [[sensor]] tables (or preset = "paper")')
     sensors = []
     for i, it in enumerate(items):
         where = f"{source}: sensor {i + 1} ({it.get('name', '?')})"
         if "position" not in it:
             raise ImutoolError(f"{where}: missing position = [x, y, z] (m, body FRD)")
-        try:
-            pos = np.asarray(it["position"], float)
-        except (TypeError, ValueError):
-            pos = np.full(0, np.nan)
-        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
-            raise ImutoolError(f"{where}: position must be [x, y, z], finite numbers in metres")
+        pos = _position(it["position"], where)
         if "direction" in it:  # single-axis
             col = it.get("column")
-            if not isinstance(col, str):
+            if not isinstance(col, str) or not col.strip():
                 raise ImutoolError(f'{where}: a single-axis sensor needs column = "NAME"')
             axes = _parse_axis(it["direction"], where)[None, :]
             cols = [col]
@@ -171,13 +200,14 @@ def layout_from_dict(doc: dict[str, Any], source: str = "layout") -> Layout:
             else:
                 axes = np.array([_parse_axis(a, where) for a in spec])
             cols = it.get("columns")
-            if not isinstance(cols, list) or len(cols) != len(axes):
-                raise ImutoolError(f"{where}: columns must list {len(axes)} CSV column names")
-        sensors.append(
-            Sensor(
-                str(it.get("name", f"S{i + 1}")), pos, axes, [str(c) for c in cols], str(it.get("unit", default_unit))
-            )
-        )
+            if (
+                not isinstance(cols, list)
+                or len(cols) != len(axes)
+                or not all(isinstance(c, str) and c.strip() for c in cols)
+            ):
+                raise ImutoolError(f"{where}: columns must list {len(axes)} CSV column names (strings)")
+        unit = _accel_unit(it.get("unit", default_unit), where)
+        sensors.append(Sensor(str(it.get("name", f"S{i + 1}")), pos, axes, list(cols), unit))
     return Layout(sensors, name=str(doc.get("name", source)), noise_density=_noise_density(doc, source))
 
 
@@ -194,7 +224,11 @@ def load_layout(path: str) -> Layout:
             doc = tomllib.load(fh)
     except FileNotFoundError:
         raise ImutoolError(f"layout file not found: {path}") from None
-    except tomllib.TOMLDecodeError as e:
+    except IsADirectoryError:
+        raise ImutoolError(f"{path}: is a folder, not a layout TOML file") from None
+    except OSError as e:
+        raise ImutoolError(f"{path}: cannot read the layout: {e.strerror}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise ImutoolError(f"{path}: not valid TOML: {e}") from None
     return layout_from_dict(doc, path)
 
@@ -252,7 +286,43 @@ def check_layout(layout: Layout, noise: float = 0.01, refuse: bool = True) -> di
 
     Returns rank, condition number of A (columns scaled by the array size so metres do not matter), and the
     one-sigma error of each unknown per 1 m/s² of accelerometer noise (diag √((AᵀA)⁻¹)). A rank below 12 is
-    refused (ImutoolError) with the geometric reason and the unobservable combinations."""
+    refused (ImutoolError) with the geometric reason and the unobservable combinations; so is a geometry the
+    linear algebra cannot decompose at all."""
+    try:
+        return _check_layout(layout, noise, refuse)
+    except np.linalg.LinAlgError as e:
+        raise ImutoolError(f"layout {layout.name}: geometry cannot be analysed ({e}); check the positions") from None
+
+
+def check_columns(layout: Layout, rec: Recording) -> None:
+    """Refuse a layout naming a column the recording lacks (one line naming them and what it has)."""
+    flat = set(rec.channels)
+    for name in rec.channels:
+        flat.update(rec.columns.get(name, []))
+    missing = [c for c in layout.rows()[2] if c not in flat]
+    if missing:
+        raise ImutoolError(
+            f"layout {layout.name}: column(s) {', '.join(missing)} not in the recording "
+            f"(has {', '.join(sorted(flat)[:20])})"
+        )
+
+
+def layout_report(layout_path: str, input_path: str | os.PathLike | None = None, **load_options: Any) -> dict[str, Any]:
+    """``gyrofree --check-layout``: the layout's observability (:func:`check_layout`); with ``input_path``, its
+    columns and units checked against that recording too. A degenerate layout, or a column the recording
+    lacks, is an ImutoolError."""
+    layout = load_layout(layout_path)
+    info = check_layout(layout, refuse=False)
+    if not info["observable"]:
+        raise ImutoolError(f"layout {layout.name} is degenerate: {'; '.join(info['reasons'])}")
+    if input_path is not None:
+        rec, _ = load_input(os.fspath(input_path), [], **load_options)
+        check_columns(layout, rec)
+        info["input"] = os.fspath(input_path)
+    return info
+
+
+def _check_layout(layout: Layout, noise: float, refuse: bool) -> dict[str, Any]:
     pos, dirs, cols, _ = layout.rows()
     if len(set(cols)) < len(cols):
         dup = sorted({c for c in cols if cols.count(c) > 1})

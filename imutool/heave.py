@@ -452,7 +452,12 @@ def heave_delayed(
     """Zero-phase heave and heave rate: X(f) = −A(f)·W(f)/(2πf)², V(f) = A(f)·W(f)/(j2πf), with
     W(f) = 1/(1 + (f_c/f)^{2n}) (a squared-magnitude Butterworth high-pass; optional low-pass too).
     Zero-padded to 2N (no wrap-around). Returns (heave, rate, latency s), latency = the half-width containing
-    99 % of the non-causal impulse response's absolute area."""
+    99 % of the non-causal impulse response's absolute area. A cut-off at or above the Nyquist frequency (it
+    would remove every frequency there is) is an ImutoolError."""
+    if not 0 < cutoff < fs / 2:
+        raise ImutoolError(
+            f"zero-phase heave cut-off {cutoff:g} Hz must be in (0, {fs / 2:g}) Hz (the Nyquist frequency)"
+        )
     x = np.asarray(a, float)
     n = len(x)
     x = x - x.mean()

@@ -16,6 +16,13 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
+from formats.recording import (
+    SENSOR_CHANNELS,
+    all_nan_sensors,
+    missing_sensor_warnings,
+    refuse_without_sensor_data,
+    require_samples,
+)
 
 LOAD_OPTIONS = (
     "columns",
@@ -83,9 +90,12 @@ def load_recording(
         report = rep.as_dict()
         drops, warns = plausibility.dropped_rows(n_in, len(rec), report, rec.meta, duplicates)
         report.update(drops)
-        checks.warnings += warns
+        checks.warnings += warns + missing_sensor_warnings(all_nan_sensors(rec))
         rec, checks = plausibility.bridge_absurd(rec, rep=checks)
     else:  # what the reader itself could not read is reported all the same
+        t = rec.time[np.isfinite(rec.time)]
+        distinct = 0 if not len(t) else (1 if np.ptp(t) == 0 else 2)  # rows at different times, up to two
+        require_samples(len(rec), distinct, path, len(t) - distinct if distinct == 1 else 0)
         report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
         checks.warnings += warns
     if with_offsets and not with_files:
@@ -305,12 +315,16 @@ class ChunkChecks:
         self._absurd = plausibility.PlausibilityReport()
         self._checked = False
         self._rows = 0
+        self._sensors: dict[str, bool] = {}  # sensor channel → some value seen (not NaN)
 
     def prepare(self, chunk: Recording) -> Recording:
         """The chunk to use: absurd samples bridged, calibrated, mounted (its times must already increase)."""
         from formats import plausibility
 
         self._rows += len(chunk)
+        for k in SENSOR_CHANNELS:
+            if k in chunk.channels and not self._sensors.get(k):
+                self._sensors[k] = k not in all_nan_sensors(chunk)
         chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd, out_of=self._rows)
         if self.cal is not None:
             chunk = self.cal.apply(chunk)
@@ -338,6 +352,10 @@ class ChunkChecks:
         rows the reader skipped (or ``reader_meta``: the reader's metadata, e.g. a bag's, which hold them)."""
         from formats import plausibility
 
+        require_samples(rows_read, rows_kept, self.path, duplicates)
+        empty = [k for k, seen in self._sensors.items() if not seen]
+        refuse_without_sensor_data(empty, list(self._sensors), self.path)
+        missing = missing_sensor_warnings(empty)
         report, dropped = plausibility.dropped_rows(
             rows_read,
             rows_kept,
@@ -348,8 +366,8 @@ class ChunkChecks:
             counts[1] = rows_read  # the share of a unit error is over the whole run
         absurd = self._absurd.absurd_warnings()
         report.update({k: v for k, v in self._absurd.as_dict().items() if k.startswith("absurd_")})
-        self._refuse(absurd + dropped)
-        return report, self.warnings + absurd + dropped
+        self._refuse(missing + absurd + dropped)
+        return report, self.warnings + missing + absurd + dropped
 
     def meta_warnings(self, *more: list[str]) -> list[str]:
         """The output's ``warnings``: the input's own, then these (each once)."""

@@ -66,6 +66,25 @@ def interp_to(t_target: np.ndarray, t_src: np.ndarray, values: np.ndarray) -> np
 BRIDGE_STEPS = 1.5  # interp_to bridges NaN rows between finite samples at most this many median finite steps apart
 
 
+MAX_LAG_STEPS = 4000  # lags tried on one grid by best_lag (each one interpolates the whole series)
+
+
+def _lag_grid_min(
+    t: np.ndarray, x: np.ndarray, t_ref: np.ndarray, ref: np.ndarray, lags: np.ndarray, wrap_deg: bool
+) -> tuple[float, int, np.ndarray]:
+    """(best lag, its index, RMS cost of every lag) over the grid ``lags`` (s)."""
+    costs = np.empty(len(lags))
+    for i, lag in enumerate(lags):
+        r = interp_to(t - lag, t_ref, ref)
+        d = x - r
+        if wrap_deg:
+            d = wrap_deg180(d)
+        ok = np.isfinite(d)
+        costs[i] = np.sqrt(np.mean(d[ok] ** 2)) if ok.sum() > 10 else np.inf
+    k = int(np.argmin(costs))
+    return float(lags[k]), k, costs
+
+
 def best_lag(
     t: np.ndarray,
     x: np.ndarray,
@@ -78,22 +97,25 @@ def best_lag(
     """The constant lag L (s) in [−max, +max] minimising RMS of x(t) − ref(t − L), and that RMS.
 
     Positive L means x lags the reference (x at time t equals the reference at t − L).
-    Coarse grid then a parabolic refinement. ``wrap_deg`` wraps differences to ±180°.
+    Coarse grid then a parabolic refinement. ``wrap_deg`` wraps differences to ±180°. The search never goes
+    beyond the two series' combined span (a larger lag leaves nothing to compare), and a range of more than
+    :data:`MAX_LAG_STEPS` steps is searched on a coarser grid first, then at ``step_s`` around its best lag.
     """
     t = np.asarray(t, float)
     x = np.asarray(x, float)
     if step_s is None:
         step_s = float(np.median(np.diff(t))) if len(t) > 1 else 0.01
-    lags = np.arange(-max_lag_s, max_lag_s + step_s / 2, step_s)
-    costs = np.empty(len(lags))
-    for i, lag in enumerate(lags):
-        r = interp_to(t - lag, t_ref, ref)
-        d = x - r
-        if wrap_deg:
-            d = wrap_deg180(d)
-        ok = np.isfinite(d)
-        costs[i] = np.sqrt(np.mean(d[ok] ** 2)) if ok.sum() > 10 else np.inf
-    k = int(np.argmin(costs))
+    t_ref = np.asarray(t_ref, float)
+    if len(t) and len(t_ref):
+        span = max(float(t[-1]), float(t_ref[-1])) - min(float(t[0]), float(t_ref[0]))
+        max_lag_s = min(float(max_lag_s), span)
+    if step_s > 0 and 2 * max_lag_s / step_s > MAX_LAG_STEPS:
+        coarse = 2 * max_lag_s / MAX_LAG_STEPS
+        centre = _lag_grid_min(t, x, t_ref, ref, np.arange(-max_lag_s, max_lag_s + coarse / 2, coarse), wrap_deg)[0]
+        lags = np.arange(centre - 2 * coarse, centre + 2 * coarse + step_s / 2, step_s)
+    else:
+        lags = np.arange(-max_lag_s, max_lag_s + step_s / 2, step_s)
+    k, costs = _lag_grid_min(t, x, t_ref, ref, lags, wrap_deg)[1:]
     lag = float(lags[k])
     if 0 < k < len(lags) - 1 and np.all(np.isfinite(costs[k - 1 : k + 2])):
         c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]

@@ -17,6 +17,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.recording import require_samples
 from imutool.routes import OnInput, RouteResult, load_input
 
 _FORMATS = {".png": "png", ".pdf": "pdf", ".svg": "svg"}
@@ -101,6 +102,7 @@ def _collect(
         t0 = None
         bucket = 1
         total = 0
+        span = (np.inf, -np.inf)  # earliest and latest finite time seen
         csv_opts = {k: io.get(k) for k in ("columns", "profile", "time_column", "header_rows")}
         csv_opts["rate_hz"] = io.get("input_rate_hz")
         for chunk in iter_csv(path, chunk_rows=250_000, **csv_opts):
@@ -111,6 +113,9 @@ def _collect(
                 est_rows = max(len(chunk), int(size / max(1, _bytes_per_row(path, len(chunk)))))
                 bucket = max(1, -(-2 * est_rows // max_points))  # 2 points per bucket
             total += len(chunk)
+            finite = chunk.time[np.isfinite(chunk.time)]
+            if len(finite):
+                span = (min(span[0], float(finite.min())), max(span[1], float(finite.max())))
             chunk = (
                 chunk.slice_time(None if start is None else t0 + start, None if end is None else t0 + end)
                 if (start is not None or end is not None)
@@ -123,6 +128,8 @@ def _collect(
                 parts.setdefault(n, []).append(envelope(*own_samples(chunk.time - t0, a), bucket))
         if template is None:
             raise ImutoolError("no data rows", path=path)
+        distinct = 2 if span[1] > span[0] else (1 if np.isfinite(span[0]) else 0)  # rows at different times
+        require_samples(total, distinct, path, total - 1 if distinct == 1 else 0)
         out = {
             n: (np.concatenate([p[0] for p in parts[n]]), np.concatenate([p[1] for p in parts[n]]))
             for n in names

@@ -815,15 +815,17 @@ def test_output_parent_is_a_file(corpus, tmp_path, cmd):
     assert f.read_text() == "I am a file\n"
 
 
-@pytest.mark.parametrize(
-    "cmd", ["convert", "filter", "heave", "cal-mag", "report", "simulate", "nmea", "plot", "allan"]
-)
+@pytest.mark.parametrize("cmd", list(WRITERS))  # every writer (capture serial: tests/test_hostile_refusals.py)
 @pytest.mark.parametrize(
     "target", ["/dev/full", "/dev/null", "/proc/imutool_test.csv", "/sys/imutool_test.csv", "/proc/self/imutool/x.csv"]
 )
 def test_unwritable_targets(corpus, tmp_path, cmd, target):
+    target = str(Path(target).with_suffix(EXT[cmd])) if target.startswith(("/proc", "/sys")) else target
     args, inputs = _writer(corpus, tmp_path, cmd, target)
-    check(args, inputs=inputs, names=[target])
+    # a calibration the corpus's data cannot give is refused before anything is written (naming the input); a
+    # report writes its JSON beside the PDF first
+    names = [target, str(Path(target).with_suffix(".json")), *(inputs if cmd.startswith("cal-") else [])]
+    check(args, inputs=inputs, names=names)
     assert os.path.exists("/dev/full") and os.path.exists("/dev/null")
     assert os.path.isfile("/dev/full") is False
 
@@ -937,11 +939,13 @@ def _limited(args: list, cwd: Path, limit: int) -> subprocess.CompletedProcess:
     [
         ["convert", "@roll.csv", "OUT.csv"],
         ["convert", "@roll.csv", "OUT.bag"],
+        ["convert", "@roll.csv", "OUT.db3"],  # was: internal error "database or disk is full"
+        ["convert", "@roll.csv", "OUTbag"],  # a ROS2 bag folder
         ["filter", "@roll.csv", "-o", "OUT.csv"],
         ["heave", "@roll.csv", "-o", "OUT.csv"],
         ["nmea", "@est.csv", "-o", "OUT.nmea", "--baud", "460800"],
     ],  # every row
-    ids=["convert-csv", "convert-bag", "filter", "heave", "nmea"],
+    ids=["convert-csv", "convert-bag", "convert-db3", "convert-bag-folder", "filter", "heave", "nmea"],
 )
 def test_full_disk(corpus, tmp_path, cmd):
     out = None

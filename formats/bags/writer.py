@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import sqlite3
 import struct
 import tempfile
 from pathlib import Path
@@ -156,6 +157,21 @@ def _stamps_ns(t: np.ndarray) -> np.ndarray:
     return sec * 1_000_000_000 + nsec
 
 
+_TOPIC = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+
+
+def check_topic_name(name: object, what: str = "topic") -> str:
+    """A concrete ROS topic name (ROS 2 naming rules, which ROS 1 accepts too): tokens of letters, digits and
+    underscores separated by single slashes, none starting with a digit, no repeated underscore, no trailing
+    slash, no substitution (``~``, ``{}``) since a bag stores the resolved name. Returns it; else ImutoolError."""
+    if not isinstance(name, str) or not _TOPIC.fullmatch(name) or "__" in name:
+        raise ImutoolError(
+            f"{what} {name!r} is not a valid ROS topic name (letters, digits, '_' in tokens separated by single "
+            "'/', a token not starting with a digit, no '__', no trailing '/'; e.g. /imu/data)"
+        )
+    return name
+
+
 def write_bag(
     rec: Recording,
     path: str | os.PathLike,
@@ -181,6 +197,11 @@ def write_bag(
     p = Path(path)
     ext = p.suffix.lower()
     ros1 = ext == ".bag"
+    try:
+        check_topic_name(topic, "IMU topic")
+        check_topic_name(mag_topic, "magnetometer topic")
+    except ImutoolError as e:
+        raise ImutoolError(str(e), path=path) from None
     if len(rec) == 0:
         raise ImutoolError("nothing to write: the recording has no rows", path=path)
     has_imu = any(k in rec for k in ("gyro", "accel", "q")) or all(k in rec for k in ("roll", "pitch", "heading"))
@@ -248,6 +269,8 @@ def write_bag(
         raise
     except OSError as exc:
         raise ImutoolError(f"cannot write bag: {exc}", path=path) from None
+    except sqlite3.Error as exc:  # rosbag2's sqlite3 storage: "database or disk is full", "disk I/O error"
+        raise ImutoolError(f"cannot write bag: {exc} (disk full?)", path=path) from None
     return {
         "format": "ros1" if ros1 else f"ros2-{storage}",
         "messages": {t: int(len(pay)) for t, _, pay, _ in msgs},

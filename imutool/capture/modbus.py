@@ -67,25 +67,51 @@ class Profile:
     registers: list[Register]
 
 
+def _typed(table: dict, key: str, default: object, kind: str, where: str, path: str) -> object:
+    """``table[key]`` (or ``default``) of the TOML type ``kind``: 'str', 'int' or 'number' (finite); a wrong
+    type is one line naming the key."""
+    import math
+
+    v = table.get(key, default)
+    if kind == "str":
+        ok = isinstance(v, str)
+    elif kind == "int":
+        ok = isinstance(v, int) and not isinstance(v, bool)
+    else:
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    if not ok:
+        want = {"str": "a string", "int": "a whole number", "number": "a finite number"}[kind]
+        raise ImutoolError(f"{where}: {key} = {v!r} must be {want}", path=path)
+    return v
+
+
 def read_profile(path: str) -> Profile:
-    """Parse and check a Modbus register profile (clear errors naming the register)."""
+    """Parse and check a Modbus register profile (clear errors naming the register and the key)."""
     doc = load_profile(path)
     dev = doc.get("device", {})
+    if not isinstance(dev, dict):
+        raise ImutoolError("[device] must be a table", path=path)
+    items = doc.get("register", [])
+    if not isinstance(items, list) or not all(isinstance(r, dict) for r in items):
+        raise ImutoolError("register entries must be [[register]] tables", path=path)
     regs = []
-    for i, r in enumerate(doc.get("register", [])):
+    for i, r in enumerate(items):
         where = f"register {i + 1} ({r.get('name', '?')})"
         for key in ("name", "address"):
             if key not in r:
                 raise ImutoolError(f"{where}: missing '{key}'", path=path)
+        unit = r.get("unit")
+        if unit is not None and not isinstance(unit, str):
+            raise ImutoolError(f"{where}: unit = {unit!r} must be a string", path=path)
         reg = Register(
-            str(r["name"]),
-            int(r["address"]),
-            str(r.get("table", "input")),
-            str(r.get("type", "int16")),
-            float(r.get("scale", 1.0)),
-            float(r.get("offset", 0.0)),
-            r.get("unit"),
-            str(r.get("word_order", "big")),
+            str(_typed(r, "name", None, "str", where, path)),
+            int(_typed(r, "address", None, "int", where, path)),  # type: ignore[arg-type]
+            str(_typed(r, "table", "input", "str", where, path)),
+            str(_typed(r, "type", "int16", "str", where, path)),
+            float(_typed(r, "scale", 1.0, "number", where, path)),  # type: ignore[arg-type]
+            float(_typed(r, "offset", 0.0, "number", where, path)),  # type: ignore[arg-type]
+            unit,
+            str(_typed(r, "word_order", "big", "str", where, path)),
         )
         if reg.table not in ("input", "holding"):
             raise ImutoolError(f"{where}: table must be 'input' or 'holding'", path=path)
@@ -100,12 +126,15 @@ def read_profile(path: str) -> Profile:
         regs.append(reg)
     if not regs:
         raise ImutoolError("no [[register]] entries", path=path)
+    rate = float(_typed(dev, "rate_hz", 10.0, "number", "[device]", path))  # type: ignore[arg-type]
+    if not 0 < rate <= 100_000:
+        raise ImutoolError(f"[device]: rate_hz = {rate!r} must be > 0 and at most 100 000 Hz", path=path)
     return Profile(
-        str(dev.get("name", "modbus device")),
-        int(dev.get("unit", 1)),
-        int(dev.get("baud", 9600)),
-        str(dev.get("parity", "N")),
-        float(dev.get("rate_hz", 10.0)),
+        str(_typed(dev, "name", "modbus device", "str", "[device]", path)),
+        int(_typed(dev, "unit", 1, "int", "[device]", path)),  # type: ignore[arg-type]
+        int(_typed(dev, "baud", 9600, "int", "[device]", path)),  # type: ignore[arg-type]
+        str(_typed(dev, "parity", "N", "str", "[device]", path)),
+        rate,
         regs,
     )
 

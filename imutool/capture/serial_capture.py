@@ -244,10 +244,14 @@ def capture_nmea(
         "captured_by": "imutool capture serial",
     }
     kw = {"rotate_s": rotate_s, "append": append, "overwrite": force}
-    csv = CaptureCsv(base, columns, meta, array_rows=False, **kw)  # rows come as text (see NmeaRows)
-    raw = RotatingFile(base.with_suffix(".nmea"), "", **kw)
     src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log)
-    src.open_first()
+    src.open_first()  # before any file or folder is made: a missing or non-serial port leaves nothing behind
+    try:
+        csv = CaptureCsv(base, columns, meta, array_rows=False, **kw)  # rows come as text (see NmeaRows)
+        raw = RotatingFile(base.with_suffix(".nmea"), "", **kw)
+    except BaseException:
+        src.close()
+        raise
     status = StatusLine(status_s, quiet)
     stop = stop or StopFlag()
     stop.install()
@@ -371,10 +375,15 @@ def capture_bridge(
         "captured_by": "imutool capture serial --protocol bridge",
     }
     resume = last_complete_row(base) if append and not rotate_s else None
-    csv = CaptureCsv(base, BRIDGE_COLUMNS, meta, rotate_s=rotate_s, append=append, overwrite=force)
-    events = EventLog(base.with_suffix(".events.jsonl"), append=True)
-    src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log, events=events)
-    src.open_first()
+    src = SerialSource(port, baud, stats, opener=opener, log=(lambda s: None) if quiet else _log)
+    src.open_first()  # before any file or folder is made: a missing or non-serial port leaves nothing behind
+    try:
+        csv = CaptureCsv(base, BRIDGE_COLUMNS, meta, rotate_s=rotate_s, append=append, overwrite=force)
+        events = EventLog(base.with_suffix(".events.jsonl"), append=True)
+    except BaseException:
+        src.close()
+        raise
+    src.events = events
     events.add(
         "started",
         port=port,

@@ -70,8 +70,8 @@ class RotatingFile:
 
     def _open_new(self) -> None:
         p = self._name_for_now()
-        p.parent.mkdir(parents=True, exist_ok=True)
         try:
+            p.parent.mkdir(parents=True, exist_ok=True)
             if p.exists() and self.append:
                 self._cut_partial_line(p)
                 self._f = open(p, "a", encoding="utf-8", newline="\n")

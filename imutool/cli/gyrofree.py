@@ -23,7 +23,7 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.gyrofree import RATE_RW, check_layout, load_layout, run_gyrofree
+from imutool.gyrofree import RATE_RW, layout_report, load_layout, run_gyrofree
 from imutool.routes import OnInput, RouteResult
 
 
@@ -113,11 +113,7 @@ def gyrofree_route(
 def gyrofree_cmd(check_layout_only: bool, as_json: bool, quiet: bool, **options: Any) -> None:
     """ω (rad/s), ω̇ (rad/s²), f_O and attitude from N accelerometers (no gyro); --check-layout for geometry."""
     if check_layout_only:
-        layout = load_layout(options["layout_path"])
-        info = check_layout(layout, refuse=False)
-        emit_summary(info, as_json, quiet)
-        if not info["observable"]:
-            raise ImutoolError(f"layout {layout.name} is degenerate: {'; '.join(info['reasons'])}")
+        emit_summary(_layout_check(**options), as_json, quiet)
         return
     res = gyrofree_route(on_input=note_input, **options)
     emit_summary(res.summary, as_json, quiet)
@@ -126,12 +122,18 @@ def gyrofree_cmd(check_layout_only: bool, as_json: bool, quiet: bool, **options:
 def _batch_route(check_layout_only: bool = False, quiet: bool = True, **options: Any) -> Any:
     """What ``imutool batch gyrofree`` runs per input: the route, or the layout check (an error if degenerate)."""
     if check_layout_only:
-        layout = load_layout(options["layout_path"])
-        info = check_layout(layout, refuse=False)
-        if not info["observable"]:
-            raise ImutoolError(f"layout {layout.name} is degenerate: {'; '.join(info['reasons'])}")
-        return RouteResult(info)
+        return RouteResult(_layout_check(**options))
     return gyrofree_route(**options)
+
+
+LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
+
+
+def _layout_check(input_path: str | None, layout_path: str, **options: Any) -> dict[str, Any]:
+    """--check-layout: :func:`imutool.gyrofree.layout_report` with the input options (columns, profile, topic,
+    ...) of a given INPUT."""
+    load = {k: options[k] for k in LOAD_OPTIONS if options.get(k) is not None}
+    return layout_report(layout_path, input_path, strict=strict_requested(), **load)
 
 
 gyrofree_cmd = route_of(_batch_route)(gyrofree_cmd)

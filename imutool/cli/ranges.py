@@ -5,6 +5,10 @@ One table instead of ranges scattered over the command modules: each entry is ``
 field_ut"`` wins over ``"field_ut"``). Every float option refuses NaN and ±inf (:class:`FiniteFloat`); an int
 option gets :class:`click.IntRange`. ``tests/test_hostile.py`` checks that every numeric option has an entry, so
 a new option without a declared range fails the tests. Cross-option rules (start before end) stay in the commands.
+
+Every option bounded below at zero or more (a rate, a duration, a window, a noise, a count) is also bounded above,
+at :data:`HUGE` unless its entry says less: a value of 1e300 is a typing error, and squared (a variance) or
+multiplied by a rate (an array size) it would overflow or ask for terabytes.
 """
 
 from __future__ import annotations
@@ -14,6 +18,8 @@ import click
 from imutool.cli.common import FiniteFloat
 
 Bound = tuple[float | None, float | None, bool, bool]
+
+HUGE = 1e9  # the largest value of an option bounded below at ≥ 0 (s, Hz, m/s², counts ...) unless declared less
 
 POS: Bound = (0, None, True, False)  # > 0: rates, durations, noises, cut-offs, sizes
 NONNEG: Bound = (0, None, False, False)  # ≥ 0: gates and thresholds where 0 means "off"
@@ -33,7 +39,7 @@ RANGES: dict[str, Bound] = {
     # sizes and counts
     "chunk_rows": COUNT1,
     "header_rows": (1, 1000, False, False),
-    "update_every": (0, None, False, False),
+    "update_every": (0, 1_000_000, False, False),
     "per_decade": (1, 1000, False, False),
     "grid_bands": (2, 90, False, False),
     "max_points": (2, None, False, False),
@@ -74,8 +80,8 @@ RANGES: dict[str, Bound] = {
     "min_duration_s": NONNEG,
     "step_min_s": POS,
     "drift_min_s": POS,
-    "max_lag_s": NONNEG,
-    "max_lag": NONNEG,
+    "max_lag_s": (0, 3600, False, False),  # a constant lag search of ± an hour; more is a unit error
+    "max_lag": (0, 3600, False, False),
     "stream_mb": NONNEG,
     # noises and sigmas (a zero noise makes a filter singular)
     "gyro_noise": POS,
@@ -167,6 +173,14 @@ def _range_type(param: click.Parameter, bound: Bound) -> click.ParamType:
     return FiniteFloat(lo, hi, min_open=lo_open, max_open=hi_open)
 
 
+def _cap(param: click.Parameter) -> None:
+    """An option bounded below at ≥ 0 and not above gets the upper bound :data:`HUGE`."""
+    t = param.type
+    if isinstance(t, (click.IntRange, click.FloatRange)) and t.max is None and t.min is not None and t.min >= 0:
+        t.max = int(HUGE) if isinstance(t, click.IntRange) else HUGE
+        t.max_open = False
+
+
 def is_numeric(param: click.Parameter) -> bool:
     return isinstance(param.type, (click.types.IntParamType, click.types.FloatParamType))
 
@@ -194,17 +208,20 @@ def apply_ranges(cmd: click.Command, path: str | None = None) -> click.Command:
     if getattr(cmd, "_imutool_ranges", False):
         return cmd
     for p in cmd.params:
-        if not is_numeric(p) or isinstance(p.type, (FiniteFloat, click.IntRange)):
-            continue  # declared by the command itself
-        if isinstance(p.type, click.FloatRange):  # declared, but click's FloatRange lets NaN through
+        if not is_numeric(p):
+            continue
+        if isinstance(p.type, (FiniteFloat, click.IntRange)):
+            pass  # declared by the command itself
+        elif isinstance(p.type, click.FloatRange):  # declared, but click's FloatRange lets NaN through
             t = p.type
             p.type = FiniteFloat(t.min, t.max, min_open=t.min_open, max_open=t.max_open, clamp=t.clamp)
-            continue
-        bound = bound_for(path, p.name or "")
-        if bound is not None:
-            p.type = _range_type(p, bound)
-        elif isinstance(p.type, click.types.FloatParamType):
-            p.type = FiniteFloat()
+        else:
+            bound = bound_for(path, p.name or "")
+            if bound is not None:
+                p.type = _range_type(p, bound)
+            elif isinstance(p.type, click.types.FloatParamType):
+                p.type = FiniteFloat()
+        _cap(p)
     if isinstance(cmd, click.Group):
         for name, sub in cmd.commands.items():
             apply_ranges(sub, f"{path} {name}")

@@ -143,9 +143,21 @@ def _check_option(name: str, key: str, value: object, default: object) -> None:
         raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be a number (default {default!r})")
     if not np.isfinite(float(value)):
         raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be finite")
-    positive = "period" in key or key.endswith(("_hz", "_s")) or key in ("duration", "rate_hz")
+    positive = "period" in key or key.endswith(("_hz", "_s")) or key in ("duration", "rate_hz", "tp")
     if positive and default > 0 and not float(value) > 0:
         raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be > 0 (default {default!r})")
+    if key in _NONNEGATIVE or any(w in key for w in ("noise", "damping", "fraction")):
+        if not float(value) >= 0:
+            raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be ≥ 0 (default {default!r})")
+    if key in _COUNTS and not (float(value) >= 1 and float(value) == int(value)):
+        raise ImutoolError(f"scenario {name!r}: option {key}={value!r} must be a whole number ≥ 1")
+    if key == "gamma" and not float(value) >= 1:  # JONSWAP peak enhancement: 1 is Pierson-Moskowitz
+        raise ImutoolError(f"scenario {name!r}: option gamma={value!r} must be ≥ 1 (JONSWAP; default {default!r})")
+
+
+# scenario options that are sizes (a negative wave height or count has no meaning) and counts
+_NONNEGATIVE = ("hs", "severity", "turns", "translation", "r", "swing_height", "step_length")
+_COUNTS = ("components", "n_steps", "poses")
 
 
 MAX_ROWS = 2e8  # samples one simulation may produce (≈ 11.6 days at 200 Hz; 10 columns of float64 = 16 GB)
