@@ -158,7 +158,8 @@ def filter_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
 
     Output columns: roll, pitch, heading (deg), qw..qz (body→NED), gyro_bias_x..z (rad/s), roll_std,
     pitch_std, heading_std (deg, one sigma), accel_rejected, mag_rejected, rest, inconsistent (0/1: the
-    filter's self-check); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
+    self-check of roll and pitch), heading_inconsistent (0/1: the heading's, from the magnetometer or heading
+    input); ref_* and label columns of the input are carried over so `imutool evaluate OUTPUT`
     works directly. EKF tuning: --params FILE / --param NAME=VALUE (list and units: --save-params).
     """
     with lazy_bar("filter", unit="samples", quiet=quiet) as b:
