@@ -206,6 +206,179 @@ from imutool.attitude.updates import _apply_correction, _heading_update, _reset_
 from imutool.quaternion import fast_atan2, qmul, rmat, rotvec_quat
 
 
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+def _rest_update(st, P, prm, dx, R):
+    """The zero-rate pseudo-measurement of the bias, per axis, and R refreshed (s, rad/s). Sections of the loop that
+    run rarely or only with an option are compiled apart (a call only where they run; the loop compiles faster)."""
+    _propagate_pending(st, P, prm)
+    # σ per sample: the update is the mean rate of the still samples since the last one, and
+    # stands for them (R = σ²/n; a vibration at the update rate averages out, not aliases)
+    n_use = st[S_USE_R]
+    r_rest = prm[P_REST_NOISE] ** 2 / n_use
+    st[S_CNT_R], st[S_USE_R] = 0.0, 0.0
+    for i in range(3):
+        s_ = P[3 + i, 3 + i] + r_rest
+        yy = st[S_RSUM + i] / n_use - st[4 + i]
+        for j in range(6):
+            dx[j] = P[j, 3 + i] / s_ * yy
+        for a_ in range(6):
+            for b_ in range(a_, 6):
+                v = P[a_, b_] - P[a_, 3 + i] * P[b_, 3 + i] / s_
+                P[a_, b_] = v
+                P[b_, a_] = v
+        _apply_correction(st, dx)
+        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
+    st[S_RSUM], st[S_RSUM + 1], st[S_RSUM + 2] = 0.0, 0.0, 0.0
+    rmat(st[0], st[1], st[2], st[3], R)
+
+
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+def _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok):
+    """The specific force (m/s², body) less the lever arm's rotation terms; the rate's low-pass advanced by dt (s)."""
+    if dt > 0:
+        # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
+        # differentiated (bias-free rate; the bias cancels in ω̇ and is negligible in ω × (ω × r))
+        al = dt / (prm[P_LEVER_TAU] + dt) if prm[P_LEVER_TAU] > 0 else 1.0
+        if st[S_WINIT] == 0.0:
+            st[S_WLP], st[S_WLP + 1], st[S_WLP + 2] = gk0 - st[4], gk1 - st[5], gk2 - st[6]
+            st[S_WINIT] = 1.0
+        for i in range(3):
+            wi = (gk0 if i == 0 else (gk1 if i == 1 else gk2)) - st[4 + i]
+            new = st[S_WLP + i] + al * (wi - st[S_WLP + i])
+            st[S_WDOT + i] = (new - st[S_WLP + i]) / dt
+            st[S_WLP + i] = new
+    if acc_ok:
+        wx, wy, wz = st[S_WLP], st[S_WLP + 1], st[S_WLP + 2]
+        ex, ey, ez = st[S_WDOT], st[S_WDOT + 1], st[S_WDOT + 2]
+        rx, ry, rz = lever[0], lever[1], lever[2]
+        cx, cy, cz = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx  # ω × r
+        ax -= (ey * rz - ez * ry) + (wy * cz - wz * cy)
+        ay -= (ez * rx - ex * rz) + (wz * cx - wx * cz)
+        az -= (ex * ry - ey * rx) + (wx * cy - wy * cx)
+    return ax, ay, az
+
+
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+def _gnss_force(st, R, gk0, gk1, gk2, sog, cog, sogdot, along_bow, ax, ay, az):
+    """The specific force (m/s², body) less the GNSS kinematic acceleration (sog m/s, cog rad, sogdot m/s²) of the
+    turn: along the course, or ``along_bow`` where no heading is held (the course cannot be turned into body axes
+    then; the bow's direction can, whatever the heading's error)."""
+    wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
+    if along_bow:
+        hn = max(np.sqrt(R[0, 0] * R[0, 0] + R[1, 0] * R[1, 0]), 1e-9)
+        c, s = R[0, 0] / hn, R[1, 0] / hn
+    else:
+        c, s = np.cos(cog), np.sin(cog)
+    sd = sogdot if np.isfinite(sogdot) else 0.0
+    an0 = sd * c - sog * wr * s
+    an1 = sd * s + sog * wr * c
+    ax -= R[0, 0] * an0 + R[1, 0] * an1
+    ay -= R[0, 1] * an0 + R[1, 1] * an1
+    az -= R[0, 2] * an0 + R[1, 2] * an1
+    return ax, ay, az
+
+
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+def _heading_input(st, P, prm, R, dx, tk, hk):
+    """An external true heading hk (rad, NED) at time tk (s): a scalar update, a glitch skipped, or taken outright
+    after a long glitch; True if it was used. R is refreshed."""
+    dth = tk - st[S_HLAST] if np.isfinite(st[S_HLAST]) else 0.0
+    st[S_HLAST] = tk
+    _propagate_pending(st, P, prm)
+    rmat(st[0], st[1], st[2], st[3], R)
+    yh = hk - fast_atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
+    yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
+    s2h = prm[P_HDG_NOISE] ** 2
+    # a glitched fix is skipped, for a bounded time: a heading that stays away that long is the
+    # gyrocompass's, and the filter's own is the one to give way
+    vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
+    glitch = yh * yh > HEADING_GATE_SIGMA**2 * (vh + s2h)
+    if glitch and st[S_HREJ_T] < HEADING_REJECT_MAX_S:
+        st[S_HREJ_T] += dth
+        st[S_NHREJ] += 1
+        return False
+    st[S_HREJ_T] = 0.0
+    if glitch:  # away for HEADING_REJECT_MAX_S: the gyrocompass's heading is taken outright
+        _reset_heading(st, P, R[2, 0], R[2, 1], R[2, 2], yh, s2h)
+    else:
+        _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, s2h, dx, FALSE, 0.0, 0.0, 0.0)
+        _apply_correction(st, dx)  # dx along r: its reset is G = I
+    return True
+
+
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+def _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use):
+    """mag_mode "full": the paper's normalised 3-vector update with the mean world-frame field (m0, m1, m2) of
+    n_use samples."""
+    h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
+    h1 = R[0, 1] * st[S_MREF] + R[1, 1] * st[S_MREF + 1] + R[2, 1] * st[S_MREF + 2]
+    h2 = R[0, 2] * st[S_MREF] + R[1, 2] * st[S_MREF + 1] + R[2, 2] * st[S_MREF + 2]
+    nw = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)  # the mean direction, back in the body frame
+    y0 = (R[0, 0] * m0 + R[1, 0] * m1 + R[2, 0] * m2) / nw - h0
+    y1 = (R[0, 1] * m0 + R[1, 1] * m1 + R[2, 1] * m2) / nw - h1
+    y2 = (R[0, 2] * m0 + R[1, 2] * m1 + R[2, 2] * m2) / nw - h2
+    _vec_update(P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2 / n_use, 0.0, TRUE, dx, FALSE, 0.0)
+    _apply_correction(st, dx)
+    _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
+
+
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+def _velocity_aiding(st, R, RI, tk, vn_k, ve_k, w0, w1, w2, arm_sa, ax, ay, az, dt, gap, acc_ok):
+    """Velocity aiding's interval sums at one row (time tk s, the antenna's north/east velocity m/s, the bias-free
+    rate w rad/s, the force a m/s² body); True if RI = R(q_I) was computed for this row."""
+    ri_now = False
+    # velocity aiding: ∫ R_I f dt between two velocity fixes is R_I·(Δv − g Δt) whatever the translation
+    # (sway, surge, turn, at any frequency), so the mean force of an interval less Δv/Δt is gravity in I;
+    # the low-pass takes it, one interval late, while the fixes keep coming (docs/attitude.md)
+    if gap:  # the frame I restarted: no interval across a gap
+        st[S_VA_HAVE], st[S_VA_OK] = 0.0, 0.0
+    elif dt > 0:
+        if acc_ok:
+            rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+            ri_now = True
+            for i in range(3):
+                st[S_VA_SUM + i] += (RI[i, 0] * ax + RI[i, 1] * ay + RI[i, 2] * az) * dt
+        else:
+            st[S_VA_BAD] = 1.0
+        st[S_VA_T] += dt
+    is_fix = (
+        np.isfinite(vn_k)
+        and np.isfinite(ve_k)
+        and not (vn_k == st[S_VA_LAST] and ve_k == st[S_VA_LAST + 1])
+        and not (st[S_VA_HAVE] > 0 and tk - st[S_VA_TFIX] < VA_MIN_SPACING)
+    )
+    st[S_VA_LAST], st[S_VA_LAST + 1] = vn_k, ve_k
+    if is_fix:
+        # the sensor's horizontal velocity: the antenna's plus R (ω × r), r from the antenna to the sensor
+        cx = w1 * arm_sa[2] - w2 * arm_sa[1]
+        cy = w2 * arm_sa[0] - w0 * arm_sa[2]
+        cz = w0 * arm_sa[1] - w1 * arm_sa[0]
+        vel_n = vn_k + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
+        vel_e = ve_k + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
+        span = st[S_VA_T]
+        if st[S_VA_HAVE] > 0 and st[S_VA_BAD] == 0.0 and 0.0 < span <= VA_MAX_INTERVAL:
+            acc_n = (vel_n - st[S_VA_PREV]) / span
+            acc_e = (vel_e - st[S_VA_PREV + 1]) / span
+            if not ri_now:
+                rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
+                ri_now = True
+            bx = R[0, 0] * acc_n + R[1, 0] * acc_e  # body: Rᵀ (acc_n, acc_e, 0)
+            by = R[0, 1] * acc_n + R[1, 1] * acc_e
+            bz = R[0, 2] * acc_n + R[1, 2] * acc_e
+            for i in range(3):
+                st[S_VA_IN + i] = st[S_VA_SUM + i] / span - (RI[i, 0] * bx + RI[i, 1] * by + RI[i, 2] * bz)
+            st[S_VA_OK] = 1.0
+        else:
+            st[S_VA_OK] = 0.0
+        st[S_VA_PREV], st[S_VA_PREV + 1] = vel_n, vel_e
+        st[S_VA_HAVE], st[S_VA_TFIX] = 1.0, tk
+        st[S_VA_SUM], st[S_VA_SUM + 1], st[S_VA_SUM + 2] = 0.0, 0.0, 0.0
+        st[S_VA_T], st[S_VA_BAD] = 0.0, 0.0
+    elif st[S_VA_OK] > 0 and tk - st[S_VA_TFIX] > VA_MAX_INTERVAL:
+        st[S_VA_OK] = 0.0  # the fixes stopped: the low-pass takes the force again
+    return ri_now
+
+
 @njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def ekf_kernel(
     t,
@@ -365,26 +538,7 @@ def ekf_kernel(
                 st[S_RSUM + 1] += gk1
                 st[S_RSUM + 2] += gk2
                 if st[S_CNT_R] >= update_every:
-                    _propagate_pending(st, P, prm)
-                    # σ per sample: the update is the mean rate of the still samples since the last one, and
-                    # stands for them (R = σ²/n; a vibration at the update rate averages out, not aliases)
-                    n_use = st[S_USE_R]
-                    r_rest = prm[P_REST_NOISE] ** 2 / n_use
-                    st[S_CNT_R], st[S_USE_R] = 0.0, 0.0
-                    for i in range(3):
-                        s_ = P[3 + i, 3 + i] + r_rest
-                        yy = st[S_RSUM + i] / n_use - st[4 + i]
-                        for j in range(6):
-                            dx[j] = P[j, 3 + i] / s_ * yy
-                        for a_ in range(6):
-                            for b_ in range(a_, 6):
-                                v = P[a_, b_] - P[a_, 3 + i] * P[b_, 3 + i] / s_
-                                P[a_, b_] = v
-                                P[b_, a_] = v
-                        _apply_correction(st, dx)
-                        _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
-                    st[S_RSUM], st[S_RSUM + 1], st[S_RSUM + 2] = 0.0, 0.0, 0.0
-                    rmat(st[0], st[1], st[2], st[3], R)
+                    _rest_update(st, P, prm, dx, R)
             elif st[S_USE_R] > 0:  # the rest ended between updates: its samples are not carried to the next rest
                 st[S_USE_R] = 0.0
                 st[S_RSUM], st[S_RSUM + 1], st[S_RSUM + 2] = 0.0, 0.0, 0.0
@@ -396,92 +550,15 @@ def ekf_kernel(
         ri_now = False  # RI = R(q_I) computed for this sample
         fed = False  # this sample went into the accelerometer low-pass
         if use_va:
-            # velocity aiding: ∫ R_I f dt between two velocity fixes is R_I·(Δv − g Δt) whatever the translation
-            # (sway, surge, turn, at any frequency), so the mean force of an interval less Δv/Δt is gravity in I;
-            # the low-pass takes it, one interval late, while the fixes keep coming (docs/attitude.md)
-            if gap:  # the frame I restarted: no interval across a gap
-                st[S_VA_HAVE], st[S_VA_OK] = 0.0, 0.0
-            elif dt > 0:
-                if acc_ok:
-                    rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
-                    ri_now = True
-                    for i in range(3):
-                        st[S_VA_SUM + i] += (RI[i, 0] * ax + RI[i, 1] * ay + RI[i, 2] * az) * dt
-                else:
-                    st[S_VA_BAD] = 1.0
-                st[S_VA_T] += dt
-            vn_k, ve_k = vel[k, 0], vel[k, 1]
-            is_fix = (
-                np.isfinite(vn_k)
-                and np.isfinite(ve_k)
-                and not (vn_k == st[S_VA_LAST] and ve_k == st[S_VA_LAST + 1])
-                and not (st[S_VA_HAVE] > 0 and t[k] - st[S_VA_TFIX] < VA_MIN_SPACING)
+            ri_now = _velocity_aiding(
+                st, R, RI, t[k], vel[k, 0], vel[k, 1], w0, w1, w2, arm_sa, ax, ay, az, dt, gap, acc_ok
             )
-            st[S_VA_LAST], st[S_VA_LAST + 1] = vn_k, ve_k
-            if is_fix:
-                # the sensor's horizontal velocity: the antenna's plus R (ω × r), r from the antenna to the sensor
-                cx = w1 * arm_sa[2] - w2 * arm_sa[1]
-                cy = w2 * arm_sa[0] - w0 * arm_sa[2]
-                cz = w0 * arm_sa[1] - w1 * arm_sa[0]
-                vel_n = vn_k + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
-                vel_e = ve_k + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
-                span = st[S_VA_T]
-                if st[S_VA_HAVE] > 0 and st[S_VA_BAD] == 0.0 and 0.0 < span <= VA_MAX_INTERVAL:
-                    acc_n = (vel_n - st[S_VA_PREV]) / span
-                    acc_e = (vel_e - st[S_VA_PREV + 1]) / span
-                    if not ri_now:
-                        rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
-                        ri_now = True
-                    bx = R[0, 0] * acc_n + R[1, 0] * acc_e  # body: Rᵀ (acc_n, acc_e, 0)
-                    by = R[0, 1] * acc_n + R[1, 1] * acc_e
-                    bz = R[0, 2] * acc_n + R[1, 2] * acc_e
-                    for i in range(3):
-                        st[S_VA_IN + i] = st[S_VA_SUM + i] / span - (RI[i, 0] * bx + RI[i, 1] * by + RI[i, 2] * bz)
-                    st[S_VA_OK] = 1.0
-                else:
-                    st[S_VA_OK] = 0.0
-                st[S_VA_PREV], st[S_VA_PREV + 1] = vel_n, vel_e
-                st[S_VA_HAVE], st[S_VA_TFIX] = 1.0, t[k]
-                st[S_VA_SUM], st[S_VA_SUM + 1], st[S_VA_SUM + 2] = 0.0, 0.0, 0.0
-                st[S_VA_T], st[S_VA_BAD] = 0.0, 0.0
-            elif st[S_VA_OK] > 0 and t[k] - st[S_VA_TFIX] > VA_MAX_INTERVAL:
-                st[S_VA_OK] = 0.0  # the fixes stopped: the low-pass takes the force again
-        if use_lever and dt > 0:
-            # rotation about the centre: the sensor at r feels ω̇ × r + ω × (ω × r); ω low-passed (τ = lever LP) and
-            # differentiated (bias-free rate; the bias cancels in ω̇ and is negligible in ω × (ω × r))
-            al = dt / (prm[P_LEVER_TAU] + dt) if prm[P_LEVER_TAU] > 0 else 1.0
-            if st[S_WINIT] == 0.0:
-                st[S_WLP], st[S_WLP + 1], st[S_WLP + 2] = gk0 - st[4], gk1 - st[5], gk2 - st[6]
-                st[S_WINIT] = 1.0
-            for i in range(3):
-                wi = (gk0 if i == 0 else (gk1 if i == 1 else gk2)) - st[4 + i]
-                new = st[S_WLP + i] + al * (wi - st[S_WLP + i])
-                st[S_WDOT + i] = (new - st[S_WLP + i]) / dt
-                st[S_WLP + i] = new
-        if acc_ok and use_lever:
-            wx, wy, wz = st[S_WLP], st[S_WLP + 1], st[S_WLP + 2]
-            ex, ey, ez = st[S_WDOT], st[S_WDOT + 1], st[S_WDOT + 2]
-            rx, ry, rz = lever[0], lever[1], lever[2]
-            cx, cy, cz = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx  # ω × r
-            ax -= (ey * rz - ez * ry) + (wy * cz - wz * cy)
-            ay -= (ez * rx - ex * rz) + (wz * cx - wx * cz)
-            az -= (ex * ry - ey * rx) + (wx * cy - wy * cx)
+        if use_lever:
+            ax, ay, az = _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok)
         if acc_ok:
             if use_gnss > 0 and not use_va and np.isfinite(sog[k]) and (use_gnss == 2 or np.isfinite(cog[k])):
-                # the turn alone: along the course (1), or along the bow (2: no heading is held, so the course
-                # cannot be turned into body axes; the bow's direction can, whatever the heading's error)
-                wr = R[2, 0] * (gk0 - st[4]) + R[2, 1] * (gk1 - st[5]) + R[2, 2] * (gk2 - st[6])
-                if use_gnss == 2:
-                    hn = max(np.sqrt(R[0, 0] * R[0, 0] + R[1, 0] * R[1, 0]), 1e-9)
-                    c, s = R[0, 0] / hn, R[1, 0] / hn
-                else:
-                    c, s = np.cos(cog[k]), np.sin(cog[k])
-                sd = sogdot[k] if np.isfinite(sogdot[k]) else 0.0
-                an0 = sd * c - sog[k] * wr * s
-                an1 = sd * s + sog[k] * wr * c
-                ax -= R[0, 0] * an0 + R[1, 0] * an1
-                ay -= R[0, 1] * an0 + R[1, 1] * an1
-                az -= R[0, 2] * an0 + R[1, 2] * an1
+                # the turn alone: along the course (1), or along the bow (2: no heading is held)
+                ax, ay, az = _gnss_force(st, R, gk0, gk1, gk2, sog[k], cog[k], sogdot[k], use_gnss == 2, ax, ay, az)
             na = np.sqrt(ax * ax + ay * ay + az * az)
             dev_a = abs(na - g)
             if prm[P_ACC_BIAS_DEV] > 0 and dev_a > prm[P_ACC_BIAS_DEV]:
@@ -750,43 +827,11 @@ def ekf_kernel(
                 _apply_correction(st, dx)  # dx along r: its reset is G = I
                 flag |= F_MAG_USED
             elif due:
-                h0 = R[0, 0] * st[S_MREF] + R[1, 0] * st[S_MREF + 1] + R[2, 0] * st[S_MREF + 2]
-                h1 = R[0, 1] * st[S_MREF] + R[1, 1] * st[S_MREF + 1] + R[2, 1] * st[S_MREF + 2]
-                h2 = R[0, 2] * st[S_MREF] + R[1, 2] * st[S_MREF + 1] + R[2, 2] * st[S_MREF + 2]
-                nw = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)  # the mean direction, back in the body frame
-                y0 = (R[0, 0] * m0 + R[1, 0] * m1 + R[2, 0] * m2) / nw - h0
-                y1 = (R[0, 1] * m0 + R[1, 1] * m1 + R[2, 1] * m2) / nw - h1
-                y2 = (R[0, 2] * m0 + R[1, 2] * m1 + R[2, 2] * m2) / nw - h2
-                ok, nis = _vec_update(
-                    P, h0, h1, h2, y0, y1, y2, prm[P_MAG_NOISE] ** 2 / n_use, 0.0, TRUE, dx, FALSE, 0.0
-                )
-                _apply_correction(st, dx)
-                _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
+                _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use)
                 flag |= F_MAG_USED
         # ---------------- external heading (gyrocompass) ----------------
         if hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
-            dth = t[k] - st[S_HLAST] if np.isfinite(st[S_HLAST]) else 0.0
-            st[S_HLAST] = t[k]
-            _propagate_pending(st, P, prm)
-            rmat(st[0], st[1], st[2], st[3], R)
-            yh = hdg[k] - fast_atan2(R[1, 0], R[0, 0])  # measured − estimated heading of the body x axis
-            yh -= 2.0 * np.pi * np.floor((yh + np.pi) / (2.0 * np.pi))
-            s2h = prm[P_HDG_NOISE] ** 2
-            # a glitched fix is skipped, for a bounded time: a heading that stays away that long is the
-            # gyrocompass's, and the filter's own is the one to give way
-            vh = _vertical_forms(P, R[2, 0], R[2, 1], R[2, 2])[0]
-            glitch = yh * yh > HEADING_GATE_SIGMA**2 * (vh + s2h)
-            if glitch and st[S_HREJ_T] < HEADING_REJECT_MAX_S:
-                st[S_HREJ_T] += dth
-                st[S_NHREJ] += 1
-            elif glitch:  # away for HEADING_REJECT_MAX_S: the gyrocompass's heading is taken outright
-                st[S_HREJ_T] = 0.0
-                _reset_heading(st, P, R[2, 0], R[2, 1], R[2, 2], yh, s2h)
-                flag |= F_HDG_USED
-            else:
-                st[S_HREJ_T] = 0.0
-                _heading_update(P, R[2, 0], R[2, 1], R[2, 2], yh, s2h, dx, FALSE, 0.0, 0.0, 0.0)
-                _apply_correction(st, dx)  # dx along r: its reset is G = I
+            if _heading_input(st, P, prm, R, dx, t[k], hdg[k]):
                 flag |= F_HDG_USED
         # ---------------- outputs ----------------
         for i in range(4):
