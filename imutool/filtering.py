@@ -14,8 +14,9 @@ for Parquet) in bounded memory (:func:`stream_ekf`). Angles in the outputs are d
 
 from __future__ import annotations
 
+import itertools
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,7 +37,7 @@ from imutool.attitude import (
     result_recording,
     run_ekf,
 )
-from imutool.attitude.motion import choose_motion, params_for_motion
+from imutool.attitude.motion import ANALYSIS_MAX_S, MotionChoice, choose_motion, params_for_motion
 from imutool.attitude.recording import drop_clipped, flag_clipped, gnss_inputs, heading_channel
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
@@ -345,6 +346,31 @@ STREAM_OPTIONS = ("columns", "profile", "mounting", "calibration_file", "input_r
 """The load options a streamed run takes (the others have their defaults there: no --with, no sorting)."""
 
 
+def _motion_lookahead(chunks: Iterable[Recording], params: Any) -> tuple[Iterator[Recording], MotionChoice]:
+    """The first chunks held back until they span ``ANALYSIS_MAX_S`` (or the file ends), the motion chosen on their
+    gyro (rad/s, rows whose time increases) — the same first span an in-memory run judges — then every chunk in
+    order. One chunk of 1 M rows spans more than that at 200 Hz: usually nothing more is held."""
+    it = iter(chunks)
+    held: list[Recording] = []
+    times: list[np.ndarray] = []
+    rates: list[np.ndarray] = []
+    for chunk in it:
+        held.append(chunk)
+        if len(chunk) and "gyro" in chunk.channels:
+            times.append(np.asarray(chunk.time, dtype=np.float64))
+            rates.append(np.asarray(chunk.in_unit("gyro", "rad/s"), dtype=np.float64).reshape(len(chunk), -1))
+        if times and times[-1][-1] - times[0][0] >= ANALYSIS_MAX_S:
+            break
+    t = np.concatenate(times) if times else np.empty(0)
+    g = np.concatenate(rates) if rates else np.empty((0, 3))
+    if len(t):
+        rising = t >= np.maximum.accumulate(t)
+        rising[1:] &= np.diff(t) > 0
+        t, g = t[rising], g[rising]
+    choice = choose_motion(params, t, g) if g.shape[1:] == (3,) else choose_motion(params, t[:0], np.empty((0, 3)))
+    return itertools.chain(held, it), choice
+
+
 def stream_ekf(
     path: str | os.PathLike,
     output: str | os.PathLike,
@@ -404,6 +430,7 @@ def stream_ekf(
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         chunks = in_background(chunks)
+    chunks, motion = _motion_lookahead(chunks, params)  # the motion of the same first span as in memory
     with writer as w:
         for chunk in chunks:
             rows_read += len(chunk)
@@ -424,7 +451,6 @@ def stream_ekf(
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
-                motion = choose_motion(params, chunk.time, chunk["gyro"])  # from the first chunk
                 run_params = params_for_motion(params, motion)
                 summary["motion"] = motion.summary()
                 self_checks = SelfCheck(run_params, dt_nom, lever_arm)

@@ -55,9 +55,13 @@ filter.)
   accel_gate (a shock); update skipped when its normalised innovation squared exceeds accel_nis_gate (off by
   default; forced back in after reject_timeout s of continuous rejection);
   magnetometer skipped when its norm or dip departs from the reference; rest detection (low rate, ‖a‖ ≈ g
-  for rest_time s) adds a zero-rate pseudo-measurement of the bias; optional GNSS compensation of the
-  kinematic acceleration: a_ned = SȮG·[cos χ, sin χ, 0] + SOG·r·[−sin χ, cos χ, 0] (χ = COG, r = the world
-  vertical rate from the gyro) is subtracted from the measured specific force (f = Rᵀ(a_ned − g_ned)).
+  for rest_time s) adds a zero-rate pseudo-measurement of the bias; GNSS velocity aiding (``_velocity_aiding``):
+  between two velocity fixes ∫ R_I f dt = R_IN (Δv_s − g Δt), so the low-pass takes each interval's mean force
+  less Δv_s/Δt (sway, surge and turn removed at any frequency; v_s the antenna's velocity + R (ω × r)); without
+  it, the turn's kinematic acceleration a_ned = SȮG·[cos χ, sin χ, 0] + SOG·r·[−sin χ, cos χ, 0] (χ = COG, or the
+  bow's direction where no heading is held; r = the world vertical rate from the gyro) is subtracted from the
+  measured specific force (f = Rᵀ(a_ned − g_ned)). A low-pass longer than LP_TAU_START starts at it and lengthens
+  by LP_TAU_GROWTH s per s (its lag learned while short).
 - NaN rows: a NaN gyro sample is replaced by the last good one (counted); NaN accel/mag skip that update.
 """
 
