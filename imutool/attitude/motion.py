@@ -28,7 +28,7 @@ SHIP_MAX_RATE = 30.0  # deg/s, 99th percentile of the rotation rate
 SHIP_LOW_SHARE = 0.9  # share of the rotation's power (above 0.02 Hz) below SHIP_BAND_HZ
 SHIP_BAND_HZ = 0.5
 MIN_RATE = 0.5  # deg/s: below this 99th percentile the sensor is still, not rolling
-ANALYSIS_MAX_S = 1800.0  # s: auto looks at most at the first half hour (a streamed run: its first chunk)
+ANALYSIS_MAX_S = 600.0  # s: auto looks at the first ten minutes (30 roll periods; a stream holds that much back)
 ANALYSIS_HZ = 10.0  # Hz: the gyro is averaged down to about this rate first (the band of interest is < 1 Hz)
 
 
