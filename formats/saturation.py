@@ -63,13 +63,12 @@ def clipped(values: np.ndarray, channel: str, min_run: int = MIN_RUN) -> Clippin
     return Clipping(mask, limits)
 
 
-def clipping_warning(channel: str, clip: Clipping, unit: str, rate_hz: float | None = None) -> str:
-    """One line for a user: which channel, at which values, how many samples, and what it means."""
-    vals = sorted({round(v, 4) for axis in clip.limits for v in axis})
-    where = ", ".join(f"{v:g}" for v in vals)
-    dur = f" ({clip.count / rate_hz:.2f} s)" if rate_hz else ""
+def clipping_warning(channel: str, limits: set[float], count: int, unit: str) -> str:
+    """One line for a user: which channel, at which values (``limits``, in ``unit``), how many samples, and what it
+    means."""
+    where = ", ".join(f"{v:g}" for v in sorted(limits))
     what = {
         "accel": "not used by the attitude filter there (the motion went beyond the sensor's range)",
         "gyro": "the attitude integrates a wrong rate there: check the gyro's range setting",
     }[channel]
-    return f"{channel} clipped at {where} {unit} (its range limit) on {clip.count} samples{dur}: {what}"
+    return f"{channel} clipped at {where} {unit} (its range limit) on {count} samples: {what}"

@@ -469,8 +469,10 @@ class SelfCheck:
         for name, unit in (("accel", "m/s^2"), ("gyro", "rad/s")):
             if self.clipped[name]:
                 summary[f"{name}_clipped_samples"] = self.clipped[name]
-                clip = Clipping(np.ones(self.clipped[name], dtype=bool), [tuple(sorted(self.clip_limits[name]))])
-                warnings.append(clipping_warning(name, clip, unit) + f", the first at {self.clip_first[name]:.2f} s")
+                warnings.append(
+                    clipping_warning(name, self.clip_limits[name], self.clipped[name], unit)
+                    + f", the first at {self.clip_first[name]:.2f} s"
+                )
         meta = output_metadata(self.lever_arm, summary)
         return SelfCheckReport(summary, warnings, meta)
 
