@@ -1,6 +1,8 @@
 """Calibration speed: Allan deviation on 24 h of 200 Hz data (3 axes), ellipsoid fit on 100 k samples.
 
-Run: python benchmarks/calibration.py   (prints figures; targets: Allan < 10 s, ellipsoid fit < 1 s)
+Run: python benchmarks/calibrate.py   (prints figures; targets: Allan < 10 s, ellipsoid fit < 1 s)
+
+(Not named calibration.py: run from this folder, that name hid the `calibration` package from every benchmark.)
 """
 
 from __future__ import annotations
