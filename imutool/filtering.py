@@ -37,8 +37,16 @@ from imutool.attitude import (
     result_recording,
     run_ekf,
 )
+from imutool.attitude.lever_estimate import LeverArmEstimate
 from imutool.attitude.motion import ANALYSIS_MAX_S, MotionChoice, choose_motion, params_for_motion
-from imutool.attitude.recording import drop_clipped, flag_clipped, gnss_inputs, heading_channel
+from imutool.attitude.recording import (
+    clipped_nan,
+    drop_clipped,
+    flag_clipped,
+    gnss_inputs,
+    heading_channel,
+    ship_lever_arm,
+)
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import STREAMABLE, chunk_writer, expected_rows
@@ -346,7 +354,9 @@ STREAM_OPTIONS = ("columns", "profile", "mounting", "calibration_file", "input_r
 """The load options a streamed run takes (the others have their defaults there: no --with, no sorting)."""
 
 
-def _motion_lookahead(chunks: Iterable[Recording], params: Any) -> tuple[Iterator[Recording], MotionChoice]:
+def _motion_lookahead(
+    chunks: Iterable[Recording], params: Any
+) -> tuple[Iterator[Recording], MotionChoice, list[Recording]]:
     """The first chunks held back until they span ``ANALYSIS_MAX_S`` (or the file ends), the motion chosen on their
     gyro (rad/s, rows whose time increases) — the same first span an in-memory run judges — then every chunk in
     order. One chunk of 1 M rows spans more than that at 200 Hz: usually nothing more is held."""
@@ -368,7 +378,38 @@ def _motion_lookahead(chunks: Iterable[Recording], params: Any) -> tuple[Iterato
         rising[1:] &= np.diff(t) > 0
         t, g = t[rising], g[rising]
     choice = choose_motion(params, t, g) if g.shape[1:] == (3,) else choose_motion(params, t[:0], np.empty((0, 3)))
-    return itertools.chain(held, it), choice
+    return itertools.chain(held, it), choice, held
+
+
+def _stream_lever_arm(
+    held: list[Recording],
+    params: EkfParams,
+    motion: MotionChoice,
+    run_params: EkfParams,
+    lever_arm: np.ndarray | None,
+    use_gnss: bool,
+    antenna_arm: np.ndarray | None,
+) -> tuple[np.ndarray | None, LeverArmEstimate | None]:
+    """:func:`imutool.attitude.recording.ship_lever_arm` on a stream's held-back first chunks (already checked):
+    the same rows and inputs an in-memory run estimates from."""
+    if lever_arm is not None or motion.kind != "ship" or not params.lever_arm_estimate or not held:
+        return lever_arm, None
+    accel, gyro, mags, sogs, cogs, vels, headings = [], [], [], [], [], [], []
+    for chunk in held:
+        gyro.append(chunk.in_unit("gyro", "rad/s"))
+        accel.append(clipped_nan(chunk["accel"]))
+        mags.append(chunk.channels.get("mag"))
+        sog, cog, vel = gnss_inputs(chunk, use_gnss)
+        sogs.append(sog), cogs.append(cog), vels.append(vel), headings.append(heading_channel(chunk))
+
+    def joined(parts: list) -> np.ndarray | None:
+        return None if any(p is None for p in parts) else np.concatenate([np.asarray(p, float) for p in parts])
+
+    time = np.concatenate([c.time for c in held])
+    return ship_lever_arm(
+        params, motion, None, time, joined(gyro), joined(accel), joined(mags), run_params,
+        joined(sogs), joined(cogs), joined(vels), joined(headings), antenna_arm,
+    )  # fmt: skip
 
 
 def stream_ekf(
@@ -430,8 +471,10 @@ def stream_ekf(
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         chunks = in_background(chunks)
-    chunks, motion = _motion_lookahead(chunks, params)  # the motion of the same first span as in memory
-    with writer as w:
+
+    def prepared(chunks: Iterable[Recording]) -> Iterator[Recording]:
+        """The chunks as the filter takes them: rows whose time increases, the input checks applied."""
+        nonlocal rows_read, duplicates, t_last
         for chunk in chunks:
             rows_read += len(chunk)
             before = np.maximum.accumulate(np.concatenate([[t_last], chunk.time[:-1]]))
@@ -445,13 +488,21 @@ def stream_ekf(
                 summary["skipped_rows_first"] = chunk.meta.get("skipped_rows_first")
             if len(chunk) == 0:
                 continue
+            t_last = float(chunk.time[-1])
             chunk = checks.prepare(chunk)
             for ch in ("gyro", "accel"):
                 if ch not in chunk.channels:
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
+            yield chunk
+
+    with writer as w:  # (a refusal from here on removes the output's temporary file)
+        # the motion, and on a ship without a lever arm its estimate, of the same first span as in memory
+        chunks, motion, held = _motion_lookahead(prepared(chunks), params)
+        run_params = params_for_motion(params, motion)
+        lever_arm, lever_est = _stream_lever_arm(held, params, motion, run_params, lever_arm, use_gnss, antenna_arm)
+        for chunk in chunks:
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
-                run_params = params_for_motion(params, motion)
                 summary["motion"] = motion.summary()
                 self_checks = SelfCheck(run_params, dt_nom, lever_arm)
                 self_checks.motion = motion.kind
@@ -493,8 +544,9 @@ def stream_ekf(
             est.meta["motion"] = summary["motion"]
             # the metadata as far as known (the heading source is final at the end: set_final_meta below)
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
+            if lever_est is not None:
+                est.meta["lever_arm_estimate"] = lever_est.summary()
             w.write(est)
-            t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
             report(progress, summary["rows"], total)
         validation, input_warnings = checks.finish(
@@ -507,6 +559,9 @@ def stream_ekf(
         summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
         summary.update(checked.summary)  # (the order of an in-memory run's summary)
         warnings = checked.warnings
+        if lever_est is not None:
+            summary["lever_arm_estimate"] = lever_est.summary()
+            warnings = [m for m in (lever_est.message(),) if m] + warnings
         everything = checks.meta_warnings(input_warnings, warnings)
         w.set_final_meta(
             {

@@ -538,25 +538,34 @@ def test_zero_phase_lowpass_has_no_lag_follows_the_body_and_skips_missing_rows()
 
 
 def test_lever_arm_cli_metadata_and_sign(tmp_path):
-    """`filter --lever-arm` is recorded in the output; the wrong sign of the lever arm is worse than none."""
+    """`filter --lever-arm` is recorded in the output; the wrong sign of the lever arm is worse than none; none
+    given, it is estimated from the ship's motion (said on stderr) unless lever_arm_estimate=false."""
     from imutool.cli import cli
 
-    rec = simulate("ship-at-sea", duration=150, seed=4, turn_rate_dps=0)
+    rec = simulate("ship-at-sea", duration=200, seed=5, turn_rate_dps=0)
     src = tmp_path / "bridge.csv"
     formats.write(rec, src)
     x, y, z = rec.meta["lever_arm_m"]
     errs = {}
-    for name, arm in (("right", f"{x},{y},{z}"), ("none", None), ("flipped", f"{-x},{-y},{-z}")):
+    cases = {
+        "right": ["--lever-arm", f"{x},{y},{z}"],
+        "estimated": [],
+        "none": ["--param", "lever_arm_estimate=false"],
+        "flipped": ["--lever-arm", f"{-x},{-y},{-z}"],
+    }
+    for name, extra in cases.items():
         out = tmp_path / f"{name}.csv"
-        extra = ["--lever-arm", arm] if arm else []
         run = CliRunner().invoke(cli, ["filter", str(src), "-o", str(out), "-q", *extra])
         assert run.exit_code == 0, run.output
+        assert ("no lever arm given: estimated" in run.output) == (name == "estimated"), run.output
+        arm = extra[1] if extra and extra[0] == "--lever-arm" else None
         est = formats.read(out)
         late = est.time > 60
         errs[name] = _rmse(est["roll"][late], rec["ref_roll"][late])
         if arm:
             assert est.meta["lever_arm_m"] == pytest.approx([float(v) for v in arm.split(",")])
     assert errs["right"] < 0.5 < errs["none"] < errs["flipped"], errs
+    assert errs["estimated"] < errs["right"] + 0.1, errs
 
 
 @pytest.mark.parametrize("fault", ["flip_x", "scale_3"])
@@ -773,12 +782,12 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     assert "note:" in err and "update_every = 1" in err and "--update-every 0" in err
     assert "mag_noise_deg = 20" in err and "--param mag_noise_deg=0" in err and "mag_reference_tau = 0" in err
     assert "mag_new_time" in err and "mag_bias_gate" in err  # saved before the new-field acceptance and the gate
-    assert err.count("note:") == 5  # and the motion model's (a file without `motion`)
+    assert err.count("note:") == 6  # and the motion model's and the lever-arm estimate's (a version-0 file)
     code, out, err = run_main(
         ["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0", "--json"], capsys
     )
     assert code == 0 and json.loads(out)["update_every"] == 4  # 200 Hz: every 4th
-    assert "update_every = 1" not in err and err.count("note:") == 4 and "mag_noise_deg = 20" in err
+    assert "update_every = 1" not in err and err.count("note:") == 5 and "mag_noise_deg = 20" in err
     code, out, err = run_main(
         [
             "filter",
@@ -794,18 +803,18 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
         ],
         capsys,
     )
-    assert code == 0 and err.count("note:") == 2 and "mag_new_time" in err
+    assert code == 0 and err.count("note:") == 3 and "mag_new_time" in err
     last_release = tmp_path / "last_release.toml"  # saved with mag_heading_density, before mag_new_time
     last_release.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2c.csv", "--params", last_release], capsys)
-    assert code == 0 and err.count("note:") == 2 and "mag_new_time" in err
+    assert code == 0 and err.count("note:") == 3 and "mag_new_time" in err
     two_stage = tmp_path / "two_stage.toml"  # saved before the Butterworth: every key of its day, no smoother_lp_tau
     two_stage.write_text(
         "[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
         "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n"
     )
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2d.csv", "--params", two_stage], capsys)
-    assert code == 0 and err.count("note:") == 2 and "Butterworth" in err and "has no smoother_lp_tau" in err
+    assert code == 0 and err.count("note:") == 3 and "Butterworth" in err and "has no smoother_lp_tau" in err
     code, out, err = run_main(
         ["filter", src, "-o", tmp_path / "o2e.csv", "--params", f.with_name("used.toml"), "--param", "accel_lp_tau=2"],
         capsys,
@@ -1849,17 +1858,22 @@ def test_params_file_version_and_migrations(tmp_path, capsys):
         "mag_new_field",
         "butterworth_lowpass",
         "motion_model",
+        "lever_arm_estimate",
     ]
     notes = v0.notes()
-    assert len(notes) == 6 and "before 2026-11-26" in notes[0] and "commit 1816144" in notes[3]
+    assert len(notes) == 7 and "before 2026-11-26" in notes[0] and "commit 1816144" in notes[3]
     later = v0.notes(EkfParams(update_every=0, mag_noise_deg=20.0), {"update_every"})  # --update-every 0 given
-    assert len(later) == 5 and later[0].startswith(f"{old} sets mag_noise_deg = 20")
+    assert len(later) == 6 and later[0].startswith(f"{old} sets mag_noise_deg = 20")
     run = CliRunner().invoke(cli, ["filter", str(_roll(tmp_path)), "-o", str(tmp_path / "e.csv"), "--params", str(old)])
     assert run.exit_code == 0, run.output
     assert [line for line in run.stderr.splitlines() if line.startswith("note: ")] == [f"note: {n}" for n in notes]
     partial = tmp_path / "partial.toml"  # saved with the density, before the new-field acceptance
     partial.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
-    assert [m.name for m in read_params_file(str(partial)).migrations] == ["mag_new_field", "motion_model"]
+    assert [m.name for m in read_params_file(str(partial)).migrations] == [
+        "mag_new_field",
+        "motion_model",
+        "lever_arm_estimate",
+    ]
 
     for text, needle in (
         (f"version = {PARAMS_VERSION + 1}\n[ekf]\ngyro_noise = 0.001\n", "newer than this imutool"),

@@ -122,6 +122,9 @@ PARAMS: tuple[Param, ...] = (
     Param("ship_lp_tau", 5.0, "s", (0.0, 100.0), UNUSED, None,
           "the low-pass's delay on ship motion (motion ship, or auto on a ship): long against the wave band — "
           "a sway at 6 s attenuated 14×, at 10 s 5× — and short against the gyro bias's drift"),
+    Param("lever_arm_estimate", True, "bool", (0, 1), UNUSED, None,
+          "on ship motion with no lever arm given, the sensor's lever arm from the centre of rotation is estimated "
+          "from the first ten minutes and used (imutool/attitude/lever_estimate.py; false: none, as before)"),
     Param("smoother_lp_tau", 3.0, "s", (0.0, 100.0), UNUSED, None,
           "delay of the smoother's low-pass of the specific force, run forwards and backwards (no lag: a longer τ "
           "costs it no delay; offline VQF's 3 s) (0: accel_lp_tau)"),

@@ -242,7 +242,7 @@ class EkfCoefficients:
 # The format's version, written by EkfParams.to_toml as `version = N` above the [ekf] table. A file without one is
 # version 0: every file saved before versions existed (2026-11-27). Raise it when a parameter's meaning changes,
 # with a Migration below saying what changed.
-PARAMS_VERSION = 2
+PARAMS_VERSION = 3
 MOTIONS = ("auto", "ship", "handheld")  # EkfParams.motion (imutool/attitude/motion.py)
 
 
@@ -319,6 +319,16 @@ def _butterworth_notes(path: str, keys: frozenset[str], used: Any, overridden: f
     ]
 
 
+def _lever_estimate_notes(path: str, keys: frozenset[str], used: Any, overridden: frozenset[str]) -> list[str]:
+    if "lever_arm_estimate" in overridden or not used.lever_arm_estimate or used.motion == "handheld":
+        return []
+    return [
+        f"{path} was saved before the lever-arm estimate (version < 3, 2026-11-27): on ship motion with no "
+        "--lever-arm the sensor's lever arm is now estimated from the data and used; --param "
+        "lever_arm_estimate=false for the behaviour before"
+    ]
+
+
 def _motion_notes(path: str, keys: frozenset[str], used: Any, overridden: frozenset[str]) -> list[str]:
     if "motion" in overridden or used.motion == "handheld":
         return []
@@ -375,6 +385,14 @@ MIGRATIONS: tuple[Migration, ...] = (
         2,
         None,
         _motion_notes,
+    ),
+    Migration(
+        "lever_arm_estimate",
+        "2026-11-27",
+        "on ship motion with no lever arm given, the lever arm is estimated (lever_arm_estimate)",
+        3,
+        None,
+        _lever_estimate_notes,
     ),
 )
 

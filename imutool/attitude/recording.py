@@ -10,7 +10,8 @@ from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
 from formats.saturation import clipped
 from imutool.attitude.layout import F_ACC_REJ
-from imutool.attitude.motion import choose_motion, params_for_motion
+from imutool.attitude.lever_estimate import LeverArmEstimate, analysis_span, estimate_lever_arm
+from imutool.attitude.motion import MotionChoice, choose_motion, params_for_motion
 from imutool.attitude.params import EkfParams
 from imutool.attitude.run import AttitudeResult, nominal_dt, run_ekf
 from imutool.attitude.selfcheck import SampleFlag, SelfCheck, has_flag
@@ -99,10 +100,57 @@ def drop_clipped(
     (:mod:`formats.saturation`)."""
     clip_a, clip_g = clipped(accel, "accel"), clipped(gyro, "gyro")
     checks.add_clipping(time, clip_a, clip_g)
-    if clip_a.count:
-        accel = np.array(accel, dtype=np.float64)
-        accel[clip_a.mask] = np.nan
-    return accel, clip_a.mask
+    return _nan_where(accel, clip_a.mask), clip_a.mask
+
+
+def clipped_nan(accel: np.ndarray) -> np.ndarray:
+    """``accel`` (N,3) m/s² as the filter takes it: NaN at its clipped samples (:func:`drop_clipped`, unreported)."""
+    return _nan_where(accel, clipped(accel, "accel").mask)
+
+
+def _nan_where(accel: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    if not mask.any():
+        return accel
+    accel = np.array(accel, dtype=np.float64)
+    accel[mask] = np.nan
+    return accel
+
+
+def ship_lever_arm(
+    params: EkfParams,
+    motion: MotionChoice,
+    lever_arm: np.ndarray | None,
+    time: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    mag: np.ndarray | None,
+    run_params: EkfParams,
+    sog: np.ndarray | None,
+    cog: np.ndarray | None,
+    vel: np.ndarray | None,
+    heading: np.ndarray | None,
+    antenna_arm: np.ndarray | None,
+) -> tuple[np.ndarray | None, LeverArmEstimate | None]:
+    """(the lever arm the filter runs with, the estimate or None): ``lever_arm`` when given; on ship motion
+    without one (and ``params.lever_arm_estimate``) the one :func:`estimate_lever_arm` finds on the first rows of
+    the inputs (the filter's own inputs: SI, body FRD; ``accel`` with clipped samples NaN), the filter run on them
+    with ``run_params`` as the whole run is. An in-memory run and a stream pass the same rows."""
+    if lever_arm is not None or motion.kind != "ship" or not params.lever_arm_estimate or len(time) == 0:
+        return lever_arm, None
+    span = analysis_span(time)
+
+    def cut(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.asarray(a)[span]
+
+    def run(arm: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        res, _ = run_ekf(
+            time[span], gyro[span], accel[span], cut(mag), run_params, cut(sog), cut(cog),
+            lever_arm=arm, heading_deg=cut(heading), velocity_ne=cut(vel), antenna_arm=antenna_arm,
+        )  # fmt: skip
+        return res.q, res.bias
+
+    est = estimate_lever_arm(time[span], gyro[span], accel[span], run)
+    return est.arm_m, est
 
 
 def flag_clipped(res: AttitudeResult, rows: np.ndarray) -> None:
@@ -143,6 +191,10 @@ def ekf_recording(
     checks = SelfCheck(run_params, nominal_dt(rec.time), lever_arm)  # the same accumulator as a streamed run's
     checks.motion = motion.kind
     accel, clipped_rows = drop_clipped(gyro, accel, checks, rec.time)
+    lever_arm, lever_est = ship_lever_arm(
+        params, motion, lever_arm, rec.time, gyro, accel, mag, run_params, sog, cog, vel, heading, antenna_arm
+    )
+    checks.lever_arm = lever_arm
     res, _ = run_ekf(
         rec.time,
         gyro,
@@ -165,11 +217,16 @@ def ekf_recording(
     report = checks.report()
     summary.update(report.summary)
     warnings = report.warnings
+    if lever_est is not None:
+        summary["lever_arm_estimate"] = lever_est.summary()
+        warnings = [m for m in (lever_est.message(),) if m] + warnings
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, run_params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
     out.meta["motion"] = summary["motion"] = motion.summary()
     out.meta.update(report.metadata)
+    if lever_est is not None:
+        out.meta["lever_arm_estimate"] = lever_est.summary()
     if warnings:
         out.meta["warnings"] = merged_warnings(out.meta, warnings)
         summary["warnings"] = list(summary.get("warnings") or []) + warnings
