@@ -45,7 +45,7 @@ INC_STEPS = {
 @pytest.fixture(scope="module")
 def data(tmp_path_factory) -> dict[str, str]:
     """Small inputs, one per kind of command (written once for the module)."""
-    from imutool.report.simulate import heading_test, inclinometer_test
+    from imutool.sim.programmes import heading_test, inclinometer_test
 
     d = tmp_path_factory.mktemp("inputs")
     paths = {k: str(d / f"{k}.csv") for k in ("sea", "walk", "array", "pr", "att", "inc_dut", "inc_ref", "roll")}

@@ -1,4 +1,5 @@
-"""Simulated test programmes for the evidence reports: a device under test (DUT) against a reference.
+"""Simulated test programmes for the evidence reports (``imutool report``): a device under test (DUT) against a
+reference, as two recordings of angles (not raw sensor samples like the scenarios of :mod:`imutool.sim`).
 
 ``inclinometer_test`` follows the ISO 19697-style sequence a tilt/motion table would run: static heel steps on both
 sides, sinusoidal roll at several period/amplitude combinations (one asymmetric), and a long static hold
@@ -8,16 +9,25 @@ rates of turn (follow-up) and a rolling segment at a constant heading (dynamic e
 The DUT carries known injected errors so the report can be checked against them:
 ``dut = (1 + scale) · truth(t − lag) + offset + drift·t + noise`` (deg; for heading also a semicircular deviation
 ``a·sin h + b·cos h`` and a roll coupling ``c·roll``). Angles deg, roll + starboard down, heading clockwise from
-north; time s from the start of the programme. Deterministic for a seed.
+north; time s from the start of the programme. Deterministic for a seed. ``sea_pair`` is two motion sensors on
+one ship at sea (irregular roll from the JONSWAP shape of :mod:`imutool.sim.sea`); ``write_sample_data`` writes
+the bundled report examples (sample_data/).
 """
 
 from __future__ import annotations
 
+import os
+from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
 
+import formats
 from formats import Recording
+from formats.atomic import atomic_path
+from imutool.nmea_out import nmea_lines
+from imutool.sim.sea import jonswap_shape
+from imutool.sim.sensor import GRAVITY
 
 DEFAULT_STEPS = (0.0, 5.0, 10.0, 20.0, 30.0, 45.0, -5.0, -10.0, -20.0, -30.0, -45.0, 0.0)
 # (period s, starboard amplitude deg, port amplitude deg, cycles): periods 4-30 s (standards.md P10, I)
@@ -28,7 +38,6 @@ DEFAULT_DYNAMIC = (
     (15.0, 25.0, 15.0, 4),
     (30.0, 15.0, 15.0, 3),
 )
-G = 9.80665  # m/s²
 
 
 def _ramp(a: float, b: float, n: int) -> np.ndarray:
@@ -155,7 +164,7 @@ def inclinometer_test(
     t, heel, segs, lat = inclinometer_programme(rate_hz=rate_hz, long_s=long_s, **programme)
     ref = heel + (rng.normal(0.0, ref_noise_deg, heel.size) if ref_noise_deg > 0 else 0.0)
     dut = (1.0 + scale) * _shift(t, heel, lag_s) + offset_deg + drift_deg_per_h * t / 3600.0
-    dut = dut + accel_coupling * np.degrees(np.arctan2(_shift(t, lat, lag_s), G))
+    dut = dut + accel_coupling * np.degrees(np.arctan2(_shift(t, lat, lag_s), GRAVITY))
     if noise_deg > 0:
         dut = dut + rng.normal(0.0, noise_deg, heel.size)
     zeros = np.zeros_like(t)
@@ -212,8 +221,7 @@ def irregular_roll(
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
     wp = 2 * np.pi / tp_s
     w = np.linspace(0.4 * wp, 3.0 * wp, n_comp)
-    sig = np.where(w <= wp, 0.07, 0.09)
-    spec = w**-5 * np.exp(-1.25 * (wp / w) ** 4) * gamma ** np.exp(-((w - wp) ** 2) / (2 * sig**2 * wp**2))
+    spec = jonswap_shape(w, tp_s, gamma)
     amp = np.sqrt(2 * spec * (w[1] - w[0]))
     ph = rng.uniform(0, 2 * np.pi, n_comp)
     x = (amp[None, :] * np.cos(w[None, :] * t[:, None] + ph[None, :])).sum(axis=1)
@@ -257,8 +265,6 @@ def sea_pair(
 
 def write_steps_csv(segs: list[dict[str, Any]], path: str) -> None:
     """Write the static segments as a steps file: ``start,end,reference`` (s, s, deg), atomically."""
-    from formats.atomic import atomic_path
-
     rows = [s for s in segs if s["kind"] in ("static", "long")]
     with atomic_path(path) as tmp, open(tmp, "w") as f:
         f.write("start,end,reference\n")
@@ -416,13 +422,6 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
     ``imutool nmea``'s generator), heading_dut.csv / heading_reference.csv (SAMPLE_HEADING_ERRORS; turns at 8
     and 20 °/s). The test record example ``test_info.toml`` is a hand-written file, not generated.
     """
-    import os
-    from datetime import datetime, timezone
-
-    import formats
-    from formats.atomic import atomic_path
-    from imutool.nmea_out import nmea_lines
-
     os.makedirs(folder, exist_ok=True)
     out = {}
     dut, ref, segs = inclinometer_test(
