@@ -39,7 +39,7 @@ import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, ne
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import input_notes
-from imutool.routes import OnInput, RouteResult, load_input
+from imutool.routes import OnInput, RouteResult, load_input, read_source
 
 RATE_RW = 1e-4  # rad/s/√s: random walk of ω in the EKF's process noise
 TILT_GAIN = 0.0  # 1/s: gravity tilt correction of the attitude from the centre specific force (0 = pure integration)
@@ -655,11 +655,7 @@ def run_gyrofree(
     if not isinstance(layout, Layout):
         layout = load_layout(os.fspath(layout))
     inputs: list[dict[str, Any]] = []
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
     if planar:
         names = list(planar)
         if len(names) != 2:

@@ -49,7 +49,7 @@ from formats.errors import ImutoolError
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
 from imutool.nmea_out import write_log
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, read_source
 
 GRAVITY = 9.80665
 METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
@@ -1269,11 +1269,7 @@ def run_heave(
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
     cols = None
     if vertical:
         cols = [c if c in rec.channels else c.lower() if c.lower() in rec.channels else c for c in vertical]
