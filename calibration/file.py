@@ -28,6 +28,7 @@ import numpy as np
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.frames import parse_axis_remap
 
 SECTIONS = ("mag", "gyro", "accel", "deviation", "mounting")
 
@@ -405,7 +406,6 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
             _number(v, _key("deviation", f"std.{k}"), path)
     if "mounting" in data:
         s = data["mounting"]
-        from formats.frames import parse_axis_remap
 
         try:
             parse_axis_remap(str(s.get("remap", "x,y,z")))

@@ -18,13 +18,16 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from datetime import date, datetime, timezone
 from typing import Any
 
 import numpy as np
 
 import formats
 from formats import Recording
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.frames import wrap_deg180
 from imutool.loading import require_channels
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
 
@@ -402,8 +405,6 @@ def card_info(path: str | os.PathLike | None) -> dict[str, Any]:
 def swing_date(date_opt: str | None, *recs: Any) -> Any:
     """Date of the swing: ``date_opt`` (YYYY-MM-DD), else the real time of a recording (metadata start time /
     Unix time axis); None when neither says."""
-    from datetime import date, datetime, timezone
-
     from formats.nmea import utc_offset_s
 
     if date_opt:
@@ -467,8 +468,6 @@ def deviation_card(
     from calibration.file import provenance, update_calibration
     from calibration.swing import heading_from_mag, roll_pitch_from_accel
     from calibration.wmm import parse_position, position_from_nmea, wmm_variation
-    from formats.atomic import atomic_path
-    from formats.frames import wrap_deg180
 
     input_path = _source_name(source)
     reference = os.fspath(reference) if reference else None

@@ -20,6 +20,7 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
+from formats.frames import quat_to_euler
 from imutool.loading import LOAD_OPTIONS
 from imutool.progress import Progress, report
 from imutool.routes import RouteResult
@@ -331,8 +332,6 @@ def run_convert(
             opts["compression"] = compression
     elif kout == "nmea":
         if "q" in rec and not any(k in rec for k in ("roll", "pitch", "heading")):
-            from formats.frames import quat_to_euler
-
             r, p, h = quat_to_euler(rec["q"])
             rec = rec.copy()
             for name, v in (("roll", r), ("pitch", p), ("heading", h)):
