@@ -30,6 +30,9 @@ from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import parse_axis_remap
 
+from .deviation import DeviationCard
+from .magnetometer import MAX_CONDITION
+
 SECTIONS = ("mag", "gyro", "accel", "deviation", "mounting")
 
 
@@ -188,7 +191,6 @@ class Calibration:
         """The deviation card (None when the file has no [deviation] section)."""
         if "deviation" not in self.sections:
             return None
-        from .deviation import DeviationCard
 
         return DeviationCard.from_section(self.sections["deviation"], path=self.path)
 
@@ -337,8 +339,6 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
     in ``SCALE_RANGE``. [deviation]: A–E finite numbers (deg) below ``DEVIATION_COEFF_MAX_DEG``. [mounting]:
     a valid remap and three finite misalignment angles below ``MISALIGNMENT_MAX_DEG``.
     """
-    from .magnetometer import MAX_CONDITION
-
     for vk in ("imutool_calibration", "version"):
         if vk in data and data[vk] != FILE_VERSION:
             raise ImutoolError(

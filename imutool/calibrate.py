@@ -28,7 +28,7 @@ from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import wrap_deg180
-from imutool.loading import require_channels
+from imutool.loading import load_recording, merge_with, require_channels
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
 
 
@@ -84,8 +84,6 @@ def load_for_fit(
 
     ``fitting``: the section being estimated. Its parameters are in sensor axes and relative to raw data, so
     a ``mounting`` and a ``calibration_file`` that already holds that section are refused."""
-    from imutool.loading import load_recording, merge_with
-
     opts = {k: v for k, v in (load_options or {}).items() if v is not None}
     _check_load_options(opts)
     if fitting and opts.get("mounting"):

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ImutoolError
+from imutool import __version__
 
 PASS, FAIL, INSUFFICIENT, NOT_TESTED = "pass", "fail", "insufficient data", "not tested"
 STATUSES = (PASS, FAIL, INSUFFICIENT, NOT_TESTED)
@@ -179,8 +180,6 @@ def sha256_of(path: str | os.PathLike) -> str:
 
 def tool_identity() -> dict[str, Any]:
     """imutool version and git commit (if the package sits in a git checkout)."""
-    from imutool import __version__
-
     git = None
     try:
         root = Path(__file__).resolve().parents[2]
