@@ -86,7 +86,7 @@ def allan_noise(
     kalibr = os.fspath(kalibr) if kalibr else None
 
     from calibration.allan import analyse, plot_allan
-    from calibration.noise import write_kalibr, write_noise
+    from calibration.noise_file import write_kalibr, write_noise
 
     def _stage(name: str) -> None:
         if stage is not None:
