@@ -31,8 +31,8 @@ def chirp(duration=300.0, fs=20.0, a_s=12.0, a_p=7.0, t0=8.0, t1=12.0):
 def main() -> None:
     from imutool.report.inclinometer import inclinometer_evidence
     from imutool.report.pdf import render_pdf
-    from imutool.report.simulate import inclinometer_test
     from imutool.roll import roll_stats
+    from imutool.sim.programmes import inclinometer_test
 
     roll_stats(np.arange(100.0), np.sin(np.arange(100.0)))  # compile
     print("| noise (deg, 1σ) | fs (Hz) | max period error stbd/port (s) | max amplitude error stbd/port (deg) |")
@@ -58,8 +58,8 @@ def main() -> None:
     )
     print("|---|---|---|---|---|")
     from imutool.report.common import tol_period
-    from imutool.report.simulate import sea_pair
     from imutool.roll import pair_cycles, roll_cycles
+    from imutool.sim.programmes import sea_pair
 
     for std in (0.5, 1.0, 6.0):
         n_max = n_j = 0

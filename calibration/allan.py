@@ -30,6 +30,7 @@ from numba import njit
 from scipy.optimize import nnls
 
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 
 BI_FACTOR = 0.6643  # √(2 ln 2 / π)
@@ -244,8 +245,6 @@ def plot_allan(results: list[AllanResult], path: str, title: str = "Allan deviat
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from formats.atomic import atomic_path
 
     fig, axs = plt.subplots(len(results), 1, figsize=(8, 4.2 * len(results)), squeeze=False)
     for ax, r in zip(axs[:, 0], results, strict=True):

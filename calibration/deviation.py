@@ -25,11 +25,13 @@ approximated by −δ(M)). Limits flagged by the fit (:data:`DEVIATION_LIMIT_DEG
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import wrap_deg180
 
@@ -340,8 +342,6 @@ def card_text(card: DeviationCard, header: dict[str, Any] | None = None, step_de
         )
     ws = card.warnings or card_warnings(card)
     if ws:
-        import textwrap
-
         lines.append("")
         for w in ws:
             lines += textwrap.wrap(f"WARNING: {w}", width=110, subsequent_indent="         ")
@@ -374,8 +374,6 @@ def plot_card(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from formats.atomic import atomic_path
 
     fig = plt.figure(figsize=(8.27, 11.0))
     ax = fig.add_axes((0.1, 0.62, 0.85, 0.30))

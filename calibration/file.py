@@ -28,6 +28,10 @@ import numpy as np
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.frames import parse_axis_remap
+
+from .deviation import DeviationCard
+from .magnetometer import MAX_CONDITION
 
 SECTIONS = ("mag", "gyro", "accel", "deviation", "mounting")
 
@@ -187,7 +191,6 @@ class Calibration:
         """The deviation card (None when the file has no [deviation] section)."""
         if "deviation" not in self.sections:
             return None
-        from .deviation import DeviationCard
 
         return DeviationCard.from_section(self.sections["deviation"], path=self.path)
 
@@ -336,8 +339,6 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
     in ``SCALE_RANGE``. [deviation]: A–E finite numbers (deg) below ``DEVIATION_COEFF_MAX_DEG``. [mounting]:
     a valid remap and three finite misalignment angles below ``MISALIGNMENT_MAX_DEG``.
     """
-    from .magnetometer import MAX_CONDITION
-
     for vk in ("imutool_calibration", "version"):
         if vk in data and data[vk] != FILE_VERSION:
             raise ImutoolError(
@@ -405,7 +406,6 @@ def validate_calibration(data: dict[str, Any], path: str) -> None:
             _number(v, _key("deviation", f"std.{k}"), path)
     if "mounting" in data:
         s = data["mounting"]
-        from formats.frames import parse_axis_remap
 
         try:
             parse_axis_remap(str(s.get("remap", "x,y,z")))

@@ -34,6 +34,7 @@ Method:
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +43,7 @@ from numba import njit
 from scipy.optimize import least_squares
 
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 
 KINDS = ("offset", "diag", "full", "auto")
@@ -575,8 +577,6 @@ def calibrate_sphere(
 # -- convention crosswalk ------------------------------------------------------------------------------------
 def crosswalk(b: np.ndarray, a: np.ndarray, form: str) -> str:
     """Text of the parameters in another tool's convention (matlab | fusion | magneto | json)."""
-    import json
-
     b = np.asarray(b, dtype=float)
     a = np.asarray(a, dtype=float)
 
@@ -618,8 +618,6 @@ def plot_before_after(m: np.ndarray, fit: MagFit, path: str, title: str = "Magne
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from formats.atomic import atomic_path
 
     m = np.asarray(m, dtype=float)
     m = m[np.all(np.isfinite(m), axis=1)]

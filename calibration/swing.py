@@ -25,7 +25,7 @@ from scipy.optimize import least_squares
 
 from formats.errors import ImutoolError
 
-from .magnetometer import COVERAGE_WINDOW, MagFit
+from .magnetometer import COVERAGE_WINDOW, MagFit, check_soft_iron
 
 
 def roll_pitch_from_accel(f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -150,7 +150,6 @@ def calibrate_swing(
     p = p0.copy()
     p[free] = sol.x
     b, a = unpack(p)
-    from .magnetometer import check_soft_iron
 
     why = check_soft_iron(b, a, "swing fit:")
     if why is not None:

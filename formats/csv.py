@@ -32,6 +32,7 @@ from . import units as _units
 from .atomic import AtomicChunkWriter, atomic_path
 from .columns import (
     Mapping,
+    _unit_in,
     clean_name,
     infer_mapping,
     load_profile,
@@ -295,8 +296,6 @@ def _apply_time_column(mapping: Mapping, spec: str, names: list[str], path: str)
 
 def _infer_time_unit(header: str) -> str | None:
     """A time unit stated in the column name (``Time (ms)``, ``t_us``), if any."""
-    from .columns import _unit_in
-
     u = _unit_in(header) or (clean_name(header).rsplit("_", 1)[-1] if "_" in clean_name(header) else None)
     if u and _units.is_known(u):
         try:

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from . import units as _units
+from .frames import parse_axis_remap
 from .recording import Recording
 from .units import STANDARD_GRAVITY
 
@@ -540,7 +541,6 @@ def _remap_for_up_axis(axis: int, sign: float) -> str:
         for perm2 in ("x", "y", "z", "-x", "-y", "-z"):
             cand.append((perm, perm2))
     up = ("-" if sign > 0 else "") + _AX[axis]  # body z = −up
-    from .frames import parse_axis_remap
 
     for bx, by in cand:
         spec = f"{bx},{by},{up}"

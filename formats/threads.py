@@ -10,6 +10,7 @@ where it is installed, for those already loaded).
 from __future__ import annotations
 
 import os
+import sys
 
 ENV = "IMUTOOL_THREADS"  # the budget of this process (set by batch in its workers; a user may set it too)
 # the thread pools of numerical libraries, read when each library loads
@@ -38,8 +39,6 @@ def limit_threads(n: int) -> int:
     Sets ``IMUTOOL_THREADS`` and the numerical libraries' variables (for what loads later), numba's thread count
     and pyarrow's CPU count where they are loaded, and the BLAS/OpenMP pools through threadpoolctl where it is
     installed (optional: numpy's BLAS is loaded before a forked worker starts)."""
-    import sys
-
     n = max(1, int(n))
     os.environ[ENV] = str(n)
     for name in LIBRARY_ENV:

@@ -18,14 +18,17 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from datetime import date, datetime, timezone
 from typing import Any
 
 import numpy as np
 
 import formats
 from formats import Recording
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from imutool.loading import require_channels
+from formats.frames import wrap_deg180
+from imutool.loading import load_recording, merge_with, require_channels
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
 
 
@@ -81,8 +84,6 @@ def load_for_fit(
 
     ``fitting``: the section being estimated. Its parameters are in sensor axes and relative to raw data, so
     a ``mounting`` and a ``calibration_file`` that already holds that section are refused."""
-    from imutool.loading import load_recording, merge_with
-
     opts = {k: v for k, v in (load_options or {}).items() if v is not None}
     _check_load_options(opts)
     if fitting and opts.get("mounting"):
@@ -402,8 +403,6 @@ def card_info(path: str | os.PathLike | None) -> dict[str, Any]:
 def swing_date(date_opt: str | None, *recs: Any) -> Any:
     """Date of the swing: ``date_opt`` (YYYY-MM-DD), else the real time of a recording (metadata start time /
     Unix time axis); None when neither says."""
-    from datetime import date, datetime, timezone
-
     from formats.nmea import utc_offset_s
 
     if date_opt:
@@ -467,8 +466,6 @@ def deviation_card(
     from calibration.file import provenance, update_calibration
     from calibration.swing import heading_from_mag, roll_pitch_from_accel
     from calibration.wmm import parse_position, position_from_nmea, wmm_variation
-    from formats.atomic import atomic_path
-    from formats.frames import wrap_deg180
 
     input_path = _source_name(source)
     reference = os.fspath(reference) if reference else None

@@ -20,8 +20,17 @@ import numpy as np
 
 import formats
 from formats.errors import ImutoolError
-from imutool.loading import LOAD_OPTIONS
-from imutool.progress import Progress, report
+from formats.frames import quat_to_euler
+from imutool.loading import (
+    LOAD_OPTIONS,
+    ChunkChecks,
+    load_recording,
+    mapping_options,
+    merge_with,
+    merged_warnings,
+    read_input,
+)
+from imutool.progress import Progress, estimate_rows, report
 from imutool.routes import RouteResult
 
 STREAMABLE = ("csv", "parquet")
@@ -70,8 +79,6 @@ def stream_convert(
     report is the summary's ``validation``, and it and the warnings go into the output's metadata at the end.
     ``progress(rows_read, rows_expected)`` after each chunk (expected: Parquet footer count, CSV estimate).
     """
-    from imutool.loading import ChunkChecks, mapping_options
-
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
     opts: dict[str, Any] = mapping_options(src, columns, profile)
@@ -80,8 +87,6 @@ def stream_convert(
     if formats.kind_of(src) == "csv":
         opts.update(time_opts)
     elif any(v is not None for v in time_opts.values()):
-        from imutool.loading import read_input
-
         read_input(src, **time_opts)  # the one-line refusal of a CSV-only option
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
     total = expected_rows(src) if progress is not None else None
@@ -155,8 +160,6 @@ def expected_rows(path: str | os.PathLike) -> int | None:
         except ImutoolError:
             return None
     if kind == "csv":
-        from imutool.progress import estimate_rows
-
         return estimate_rows(path)
     return None
 
@@ -216,8 +219,6 @@ def run_convert(
     (ROS1 none/bz2/lz4). ``stream=False`` reads CSV/Parquet whole. ``progress(rows, total)`` while streaming;
     ``stage(name)`` ('reading', 'writing') otherwise; ``on_input(path, report)`` after a whole-file load.
     """
-    from imutool.loading import ChunkChecks, mapping_options, merged_warnings
-
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"run_convert() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
@@ -262,8 +263,6 @@ def run_convert(
     if stage is not None:
         stage("reading")
     if kin in ("ros1", "ros2"):
-        from imutool.loading import read_input
-
         if any(opt[k] is not None for k in ("input_rate_hz", "time_column", "header_rows")):  # refused: CSV only
             read_input(
                 src, rate_hz=opt["input_rate_hz"], time_column=opt["time_column"], header_rows=opt["header_rows"]
@@ -292,8 +291,6 @@ def run_convert(
         summary["validation_actions"] = rep.actions
         merged_notes: list[str] = []
         if opt["with_files"]:
-            from imutool.loading import merge_with
-
             rec, merged = merge_with(
                 rec,
                 src,
@@ -313,8 +310,6 @@ def run_convert(
         if len(rec):
             noted(src, {**report, "warnings": warns})
     else:
-        from imutool.loading import load_recording
-
         rec, rep2 = load_recording(src, strict=strict, **{k: v for k, v in opt.items() if v is not None})
         if len(rec):
             noted(src, rep2)
@@ -331,8 +326,6 @@ def run_convert(
             opts["compression"] = compression
     elif kout == "nmea":
         if "q" in rec and not any(k in rec for k in ("roll", "pitch", "heading")):
-            from formats.frames import quat_to_euler
-
             r, p, h = quat_to_euler(rec["q"])
             rec = rec.copy()
             for name, v in (("roll", r), ("pitch", p), ("heading", h)):

@@ -21,6 +21,7 @@ import numpy as np
 
 import formats
 from formats import Recording
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
 from imutool.clock import Clock
@@ -382,7 +383,6 @@ def plot_errors(est: Recording, ref: Recording, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from formats.atomic import atomic_path
     from imutool.metrics import interp_to, unwrap_deg
 
     names = [n for n in ("roll", "pitch", "heading") if n in est.channels and f"ref_{n}" in ref.channels]

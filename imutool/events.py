@@ -37,6 +37,7 @@ the worst roll per voyage.
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import re
@@ -457,8 +458,6 @@ def analyse(
 
 def write_table(rows: list[dict[str, Any]], path: str) -> None:
     """Rows (dicts) as CSV, columns in order of first appearance, None as an empty field (atomic)."""
-    import csv
-
     cols: list[str] = []
     for r in rows:
         cols += [k for k in r if k not in cols]

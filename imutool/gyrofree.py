@@ -38,8 +38,10 @@ import formats
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
+from formats.frames import quat_to_euler
+from formats.units import convert, lookup
 from imutool.loading import input_notes
-from imutool.routes import OnInput, RouteResult, load_input
+from imutool.routes import OnInput, RouteResult, load_input, read_source
 
 RATE_RW = 1e-4  # rad/s/√s: random walk of ω in the EKF's process noise
 TILT_GAIN = 0.0  # 1/s: gravity tilt correction of the attitude from the centre specific force (0 = pure integration)
@@ -149,8 +151,6 @@ def _position(v: Any, where: str) -> np.ndarray:
 
 def _accel_unit(v: Any, where: str) -> str:
     """A sensor's unit: a string naming an acceleration unit imutool knows (g, mg, m/s^2 ...)."""
-    from formats.units import lookup  # noqa: PLC0415
-
     if not isinstance(v, str):
         raise ImutoolError(f'{where}: unit must be a string such as "m/s^2" or "g", got {v!r}')
     try:
@@ -518,7 +518,7 @@ def planar_roll(
     rolling section); the component along the x axis gives ω̇x. Rate and angle by band-pass integration:
     zero-phase (default) or causal, cut-off ``cutoff`` Hz (default 0.3 × the dominant frequency).
     Returns roll_accel (rad/s²), roll_rate (rad/s), roll (rad), cutoff_hz."""
-    from scipy import signal  # noqa: PLC0415
+    from scipy import signal  # here: scipy.signal is heavy to import and only the planar mode needs it
 
     from imutool.heave import bandpass_integrator, dominant_frequency, heave_delayed  # noqa: PLC0415
 
@@ -551,8 +551,6 @@ def planar_roll(
 # ------------------------------------------------------------------------------------------------------------------
 def measurements(rec: Recording, layout: Layout) -> np.ndarray:
     """(N, M) specific force along every measured axis, m/s², in layout row order."""
-    from formats.units import convert  # noqa: PLC0415
-
     _, _, cols, units = layout.rows()
     out = np.empty((len(rec), len(cols)))
     flat: dict[str, np.ndarray] = {}
@@ -583,7 +581,6 @@ def gyrofree_recording(
 ) -> tuple[Recording, dict[str, Any]]:
     """Full gyro-free solution: gyro (ω, rad/s), angular_accel (rad/s²), accel (f_O, m/s²), ω one-sigma, q and
     roll/pitch/heading (deg) from quaternion integration (tilt-corrected with gain ``tilt_gain`` 1/s, 0 = off)."""
-    from formats.frames import quat_to_euler  # noqa: PLC0415
     from imutool.heave import complementary_attitude  # noqa: PLC0415
 
     y = measurements(rec, layout)
@@ -655,11 +652,7 @@ def run_gyrofree(
     if not isinstance(layout, Layout):
         layout = load_layout(os.fspath(layout))
     inputs: list[dict[str, Any]] = []
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
     if planar:
         names = list(planar)
         if len(names) != 2:

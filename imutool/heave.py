@@ -40,16 +40,18 @@ from typing import Any
 import numpy as np
 from numba import njit
 from scipy import signal
+from scipy.interpolate import CubicSpline
 from scipy.linalg import expm
 
 import formats
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
+from formats.frames import quat_to_matrix
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
 from imutool.nmea_out import write_log
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, read_source
 
 GRAVITY = 9.80665
 METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
@@ -234,7 +236,6 @@ def vertical_acceleration(
         r = np.asarray(lever_arm, float)
         f = f + np.cross(wdot, r) + np.cross(w, np.cross(w, r))
         info["lever_arm_m"] = [float(v) for v in r]
-    from formats.frames import quat_to_matrix  # noqa: PLC0415
 
     rm = quat_to_matrix(q)
     f_down = np.einsum("nj,nj->n", rm[:, 2, :], f)
@@ -502,8 +503,6 @@ def heave_envelope(a: np.ndarray, fs: float, period: float, lowpass: float | Non
     periods apart). A bias random walk makes the double integral wander by metres, so that the oscillation has
     no extrema at all; the wander is first reduced by a cubic spline through the means of consecutive
     two-period blocks (a coarse trend the envelopes then refine)."""
-    from scipy.interpolate import CubicSpline  # noqa: PLC0415
-
     x = np.asarray(a, float) - np.mean(a)
     if lowpass:
         x = signal.sosfiltfilt(signal.butter(4, lowpass, "lowpass", fs=fs, output="sos"), x)
@@ -1269,11 +1268,7 @@ def run_heave(
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
     cols = None
     if vertical:
         cols = [c if c in rec.channels else c.lower() if c.lower() in rec.channels else c for c in vertical]

@@ -38,7 +38,7 @@ from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
 from imutool.loading import input_notes, require_channels
 from imutool.quaternion import rmat
-from imutool.routes import OnInput, RouteResult, Stage, load_input
+from imutool.routes import OnInput, RouteResult, Stage, read_source
 
 GYRO_NOISE_DEG = 0.3  # deg/s/√Hz: the gyro white-noise density of the process model (InsConfig.gyro_noise)
 ZARU_SIGMA_DEG = 1.0  # deg/s: std of the zero angular-rate pseudo-measurement (InsConfig.zaru_sigma)
@@ -825,12 +825,7 @@ def run_ins_track(
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
-    report: dict[str, Any] = {}
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, report = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec, name, report = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
     require_channels(rec, ["gyro", "accel"], name)
     for opt, v in (
         ("--gyro-noise", gyro_noise_deg),

@@ -1,9 +1,10 @@
 """Loading a recording the way every imutool command does: read, validate, bridge absurd samples, calibrate,
 mount, check plausibility.
 
-:func:`load_recording` is the library route behind every command's input (the CLI's ``load_input`` adds only
-printing the warnings and keeping the report for the command's summary). Nothing is printed here: what validation
-did and every plausibility warning come back in the report (and in ``rec.meta``).
+:func:`load_recording` is the library route behind every command's input (the routes call it through
+:func:`imutool.routes.load_input`; the CLI adds only printing the warnings, :func:`imutool.cli.common.note_input`).
+Nothing is printed here: what validation did and every plausibility warning come back in the report (and in
+``rec.meta``).
 """
 
 from __future__ import annotations

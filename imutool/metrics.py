@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from formats.frames import wrap_deg180
+from formats.frames import quat_conjugate, quat_multiply, wrap_deg180
 
 
 def error_stats(err: np.ndarray) -> dict[str, float]:
@@ -141,8 +141,6 @@ def quat_errors(q_est: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.nd
     """BROAD error angles (rad) per sample with d = q_est ⊗ q_ref* (world frame): total = 2·acos|d_w|,
     heading = 2·atan(|d_z| / |d_w|) (rotation about the vertical), inclination = 2·acos√(d_w² + d_z²)
     (angle between the two z axes)."""
-    from formats.frames import quat_conjugate, quat_multiply
-
     d = quat_multiply(np.asarray(q_est, float), quat_conjugate(np.asarray(q_ref, float)))
     dw, dz = np.abs(d[..., 0]), np.abs(d[..., 3])
     total = 2 * np.arccos(np.clip(dw, 0.0, 1.0))

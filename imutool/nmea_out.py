@@ -56,7 +56,7 @@ from formats.nmea import (
     utc_offset_s,
     xdr_roll_pitch,
 )
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, read_source
 
 SENTENCES = ("HRM", "XDR", "HDG", "HDT", "THS", "ROT", "PASHR", "TSS1")
 HEADING_REFS = ("compass", "magnetic", "true")
@@ -662,6 +662,19 @@ def open_port(name: str, baud: int) -> Any:
         raise ImutoolError(f"cannot open serial port: {e}", path=name) from None
 
 
+def _written(plan: LogPlan, counts: dict[str, int]) -> dict[str, Any]:
+    """The summary's part on what was written: sentences per type, total, the rate (Hz; chosen how) and the line
+    use against the baud rate (bytes/s)."""
+    return {
+        "sentences": counts,
+        "total": int(sum(counts.values())),
+        "rate_hz": plan.rate.rate_hz,
+        "rate_chosen": plan.rate.chosen,
+        "bytes_per_s": round(plan.rate.bytes_per_s, 1),
+        "line_bytes_per_s": plan.rate.capacity_bytes_per_s,
+    }
+
+
 def write_log(
     rec: Recording,
     path: str,
@@ -690,12 +703,7 @@ def write_log(
     counts = write_planned(rec, plan, path, header=header, time_prefix=time_prefix, **kw)
     return {
         "path": path,
-        "sentences": counts,
-        "total": int(sum(counts.values())),
-        "rate_hz": plan.rate.rate_hz,
-        "rate_chosen": plan.rate.chosen,
-        "bytes_per_s": round(plan.rate.bytes_per_s, 1),
-        "line_bytes_per_s": plan.rate.capacity_bytes_per_s,
+        **_written(plan, counts),
         "baud": baud,
         "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
         "utc": plan.utc,
@@ -735,11 +743,7 @@ def run_nmea(
     if unknown:
         raise TypeError(f"run_nmea() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
     inputs: list[dict[str, Any]] = []
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **options)
+    rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **options)
     card = None
     card_from = None
     if options.get("calibration_file"):
@@ -781,12 +785,7 @@ def run_nmea(
         "output": None if output is None else os.fspath(output),
         "serial": serial_port,
         "baud": baud,
-        "sentences": counts,
-        "total": int(sum(counts.values())),
-        "rate_hz": plan.rate.rate_hz,
-        "rate_chosen": plan.rate.chosen,
-        "bytes_per_s": round(plan.rate.bytes_per_s, 1),
-        "line_bytes_per_s": plan.rate.capacity_bytes_per_s,
+        **_written(plan, counts),
         "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
         "utc": plan.utc,
         "deviation": card_from or deviation,

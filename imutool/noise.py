@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from formats.errors import ImutoolError
+from imutool.loading import load_recording
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
 
 SI = {"gyro": "rad/s", "accel": "m/s^2", "mag": "uT"}
@@ -75,8 +76,6 @@ def allan_noise(
     an input's warnings are an error);
         ``on_input(path, report)`` after each file is read, ``stage(name)`` as each step starts.
     """
-    from imutool.loading import load_recording
-
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"allan_noise() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
@@ -87,7 +86,7 @@ def allan_noise(
     kalibr = os.fspath(kalibr) if kalibr else None
 
     from calibration.allan import analyse, plot_allan
-    from calibration.noise import write_kalibr, write_noise
+    from calibration.noise_file import write_kalibr, write_noise
 
     def _stage(name: str) -> None:
         if stage is not None:

@@ -76,6 +76,23 @@ def load_input(
     return rec, report
 
 
+def read_source(
+    source: str | os.PathLike | Recording,
+    inputs: list[dict[str, Any]],
+    *,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **load_options: Any,
+) -> tuple[Recording, str, dict[str, Any]]:
+    """A route's input as (recording, name, loading report): a Recording as it is (named by its ``meta['source']``,
+    no report, nothing appended to ``inputs``), a path through :func:`load_input`."""
+    if isinstance(source, Recording):
+        return source, str(source.meta.get("source", "<recording>")), {}
+    name = os.fspath(source)
+    rec, report = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    return rec, name, report
+
+
 def with_inputs(summary: dict[str, Any], inputs: list[dict[str, Any]]) -> dict[str, Any]:
     """``summary`` with ``validation`` (each input's report without its plausibility figures; kept when the
     summary has its own) and the inputs' warnings appended to its ``warnings``. Without inputs: ``summary``."""

@@ -27,9 +27,10 @@ import numpy as np
 
 import formats
 from formats import Recording
+from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from imutool.loading import input_notes, require_channels
-from imutool.routes import OnInput, RouteResult, Stage, load_input
+from imutool.routes import OnInput, RouteResult, Stage, read_source
 
 GRAVITY = 9.80665  # m/s², magnitude used by SHOE and MAG
 
@@ -292,8 +293,6 @@ def pick_threshold(
 
 def write_intervals(result: ZviResult, path: str | Path) -> None:
     """Write the interval table (start_s, end_s, duration_s) as CSV, or the summary + table as .json."""
-    from formats.atomic import atomic_path
-
     rows = result.table()
     path = Path(path)
     with atomic_path(path) as tmp:
@@ -313,8 +312,6 @@ def plot_zvi(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from formats.atomic import atomic_path
 
     t = result.time - result.time[0]
     fig, ax = plt.subplots(3, 1, figsize=(11, 7), sharex=True)
@@ -381,12 +378,7 @@ def run_zvi(
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
-    report: dict[str, Any] = {}
-    if isinstance(source, Recording):
-        rec, name = source, str(source.meta.get("source", "<recording>"))
-    else:
-        name = os.fspath(source)
-        rec, report = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec, name, report = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
     require_channels(rec, ["gyro", "accel"], name)
     given = {
         "gamma": gamma,

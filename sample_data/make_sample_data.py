@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from imutool.report.simulate import write_sample_data
+from imutool.sim.programmes import write_sample_data
 
 if __name__ == "__main__":
     here = Path(__file__).resolve().parent

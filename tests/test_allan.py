@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibration.allan import allan_deviation, analyse
-from calibration.noise import load_noise, write_kalibr, write_noise
+from calibration.noise_file import load_noise, write_kalibr, write_noise
 from formats.errors import ImutoolError
 
 

@@ -113,3 +113,28 @@ def test_bare_group_prints_help():
     with pytest.raises(SystemExit) as ex:
         main(["calibrate"])
     assert ex.value.code == 0
+
+
+def test_filter_defaults_are_the_librarys():
+    """`imutool filter` keeps its option defaults literal (so `--help` loads no numba): they must be the route's."""
+    import inspect
+
+    from imutool.cli.filter import filter_cmd
+    from imutool.compass import CompassParams
+    from imutool.filtering import run_filter
+
+    cli_default = {p.name: p.default for p in filter_cmd.params}
+    lib = {k: v.default for k, v in inspect.signature(run_filter).parameters.items()}
+    comp = CompassParams()
+    pairs = {
+        "method": lib["method"],
+        "cutoff": lib["cutoff_hz"],
+        "order": lib["order"],
+        "chunk_rows": lib["chunk_rows"],
+        "stream_mb": lib["stream_mb"],
+        "compass_model": comp.model,
+        "comp_q": comp.q,
+        "comp_r": comp.r,
+        "variation": comp.variation_deg,
+    }
+    assert {k: cli_default[k] for k in pairs} == pairs

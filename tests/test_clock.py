@@ -15,7 +15,7 @@ from formats import Recording
 from imutool.clock import Clock
 from imutool.report.heading import heading_evidence
 from imutool.report.pdf import render_pdf, row_cells, row_keys
-from imutool.report.simulate import heading_test
+from imutool.sim.programmes import heading_test
 
 needs_pdftotext = pytest.mark.skipif(
     shutil.which("pdftotext") is None, reason="pdftotext (poppler-utils) not installed: PDF text not extracted"

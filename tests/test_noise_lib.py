@@ -9,7 +9,7 @@ import pytest
 from conftest import run_main
 
 import formats
-from calibration.noise import load_noise
+from calibration.noise_file import load_noise
 from formats.errors import ImutoolError
 from imutool.noise import allan_noise
 

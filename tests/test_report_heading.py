@@ -10,7 +10,7 @@ import formats
 from imutool.cli.nmea import nmea_lines
 from imutool.report.heading import HeadingOptions, heading_evidence
 from imutool.report.pdf import load_schema, render_pdf
-from imutool.report.simulate import heading_test
+from imutool.sim.programmes import heading_test
 
 
 def items(ev):

@@ -17,8 +17,8 @@ from formats import Recording
 from imutool.cli import cli
 from imutool.report.inclinometer import InclinometerOptions, hrm_capture_check, inclinometer_evidence
 from imutool.report.pdf import load_schema
-from imutool.report.simulate import inclinometer_test, write_sample_data, write_steps_csv
 from imutool.roll import roll_stats
+from imutool.sim.programmes import inclinometer_test, write_sample_data, write_steps_csv
 
 SAMPLE_TOML = str(Path(__file__).resolve().parents[1] / "sample_data" / "test_info.toml")
 SHORT = {

@@ -14,8 +14,8 @@ import pytest
 from imutool.report.heading import heading_evidence
 from imutool.report.inclinometer import InclinometerOptions, inclinometer_evidence
 from imutool.report.pdf import _heading_figures, render_pdf, row_cells, row_keys
-from imutool.report.simulate import heading_test, inclinometer_test
 from imutool.report.testinfo import load_test_info
+from imutool.sim.programmes import heading_test, inclinometer_test
 
 SAMPLE_TOML = Path(__file__).resolve().parents[1] / "sample_data" / "test_info.toml"
 

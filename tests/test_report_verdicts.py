@@ -14,8 +14,8 @@ import formats
 from formats import ImutoolError
 from imutool.cli import cli
 from imutool.report.inclinometer import InclinometerOptions, inclinometer_evidence
-from imutool.report.simulate import inclinometer_test, sea_pair
 from imutool.report.testinfo import FIELDS, load_test_info, missing_fields
+from imutool.sim.programmes import inclinometer_test, sea_pair
 
 SAMPLE_TOML = Path(__file__).resolve().parents[1] / "sample_data" / "test_info.toml"
 SHORT = {

@@ -45,7 +45,7 @@ INC_STEPS = {
 @pytest.fixture(scope="module")
 def data(tmp_path_factory) -> dict[str, str]:
     """Small inputs, one per kind of command (written once for the module)."""
-    from imutool.report.simulate import heading_test, inclinometer_test
+    from imutool.sim.programmes import heading_test, inclinometer_test
 
     d = tmp_path_factory.mktemp("inputs")
     paths = {k: str(d / f"{k}.csv") for k in ("sea", "walk", "array", "pr", "att", "inc_dut", "inc_ref", "roll")}
@@ -550,3 +550,18 @@ def test_evaluate(data, tmp_path, monkeypatch, capsys):
     out = json.loads(capsys.readouterr().out)
     assert e.value.code == 0, out
     assert out["results"][0]["status"] == "ok" and out["results"][0]["error"] is None
+
+
+def test_read_source_takes_a_recording_or_a_path(data):
+    """One helper gives every route its input: a Recording as it is (no loading report), a path loaded once."""
+    from imutool.routes import read_source
+
+    rec = formats.read(data["roll"])
+    rec.meta["source"] = "deck.csv"
+    inputs: list[dict[str, Any]] = []
+    assert read_source(rec, inputs) == (rec, "deck.csv", {})
+    assert inputs == []
+    seen = []
+    loaded, name, report = read_source(data["roll"], inputs, on_input=lambda p, r: seen.append(p))
+    assert name == data["roll"] and len(loaded) == len(rec) and report
+    assert seen == [data["roll"]] and inputs == [{"input": data["roll"], **report}]

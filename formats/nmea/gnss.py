@@ -29,6 +29,7 @@ import re
 from collections.abc import Callable, Iterable
 from typing import Any
 
+import numpy as np
 from pynmea2.types.proprietary.tnl import TNLGGK
 from pynmea2.types.talker import GGA, GST
 
@@ -204,8 +205,6 @@ def height_meta(datum_codes: Any, separations: Any, opts: Any) -> dict[str, Any]
     """``meta['gnss_height']``: which height datum the ``gnss_height`` rows are in (counts per datum letter), the
     ``gga_altitude`` setting, and a note when the datum is unknown (separation empty), mixed, or the separation
     is 0 (a receiver that writes the ellipsoidal height into the altitude field)."""
-    import numpy as np  # noqa: PLC0415
-
     codes = np.asarray(datum_codes, dtype=float)
     codes = codes[np.isfinite(codes)]
     counts = {chr(int(c)): int(n) for c, n in zip(*np.unique(codes, return_counts=True), strict=True)}

@@ -9,6 +9,8 @@ has smbus2's ``read_byte_data / write_byte_data / read_i2c_block_data`` (a fake 
 from __future__ import annotations
 
 import struct
+import time as _time
+from pathlib import Path
 
 import numpy as np
 
@@ -179,9 +181,6 @@ def capture_i2c(
     stop: StopFlag | None = None,
 ) -> dict:
     """Read an MPU6050 and/or a magnetometer on a Linux I2C bus at a steady rate into an imutool CSV (SI)."""
-    import time as _time
-    from pathlib import Path
-
     from .serial_capture import utc_name
 
     if bus is None:

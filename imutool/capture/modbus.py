@@ -24,8 +24,13 @@ Consecutive registers of the same table are read in one request.
 
 from __future__ import annotations
 
+import math
 import struct
+import time
 from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 from formats.columns import load_profile
 from formats.errors import ImutoolError
@@ -70,8 +75,6 @@ class Profile:
 def _typed(table: dict, key: str, default: object, kind: str, where: str, path: str) -> object:
     """``table[key]`` (or ``default``) of the TOML type ``kind``: 'str', 'int' or 'number' (finite); a wrong
     type is one line naming the key."""
-    import math
-
     v = table.get(key, default)
     if kind == "str":
         ok = isinstance(v, str)
@@ -214,11 +217,6 @@ def capture_modbus(
     stop=None,
 ) -> dict:
     """Poll a Modbus RTU device at a steady rate into an imutool CSV (values scaled per the profile)."""
-    import time
-    from pathlib import Path
-
-    import numpy as np
-
     from .runtime import CaptureStats, StatusLine, StopFlag, finish_poll_capture, iso_utc, poll
     from .serial_capture import utc_name
     from .sink import CaptureCsv

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from formats import nmea
+
 from .bridge import Frame, Scales, encode_binary, encode_config, encode_text
 
 
@@ -51,8 +53,6 @@ def bridge_frames(rate_hz: float, scales: Scales, seed: int = 0, start_seq: int 
 
 def nmea_lines(rate_hz: float, seed: int = 0) -> Iterator[tuple[int, bytes]]:
     """Endless NMEA sentences (HDT, XDR roll/pitch, HRM-like heel) of a rolling, slowly turning ship."""
-    from formats import nmea
-
     rng = np.random.default_rng(seed)
     k = 0
     while True:

@@ -10,6 +10,7 @@ appends a ``# capture_end: ...`` comment line with the counts. Disk full raises 
 from __future__ import annotations
 
 import errno
+import json
 import os
 import time
 from datetime import datetime, timezone
@@ -212,7 +213,6 @@ class EventLog:
         self.file = RotatingFile(path, "", append=append, overwrite=not append, fsync_interval=0.0)
 
     def add(self, event: str, **fields) -> None:
-        import json
 
         rec = {
             "utc": datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z"),

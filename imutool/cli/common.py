@@ -11,7 +11,6 @@ from typing import Any, TypeVar
 import click
 import numpy as np
 
-from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import load_recording, require_channels  # noqa: F401  (require_channels: re-exported)
 from imutool.routes import with_inputs
@@ -150,56 +149,6 @@ def strict_requested() -> bool:
     return bool(ctx is not None and ctx.meta.get("imutool.strict"))
 
 
-def load_input(
-    path: str,
-    *,
-    columns: str | None = None,
-    profile: str | None = None,
-    topic: str | None = None,
-    stamp: str = "header",
-    duplicates: str = "drop",
-    backwards: str = "error",
-    mounting: str | None = None,
-    calibration_file: str | None = None,
-    validate: bool = True,
-    strict: bool | None = None,
-    input_rate_hz: float | None = None,
-    time_column: str | None = None,
-    header_rows: int | None = None,
-    with_files: tuple[str, ...] = (),
-    with_offsets: tuple[float, ...] = (),
-) -> tuple[Recording, dict[str, Any]]:
-    """Read, validate, bridge absurd samples, apply calibration and mounting, check plausibility.
-
-    Returns (recording, validation report dict): the library's :func:`imutool.loading.load_recording`, plus
-    :func:`note_input` — what validation did (rows read/kept/dropped and why, samples bridged) and every
-    plausibility warning go to stderr and, through the click context, into the command's summary
-    (:func:`emit_summary`); they are also in ``rec.meta`` (written into the output's header by estimators that
-    carry the input's metadata). ``strict`` (default: the ``--strict`` option) turns the warnings into an
-    ImutoolError.
-    """
-    rec, report = load_recording(
-        path,
-        columns=columns,
-        profile=profile,
-        topic=topic,
-        stamp=stamp,
-        duplicates=duplicates,
-        backwards=backwards,
-        mounting=mounting,
-        calibration_file=calibration_file,
-        validate=validate,
-        input_rate_hz=input_rate_hz,
-        time_column=time_column,
-        header_rows=header_rows,
-        with_files=with_files,
-        with_offsets=with_offsets,
-    )
-    if len(rec):
-        note_input(path, report, strict)
-    return rec, report
-
-
 def note_input(path: str, report: dict[str, Any], strict: bool | None = None) -> None:
     """After a library function loaded ``path`` (report from :func:`imutool.loading.load_recording`): its
     warnings to stderr (an error under ``--strict``), the report kept for the command's summary."""
@@ -222,7 +171,7 @@ def _note_input(path: str, report: dict[str, Any], warnings: list[str], strict: 
 
 
 def emit_summary(summary: dict[str, Any], as_json: bool, quiet: bool, lines: Iterable[str] | None = None) -> None:
-    """Print the one-screen summary (or JSON) to stdout (with what input validation did, see load_input)."""
+    """Print the one-screen summary (or JSON) to stdout (with what input validation did, see note_input)."""
     ctx = click.get_current_context(silent=True)
     inputs = ctx.meta.get("imutool.inputs") if ctx is not None else None
     if inputs:

@@ -10,14 +10,21 @@ from typing import Any
 
 import click
 
-from imutool.cli.common import emit_summary, input_options, note_input, route_of, safe_outputs, strict_requested
+from formats.errors import ImutoolError
+from imutool.cli.common import (
+    default_of,
+    emit_summary,
+    input_options,
+    note_input,
+    route_of,
+    safe_outputs,
+    strict_requested,
+)
+from imutool.evaluation import parse_align_heading, run_evaluate
 
 
 def _align(value: str | None) -> str | None:
     """``--align-heading`` checked at parsing (a usage error names the option)."""
-    from formats.errors import ImutoolError
-    from imutool.evaluation import parse_align_heading
-
     try:
         parse_align_heading(value)
     except ImutoolError as e:
@@ -37,8 +44,6 @@ def evaluate_route(
     **load_options: Any,
 ) -> Any:
     """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST)."""
-    from imutool.evaluation import run_evaluate
-
     return run_evaluate(
         est_path,
         ref_path,
@@ -70,7 +75,7 @@ def evaluate_route(
 @click.option(
     "--max-lag",
     type=float,
-    default=0.0,
+    default=default_of(run_evaluate, "max_lag_s"),
     show_default=True,
     help="Search a constant lag up to ± this many seconds (response time / phase lag).",
 )

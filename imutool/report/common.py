@@ -13,10 +13,14 @@ import os
 import re
 import subprocess
 from datetime import datetime, timezone
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from formats.errors import ImutoolError
+from imutool import __version__
 
 PASS, FAIL, INSUFFICIENT, NOT_TESTED = "pass", "fail", "insufficient data", "not tested"
 STATUSES = (PASS, FAIL, INSUFFICIENT, NOT_TESTED)
@@ -46,8 +50,6 @@ CONFIDENCE = {
 
 def check_tolerance(name: str, floor: float, pct: float, unit: str) -> None:
     """Refuse a tolerance that cannot be met or means nothing: floor > 0 and 0 < pct < 100."""
-    from formats.errors import ImutoolError
-
     if not (np.isfinite(floor) and floor > 0):
         raise ImutoolError(
             f"{name} tolerance floor must be > 0 {unit} (got {floor:g}): a zero or negative "
@@ -60,8 +62,6 @@ def check_tolerance(name: str, floor: float, pct: float, unit: str) -> None:
 def standards_cited(ids: list[str]) -> list[dict[str, str]]:
     """The rows of the shipped standards excerpts (imutool/report/standards.md) with these ids: id, requirement,
     value, source, confidence — so a report quotes what it applies, with its confidence tag."""
-    from importlib import resources
-
     text = resources.files("imutool.report").joinpath("standards.md").read_text(encoding="utf-8")
     rows: dict[str, dict[str, str]] = {}
     for line in text.splitlines():
@@ -180,8 +180,6 @@ def sha256_of(path: str | os.PathLike) -> str:
 
 def tool_identity() -> dict[str, Any]:
     """imutool version and git commit (if the package sits in a git checkout)."""
-    from imutool import __version__
-
     git = None
     try:
         root = Path(__file__).resolve().parents[2]

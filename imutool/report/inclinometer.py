@@ -37,6 +37,7 @@ from .common import (
     PASS,
     SCOPE,
     STANDARDS_FILE,
+    check_tolerance,
     clean,
     input_record,
     item,
@@ -182,8 +183,6 @@ class InclinometerOptions:
 
     def check(self) -> None:
         """Refuse impossible settings (exit status 2 at the command line)."""
-        from .common import check_tolerance
-
         check_tolerance("angle", self.angle_floor_deg, self.angle_pct, "deg")
         check_tolerance("period", self.period_floor_s, self.period_pct, "s")
         if self.criterion not in ("max", "p95"):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+from importlib import resources
 from typing import Any
 
 import numpy as np
@@ -909,6 +910,4 @@ def write_json(ev: dict[str, Any], path: str) -> None:
 
 def load_schema() -> dict[str, Any]:
     """The evidence JSON schema shipped with imutool (schema/evidence.schema.json)."""
-    from importlib import resources
-
     return json.loads(resources.files("imutool.report").joinpath("schema/evidence.schema.json").read_text())

@@ -14,7 +14,7 @@ from typing import Any
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, read_source
 
 from .common import sha256_of
 from .heading import HeadingOptions, heading_evidence
@@ -82,13 +82,9 @@ def _load_pair(
     )
     ref_options = {k: v for k, v in load_options.items() if k not in dut_only}
     for src, opts in ((dut, load_options), (reference, ref_options)):
-        if isinstance(src, Recording):
-            recs.append(src)
-            names.append(str(src.meta.get("source", "<recording>")))
-        else:
-            name = os.fspath(src)
-            recs.append(load_input(name, inputs, strict=strict, on_input=on_input, **opts)[0])
-            names.append(name)
+        rec, name, _ = read_source(src, inputs, strict=strict, on_input=on_input, **opts)
+        recs.append(rec)
+        names.append(name)
     d = evaluated_window(recs[0], t_start, t_end, names[0])
     r = evaluated_window(recs[1], t_start, t_end, names[1])
     return d, r, names[0], names[1]

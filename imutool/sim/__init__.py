@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import inspect
 import os
 from collections.abc import Callable
 from typing import Any
@@ -58,8 +59,6 @@ def available() -> list[str]:
 
 def options(name: str) -> list[str]:
     """The option names a scenario accepts (besides duration, rate_hz and seed)."""
-    import inspect
-
     params = inspect.signature(scenario(name)).parameters
     return [
         p
@@ -77,7 +76,6 @@ def simulate(name: str, **options_) -> Recording:
         raise ImutoolError(
             f"scenario {name!r} has no option {', '.join(map(repr, unknown))}; valid: {', '.join(valid)}"
         )
-    import inspect
 
     defaults = {k: v.default for k, v in inspect.signature(scenario(name)).parameters.items()}
     dur, rate = options_.get("duration", defaults.get("duration")), options_.get("rate_hz", defaults.get("rate_hz"))

@@ -12,6 +12,7 @@ import numpy as np
 
 from formats import Recording
 from formats.frames import quat_multiply, quat_normalize, quat_to_euler
+from formats.units import convert
 from imutool.sim.sensor import GRAVITY, specific_force
 
 
@@ -81,7 +82,6 @@ def accel_array(
     if bias_mps2 > 0:
         y = y + rng.standard_normal(y.shape[1]) * bias_mps2
     rec = Recording(t)
-    from formats.units import convert  # noqa: PLC0415
 
     for j, (c, un) in enumerate(zip(cols, units, strict=True)):
         v = y[:, j] if un in ("m/s^2", "m/s2") else convert(y[:, j], "m/s^2", un)

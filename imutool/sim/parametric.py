@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from formats import Recording
+from formats.errors import ImutoolError
 from formats.frames import euler_to_quat
 from imutool.sim.sensor import MPU6050_ACCEL, MPU6050_GYRO, body_rates_from_euler, imu_recording
 
@@ -73,8 +74,6 @@ def parametric_roll(
     duration = 900.0 if duration is None else float(duration)
     rate_hz = 20.0 if rate_hz is None else float(rate_hz)
     if encounter_period_s <= 0 or roll_ratio <= 0:
-        from formats.errors import ImutoolError
-
         raise ImutoolError("parametric-roll: encounter_period_s and roll_ratio must be > 0")
     rng = np.random.default_rng(seed)
     t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz

@@ -28,14 +28,21 @@ def _accel_errors(noise_ug: float, bias_up: float, bias_rw: float) -> SensorErro
     )
 
 
-def jonswap(omega: np.ndarray, hs: float, tp: float, gamma: float = 3.3) -> np.ndarray:
-    """JONSWAP wave-elevation spectrum S(ω) (m²·s/rad) scaled so that 4·√m0 = Hs."""
+def jonswap_shape(omega: np.ndarray, tp: float, gamma: float = 3.3) -> np.ndarray:
+    """The JONSWAP spectrum's shape ω⁻⁵ e^{−1.25 (ωp/ω)⁴} γ^r (ω rad/s, peak period tp s, peak enhancement γ),
+    unscaled; 0 at ω ≤ 0."""
     w = np.asarray(omega, float)
     wp = 2 * np.pi / tp
     sigma = np.where(w <= wp, 0.07, 0.09)
     r = np.exp(-((w - wp) ** 2) / (2 * sigma**2 * wp**2))
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        s = np.where(w > 0, w**-5.0 * np.exp(-1.25 * (wp / w) ** 4) * gamma**r, 0.0)
+        return np.where(w > 0, w**-5.0 * np.exp(-1.25 * (wp / w) ** 4) * gamma**r, 0.0)
+
+
+def jonswap(omega: np.ndarray, hs: float, tp: float, gamma: float = 3.3) -> np.ndarray:
+    """JONSWAP wave-elevation spectrum S(ω) (m²·s/rad) scaled so that 4·√m0 = Hs."""
+    w = np.asarray(omega, float)
+    s = jonswap_shape(w, tp, gamma)
     m0 = np.trapezoid(s, w)
     return s * (hs / 4.0) ** 2 / m0 if m0 > 0 else s
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from formats import Recording
-from formats.frames import quat_to_matrix
+from formats.frames import quat_conjugate, quat_multiply, quat_to_euler, quat_to_matrix
 
 GRAVITY = 9.80665  # m/s², local gravity used by the simulator (NED: g points down, +z)
 
@@ -145,8 +145,6 @@ def imu_recording(
     Truth columns: ref_q, ref_roll/ref_pitch/ref_heading (deg), ref_gyro (rad/s), ref_gyro_bias (rad/s),
     ref_accel (m/s², error-free specific force) and ref_mag (µT, undistorted field in body axes).
     """
-    from formats.frames import quat_conjugate, quat_multiply, quat_to_euler
-
     t = np.asarray(t, dtype=float)
     fs = 1.0 / float(np.median(np.diff(t)))
     if gyro_true is None:
