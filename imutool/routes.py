@@ -76,6 +76,28 @@ def load_input(
     return rec, report
 
 
+def load_reference(
+    path: str | os.PathLike,
+    inputs: list[dict[str, Any]],
+    *,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **load_options: Any,
+) -> tuple[Recording, dict[str, Any]]:
+    """:func:`load_input` of a command's second recording, its reference (``evaluate --reference``, the reports'
+    ``--reference``): the same loading, its errors naming the reference's flags (``--ref-rate``, ``--ref-with``
+    ...: :func:`imutool.loading.reference_text`)."""
+    from formats.errors import ImutoolError
+    from imutool.loading import reference_text
+
+    try:
+        return load_input(path, inputs, strict=strict, on_input=on_input, **load_options)
+    except ImutoolError as e:
+        err = ImutoolError(reference_text(str(e)))
+        err.path, err.line = e.path, e.line
+        raise err from None
+
+
 def with_inputs(summary: dict[str, Any], inputs: list[dict[str, Any]]) -> dict[str, Any]:
     """``summary`` with ``validation`` (each input's report without its plausibility figures; kept when the
     summary has its own) and the inputs' warnings appended to its ``warnings``. Without inputs: ``summary``."""

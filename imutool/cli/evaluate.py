@@ -10,7 +10,15 @@ from typing import Any
 
 import click
 
-from imutool.cli.common import emit_summary, input_options, note_input, route_of, safe_outputs, strict_requested
+from imutool.cli.common import (
+    emit_summary,
+    input_options,
+    note_input,
+    reference_options,
+    route_of,
+    safe_outputs,
+    strict_requested,
+)
 
 
 def _align(value: str | None) -> str | None:
@@ -36,7 +44,8 @@ def evaluate_route(
     on_input: Any = None,
     **load_options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST)."""
+    """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST; the ``ref_*``
+    ones, :func:`imutool.cli.common.reference_options`, to the reference)."""
     from imutool.evaluation import run_evaluate
 
     return run_evaluate(
@@ -84,6 +93,7 @@ def evaluate_route(
     "'auto' estimates it as the circular mean of estimate − reference heading and reports it.",
 )
 @input_options
+@reference_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("plot_path")
@@ -123,6 +133,11 @@ def evaluate_cmd(
             lines.append(f"heading alignment: {al['offset_deg']:+.3f}° added to the reference ({al['how']})")
         for note in summary.get("derived", []):
             lines.append(f"note: {note}")
+        ld = summary.get("reference_loading")
+        if ld:
+            from imutool.loading import loading_text
+
+            lines.append(f"reference loaded: {loading_text(ld)}")
         lines.append(f"compared: {summary['span']['text']}")
     emit_summary(summary, as_json, quiet, lines)
 
