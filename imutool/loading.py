@@ -51,10 +51,13 @@ REF_LOAD_OPTIONS = {
     "ref_header_rows": ("header_rows", "--ref-header-rows"),
     "ref_with_files": ("with_files", "--ref-with"),
     "ref_with_offsets": ("with_offsets", "--ref-with-offset"),
+    "ref_start": ("start", "--ref-start"),
 }
 """How a command's second recording (its reference: ``evaluate``, ``report inclinometer|heading``) is loaded: each
 option → (the :func:`load_recording` parameter it sets for the reference, its command-line flag). The reference
-goes through :func:`load_recording` as the main input does, with these in place of ``--rate ... --with``."""
+goes through :func:`load_recording` as the main input does, with these in place of ``--rate ... --with``;
+``start`` (``--ref-start``) then puts its first row at a given time (:func:`starting_at`): a clockless reference
+on the input's clock."""
 
 FLAGS = {
     "input_rate_hz": "--rate",
@@ -62,6 +65,7 @@ FLAGS = {
     "header_rows": "--header-rows",
     "with_files": "--with",
     "with_offsets": "--with-offset",
+    "start": "--start",
 }
 """The command-line flag of each loading option that says how a file's times and header are read."""
 
@@ -436,7 +440,7 @@ def reference_text(text: str) -> str:
     """``text`` (an error or a note about loading) with the main input's time and header flags named as the
     reference's (``--rate`` → ``--ref-rate``, ``--with`` → ``--ref-with`` ...): what a user of the reference
     typed."""
-    return re.sub(r"(?<![\w-])--(rate|time-column|header-rows|with-offset|with)(?![\w-])", r"--ref-\1", text)
+    return re.sub(r"(?<![\w-])--(rate|time-column|header-rows|with-offset|with|start)(?![\w-])", r"--ref-\1", text)
 
 
 def how_loaded(rec: Recording, given: dict[str, Any], reference: bool = False) -> dict[str, Any]:
@@ -462,6 +466,33 @@ def how_loaded(rec: Recording, given: dict[str, Any], reference: bool = False) -
         out["merged"] = [
             {"input": f["input"], "channels": f["channels"], "offset_s": f["offset_s"]} for f in merged["files"][1:]
         ]
+    return out
+
+
+def starting_at(rec: Recording, start: float | str, path: str) -> Recording:
+    """``rec`` with its times shifted so that its first row is at ``start``: seconds on the other recording's
+    clock, or an ISO 8601 UTC time (its times become Unix seconds: a date). The shift (s) is in the metadata
+    (``time_shift_s``, and said in ``time_source``)."""
+    from imutool.clock import parse_utc
+
+    try:
+        t0 = float(start)
+    except (TypeError, ValueError):
+        t0 = parse_utc(str(start))
+        if t0 is None:
+            raise ImutoolError(
+                f"--start {start!r}: expected seconds or a UTC date and time (e.g. 2014-08-01T12:00:00Z)", path=path
+            ) from None
+    if not np.isfinite(t0):
+        raise ImutoolError(f"--start {start!r}: not a finite time", path=path)
+    if not len(rec):
+        return rec
+    shift = t0 - float(rec.time[0])
+    out = rec.copy()
+    out.time = rec.time + shift
+    was = rec.meta.get("time_source")
+    out.meta["time_shift_s"] = shift
+    out.meta["time_source"] = (f"{was}; " if was else "") + f"shifted {shift:+.3f} s: first row at --start {start}"
     return out
 
 

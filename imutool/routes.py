@@ -86,16 +86,21 @@ def load_reference(
 ) -> tuple[Recording, dict[str, Any]]:
     """:func:`load_input` of a command's second recording, its reference (``evaluate --reference``, the reports'
     ``--reference``): the same loading, its errors naming the reference's flags (``--ref-rate``, ``--ref-with``
-    ...: :func:`imutool.loading.reference_text`)."""
+    ...: :func:`imutool.loading.reference_text`); ``start`` (``--ref-start``: seconds on the input's clock or an
+    ISO 8601 UTC time) puts its first row there (:func:`imutool.loading.starting_at`)."""
     from formats.errors import ImutoolError
-    from imutool.loading import reference_text
+    from imutool.loading import reference_text, starting_at
 
+    start = load_options.pop("start", None)
     try:
-        return load_input(path, inputs, strict=strict, on_input=on_input, **load_options)
+        rec, report = load_input(path, inputs, strict=strict, on_input=on_input, **load_options)
+        if start is not None:
+            rec = starting_at(rec, start, os.fspath(path))
     except ImutoolError as e:
         err = ImutoolError(reference_text(str(e)))
         err.path, err.line = e.path, e.line
         raise err from None
+    return rec, report
 
 
 def with_inputs(summary: dict[str, Any], inputs: list[dict[str, Any]]) -> dict[str, Any]:

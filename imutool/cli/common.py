@@ -173,6 +173,14 @@ def reference_options(f: Callable) -> Callable:
             metavar="S",
             help="Seconds added to a --ref-with file's times: one per --ref-with, in order.",
         ),
+        click.option(
+            "--ref-start",
+            type=ClockTime(),
+            default=None,
+            metavar="S|UTC",
+            help="Put the reference's first row at this time (its times shifted): s on the input's clock, or a UTC "
+            "time (2014-08-01T12:00:00Z) — a reference without a clock (--ref-rate) against a dated input.",
+        ),
     ]
     for o in reversed(opts):
         f = o(f)
