@@ -139,8 +139,9 @@ def run_evaluate(
     ``load_options``: ``--columns ... --rate --time-column --header-rows --with``; ``strict``; ``on_input(path,
     report)`` after it); the reference is read as it is (:func:`load_for_evaluation`), or, given any of the
     reference's options (``ref_rate_hz``, ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``,
-    ``ref_with_offsets``: :data:`imutool.loading.REF_LOAD_OPTIONS`), loaded with them as an input is (time order
-    as :func:`load_for_evaluation` puts it; ``reference_loading`` in the summary says how)."""
+    ``ref_with_offsets``, ``ref_start``: :data:`imutool.loading.REF_LOAD_OPTIONS`; a path only), loaded with them
+    as an input is (time order as :func:`load_for_evaluation` puts it; ``reference_loading`` in the summary says
+    how)."""
     load_options, ref_given = split_reference_options(load_options)
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
@@ -154,17 +155,18 @@ def run_evaluate(
         flags = ", ".join(sorted(reference_text(FLAGS[k]) for k in ref_given))
         if reference is None:
             raise ImutoolError(f"{flags}: say how to read a reference file; give the file with --reference")
-        if not isinstance(reference, Recording):
-            reference = load_reference(
-                os.fspath(reference),
-                inputs,
-                strict=strict,
-                on_input=on_input,
-                duplicates="drop",
-                backwards="sort",
-                **ref_given,
-            )[0]
-            loaded = how_loaded(reference, ref_given, reference=True)
+        if isinstance(reference, Recording):
+            raise TypeError("the reference's loading options apply to a file, not to a Recording already loaded")
+        reference = load_reference(
+            os.fspath(reference),
+            inputs,
+            strict=strict,
+            on_input=on_input,
+            duplicates="drop",
+            backwards="sort",
+            **ref_given,
+        )[0]
+        loaded = how_loaded(reference, ref_given, reference=True)
     summary = evaluate(
         estimate, reference, channel=channel, max_lag_s=max_lag_s, plot=plot, align_heading=align_heading
     )

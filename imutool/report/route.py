@@ -124,6 +124,8 @@ def _load_pair(
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"unexpected keyword argument(s) {', '.join(sorted(unknown))}")
+    if ref_given and isinstance(reference, Recording):
+        raise TypeError("the reference's loading options apply to a file, not to a Recording already loaded")
     dut_only = (
         "mounting",
         "calibration_file",
