@@ -28,8 +28,16 @@ from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import wrap_deg180
-from imutool.loading import load_recording, merge_with, require_channels
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage
+from imutool.loading import (
+    FLAGS,
+    how_loaded,
+    load_recording,
+    merge_with,
+    reference_text,
+    require_channels,
+    split_reference_options,
+)
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_reference
 
 
 @dataclass
@@ -451,7 +459,9 @@ def deviation_card(
     """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ (deg; magnetic = compass + δ) from the
     compass heading of ``source`` (``heading_column``, else 'heading', else the tilt-compensated magnetometer)
     against reference headings (``reference`` file: NMEA HDT/THS/HDM..., or a CSV column; default a reference
-    column of the input).
+    column of the input). The reference file is read as it is, or, given any of its own options (``ref_rate_hz``
+    ... ``ref_start``, :data:`imutool.loading.REF_LOAD_OPTIONS`), loaded with them as an input is (the summary's
+    ``reference_loading`` says how).
 
     A true reference needs the ``variation`` (deg, E +), or a ``position`` ('LAT,LON'; default the first fix of
     an NMEA reference) and a ``date`` for the World Magnetic Model. ``time_offset`` s is added to the reference
@@ -469,6 +479,10 @@ def deviation_card(
 
     input_path = _source_name(source)
     reference = os.fspath(reference) if reference else None
+    load_options, ref_given = split_reference_options(load_options)
+    if ref_given and not reference:
+        flags = ", ".join(sorted(reference_text(FLAGS[k]) for k in ref_given))
+        raise ImutoolError(f"{flags}: say how to read a reference file; give the file with --reference")
     outputs = [os.fspath(outputs)] if isinstance(outputs, (str, os.PathLike)) else [os.fspath(o) for o in outputs]
     for o in outputs:
         if not o.lower().endswith(CARD_OUTPUTS):
@@ -498,7 +512,14 @@ def deviation_card(
             compass_hdg = heading_from_mag(m)
             src = "mag (assumed level)"
     # reference
-    if reference:
+    loaded = None
+    if reference and ref_given:  # the reference's own options: loaded as an input is (time order kept by sorting)
+        ref_rec = load_reference(
+            reference, [], strict=strict, on_input=noted, duplicates="drop", backwards="sort", **ref_given
+        )[0]
+        loaded = how_loaded(ref_rec, ref_given, reference=True)
+        rsrc = reference
+    elif reference:
         ref_rec = formats.read(reference)
         rsrc = reference
     else:
@@ -608,6 +629,8 @@ def deviation_card(
         "warnings": card.warnings,
         "card_15deg": [[p, round(d, 2)] for p, d, _ in card.table(15.0)],
     }
+    if loaded is not None:
+        summary["reference_loading"] = loaded
     if card.invertible():
         summary["magnetic_to_compass_15deg"] = [[m, round(p, 2)] for m, _, p in card.table_magnetic(15.0)]
     for o in outputs:

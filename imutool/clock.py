@@ -11,6 +11,7 @@ offset.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 from typing import Any
@@ -73,6 +74,12 @@ class Clock:
                 s = d.strftime("%H:%M:%S")
                 return s + (d.strftime(".%f")[: decimals + 1] if decimals > 0 else "")
         return f"{float(t) - self.start_s:.{decimals}f}"
+
+    def time_of(self, unix: float) -> float:
+        """Recording time (s) of the Unix time ``unix`` (a dated clock only: ValueError otherwise)."""
+        if self.origin_unix is None:
+            raise ValueError("a clock without a date has no recording time for a UTC time")
+        return float(unix) - self.origin_unix
 
     @property
     def unit(self) -> str:
@@ -144,6 +151,20 @@ def utc_origin(first_time_s: float, meta: dict[str, Any]) -> float | None:
         return None
     try:
         d = datetime.fromisoformat(str(text).strip().replace("Z", "+00:00"))
+    except ValueError:
+        return None
+    return (d if d.tzinfo else d.replace(tzinfo=timezone.utc)).timestamp()
+
+
+def parse_utc(text: str) -> float | None:
+    """Unix time (s) of an ISO 8601 date and time (``2014-08-01T12:00:00Z``, ``2014-08-01 12:00:00.5``,
+    ``2014-08-01T14:00+02:00``; no zone: UTC); None for text that is not one (a number of seconds, a time without
+    a date)."""
+    t = str(text).strip()
+    if not re.fullmatch(r"\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(:\d{2}(\.\d+)?)?(Z|[+-]\d{2}:?\d{2})?", t, flags=re.I):
+        return None
+    try:
+        d = datetime.fromisoformat(re.sub(r"[zZ]$", "+00:00", t))
     except ValueError:
         return None
     return (d if d.tzinfo else d.replace(tzinfo=timezone.utc)).timestamp()

@@ -25,7 +25,8 @@ from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
 from imutool.clock import Clock
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input
+from imutool.loading import FLAGS, how_loaded, reference_text, split_reference_options
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input, load_reference
 
 CHANNELS = ("angles", "quaternion", "heave", "position")
 ANGLES = ("roll", "pitch", "heading")
@@ -137,7 +138,12 @@ def run_evaluate(
 
     A path ``estimate`` is loaded as every command's input (:func:`imutool.loading.load_recording` with
     ``load_options``: ``--columns ... --rate --time-column --header-rows --with``; ``strict``; ``on_input(path,
-    report)`` after it); the reference is read as it is (:func:`load_for_evaluation`)."""
+    report)`` after it); the reference is read as it is (:func:`load_for_evaluation`), or, given any of the
+    reference's options (``ref_rate_hz``, ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``,
+    ``ref_with_offsets``, ``ref_start``: :data:`imutool.loading.REF_LOAD_OPTIONS`; a path only), loaded with them
+    as an input is (time order as :func:`load_for_evaluation` puts it; ``reference_loading`` in the summary says
+    how)."""
+    load_options, ref_given = split_reference_options(load_options)
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"run_evaluate() got unexpected keyword argument(s) {', '.join(sorted(unknown))}")
@@ -145,9 +151,28 @@ def run_evaluate(
     if not isinstance(estimate, Recording):
         opts = {k: v for k, v in load_options.items() if v is not None}
         estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, **opts)[0]
+    loaded = None
+    if ref_given:
+        flags = ", ".join(sorted(reference_text(FLAGS[k]) for k in ref_given))
+        if reference is None:
+            raise ImutoolError(f"{flags}: say how to read a reference file; give the file with --reference")
+        if isinstance(reference, Recording):
+            raise TypeError("the reference's loading options apply to a file, not to a Recording already loaded")
+        reference = load_reference(
+            os.fspath(reference),
+            inputs,
+            strict=strict,
+            on_input=on_input,
+            duplicates="drop",
+            backwards="sort",
+            **ref_given,
+        )[0]
+        loaded = how_loaded(reference, ref_given, reference=True)
     summary = evaluate(
         estimate, reference, channel=channel, max_lag_s=max_lag_s, plot=plot, align_heading=align_heading
     )
+    if loaded is not None:
+        summary["reference_loading"] = loaded
     return RouteResult(summary, inputs)
 
 

@@ -10,6 +10,7 @@ Nothing is printed here: what validation did and every plausibility warning come
 from __future__ import annotations
 
 import os
+import re
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,30 @@ LOAD_OPTIONS = (
 recording takes."""
 
 CSV_ONLY = {"rate_hz": "--rate", "time_column": "--time-column", "header_rows": "--header-rows"}
+
+REF_LOAD_OPTIONS = {
+    "ref_rate_hz": ("input_rate_hz", "--ref-rate"),
+    "ref_time_column": ("time_column", "--ref-time-column"),
+    "ref_header_rows": ("header_rows", "--ref-header-rows"),
+    "ref_with_files": ("with_files", "--ref-with"),
+    "ref_with_offsets": ("with_offsets", "--ref-with-offset"),
+    "ref_start": ("start", "--ref-start"),
+}
+"""How a command's second recording (its reference: ``evaluate``, ``report inclinometer|heading``) is loaded: each
+option → (the :func:`load_recording` parameter it sets for the reference, its command-line flag). The reference
+goes through :func:`load_recording` as the main input does, with these in place of ``--rate ... --with``;
+``start`` (``--ref-start``) then puts its first row at a given time (:func:`starting_at`): a clockless reference
+on the input's clock."""
+
+FLAGS = {
+    "input_rate_hz": "--rate",
+    "time_column": "--time-column",
+    "header_rows": "--header-rows",
+    "with_files": "--with",
+    "with_offsets": "--with-offset",
+    "start": "--start",
+}
+"""The command-line flag of each loading option that says how a file's times and header are read."""
 
 
 def load_recording(
@@ -387,3 +412,102 @@ def input_notes(meta: dict[str, Any]) -> dict[str, Any]:
     :func:`load_recording`), for the metadata of an output built from it: an estimate says what was wrong with
     the data it came from."""
     return {k: meta[k] for k in INPUT_NOTES if meta.get(k)}
+
+
+def reference_load_options(options: dict[str, Any]) -> dict[str, Any]:
+    """The :func:`load_recording` options of a reference from ``options`` (keys of :data:`REF_LOAD_OPTIONS`; the
+    ones not given — None or empty — left out, so a reference without them loads as before). An unknown key is a
+    TypeError (a caller's mistake)."""
+    unknown = set(options) - set(REF_LOAD_OPTIONS)
+    if unknown:
+        raise TypeError(f"unexpected reference option(s) {', '.join(sorted(unknown))}")
+    out: dict[str, Any] = {}
+    for k, v in options.items():
+        if v is None or (isinstance(v, (tuple, list)) and not v):
+            continue
+        out[REF_LOAD_OPTIONS[k][0]] = tuple(v) if isinstance(v, (tuple, list)) else v
+    return out
+
+
+def split_reference_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(``options`` without the reference's, the reference's :func:`load_recording` options given): what a route
+    that reads a reference does with its keyword arguments (:func:`reference_load_options`)."""
+    ref = {k: options[k] for k in REF_LOAD_OPTIONS if k in options}
+    rest = {k: v for k, v in options.items() if k not in REF_LOAD_OPTIONS}
+    return rest, reference_load_options(ref)
+
+
+def reference_text(text: str) -> str:
+    """``text`` (an error or a note about loading) with the main input's time and header flags named as the
+    reference's (``--rate`` → ``--ref-rate``, ``--with`` → ``--ref-with`` ...): what a user of the reference
+    typed."""
+    return re.sub(r"(?<![\w-])--(rate|time-column|header-rows|with-offset|with|start)(?![\w-])", r"--ref-\1", text)
+
+
+def how_loaded(rec: Recording, given: dict[str, Any], reference: bool = False) -> dict[str, Any]:
+    """How a recording was loaded, for a report's JSON/PDF and a summary: ``options`` (the time and header options
+    given — :func:`load_recording` names — by flag; ``reference``: the reference's flags, ``--ref-rate`` ...),
+    ``time`` (where its times came from: its reader's ``time_source``), ``dated`` (whether its times give a UTC
+    clock time, :class:`imutool.clock.Clock`) and ``merged`` (each ``--with`` file, its channels and clock
+    offset, s)."""
+    from imutool.clock import Clock
+
+    name = reference_text if reference else str
+    opts = {
+        name(f): (list(given[k]) if isinstance(given[k], tuple) else given[k]) for k, f in FLAGS.items() if k in given
+    }
+    src = rec.meta.get("time_source")
+    out: dict[str, Any] = {
+        "options": opts,
+        "time": name(str(src)) if src else "the file's own times (time column or stamps)",
+        "dated": Clock.of(rec).dated,
+    }
+    merged = rec.meta.get("merged")
+    if isinstance(merged, dict) and merged.get("files"):
+        out["merged"] = [
+            {"input": f["input"], "channels": f["channels"], "offset_s": f["offset_s"]} for f in merged["files"][1:]
+        ]
+    return out
+
+
+def starting_at(rec: Recording, start: float | str, path: str) -> Recording:
+    """``rec`` with its times shifted so that its first row is at ``start``: seconds on the other recording's
+    clock, or an ISO 8601 UTC time (its times become Unix seconds: a date). The shift (s) is in the metadata
+    (``time_shift_s``, and said in ``time_source``)."""
+    from imutool.clock import parse_utc
+
+    try:
+        t0 = float(start)
+    except (TypeError, ValueError):
+        t0 = parse_utc(str(start))
+        if t0 is None:
+            raise ImutoolError(
+                f"--start {start!r}: expected seconds or a UTC date and time (e.g. 2014-08-01T12:00:00Z)", path=path
+            ) from None
+    if not np.isfinite(t0):
+        raise ImutoolError(f"--start {start!r}: not a finite time", path=path)
+    if not len(rec):
+        return rec
+    shift = t0 - float(rec.time[0])
+    out = rec.copy()
+    out.time = rec.time + shift
+    was = rec.meta.get("time_source")
+    out.meta["time_shift_s"] = shift
+    out.meta["time_source"] = (f"{was}; " if was else "") + f"shifted {shift:+.3f} s: first row at --start {start}"
+    return out
+
+
+def loading_text(ld: dict[str, Any]) -> str:
+    """How an input was loaded (``inputs.*.loading``, :func:`imutool.loading.how_loaded`) in one line: options
+    given, where its times came from, its date, the files merged onto it."""
+    opts = ", ".join(
+        f"{k} {' '.join(str(x) for x in v) if isinstance(v, list) else v}" for k, v in (ld.get("options") or {}).items()
+    )
+    parts = [
+        opts or "no time or header option",
+        f"times: {ld.get('time')}",
+        "dated (UTC)" if ld.get("dated") else "no date",
+    ]
+    for m in ld.get("merged") or []:
+        parts.append(f"merged {m['input']} ({', '.join(m.get('channels') or [])}; {m['offset_s']:+g} s)")
+    return "; ".join(parts)

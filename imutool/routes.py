@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from formats import Recording
-from imutool.loading import LOAD_OPTIONS, load_recording  # noqa: F401  (LOAD_OPTIONS: re-exported)
+from formats.errors import ImutoolError
+from imutool.loading import LOAD_OPTIONS, load_recording, reference_text, starting_at  # noqa: F401  (LOAD_OPTIONS: re-exported)
 
 OnInput = Callable[[str, dict[str, Any]], None]
 """``on_input(path, report)``: called right after an input is loaded (report from :func:`load_recording`)."""
@@ -91,6 +92,30 @@ def read_source(
     name = os.fspath(source)
     rec, report = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
     return rec, name, report
+
+
+def load_reference(
+    path: str | os.PathLike,
+    inputs: list[dict[str, Any]],
+    *,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    **load_options: Any,
+) -> tuple[Recording, dict[str, Any]]:
+    """:func:`load_input` of a command's second recording, its reference (``evaluate --reference``, the reports'
+    ``--reference``): the same loading, its errors naming the reference's flags (``--ref-rate``, ``--ref-with``
+    ...: :func:`imutool.loading.reference_text`); ``start`` (``--ref-start``: seconds on the input's clock or an
+    ISO 8601 UTC time) puts its first row there (:func:`imutool.loading.starting_at`)."""
+    start = load_options.pop("start", None)
+    try:
+        rec, report = load_input(path, inputs, strict=strict, on_input=on_input, **load_options)
+        if start is not None:
+            rec = starting_at(rec, start, os.fspath(path))
+    except ImutoolError as e:
+        err = ImutoolError(reference_text(str(e)))
+        err.path, err.line = e.path, e.line
+        raise err from None
+    return rec, report
 
 
 def with_inputs(summary: dict[str, Any], inputs: list[dict[str, Any]]) -> dict[str, Any]:

@@ -115,6 +115,22 @@ def test_deviation_from_a_separate_bearings_csv(files, tmp_path, capsys):
     assert np.allclose([s["coefficients_deg"][n] for n in "ABCDE"], rec.meta["deviation_deg"], atol=0.05)
 
 
+def test_deviation_from_bearings_without_a_clock(files, tmp_path, capsys):
+    """A hand-written bearings log (one every 10 s, no time column): --ref-rate and --ref-start give it its times."""
+    rec = formats.read(files / "swing.csv")
+    (tmp_path / "bearings.csv").write_text("bearing\n" + "".join(f"{b:.3f}\n" for b in rec["ref_heading"][::50]))
+    args = ["calibrate", "deviation", files / "swing.csv", "--heading-column", "ref_compass_heading"]
+    args += ["--reference", tmp_path / "bearings.csv", "-o", tmp_path / "card.txt", "--json", "--variation", "0"]
+    code, out, err = run([*args, "--ref-rate", "0.1", "--ref-start", f"{rec.time[0]:.3f}"], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert np.allclose([s["coefficients_deg"][n] for n in "ABCDE"], rec.meta["deviation_deg"], atol=0.05)
+    assert s["reference_loading"]["options"] == {"--ref-rate": 0.1, "--ref-start": float(f"{rec.time[0]:.3f}")}
+    assert "time from --ref-rate 0.1 Hz" in s["reference_loading"]["time"]
+    code, out, err = run([*args[:5], "-o", tmp_path / "c.txt", "--ref-rate", "0.1"], capsys)
+    assert code == 2 and "--ref-rate: say how to read a reference file; give the file with --reference" in err
+
+
 def test_gyro_and_accel_append_sections(files, tmp_path, capsys):
     cal = tmp_path / "cal.toml"
     from imutool.sim.sensor import imu_recording

@@ -106,3 +106,65 @@ def test_evaluate_cli_is_the_route_and_prints_utc(tmp_path, capsys):
     assert (tmp_path / "e.png").stat().st_size > 0
     assert run("evaluate", str(est), "--align-heading", "north") == 2
     assert "--align-heading" in capsys.readouterr().err
+
+
+def test_reference_loading_options(tmp_path, capsys):
+    """A reference file as it comes (a logger's ms time column under a names row and a units row; its heading in a
+    file of its own on a clock 2 s ahead): read with the reference's options, stated in the summary."""
+    import json
+
+    from imutool.cli import main
+    from imutool.evaluation import run_evaluate
+
+    def run(*args: str) -> tuple[int, str]:
+        try:
+            main(list(args))
+            code = 0
+        except SystemExit as e:
+            code = int(e.code or 0)
+        out, err = capsys.readouterr()
+        return code, out if not code else err
+
+    t = np.arange(0.0, 30.0, 0.1)
+    roll, pitch, hdg = 10 * np.sin(t), 3 * np.cos(t), (40 + 5 * t) % 360
+    est = tmp_path / "est.csv"
+    est.write_text(
+        "time,roll,pitch,heading\n"
+        + "".join(f"{a:.1f},{b + 0.5},{c},{d}\n" for a, b, c, d in zip(t, roll, pitch, hdg, strict=True))
+    )
+    ref = tmp_path / "logger.csv"
+    ref.write_text(
+        "Packet time,Roll,Pitch\nms,deg,deg\n"
+        + "".join(f"{1000 * a:.0f},{b},{c}\n" for a, b, c in zip(t, roll, pitch, strict=True))
+    )
+    gyro = tmp_path / "gyro.csv"
+    gyro.write_text("time,heading\n" + "".join(f"{a + 2:.1f},{(d - 1.0) % 360}\n" for a, d in zip(t, hdg, strict=True)))
+    args = ["evaluate", str(est), "--reference", str(ref), "--ref-time-column", "Packet time:ms"]
+    args += ["--ref-header-rows", "2", "--ref-with", str(gyro), "--ref-with-offset", "-2", "--json"]
+    code, out = run(*args)
+    assert code == 0, out
+    s = json.loads(out)
+    assert abs(s["angles"]["roll"]["rmse"] - 0.5) < 1e-9 and s["angles"]["pitch"]["rmse"] < 1e-9
+    assert abs(s["angles"]["heading"]["rmse"] - 1.0) < 1e-6  # merged onto the reference's times, 2 s back
+    ld = s["reference_loading"]
+    assert ld["options"] == {
+        "--ref-time-column": "Packet time:ms",
+        "--ref-header-rows": 2,
+        "--ref-with": [str(gyro)],
+        "--ref-with-offset": [-2.0],
+    }
+    assert ld["merged"] == [{"input": str(gyro), "channels": ["heading"], "offset_s": -2.0}] and not ld["dated"]
+    assert [v["input"] for v in s["validation"]] == [str(est), str(ref)]
+    # the same through the library route; without the options the reference is read as before
+    lib = run_evaluate(est, ref, ref_time_column="Packet time:ms", ref_header_rows=2).summary
+    assert abs(lib["angles"]["roll"]["rmse"] - 0.5) < 1e-9 and "heading" not in lib["angles"]
+    assert "reference_loading" not in run_evaluate(est, est).summary
+    # errors name the reference's flags
+    code, err = run("evaluate", str(est), "--reference", str(ref), "--ref-header-rows", "2", "--ref-with-offset", "1")
+    assert (
+        code == 2 and "give the sample rate with --ref-rate HZ, or name the time column with --ref-time-column" in err
+    )
+    code, err = run(*args[:6], "--ref-header-rows", "2", "--ref-with-offset", "1")
+    assert code == 2 and "--ref-with-offset is the clock offset of a --ref-with FILE" in err
+    code, err = run("evaluate", str(est), "--ref-rate", "10")
+    assert code == 2 and "--ref-rate: say how to read a reference file; give the file with --reference" in err

@@ -137,3 +137,26 @@ def test_with_merges_sensors_on_other_clocks(tmp_path, run):
     assert code == 2 and "give the file too" in out
     code, out = run("convert", str(g), str(tmp_path / "m2.csv"), "--with", str(m), "--with-offset", "-100")
     assert code == 0 and f"merged onto its times: {m} (mag)" in out
+
+
+def test_every_command_with_a_reference_file_takes_the_reference_loading_options():
+    """evaluate, report inclinometer|heading and calibrate deviation: one set of --ref-* options (defined once), whose
+    parameters are the keys the routes take (imutool.loading.REF_LOAD_OPTIONS)."""
+    from imutool.cli.batch import _resolve
+    from imutool.loading import REF_LOAD_OPTIONS, reference_text
+
+    flags = {flag for _, flag in REF_LOAD_OPTIONS.values()}
+    assert flags == {
+        "--ref-rate",
+        "--ref-time-column",
+        "--ref-header-rows",
+        "--ref-with",
+        "--ref-with-offset",
+        "--ref-start",
+    }
+    for words in (["evaluate"], ["report", "inclinometer"], ["report", "heading"], ["calibrate", "deviation"]):
+        params = {o: p.name for p in _resolve(words).params for o in getattr(p, "opts", [])}
+        assert {o: params.get(o) for o in flags} == {flag: k for k, (_, flag) in REF_LOAD_OPTIONS.items()}, words
+    assert reference_text("give --rate HZ or --time-column; --with-offset per --with; --ref-rate") == (
+        "give --ref-rate HZ or --ref-time-column; --ref-with-offset per --ref-with; --ref-rate"
+    )

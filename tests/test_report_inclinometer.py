@@ -296,3 +296,128 @@ def test_plot_tolerance_bands_follow_the_configured_tolerances():
     np.testing.assert_allclose(plots["tol_angle"](np.array([0.0, 10.0, 40.0])), [0.5, 0.5, 0.8])
     np.testing.assert_allclose(plots["tol_period"](np.array([10.0, 30.0])), [0.7, 0.9])
     assert "0.5°" in plots["tol_angle_label"] and "2 %" in plots["tol_angle_label"]
+
+
+# -- a reference as it comes: another Seapath, a clockless table log; windows in UTC ------------------------------
+T_2014 = 1406894400.0  # 2014-08-01T12:00:00Z
+
+
+def _psxn23(roll: float) -> str:
+    """$PSXN,23 (Kongsberg Seapath): roll (+ port up = imutool's), pitch (+ bow up), heading (true), heave (+ down),
+    with its checksum; the documented layout."""
+    from formats.nmea import checksum
+
+    body = f"PSXN,23,{roll:.2f},0.50,120.00,-0.10"
+    return f"${body}*{checksum(body)}"
+
+
+def _table_roll(n: int, rate_hz: float = 2.0) -> np.ndarray:
+    """A tilt table's roll (deg, 2 decimals as a Seapath sends them): 8° at 12 s."""
+    return np.round(8.0 * np.sin(2 * np.pi * (np.arange(n) / rate_hz) / 12.0), 2)
+
+
+def _seapath_log(path: Path, roll: np.ndarray, rate_hz: float = 2.0) -> str:
+    """A logger's file of $PSXN,23 lines, each after its arrival stamp (Unix s, 2014-08-01 from 12:00:00 UTC)."""
+    path.write_text("".join(f"{T_2014 + k / rate_hz:.2f} {_psxn23(r)}\n" for k, r in enumerate(roll)))
+    return str(path)
+
+
+def _report(capsys, tmp_path: Path, args: list[str]) -> tuple[int, str, dict]:
+    """``imutool report inclinometer ARGS -o ev.pdf`` in-process → (exit status, stdout — on an error its one
+    error line —, the evidence JSON or {})."""
+    from imutool.cli import main
+
+    (tmp_path / "ev.json").unlink(missing_ok=True)
+    code = 0
+    try:
+        main(["report", "inclinometer", *args, "-o", str(tmp_path / "ev.pdf"), "--force"])
+    except SystemExit as e:
+        code = int(e.code or 0)
+    out, err = capsys.readouterr()
+    if code == 2:
+        errors = [ln for ln in err.splitlines() if ": error: " in ln]
+        assert len(errors) == 1 and "Traceback" not in err, err
+        return code, errors[0], {}
+    return code, out, json.loads((tmp_path / "ev.json").read_text())
+
+
+def test_two_seapath_logs_as_dut_and_reference_in_a_utc_window(tmp_path, capsys):
+    """Issue 38: one Seapath against another in one call, no parser written; the DUT reads the table's roll + 0.30°.
+    The window is given as UTC clock time; a lateral-acceleration log is merged onto the reference (--ref-with)."""
+    ref_roll = _table_roll(1200)
+    ref = _seapath_log(tmp_path / "seapath_b.nmea", ref_roll)
+    dut = _seapath_log(tmp_path / "seapath_a.nmea", ref_roll + 0.30)
+    acc = tmp_path / "accel.csv"
+    acc.write_text("time,lat_accel\n" + "".join(f"{T_2014 + k:.1f},0\n" for k in range(601)))
+    code, out, ev = _report(
+        capsys,
+        tmp_path,
+        [dut, "--reference", ref, "--start", "2014-08-01T12:01:00Z", "--end", "2014-08-01T12:09:00Z"]
+        + ["--ref-with", str(acc)],
+    )
+    assert code == 1, out  # INCOMPLETE/FAIL: a CSV-less NMEA DUT without HRM cannot pass the interface item
+    jsonschema.validate(ev, load_schema())
+    it = items(ev)
+    dyn = it["dynamic_heel"]
+    assert dyn["status"] == "pass"
+    assert dyn["stats"]["max_abs"] == pytest.approx(0.30, abs=1e-6)
+    assert dyn["stats"]["rmse"] == pytest.approx(0.30, abs=1e-6)
+    assert dyn["stats"]["n"] == 960  # [12:01:00, 12:09:00) at 2 Hz
+    fit = ev["alignment"]["linear_fit"]
+    assert fit["offset_deg"] == pytest.approx(0.30, abs=1e-3) and abs(fit["scale_error"]) < 1e-4
+    for side in ("amplitude_stbd", "amplitude_port"):
+        assert it[side]["stats"]["max_abs"] == pytest.approx(0.30, abs=0.011)  # stbd +0.3, port −0.3 (2-dp crests)
+    assert ev["inputs"]["dut"]["meta"]["evaluated_window_utc"] == [
+        "2014-08-01T12:01:00.000Z",
+        "2014-08-01T12:09:00.000Z",
+    ]
+    assert ev["conventions"]["clock"]["start_utc"] == "2014-08-01T12:01:00.000Z"
+    ld = ev["inputs"]["reference"]["loading"]
+    assert ld["dated"] and ld["options"] == {"--ref-with": [str(acc)]}
+    assert ld["merged"] == [{"input": str(acc), "channels": ["lat_accel"], "offset_s": 0.0}]
+    assert ev["inputs"]["dut"]["loading"] == {"options": {}, "time": "stamp", "dated": True}
+    assert "reference loaded: --ref-with" in out
+
+
+def test_clockless_reference_given_its_rate_header_rows_and_start(tmp_path, capsys):
+    """A tilt table's log without a clock (a row of names, a row of units, 2 Hz) against a dated Seapath DUT."""
+    ref_roll = _table_roll(1200)
+    dut = _seapath_log(tmp_path / "seapath.nmea", np.round(1.05 * ref_roll, 2))  # the DUT reads 5 % high
+    table = tmp_path / "table.csv"
+    table.write_text("Roll,Pitch\ndeg,deg\n" + "".join(f"{r:.2f},0.5\n" for r in ref_roll))
+    args = [dut, "--reference", str(table), "--ref-rate", "2", "--ref-header-rows", "2"]
+    code, out, _ = _report(capsys, tmp_path, args)  # without --ref-start: the table counts from 0, the DUT is dated
+    assert code == 2 and "do not overlap in time" in out
+    code, out, ev = _report(capsys, tmp_path, [*args, "--ref-start", "2014-08-01T12:00:00Z"])
+    assert code == 1, out
+    fit = ev["alignment"]["linear_fit"]
+    assert fit["scale_error"] == pytest.approx(0.05, abs=2e-3) and abs(fit["offset_deg"]) < 0.01
+    dyn = items(ev)["dynamic_heel"]["stats"]
+    assert dyn["max_abs"] == pytest.approx(0.40, abs=0.011) and dyn["n"] == 1200  # 5 % of 8°
+    ld = ev["inputs"]["reference"]["loading"]
+    assert ld["options"] == {"--ref-rate": 2.0, "--ref-header-rows": 2, "--ref-start": "2014-08-01T12:00:00Z"}
+    assert ld["dated"] and "--ref-rate 2 Hz" in ld["time"] and "first row at --ref-start" in ld["time"]
+    assert ev["inputs"]["reference"]["meta"]["source_header_rows"] == 2
+    # a reference option the reference's format does not take is one line naming the reference's flag
+    code, out, _ = _report(capsys, tmp_path, [dut, "--reference", dut, "--ref-rate", "2"])
+    assert code == 2 and "--ref-rate: only for a CSV file" in out
+
+
+def test_report_window_refusals(tmp_path, capsys):
+    """A UTC --start on a recording without a date, and a window outside the recording: one line, exit status 2."""
+    ref_roll = _table_roll(240)
+    ref = _seapath_log(tmp_path / "b.nmea", ref_roll)
+    dut = _seapath_log(tmp_path / "a.nmea", ref_roll + 0.1)
+    code, out, _ = _report(capsys, tmp_path, [dut, "--reference", ref, "--start", "2014-08-01T13:00:00Z"])
+    assert code == 2 and "outside the recording (12:00:00.0 … 12:01:59.5 UTC, 2014-08-01)" in out
+    code, out, _ = _report(capsys, tmp_path, [dut, "--reference", ref, "--end", "1406894000"])  # seconds on its clock
+    assert code == 2 and "--end 1406894000.0: outside the recording" in out
+    code, out, _ = _report(
+        capsys, tmp_path, [dut, "--reference", ref, "--start", "2014-08-01T12:01:00", "--end", "12:00"]
+    )
+    assert code == 2 and "--end" in out and "UTC date and time" in out
+    nodate = tmp_path / "nodate.csv"
+    nodate.write_text("time,roll\n" + "".join(f"{k / 2:.1f},{r:.2f}\n" for k, r in enumerate(ref_roll)))
+    code, out, _ = _report(capsys, tmp_path, [str(nodate), "--reference", ref, "--start", "2014-08-01T12:00:30Z"])
+    assert code == 2 and len(out.strip().splitlines()) == 1
+    assert "nodate.csv: --start 2014-08-01T12:00:30Z: a UTC clock time, but the recording has no date" in out

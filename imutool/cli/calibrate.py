@@ -28,6 +28,7 @@ from imutool.cli.common import (
     input_options,
     note_input,
     output_options,
+    reference_options,
     route_of,
     safe_outputs,
     strict_requested,
@@ -259,6 +260,7 @@ mag_cmd = route_of(mag_route, MAG_OUTPUTS, append="append")(mag_cmd)
 )
 @click.option("--sensor", default=None, help="Sensor id for the provenance.")
 @input_options
+@reference_options
 @output_options
 @safe_outputs("outputs", append="append")
 def deviation_cmd(as_json: bool, quiet: bool, **options: Any) -> None:

@@ -131,6 +131,84 @@ def _input_options(f: Callable, rate_flag: str) -> Callable:
     return f
 
 
+def reference_options(f: Callable) -> Callable:
+    """How a command's reference file (``--reference``) is read, as :func:`input_options` says for its input
+    (``@reference_options``; the parameters are the keys of :data:`imutool.loading.REF_LOAD_OPTIONS`, loaded by
+    :func:`imutool.routes.load_reference`)."""
+    opts = [
+        click.option(
+            "--ref-rate",
+            "ref_rate_hz",
+            type=FiniteFloat(min=0, min_open=True),
+            default=None,
+            metavar="HZ",
+            help="A reference CSV without a time column: its sample rate; time = n / HZ (as --rate for the input).",
+        ),
+        click.option(
+            "--ref-time-column",
+            default=None,
+            metavar="NAME[:UNIT]",
+            help="The reference CSV's time column and its unit s, ms, us or ns (as --time-column).",
+        ),
+        click.option(
+            "--ref-header-rows",
+            type=click.IntRange(min=1),
+            default=None,
+            metavar="N",
+            help="The reference CSV's header rows: names, then units (as --header-rows).",
+        ),
+        click.option(
+            "--ref-with",
+            "ref_with_files",
+            multiple=True,
+            type=click.Path(exists=True),
+            help="Another recording merged onto the reference's times (as --with); repeatable.",
+        ),
+        click.option(
+            "--ref-with-offset",
+            "ref_with_offsets",
+            multiple=True,
+            type=FiniteFloat(),
+            metavar="S",
+            help="Seconds added to a --ref-with file's times: one per --ref-with, in order.",
+        ),
+        click.option(
+            "--ref-start",
+            type=ClockTime(),
+            default=None,
+            metavar="S|UTC",
+            help="Put the reference's first row at this time (its times shifted): s on the input's clock, or a UTC "
+            "time (2014-08-01T12:00:00Z) — a reference without a clock (--ref-rate) against a dated input.",
+        ),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+class ClockTime(click.ParamType):
+    """A time option: seconds (a number) or an ISO 8601 UTC date and time (``2014-08-01T12:00:00Z``, kept as
+    text for the route to put on the recording's clock)."""
+
+    name = "S|UTC"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        from imutool.clock import parse_utc
+
+        if value is None or isinstance(value, float):
+            return value
+        text = str(value).strip()
+        try:
+            v = float(text)
+        except ValueError:
+            if parse_utc(text) is None:
+                self.fail(f"{text!r}: expected seconds or a UTC date and time, e.g. 2014-08-01T12:00:00Z", param, ctx)
+            return text
+        if not np.isfinite(v):
+            self.fail(f"{text!r} is not a finite number", param, ctx)
+        return v
+
+
 def output_options(f: Callable) -> Callable:
     f = click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")(f)
     f = click.option("--quiet", "-q", is_flag=True, help="No progress or summary output.")(f)

@@ -16,6 +16,7 @@ from imutool.cli.common import (
     emit_summary,
     input_options,
     note_input,
+    reference_options,
     route_of,
     safe_outputs,
     strict_requested,
@@ -43,7 +44,8 @@ def evaluate_route(
     on_input: Any = None,
     **load_options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST)."""
+    """Parsed options → :func:`imutool.evaluation.run_evaluate` (the loading options apply to EST; the ``ref_*``
+    ones, :func:`imutool.cli.common.reference_options`, to the reference)."""
     return run_evaluate(
         est_path,
         ref_path,
@@ -89,6 +91,7 @@ def evaluate_route(
     "'auto' estimates it as the circular mean of estimate − reference heading and reports it.",
 )
 @input_options
+@reference_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("plot_path")
@@ -128,6 +131,11 @@ def evaluate_cmd(
             lines.append(f"heading alignment: {al['offset_deg']:+.3f}° added to the reference ({al['how']})")
         for note in summary.get("derived", []):
             lines.append(f"note: {note}")
+        ld = summary.get("reference_loading")
+        if ld:
+            from imutool.loading import loading_text
+
+            lines.append(f"reference loaded: {loading_text(ld)}")
         lines.append(f"compared: {summary['span']['text']}")
     emit_summary(summary, as_json, quiet, lines)
 

@@ -36,9 +36,11 @@ RANGES: dict[str, Bound] = {
     "t_end": ANY,
     "time_offset": ANY,
     "with_offsets": ANY,  # --with-offset: a --with file's clock offset (s)
+    "ref_with_offsets": ANY,  # --ref-with-offset: the same for a --ref-with file of the reference
     # sizes and counts
     "chunk_rows": COUNT1,
     "header_rows": (1, 1000, False, False),
+    "ref_header_rows": (1, 1000, False, False),
     "update_every": (0, 1_000_000, False, False),
     "per_decade": (1, 1000, False, False),
     "grid_bands": (2, 90, False, False),
@@ -56,6 +58,7 @@ RANGES: dict[str, Bound] = {
     # rates, durations, cut-offs (zero is meaningless)
     "rate_hz": (0, 100_000, True, False),
     "input_rate_hz": (0, 100_000, True, False),  # --rate of a CSV without a time column
+    "ref_rate_hz": (0, 100_000, True, False),  # --ref-rate: the same for a reference file
     "nmea_rate": (0, 100_000, True, False),
     "cutoff": POS,
     "delayed_cutoff": POS,

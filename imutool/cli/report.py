@@ -15,16 +15,19 @@ import click
 
 from formats.atomic import check_outputs
 from imutool.cli.common import (
+    ClockTime,
     FiniteFloat,
     default_of,
     emit_summary,
     input_options,
     note_input,
     output_options,
+    reference_options,
     route_of,
     safe_outputs,
     strict_requested,
 )
+from imutool.loading import REF_LOAD_OPTIONS
 from imutool.progress import stages
 from imutool.report.common import ALIGN, CRITERION, MAX_LAG_S
 from imutool.report.heading import HeadingOptions
@@ -88,6 +91,12 @@ def _print(res: RouteResult, as_json: bool, quiet: bool) -> None:
         )
         derived = f"  (derived by imutool, would be: {it['derived_result']})" if it.get("derived_result") else ""
         lines.append(f"  {it['id']:20s} {it['status']:17s} N={st.get('n', 0):<6} {mx}{derived}")
+    for name, inp in ev["inputs"].items():
+        ld = (inp or {}).get("loading") or {}
+        if ld.get("options") or ld.get("merged"):
+            from imutool.loading import loading_text
+
+            lines.append(f"  {name} loaded: {loading_text(ld)}")
     for w in ev["warnings"]:
         lines.append(f"  warning: {w}")
     emit_summary(s, as_json, quiet, lines)
@@ -141,11 +150,12 @@ def _common_options(f):
         click.option(
             "--start",
             "t_start",
-            type=float,
+            type=ClockTime(),
             default=None,
-            help="Evaluate from this time (s, recording clock), e.g. after the filter has settled.",
+            help="Evaluate from this time: s on the recordings' clock, or a UTC time (2014-08-01T12:00:00Z) where "
+            "they have a date; e.g. after the filter has settled.",
         ),
-        click.option("--end", "t_end", type=float, default=None, help="Evaluate up to this time (s)."),
+        click.option("--end", "t_end", type=ClockTime(), default=None, help="Evaluate up to this time (as --start)."),
         click.option(
             "--test-info",
             "test_info_path",
@@ -158,7 +168,7 @@ def _common_options(f):
     ]
     for o in reversed(opts):
         f = o(f)
-    return f
+    return reference_options(f)
 
 
 @report_group.command(
@@ -317,15 +327,15 @@ def inclinometer_route(
     device: str | None,
     config_path: str | None,
     test_info_path: str | None,
-    t_start: float | None,
-    t_end: float | None,
+    t_start: float | str | None,
+    t_end: float | str | None,
     quiet: bool = True,
     on_input: OnInput | None = None,
     **options: Any,
 ) -> RouteResult:
     """Parsed options → :func:`imutool.report.route.run_inclinometer_report`."""
     json_path = _paths(output, json_path)
-    load = {k: options.pop(k) for k in LOAD_OPTIONS}
+    load = {k: options.pop(k) for k in (*LOAD_OPTIONS, *REF_LOAD_OPTIONS)}
     with stages("report", ["reading", "evaluating", "writing"], quiet) as steps:
         return run_inclinometer_report(
             dut_path,
@@ -403,15 +413,15 @@ def heading_route(
     device: str | None,
     config_path: str | None,
     test_info_path: str | None,
-    t_start: float | None,
-    t_end: float | None,
+    t_start: float | str | None,
+    t_end: float | str | None,
     quiet: bool = True,
     on_input: OnInput | None = None,
     **options: Any,
 ) -> RouteResult:
     """Parsed options → :func:`imutool.report.route.run_heading_report`."""
     json_path = _paths(output, json_path)
-    load = {k: options.pop(k) for k in LOAD_OPTIONS}
+    load = {k: options.pop(k) for k in (*LOAD_OPTIONS, *REF_LOAD_OPTIONS)}
     with stages("report", ["reading", "evaluating", "writing"], quiet) as steps:
         return run_heading_report(
             dut_path,

@@ -204,12 +204,14 @@ def now_utc() -> str:
 
 
 def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> dict[str, Any]:
-    """Identification of one input: path, sha256, size, rows, rate, duration, channel used, metadata."""
+    """Identification of one input: path, sha256, size, rows, rate, duration, channel used, how it was loaded
+    (``loading``: the time and header options given, where its times came from, the files merged onto it; from
+    ``rec.meta["loading"]``, :func:`imutool.loading.how_loaded`), metadata."""
     if path is None:
         return {"path": None, "sha256": None, "kind": kind, "rows": int(len(rec)) if rec is not None else 0}
     if rec is None:
         return clean({"path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind})
-    meta = {k: v for k, v in rec.meta.items() if k not in ("validation",)}
+    meta = {k: v for k, v in rec.meta.items() if k not in ("validation", "loading")}
     return clean(
         {
             "path": os.fspath(path),
@@ -222,6 +224,7 @@ def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> 
             "channel": channel,
             "meta": meta,
             "validation": rec.meta.get("validation"),
+            **({"loading": rec.meta["loading"]} if rec.meta.get("loading") else {}),
         }
     )
 

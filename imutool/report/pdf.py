@@ -476,6 +476,10 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
                     f"{inp.get('channel', '-')}",
                 )
             )
+        if inp.get("loading"):
+            from imutool.loading import loading_text
+
+            pairs.append(("loaded", loading_text(inp["loading"])))
         L.kv(pairs)
     L.heading("Units, frames and sign conventions")
     L.kv([(k.replace("_", " "), _convention_text(k, v)) for k, v in ev["conventions"].items()])

@@ -14,7 +14,8 @@ from typing import Any
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, read_source
+from imutool.loading import FLAGS, how_loaded, split_reference_options
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input, load_reference
 
 from .common import sha256_of
 from .heading import HeadingOptions, heading_evidence
@@ -44,33 +45,87 @@ def identification(device: str | None, config: str | os.PathLike | None) -> dict
     return ident
 
 
-def evaluated_window(rec: Recording, t_start: float | None, t_end: float | None, path: str) -> Recording:
-    """``rec`` between ``t_start`` and ``t_end`` (s, recording clock; None = open); at least 10 samples."""
+WindowTime = float | str | None
+"""A report's ``--start``/``--end``: seconds on the recording's clock, or an ISO 8601 UTC time (a dated
+recording only)."""
+
+
+def window_time(value: WindowTime, rec: Recording, path: str, flag: str) -> float | None:
+    """``value`` as recording time (s): a number as it is; an ISO 8601 UTC time (``2014-08-01T12:00:00Z``) through
+    the recording's clock (:class:`imutool.clock.Clock`) — refused (ImutoolError) where the recording has no date,
+    and where it is neither."""
+    from imutool.clock import Clock, parse_utc
+
+    if value is None or (isinstance(value, (int, float)) and not isinstance(value, bool)):
+        return None if value is None else float(value)
+    text = str(value).strip()
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    unix = parse_utc(text)
+    if unix is None:
+        raise ImutoolError(f"{flag} {text!r}: expected seconds or a UTC date and time (e.g. 2014-08-01T12:00:00Z)")
+    clock = Clock.of(rec)
+    if not clock.dated:
+        raise ImutoolError(
+            f"{flag} {text}: a UTC clock time, but the recording has no date (its times count from its start); "
+            f"give {flag} in seconds",
+            path=path,
+        )
+    return clock.time_of(unix)
+
+
+def evaluated_window(rec: Recording, t_start: WindowTime, t_end: WindowTime, path: str) -> Recording:
+    """``rec`` between ``t_start`` and ``t_end`` (s on the recording's clock, or ISO 8601 UTC times where it has a
+    date: :func:`window_time`; None = open); at least 10 samples. A window that ends before it starts or lies
+    outside the recording is refused (ImutoolError naming ``path``)."""
+    from imutool.clock import Clock
+
     if t_start is None and t_end is None:
         return rec
-    out = rec.slice_time(t_start, t_end)
+    t0 = window_time(t_start, rec, path, "--start")
+    t1 = window_time(t_end, rec, path, "--end")
+    clock = Clock.of(rec)
+    if t0 is not None and t1 is not None and not t1 > t0:
+        raise ImutoolError(f"--end {t_end} is not after --start {t_start}", path=path)
+    if len(rec) and ((t0 is not None and t0 > rec.time[-1]) or (t1 is not None and t1 < rec.time[0])):
+        given = " ".join(f"{f} {v}" for f, v in (("--start", t_start), ("--end", t_end)) if v is not None)
+        raise ImutoolError(
+            f"{given}: outside the recording ({clock.text(rec.time[0])} … {clock.text(rec.time[-1])} {clock.unit}"
+            + (f", {clock.date()}" if clock.dated else f"; {rec.time[0]:.6g} … {rec.time[-1]:.6g} s on its clock")
+            + ")",
+            path=path,
+        )
+    out = rec.slice_time(t0, t1)
     if len(out) < 10:
         raise ImutoolError(f"fewer than 10 samples between --start {t_start} and --end {t_end}", path=path)
-    out.meta["evaluated_window_s"] = [t_start, t_end]
+    out.meta["evaluated_window_s"] = [t0, t1]
+    if isinstance(t_start, str) or isinstance(t_end, str):
+        out.meta["evaluated_window_utc"] = [clock.iso(t) if t is not None else None for t in (t0, t1)]
     return out
 
 
 def _load_pair(
     dut: str | os.PathLike | Recording,
     reference: str | os.PathLike | Recording,
-    t_start: float | None,
-    t_end: float | None,
+    t_start: WindowTime,
+    t_end: WindowTime,
     inputs: list[dict[str, Any]],
     strict: bool,
     on_input: OnInput | None,
     load_options: dict[str, Any],
 ) -> tuple[Recording, Recording, str, str]:
     """The DUT (mounting, calibration, the CSV time options and ``--with`` files applied) and the reference (none
-    of these: its own clock and header), windowed; with their names."""
+    of the DUT's: its own clock and header, read with the reference's options ``ref_rate_hz ... ref_with_files``,
+    :data:`imutool.loading.REF_LOAD_OPTIONS`), windowed; with their names. How each was loaded is in its
+    ``meta["loading"]`` (:func:`imutool.loading.how_loaded`)."""
+    load_options, ref_given = split_reference_options(load_options)
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
         raise TypeError(f"unexpected keyword argument(s) {', '.join(sorted(unknown))}")
-    recs, names = [], []
+    if ref_given and isinstance(reference, Recording):
+        raise TypeError("the reference's loading options apply to a file, not to a Recording already loaded")
     dut_only = (
         "mounting",
         "calibration_file",
@@ -80,11 +135,22 @@ def _load_pair(
         "with_files",
         "with_offsets",
     )
-    ref_options = {k: v for k, v in load_options.items() if k not in dut_only}
-    for src, opts in ((dut, load_options), (reference, ref_options)):
-        rec, name, _ = read_source(src, inputs, strict=strict, on_input=on_input, **opts)
-        recs.append(rec)
-        names.append(name)
+    ref_options = {k: v for k, v in load_options.items() if k not in dut_only} | ref_given
+    dut_given = {k: v for k, v in load_options.items() if k in FLAGS and v not in (None, (), [])}
+    recs, names = [], []
+    for src, opts, given, loader in (
+        (dut, load_options, dut_given, load_input),
+        (reference, ref_options, ref_given, load_reference),
+    ):
+        if isinstance(src, Recording):
+            recs.append(src)
+            names.append(str(src.meta.get("source", "<recording>")))
+        else:
+            name = os.fspath(src)
+            rec = loader(name, inputs, strict=strict, on_input=on_input, **opts)[0]
+            rec.meta["loading"] = how_loaded(rec, given, reference=loader is load_reference)
+            recs.append(rec)
+            names.append(name)
     d = evaluated_window(recs[0], t_start, t_end, names[0])
     r = evaluated_window(recs[1], t_start, t_end, names[1])
     return d, r, names[0], names[1]
@@ -124,8 +190,8 @@ def run_inclinometer_report(
     device: str | None = None,
     config: str | os.PathLike | None = None,
     test_info: str | None = None,
-    t_start: float | None = None,
-    t_end: float | None = None,
+    t_start: WindowTime = None,
+    t_end: WindowTime = None,
     strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
@@ -135,8 +201,11 @@ def run_inclinometer_report(
     ``output`` and the JSON ``json_path`` (default beside it). ``options``: every tolerance and tuning constant
     (:class:`InclinometerOptions`); ``steps_path``: CSV of the static heel steps (default detected);
     ``device``, ``config`` (file identified by sha256), ``test_info`` (test record TOML) identify the test;
-    ``t_start``/``t_end`` (s) the evaluated window. Paths are loaded with ``load_options`` (the reference without
-    mounting and calibration). ``exit_status``: 0 PASS, 1 FAIL or INCOMPLETE."""
+    ``t_start``/``t_end`` the evaluated window (s on the recordings' clock, or ISO 8601 UTC times where they have a
+    date). Paths are loaded with ``load_options`` (:data:`imutool.loading.LOAD_OPTIONS`; the reference without
+    mounting, calibration and the DUT's time, header and ``with`` options, but with its own ``ref_rate_hz``,
+    ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``, ``ref_with_offsets``). ``exit_status``: 0 PASS,
+    1 FAIL or INCOMPLETE."""
     pdf, jpath = evidence_paths(output, json_path)
     ident = identification(device, config)
     info = load_test_info(test_info)
@@ -176,8 +245,8 @@ def run_heading_report(
     device: str | None = None,
     config: str | os.PathLike | None = None,
     test_info: str | None = None,
-    t_start: float | None = None,
-    t_end: float | None = None,
+    t_start: WindowTime = None,
+    t_end: WindowTime = None,
     strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
