@@ -8,7 +8,8 @@ Factors (one at a time around a base cell, then the worst corners; not the full 
 - bridge height 10 / **20** / 30 m above the roll centre, 12 m aft (lever arm (−12, 0, −h) m, body FRD),
 - the speed source: **GNSS hull velocity** at 1 Hz with 0.05 m/s noise (sog/cog columns, sway in them), SOG/COG
   smoothed by the receiver to the track (no sway), only the ship's log speed (constant), none,
-- the lever arm given to the filter or not.
+- the lever arm given to the filter or not (then ``imutool filter`` estimates it from the motion), at every level
+  of the other four factors.
 
 Every voyage: heave ±2 m, pitch 3°, a 360° turn at 3 °/s and 8 m/s (from 180 s; 40 s in ``--quick``), MEMS noise
 and drifting biases, 100 Hz, 10 minutes (3 in ``--quick``). Scored after the first two minutes: roll and pitch
@@ -24,8 +25,8 @@ turn's centripetal acceleration U·r is removed along the body's y axis.
 
 Usage::
 
-    python benchmarks/attitude_ship.py --quick        # 3-minute voyages, 7 cells, 1 seed (~30 s on 2 cores)
-    python benchmarks/attitude_ship.py                # 10-minute voyages, 22 cells, seeds 0-2 (~2 min)
+    python benchmarks/attitude_ship.py --quick        # 3-minute voyages, 7 cells, 1 seed (~30 s; too short to estimate a lever arm)
+    python benchmarks/attitude_ship.py                # 10-minute voyages, 31 cells, seeds 0-2 (~2 min)
     python benchmarks/attitude_ship.py --param accel_lp_tau=5 --jobs 2
 """
 
@@ -73,6 +74,8 @@ def cells(quick: bool) -> list[dict]:
     out = [dict(BASE)]
     for factor, levels in LEVELS.items():
         out += [{**BASE, factor: v} for v in levels if v != BASE[factor]]
+        if factor not in ("speed", "lever"):  # every level also without the lever arm (it is estimated then)
+            out += [{**BASE, factor: v, "lever": False} for v in levels if v != BASE[factor]]
     out += [{**WORST, "speed": s, "lever": lv} for s in LEVELS["speed"] for lv in (True, False)]
     return out
 
