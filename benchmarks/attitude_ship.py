@@ -19,13 +19,11 @@ filter's self-check flags. imutool runs through the library route (:func:`imutoo
 causal) and offline VQF 6D (``pip install vqf``, benchmark-only) run on the same rows, told neither the lever arm
 nor the speed (they have no input for either).
 
-``log`` speed: ``imutool filter`` at fe3f71a has no ``--speed`` option; the cell is run as such an option would
-run: sog = the log's constant speed, cog = the heading of the filter's own first pass (magnetometer), so the
-turn's centripetal acceleration U·r is removed along the body's y axis.
+``log`` speed: ``imutool filter --speed`` (the log's constant speed, taken along the bow: the turn's term).
 
 Usage::
 
-    python benchmarks/attitude_ship.py --quick        # 3-minute voyages, 7 cells, 1 seed (~30 s; too short to estimate a lever arm)
+    python benchmarks/attitude_ship.py --quick        # 3-minute voyages, 7 cells, 1 seed (~30 s; no lever-arm estimate)
     python benchmarks/attitude_ship.py                # 10-minute voyages, 31 cells, seeds 0-2 (~2 min)
     python benchmarks/attitude_ship.py --param accel_lp_tau=5 --jobs 2
 """
@@ -121,12 +119,9 @@ def run_cell(job: tuple[dict, int, bool, dict]) -> dict:
     quiet = after & ((t < m["turn_start_s"]) | (t > turn_end + TURN_QUIET_S))
     prm = EkfParams(**overrides)
     lever = np.array(rec.meta["lever_arm_m"]) if c["lever"] else None
-    if c["speed"] == "log":  # the log's constant speed along the filter's own heading (see the module docstring)
-        first = run_filter(rec, params=prm, lever_arm=lever).recording
-        rec.add("sog", np.full(len(rec), float(rec.meta["log_speed_mps"])), "m/s")
-        rec.add("cog", np.mod(first["heading"], 360.0), "deg")
+    speed = float(rec.meta["log_speed_mps"]) if c["speed"] == "log" else None  # `filter --speed`
     t0 = time.perf_counter()
-    res = run_filter(rec, params=prm, lever_arm=lever)
+    res = run_filter(rec, params=prm, lever_arm=lever, speed=speed)
     ours = res.recording
     out = {"cell": c, "seed": seed, "filter_s": time.perf_counter() - t0}
     out["imutool"] = errors(ours["roll"], ours["pitch"], rec, after)

@@ -27,6 +27,7 @@ from formats import Recording
 from formats.csv import in_background
 from formats.errors import ImutoolError
 from formats.parquet import parquet_info
+from formats.units import factor_to_si
 from imutool.attitude import (
     EkfParams,
     SelfCheck,
@@ -40,6 +41,7 @@ from imutool.attitude import (
 from imutool.attitude.lever_estimate import LeverArmEstimate
 from imutool.attitude.motion import ANALYSIS_MAX_S, MotionChoice, choose_motion, params_for_motion
 from imutool.attitude.recording import (
+    LOG_SPEED,
     clipped_nan,
     drop_clipped,
     flag_clipped,
@@ -126,6 +128,7 @@ def run_filter(
     antenna_arm: Any = None,
     gnss: str | os.PathLike | None = None,
     use_gnss: bool = True,
+    speed: float | str | None = None,
     heading: str | os.PathLike | None = None,
     cutoff_hz: float = 0.5,
     order: int = 2,
@@ -144,7 +147,9 @@ def run_filter(
     ``smooth`` adds the zero-lag smoother (:func:`imutool.attitude.zero_lag_smooth`), ``lever_arm`` the sensor
     position from the centre of rotation, m, body FRD, ``antenna_arm`` the GNSS antenna's (default: the velocity
     is the centre's), ``gnss`` an NMEA/CSV file with sog (m/s)/cog (deg),
-    ``use_gnss=False`` ignores sog/cog, ``heading`` an NMEA (HDT/THS) or CSV file with heading_true (deg), a
+    ``use_gnss=False`` ignores sog/cog, ``speed`` the ship's speed through the water from its log (m/s, or a
+    string with a unit: "15 kn"; used along the bow for a turn's centripetal acceleration where the input has no
+    GNSS velocity), ``heading`` an NMEA (HDT/THS) or CSV file with heading_true (deg), a
     gyrocompass heading used instead of the magnetometer), ``lpf`` (Butterworth low-passed accelerometer tilt +
     magnetic heading, ``cutoff_hz``, ``order``), ``accel`` (unfiltered accelerometer tilt) or ``compass``
     (heading KF; ``compass`` an :class:`imutool.compass.CompassParams`; the deviation card of
@@ -164,6 +169,7 @@ def run_filter(
         raise ImutoolError(f"filter method {method!r}: expected one of {', '.join(METHODS)}")
     lever = _lever_arm(lever_arm)
     antenna = _lever_arm(antenna_arm, "antenna arm")
+    log_speed = parse_speed(speed)
     if method == "ekf":
         params = params if params is not None else EkfParams()
     if (
@@ -181,6 +187,7 @@ def run_filter(
             antenna_arm=antenna,
             strict=strict,
             progress=progress,
+            log_speed=log_speed,
             **{k: load_options.get(k) for k in STREAM_OPTIONS},
         )
         validation = summary.pop("validation")
@@ -202,6 +209,7 @@ def run_filter(
             rec = attach_gnss(rec, gnss)
         if heading is not None:
             rec = attach_heading(rec, heading)
+        rec = with_log_speed(rec, log_speed)
         out, s = ekf_recording(
             rec, params, smooth=smooth, use_gnss=use_gnss, lever_arm=lever, progress=progress, antenna_arm=antenna
         )
@@ -223,11 +231,43 @@ def run_filter(
         out, s = compass_recording(rec, compass if compass is not None else CompassParams(), dev)
         report(progress, len(rec), len(rec))
     summary.update(s)
+    if log_speed is not None:
+        summary["log_speed_mps"] = round(log_speed, 3)
     if validation.get("rows_with_nan"):
         summary["input_rows_with_nan"] = validation["rows_with_nan"]
     if output is not None:
         formats.write(out, output)
     return FilterResult(out, summary, validation)
+
+
+MAX_SPEED = 50.0  # m/s (97 kn): faster is not a ship's log
+
+
+def parse_speed(speed: float | str | None) -> float | None:
+    """A ship's speed through the water (m/s) from a number (m/s) or a string with a unit ("15 kn", "7.7 m/s");
+    None stays None. Refused (ImutoolError): not a number, an unknown unit, negative or above MAX_SPEED."""
+    if speed is None:
+        return None
+    text = str(speed).strip()
+    num = text.rstrip("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ/ ")
+    unit = text[len(num) :].strip() or "m/s"
+    try:
+        value = float(num) * factor_to_si(unit, "velocity")
+    except (ValueError, KeyError, ImutoolError):
+        raise ImutoolError(f"speed {speed!r}: expected a number in m/s or with a unit (15 kn, 7.7 m/s)") from None
+    if not 0.0 <= value <= MAX_SPEED:
+        raise ImutoolError(f"speed {speed!r}: expected 0 to {MAX_SPEED:g} m/s (a ship's log)")
+    return value
+
+
+def with_log_speed(rec: Recording, speed_mps: float | None) -> Recording:
+    """``rec`` with a constant ``log_speed`` channel (m/s) when a speed is given and it has none (the filter
+    takes it along the bow where there is no GNSS velocity)."""
+    if speed_mps is None or LOG_SPEED in rec.channels:
+        return rec
+    out = rec.copy()
+    out.add(LOG_SPEED, np.full(len(rec), speed_mps), "m/s")
+    return out
 
 
 def _lever_arm(lever_arm: Any, what: str = "lever arm") -> np.ndarray | None:
@@ -430,6 +470,7 @@ def stream_ekf(
     input_rate_hz: float | None = None,
     time_column: str | None = None,
     header_rows: int | None = None,
+    log_speed: float | None = None,
 ) -> dict[str, Any]:
     """Bounded-memory causal EKF over a large CSV/Parquet file: chunks streamed (Parquet by row groups), the
     filter state carried from chunk to chunk, rows appended to a .csv or .parquet output; returns the summary.
@@ -489,7 +530,7 @@ def stream_ekf(
             if len(chunk) == 0:
                 continue
             t_last = float(chunk.time[-1])
-            chunk = checks.prepare(chunk)
+            chunk = with_log_speed(checks.prepare(chunk), log_speed)
             for ch in ("gyro", "accel"):
                 if ch not in chunk.channels:
                     raise ImutoolError(f"the EKF needs channel {ch!r}", path=path)
@@ -538,7 +579,12 @@ def stream_ekf(
             )
             flag_clipped(res, clipped_rows)
             self_checks.add(
-                res, chunk["gyro"], mag_given="mag" in chunk.channels, gnss_used=vel is not None, heading_deg=heading
+                res,
+                chunk["gyro"],
+                mag_given="mag" in chunk.channels,
+                gnss_used=vel is not None,
+                heading_deg=heading,
+                speed_used=sog is not None and vel is None,
             )
             est = result_recording(chunk, res, params)
             est.meta["motion"] = summary["motion"]
@@ -571,6 +617,8 @@ def stream_ekf(
                 **({"warnings": everything} if everything else {}),
             }
         )
+    if log_speed is not None:
+        summary["log_speed_mps"] = round(log_speed, 3)
     summary["samples"] = summary["rows"]
     summary["validation"] = validation
     if warnings:

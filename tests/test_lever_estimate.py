@@ -112,3 +112,28 @@ def test_a_wrong_gyro_scale_is_not_taken_for_a_lever_arm():
     assert "gyro scale error" in refused and "x -" in refused, refused
     assert any("check the gyro's range and unit" in w for w in res.summary["warnings"]), res.summary["warnings"]
     assert "lever_arm_estimate" not in res.recording.meta or "refused" in res.recording.meta["lever_arm_estimate"]
+
+
+def test_the_logs_speed_removes_the_turn(tmp_path, capsys):
+    """No GNSS, only the log's speed (`filter --speed`): the turn's centripetal acceleration (8 m/s × 3 °/s: 2.4°
+    of false roll) is removed along the bow; without it the turn is said and costs > 1° RMS. Knots are read."""
+    from conftest import run_main
+
+    rec = _bridge(300.0, speed="log")
+    assert not {"sog", "cog", "vel_n"} & set(rec.channels)
+    lever = np.array(rec.meta["lever_arm_m"])
+    kn = rec.meta["log_speed_mps"] * 3600.0 / 1852.0
+    with_speed = run_filter(rec, lever_arm=lever, speed=f"{kn:.3f} kn")
+    without = run_filter(rec, lever_arm=lever)
+    assert _roll_errors(rec, without.recording)[0] > 1.0
+    rms, mx = _roll_errors(rec, with_speed.recording)
+    assert rms < 0.25 and mx < 1.0, (rms, mx)
+    assert "turns_without_speed_s" in without.summary and "turns_without_speed_s" not in with_speed.summary
+    src = tmp_path / "log.csv"
+    formats.write(rec, src)
+    for value, said in (("fast", "--speed 'fast': expected a number"), ("200", "--speed '200': expected 0 to 50")):
+        code, _, err = run_main(["filter", src, "-o", tmp_path / "o.csv", "--speed", value], capsys)
+        assert code == 2 and said in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "o.csv").exists()
+    code, _, err = run_main(["filter", src, "-o", tmp_path / "o.csv", "--speed", "15kn", "-q"], capsys)
+    assert code == 0 and "turn(s) without any speed" not in err, err

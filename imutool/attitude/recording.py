@@ -19,6 +19,7 @@ from imutool.attitude.smoother import zero_lag_smooth
 from imutool.loading import merged_warnings
 from imutool.progress import Progress
 
+LOG_SPEED = "log_speed"  # the channel of a speed through the water without a course (m/s): filter --speed
 SMOOTHER_BYTES_PER_SAMPLE = 1500  # measured: 1.42 kB/sample at peak (1 M samples, three N×6×6 arrays + outputs)
 
 
@@ -74,7 +75,8 @@ def gnss_inputs(rec: Recording, use_gnss: bool = True) -> tuple[np.ndarray | Non
     """(sog m/s, cog deg, velocity (N,2) m/s north/east) of a recording, each None where it has none.
 
     The velocity is ``vel_n``/``vel_e`` when present, else sog·(cos cog, sin cog); the EKF's velocity aiding
-    uses it (:func:`imutool.attitude.run.run_ekf`), the turn's compensation sog/cog."""
+    uses it (:func:`imutool.attitude.run.run_ekf`), the turn's compensation sog/cog. Without either, a
+    ``log_speed`` channel (the ship's log, ``filter --speed``) is the sog, with no course and no velocity."""
     if not use_gnss:
         return None, None, None
     sog = rec.in_unit("sog", "m/s") if "sog" in rec.channels and "cog" in rec.channels else None
@@ -87,6 +89,8 @@ def gnss_inputs(rec: Recording, use_gnss: bool = True) -> tuple[np.ndarray | Non
     elif sog is not None:
         c = np.radians(np.asarray(cog, dtype=np.float64))
         vel = np.stack([sog * np.cos(c), sog * np.sin(c)], axis=1)
+    elif LOG_SPEED in rec.channels:  # a speed without a course: along the bow, the turn's term only
+        return rec.in_unit(LOG_SPEED, "m/s"), None, None
     else:
         vel = None
     return sog, cog, vel
@@ -213,7 +217,14 @@ def ekf_recording(
     )
     flag_clipped(res, clipped_rows)
     summary = dict(res.summary)
-    checks.add(res, gyro, mag_given=mag is not None, gnss_used=vel is not None, heading_deg=heading_raw)
+    checks.add(
+        res,
+        gyro,
+        mag_given=mag is not None,
+        gnss_used=vel is not None,
+        heading_deg=heading_raw,
+        speed_used=sog is not None and vel is None,
+    )
     report = checks.report()
     summary.update(report.summary)
     warnings = report.warnings

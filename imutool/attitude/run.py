@@ -166,11 +166,11 @@ def initial_state(
 def _gnss_arrays(
     time: np.ndarray, sog: np.ndarray | None, cog_deg: np.ndarray | None, n: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    if sog is None or cog_deg is None:
+    if sog is None:
         z = np.full(n, np.nan)
         return z, z, z, False
     sog = np.asarray(sog, float)
-    cog = np.radians(np.asarray(cog_deg, float))
+    cog = np.full(n, np.nan) if cog_deg is None else np.radians(np.asarray(cog_deg, float))
     # tangential acceleration: derivative of SOG across GNSS fixes (held values: use the change points)
     ok = np.isfinite(sog)
     sogdot = np.zeros(n)
@@ -209,7 +209,8 @@ def run_ekf(
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
     :func:`rts_smooth`; 288 bytes/sample) and the compensated specific force (:func:`zero_lag_smooth`; 24
     bytes/sample); ``keep_force`` keeps the force alone (:mod:`imutool.gyro_check`). GNSS compensation is used when
-    ``sog`` (m/s) and ``cog_deg`` are given.
+    ``sog`` (m/s) and ``cog_deg`` are given; ``sog`` alone (a log's speed through the water) is taken along the bow
+    (the turn's centripetal acceleration, speed × the gyro's rate about the vertical).
     ``accel_measurement`` (N,3) m/s² body replaces the filter's causal low-pass as the accelerometer measurement
     (:func:`zero_lag_smooth`'s second pass).
     ``heading_deg`` (N,) an external true heading (gyrocompass; deg, NaN where none): when given, it is the
@@ -256,7 +257,8 @@ def run_ekf(
     # a heading held (magnetometer or external): the velocity can be turned into body axes; without one only the
     # speed along the bow is used (the turn's centripetal term), and no velocity aiding
     heading_held = bool(len(hdg) and np.isfinite(hdg).any()) or bool(use_mag and np.isfinite(m).all(axis=1).any())
-    gnss_code = np.int64(0 if not use_gnss else (1 if heading_held else 2))
+    # a speed without a course (the log's, --speed) is along the bow too
+    gnss_code = np.int64(0 if not use_gnss else (1 if heading_held and cog_deg is not None else 2))
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
     if not np.all(np.isfinite(lever)):
         raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")

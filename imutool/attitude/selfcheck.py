@@ -302,6 +302,7 @@ class SelfCheck:
         self.mag_spans = FlagSpans(params.mag_check_time)  # long magnetometer rejections
         self.new_fields: list[float] = []  # times the magnetometer's reference was replaced (s)
         self.gnss_used = self.mag_used = False  # SOG/COG given; a heading update (mag or external) taken
+        self.speed_used = False  # a speed without a course (--speed) given
         self.heading_given = self.mag_given = False  # a heading_true / mag channel in the input
         self.heading_updates = 0
         self.lag = HeadingLagTrack()  # the heading input's lag against the gyro
@@ -362,10 +363,12 @@ class SelfCheck:
         mag_given: bool,
         gnss_used: bool,
         heading_deg: np.ndarray | None = None,
+        speed_used: bool = False,
     ) -> None:
         """One chunk of the run, in time order: ``res`` its :class:`~imutool.attitude.AttitudeResult` (with the
         force: ``keep_force``), ``gyro`` (N,3) rad/s as filtered, ``mag_given`` a magnetometer channel in the
-        input, ``gnss_used`` SOG/COG used, ``heading_deg`` (N,) the external heading as it came (deg), or None."""
+        input, ``gnss_used`` SOG/COG used, ``heading_deg`` (N,) the external heading as it came (deg), or None,
+        ``speed_used`` a speed without a course (the log's: ``--speed``) used along the bow."""
         flags = res.flags
         if len(res.time):
             if not np.isfinite(self.t_first):
@@ -379,13 +382,14 @@ class SelfCheck:
         self.new_fields += [float(x) for x in res.time[has_flag(flags, SampleFlag.MAG_NEW_FIELD)]]
         self.mag_used = self.mag_used or bool(np.any(has_flag(flags, SampleFlag.MAG_USED | SampleFlag.HEADING_USED)))
         self.gnss_used = self.gnss_used or gnss_used
+        self.speed_used = self.speed_used or speed_used
         self.mag_given = self.mag_given or mag_given
         self.heading_updates += int(np.count_nonzero(has_flag(flags, SampleFlag.HEADING_USED)))
         if heading_deg is not None:
             self.heading_given = True
             self.lag.add(res.time, heading_deg, res.q, gyro, res.bias)
         self._add_scale(res.time, gyro, res.bias, res.force)
-        if self.motion == "ship" and not gnss_used and len(res.time):
+        if self.motion == "ship" and not (gnss_used or speed_used) and len(res.time):
             self._add_turns(res.time, res.q, gyro, res.bias)
         for k, v in res.summary.items():  # the state carries cumulative counters (and the tilt check's maximum)
             if isinstance(v, bool):  # a switch (gnss_compensation): on if on in any chunk
@@ -455,13 +459,13 @@ class SelfCheck:
         warnings += tilt_check(self.totals, params)
         warnings += gnss_heading_check(self.gnss_used, self.mag_used)
         turns = [sp for sp in self.turns.spans if sp[1] - sp[0] >= TURN_MIN_S]  # the last one may still be short
-        if turns and not self.gnss_used:
+        if turns and not (self.gnss_used or self.speed_used):
             summary["turns_without_speed_s"] = [[round(a, 1), round(b, 1)] for a, b in turns[:20]]
             warnings.append(
                 f"{len(turns)} turn(s) without any speed input ({_spans_text(turns)}, up to "
                 f"{self.turn_rate_max:.1f} °/s): a turn's centripetal acceleration (speed × rate of turn) reads as "
                 "roll, 0.1° per m/s of speed per °/s of turn (8 m/s at 3 °/s: 2.4°); give the ship's velocity "
-                "(sog/cog or vel_n/vel_e columns, --gnss FILE)"
+                "(sog/cog or vel_n/vel_e columns, --gnss FILE) or the log's speed (--speed)"
             )
         check, more = self.scale.report()
         summary.update(check)

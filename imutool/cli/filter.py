@@ -108,6 +108,13 @@ from imutool.routes import OnInput, RouteResult
 )
 @click.option("--no-gnss", is_flag=True, help="EKF: ignore sog/cog and vel_n/vel_e even when present.")
 @click.option(
+    "--speed",
+    default=None,
+    metavar="SPEED",
+    help="EKF: the ship's speed through the water from its log, m/s or with a unit ('15kn'): where the input has "
+    "no GNSS velocity, a turn's centripetal acceleration (speed × rate of turn, along the bow) is removed.",
+)
+@click.option(
     "--heading",
     "heading_path",
     type=click.Path(exists=True, dir_okay=False),
@@ -183,6 +190,7 @@ def filter_route(
     gnss_path: str | None,
     no_gnss: bool,
     heading_path: str | None,
+    speed: str | None,
     cutoff: float,
     order: int,
     compass_model: str,
@@ -201,7 +209,7 @@ def filter_route(
     the EKF's parameters from --params/--param (the file's migration notes on stderr unless ``quiet``), the
     lever arm, the compass model, --save-params written."""
     from imutool.compass import CompassParams  # here, not at the top: `imutool filter --help` loads no numba
-    from imutool.filtering import run_filter
+    from imutool.filtering import parse_speed, run_filter
 
     params, notes = ekf_params_and_notes(params_file, param_items, update_every, mag_mode)
     if not quiet:
@@ -213,6 +221,10 @@ def filter_route(
     antenna = parse_vector(antenna_arm, 3, "--antenna-arm") if antenna_arm else None
     if antenna is not None and not np.all(np.isfinite(antenna)):
         raise ImutoolError(f"--antenna-arm {antenna_arm!r}: expected three finite numbers (m)")
+    try:
+        speed_mps = parse_speed(speed)
+    except ImutoolError as e:
+        raise ImutoolError(f"--{e}") from None
     if save_params:
         with atomic_path(save_params) as tmp:
             tmp.write_text(params.to_toml(), encoding="utf-8")
@@ -233,6 +245,7 @@ def filter_route(
         antenna_arm=antenna,
         gnss=gnss_path if gnss_path and not no_gnss else None,
         use_gnss=not no_gnss,
+        speed=speed_mps,
         heading=heading_path,
         cutoff_hz=cutoff,
         order=order,
