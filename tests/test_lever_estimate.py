@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_velocity_aiding import voyage
 
 import formats
 from imutool.attitude import EkfParams
@@ -13,19 +14,9 @@ from imutool.sim import simulate
 
 
 def _bridge(seconds: float = 300.0, speed: str = "gnss", seed: int = 0):
-    """A bridge sensor 12 m aft and 30 m above the roll centre, 30° roll, 1.5 m of sway at 6 s (the grid's worst
-    corner), a turn from 40 s."""
-    return simulate(
-        "ship-at-sea",
-        duration=seconds,
-        seed=seed,
-        lever_arm=(-12.0, 0.0, -30.0),
-        roll_significant_deg=30.0,
-        sway_m=1.5,
-        sway_period=6.0,
-        turn_start=40.0,
-        speed_source=speed,
-    )
+    """The ship grid's worst corner (bridge 12 m aft and 30 m above the roll centre, 30° roll, 1.5 m of sway at
+    6 s, a turn from 40 s), ``seconds`` long."""
+    return voyage(speed, duration=seconds, seed=seed)
 
 
 def _roll_errors(rec, out) -> tuple[float, float]:
