@@ -16,6 +16,8 @@ One concept per module (docs/architecture.md, "The attitude package"):
 - :mod:`~imutool.attitude.selfcheck` — :class:`SelfCheck`, the one accumulator of the self-check reports
   (inconsistency, heading, new field, tilt, GNSS, heading source and lag, gyro scale) for the memory and streamed
   runs, :func:`output_metadata`, and the per-sample flags by name (:class:`SampleFlag`).
+- :mod:`~imutool.attitude.motion` — ship or hand-held, told from the gyro (the low-pass's delay);
+  :mod:`~imutool.attitude.lever_estimate` — a ship's lever arm from its motion when none is given.
 - :mod:`~imutool.attitude.recording` — :func:`ekf_recording`: the filter over a Recording, output channels.
 
 Frames and units: body FRD, world NED, q = [w, x, y, z] body→NED; gyro rad/s, accel m/s², mag µT, time s.
