@@ -438,6 +438,7 @@ def test_reference_with_foreign_column_names_mapped_with_ref_columns(tmp_path, c
     mapping = "HeelDeg=roll:deg,TrimDeg=pitch:deg"
     code, out, ev = _report(capsys, tmp_path, [dut, "--reference", str(log), "--ref-columns", mapping])
     assert code == 1, out
+    jsonschema.validate(ev, load_schema())
     dyn = items(ev)["dynamic_heel"]["stats"]
     assert dyn["n"] == 240 and dyn["rmse"] == pytest.approx(0.20, abs=1e-6)
     assert ev["inputs"]["reference"]["loading"]["options"] == {"--ref-columns": mapping}
