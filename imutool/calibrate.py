@@ -459,7 +459,7 @@ def deviation_card(
     """Deviation card δ(ψ) = A + B sinψ + C cosψ + D sin2ψ + E cos2ψ (deg; magnetic = compass + δ) from the
     compass heading of ``source`` (``heading_column``, else 'heading', else the tilt-compensated magnetometer)
     against reference headings (``reference`` file: NMEA HDT/THS/HDM..., or a CSV column; default a reference
-    column of the input). The reference file is read as it is, or, given any of its own options (``ref_rate_hz``
+    column of the input). The reference file is read as it is, or, given any of its own options (``ref_columns``
     ... ``ref_start``, :data:`imutool.loading.REF_LOAD_OPTIONS`), loaded with them as an input is (the summary's
     ``reference_loading`` says how).
 

@@ -139,8 +139,9 @@ def run_evaluate(
     A path ``estimate`` is loaded as every command's input (:func:`imutool.loading.load_recording` with
     ``load_options``: ``--columns ... --rate --time-column --header-rows --with``; ``strict``; ``on_input(path,
     report)`` after it); the reference is read as it is (:func:`load_for_evaluation`), or, given any of the
-    reference's options (``ref_rate_hz``, ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``,
-    ``ref_with_offsets``, ``ref_start``: :data:`imutool.loading.REF_LOAD_OPTIONS`; a path only), loaded with them
+    reference's options (``ref_columns``, ``ref_profile``, ``ref_rate_hz``, ``ref_time_column``,
+    ``ref_header_rows``, ``ref_with_files``, ``ref_with_offsets``, ``ref_start``:
+    :data:`imutool.loading.REF_LOAD_OPTIONS`; a path only), loaded with them
     as an input is (time order as :func:`load_for_evaluation` puts it; ``reference_loading`` in the summary says
     how)."""
     load_options, ref_given = split_reference_options(load_options)

@@ -47,6 +47,8 @@ recording takes."""
 CSV_ONLY = {"rate_hz": "--rate", "time_column": "--time-column", "header_rows": "--header-rows"}
 
 REF_LOAD_OPTIONS = {
+    "ref_columns": ("columns", "--ref-columns"),
+    "ref_profile": ("profile", "--ref-profile"),
     "ref_rate_hz": ("input_rate_hz", "--ref-rate"),
     "ref_time_column": ("time_column", "--ref-time-column"),
     "ref_header_rows": ("header_rows", "--ref-header-rows"),
@@ -56,11 +58,18 @@ REF_LOAD_OPTIONS = {
 }
 """How a command's second recording (its reference: ``evaluate``, ``report inclinometer|heading``) is loaded: each
 option → (the :func:`load_recording` parameter it sets for the reference, its command-line flag). The reference
-goes through :func:`load_recording` as the main input does, with these in place of ``--rate ... --with``;
-``start`` (``--ref-start``) then puts its first row at a given time (:func:`starting_at`): a clockless reference
-on the input's clock."""
+goes through :func:`load_recording` as the main input does, with these in place of ``--columns ... --with``
+(``columns``/``profile``: its own column mapping, given in place of the input's — where a command lets the reference
+inherit the input's mapping, :data:`MAPPING`, either one replaces both); ``start`` (``--ref-start``) then puts its
+first row at a given time (:func:`starting_at`): a clockless reference on the input's clock."""
+
+MAPPING = ("columns", "profile")
+"""The :func:`load_recording` options of a foreign CSV's column mapping (``--columns``, ``--profile``): a reference
+given either of its own (``--ref-columns``, ``--ref-profile``) takes neither of the input's."""
 
 FLAGS = {
+    "columns": "--columns",
+    "profile": "--profile",
     "input_rate_hz": "--rate",
     "time_column": "--time-column",
     "header_rows": "--header-rows",
@@ -68,7 +77,8 @@ FLAGS = {
     "with_offsets": "--with-offset",
     "start": "--start",
 }
-"""The command-line flag of each loading option that says how a file's times and header are read."""
+"""The command-line flag of each loading option that says how a file's columns, times and header are read (what
+:func:`how_loaded` records)."""
 
 
 def load_recording(
@@ -437,16 +447,20 @@ def split_reference_options(options: dict[str, Any]) -> tuple[dict[str, Any], di
     return rest, reference_load_options(ref)
 
 
-def reference_text(text: str) -> str:
-    """``text`` (an error or a note about loading) with the main input's time and header flags named as the
-    reference's (``--rate`` → ``--ref-rate``, ``--with`` → ``--ref-with`` ...): what a user of the reference
-    typed."""
-    return re.sub(r"(?<![\w-])--(rate|time-column|header-rows|with-offset|with|start)(?![\w-])", r"--ref-\1", text)
+def reference_text(text: str, inherited: tuple[str, ...] | list[str] = ()) -> str:
+    """``text`` (an error or a note about loading) with the main input's loading flags named as the reference's
+    (``--columns`` → ``--ref-columns``, ``--rate`` → ``--ref-rate``, ``--with`` → ``--ref-with`` ...): what a user
+    of the reference typed. ``inherited``: the :func:`load_recording` options the reference took from the input
+    (its ``columns``/``profile`` where a command lets it inherit them): their flags stay the input's."""
+    keep = {FLAGS[k] for k in inherited if k in FLAGS}
+    names = [re.escape(f[2:]) for f in FLAGS.values() if f not in keep]
+    return re.sub(rf"(?<![\w-])--({'|'.join(names)})(?![\w-])", r"--ref-\1", text)
 
 
 def how_loaded(rec: Recording, given: dict[str, Any], reference: bool = False) -> dict[str, Any]:
-    """How a recording was loaded, for a report's JSON/PDF and a summary: ``options`` (the time and header options
-    given — :func:`load_recording` names — by flag; ``reference``: the reference's flags, ``--ref-rate`` ...),
+    """How a recording was loaded, for a report's JSON/PDF and a summary: ``options`` (the column mapping, time and
+    header options given — :func:`load_recording` names — by flag; ``reference``: the reference's flags,
+    ``--ref-columns``, ``--ref-rate`` ...),
     ``time`` (where its times came from: its reader's ``time_source``), ``dated`` (whether its times give a UTC
     clock time, :class:`imutool.clock.Clock`) and ``merged`` (each ``--with`` file, its channels and clock
     offset, s)."""

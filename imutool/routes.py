@@ -100,19 +100,23 @@ def load_reference(
     *,
     strict: bool = False,
     on_input: OnInput | None = None,
+    inherited: tuple[str, ...] = (),
     **load_options: Any,
 ) -> tuple[Recording, dict[str, Any]]:
     """:func:`load_input` of a command's second recording, its reference (``evaluate --reference``, the reports'
-    ``--reference``): the same loading, its errors naming the reference's flags (``--ref-rate``, ``--ref-with``
-    ...: :func:`imutool.loading.reference_text`); ``start`` (``--ref-start``: seconds on the input's clock or an
-    ISO 8601 UTC time) puts its first row there (:func:`imutool.loading.starting_at`)."""
+    ``--reference``): the same loading, its errors naming the reference's flags (``--ref-columns``, ``--ref-rate``,
+    ``--ref-with`` ...: :func:`imutool.loading.reference_text`; ``inherited``: the options in ``load_options`` taken
+    from the input, e.g. its ``columns``, named by the input's flags); ``start`` (``--ref-start``: seconds on the
+    input's clock or an ISO 8601 UTC time) puts its first row there (:func:`imutool.loading.starting_at`)."""
     start = load_options.pop("start", None)
     try:
         rec, report = load_input(path, inputs, strict=strict, on_input=on_input, **load_options)
         if start is not None:
             rec = starting_at(rec, start, os.fspath(path))
     except ImutoolError as e:
-        err = ImutoolError(reference_text(str(e)))
+        if e.path is None:  # an error about the reference (its mapping ...): name it
+            raise ImutoolError(reference_text(str(e), inherited), path=os.fspath(path)) from None
+        err = ImutoolError(reference_text(str(e), inherited))
         err.path, err.line = e.path, e.line
         raise err from None
     return rec, report

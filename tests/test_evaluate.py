@@ -168,3 +168,49 @@ def test_reference_loading_options(tmp_path, capsys):
     assert code == 2 and "--ref-with-offset is the clock offset of a --ref-with FILE" in err
     code, err = run("evaluate", str(est), "--ref-rate", "10")
     assert code == 2 and "--ref-rate: say how to read a reference file; give the file with --reference" in err
+
+
+def test_reference_column_mapping(tmp_path, capsys):
+    """A reference whose roll and pitch have foreign names (a ship's log: Time_s, HeelDeg, TrimDeg) mapped with
+    --ref-columns (or --ref-profile), the estimate's own names untouched; without it nothing is compared."""
+    import json
+
+    from imutool.cli import main
+    from imutool.evaluation import run_evaluate
+
+    def run(*args: str) -> tuple[int, str]:
+        try:
+            main(list(args))
+            code = 0
+        except SystemExit as e:
+            code = int(e.code or 0)
+        out, err = capsys.readouterr()
+        return code, out if not code else err
+
+    t = np.arange(0.0, 30.0, 0.1)
+    roll, pitch = 10 * np.sin(t), 3 * np.cos(t)
+    est = tmp_path / "est.csv"
+    est.write_text(
+        "time,roll,pitch\n" + "".join(f"{a:.1f},{b + 0.5},{c - 0.2}\n" for a, b, c in zip(t, roll, pitch, strict=True))
+    )
+    ref = tmp_path / "shiplog.csv"
+    ref.write_text(
+        "Time_s,HeelDeg,TrimDeg\n" + "".join(f"{a:.1f},{b},{c}\n" for a, b, c in zip(t, roll, pitch, strict=True))
+    )
+    mapping = "HeelDeg=roll:deg,TrimDeg=pitch:deg"
+    code, err = run("evaluate", str(est), "--reference", str(ref))
+    assert code == 2 and "nothing to compare" in err
+    code, out = run("evaluate", str(est), "--reference", str(ref), "--ref-columns", mapping, "--json")
+    assert code == 0, out
+    s = json.loads(out)
+    assert abs(s["angles"]["roll"]["rmse"] - 0.5) < 1e-9 and abs(s["angles"]["pitch"]["rmse"] - 0.2) < 1e-9
+    assert s["reference_loading"]["options"] == {"--ref-columns": mapping}
+    profile = tmp_path / "shiplog.toml"
+    profile.write_text('[columns]\nHeelDeg = { to = "roll", unit = "deg" }\nTrimDeg = { to = "pitch", unit = "deg" }\n')
+    lib = run_evaluate(est, ref, ref_profile=str(profile)).summary
+    assert abs(lib["angles"]["roll"]["rmse"] - 0.5) < 1e-9 and lib["reference_loading"]["options"] == {
+        "--ref-profile": str(profile)
+    }
+    # a mapping error names the reference and its flag
+    code, err = run("evaluate", str(est), "--reference", str(ref), "--ref-columns", "Heel=roll:deg")
+    assert code == 2 and f"{ref}: --ref-columns: no column 'Heel' in the file" in err

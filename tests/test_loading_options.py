@@ -147,6 +147,8 @@ def test_every_command_with_a_reference_file_takes_the_reference_loading_options
 
     flags = {flag for _, flag in REF_LOAD_OPTIONS.values()}
     assert flags == {
+        "--ref-columns",
+        "--ref-profile",
         "--ref-rate",
         "--ref-time-column",
         "--ref-header-rows",
@@ -160,3 +162,35 @@ def test_every_command_with_a_reference_file_takes_the_reference_loading_options
     assert reference_text("give --rate HZ or --time-column; --with-offset per --with; --ref-rate") == (
         "give --ref-rate HZ or --ref-time-column; --ref-with-offset per --ref-with; --ref-rate"
     )
+    assert reference_text("--columns: no column 'X'; --profile P") == "--ref-columns: no column 'X'; --ref-profile P"
+    # where the reference took the input's mapping (a report without --ref-columns), the input's flag is kept
+    assert reference_text("--columns: no column 'X'", inherited=("columns",)) == "--columns: no column 'X'"
+
+
+def test_the_reference_mapping_replaces_the_inputs_or_is_inherited(monkeypatch):
+    """--ref-columns/--ref-profile are the reference's column mapping in place of the input's --columns/--profile
+    (either replaces both); a report's reference without them takes the input's, as before (its errors then name
+    the input's flags: ``inherited``)."""
+    from formats import Recording
+    from imutool.loading import split_reference_options
+    from imutool.report import route
+
+    rest, ref = split_reference_options({"columns": "A=roll:deg", "ref_columns": "B=roll:deg", "ref_profile": None})
+    assert rest == {"columns": "A=roll:deg"} and ref == {"columns": "B=roll:deg"}
+    seen: list[tuple] = []
+
+    def load(name, inputs, *, strict, on_input, inherited=(), **opts):
+        seen.append((name, opts.get("columns"), opts.get("profile"), inherited))
+        return Recording(np.arange(20.0), {"roll": np.zeros(20)}), {}
+
+    monkeypatch.setattr(route, "load_input", lambda *a, **k: load(*a, **k))
+    monkeypatch.setattr(route, "load_reference", load)
+    dut = {"columns": None, "profile": "dut.toml"}
+    for ref_given, expect in (
+        ({}, ("r.csv", None, "dut.toml", ("profile",))),
+        ({"ref_columns": "B=roll:deg"}, ("r.csv", "B=roll:deg", None, ())),
+        ({"ref_profile": "ref.toml"}, ("r.csv", None, "ref.toml", ())),
+    ):
+        seen.clear()
+        route._load_pair("d.csv", "r.csv", None, None, [], False, None, dut | ref_given)
+        assert seen == [("d.csv", None, "dut.toml", ()), expect], ref_given

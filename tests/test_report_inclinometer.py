@@ -421,3 +421,42 @@ def test_report_window_refusals(tmp_path, capsys):
     code, out, _ = _report(capsys, tmp_path, [str(nodate), "--reference", ref, "--start", "2014-08-01T12:00:30Z"])
     assert code == 2 and len(out.strip().splitlines()) == 1
     assert "nodate.csv: --start 2014-08-01T12:00:30Z: a UTC clock time, but the recording has no date" in out
+
+
+def test_reference_with_foreign_column_names_mapped_with_ref_columns(tmp_path, capsys):
+    """An NMEA DUT (no --columns of its own to lend) against a ship's CSV log whose roll/pitch are HeelDeg/TrimDeg:
+    --ref-columns maps them. A CSV DUT's --profile is not the reference's once it has its own mapping; without
+    one, the reference takes the DUT's as before."""
+    ref_roll = _table_roll(240)
+    dut = _seapath_log(tmp_path / "seapath.nmea", ref_roll + 0.20)
+    log = tmp_path / "shiplog.csv"
+    log.write_text(
+        "Time_s,HeelDeg,TrimDeg\n" + "".join(f"{T_2014 + k / 2:.2f},{r:.2f},0.50\n" for k, r in enumerate(ref_roll))
+    )
+    code, out, _ = _report(capsys, tmp_path, [dut, "--reference", str(log)])
+    assert code == 2 and "needs a 'roll' or 'heel' channel" in out
+    mapping = "HeelDeg=roll:deg,TrimDeg=pitch:deg"
+    code, out, ev = _report(capsys, tmp_path, [dut, "--reference", str(log), "--ref-columns", mapping])
+    assert code == 1, out
+    jsonschema.validate(ev, load_schema())
+    dyn = items(ev)["dynamic_heel"]["stats"]
+    assert dyn["n"] == 240 and dyn["rmse"] == pytest.approx(0.20, abs=1e-6)
+    assert ev["inputs"]["reference"]["loading"]["options"] == {"--ref-columns": mapping}
+    assert "reference loaded: --ref-columns HeelDeg=roll:deg,TrimDeg=pitch:deg" in out
+    # a CSV DUT with a profile of its own: the reference's --ref-columns replaces it (the profile's columns are
+    # not in the ship's log); without --ref-columns the reference inherits the DUT's mapping, as before
+    dut_csv = tmp_path / "dut.csv"
+    dut_csv.write_text(
+        "t,Krängung\n" + "".join(f"{T_2014 + k / 2:.2f},{r + 0.2:.2f}\n" for k, r in enumerate(ref_roll))
+    )
+    profile = tmp_path / "dut.toml"
+    profile.write_text('[columns]\n"Krängung" = { to = "roll", unit = "deg" }\nt = "time"\n')
+    args = [str(dut_csv), "--profile", str(profile), "--reference", str(log)]
+    code, out, _ = _report(capsys, tmp_path, args)
+    assert code == 2 and "column 'Krängung' named in the profile is not in the file" in out  # the log's
+    code, out, ev = _report(capsys, tmp_path, [*args, "--ref-columns", mapping])
+    assert code == 1, out
+    assert items(ev)["dynamic_heel"]["stats"]["rmse"] == pytest.approx(0.20, abs=1e-6)
+    assert ev["inputs"]["dut"]["loading"]["options"] == {"--profile": str(profile)}
+    code, out, ev = _report(capsys, tmp_path, [str(dut_csv), "--profile", str(profile), "--reference", str(dut_csv)])
+    assert code == 2 and "a device cannot be its own reference" in out  # the reference read with the DUT's profile

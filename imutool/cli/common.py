@@ -137,6 +137,20 @@ def reference_options(f: Callable) -> Callable:
     :func:`imutool.routes.load_reference`)."""
     opts = [
         click.option(
+            "--ref-columns",
+            default=None,
+            metavar="MAP",
+            help="The reference CSV's column mapping, e.g. 'HeelDeg=roll:deg,TrimDeg=pitch:deg' (as --columns); "
+            "with --ref-profile, in place of the input's --columns/--profile (a report's reference otherwise "
+            "takes the input's).",
+        ),
+        click.option(
+            "--ref-profile",
+            default=None,
+            type=click.Path(exists=True, dir_okay=False),
+            help="TOML sensor profile with the reference's column/unit mapping (as --profile).",
+        ),
+        click.option(
             "--ref-rate",
             "ref_rate_hz",
             type=FiniteFloat(min=0, min_open=True),

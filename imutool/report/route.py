@@ -14,7 +14,7 @@ from typing import Any
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import FLAGS, how_loaded, split_reference_options
+from imutool.loading import FLAGS, MAPPING, how_loaded, split_reference_options
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input, load_reference
 
 from .common import sha256_of
@@ -117,8 +117,9 @@ def _load_pair(
     load_options: dict[str, Any],
 ) -> tuple[Recording, Recording, str, str]:
     """The DUT (mounting, calibration, the CSV time options and ``--with`` files applied) and the reference (none
-    of the DUT's: its own clock and header, read with the reference's options ``ref_rate_hz ... ref_with_files``,
-    :data:`imutool.loading.REF_LOAD_OPTIONS`), windowed; with their names. How each was loaded is in its
+    of those: its own clock and header, read with the reference's options ``ref_columns ... ref_with_files``,
+    :data:`imutool.loading.REF_LOAD_OPTIONS`; the DUT's column mapping, ``--columns``/``--profile``, unless it is
+    given its own, ``ref_columns``/``ref_profile``), windowed; with their names. How each was loaded is in its
     ``meta["loading"]`` (:func:`imutool.loading.how_loaded`)."""
     load_options, ref_given = split_reference_options(load_options)
     unknown = set(load_options) - set(LOAD_OPTIONS)
@@ -135,7 +136,11 @@ def _load_pair(
         "with_files",
         "with_offsets",
     )
-    ref_options = {k: v for k, v in load_options.items() if k not in dut_only} | ref_given
+    own_mapping = any(k in ref_given for k in MAPPING)  # --ref-columns/--ref-profile: neither of the DUT's
+    ref_options = {
+        k: v for k, v in load_options.items() if k not in dut_only and not (own_mapping and k in MAPPING)
+    } | ref_given
+    inherited = tuple(k for k in MAPPING if ref_options.get(k) and k not in ref_given)
     dut_given = {k: v for k, v in load_options.items() if k in FLAGS and v not in (None, (), [])}
     recs, names = [], []
     for src, opts, given, loader in (
@@ -147,7 +152,8 @@ def _load_pair(
             names.append(str(src.meta.get("source", "<recording>")))
         else:
             name = os.fspath(src)
-            rec = loader(name, inputs, strict=strict, on_input=on_input, **opts)[0]
+            more = {"inherited": inherited} if loader is load_reference else {}
+            rec = loader(name, inputs, strict=strict, on_input=on_input, **more, **opts)[0]
             rec.meta["loading"] = how_loaded(rec, given, reference=loader is load_reference)
             recs.append(rec)
             names.append(name)
@@ -204,8 +210,8 @@ def run_inclinometer_report(
     ``t_start``/``t_end`` the evaluated window (s on the recordings' clock, or ISO 8601 UTC times where they have a
     date). Paths are loaded with ``load_options`` (:data:`imutool.loading.LOAD_OPTIONS`; the reference without
     mounting, calibration and the DUT's time, header and ``with`` options, but with its own ``ref_rate_hz``,
-    ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``, ``ref_with_offsets``). ``exit_status``: 0 PASS,
-    1 FAIL or INCOMPLETE."""
+    ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``, ``ref_with_offsets``; the DUT's column mapping
+    unless given its own ``ref_columns``/``ref_profile``). ``exit_status``: 0 PASS, 1 FAIL or INCOMPLETE."""
     pdf, jpath = evidence_paths(output, json_path)
     ident = identification(device, config)
     info = load_test_info(test_info)
