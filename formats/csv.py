@@ -900,45 +900,77 @@ class CsvWriter(AtomicChunkWriter):
     Usage: ``with CsvWriter(path) as w: w.write(chunk) ...`` — the header comes from the first chunk.
     ``background=True``: formatting and writing of a chunk overlap the caller's next chunk (one in flight).
     Metadata handed to :meth:`set_final_meta` (known only at the end: a streamed run's warnings) replace the first
-    chunk's keys in the header at close: the file is written once more, the final header followed by the rows
-    copied in large blocks (in the kernel where it can: ``os.copy_file_range``), so a person opening it sees one
-    clean header — no line kept blank for them, no key twice (``benchmarks/stream_header.py`` measures the copy).
+    chunk's keys in the header, so a person opening the file sees one clean header — no line kept blank for them,
+    no key twice. The rows written before they were known are copied once behind the final header, in a new file
+    (in large blocks, in the kernel where it can: ``os.copy_file_range``; ``benchmarks/stream_header.py`` measures
+    the copy); rows written after go straight behind it. So a stream that knows its final metadata before its last
+    chunk (:func:`imutool.filtering.stream_ekf` looks one chunk ahead) hands them over before writing that chunk,
+    and only the rows before it are copied.
     """
 
     def __init__(self, path: str, background: bool = False):
         super().__init__(path, background, "imutool-writer")
-        self._f = open(self._tmp, "wb")
-        self._head: Recording | None = None  # the first chunk without rows: its header, rebuilt at close
-        self._head_len = 0
+        self._cur = str(self._tmp)  # the file the rows go to: the temporary file, or its rewrite behind a new header
+        self._f = open(self._cur, "wb")
+        self._head: Recording | None = None  # the first chunk without rows: its header, rebuilt with final_meta
+        self._head_bytes = b""  # the header the current file starts with
+
+    def _header(self) -> bytes:
+        """The header of the first chunk with the final metadata merged in (a key of the first chunk keeps its
+        place, new keys follow)."""
+        assert self._head is not None
+        first = self._head.meta
+        self._head.meta = {**first, **self.final_meta}
+        try:
+            return header_text(self._head).encode("utf-8")
+        finally:
+            self._head.meta = first
 
     def _first(self, rec: Recording) -> None:
-        head = header_text(rec).encode("utf-8")
-        self._f.write(head)
-        self._head_len = len(head)
         self._head = rec.select(slice(0, 0))
         self._head.meta = dict(rec.meta)
+        head = self._header() if self.final_meta else header_text(rec).encode("utf-8")
+        self._f.write(head)
+        self._head_bytes = head
+
+    def _rewrite(self, head: bytes) -> None:
+        """Start a new file with ``head`` and the current file's rows copied behind it; it becomes the current
+        file (open for more rows) and the old one is removed."""
+        self._f.close()
+        old = self._cur
+        self._cur = str(self._tmp) + (".meta" if old == str(self._tmp) else "")
+        self._f = open(self._cur, "wb")
+        self._f.write(head)
+        with open(old, "rb") as src:
+            copy_range(src, self._f, len(self._head_bytes))
+        self._head_bytes = head
+        if old != str(self._tmp):  # the temporary file itself stays: atomic_path renames or removes it
+            os.unlink(old)
 
     def _write_chunk(self, rec: Recording) -> None:
+        if self.final_meta:
+            head = self._header()
+            if head != self._head_bytes:
+                self._rewrite(head)
         _write_rows(self._f, rec)
 
     def _finish(self) -> None:
+        if self._started and self._head is not None and self.final_meta:
+            head = self._header()
+            if head != self._head_bytes:  # metadata given after the last row: the rows copied behind them
+                self._rewrite(head)
         self._f.close()
-        if not self.final_meta or not self._started or self._head is None:  # nothing written: no header to fill
-            return
-        self._head.meta.update(self.final_meta)  # a key of the first chunk keeps its place, new keys follow
-        head = header_text(self._head).encode("utf-8")
-        moved = str(self._tmp) + ".meta"
-        try:
-            with open(self._tmp, "rb") as src, open(moved, "wb") as dst:
-                dst.write(head)
-                copy_range(src, dst, self._head_len)
-            os.replace(moved, self._tmp)
-        finally:
-            if os.path.exists(moved):
-                os.unlink(moved)
+        if self._cur != str(self._tmp):
+            os.replace(self._cur, self._tmp)
+            self._cur = str(self._tmp)
 
     def _discard(self) -> None:
         try:
             self._f.close()
         except OSError:
             pass
+        if self._cur != str(self._tmp):  # a rewrite behind the final header (the temporary file: atomic_path)
+            try:
+                os.unlink(self._cur)
+            except OSError:
+                pass

@@ -371,6 +371,34 @@ def _motion_lookahead(chunks: Iterable[Recording], params: Any) -> tuple[Iterato
     return itertools.chain(held, it), choice
 
 
+class _Ahead:
+    """An iterator that can tell whether another item follows (:meth:`at_end` takes it in advance)."""
+
+    _NONE = object()
+
+    def __init__(self, items: Iterable[Any]) -> None:
+        self._it = iter(items)
+        self._next: Any = self._NONE
+
+    def __iter__(self) -> _Ahead:
+        return self
+
+    def __next__(self) -> Any:
+        if self._next is not self._NONE:
+            item, self._next = self._next, self._NONE
+            return item
+        return next(self._it)
+
+    def at_end(self) -> bool:
+        """True when no item follows (waits for the next one)."""
+        if self._next is self._NONE:
+            try:
+                self._next = next(self._it)
+            except StopIteration:
+                return True
+        return False
+
+
 def stream_ekf(
     path: str | os.PathLike,
     output: str | os.PathLike,
@@ -431,6 +459,31 @@ def stream_ekf(
     if kind == "parquet":
         chunks = in_background(chunks)
     chunks, motion = _motion_lookahead(chunks, params)  # the motion of the same first span as in memory
+    chunks = _Ahead(chunks)
+    final: tuple[dict[str, Any], list[str]] | None = None  # (validation, the self-check's warnings) once known
+
+    def finish(w: Any) -> tuple[dict[str, Any], list[str]]:
+        """The run's validation and self-check, and the output's final metadata handed to the writer."""
+        validation, input_warnings = checks.finish(
+            rows_read, summary["rows"], duplicates=duplicates, skipped=int(summary.get("skipped_rows", 0) or 0)
+        )
+        validation["warnings"] = input_warnings
+        if summary["rows"] == 0 or self_checks is None:
+            raise ImutoolError("no data rows", path=path)
+        checked = self_checks.report()
+        summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
+        summary.update(checked.summary)  # (the order of an in-memory run's summary)
+        everything = checks.meta_warnings(input_warnings, checked.warnings)
+        w.set_final_meta(
+            {
+                "validation": {k: v for k, v in validation.items() if k != "warnings"},
+                # the keys known only at the end (the lever arm's went out with the first chunk)
+                **{k: v for k, v in checked.metadata.items() if not k.startswith("lever_arm")},
+                **({"warnings": everything} if everything else {}),
+            }
+        )
+        return validation, checked.warnings
+
     with writer as w:
         for chunk in chunks:
             rows_read += len(chunk)
@@ -493,29 +546,15 @@ def stream_ekf(
             est.meta["motion"] = summary["motion"]
             # the metadata as far as known (the heading source is final at the end: set_final_meta below)
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
-            w.write(est)
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
+            if chunks.at_end():  # the last chunk: the final metadata first, so its rows go straight behind them
+                final = finish(w)
+            w.write(est)
             report(progress, summary["rows"], total)
-        validation, input_warnings = checks.finish(
-            rows_read, summary["rows"], duplicates=duplicates, skipped=int(summary.get("skipped_rows", 0) or 0)
-        )
-        validation["warnings"] = input_warnings
-        if summary["rows"] == 0 or self_checks is None:
-            raise ImutoolError("no data rows", path=path)
-        checked = self_checks.report()
-        summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
-        summary.update(checked.summary)  # (the order of an in-memory run's summary)
-        warnings = checked.warnings
-        everything = checks.meta_warnings(input_warnings, warnings)
-        w.set_final_meta(
-            {
-                "validation": {k: v for k, v in validation.items() if k != "warnings"},
-                # the keys known only at the end (the lever arm's went out with the first chunk)
-                **{k: v for k, v in checked.metadata.items() if not k.startswith("lever_arm")},
-                **({"warnings": everything} if everything else {}),
-            }
-        )
+        if final is None:  # the stream ended in rows that were all dropped (or none at all)
+            final = finish(w)
+        validation, warnings = final
     summary["samples"] = summary["rows"]
     summary["validation"] = validation
     if warnings:
