@@ -915,12 +915,12 @@ class CsvWriter(AtomicChunkWriter):
         self._head: Recording | None = None  # the first chunk without rows: its header, rebuilt with final_meta
         self._head_bytes = b""  # the header the current file starts with
 
-    def _header(self) -> bytes:
-        """The header of the first chunk with the final metadata merged in (a key of the first chunk keeps its
+    def _header(self, final: dict[str, Any]) -> bytes:
+        """The header of the first chunk with the metadata ``final`` merged in (a key of the first chunk keeps its
         place, new keys follow)."""
         assert self._head is not None
         first = self._head.meta
-        self._head.meta = {**first, **self.final_meta}
+        self._head.meta = {**first, **final}
         try:
             return header_text(self._head).encode("utf-8")
         finally:
@@ -929,7 +929,8 @@ class CsvWriter(AtomicChunkWriter):
     def _first(self, rec: Recording) -> None:
         self._head = rec.select(slice(0, 0))
         self._head.meta = dict(rec.meta)
-        head = self._header() if self.final_meta else header_text(rec).encode("utf-8")
+        final = self.final_meta
+        head = self._header(final) if final else header_text(rec).encode("utf-8")
         self._f.write(head)
         self._head_bytes = head
 
@@ -948,15 +949,16 @@ class CsvWriter(AtomicChunkWriter):
             os.unlink(old)
 
     def _write_chunk(self, rec: Recording) -> None:
-        if self.final_meta:
-            head = self._header()
+        final = self.final_meta  # one version (set_final_meta replaces the dict)
+        if final:
+            head = self._header(final)
             if head != self._head_bytes:
                 self._rewrite(head)
         _write_rows(self._f, rec)
 
     def _finish(self) -> None:
         if self._started and self._head is not None and self.final_meta:
-            head = self._header()
+            head = self._header(self.final_meta)
             if head != self._head_bytes:  # metadata given after the last row: the rows copied behind them
                 self._rewrite(head)
         self._f.close()
