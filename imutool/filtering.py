@@ -548,6 +548,9 @@ def stream_ekf(
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
             t_last = float(chunk.time[-1])
             summary["rows"] += len(chunk)
+            # the input and the filter's arrays of this chunk let go before looking ahead (the next chunk taken
+            # lets the reader parse one more): what is held is what was held before
+            chunk = accel = res = sog = cog = vel = heading = before = keep = clipped_rows = None  # type: ignore[assignment]
             if chunks.at_end():  # the last chunk: the final metadata first, so its rows go straight behind them
                 final = finish(w)
             w.write(est)
