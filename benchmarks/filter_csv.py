@@ -1,16 +1,18 @@
 """`imutool filter` on one big CSV against a plain polars read + write of the same file, in the same run.
 
 The goal (issue 37): the whole filter — read, validate, plausibility, EKF, self-checks, format, write — within
-1.5× of what polars needs only to read and write the file. Each side runs in its own process, interleaved, best of
-``--repeat``; wall time (what a user waits) with CPU time alongside. The filter's stages are timed in a separate
-run (``--stages``): wall and thread CPU of each stage, the background threads (reader, parse, writer, format)
-included, imports and the kernels' first calls apart.
+1.5× of what polars needs only to read and write the file. Each side runs in its own process, interleaved in
+``--repeat`` rounds (``--baseline``: another clone too, for an A/B); best and median wall time (what a user waits),
+median CPU time, and the ratio to polars of each round (on a shared machine the load decides the best round).
+The filter's stages are timed in a separate run (``--stages``): wall and thread CPU of each stage, the background
+threads (reader, parse, writer, format) included, imports and the kernels' first calls apart.
 
 Usage::
 
     python benchmarks/filter_csv.py                  # 2 M rows at 200 Hz (a 370 MB CSV, written once to --dir)
     python benchmarks/filter_csv.py --rows 500000 --repeat 3 --stages
     python benchmarks/filter_csv.py --repeat 0 --stages   # the stages alone (wall and CPU per stage, per thread)
+    python benchmarks/filter_csv.py --repeat 8 --baseline ../main   # A/B: another clone in the same rounds
 """
 
 from __future__ import annotations
@@ -47,11 +49,15 @@ def make_csv(path: Path, rows: int) -> None:
     formats.write(keep, path)
 
 
-def timed(cmd: list[str]) -> tuple[float, float]:
-    """(wall s, CPU s of the child) of one command."""
+def timed(cmd: list[str], cwd: Path, tree: Path | None = None) -> tuple[float, float]:
+    """(wall s, CPU s of the child) of one command, run in ``cwd`` (``python -c`` puts the working folder first on
+    the path: never the folder holding a clone), with ``tree`` (a clone of imutool) first on its path."""
+    env = dict(os.environ)
+    if tree is not None:
+        env["PYTHONPATH"] = str(tree)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, cwd=cwd, env=env)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -168,7 +174,7 @@ def stage_run(src: str, out: str) -> None:
 
 def stages(src: Path, out: Path) -> None:
     """Where the time goes: :func:`stage_run` in a fresh process (its imports and kernel loads as a user's)."""
-    subprocess.run([sys.executable, __file__, "--stage-run", str(src), str(out)], check=True)
+    subprocess.run([sys.executable, __file__, "--stage-run", str(src), str(out)], check=True, cwd=out.parent)
 
 
 def main() -> None:
@@ -177,6 +183,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--dir", default="/tmp")
     ap.add_argument("--stages", action="store_true", help="also time the stages of one run (in a fresh process)")
+    ap.add_argument("--baseline", help="another clone of imutool (e.g. main's) run in the same rounds, for an A/B")
     ap.add_argument("--stage-run", nargs=2, metavar=("SRC", "OUT"), help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.stage_run:
@@ -189,25 +196,42 @@ def main() -> None:
         print(f"writing {src} ({a.rows} rows) ...", flush=True)
         make_csv(src, a.rows)
     print(f"{src}: {src.stat().st_size / 1e6:.0f} MB; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    warm = work / "warm.csv"
-    subprocess.run([sys.executable, "-c", FILTER, "filter", str(src), "-o", str(warm), "-q", "--force"], check=True)
-    best = {"filter": (1e9, 0.0), "polars": (1e9, 0.0)}
+    sides = {"filter": ROOT} | ({"baseline": Path(a.baseline).resolve()} if a.baseline else {})
+    for name, tree in sides.items():  # compiled kernels cached, files in the page cache
+        warm = work / f"warm_{name}.csv"
+        warm.unlink(missing_ok=True)
+        timed([sys.executable, "-c", FILTER, "filter", str(src), "-o", str(warm), "-q"], work, tree)
+    runs: dict[str, list[tuple[float, float]]] = {name: [] for name in [*sides, "polars"]}
     loads = []
     for k in range(a.repeat):
-        out = work / "est.csv"
-        out.unlink(missing_ok=True)
         loads.append(os.getloadavg()[0])
-        f = timed([sys.executable, "-c", FILTER, "filter", str(src), "-o", str(out), "-q"])
-        best["filter"] = min(best["filter"], f)
-        p = timed([sys.executable, "-c", POLARS, str(src), str(work / "polars.csv")])
-        best["polars"] = min(best["polars"], p)
-        print(f"round {k + 1}: load {loads[-1]:.1f}: filter {f[0]:.2f} s, polars {p[0]:.2f} s: {f[0] / p[0]:.2f}x")
+        for name, tree in sides.items():
+            out = work / f"est_{name}.csv"
+            out.unlink(missing_ok=True)
+            runs[name].append(
+                timed([sys.executable, "-c", FILTER, "filter", str(src), "-o", str(out), "-q"], work, tree)
+            )
+        runs["polars"].append(timed([sys.executable, "-c", POLARS, str(src), str(work / "polars.csv")], work))
+        p = runs["polars"][-1][0]
+        print(
+            f"round {k + 1}: load {loads[-1]:.1f}: "
+            + ", ".join(f"{name} {runs[name][-1][0]:.2f} s ({runs[name][-1][0] / p:.2f}x)" for name in sides)
+            + f", polars {p:.2f} s"
+        )
     if a.repeat:
-        (fw, fc), (pw, pc) = best["filter"], best["polars"]
-        print(f"best of {a.repeat} (load {min(loads):.1f}–{max(loads):.1f}):")
-        print(f"imutool filter : {fw:6.2f} s wall, {fc:6.2f} s CPU")
-        print(f"polars r + w   : {pw:6.2f} s wall, {pc:6.2f} s CPU")
-        print(f"ratio (wall)   : {fw / pw:.2f}x  (goal <= 1.5x)")
+        print(f"{a.repeat} rounds (load {min(loads):.1f}–{max(loads):.1f}): best / median wall, median CPU; ratios")
+        for name in runs:
+            wall = sorted(r[0] for r in runs[name])
+            cpu = sorted(r[1] for r in runs[name])
+            line = f"{name:9s}: {wall[0]:6.2f} / {wall[len(wall) // 2]:6.2f} s wall, {cpu[len(cpu) // 2]:6.2f} s CPU"
+            if name != "polars":
+                ratios = sorted(r[0] / p[0] for r, p in zip(runs[name], runs["polars"], strict=True))
+                line += f"; ratio median {ratios[len(ratios) // 2]:.2f}x ({ratios[0]:.2f}–{ratios[-1]:.2f})"
+            print(line)
+        if a.baseline:
+            same = (work / "est_filter.csv").read_bytes() == (work / "est_baseline.csv").read_bytes()
+            print(f"outputs byte-identical: {same}")
+        print("goal: filter <= 1.5x polars")
     if a.stages:
         out = work / "est_stages.csv"
         out.unlink(missing_ok=True)
