@@ -295,8 +295,9 @@ class AtomicChunkWriter:
         self.final_meta: dict[str, Any] = {}
 
     def set_final_meta(self, meta: dict[str, Any]) -> None:
-        """Metadata that replace the first chunk's keys of the same name when the file is closed."""
-        self.final_meta.update(meta)
+        """Metadata that replace the first chunk's keys of the same name when the file is closed. (A new dict each
+        time: a chunk being written in the background reads one version of it.)"""
+        self.final_meta = {**self.final_meta, **meta}
 
     def write(self, chunk: Any) -> None:
         if not self._started:

@@ -389,13 +389,17 @@ class _BlockParser:
         return out[:row]
 
 
-def _parse_parallel(parser: _BlockParser, buf: np.ndarray, end: int) -> np.ndarray:
+def _parse_parallel(
+    parser: _BlockParser, buf: np.ndarray, end: int, pool: ThreadPoolExecutor | None = None
+) -> list[np.ndarray]:
     """Parse the whole lines of buf[:end] with ``parser`` (its running line number and report are updated); big
-    buffers are cut at line ends into pieces parsed by threads (the kernel releases the GIL), bad-row line numbers
-    made absolute afterwards. ``strict`` parses in one piece (it stops at the first bad row)."""
+    buffers are cut at line ends into pieces parsed by threads (the kernel releases the GIL; ``pool``: threads to
+    use, else made here), bad-row line numbers made absolute afterwards. ``strict`` parses in one piece (it stops
+    at the first bad row). Returns the pieces' rows, (n_i, ncol) float64 arrays in file order, not joined: the
+    caller copies them once, into the channels (:func:`_gather`)."""
     n = _threads()
     if parser.strict or n == 1 or end < (8 << 20):
-        return parser.parse(buf, end, _rows_hint(buf, end))
+        return [parser.parse(buf, end, _rows_hint(buf, end))]
     cuts = [0]
     for k in range(1, n):
         c = int(end * k // n)
@@ -409,13 +413,15 @@ def _parse_parallel(parser: _BlockParser, buf: np.ndarray, end: int) -> np.ndarr
     parsers = [_BlockParser(parser.hdr, parser.path, False, r) for r in reps]
     for p in parsers:
         p.line = 0  # relative line numbers; made absolute below
-    with ThreadPoolExecutor(len(pieces)) as pool:
-        arrays = list(
-            pool.map(
-                lambda k: parsers[k].parse(pieces[k], pieces[k].size, _rows_hint(pieces[k], pieces[k].size)),
-                range(len(pieces)),
-            )
-        )
+
+    def one(k: int) -> np.ndarray:
+        return parsers[k].parse(pieces[k], pieces[k].size, _rows_hint(pieces[k], pieces[k].size))
+
+    if pool is None:
+        with ThreadPoolExecutor(len(pieces)) as own:
+            arrays = list(own.map(one, range(len(pieces))))
+    else:
+        arrays = list(pool.map(one, range(len(pieces))))
     for p, r in zip(parsers, reps, strict=True):
         for msg in r.first_bad:
             if len(parser.rep.first_bad) < 5:
@@ -423,7 +429,28 @@ def _parse_parallel(parser: _BlockParser, buf: np.ndarray, end: int) -> np.ndarr
                 parser.rep.first_bad.append(f"line {int(ln) + parser.line}:{rest}")
         parser.rep.bad_rows += r.bad_rows
         parser.line += p.line
-    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+    return arrays
+
+
+def _gather(pieces: list[np.ndarray], cols: list[int], rows: int) -> np.ndarray:
+    """The columns ``cols`` of the first ``rows`` rows of ``pieces`` ((n_i, ncol) arrays, in order) as one new
+    C-contiguous array, (rows,) for one column, else (rows, len(cols)): the one copy of the parsed values."""
+    k = len(cols)
+    out = np.empty((rows, k)) if k > 1 else np.empty(rows)
+    run = cols == list(range(cols[0], cols[0] + k))  # adjacent columns: a slice, no index array
+    r = 0
+    for a in pieces:
+        if r >= rows:
+            break
+        m = min(a.shape[0], rows - r)
+        if k == 1:
+            out[r : r + m] = a[:m, cols[0]]
+        elif run:
+            out[r : r + m] = a[:m, cols[0] : cols[0] + k]
+        else:
+            out[r : r + m] = a[:m][:, cols]
+        r += m
+    return out
 
 
 def _rows_hint(buf: np.ndarray, end: int) -> int:
@@ -435,20 +462,26 @@ def _rows_hint(buf: np.ndarray, end: int) -> int:
     return int(end / (head.size / n) * 1.05) + 16
 
 
-def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport, first_row: int = 0) -> Recording:
-    """The parsed rows as a Recording (``first_row``: the index of the first of them in the file, for the times
-    of a file read at ``--rate``)."""
+def _to_recording(
+    hdr: CsvHeader, pieces: list[np.ndarray], path: str, rep: ReadReport, first_row: int = 0, rows: int | None = None
+) -> Recording:
+    """The parsed rows (``pieces``: (n_i, ncol) arrays in file order, the first ``rows`` of them; all by
+    default) as a Recording, each channel copied once out of them (``first_row``: the index of the first row in
+    the file, for the times of a file read at ``--rate``)."""
+    if rows is None:
+        rows = sum(a.shape[0] for a in pieces)
     names = hdr.names
+    # a mapped column's scale, then its unit's factor to SI, applied to the column in that order
+    factors: dict[int, list[float]] = {}
     if hdr.mapping is not None:
         targets = []
         unit_of: dict[str, str | None] = {}
         for j, cm in enumerate(hdr.mapping.columns):
-            col = data[:, j]
             if cm.scale != 1.0:
-                col *= cm.scale
+                factors.setdefault(j, []).append(cm.scale)
             q = _expected_quantity_of(cm.target)
             if q and cm.unit:
-                col *= _units.factor_to_si(cm.unit, q)
+                factors.setdefault(j, []).append(_units.factor_to_si(cm.unit, q))
                 unit_of[cm.target] = _units.SI_UNIT[q] if q != "temperature" else "degC"
             else:
                 unit_of[cm.target] = cm.unit
@@ -462,11 +495,21 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport, 
                 k, _, v = item.partition("=")
                 if k.strip():
                     unit_of[k.strip()] = v.strip()
+
+    def columns(idx: list[int]) -> np.ndarray:
+        arr = _gather(pieces, idx, rows)
+        for i, j in enumerate(idx):
+            for f in factors.get(j, ()):
+                if arr.ndim == 1:
+                    arr *= f
+                else:
+                    arr[:, i] *= f
+        return arr
+
     if "time" in names:
-        ti = names.index("time")
-        rec = Recording(data[:, ti].copy())
+        rec = Recording(columns([names.index("time")]))
     elif hdr.rate_hz is not None:
-        rec = Recording((first_row + np.arange(data.shape[0], dtype=np.float64)) / hdr.rate_hz)
+        rec = Recording((first_row + np.arange(rows, dtype=np.float64)) / hdr.rate_hz)
     else:
         raise ImutoolError(
             "no time column found (looked for time/timestamp/t headers): give the sample rate with --rate HZ, "
@@ -476,15 +519,13 @@ def _to_recording(hdr: CsvHeader, data: np.ndarray, path: str, rep: ReadReport, 
     groups = group_columns([n for n in names if n != "time"])
     idx = {n: j for j, n in enumerate(names)}
     for ch, cols in groups:
-        arr = data[:, [idx[c] for c in cols]]
-        if len(cols) == 1:
-            arr = arr[:, 0]
+        arr = columns([idx[c] for c in cols])
         unit = canonical_unit(ch) if hdr.mapping is None else None
         if unit is None:
             unit = unit_of.get(ch) or unit_of.get(cols[0])
             if unit is None and hdr.mapping is not None:
                 unit = canonical_unit(ch) if ch in ("gyro", "accel", "mag", "temp") else None
-        rec.add(ch, np.ascontiguousarray(arr), unit, columns=cols)
+        rec.add(ch, arr, unit, columns=cols)
     meta = {k: v for k, v in hdr.meta.items() if not k.startswith("_")}
     meta.pop("units", None)
     meta["source"] = os.fspath(path)
@@ -586,47 +627,78 @@ def in_background(items: Iterator[Any], depth: int = 1) -> Iterator[Any]:
         quit_.set()
 
 
+def _last_newline(buf: np.ndarray, end: int) -> int:
+    """The index of the last LF in buf[:end], or -1; searched backwards in growing windows (a line is short)."""
+    w = 1 << 16
+    hi = end
+    while hi > 0:
+        lo = max(0, hi - w)
+        nl = np.flatnonzero(buf[lo:hi] == 10)
+        if nl.size:
+            return lo + int(nl[-1])
+        hi = lo
+        w *= 4
+    return -1
+
+
 def _iter_csv(path: str, hdr: CsvHeader, chunk_rows: int, strict: bool, block_bytes: int) -> Iterator[Recording]:
+    """The chunks of ``chunk_rows`` rows: blocks of ``block_bytes`` read into one reused buffer (the part line at
+    a block's end moved to its front), parsed in pieces by threads, and each chunk's channels copied once out of
+    the pieces (no joined block or chunk array in between)."""
     done = 0  # rows yielded so far
     rep = ReadReport()
     parser = _BlockParser(hdr, path, strict, rep)
     pending: list[np.ndarray] = []
     npending = 0
-    carry = b""
-    with open(path, "rb") as f:
-        f.seek(hdr.data_offset)
-        while True:
-            block = f.read(block_bytes)
-            eof = not block
-            data = carry + block
-            if eof:
-                end = len(data)
-                carry = b""
-            else:
-                cut = data.rfind(b"\n")
-                if cut < 0:
-                    carry = data
-                    continue
-                end = cut + 1
-                carry = data[end:]
-            if end:
-                buf = np.frombuffer(data, np.uint8)
-                arr = _parse_parallel(parser, buf, end)
-                del buf
-                if arr.shape[0]:
-                    pending.append(arr)
-                    npending += arr.shape[0]
-            del data
-            while npending >= chunk_rows or (eof and npending):
-                allrows = pending[0] if len(pending) == 1 else np.concatenate(pending)
-                take = min(chunk_rows, allrows.shape[0])
-                yield _to_recording(hdr, allrows[:take], path, rep, done)
-                done += take
-                rest = allrows[take:]
-                pending = [rest] if rest.shape[0] else []
-                npending = rest.shape[0]
-            if eof:
-                break
+    buf = np.empty(block_bytes, np.uint8)
+    carry = 0  # bytes of an unfinished line at the front of buf
+    nthreads = _threads()
+    pool = ThreadPoolExecutor(nthreads, thread_name_prefix="imutool-parse") if nthreads > 1 else None
+    try:
+        with open(path, "rb") as f:
+            f.seek(hdr.data_offset)
+            while True:
+                if buf.size < carry + block_bytes:  # a line longer than a block: room for it and a block more
+                    grown = np.empty(carry + block_bytes, np.uint8)
+                    grown[:carry] = buf[:carry]
+                    buf = grown
+                got = f.readinto(memoryview(buf)[carry : carry + block_bytes])
+                eof = not got
+                total = carry + got
+                if eof:
+                    end = total
+                else:
+                    cut = _last_newline(buf, total)
+                    if cut < 0:
+                        carry = total
+                        continue
+                    end = cut + 1
+                if end:
+                    for arr in _parse_parallel(parser, buf, end, pool):
+                        if arr.shape[0]:
+                            pending.append(arr)
+                            npending += arr.shape[0]
+                carry = total - end
+                if carry:
+                    buf[:carry] = buf[end:total].copy()
+                while npending >= chunk_rows or (eof and npending):
+                    take = min(chunk_rows, npending)
+                    yield _to_recording(hdr, pending, path, rep, done, take)
+                    done += take
+                    left, rest = take, []
+                    for a in pending:  # what the chunk did not take stays, as views
+                        if left >= a.shape[0]:
+                            left -= a.shape[0]
+                            continue
+                        rest.append(a[left:])
+                        left = 0
+                    pending = rest
+                    npending -= take
+                if eof:
+                    break
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=False)
 
 
 def read_csv(
@@ -653,14 +725,14 @@ def read_csv(
         buf = np.fromfile(path, dtype=np.uint8, offset=hdr.data_offset)
     except OSError as e:
         raise ImutoolError(f"cannot read: {e.strerror}", path=path) from None
-    data = _parse_parallel(_BlockParser(hdr, path, strict, rep), buf, buf.size)
+    pieces = _parse_parallel(_BlockParser(hdr, path, strict, rep), buf, buf.size)
     del buf
-    if data.shape[0] == 0:
+    if sum(a.shape[0] for a in pieces) == 0:
         msg = "no data rows"
         if rep.bad_rows:
             msg += f" ({rep.bad_rows} malformed rows skipped; first: {rep.first_bad[0]})"
         raise ImutoolError(msg, path=path)
-    return _to_recording(hdr, data, path, rep)
+    return _to_recording(hdr, pieces, path, rep)
 
 
 def _fmt_meta(v: Any) -> str:
@@ -827,45 +899,79 @@ class CsvWriter(AtomicChunkWriter):
     Usage: ``with CsvWriter(path) as w: w.write(chunk) ...`` — the header comes from the first chunk.
     ``background=True``: formatting and writing of a chunk overlap the caller's next chunk (one in flight).
     Metadata handed to :meth:`set_final_meta` (known only at the end: a streamed run's warnings) replace the first
-    chunk's keys in the header at close: the file is written once more, the final header followed by the rows
-    copied in large blocks (in the kernel where it can: ``os.copy_file_range``), so a person opening it sees one
-    clean header — no line kept blank for them, no key twice (``benchmarks/stream_header.py`` measures the copy).
+    chunk's keys in the header, so a person opening the file sees one clean header — no line kept blank for them,
+    no key twice. The rows written before they were known are copied once behind the final header, in a new file
+    (in large blocks, in the kernel where it can: ``os.copy_file_range``; ``benchmarks/stream_header.py`` measures
+    the copy); rows written after go straight behind it. So a stream that knows its final metadata before its last
+    chunk (:func:`imutool.filtering.stream_ekf` looks one chunk ahead) hands them over before writing that chunk,
+    and only the rows before it are copied.
     """
 
     def __init__(self, path: str, background: bool = False):
         super().__init__(path, background, "imutool-writer")
-        self._f = open(self._tmp, "wb")
-        self._head: Recording | None = None  # the first chunk without rows: its header, rebuilt at close
-        self._head_len = 0
+        self._cur = str(self._tmp)  # the file the rows go to: the temporary file, or its rewrite behind a new header
+        self._f = open(self._cur, "wb")
+        self._head: Recording | None = None  # the first chunk without rows: its header, rebuilt with final_meta
+        self._head_bytes = b""  # the header the current file starts with
+
+    def _header(self, final: dict[str, Any]) -> bytes:
+        """The header of the first chunk with the metadata ``final`` merged in (a key of the first chunk keeps its
+        place, new keys follow)."""
+        assert self._head is not None
+        first = self._head.meta
+        self._head.meta = {**first, **final}
+        try:
+            return header_text(self._head).encode("utf-8")
+        finally:
+            self._head.meta = first
 
     def _first(self, rec: Recording) -> None:
-        head = header_text(rec).encode("utf-8")
-        self._f.write(head)
-        self._head_len = len(head)
         self._head = rec.select(slice(0, 0))
         self._head.meta = dict(rec.meta)
+        final = self.final_meta
+        head = self._header(final) if final else header_text(rec).encode("utf-8")
+        self._f.write(head)
+        self._head_bytes = head
+
+    def _rewrite(self, head: bytes) -> None:
+        """Start a new file with ``head`` and the current file's rows copied behind it; it becomes the current
+        file (open for more rows) and the old one is removed."""
+        self._f.close()
+        old = self._cur
+        self._cur = str(self._tmp) + (".meta" if old == str(self._tmp) else "")
+        self._f = open(self._cur, "wb")
+        self._f.write(head)
+        with open(old, "rb") as src:
+            copy_range(src, self._f, len(self._head_bytes))
+        self._head_bytes = head
+        if old != str(self._tmp):  # the temporary file itself stays: atomic_path renames or removes it
+            os.unlink(old)
 
     def _write_chunk(self, rec: Recording) -> None:
+        final = self.final_meta  # one version (set_final_meta replaces the dict)
+        if final:
+            head = self._header(final)
+            if head != self._head_bytes:
+                self._rewrite(head)
         _write_rows(self._f, rec)
 
     def _finish(self) -> None:
+        if self._started and self._head is not None and self.final_meta:
+            head = self._header(self.final_meta)
+            if head != self._head_bytes:  # metadata given after the last row: the rows copied behind them
+                self._rewrite(head)
         self._f.close()
-        if not self.final_meta or not self._started or self._head is None:  # nothing written: no header to fill
-            return
-        self._head.meta.update(self.final_meta)  # a key of the first chunk keeps its place, new keys follow
-        head = header_text(self._head).encode("utf-8")
-        moved = str(self._tmp) + ".meta"
-        try:
-            with open(self._tmp, "rb") as src, open(moved, "wb") as dst:
-                dst.write(head)
-                copy_range(src, dst, self._head_len)
-            os.replace(moved, self._tmp)
-        finally:
-            if os.path.exists(moved):
-                os.unlink(moved)
+        if self._cur != str(self._tmp):
+            os.replace(self._cur, self._tmp)
+            self._cur = str(self._tmp)
 
     def _discard(self) -> None:
         try:
             self._f.close()
         except OSError:
             pass
+        if self._cur != str(self._tmp):  # a rewrite behind the final header (the temporary file: atomic_path)
+            try:
+                os.unlink(self._cur)
+            except OSError:
+                pass

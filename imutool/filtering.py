@@ -452,6 +452,34 @@ def _stream_lever_arm(
     )  # fmt: skip
 
 
+class _Ahead:
+    """An iterator that can tell whether another item follows (:meth:`at_end` takes it in advance)."""
+
+    _NONE = object()
+
+    def __init__(self, items: Iterable[Any]) -> None:
+        self._it = iter(items)
+        self._next: Any = self._NONE
+
+    def __iter__(self) -> _Ahead:
+        return self
+
+    def __next__(self) -> Any:
+        if self._next is not self._NONE:
+            item, self._next = self._next, self._NONE
+            return item
+        return next(self._it)
+
+    def at_end(self) -> bool:
+        """True when no item follows (waits for the next one)."""
+        if self._next is self._NONE:
+            try:
+                self._next = next(self._it)
+            except StopIteration:
+                return True
+        return False
+
+
 def stream_ekf(
     path: str | os.PathLike,
     output: str | os.PathLike,
@@ -512,6 +540,33 @@ def stream_ekf(
     chunks = formats.iter_chunks(path, chunk_rows=chunk_rows, **opts)
     if kind == "parquet":
         chunks = in_background(chunks)
+    final: tuple[dict[str, Any], list[str]] | None = None  # (validation, the self-check's warnings) once known
+
+    def finish(w: Any) -> tuple[dict[str, Any], list[str]]:
+        """The run's validation and self-check, and the output's final metadata handed to the writer."""
+        validation, input_warnings = checks.finish(
+            rows_read, summary["rows"], duplicates=duplicates, skipped=int(summary.get("skipped_rows", 0) or 0)
+        )
+        validation["warnings"] = input_warnings
+        if summary["rows"] == 0 or self_checks is None:
+            raise ImutoolError("no data rows", path=path)
+        checked = self_checks.report()
+        summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
+        summary.update(checked.summary)  # (the order of an in-memory run's summary)
+        warnings = checked.warnings
+        if lever_est is not None:
+            summary["lever_arm_estimate"] = lever_est.summary()
+            warnings = [m for m in (lever_est.message(),) if m] + warnings
+        everything = checks.meta_warnings(input_warnings, warnings)
+        w.set_final_meta(
+            {
+                "validation": {k: v for k, v in validation.items() if k != "warnings"},
+                # the keys known only at the end (the lever arm's went out with the first chunk)
+                **{k: v for k, v in checked.metadata.items() if not k.startswith("lever_arm")},
+                **({"warnings": everything} if everything else {}),
+            }
+        )
+        return validation, warnings
 
     def prepared(chunks: Iterable[Recording]) -> Iterator[Recording]:
         """The chunks as the filter takes them: rows whose time increases, the input checks applied."""
@@ -541,6 +596,8 @@ def stream_ekf(
         chunks, motion, held = _motion_lookahead(prepared(chunks), params)
         run_params = params_for_motion(params, motion)
         lever_arm, lever_est = _stream_lever_arm(held, params, motion, run_params, lever_arm, use_gnss, antenna_arm)
+        held = []  # (the chunks are in the iterator; the list let go)
+        chunks = _Ahead(chunks)
         for chunk in chunks:
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
@@ -592,31 +649,17 @@ def stream_ekf(
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
             if lever_est is not None:
                 est.meta["lever_arm_estimate"] = lever_est.summary()
-            w.write(est)
             summary["rows"] += len(chunk)
+            # the input and the filter's arrays of this chunk let go before looking ahead (the next chunk taken
+            # lets the reader parse one more): what is held is what was held before
+            chunk = accel = res = sog = cog = vel = heading = clipped_rows = None  # type: ignore[assignment]
+            if chunks.at_end():  # the last chunk: the final metadata first, so its rows go straight behind them
+                final = finish(w)
+            w.write(est)
             report(progress, summary["rows"], total)
-        validation, input_warnings = checks.finish(
-            rows_read, summary["rows"], duplicates=duplicates, skipped=int(summary.get("skipped_rows", 0) or 0)
-        )
-        validation["warnings"] = input_warnings
-        if summary["rows"] == 0 or self_checks is None:
-            raise ImutoolError("no data rows", path=path)
-        checked = self_checks.report()
-        summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
-        summary.update(checked.summary)  # (the order of an in-memory run's summary)
-        warnings = checked.warnings
-        if lever_est is not None:
-            summary["lever_arm_estimate"] = lever_est.summary()
-            warnings = [m for m in (lever_est.message(),) if m] + warnings
-        everything = checks.meta_warnings(input_warnings, warnings)
-        w.set_final_meta(
-            {
-                "validation": {k: v for k, v in validation.items() if k != "warnings"},
-                # the keys known only at the end (the lever arm's went out with the first chunk)
-                **{k: v for k, v in checked.metadata.items() if not k.startswith("lever_arm")},
-                **({"warnings": everything} if everything else {}),
-            }
-        )
+        if final is None:  # the stream ended in rows that were all dropped (or none at all)
+            final = finish(w)
+        validation, warnings = final
     if log_speed is not None:
         summary["log_speed_mps"] = round(log_speed, 3)
     summary["samples"] = summary["rows"]

@@ -636,6 +636,50 @@ def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings, monkeyp
         p.unlink()
 
 
+@pytest.mark.parametrize("background", [False, True])
+def test_csvwriter_final_meta_before_the_last_chunk_copies_only_the_rows_before(tmp_path, monkeypatch, background):
+    """Final metadata handed over before the last chunk (a stream that looks one chunk ahead): only the rows
+    already written are copied behind the final header, the last chunk goes straight behind it, and the file is
+    byte for byte the one written with the metadata given at the end; given before the first chunk, nothing is
+    copied."""
+    import formats.csv as fcsv
+
+    t = np.arange(1000) * 0.01
+    rec = Recording(t, {"gyro": np.sin(t)[:, None] * [1.0, 2.0, 3.0]}, meta={"warnings": ["first chunk"], "a": 1})
+    final = {"warnings": ["first chunk", "a warning known at the end"], "validation": {"rows_read": 1000}}
+    copied: list[int] = []
+    real_copy = fcsv.copy_range
+
+    def counting_copy(src, dst, offset):
+        before = dst.tell()
+        real_copy(src, dst, offset)
+        copied.append(dst.tell() - before)
+
+    monkeypatch.setattr(fcsv, "copy_range", counting_copy)
+    outputs = {}
+    for when in ("end", "before last", "before first"):
+        p = tmp_path / f"{when.replace(' ', '_')}.csv"
+        copied.clear()
+        with CsvWriter(str(p), background=background) as w:
+            if when == "before first":
+                w.set_final_meta(final)
+            w.write(rec.select(slice(0, 400)))
+            if when == "before last":
+                w.set_final_meta(final)
+            w.write(rec.select(slice(400, 1000)))
+            if when == "end":
+                w.set_final_meta(final)
+        outputs[when] = p.read_bytes()
+        rows = outputs[when].split(b"time,gyro_x,gyro_y,gyro_z\n", 1)[1]
+        first_rows = b"".join(rows.splitlines(keepends=True)[:400])
+        expected = {"end": [len(rows)], "before last": [len(first_rows)], "before first": []}[when]
+        # given at the end while the last chunk is still being written in the background: either is right
+        assert copied == expected or (background and when == "end" and copied == [len(first_rows)]), when
+        assert sorted(f.name for f in tmp_path.iterdir()) == sorted(f"{k.replace(' ', '_')}.csv" for k in outputs)
+    assert outputs["end"] == outputs["before last"] == outputs["before first"]
+    assert read_csv(str(tmp_path / "end.csv")).meta["warnings"] == final["warnings"]
+
+
 def test_a_decimal_point_without_digits_is_not_a_number(tmp_path):
     """'.nan', '-.inf' and '.' are not numbers to float(); the reader skipped none of them before (it took the
     word after the point: '.nan' read as NaN — found by the fuzz test above). They are counted, skipped rows."""

@@ -419,3 +419,45 @@ def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
         for window in (0.0, 0.01, 2.0, 7.3):
             assert _last_pair_start(t, window) == kernel_cut(t, window)
     assert _last_pair_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12
+
+
+def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_path, monkeypatch):
+    """A streamed run knows its final metadata (validation, self-check, warnings) after its last chunk's EKF and
+    hands them to the writer before writing that chunk: only the rows before it are copied behind the final header
+    (the whole file was, at close), and the file is byte for byte the one written the old way."""
+    import formats.csv as fcsv
+
+    copied: list[int] = []
+    real_copy = fcsv.copy_range
+
+    def counting_copy(src, dst, offset):
+        before = dst.tell()
+        real_copy(src, dst, offset)
+        copied.append(dst.tell() - before)
+
+    monkeypatch.setattr(fcsv, "copy_range", counting_copy)
+    out = tmp_path / "streamed.csv"
+    run_filter(roll_csv, out, stream_mb=0, chunk_rows=2500)  # 6001 rows: 2500, 2500, 1001
+    text = out.read_bytes()
+    rows = text.split(b"\ntime,", 1)[1].split(b"\n", 1)[1].splitlines(keepends=True)
+    assert len(rows) == 6001
+    assert copied == [len(b"".join(rows[:5000]))]  # the first two chunks, once; the last one written in place
+    # the same file when the metadata are given at the end (the writer then copies every row)
+    monkeypatch.setattr(fcsv.CsvWriter, "set_final_meta", _set_at_close)
+    late = tmp_path / "late.csv"
+    run_filter(roll_csv, late, stream_mb=0, chunk_rows=2500)
+    assert late.read_bytes() == text
+
+
+def _set_at_close(self, meta):
+    """CsvWriter.set_final_meta that keeps the metadata back until close (as before the stream looked ahead)."""
+    self._late = {**getattr(self, "_late", {}), **meta}
+    if not getattr(self, "_wrapped", False):
+        self._wrapped = True
+        finish = self._finish
+
+        def at_close():
+            self.final_meta = {**self.final_meta, **self._late}
+            finish()
+
+        self._finish = at_close
