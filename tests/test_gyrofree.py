@@ -130,3 +130,23 @@ def test_cli_check_layout_and_refusal(tmp_path):
     with pytest.raises(SystemExit) as ei:
         main(["gyrofree", "--layout", str(f), "--check-layout", "-q"])
     assert ei.value.code == 2
+
+
+def test_check_layout_takes_every_loading_option(tmp_path, capsys):
+    """--check-layout loads INPUT as the route does: --rate (a CSV without a time column) reaches the loader."""
+    import json
+
+    from imutool.cli import main
+
+    cols = [f"a{i}_{a}" for i in range(1, 5) for a in "xyz"]
+    f = tmp_path / "array.csv"
+    rows = "\n".join(",".join(f"{0.01 * i + j:.3f}" for j in range(12)) for i in range(50))
+    f.write_text(",".join(cols) + "\n" + rows + "\n")
+    args = ["gyrofree", str(f), "--layout", str(EXAMPLE), "--check-layout", "--json"]
+    with pytest.raises(SystemExit) as ei:
+        main(args)  # no time column: needs --rate
+    assert ei.value.code == 2 and "--rate" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as ei:
+        main([*args, "--rate", "100"])
+    assert ei.value.code in (0, None)
+    assert json.loads(capsys.readouterr().out)["input"] == str(f)
