@@ -31,6 +31,10 @@ from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input, load_
 CHANNELS = ("angles", "quaternion", "heave", "position")
 ANGLES = ("roll", "pitch", "heading")
 
+EVALUATE_DEFAULTS: dict[str, Any] = {"channel": None, "max_lag_s": 0.0, "plot": None, "align_heading": None}
+"""What is compared and how, unless said: every channel both have, no lag search (s), no plot, no heading offset.
+The defaults of :func:`evaluate` and :func:`run_evaluate` (and of the ``imutool evaluate`` options)."""
+
 
 def load_for_evaluation(path: str | os.PathLike) -> Recording:
     """Read ``path`` and put it in time order (duplicates dropped, backwards time sorted)."""
@@ -44,10 +48,10 @@ def evaluate(
     estimate: str | os.PathLike | Recording,
     reference: str | os.PathLike | Recording | None = None,
     *,
-    channel: str | None = None,
-    max_lag_s: float = 0.0,
-    plot: str | os.PathLike | None = None,
-    align_heading: float | str | None = None,
+    channel: str | None = EVALUATE_DEFAULTS["channel"],
+    max_lag_s: float = EVALUATE_DEFAULTS["max_lag_s"],
+    plot: str | os.PathLike | None = EVALUATE_DEFAULTS["plot"],
+    align_heading: float | str | None = EVALUATE_DEFAULTS["align_heading"],
 ) -> dict[str, Any]:
     """Compare ``estimate`` with ``reference`` (paths or Recordings; default: the estimate's own ``ref_*``).
 
@@ -125,10 +129,10 @@ def run_evaluate(
     estimate: str | os.PathLike | Recording,
     reference: str | os.PathLike | Recording | None = None,
     *,
-    channel: str | None = None,
-    max_lag_s: float = 0.0,
-    plot: str | os.PathLike | None = None,
-    align_heading: float | str | None = None,
+    channel: str | None = EVALUATE_DEFAULTS["channel"],
+    max_lag_s: float = EVALUATE_DEFAULTS["max_lag_s"],
+    plot: str | os.PathLike | None = EVALUATE_DEFAULTS["plot"],
+    align_heading: float | str | None = EVALUATE_DEFAULTS["align_heading"],
     strict: bool = False,
     on_input: OnInput | None = None,
     **load_options: Any,

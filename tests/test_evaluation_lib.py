@@ -42,3 +42,18 @@ def test_refusals(tmp_path):
         evaluate(rec)
     with pytest.raises(ImutoolError, match="channel"):
         evaluate(rec, channel="yaw")
+
+
+def test_evaluate_defaults_live_once():
+    """evaluate, run_evaluate and the command's route take their defaults from EVALUATE_DEFAULTS."""
+    import inspect
+
+    from imutool.cli.evaluate import evaluate_route
+    from imutool.evaluation import EVALUATE_DEFAULTS
+
+    for func in (evaluate, run_evaluate):
+        params = inspect.signature(func).parameters
+        assert {k: params[k].default for k in EVALUATE_DEFAULTS} == EVALUATE_DEFAULTS
+    cli_names = {"channel": "channel", "max_lag_s": "max_lag", "plot": "plot_path", "align_heading": "align_heading"}
+    params = inspect.signature(evaluate_route).parameters
+    assert {k: params[cli_names[k]].default for k in EVALUATE_DEFAULTS} == EVALUATE_DEFAULTS
