@@ -150,3 +150,20 @@ def test_check_layout_takes_every_loading_option(tmp_path, capsys):
         main([*args, "--rate", "100"])
     assert ei.value.code in (0, None)
     assert json.loads(capsys.readouterr().out)["input"] == str(f)
+
+
+def test_planar_options_without_planar_are_refused(tmp_path, capsys):
+    """--cutoff and --causal belong to the --planar roll: without --planar they would be silently unused."""
+    from imutool.cli import main
+
+    src, out = tmp_path / "array.csv", tmp_path / "o.csv"
+    formats.write(accel_array(duration=2, rate_hz=50, seed=1), str(src))
+    for extra, needle in (
+        (["--cutoff", "0.2"], "--cutoff applies only with --planar"),
+        (["--cutoff", "0.2", "--causal"], "--cutoff and --causal apply only with --planar"),
+    ):
+        with pytest.raises(SystemExit) as ei:
+            main(["gyrofree", str(src), "--layout", "paper", "-o", str(out), *extra])
+        err = capsys.readouterr().err
+        assert ei.value.code == 2 and needle in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()

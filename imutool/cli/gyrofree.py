@@ -105,8 +105,8 @@ def gyrofree_route(
     metavar="COL1,COL2",
     help="Reduced mode: two parallel single-axis accelerometers (layout sensors' columns) → roll.",
 )
-@click.option("--causal", is_flag=True, help="Planar mode: causal band-pass integration (default zero-phase).")
-@click.option("--cutoff", type=float, default=None, help="Planar mode band-pass cut-off Hz [0.3 × dominant].")
+@click.option("--causal", is_flag=True, help="Planar mode only: causal band-pass integration (default zero-phase).")
+@click.option("--cutoff", type=float, default=None, help="Planar mode only: band-pass cut-off Hz [0.3 × dominant].")
 @input_options
 @output_options
 @safe_outputs("output")
