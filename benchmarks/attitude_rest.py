@@ -25,8 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from attitude_broad import BROAD, ENU2NED, load_trials, score  # noqa: E402
 
 from formats.frames import quat_multiply  # noqa: E402
-from imutool.attitude import EkfParams, run_ekf  # noqa: E402
-from imutool.cli.filter import ekf_params  # noqa: E402
+from imutool.attitude import EkfParams, params_from_options, run_ekf  # noqa: E402
 
 
 def still_after_motion(d: dict) -> np.ndarray:
@@ -43,7 +42,7 @@ def main() -> None:
         "--param", action="append", default=[], help="NAME=VALUE, an EkfParams field (as imutool filter --param)"
     )
     args = ap.parse_args()
-    prm = ekf_params(None, tuple(args.param), None, None)  # parsed and checked as `imutool filter --param`
+    prm = params_from_options(None, args.param)[0]  # parsed and checked as `imutool filter --param`
     kw = {k: v for k, v in vars(prm).items() if v != getattr(EkfParams(), k)}
     from vqf import VQF
 

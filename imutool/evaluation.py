@@ -24,12 +24,20 @@ from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
+from formats.recording import require_samples
 from imutool.clock import Clock
 from imutool.loading import FLAGS, how_loaded, reference_text, split_reference_options
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input, load_reference
 
 CHANNELS = ("angles", "quaternion", "heave", "position")
 ANGLES = ("roll", "pitch", "heading")
+MIN_REFERENCE_ROWS = 10
+"""Reference rows within the estimate's span below which no comparison is made (as a report's window needs ten
+samples): statistics of fewer describe the interpolation between them, not the estimate."""
+
+EVALUATE_DEFAULTS: dict[str, Any] = {"channel": None, "max_lag_s": 0.0, "plot": None, "align_heading": None}
+"""What is compared and how, unless said: every channel both have, no lag search (s), no plot, no heading offset.
+The defaults of :func:`evaluate` and :func:`run_evaluate` (and of the ``imutool evaluate`` options)."""
 
 
 def load_for_evaluation(path: str | os.PathLike) -> Recording:
@@ -44,10 +52,10 @@ def evaluate(
     estimate: str | os.PathLike | Recording,
     reference: str | os.PathLike | Recording | None = None,
     *,
-    channel: str | None = None,
-    max_lag_s: float = 0.0,
-    plot: str | os.PathLike | None = None,
-    align_heading: float | str | None = None,
+    channel: str | None = EVALUATE_DEFAULTS["channel"],
+    max_lag_s: float = EVALUATE_DEFAULTS["max_lag_s"],
+    plot: str | os.PathLike | None = EVALUATE_DEFAULTS["plot"],
+    align_heading: float | str | None = EVALUATE_DEFAULTS["align_heading"],
 ) -> dict[str, Any]:
     """Compare ``estimate`` with ``reference`` (paths or Recordings; default: the estimate's own ``ref_*``).
 
@@ -125,10 +133,10 @@ def run_evaluate(
     estimate: str | os.PathLike | Recording,
     reference: str | os.PathLike | Recording | None = None,
     *,
-    channel: str | None = None,
-    max_lag_s: float = 0.0,
-    plot: str | os.PathLike | None = None,
-    align_heading: float | str | None = None,
+    channel: str | None = EVALUATE_DEFAULTS["channel"],
+    max_lag_s: float = EVALUATE_DEFAULTS["max_lag_s"],
+    plot: str | os.PathLike | None = EVALUATE_DEFAULTS["plot"],
+    align_heading: float | str | None = EVALUATE_DEFAULTS["align_heading"],
     strict: bool = False,
     on_input: OnInput | None = None,
     **load_options: Any,
@@ -279,12 +287,11 @@ def compared_span(est: Recording, ref: Recording) -> dict[str, Any]:
 
 
 def check_overlap(est: Recording, ref: Recording, est_path: str, ref_path: str) -> None:
-    """A reference that can be compared with the estimate: two rows or more, and a time span that overlaps
-    the estimate's by more than one sample interval (an ImutoolError naming the reference otherwise)."""
-    if len(ref) < 2:
-        raise ImutoolError(f"the reference has {len(ref)} row(s): nothing to compare with", path=ref_path)
-    if len(est) < 2:
-        raise ImutoolError(f"the estimate has {len(est)} row(s): nothing to compare", path=est_path)
+    """A reference that can be compared with the estimate: each a recording with a duration
+    (:func:`formats.recording.require_samples`), time spans that overlap, and at least :data:`MIN_REFERENCE_ROWS`
+    reference rows within the estimate's span (an ImutoolError naming the reference otherwise)."""
+    require_samples(len(ref), _distinct_times(ref), ref_path)
+    require_samples(len(est), _distinct_times(est), est_path)
     start = max(float(est.time[0]), float(ref.time[0]))
     end = min(float(est.time[-1]), float(ref.time[-1]))
     if not end > start:
@@ -293,6 +300,20 @@ def check_overlap(est: Recording, ref: Recording, est_path: str, ref_path: str) 
             f"{os.path.basename(est_path)} ({est.time[0]:.6g} … {est.time[-1]:.6g} s) in time: same clock?",
             path=ref_path,
         )
+    inside = int(np.count_nonzero((ref.time >= est.time[0]) & (ref.time <= est.time[-1])))
+    if inside < MIN_REFERENCE_ROWS:
+        raise ImutoolError(
+            f"the reference has {inside} row(s) within the estimate's span ({est.time[0]:.6g} … {est.time[-1]:.6g} "
+            f"s): a comparison needs at least {MIN_REFERENCE_ROWS} (fewer describe the interpolation between them, "
+            "not the estimate)",
+            path=ref_path,
+        )
+
+
+def _distinct_times(rec: Recording) -> int:
+    """Rows at different times, counted up to two (what :func:`formats.recording.require_samples` asks)."""
+    t = rec.time[np.isfinite(rec.time)]
+    return 0 if not len(t) else (1 if np.ptp(t) == 0 else 2)
 
 
 def _name(x: str | os.PathLike | Recording) -> str:

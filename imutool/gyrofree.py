@@ -649,6 +649,14 @@ def run_gyrofree(
     ``planar``: two single-axis sensors' columns → dynamic roll (:func:`planar_roll`, zero-phase unless
     ``causal``, band-pass ``cutoff`` Hz). A path is loaded with ``load_options`` (columns, ... calibration_file).
     """
+    if not planar:
+        unused = [flag for flag, given in (("--cutoff", cutoff is not None), ("--causal", causal)) if given]
+        if unused:
+            verb = "apply" if len(unused) > 1 else "applies"
+            raise ImutoolError(
+                f"{' and '.join(unused)} {verb} only with --planar COL1,COL2 (the two-accelerometer roll's "
+                "band-pass); the full solution has no band-pass"
+            )
     if not isinstance(layout, Layout):
         layout = load_layout(os.fspath(layout))
     inputs: list[dict[str, Any]] = []

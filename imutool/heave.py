@@ -57,6 +57,7 @@ GRAVITY = 9.80665
 METHODS = ("realtime", "harmonic", "paper", "bandpass", "envelope")
 GNSS_METHOD = "gnss"  # run_heave only: the detrended GNSS height (imutool.gnss_heave), no accelerometer
 ROUTE_METHODS = METHODS + (GNSS_METHOD,)
+CUTOFF_METHODS = ("bandpass", "paper", "harmonic")  # the methods with a causal band-pass at ``cutoff``
 TILT_GAIN = 0.07  # 1/s: tilt-filter gain (+ integral gyro-bias term gain²/4: a critically damped PI loop)
 RT_ORDER = 6  # real-time corrected integrator: order,
 RT_RATIO = 0.3  # corner as a fraction of the tracked dominant frequency,
@@ -949,6 +950,22 @@ def heave_realtime(
 # ------------------------------------------------------------------------------------------------------------------
 # Driver
 # ------------------------------------------------------------------------------------------------------------------
+def refuse_unused_cutoff(method: str, cutoff: float | None) -> None:
+    """A band-pass ``cutoff`` (Hz, ``--cutoff``) given for a method without that band-pass would be silently
+    unused: refused (ImutoolError naming --cutoff and --method)."""
+    if cutoff is None or method in CUTOFF_METHODS:
+        return
+    why = {
+        "realtime": "its corner follows the tracked sea: set it with --cutoff-ratio",
+        "envelope": "the envelope detrend has no band-pass",
+        GNSS_METHOD: "the GNSS height is detrended over --height-window",
+    }.get(method, "it has no band-pass")
+    raise ImutoolError(
+        f"--cutoff {cutoff:g} does not apply to --method {method} ({why}); --cutoff is the band-pass corner of "
+        f"--method {', '.join(CUTOFF_METHODS)}"
+    )
+
+
 def estimate_heave(
     t: np.ndarray,
     a_up: np.ndarray,
@@ -985,6 +1002,7 @@ def estimate_heave(
     """
     if method not in METHODS:
         raise ImutoolError(f"unknown heave method {method!r}; choose one of {', '.join(METHODS)}")
+    refuse_unused_cutoff(method, cutoff)
     if harmonics is None:
         harmonics = 3 if method == "paper" else 5
     if cutoff_ratio is None:
@@ -1265,6 +1283,8 @@ def run_heave(
     Returns the output recording and the summary (rows, heave_positive, the estimator's figures, ``nmea``).
     """
     load_options = {k: options.pop(k) for k in LOAD_OPTIONS if k in options}
+    if method in ROUTE_METHODS:  # before reading: a --cutoff no band-pass would use
+        refuse_unused_cutoff(method, options.get("cutoff"))
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
@@ -1282,6 +1302,7 @@ def run_heave(
 
         if lever_arm is not None:
             raise ImutoolError("--lever-arm is the IMU's; for a heave from GNSS height give --gnss-lever-arm")
+        refuse_unused_cutoff(GNSS_METHOD, options.get("cutoff"))
         out, summary = height_heave(rec, window_s=height_window_s, fix=gnss_fix, lever_arm=gnss_lever_arm)
         if method != GNSS_METHOD:
             summary["method_note"] = f"no accelerometer in the input: heave from gnss_height (not {method})"

@@ -26,13 +26,11 @@ from formats.recording import (
     require_samples,
 )
 
-LOAD_OPTIONS = (
-    "columns",
-    "profile",
-    "topic",
-    "stamp",
-    "duplicates",
-    "backwards",
+READ_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards")
+"""How a file's columns, bag topic and rows are read: a report's reference file (``--reference``) is read with
+these too (its column mapping, :data:`MAPPING`, unless it is given its own)."""
+
+INPUT_ONLY_OPTIONS = (
     "mounting",
     "calibration_file",
     "input_rate_hz",
@@ -41,6 +39,10 @@ LOAD_OPTIONS = (
     "with_files",
     "with_offsets",
 )
+"""The input's own: its mounting and calibration, its clock, header and ``--with`` files (a reference has its
+own clock options, :data:`REF_LOAD_OPTIONS`, and neither mounting nor calibration)."""
+
+LOAD_OPTIONS = READ_OPTIONS + INPUT_ONLY_OPTIONS
 """How a path is loaded (:func:`load_recording`): the ``--columns ... --with`` options every command that reads a
 recording takes."""
 

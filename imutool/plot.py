@@ -186,6 +186,7 @@ def run_plot(
     series, rec, total = _collect(path, tuple(channels), start, end, max_points, load_options, inputs, strict, on_input)
     if not series:
         raise ImutoolError("no samples in the requested time window", path=path)
+    series, empty = _with_values(series, path, start is not None or end is not None)
 
     import matplotlib
 
@@ -214,4 +215,20 @@ def run_plot(
     with atomic_path(output) as tmp:
         fig.savefig(tmp, format=_FORMATS[ext], dpi=dpi)
     plt.close(fig)
-    return RouteResult({"output": output, "channels": names, "rows": total, "points_per_line": drawn}, inputs)
+    summary: dict[str, Any] = {"output": output, "channels": names, "rows": total, "points_per_line": drawn}
+    if empty:
+        summary["not_drawn"] = empty
+        summary["warnings"] = [f"not drawn: every value of {', '.join(empty)} is NaN or missing"]
+    return RouteResult(summary, inputs)
+
+
+def _with_values(
+    series: dict[str, tuple[np.ndarray, np.ndarray]], path: str, windowed: bool
+) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], list[str]]:
+    """(the channels of ``series`` that hold a finite value, the names of those that hold none). None holding
+    one is an ImutoolError naming them: empty axes would look like a plot."""
+    empty = [n for n, (_, y) in series.items() if not np.isfinite(y).any()]
+    if len(empty) == len(series):
+        where = " in the requested time window" if windowed else ""
+        raise ImutoolError(f"every value of {', '.join(empty)} is NaN or missing{where}: nothing to draw", path=path)
+    return {n: v for n, v in series.items() if n not in empty}, empty

@@ -1890,6 +1890,26 @@ def test_params_file_version_and_migrations(tmp_path, capsys):
         assert not (tmp_path / "x.csv").exists()
 
 
+def test_params_from_options_is_the_library_route(tmp_path):
+    """The run's parameters and migration notes come from the library (not the click module): defaults, then the
+    file, then --param items, then the everyday flags; a bad name or value refused naming --param."""
+    import inspect
+
+    from imutool.attitude import params_from_options, read_params_file
+    from imutool.cli import filter as cli_filter
+
+    assert params_from_options() == (EkfParams(), [])
+    old = tmp_path / "old.toml"
+    old.write_text("[ekf]\nupdate_every = 1\nmag_noise_deg = 20.0\naccel_lp_tau = 3.0\n")
+    p, notes = params_from_options(str(old), ["accel-lp-tau=2", "mag_mode=full"], update_every=0)
+    assert (p.accel_lp_tau, p.mag_mode, p.update_every, p.mag_noise_deg) == (2.0, "full", 0, 20.0)
+    assert notes == read_params_file(str(old)).notes(p, {"accel_lp_tau", "mag_mode", "update_every"}) and notes
+    for item, needle in (("nonsense=1", "--param 'nonsense=1'"), ("accel_lp_tau=x", "--param accel_lp_tau='x'")):
+        with pytest.raises(ImutoolError, match=re.escape(needle)):
+            params_from_options(None, [item])
+    assert "EkfParams" not in inspect.getsource(cli_filter)
+
+
 def _roll(tmp_path):
     src = tmp_path / "roll20.csv"
     if not src.exists():

@@ -147,3 +147,21 @@ def test_plot_errors(messy_csv, tmp_path):
         _run("plot", messy_csv, "nothing", "-o", str(tmp_path / "x.png"))
     with pytest.raises(Exception, match="must end in"):
         _run("plot", messy_csv, "gyro", "-o", str(tmp_path / "x.jpg"))
+
+
+def test_plot_refuses_a_channel_without_values(tmp_path, capsys):
+    """A channel whose every value is NaN is said in one line (exit 2, nothing written) instead of empty axes;
+    beside a channel with values it is left out and named in the summary."""
+    t = np.arange(200) / 100.0
+    rec = Recording(t)
+    rec.add("gyro", np.full((200, 3), 0.1))
+    rec.add("heave", np.full(200, np.nan), unit="m")
+    p, out = tmp_path / "nan.csv", tmp_path / "h.png"
+    write_csv(rec, str(p))
+    with pytest.raises(SystemExit) as ei:
+        main(["plot", str(p), "heave", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert ei.value.code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "every value of heave is NaN or missing: nothing to draw" in err and not out.exists()
+    s = json.loads(_run("plot", str(p), "gyro", "heave", "-o", str(out), "--json").output)
+    assert s["channels"] == ["gyro"] and s["not_drawn"] == ["heave"] and out.exists()

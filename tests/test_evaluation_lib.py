@@ -42,3 +42,50 @@ def test_refusals(tmp_path):
         evaluate(rec)
     with pytest.raises(ImutoolError, match="channel"):
         evaluate(rec, channel="yaw")
+
+
+def test_evaluate_defaults_live_once():
+    """evaluate, run_evaluate and the command's route take their defaults from EVALUATE_DEFAULTS."""
+    import inspect
+
+    from imutool.cli.evaluate import evaluate_route
+    from imutool.evaluation import EVALUATE_DEFAULTS
+
+    for func in (evaluate, run_evaluate):
+        params = inspect.signature(func).parameters
+        assert {k: params[k].default for k in EVALUATE_DEFAULTS} == EVALUATE_DEFAULTS
+    cli_names = {"channel": "channel", "max_lag_s": "max_lag", "plot": "plot_path", "align_heading": "align_heading"}
+    params = inspect.signature(evaluate_route).parameters
+    assert {k: params[cli_names[k]].default for k in EVALUATE_DEFAULTS} == EVALUATE_DEFAULTS
+
+
+def test_a_reference_of_a_few_rows_is_refused(tmp_path, capsys):
+    """Fewer than MIN_REFERENCE_ROWS reference rows within the estimate's span (e.g. two) compare the estimate
+    with the line between them: refused in one line naming the reference; a reference of one row at one time
+    is refused by require_samples (as every input is)."""
+    from formats import Recording
+    from imutool.evaluation import MIN_REFERENCE_ROWS
+
+    t = np.arange(0.0, 20.0, 0.1)
+    est = Recording(t, meta={"source": "est"})
+    for k in ("roll", "pitch", "heading"):
+        est.add(k, np.sin(t) + 10.0, "deg")
+
+    def ref_of(times):
+        r = Recording(np.asarray(times, float), meta={"source": "ref"})
+        for k in ("roll", "pitch", "heading"):
+            r.add(f"ref_{k}", np.sin(r.time) + 10.0, "deg")
+        return r
+
+    with pytest.raises(ImutoolError, match=r"2 row\(s\) within the estimate's span") as ei:
+        evaluate(est, ref_of([1.0, 15.0]))
+    assert ei.value.path == "ref"
+    with pytest.raises(ImutoolError, match="at least two rows at different times"):
+        evaluate(est, ref_of([3.0, 3.0]))
+    assert evaluate(est, ref_of(np.linspace(0, 19, MIN_REFERENCE_ROWS)))["angles"]["roll"]["rmse"] < 0.5
+    e, r = tmp_path / "est.csv", tmp_path / "ref.csv"
+    formats.write(est, str(e))
+    formats.write(ref_of([1.0, 15.0]), str(r))
+    code, _, err = run_main(["evaluate", e, "--reference", r], capsys)
+    lines = [x for x in err.splitlines() if x.strip() and "compiling" not in x]
+    assert code == 2 and len(lines) == 1 and str(r) in lines[0] and "at least 10" in lines[0], err

@@ -130,3 +130,40 @@ def test_cli_check_layout_and_refusal(tmp_path):
     with pytest.raises(SystemExit) as ei:
         main(["gyrofree", "--layout", str(f), "--check-layout", "-q"])
     assert ei.value.code == 2
+
+
+def test_check_layout_takes_every_loading_option(tmp_path, capsys):
+    """--check-layout loads INPUT as the route does: --rate (a CSV without a time column) reaches the loader."""
+    import json
+
+    from imutool.cli import main
+
+    cols = [f"a{i}_{a}" for i in range(1, 5) for a in "xyz"]
+    f = tmp_path / "array.csv"
+    rows = "\n".join(",".join(f"{0.01 * i + j:.3f}" for j in range(12)) for i in range(50))
+    f.write_text(",".join(cols) + "\n" + rows + "\n")
+    args = ["gyrofree", str(f), "--layout", str(EXAMPLE), "--check-layout", "--json"]
+    with pytest.raises(SystemExit) as ei:
+        main(args)  # no time column: needs --rate
+    assert ei.value.code == 2 and "--rate" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as ei:
+        main([*args, "--rate", "100"])
+    assert ei.value.code in (0, None)
+    assert json.loads(capsys.readouterr().out)["input"] == str(f)
+
+
+def test_planar_options_without_planar_are_refused(tmp_path, capsys):
+    """--cutoff and --causal belong to the --planar roll: without --planar they would be silently unused."""
+    from imutool.cli import main
+
+    src, out = tmp_path / "array.csv", tmp_path / "o.csv"
+    formats.write(accel_array(duration=2, rate_hz=50, seed=1), str(src))
+    for extra, needle in (
+        (["--cutoff", "0.2"], "--cutoff applies only with --planar"),
+        (["--cutoff", "0.2", "--causal"], "--cutoff and --causal apply only with --planar"),
+    ):
+        with pytest.raises(SystemExit) as ei:
+            main(["gyrofree", str(src), "--layout", "paper", "-o", str(out), *extra])
+        err = capsys.readouterr().err
+        assert ei.value.code == 2 and needle in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()

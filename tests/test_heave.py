@@ -273,3 +273,23 @@ def test_a_bag_whose_orientation_is_all_zeros_takes_the_tilt_filter(tmp_path, ca
     code, out, err = run_main(["heave", csv, "-o", tmp_path / "h3.csv", "--attitude", "q"], capsys)
     assert code == 2 and "all zeros" in err and "accelerometer values missing" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_cutoff_without_a_band_pass_is_refused(tmp_path, capsys):
+    """--cutoff is the band-pass corner of bandpass/paper/harmonic: given with realtime (the default) or envelope
+    it would be silently unused, so it is refused in one line naming --cutoff and --method; nothing is written."""
+    from conftest import run_main
+
+    src, out = tmp_path / "p.csv", tmp_path / "h.csv"
+    formats.write(heave_platform(duration=120, rate_hz=20, seed=2), str(src))
+    for method in ("realtime", "envelope"):
+        code, _, err = run_main(["heave", src, "-o", out, "--method", method, "--cutoff", "0.05"], capsys)
+        lines = [x for x in err.splitlines() if x.strip() and "compiling" not in x]  # a cold kernel cache says so
+        assert code == 2 and len(lines) == 1, err
+        assert f"--cutoff 0.05 does not apply to --method {method}" in err and not out.exists()
+    code, _, err = run_main(["heave", src, "-o", out, "--cutoff", "0.05"], capsys)  # realtime by default
+    assert code == 2 and "--cutoff-ratio" in err
+    with pytest.raises(ImutoolError, match="--method realtime"):
+        H.estimate_heave(np.arange(100) / 10.0, np.zeros(100), cutoff=0.05)
+    code, _, err = run_main(["heave", src, "-o", out, "--method", "bandpass", "--cutoff", "0.05", "-q"], capsys)
+    assert code == 0 and out.exists(), err

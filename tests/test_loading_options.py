@@ -194,3 +194,16 @@ def test_the_reference_mapping_replaces_the_inputs_or_is_inherited(monkeypatch):
         seen.clear()
         route._load_pair("d.csv", "r.csv", None, None, [], False, None, dut | ref_given)
         assert seen == [("d.csv", None, "dut.toml", ()), expect], ref_given
+
+
+def test_one_definition_of_the_loading_options():
+    """LOAD_OPTIONS is how a file is read (a reference too) plus the input's own; every reference option stands in
+    for one of the input's own, for the column mapping (MAPPING) or is --ref-start."""
+    import inspect
+
+    from imutool.loading import INPUT_ONLY_OPTIONS, LOAD_OPTIONS, MAPPING, READ_OPTIONS, REF_LOAD_OPTIONS
+
+    assert LOAD_OPTIONS == READ_OPTIONS + INPUT_ONLY_OPTIONS
+    assert set(LOAD_OPTIONS) <= set(inspect.signature(load_recording).parameters)
+    assert {k for k, _ in REF_LOAD_OPTIONS.values()} - {"start", *MAPPING} <= set(INPUT_ONLY_OPTIONS)
+    assert set(MAPPING) <= set(READ_OPTIONS)

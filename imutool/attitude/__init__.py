@@ -43,6 +43,7 @@ from imutool.attitude.params import (
     EkfParams,
     Migration,
     ParamsFile,
+    params_from_options,
     read_params_file,
 )
 from imutool.attitude.recording import (
@@ -112,6 +113,7 @@ __all__ = [
     "new_field_check",
     "nominal_dt",
     "output_metadata",
+    "params_from_options",
     "params_markdown",
     "quat_error_metrics",
     "read_params_file",

@@ -34,6 +34,7 @@ __all__ = [
     "Param",
     "ParamsFile",
     "ToKernel",
+    "params_from_options",
     "read_params_file",
 ]
 
@@ -453,3 +454,55 @@ def read_params_file(path: str) -> ParamsFile:
         m for m in MIGRATIONS if version < m.before_version and (version > 0 or m.detect is None or m.detect(table))
     )
     return ParamsFile(path, version, frozenset(table), params, applied)
+
+
+def params_from_options(
+    params_file: str | None = None,
+    items: Iterable[str] = (),
+    *,
+    update_every: int | None = None,
+    mag_mode: str | None = None,
+) -> tuple[EkfParams, list[str]]:
+    """The run's :class:`EkfParams` and the notes of the file's migrations for it: the defaults, then the
+    parameters file ``params_file`` (``--params``), then ``items`` (``--param NAME=VALUE``, each value parsed as
+    its default's type), then ``update_every`` and ``mag_mode`` (the everyday flags; None: not given). The notes
+    (:meth:`ParamsFile.notes`) say what changed in meaning since an older file was saved, for the names the
+    command line did not set. A bad name or value is an ImutoolError naming ``--param``."""
+    values: dict[str, Any] = {}
+    overridden: set[str] = set()
+    pfile = read_params_file(params_file) if params_file else None
+    if pfile is not None:
+        values.update(vars(pfile.params))
+    defaults = EkfParams()
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or name not in PARAM_DOC:
+            raise ImutoolError(f"--param {item!r}: expected NAME=VALUE with NAME one of {', '.join(PARAM_DOC)}")
+        values[name] = parse_param_value(name, text.strip(), getattr(defaults, name))
+        overridden.add(name)
+    for name, value in (("update_every", update_every), ("mag_mode", mag_mode)):
+        if value is not None:
+            values[name] = value
+            overridden.add(name)
+    params = EkfParams.from_dict(values, source="--params/--param")
+    return params, [] if pfile is None else pfile.notes(params, overridden)
+
+
+def parse_param_value(name: str, text: str, default: Any) -> Any:
+    """``--param NAME=TEXT``'s value as the type of the parameter's ``default`` (bool: true/false/1/0/yes/no;
+    tuple: comma-separated numbers); an ImutoolError otherwise."""
+    try:
+        if isinstance(default, bool):
+            if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError
+            return text.lower() in ("true", "1", "yes")
+        if isinstance(default, tuple):
+            return tuple(float(x) for x in text.split(","))
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            return float(text)
+        return text
+    except ValueError:
+        raise ImutoolError(f"--param {name}={text!r}: expected a value like {default!r}") from None

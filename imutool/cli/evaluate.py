@@ -21,7 +21,7 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.evaluation import parse_align_heading, run_evaluate
+from imutool.evaluation import CHANNELS, parse_align_heading, run_evaluate
 
 
 def _align(value: str | None) -> str | None:
@@ -36,10 +36,10 @@ def _align(value: str | None) -> str | None:
 def evaluate_route(
     est_path: str,
     ref_path: str | None = None,
-    channel: str | None = None,
-    max_lag: float = 0.0,
-    plot_path: str | None = None,
-    align_heading: str | None = None,
+    channel: str | None = default_of(run_evaluate, "channel"),
+    max_lag: float = default_of(run_evaluate, "max_lag_s"),
+    plot_path: str | None = default_of(run_evaluate, "plot"),
+    align_heading: str | None = default_of(run_evaluate, "align_heading"),
     quiet: bool = True,
     on_input: Any = None,
     **load_options: Any,
@@ -70,7 +70,7 @@ def evaluate_route(
 )
 @click.option(
     "--channel",
-    type=click.Choice(["angles", "quaternion", "heave", "position"]),
+    type=click.Choice(list(CHANNELS)),
     default=None,
     help="What to compare (default: angles, plus quaternion when both files have one).",
 )

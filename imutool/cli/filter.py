@@ -208,10 +208,11 @@ def filter_route(
     """Parsed options → :func:`imutool.filtering.run_filter` (the same for the command and ``imutool batch``):
     the EKF's parameters from --params/--param (the file's migration notes on stderr unless ``quiet``), the
     lever arm, the compass model, --save-params written."""
-    from imutool.compass import CompassParams  # here, not at the top: `imutool filter --help` loads no numba
+    from imutool.attitude.params import params_from_options  # here, not at the top: `--help` loads no numba
+    from imutool.compass import CompassParams
     from imutool.filtering import parse_speed, run_filter
 
-    params, notes = ekf_params_and_notes(params_file, param_items, update_every, mag_mode)
+    params, notes = params_from_options(params_file, param_items, update_every=update_every, mag_mode=mag_mode)
     if not quiet:
         for note in notes:  # what changed in meaning since an older parameters file was saved (the library's)
             click.echo(f"note: {note}", err=True)
@@ -262,57 +263,6 @@ def filter_route(
 
 
 filter_cmd = route_of(filter_route, ("output", "save_params"))(filter_cmd)
-
-
-def ekf_params(params_file: str | None, items: tuple[str, ...], update_every: int | None, mag_mode: str | None) -> Any:
-    """EkfParams from the defaults, then --params FILE, then --param NAME=VALUE, then the everyday flags."""
-    return ekf_params_and_notes(params_file, items, update_every, mag_mode)[0]
-
-
-def ekf_params_and_notes(
-    params_file: str | None, items: tuple[str, ...], update_every: int | None, mag_mode: str | None
-) -> tuple[Any, list[str]]:
-    """:func:`ekf_params` and the notes of the file's migrations for that run
-    (:meth:`imutool.attitude.params.ParamsFile.notes`: what changed in meaning since an older file was saved)."""
-    from imutool.attitude import PARAM_DOC, EkfParams, read_params_file
-
-    values: dict[str, Any] = {}
-    overridden: set[str] = set()
-    pfile = read_params_file(params_file) if params_file else None
-    if pfile is not None:
-        values.update(vars(pfile.params))
-    for item in items:
-        name, sep, text = item.partition("=")
-        name = name.strip().replace("-", "_")
-        if not sep or name not in PARAM_DOC:
-            raise ImutoolError(f"--param {item!r}: expected NAME=VALUE with NAME one of {', '.join(PARAM_DOC)}")
-        values[name] = _param_value(name, text.strip(), getattr(EkfParams(), name))
-        overridden.add(name)
-    if update_every is not None:
-        values["update_every"] = update_every
-        overridden.add("update_every")
-    if mag_mode is not None:
-        values["mag_mode"] = mag_mode
-        overridden.add("mag_mode")
-    params = EkfParams.from_dict(values, source="--params/--param")
-    return params, [] if pfile is None else pfile.notes(params, overridden)
-
-
-def _param_value(name: str, text: str, default: Any) -> Any:
-    try:
-        if isinstance(default, bool):
-            if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                raise ValueError
-            return text.lower() in ("true", "1", "yes")
-        if isinstance(default, tuple):
-            return tuple(float(x) for x in text.split(","))
-        if isinstance(default, int):
-            return int(text)
-        if isinstance(default, float):
-            return float(text)
-        return text
-    except ValueError:
-        raise ImutoolError(f"--param {name}={text!r}: expected a value like {default!r}") from None
 
 
 def _warn(summary: dict[str, Any]) -> None:

@@ -24,7 +24,7 @@ from imutool.cli.common import (
     strict_requested,
 )
 from imutool.gyrofree import RATE_RW, layout_report, load_layout, run_gyrofree
-from imutool.routes import OnInput, RouteResult
+from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult
 
 
 def gyrofree_route(
@@ -105,8 +105,8 @@ def gyrofree_route(
     metavar="COL1,COL2",
     help="Reduced mode: two parallel single-axis accelerometers (layout sensors' columns) → roll.",
 )
-@click.option("--causal", is_flag=True, help="Planar mode: causal band-pass integration (default zero-phase).")
-@click.option("--cutoff", type=float, default=None, help="Planar mode band-pass cut-off Hz [0.3 × dominant].")
+@click.option("--causal", is_flag=True, help="Planar mode only: causal band-pass integration (default zero-phase).")
+@click.option("--cutoff", type=float, default=None, help="Planar mode only: band-pass cut-off Hz [0.3 × dominant].")
 @input_options
 @output_options
 @safe_outputs("output")
@@ -126,12 +126,9 @@ def _batch_route(check_layout_only: bool = False, quiet: bool = True, **options:
     return gyrofree_route(**options)
 
 
-LOAD_OPTIONS = ("columns", "profile", "topic", "stamp", "duplicates", "backwards", "mounting", "calibration_file")
-
-
 def _layout_check(input_path: str | None, layout_path: str, **options: Any) -> dict[str, Any]:
-    """--check-layout: :func:`imutool.gyrofree.layout_report` with the input options (columns, profile, topic,
-    ...) of a given INPUT."""
+    """--check-layout: :func:`imutool.gyrofree.layout_report` with every loading option of a given INPUT
+    (:data:`imutool.loading.LOAD_OPTIONS`: ``--columns ... --rate --time-column --header-rows --with``)."""
     load = {k: options[k] for k in LOAD_OPTIONS if options.get(k) is not None}
     return layout_report(layout_path, input_path, strict=strict_requested(), **load)
 

@@ -131,7 +131,12 @@ def heave_route(
     metavar="X,Y,Z",
     help="Monitoring point relative to the IMU, m body FRD (x bow, y starboard, z down).",
 )
-@click.option("--cutoff", type=float, default=None, help="Causal band-pass cut-off Hz [default 0.2 × dominant].")
+@click.option(
+    "--cutoff",
+    type=float,
+    default=None,
+    help="Causal band-pass cut-off Hz, methods bandpass/paper/harmonic only [default 0.2 × dominant].",
+)
 @click.option(
     "--cutoff-ratio",
     type=float,

@@ -14,7 +14,7 @@ from typing import Any
 
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import FLAGS, MAPPING, how_loaded, split_reference_options
+from imutool.loading import FLAGS, INPUT_ONLY_OPTIONS, MAPPING, how_loaded, split_reference_options
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input, load_reference
 
 from .common import sha256_of
@@ -127,18 +127,9 @@ def _load_pair(
         raise TypeError(f"unexpected keyword argument(s) {', '.join(sorted(unknown))}")
     if ref_given and isinstance(reference, Recording):
         raise TypeError("the reference's loading options apply to a file, not to a Recording already loaded")
-    dut_only = (
-        "mounting",
-        "calibration_file",
-        "input_rate_hz",
-        "time_column",
-        "header_rows",
-        "with_files",
-        "with_offsets",
-    )
     own_mapping = any(k in ref_given for k in MAPPING)  # --ref-columns/--ref-profile: neither of the DUT's
     ref_options = {
-        k: v for k, v in load_options.items() if k not in dut_only and not (own_mapping and k in MAPPING)
+        k: v for k, v in load_options.items() if k not in INPUT_ONLY_OPTIONS and not (own_mapping and k in MAPPING)
     } | ref_given
     inherited = tuple(k for k in MAPPING if ref_options.get(k) and k not in ref_given)
     dut_given = {k: v for k, v in load_options.items() if k in FLAGS and v not in (None, (), [])}
