@@ -14,7 +14,6 @@ for Parquet) in bounded memory (:func:`stream_ekf`). Angles in the outputs are d
 
 from __future__ import annotations
 
-import itertools
 import os
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -170,6 +169,8 @@ def run_filter(
     lever = _lever_arm(lever_arm)
     antenna = _lever_arm(antenna_arm, "antenna arm")
     log_speed = parse_speed(speed)
+    if log_speed is not None and method != "ekf":
+        raise ImutoolError(f"a log speed applies to the EKF (method ekf), not to method {method!r}")
     if method == "ekf":
         params = params if params is not None else EkfParams()
     if (
@@ -231,8 +232,8 @@ def run_filter(
         out, s = compass_recording(rec, compass if compass is not None else CompassParams(), dev)
         report(progress, len(rec), len(rec))
     summary.update(s)
-    if log_speed is not None:
-        summary["log_speed_mps"] = round(log_speed, 3)
+    if log_speed is not None and method == "ekf" and gnss_inputs(rec, use_gnss)[2] is None:
+        summary["log_speed_mps"] = round(log_speed, 3)  # (used: no GNSS velocity in the input)
     if validation.get("rows_with_nan"):
         summary["input_rows_with_nan"] = validation["rows_with_nan"]
     if output is not None:
@@ -265,7 +266,7 @@ def with_log_speed(rec: Recording, speed_mps: float | None) -> Recording:
     takes it along the bow where there is no GNSS velocity)."""
     if speed_mps is None or LOG_SPEED in rec.channels:
         return rec
-    out = rec.copy()
+    out = Recording(rec.time, dict(rec.channels), dict(rec.units), dict(rec.meta), dict(rec.columns))  # shallow
     out.add(LOG_SPEED, np.full(len(rec), speed_mps), "m/s")
     return out
 
@@ -418,7 +419,14 @@ def _motion_lookahead(
         rising[1:] &= np.diff(t) > 0
         t, g = t[rising], g[rising]
     choice = choose_motion(params, t, g) if g.shape[1:] == (3,) else choose_motion(params, t[:0], np.empty((0, 3)))
-    return itertools.chain(held, it), choice, held
+    return _held_then(held, it), choice, list(held)
+
+
+def _held_then(held: list[Recording], rest: Iterator[Recording]) -> Iterator[Recording]:
+    """The held chunks, each let go once given, then the rest (``itertools.chain`` would keep them all)."""
+    while held:
+        yield held.pop(0)
+    yield from rest
 
 
 def _stream_lever_arm(
@@ -596,7 +604,7 @@ def stream_ekf(
         chunks, motion, held = _motion_lookahead(prepared(chunks), params)
         run_params = params_for_motion(params, motion)
         lever_arm, lever_est = _stream_lever_arm(held, params, motion, run_params, lever_arm, use_gnss, antenna_arm)
-        held = []  # (the chunks are in the iterator; the list let go)
+        held = []  # the estimate's copy of the list let go: each held chunk is freed once filtered
         chunks = _Ahead(chunks)
         for chunk in chunks:
             if dt_nom is None:
@@ -660,7 +668,7 @@ def stream_ekf(
         if final is None:  # the stream ended in rows that were all dropped (or none at all)
             final = finish(w)
         validation, warnings = final
-    if log_speed is not None:
+    if log_speed is not None and self_checks is not None and self_checks.speed_used:
         summary["log_speed_mps"] = round(log_speed, 3)
     summary["samples"] = summary["rows"]
     summary["validation"] = validation

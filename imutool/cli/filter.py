@@ -111,8 +111,9 @@ from imutool.routes import OnInput, RouteResult
     "--speed",
     default=None,
     metavar="SPEED",
-    help="EKF: the ship's speed through the water from its log, m/s or with a unit ('15kn'): where the input has "
-    "no GNSS velocity, a turn's centripetal acceleration (speed × rate of turn, along the bow) is removed.",
+    help="EKF: the ship's speed through the water from its log, m/s or with a unit ('15kn'), taken as constant for "
+    "the whole run: where the input has no GNSS velocity, a turn's centripetal acceleration (speed × rate of turn, "
+    "along the bow) is removed.",
 )
 @click.option(
     "--heading",
