@@ -73,3 +73,21 @@ def run_cli_on_pty(args: list[str], cwd, env: dict) -> tuple[int, str, str]:
         return p.returncode, out, b"".join(chunks).decode(errors="replace")
     finally:
         os.close(master)
+
+
+@pytest.fixture
+def copy_sizes(monkeypatch) -> list[int]:
+    """The bytes of each copy the CSV writer makes behind its final header (``formats.csv.copy_range``), in order;
+    the copies still happen."""
+    import formats.csv as fcsv
+
+    sizes: list[int] = []
+    real_copy = fcsv.copy_range
+
+    def counting_copy(src, dst, offset):
+        before = dst.tell()
+        real_copy(src, dst, offset)
+        sizes.append(dst.tell() - before)
+
+    monkeypatch.setattr(fcsv, "copy_range", counting_copy)
+    return sizes

@@ -637,25 +637,16 @@ def test_csvwriter_final_meta_goes_into_the_header(tmp_path, n_warnings, monkeyp
 
 
 @pytest.mark.parametrize("background", [False, True])
-def test_csvwriter_final_meta_before_the_last_chunk_copies_only_the_rows_before(tmp_path, monkeypatch, background):
+def test_csvwriter_final_meta_before_the_last_chunk_copies_only_the_rows_before(tmp_path, copy_sizes, background):
     """Final metadata handed over before the last chunk (a stream that looks one chunk ahead): only the rows
     already written are copied behind the final header, the last chunk goes straight behind it, and the file is
     byte for byte the one written with the metadata given at the end; given before the first chunk, nothing is
     copied."""
-    import formats.csv as fcsv
 
     t = np.arange(1000) * 0.01
     rec = Recording(t, {"gyro": np.sin(t)[:, None] * [1.0, 2.0, 3.0]}, meta={"warnings": ["first chunk"], "a": 1})
     final = {"warnings": ["first chunk", "a warning known at the end"], "validation": {"rows_read": 1000}}
-    copied: list[int] = []
-    real_copy = fcsv.copy_range
-
-    def counting_copy(src, dst, offset):
-        before = dst.tell()
-        real_copy(src, dst, offset)
-        copied.append(dst.tell() - before)
-
-    monkeypatch.setattr(fcsv, "copy_range", counting_copy)
+    copied = copy_sizes
     outputs = {}
     for when in ("end", "before last", "before first"):
         p = tmp_path / f"{when.replace(' ', '_')}.csv"

@@ -2,11 +2,18 @@
 
 import numpy as np
 from click.testing import CliRunner
+from conftest import run_main
 
 import formats
 from formats import Recording
 from formats.frames import euler_to_quat
 from imutool.metrics import evaluate_angle, quat_errors, snr_db
+
+
+def _cli(capsys, *args: str) -> tuple[int, str]:
+    """imutool's entry point in-process: (exit status, stdout when 0 else stderr)."""
+    code, out, err = run_main(args, capsys)
+    return code, out if not code else err
 
 
 def test_heading_wrap_and_lag():
@@ -113,17 +120,10 @@ def test_reference_loading_options(tmp_path, capsys):
     file of its own on a clock 2 s ahead): read with the reference's options, stated in the summary."""
     import json
 
-    from imutool.cli import main
     from imutool.evaluation import run_evaluate
 
     def run(*args: str) -> tuple[int, str]:
-        try:
-            main(list(args))
-            code = 0
-        except SystemExit as e:
-            code = int(e.code or 0)
-        out, err = capsys.readouterr()
-        return code, out if not code else err
+        return _cli(capsys, *args)
 
     t = np.arange(0.0, 30.0, 0.1)
     roll, pitch, hdg = 10 * np.sin(t), 3 * np.cos(t), (40 + 5 * t) % 360
@@ -175,17 +175,10 @@ def test_reference_column_mapping(tmp_path, capsys):
     --ref-columns (or --ref-profile), the estimate's own names untouched; without it nothing is compared."""
     import json
 
-    from imutool.cli import main
     from imutool.evaluation import run_evaluate
 
     def run(*args: str) -> tuple[int, str]:
-        try:
-            main(list(args))
-            code = 0
-        except SystemExit as e:
-            code = int(e.code or 0)
-        out, err = capsys.readouterr()
-        return code, out if not code else err
+        return _cli(capsys, *args)
 
     t = np.arange(0.0, 30.0, 0.1)
     roll, pitch = 10 * np.sin(t), 3 * np.cos(t)

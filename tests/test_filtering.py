@@ -421,21 +421,13 @@ def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
     assert _last_pair_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12
 
 
-def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_path, monkeypatch):
+def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_path, monkeypatch, copy_sizes):
     """A streamed run knows its final metadata (validation, self-check, warnings) after its last chunk's EKF and
     hands them to the writer before writing that chunk: only the rows before it are copied behind the final header
     (the whole file was, at close), and the file is byte for byte the one written the old way."""
     import formats.csv as fcsv
 
-    copied: list[int] = []
-    real_copy = fcsv.copy_range
-
-    def counting_copy(src, dst, offset):
-        before = dst.tell()
-        real_copy(src, dst, offset)
-        copied.append(dst.tell() - before)
-
-    monkeypatch.setattr(fcsv, "copy_range", counting_copy)
+    copied = copy_sizes
     out = tmp_path / "streamed.csv"
     run_filter(roll_csv, out, stream_mb=0, chunk_rows=2500)  # 6001 rows: 2500, 2500, 1001
     text = out.read_bytes()
