@@ -44,6 +44,7 @@ PACKAGES = ("imutool", "calibration", "formats")
 KEEP_VERSIONS = 3  # version folders kept (the current one included)
 _VERSION_DIR = re.compile(r"^kernels-[0-9a-f]{12}$")
 _SITE = Path(__file__).resolve().parent.parent  # the folder holding the three packages (site-packages or a clone)
+PACKAGES_FOLDER = str(_SITE)
 
 # kernel groups: module-name prefix -> (what the user is told is compiling, about how long an empty cache takes to
 # compile it on this project's 2-core machine without other load, s; twice that and more under load). A module of
@@ -251,6 +252,7 @@ class _CompileAnnouncer(event.Listener):
         self.announced: set[str] = set()
         self._starts: list[tuple[str, float] | None] = []
         self.times = os.environ.get("IMUTOOL_KERNEL_TIMES", "") not in ("", "0")
+        self.silent = False  # True in formats.kernel_warm's second process
 
     def on_start(self, ev) -> None:
         disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
@@ -262,7 +264,7 @@ class _CompileAnnouncer(event.Listener):
             self._starts.append(None)
             return
         what, seconds = group
-        if what not in self.announced:
+        if what not in self.announced and not self.silent:
             self.announced.add(what)
             when = "first run only" if _State.persistent else "no writable cache folder: every run"
             about = f", ~{seconds:.0f} s" if seconds >= 1 else ""
@@ -271,7 +273,7 @@ class _CompileAnnouncer(event.Listener):
 
     def on_end(self, ev) -> None:
         start = self._starts.pop() if self._starts else None
-        if start is not None and self.times:
+        if start is not None and self.times and not self.silent:
             print(f"imutool: compiled {start[0]} in {time.perf_counter() - start[1]:.1f} s", file=sys.stderr)
 
 

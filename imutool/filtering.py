@@ -48,6 +48,7 @@ from imutool.attitude.recording import (
     heading_channel,
     ship_lever_arm,
 )
+from imutool.attitude.warm import warm_filter_kernels
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import STREAMABLE, chunk_writer, expected_rows
@@ -173,6 +174,7 @@ def run_filter(
         raise ImutoolError(f"a log speed applies to the EKF (method ekf), not to method {method!r}")
     if method == "ekf":
         params = params if params is not None else EkfParams()
+        warm_filter_kernels(smooth)  # a cold cache: a second process compiles the helpers (formats.kernel_warm)
     if (
         not isinstance(source, Recording)
         and not load_options.get("with_files")  # merged in memory

@@ -210,7 +210,7 @@ from imutool.attitude.updates import _apply_correction, _heading_update, _reset_
 from imutool.quaternion import fast_atan2, qmul, rmat, rotvec_quat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def _rest_update(st, P, prm, dx, R):
     """The zero-rate pseudo-measurement of the bias, per axis, and R refreshed (s, rad/s). Sections of the loop that
     run rarely or only with an option are compiled apart (a call only where they run; the loop compiles faster)."""
@@ -236,7 +236,7 @@ def _rest_update(st, P, prm, dx, R):
     rmat(st[0], st[1], st[2], st[3], R)
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok):
     """The specific force (m/s², body) less the lever arm's rotation terms; the rate's low-pass advanced by dt (s)."""
     if dt > 0:
@@ -262,7 +262,7 @@ def _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok):
     return ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def _gnss_force(st, R, gk0, gk1, gk2, sog, cog, sogdot, along_bow, ax, ay, az):
     """The specific force (m/s², body) less the GNSS kinematic acceleration (sog m/s, cog rad, sogdot m/s²) of the
     turn: along the course, or ``along_bow`` where no heading is held (the course cannot be turned into body axes
@@ -282,7 +282,7 @@ def _gnss_force(st, R, gk0, gk1, gk2, sog, cog, sogdot, along_bow, ax, ay, az):
     return ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def _heading_input(st, P, prm, R, dx, tk, hk):
     """An external true heading hk (rad, NED) at time tk (s): a scalar update, a glitch skipped, or taken outright
     after a long glitch; True if it was used. R is refreshed."""
@@ -310,7 +310,7 @@ def _heading_input(st, P, prm, R, dx, tk, hk):
     return True
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use):
     """mag_mode "full": the paper's normalised 3-vector update with the mean world-frame field (m0, m1, m2) of
     n_use samples."""
@@ -326,7 +326,7 @@ def _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use):
     _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def _velocity_aiding(st, R, RI, tk, vn_k, ve_k, w0, w1, w2, arm_sa, ax, ay, az, dt, gap, acc_ok):
     """Velocity aiding's interval sums at one row (time tk s, the antenna's north/east velocity m/s, the bias-free
     rate w rad/s, the force a m/s² body); True if RI = R(q_I) was computed for this row."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from imutool.attitude.covariance import _propagate_pending, _vertical_forms
 from imutool.attitude.layout import (
     P_MAG_DIP_GATE,
@@ -40,7 +41,7 @@ def _dip_gate(sin_dip, cos_gate, sin_gate):
     return np.arcsin(s), lo, hi
 
 
-@njit
+@njit(cache=True)
 def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, sin_gate):
     """No lock-out of the magnetometer (VQF's new-field acceptance, Laidig & Seel 2023, Sec. IV-C). Called for a sample
     the gates reject, of norm ``nm`` (µT), dip sine ``sz`` and horizontal direction ``hx``, ``hy`` (north and east

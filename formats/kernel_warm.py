@@ -1,0 +1,139 @@
+"""A cold first run, on two cores: a second process compiles a command's kernel helpers while the first compiles.
+
+numba compiles in one thread (a process-wide lock), and most of a first run's time is numba's own Python passes
+(type inference ~55 %, lowering ~25 %, LLVM ~10 % in a profile of the filter's first run, 2026-11-28), so a cold
+cache cannot be compiled faster in one process. It can be split across processes. A kernel's helpers (the @njit
+functions it calls) are compiled when the kernel's type inference first reaches each call; a helper marked
+``cache=True`` is looked up in the cache first, and a cached helper's LLVM bitcode is linked into the kernel just as
+a freshly compiled one's (the same code, inlined or not as LLVM decides either way: the results are the same).
+
+:func:`warm_in_background` is called by a command's library route before its work starts. When the command's main
+kernel is not in the cache yet and the machine has a second core, it starts ``python -m formats.kernel_warm``: that
+process compiles the listed functions with the argument types the kernels call them with, from the *last* needed
+to the first, while the command compiles from the first; each finds in the cache what the other finished. Nothing
+is waited for: the command never depends on the second process, which stays silent (a function it cannot compile
+is left to the command) and is never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
+
+A list is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
+boolean"``), kept beside the command's kernels (e.g. :data:`imutool.attitude.warm.FILTER_KERNELS`); a test records
+a real cold compile and checks that every cached helper it compiled is listed with the types it was called with.
+"""
+
+from __future__ import annotations
+
+import atexit
+import importlib
+import os
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from numba.core import sigutils, types
+
+from formats import kernel_cache
+from formats.threads import thread_budget
+
+ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set inside one)
+
+Entry = tuple[str, str, str]  # (module, function name, argument types)
+
+
+def type_text(t: types.Type) -> str:
+    """A numba type in signature syntax: ``float64[:, ::1]`` for a 2-D C array, ``boolean``, ``int64``."""
+    if isinstance(t, types.Array):
+        if not t.mutable or not t.aligned:
+            raise ValueError(f"no signature syntax for {t!r}")
+        dims = [":"] * t.ndim
+        if t.layout == "C":
+            dims[-1] = "::1"
+        elif t.layout == "F":
+            dims[0] = "::1"
+        return f"{type_text(t.dtype)}[{', '.join(dims)}]"
+    if isinstance(t, types.Boolean):
+        return "boolean"
+    return str(t)
+
+
+def argument_types(text: str) -> tuple[types.Type, ...]:
+    """The argument types of ``"float64[::1], int64"`` (numba's signature syntax, no return type)."""
+    args, _ = sigutils.normalize_signature(f"({text},)" if text else "()")
+    return tuple(args)
+
+
+def _index_file(dispatcher) -> Path | None:
+    """The cache index file of ``dispatcher`` (numba's internals; None where they differ)."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    path = getattr(cache_file, "_index_path", None)
+    return Path(path) if path else None
+
+
+def is_cached(dispatcher) -> bool:
+    """True if ``dispatcher`` has an entry in the kernel cache (any signature), or its cache cannot be located."""
+    index = _index_file(dispatcher)
+    return index is None or index.exists()
+
+
+def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | None:
+    """Start the warming process for ``entries`` if ``probe`` (the command's main kernel) is not cached yet.
+
+    Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
+    a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), switched
+    off, a cache that lasts only as long as this process, or the process could not be started.
+    """
+    if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not entries:
+        return None
+    if kernel_cache.cache_folder() is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
+        return None
+    env = dict(os.environ, **{ENV_SWITCH: "0"})  # the same environment: the same cache folder is chosen
+    if env.get("NUMBA_CACHE_DIR"):
+        env["NUMBA_CACHE_DIR"] = os.path.abspath(env["NUMBA_CACHE_DIR"])  # it starts in another folder
+    lines = "\n".join("\t".join(e) for e in reversed(entries))
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "formats.kernel_warm"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
+            cwd=kernel_cache.PACKAGES_FOLDER,  # `-m` imports from the folder it starts in: ours, not a user's
+            close_fds=True,
+        )
+        assert proc.stdin is not None
+        proc.stdin.write(lines.encode())
+        proc.stdin.close()
+    except (OSError, ValueError):
+        return None
+    atexit.register(_stop, proc)  # a command that ends first leaves no process behind
+    return proc
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def compile_entries(entries: Sequence[Entry]) -> int:
+    """Compile each entry in order (from the cache where it is there already); the number compiled or loaded."""
+    done = 0
+    for module, name, text in entries:
+        try:
+            fn = getattr(importlib.import_module(module), name)
+            fn.compile(argument_types(text))
+        except Exception:  # noqa: BLE001 - a helper this process cannot compile is left to the command
+            continue
+        done += 1
+    return done
+
+
+def _main() -> None:
+    announcer = getattr(kernel_cache.event, "_imutool_announcer", None)
+    if announcer is not None:
+        announcer.silent = True  # the command says what compiles; this process has no one to tell
+    entries = [tuple(line.split("\t")) for line in sys.stdin.read().splitlines() if line.count("\t") == 2]
+    compile_entries(entries)  # type: ignore[arg-type]
+
+
+if __name__ == "__main__":
+    _main()

@@ -1,0 +1,143 @@
+"""A cold first run compiles on two cores: the filter's helpers in a second process (formats/kernel_warm.py).
+
+The slow test records what a cold ``imutool filter --smooth`` really compiles (numba's compile events, in a
+subprocess with an empty cache and no warming) and checks that :mod:`imutool.attitude.warm` lists every cached
+function of it with the argument types it was called with: a helper added to the EKF without its entry, or a
+changed argument list, names itself here. The quick tests check the process's own work: what it compiles is
+loaded, not compiled again, by the next process.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+import formats.kernel_warm as kw
+from imutool.attitude.kernel import ekf_kernel
+from imutool.attitude.warm import FILTER_KERNELS, SMOOTH_KERNELS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _env(tmp_path: Path, **extra: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "IMUTOOL_KERNEL_TIMES")}
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba")
+    env.update(extra)
+    return env
+
+
+def test_every_entry_is_in_signature_syntax():
+    for module, name, text in FILTER_KERNELS + SMOOTH_KERNELS:
+        types = kw.argument_types(text)
+        assert ", ".join(kw.type_text(t) for t in types) == text, (module, name)
+    assert kw.type_text(kw.argument_types("float64[:, :, ::1]")[0]) == "float64[:, :, ::1]"
+
+
+def test_no_second_process_when_switched_off_cached_or_one_thread(monkeypatch):
+    monkeypatch.setenv(kw.ENV_SWITCH, "0")
+    assert kw.warm_in_background(ekf_kernel, FILTER_KERNELS) is None
+    monkeypatch.delenv(kw.ENV_SWITCH)
+    monkeypatch.setenv("IMUTOOL_THREADS", "1")  # a batch worker's share of one core
+    assert kw.warm_in_background(ekf_kernel, FILTER_KERNELS) is None
+    monkeypatch.delenv("IMUTOOL_THREADS")
+    monkeypatch.setattr(kw, "is_cached", lambda probe: True)
+    assert kw.warm_in_background(ekf_kernel, FILTER_KERNELS) is None
+
+
+CHECK = textwrap.dedent(
+    """
+    import sys
+    from formats.kernel_warm import argument_types
+    from imutool.attitude import covariance
+    for name, text in [("_add_rrt", sys.argv[1]), ("_vertical_forms", sys.argv[2])]:
+        fn = getattr(covariance, name)
+        fn.compile(argument_types(text))
+        print(name, fn.stats.cache_hits.get(argument_types(text), 0), sum(fn.stats.cache_misses.values()))
+    """
+)
+
+
+def test_what_the_second_process_compiles_the_next_one_loads(tmp_path):
+    entries = [e for e in FILTER_KERNELS if e[1] in ("_vertical_forms", "_add_rrt")]
+    assert len(entries) == 2
+    env = _env(tmp_path)
+    warm = subprocess.run(
+        [sys.executable, "-m", "formats.kernel_warm"],
+        input="\n".join("\t".join(e) for e in entries),
+        env=env,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert warm.returncode == 0 and warm.stdout == "" and warm.stderr == "", warm.stderr
+    texts = {name: text for _, name, text in entries}
+    r = subprocess.run(
+        [sys.executable, "-c", CHECK, texts["_add_rrt"], texts["_vertical_forms"]],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["_add_rrt", "1", "0", "_vertical_forms", "1", "0"], r.stdout  # loaded, not compiled
+    assert "compiling" not in r.stderr, r.stderr
+
+
+RECORD = textwrap.dedent(
+    """
+    import sys
+    from numba.core import caching, event
+    from formats.kernel_warm import type_text
+    seen = []
+    class Recorder(event.Listener):
+        def on_start(self, ev):
+            pass
+        def on_end(self, ev):
+            d = ev.data["dispatcher"]
+            if d.py_func.__module__.split(".")[0] in ("imutool", "formats", "calibration") and not isinstance(
+                d._cache, caching.NullCache
+            ):
+                seen.append((d.py_func.__module__, d.py_func.__name__, ", ".join(type_text(a) for a in ev.data["args"])))
+    event.register("numba:compile", Recorder())
+    from imutool.cli import main
+    sys.argv = ["imutool", *sys.argv[1:]]
+    try:
+        main()
+    except SystemExit as e:
+        assert not e.code, e.code
+    for entry in seen:
+        print("\\t".join(entry))
+    """
+)
+
+
+@pytest.mark.slow
+def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
+    """~40 s: one cold compile of the filter's kernels, with the smoother."""
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
+    run = [sys.executable, "-c", "from imutool.cli import main; main()"]
+    sim = ["simulate", "ship-roll", "--duration", "20", "-o", "r.csv"]
+    sim_env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-sim"))  # the filter's own cache stays empty
+    assert subprocess.run(run + sim, cwd=tmp_path, env=sim_env, capture_output=True, timeout=300).returncode == 0
+    r = subprocess.run(
+        [sys.executable, "-c", RECORD, "filter", "r.csv", "-o", "est.csv", "--smooth", "-q"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert r.returncode == 0, r.stderr
+    compiled = {tuple(line.split("\t")) for line in r.stdout.splitlines()}
+    own = {e for e in compiled if e[1] in ("parse_block", "ekf_kernel")}  # the command's own: first and probe
+    assert {e[1] for e in own} == {"parse_block", "ekf_kernel"}, sorted(compiled)
+    listed = set(FILTER_KERNELS + SMOOTH_KERNELS)
+    assert compiled - own - listed == set(), "compiled but not listed (add to imutool/attitude/warm.py)"
+    assert listed - compiled == set(), "listed but not compiled as listed (remove or correct the types)"
