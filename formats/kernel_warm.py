@@ -15,7 +15,7 @@ is waited for: the command never depends on the second process, which stays sile
 is left to the command) and is never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
 
 A list is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
-boolean"``), kept beside the command's kernels (e.g. :data:`imutool.attitude.warm.FILTER_KERNELS`); a test records
+boolean"``), kept beside the command's kernels (e.g. :mod:`imutool.attitude.warm`); a test records
 a real cold compile and checks that every cached helper it compiled is listed with the types it was called with.
 """
 
@@ -74,21 +74,23 @@ def is_cached(dispatcher) -> bool:
     return index is None or index.exists()
 
 
-def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | None:
-    """Start the warming process for ``entries`` if ``probe`` (the command's main kernel) is not cached yet.
+def warm_in_background(probe, helpers: Sequence[Entry], later: Sequence[Entry] = ()) -> subprocess.Popen | None:
+    """Start the warming process if ``probe`` (the command's main kernel) is not cached yet: it compiles
+    ``helpers`` (the probe's, in the order the probe first calls them) from the last to the first, then ``later``
+    (kernels the command needs after the probe) in order.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
     a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), switched
     off, a cache that lasts only as long as this process, or the process could not be started.
     """
-    if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not entries:
+    if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not (helpers or later):
         return None
     if kernel_cache.cache_folder() is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
         return None
     env = dict(os.environ, **{ENV_SWITCH: "0"})  # the same environment: the same cache folder is chosen
     if env.get("NUMBA_CACHE_DIR"):
         env["NUMBA_CACHE_DIR"] = os.path.abspath(env["NUMBA_CACHE_DIR"])  # it starts in another folder
-    lines = "\n".join("\t".join(e) for e in reversed(entries))
+    lines = "\n".join("\t".join(e) for e in [*reversed(helpers), *later])
     try:
         proc = subprocess.Popen(
             [sys.executable, "-m", "formats.kernel_warm"],

@@ -19,7 +19,9 @@ import pytest
 
 import formats.kernel_warm as kw
 from imutool.attitude.kernel import ekf_kernel
-from imutool.attitude.warm import FILTER_KERNELS, SMOOTH_KERNELS
+from imutool.attitude.warm import AFTER_THE_EKF, EKF_HELPERS, SMOOTH_KERNELS
+
+ALL = EKF_HELPERS + AFTER_THE_EKF + SMOOTH_KERNELS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,7 +34,7 @@ def _env(tmp_path: Path, **extra: str) -> dict:
 
 
 def test_every_entry_is_in_signature_syntax():
-    for module, name, text in FILTER_KERNELS + SMOOTH_KERNELS:
+    for module, name, text in ALL:
         types = kw.argument_types(text)
         assert ", ".join(kw.type_text(t) for t in types) == text, (module, name)
     assert kw.type_text(kw.argument_types("float64[:, :, ::1]")[0]) == "float64[:, :, ::1]"
@@ -40,13 +42,13 @@ def test_every_entry_is_in_signature_syntax():
 
 def test_no_second_process_when_switched_off_cached_or_one_thread(monkeypatch):
     monkeypatch.setenv(kw.ENV_SWITCH, "0")
-    assert kw.warm_in_background(ekf_kernel, FILTER_KERNELS) is None
+    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
     monkeypatch.delenv(kw.ENV_SWITCH)
     monkeypatch.setenv("IMUTOOL_THREADS", "1")  # a batch worker's share of one core
-    assert kw.warm_in_background(ekf_kernel, FILTER_KERNELS) is None
+    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
     monkeypatch.delenv("IMUTOOL_THREADS")
     monkeypatch.setattr(kw, "is_cached", lambda probe: True)
-    assert kw.warm_in_background(ekf_kernel, FILTER_KERNELS) is None
+    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
 
 
 CHECK = textwrap.dedent(
@@ -63,7 +65,7 @@ CHECK = textwrap.dedent(
 
 
 def test_what_the_second_process_compiles_the_next_one_loads(tmp_path):
-    entries = [e for e in FILTER_KERNELS if e[1] in ("_vertical_forms", "_add_rrt")]
+    entries = [e for e in EKF_HELPERS if e[1] in ("_vertical_forms", "_add_rrt")]
     assert len(entries) == 2
     env = _env(tmp_path)
     warm = subprocess.run(
@@ -104,7 +106,8 @@ RECORD = textwrap.dedent(
             if d.py_func.__module__.split(".")[0] in ("imutool", "formats", "calibration") and not isinstance(
                 d._cache, caching.NullCache
             ):
-                seen.append((d.py_func.__module__, d.py_func.__name__, ", ".join(type_text(a) for a in ev.data["args"])))
+                types = ", ".join(type_text(a) for a in ev.data["args"])
+                seen.append((d.py_func.__module__, d.py_func.__name__, types))
     event.register("numba:compile", Recorder())
     from imutool.cli import main
     sys.argv = ["imutool", *sys.argv[1:]]
@@ -138,6 +141,6 @@ def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
     compiled = {tuple(line.split("\t")) for line in r.stdout.splitlines()}
     own = {e for e in compiled if e[1] in ("parse_block", "ekf_kernel")}  # the command's own: first and probe
     assert {e[1] for e in own} == {"parse_block", "ekf_kernel"}, sorted(compiled)
-    listed = set(FILTER_KERNELS + SMOOTH_KERNELS)
+    listed = set(ALL)
     assert compiled - own - listed == set(), "compiled but not listed (add to imutool/attitude/warm.py)"
     assert listed - compiled == set(), "listed but not compiled as listed (remove or correct the types)"

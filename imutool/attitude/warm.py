@@ -1,9 +1,10 @@
 """The filter's kernels for a cold first run, compiled two at a time (:mod:`formats.kernel_warm`).
 
-:data:`FILTER_KERNELS` lists, in the order a cold ``imutool filter`` first needs them, every cached function the
-command compiles after the CSV parser, with the argument types it is called with: the EKF kernel's helpers, then
-the gyro check's kernel and the CSV writer's. The EKF kernel itself (the probe: not cached yet = a cold run) is the
-command's own. :data:`SMOOTH_KERNELS` adds the RTS pass and the zero-phase low-pass of ``--smooth``.
+:data:`EKF_HELPERS` lists the EKF kernel's cached helpers in the order its type inference first reaches them, and
+:data:`AFTER_THE_EKF` the kernels a cold ``imutool filter`` compiles after it (the gyro check's, the CSV writer's),
+each with the argument types it is called with; :data:`SMOOTH_KERNELS` adds the RTS pass and the zero-phase
+low-pass of ``--smooth``. The EKF kernel itself (the probe: not cached yet = a cold run) and the CSV parser (the
+first thing the command compiles) are the command's own.
 
 A helper added to the EKF, or a changed argument list, must be listed here with its types (signature syntax:
 ``float64[:, ::1]`` a 2-D C array): ``tests/test_kernel_warm.py`` records a real cold compile and names what is
@@ -24,7 +25,7 @@ _COV = "imutool.attitude.covariance"
 _UPD = "imutool.attitude.updates"
 _KER = "imutool.attitude.kernel"
 
-FILTER_KERNELS: tuple[Entry, ...] = (
+EKF_HELPERS: tuple[Entry, ...] = (
     (_COV, "_propagate_cov_q", ", ".join([_M] + [_F] * 7)),
     (_COV, "_add_rrt", f"{_M}, int64, int64, {_F}, {_F}, {_F}, {_F}"),
     (_COV, "_propagate_pending", f"{_A}, {_M}, {_A}"),
@@ -47,6 +48,9 @@ FILTER_KERNELS: tuple[Entry, ...] = (
     (_UPD, "_heading_update", ", ".join([_M] + [_F] * 5 + [_A, "boolean", _F, _F, _F])),
     (_KER, "_mag_vector_update", ", ".join([_A, _M, _A, _M, _A] + [_F] * 4)),
     (_KER, "_heading_input", ", ".join([_A, _M, _A, _M, _A, _F, _F])),
+)
+
+AFTER_THE_EKF: tuple[Entry, ...] = (
     (
         "imutool.gyro_check",
         "pair_discrepancy_kernel",
@@ -72,4 +76,4 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
 
 def warm_filter_kernels(smooth: bool = False) -> subprocess.Popen | None:
     """On a cold cache, compile the filter's helpers in a second process while this one compiles (see the top)."""
-    return warm_in_background(ekf_kernel, FILTER_KERNELS + (SMOOTH_KERNELS if smooth else ()))
+    return warm_in_background(ekf_kernel, EKF_HELPERS, AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()))
