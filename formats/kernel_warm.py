@@ -32,9 +32,9 @@ from pathlib import Path
 from numba.core import sigutils, types
 
 from formats import kernel_cache
-from formats.threads import thread_budget
+from formats.threads import thread_budget, usable_cores
 
-ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set inside one)
+ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set inside one); "1": even on a busy machine
 
 Entry = tuple[str, str, str]  # (module, function name, argument types)
 
@@ -80,11 +80,14 @@ def warm_in_background(probe, helpers: Sequence[Entry], later: Sequence[Entry] =
     (kernels the command needs after the probe) in order.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
-    a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), switched
-    off, a cache that lasts only as long as this process, or the process could not be started.
+    a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), no idle
+    core (load average above the usable cores − 1: the second process would only slow the command), switched off,
+    a cache that lasts only as long as this process, or the process could not be started.
     """
     if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not (helpers or later):
         return None
+    if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > usable_cores() - 1:
+        return None  # no core to spare: a second process would only take the command's share
     if kernel_cache.cache_folder() is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
         return None
     env = dict(os.environ, **{ENV_SWITCH: "0"})  # the same environment: the same cache folder is chosen
@@ -108,6 +111,14 @@ def warm_in_background(probe, helpers: Sequence[Entry], later: Sequence[Entry] =
         return None
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
     return proc
+
+
+def _busy_cores() -> float:
+    """The machine's load (runnable processes, 1-minute mean; 0 where the platform has none)."""
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 0.0
 
 
 def _stop(proc: subprocess.Popen) -> None:
