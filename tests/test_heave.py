@@ -203,6 +203,7 @@ def _changing_sea():
     return t, acc + (va - a1), w * h1 + (1 - w) * h2
 
 
+@pytest.mark.slow
 def test_settled_flag_is_honest_and_marks_a_change_of_sea():
     t, acc, ref = _changing_sea()
     res = H.estimate_heave(t, acc, method="realtime")

@@ -36,6 +36,7 @@ def _cli(args: list[str], cwd: Path, env: dict) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_cold_cache_says_it_compiles_once_and_caches_in_the_user_folder(tmp_path):
     pytest.importorskip("pyarrow")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "IMUTOOL_KERNEL_TIMES")}
@@ -215,7 +216,7 @@ def test_version_of_the_real_packages_ignores_routes_and_follows_kernels_and_the
     _edit(tmp_path / "imutool" / "routes.py", "def read_source(", "# a developer's edit\ndef read_source(")
     report = tmp_path / "imutool" / "report" / "route.py"
     report.write_text(report.read_text(encoding="utf-8") + "# a developer's edit\n", encoding="utf-8")
-    assert kc.source_version(memo) == v0 == kc.source_version()
+    assert kc.source_version(memo) == v0
     _edit(tmp_path / "imutool" / "attitude" / "layout.py", "LP_MEAN_MAX = 0.25", "LP_MEAN_MAX = 0.3")
     v1 = kc.source_version(memo)
     assert v1 != v0
