@@ -656,7 +656,7 @@ def test_streamed_self_check_finds_the_same_samples_and_spans(tmp_path):
     assert len(got["memory"]["inconsistent_spans_s"]) > 0
 
 
-@pytest.mark.parametrize("streamed", [False, True])
+@pytest.mark.parametrize("streamed", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
     """The field changes for good 40 s in (×1.3: a new mounting, steel nearby): the magnetometer is rejected from
     then on and the heading is the gyro's alone. That is said — on stderr, as spans in the JSON summary and in the
@@ -682,7 +682,7 @@ def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
             assert "mag_rejected_spans_s" not in summary and "magnetometer" not in run.stderr and not said
 
 
-@pytest.mark.parametrize("streamed", [False, True])
+@pytest.mark.parametrize("streamed", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_sog_cog_without_a_magnetometer_heading_is_said(tmp_path, streamed):
     """Velocity aiding needs the heading: without a magnetometer nothing holds it, so only the speed is used,
     along the bow (gnss_heading_check; the velocity turned with the unheld heading gave 3.0° RMS on seed 0, along
