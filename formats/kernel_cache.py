@@ -12,11 +12,19 @@ install works. ``<root>`` is ``$NUMBA_CACHE_DIR/imutool`` when ``NUMBA_CACHE_DIR
 per-user cache folder (:func:`user_cache_root`). If that cannot be written (a read-only home), a private folder
 in the temporary directory is used, and failing that a folder that lives only as long as the process.
 
-``<version>`` is a short hash of every library source file of the three packages (the CLI, which no kernel can
-reach, excepted) and of the numba and Python versions. numba keys a kernel's cache on its own file only, so a
-kernel that calls a helper in another file would keep the old helper after that file changed; with the version
-in the path any source change starts a fresh cache. The newest :data:`KEEP_VERSIONS` version folders are kept,
-older ones are removed when a new one is made.
+``<version>`` is a short hash of the library files whose content can reach a compiled kernel, and of the numba
+and Python versions. numba keys a kernel's cache on its own file only, so a kernel that calls a helper in another
+file, or freezes a constant imported from one, would keep the old value after that file changed; with the version
+in the path such a change starts a fresh cache. The files are found by a static scan (:func:`kernel_sources`,
+``ast`` only, nothing imported): the kernel files (a function decorated, or a statement wrapped, with one of
+numba's decorators imported from ``numba``: ``njit``, ``jit``, ``vectorize``...) and every file that a name a
+kernel mentions leads to, followed through the module-level statements that define it and through
+``import``/``from ... import`` of the three packages, transitively. A file no kernel name leads to (a route, a
+report, the CLI) can be edited without recompiling anything. The scan takes ~0.4 s; its answer is kept per hash of
+every library file in ``<root>/kernel-sources.json``, so a process whose sources did not change pays only for
+reading and hashing them (~10 ms). Not seen by the scan: a kernel that reads a non-Python file at import, or a
+module that takes numba's decorators from another of our modules instead of from ``numba`` (neither exists). The
+newest :data:`KEEP_VERSIONS` version folders are kept, older ones are removed when a new one is made.
 
 A kernel that is not in the cache yet is announced once per kernel group on stderr before it compiles
 ("imutool: compiling the filter's kernels (first run only, ~N s)"), from numba's own ``numba:compile`` event,
@@ -26,8 +34,10 @@ kernel's time.
 
 from __future__ import annotations
 
+import ast
 import atexit
 import hashlib
+import json
 import os
 import re
 import shutil
@@ -86,31 +96,304 @@ def user_cache_root() -> Path:
     return (Path(xdg) if os.path.isabs(xdg) else Path.home() / ".cache") / "imutool"
 
 
-def _library_sources() -> list[Path]:
+def _library_sources(site: Path | None = None) -> list[Path]:
     """Every library .py file of the three packages, in a fixed order (imutool/cli excepted: no kernel reaches it)."""
+    site = _SITE if site is None else site
     files: list[Path] = []
     for pkg in PACKAGES:
-        top = _SITE / pkg
+        top = site / pkg
         for dirpath, dirnames, filenames in os.walk(top):
             here = Path(dirpath)
             dirnames[:] = sorted(
-                d for d in dirnames if d != "__pycache__" and not (here == _SITE / "imutool" and d == "cli")
+                d for d in dirnames if d != "__pycache__" and not (here == site / "imutool" and d == "cli")
             )
             files.extend(here / f for f in sorted(filenames) if f.endswith(".py"))
     return files
 
 
-def source_version() -> str:
-    """12 hex digits that change with any library source file of the three packages, numba's and Python's version."""
-    h = hashlib.blake2b(digest_size=16)
-    h.update(f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode())
-    for path in _library_sources():
-        h.update(path.relative_to(_SITE).as_posix().encode() + b"\0")
+_NUMBA_DECORATORS = frozenset(
+    {
+        "njit",
+        "jit",
+        "generated_jit",
+        "vectorize",
+        "guvectorize",
+        "cfunc",
+        "stencil",
+        "jitclass",
+        "overload",
+        "overload_method",
+        "overload_attribute",
+        "register_jitable",
+        "intrinsic",
+    }
+)
+_ALL = ("*",)  # a reference to a whole module (``import m`` used as ``m``, ``from m import *``)
+
+
+class _Scan:
+    """What one source file binds at module level and what each binding refers to (names, dotted references)."""
+
+    def __init__(self, module: str, is_package: bool, text: bytes):
+        self.package = module if is_package else module.rpartition(".")[0]
+        self.defs: dict[str, set[tuple[str, ...]]] = {}  # module-level name -> references its statements make
+        self.imports: dict[str, list[tuple[str, str | None]]] = {}  # name -> (module, attribute or None: the module)
+        self.star: list[str] = []  # modules of ``from m import *``
+        self.roots: set[str] = set()  # names whose statement uses a numba decorator: the kernels
+        self._numba: set[str] = set()  # local names of numba's decorators
+        self._numba_modules: set[str] = set()  # local names of numba itself (``import numba as nb``)
         try:
-            h.update(path.read_bytes())
+            tree = ast.parse(text)
+        except (SyntaxError, ValueError):  # cannot be imported either; kept in the version if it mentions numba
+            self.roots.add("")
+            return
+        for node in ast.walk(tree):  # imports anywhere (a factory function may import what its kernel uses)
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                self._bind(node)
+        self._statements(tree.body, set())
+
+    def _bind(self, node: ast.Import | ast.ImportFrom) -> None:
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "numba":
+                    self._numba_modules.add(a.asname or "numba")
+                elif a.asname:
+                    self.imports.setdefault(a.asname, []).append((a.name, None))
+                else:
+                    top = a.name.split(".")[0]
+                    self.imports.setdefault(top, []).append((top, None))
+            return
+        if node.level:
+            base = self.package.split(".")[: max(0, len(self.package.split(".")) - node.level + 1)]
+            module = ".".join([*base, node.module] if node.module else base)
+        else:
+            module = node.module or ""
+        for a in node.names:
+            if module.split(".")[0] == "numba":
+                if a.name in _NUMBA_DECORATORS:
+                    self._numba.add(a.asname or a.name)
+            elif a.name == "*":
+                self.star.append(module)
+            else:
+                self.imports.setdefault(a.asname or a.name, []).append((module, a.name))
+
+    def _refs(self, node: ast.AST) -> tuple[set[tuple[str, ...]], bool]:
+        """The names and dotted references (``qn.qmul``) in ``node``; True if one is a numba decorator."""
+        refs: set[tuple[str, ...]] = set()
+        numba_used = False
+        stack = [node]
+        while stack:
+            n = stack.pop()
+            if isinstance(n, ast.Attribute):
+                chain = [n.attr]
+                base = n.value
+                while isinstance(base, ast.Attribute):
+                    chain.append(base.attr)
+                    base = base.value
+                if isinstance(base, ast.Name):
+                    refs.add((base.id, *reversed(chain)))
+                    if base.id in self._numba_modules and n.attr in _NUMBA_DECORATORS:
+                        numba_used = True
+                    continue
+                stack.append(base)
+            elif isinstance(n, ast.Name):
+                refs.add((n.id,))
+                numba_used = numba_used or n.id in self._numba
+            else:
+                stack.extend(ast.iter_child_nodes(n))
+        return refs, numba_used
+
+    def _statements(self, body: list[ast.stmt], outer: set[tuple[str, ...]]) -> None:
+        for stmt in body:
+            if isinstance(stmt, (ast.Import, ast.ImportFrom)):
+                continue
+            nested = [getattr(stmt, f, None) for f in ("body", "orelse", "finalbody")]
+            if isinstance(stmt, (ast.If, ast.For, ast.AsyncFor, ast.While, ast.With, ast.AsyncWith, ast.Try)):
+                head = [getattr(stmt, f) for f in ("test", "iter", "target") if hasattr(stmt, f)]
+                head += [item for item in getattr(stmt, "items", [])]
+                refs = set(outer)
+                for h in head:
+                    refs |= self._refs(h)[0]
+                for block in nested:
+                    if block:
+                        self._statements(block, refs)
+                for handler in getattr(stmt, "handlers", []):
+                    self._statements(handler.body, refs)
+                continue
+            refs, is_kernel = self._refs(stmt)
+            if isinstance(stmt, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                names = {stmt.name}
+            else:
+                names = {t[0] for t in self._targets(stmt)}
+            if not names:  # a bare statement (``TABLE.update(...)``): it may change every name it mentions
+                names = {r[0] for r in refs}
+            for name in names:
+                self.defs.setdefault(name, set()).update(refs | outer)
+                if is_kernel:
+                    self.roots.add(name)
+
+    @staticmethod
+    def _targets(stmt: ast.stmt) -> set[tuple[str, ...]]:
+        targets: list[ast.AST] = []
+        if isinstance(stmt, ast.Assign):
+            targets = list(stmt.targets)
+        elif isinstance(stmt, (ast.AnnAssign, ast.AugAssign)):
+            targets = [stmt.target]
+        found: set[tuple[str, ...]] = set()
+        for t in targets:
+            for n in ast.walk(t):
+                if isinstance(n, ast.Name):
+                    found.add((n.id,))
+        return found
+
+
+def _module_file(site: Path, module: str) -> Path | None:
+    """The source file of a module of our packages (``a.b`` -> a/b.py or a/b/__init__.py), None for any other."""
+    parts = module.split(".")
+    if not parts[0] or parts[0] not in PACKAGES or (parts[:2] == ["imutool", "cli"]):
+        return None
+    path = site.joinpath(*parts)
+    if path.with_suffix(".py").is_file():
+        return path.with_suffix(".py")
+    if (path / "__init__.py").is_file():
+        return path / "__init__.py"
+    return None
+
+
+def kernel_sources(site: Path | None = None, texts: dict[Path, bytes] | None = None) -> list[Path]:
+    """The library files whose content can reach a compiled kernel, found by a static scan (sorted).
+
+    A kernel file uses one of numba's decorators (imported from ``numba``); from each kernel, every name it
+    mentions is followed: to the module-level statement that defines it in its file (a constant, a helper, a
+    table built at import), or through an ``import``/``from ... import`` into another module of the three
+    packages, and on from there. A file is in the set as soon as one followed name lies in it.
+    """
+    site = _SITE if site is None else site
+    texts = {} if texts is None else texts
+    scans: dict[Path, _Scan] = {}
+
+    def scan(path: Path) -> _Scan:
+        if path not in scans:
+            rel = path.relative_to(site).with_suffix("")
+            is_package = rel.name == "__init__"
+            module = ".".join(rel.parent.parts if is_package else rel.parts)
+            text = texts[path] if path in texts else path.read_bytes()
+            scans[path] = _Scan(module, is_package, text)
+        return scans[path]
+
+    work: list[tuple[Path, tuple[str, ...]]] = []
+    for path in _library_sources(site):
+        text = texts.get(path)
+        if text is None:
+            text = texts[path] = path.read_bytes()
+        if b"numba" in text:
+            work.extend((path, (name,)) for name in scan(path).roots)
+    seen: set[tuple[Path, tuple[str, ...]]] = set()
+    reached: set[Path] = set()
+
+    def module_ref(module: str, rest: tuple[str, ...]) -> None:
+        if rest and rest != _ALL and _module_file(site, f"{module}.{rest[0]}") is not None:
+            module_ref(f"{module}.{rest[0]}", rest[1:])  # a sub-module reached as an attribute
+            return
+        path = _module_file(site, module)
+        if path is not None:
+            work.append((path, rest or _ALL))
+
+    while work:
+        path, ref = work.pop()
+        if (path, ref) in seen:
+            continue
+        seen.add((path, ref))
+        reached.add(path)
+        s = scan(path)
+        names = list(s.defs) + list(s.imports) if ref == _ALL else [ref[0]]
+        if ref == _ALL:
+            for module in s.star:
+                module_ref(module, _ALL)
+        rest = () if ref == _ALL else ref[1:]
+        for name in names:
+            found = False
+            for inner in s.defs.get(name, ()):
+                found = True
+                work.append((path, inner))
+            for module, attr in s.imports.get(name, ()):
+                found = True
+                if attr is None:
+                    module_ref(module, rest)
+                elif _module_file(site, f"{module}.{attr}") is not None:
+                    module_ref(f"{module}.{attr}", rest)
+                else:
+                    module_ref(module, (attr, *rest))
+            if not found:  # not bound here: perhaps by a ``from m import *``
+                for module in s.star:
+                    module_ref(module, (name, *rest))
+    return sorted(reached)
+
+
+MEMO_NAME = "kernel-sources.json"  # in the cache root: the scan's answer for the last few source trees
+_MEMO_KEEP = 8
+
+
+def _read_memo(memo: Path | None, tree: str) -> list[str] | None:
+    try:
+        found = json.loads(memo.read_text(encoding="utf-8")).get(tree) if memo is not None else None
+    except (OSError, ValueError, AttributeError):
+        return None
+    if isinstance(found, list) and all(isinstance(f, str) for f in found):
+        return found
+    return None
+
+
+def _write_memo(memo: Path | None, tree: str, files: list[str]) -> None:
+    if memo is None:
+        return
+    try:
+        entries = json.loads(memo.read_text(encoding="utf-8"))
+        entries = entries if isinstance(entries, dict) else {}
+    except (OSError, ValueError):
+        entries = {}
+    entries.pop(tree, None)
+    entries[tree] = files
+    entries = dict(list(entries.items())[-_MEMO_KEEP:])
+    tmp = ""
+    try:
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=memo.parent, prefix=".kernel-sources-", suffix=".tmp")
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            json.dump(entries, f)
+        os.replace(tmp, memo)  # whole or not at all: processes starting together may each write it
+    except OSError:
+        if tmp:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+
+
+def source_version(memo: Path | None = None) -> str:
+    """12 hex digits that change with the files that can reach a compiled kernel and numba's and Python's version.
+
+    The set of files is :func:`kernel_sources`; ``memo`` (a JSON file) keeps that answer per hash of every library
+    file, so only the first process after a change of any file pays for the scan (~0.3 s; reading and hashing the
+    files ~15 ms).
+    """
+    head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()
+    texts: dict[Path, bytes] = {}
+    tree = hashlib.blake2b(head, digest_size=16)
+    for path in _library_sources():
+        try:
+            texts[path] = path.read_bytes()
         except OSError:
-            h.update(b"<unreadable>")
-        h.update(b"\0")
+            texts[path] = b"<unreadable>"
+        tree.update(path.relative_to(_SITE).as_posix().encode() + b"\0" + texts[path] + b"\0")
+    files = _read_memo(memo, tree.hexdigest())
+    if files is None:
+        files = [p.relative_to(_SITE).as_posix() for p in kernel_sources(_SITE, texts)]
+        _write_memo(memo, tree.hexdigest(), files)
+    h = hashlib.blake2b(head, digest_size=16)
+    for rel in files:
+        text = texts.get(_SITE / rel, b"<gone>")
+        h.update(rel.encode() + b"\0" + text + b"\0")
     return h.hexdigest()[:12]
 
 
@@ -151,7 +434,7 @@ def cache_folder() -> Path | None:
     """This process's versioned kernel cache folder (made on first use), or None if no folder can be written."""
     if _State.folder is not None:
         return _State.folder
-    _State.version = source_version()
+    _State.version = source_version(memo=user_cache_root() / MEMO_NAME)
     name = f"kernels-{_State.version}"
     uid = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
     root = user_cache_root()

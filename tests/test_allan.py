@@ -187,6 +187,7 @@ def test_allan_cli_labels_and_refuses_unresolved_kalibr(tmp_path):
     assert "gyro_bias_instability" not in noise and noise["gyro_bias_instability_upper_bound"] > 0
 
 
+@pytest.mark.slow
 def test_allan_cli_on_the_real_static_recording(shared, tmp_path, capsys):
     from imutool.cli import main
 

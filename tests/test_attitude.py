@@ -656,7 +656,7 @@ def test_streamed_self_check_finds_the_same_samples_and_spans(tmp_path):
     assert len(got["memory"]["inconsistent_spans_s"]) > 0
 
 
-@pytest.mark.parametrize("streamed", [False, True])
+@pytest.mark.parametrize("streamed", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
     """The field changes for good 40 s in (×1.3: a new mounting, steel nearby): the magnetometer is rejected from
     then on and the heading is the gyro's alone. That is said — on stderr, as spans in the JSON summary and in the
@@ -682,7 +682,7 @@ def test_a_heading_without_its_magnetometer_is_said(tmp_path, streamed):
             assert "mag_rejected_spans_s" not in summary and "magnetometer" not in run.stderr and not said
 
 
-@pytest.mark.parametrize("streamed", [False, True])
+@pytest.mark.parametrize("streamed", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_sog_cog_without_a_magnetometer_heading_is_said(tmp_path, streamed):
     """Velocity aiding needs the heading: without a magnetometer nothing holds it, so only the speed is used,
     along the bow (gnss_heading_check; the velocity turned with the unheld heading gave 3.0° RMS on seed 0, along
@@ -954,6 +954,7 @@ BROAD_VQF_LOWER_RATES = {
 }
 
 
+@pytest.mark.slow
 def test_broad_at_lower_sample_rates(shared):
     """Other recordings come at other rates. The 16 BROAD trials averaged down to 95 and 48 Hz (as a sensor with a
     lower output rate averages): the causal mean total and inclination stay at or below VQF's at the same rate, no
@@ -986,6 +987,7 @@ def test_broad_at_lower_sample_rates(shared):
         assert r[:, 0].mean() <= r[:, 2].mean() and r[:, 1].mean() <= r[:, 3].mean(), (k, r.mean(axis=0))
 
 
+@pytest.mark.slow
 def test_broad_started_beside_steel(shared):
     """The 16 BROAD trials as if each recording had started beside steel: a world-fixed field added to the
     magnetometer over the first 10 s (the sensor is still then; BROAD's motion starts after 27–46 s;
@@ -1454,7 +1456,7 @@ def _gyrocompass(rec, seed=0):
     return rec.time[idx], np.round((rec["ref_heading"][idx] + noise) % 360, 1)
 
 
-@pytest.mark.parametrize("streamed", [False, True])
+@pytest.mark.parametrize("streamed", [pytest.param(False, marks=pytest.mark.slow), True])
 def test_a_gyrocompass_heading_replaces_the_magnetometer(tmp_path, streamed):
     """A bridge sensor without a magnetometer, SOG/COG and its lever arm: nothing holds the heading, so only the
     speed along the bow is used (warned; the sway and surge stay in the roll). A gyrocompass heading (channel
@@ -1669,6 +1671,7 @@ def test_attach_gnss_sorts_bridges_an_outage_and_refuses_a_file_without_clock(tm
         filtering.attach_gnss(rec, vtg)
 
 
+@pytest.mark.slow
 def test_a_late_gyrocompass_is_read_later_with_heading_input_latency(tmp_path, capsys):
     """A gyrocompass whose HDT is 0.8 s late: through the turn the heading lags by 0.8 s × 3 °/s. The run measures
     the lag against the gyro and says it (summary, metadata, one warning) until it is given; with

@@ -288,6 +288,7 @@ def _on_pty(args: list[str], cwd: Path) -> tuple[int, str]:
     return rc, term
 
 
+@pytest.mark.slow
 def test_progress_is_the_shared_bar_and_respects_quiet(tmp_path):
     """The batch bar is imutool.progress.bar (label, done/total files, ETA) on a terminal; --quiet: nothing."""
     for i in range(3):
@@ -312,7 +313,7 @@ def _threads_seen(job: batch.Job) -> dict:
     }
 
 
-@pytest.mark.parametrize("scheduler", [None, "local"])
+@pytest.mark.parametrize("scheduler", [None, pytest.param("local", marks=pytest.mark.slow)])
 def test_workers_share_the_cores_and_no_job_takes_more(tmp_path, scheduler):
     """N workers on C cores: each job's thread pools (CSV parser/writer, pyarrow, numba, BLAS) get C ÷ N threads,
     so N workers never oversubscribe; one worker (no pool) leaves a job the whole machine."""

@@ -27,6 +27,7 @@ def _feed(clock, t_send, mcu_us, seq, rng, t0=1.75e9, latency=(0.001, 0.005)):
     return np.concatenate(out)
 
 
+@pytest.mark.slow
 def test_mcu_clock_with_drift_and_wrap_is_mapped_to_utc_per_frame():
     rng = np.random.default_rng(1)
     t_send = np.arange(200 * 300) / 200.0  # 5 min at 200 Hz

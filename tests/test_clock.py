@@ -47,6 +47,7 @@ def dated_report(tmp_path_factory):
     return ev, plots, pdf
 
 
+@pytest.mark.slow
 def test_json_times_carry_iso_utc(dated_report):
     ev, _, _ = dated_report
     assert ev["conventions"]["clock"]["start_utc"] == "2014-08-01T00:00:00.000Z"
@@ -56,6 +57,7 @@ def test_json_times_carry_iso_utc(dated_report):
     assert Clock(0.0).iso(r["start_s"]) == r["start_utc"]
 
 
+@pytest.mark.slow
 @needs_pdftotext
 def test_pdf_prints_utc_clock_times(dated_report):
     ev, plots, pdf = dated_report

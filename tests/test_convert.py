@@ -43,7 +43,10 @@ def csv_in(tmp_path) -> Path:
     return p
 
 
-@pytest.mark.parametrize("ext", [".bag", ".db3", ".mcap", "_folder"])
+@pytest.mark.parametrize(
+    "ext",
+    [".bag", *(pytest.param(e, marks=pytest.mark.slow) for e in (".db3", ".mcap", "_folder"))],
+)
 def test_csv_bag_csv_cli(tmp_path, csv_in, capsys, ext):
     bag = tmp_path / f"out{ext}"
     code, out, err = run(["convert", csv_in, bag, "--json"], capsys)

@@ -44,6 +44,7 @@ def _write_text(path, text: str | bytes) -> str:
 
 
 # -- exact number conversion ----------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_parser_bit_identical_to_float_on_random_decimals():
     rng = np.random.default_rng(3)
     toks = []

@@ -42,7 +42,7 @@ def test_a_gyro_in_the_wrong_range_is_said_with_its_factor(ship, k):
         assert any("gyro scale check:" in w for w in est.meta["warnings"])
 
 
-@pytest.mark.parametrize("fault", ["x2", "y reversed"])
+@pytest.mark.parametrize("fault", ["x2", pytest.param("y reversed", marks=pytest.mark.slow)])
 def test_the_check_is_the_same_streamed_and_in_memory(ship, tmp_path, fault):
     """`imutool filter` on a file that streams (chunks of 5000 rows: pairs do not cross a chunk) says the same as
     an in-memory run: stderr, the JSON summary and the output's metadata."""

@@ -817,7 +817,9 @@ def test_output_parent_is_a_file(corpus, tmp_path, cmd):
 
 @pytest.mark.parametrize("cmd", list(WRITERS))  # every writer (capture serial: tests/test_hostile_refusals.py)
 @pytest.mark.parametrize(
-    "target", ["/dev/full", "/dev/null", "/proc/imutool_test.csv", "/sys/imutool_test.csv", "/proc/self/imutool/x.csv"]
+    "target",
+    ["/dev/full", "/dev/null", "/proc/imutool_test.csv"]
+    + [pytest.param(t, marks=pytest.mark.slow) for t in ("/sys/imutool_test.csv", "/proc/self/imutool/x.csv")],
 )
 def test_unwritable_targets(corpus, tmp_path, cmd, target):
     target = str(Path(target).with_suffix(EXT[cmd])) if target.startswith(("/proc", "/sys")) else target
@@ -937,15 +939,15 @@ def _limited(args: list, cwd: Path, limit: int) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     "cmd",
     [
-        ["convert", "@roll.csv", "OUT.csv"],
-        ["convert", "@roll.csv", "OUT.bag"],
-        ["convert", "@roll.csv", "OUT.db3"],  # was: internal error "database or disk is full"
-        ["convert", "@roll.csv", "OUTbag"],  # a ROS2 bag folder
-        ["filter", "@roll.csv", "-o", "OUT.csv"],
-        ["heave", "@roll.csv", "-o", "OUT.csv"],
-        ["nmea", "@est.csv", "-o", "OUT.nmea", "--baud", "460800"],
+        pytest.param(["convert", "@roll.csv", "OUT.csv"], id="convert-csv"),  # the quick loop's one
+        pytest.param(["convert", "@roll.csv", "OUT.bag"], id="convert-bag", marks=pytest.mark.slow),
+        # was: internal error "database or disk is full"
+        pytest.param(["convert", "@roll.csv", "OUT.db3"], id="convert-db3", marks=pytest.mark.slow),
+        pytest.param(["convert", "@roll.csv", "OUTbag"], id="convert-bag-folder", marks=pytest.mark.slow),  # ROS2
+        pytest.param(["filter", "@roll.csv", "-o", "OUT.csv"], id="filter", marks=pytest.mark.slow),
+        pytest.param(["heave", "@roll.csv", "-o", "OUT.csv"], id="heave", marks=pytest.mark.slow),
+        pytest.param(["nmea", "@est.csv", "-o", "OUT.nmea", "--baud", "460800"], id="nmea", marks=pytest.mark.slow),
     ],  # every row
-    ids=["convert-csv", "convert-bag", "convert-db3", "convert-bag-folder", "filter", "heave", "nmea"],
 )
 def test_full_disk(corpus, tmp_path, cmd):
     out = None

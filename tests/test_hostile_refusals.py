@@ -203,7 +203,9 @@ def test_check_layout_refuses_columns_the_input_lacks(files):
 
 
 # -- ROS2 bags onto a full disk ----------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ["full.db3", "fullbag", "full.mcap", "full.bag"])
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=pytest.mark.slow) for n in ("full.db3", "fullbag", "full.mcap")] + ["full.bag"]
+)
 def test_bag_onto_a_full_disk_is_one_line(files, tmp_path, name):
     """Was: internal error 'database or disk is full' (sqlite3) for .db3 and bag folders."""
     run(["convert", files["roll.csv"], tmp_path / "warm.db3", "-q"])  # the bag kernels compiled, outside the limit
@@ -517,6 +519,7 @@ def test_valid_ros_topic_names_are_written(files, tmp_path, topic):
     assert check_topic_name(topic) == topic
 
 
+@pytest.mark.slow
 def test_full_disk_with_a_cold_kernel_cache_is_one_line(files, tmp_path, monkeypatch):
     """After an upgrade the kernels compile again; a cache entry the full disk cannot take is skipped (was: internal
     error OSError 'File too large' from numba's cache), and the output's own error is the one line."""

@@ -8,7 +8,9 @@ kernel's cache files are in the user's folder.
 from __future__ import annotations
 
 import ast
+import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -34,6 +36,7 @@ def _cli(args: list[str], cwd: Path, env: dict) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_cold_cache_says_it_compiles_once_and_caches_in_the_user_folder(tmp_path):
     pytest.importorskip("pyarrow")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "IMUTOOL_KERNEL_TIMES")}
@@ -119,33 +122,121 @@ def test_user_cache_root_per_platform(monkeypatch, tmp_path):
     assert kc.user_cache_root() == tmp_path / "nc" / "imutool"
 
 
-def _tree(site: Path) -> None:
-    for rel, text in {
-        "imutool/__init__.py": "",
-        "imutool/kern.py": "X = 1\n",
-        "imutool/cli/__init__.py": "",
-        "calibration/__init__.py": "",
-        "formats/__init__.py": "",
-        "formats/helper.py": "def h(): return 1\n",
-    }.items():
+def _tree(site: Path, files: dict[str, str]) -> None:
+    for rel, text in files.items():
         (site / rel).parent.mkdir(parents=True, exist_ok=True)
         (site / rel).write_text(text)
 
 
-def test_version_follows_every_library_source_file(monkeypatch, tmp_path):
-    _tree(tmp_path)
+# a small tree with every way a kernel reaches another file, and files no kernel reaches
+SMALL = {
+    "imutool/__init__.py": "from imutool.plain import route  # re-exported: no kernel reaches it\n",
+    "imutool/kern.py": (
+        "import numba as nb\n"
+        "from numba import njit\n"
+        "from formats import units\n"
+        "from imutool import sub\n"
+        "from imutool.plain import route\n"
+        "from .consts import BASE\n"
+        "SCALE = BASE * 2\n"
+        "@njit(cache=True)\n"
+        "def k(x):\n"
+        "    return x * SCALE + units.G + sub.helpers.h(x)\n"
+        "@nb.vectorize\n"
+        "def v(x):\n"
+        "    return x\n"
+        "def run():\n"
+        "    return route(k(1.0))\n"
+    ),
+    "imutool/consts.py": "from formats.deep import DEEP\nBASE = DEEP + 1\n",
+    "imutool/plain.py": "from formats.errors import E\ndef route(x):\n    return x\n",
+    "imutool/sub/__init__.py": "",
+    "imutool/sub/helpers.py": "from numba import njit\n@njit\ndef h(x):\n    return x\n",
+    "imutool/wrapped.py": "import numba\ndef _f(x):\n    return x\nf = numba.njit(_f)\n",
+    "imutool/uses_numba_only.py": "import numba\nnumba.set_num_threads(1)\n",
+    "imutool/cli/__init__.py": "",
+    "calibration/__init__.py": "",
+    "formats/__init__.py": "",
+    "formats/units.py": "G = 9.8\n",
+    "formats/deep.py": "DEEP = 1\n",
+    "formats/errors.py": "class E(Exception):\n    pass\n",
+}
+
+
+def test_the_scan_finds_the_kernel_files_and_what_their_kernels_reach(tmp_path):
+    _tree(tmp_path, SMALL)
+    found = [p.relative_to(tmp_path).as_posix() for p in kc.kernel_sources(tmp_path)]
+    assert found == [
+        "formats/deep.py",  # a constant that a constant of a kernel's file is made from
+        "formats/units.py",  # a module's attribute
+        "imutool/consts.py",  # a relative import
+        "imutool/kern.py",
+        "imutool/sub/helpers.py",  # a kernel called through a sub-package's module
+        "imutool/wrapped.py",  # numba.njit called, not written as a decorator
+    ]
+
+
+def test_version_follows_only_what_a_kernel_can_reach(monkeypatch, tmp_path):
+    _tree(tmp_path, SMALL)
     monkeypatch.setattr(kc, "_SITE", tmp_path)
     v0 = kc.source_version()
     assert len(v0) == 12 and int(v0, 16) >= 0
-    os.utime(tmp_path / "formats" / "helper.py", (time.time() + 100, time.time() + 100))
+    os.utime(tmp_path / "formats" / "deep.py", (time.time() + 100, time.time() + 100))
     assert kc.source_version() == v0, "a touched file with the same content is the same version"
-    (tmp_path / "imutool" / "cli" / "__init__.py").write_text("# the CLI: no kernel reaches it\n")
+    for rel in ("imutool/plain.py", "imutool/__init__.py", "formats/errors.py", "imutool/cli/__init__.py"):
+        (tmp_path / rel).write_text((tmp_path / rel).read_text() + "# edited: no kernel reaches it\n")
+        assert kc.source_version() == v0, rel
+    (tmp_path / "calibration" / "new.py").write_text("X = 1\n")
     assert kc.source_version() == v0
-    (tmp_path / "formats" / "helper.py").write_text("def h(): return 2\n")  # a helper another file's kernel calls
+    (tmp_path / "formats" / "deep.py").write_text("DEEP = 2\n")  # frozen into a kernel through two files
     v1 = kc.source_version()
     assert v1 != v0
-    (tmp_path / "calibration" / "new.py").write_text("")
-    assert kc.source_version() not in (v0, v1)
+    (tmp_path / "calibration" / "new.py").write_text("from numba import njit\n@njit\ndef n():\n    return 1\n")
+    assert kc.source_version() not in (v0, v1), "a new kernel file"
+
+
+def _copy_of_the_packages(site: Path) -> None:
+    for pkg in KERNEL_PACKAGES:
+        shutil.copytree(ROOT / pkg, site / pkg, ignore=shutil.ignore_patterns("__pycache__", "cli"))
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text(encoding="utf-8")
+    assert text.count(old) == 1, (path, old)
+    path.write_text(text.replace(old, new), encoding="utf-8")
+
+
+def test_version_of_the_real_packages_ignores_routes_and_follows_kernels_and_their_constants(monkeypatch, tmp_path):
+    """Editing a route does not throw the compiled kernels away; editing a kernel or a constant it freezes does."""
+    _copy_of_the_packages(tmp_path)
+    monkeypatch.setattr(kc, "_SITE", tmp_path)
+    memo = tmp_path / "cache" / kc.MEMO_NAME
+    v0 = kc.source_version(memo)
+    assert memo.is_file() and kc.source_version(memo) == v0
+    _edit(tmp_path / "imutool" / "routes.py", "def read_source(", "# a developer's edit\ndef read_source(")
+    report = tmp_path / "imutool" / "report" / "route.py"
+    report.write_text(report.read_text(encoding="utf-8") + "# a developer's edit\n", encoding="utf-8")
+    assert kc.source_version(memo) == v0
+    _edit(tmp_path / "imutool" / "attitude" / "layout.py", "LP_MEAN_MAX = 0.25", "LP_MEAN_MAX = 0.3")
+    v1 = kc.source_version(memo)
+    assert v1 != v0
+    _edit(
+        tmp_path / "imutool" / "heave.py", "def _complementary_kernel(", "# a kernel's file\ndef _complementary_kernel("
+    )
+    assert kc.source_version(memo) not in (v0, v1)
+
+
+def test_a_memo_of_another_tree_or_a_broken_one_is_not_trusted(monkeypatch, tmp_path):
+    _tree(tmp_path, SMALL)
+    monkeypatch.setattr(kc, "_SITE", tmp_path)
+    memo = tmp_path / "memo.json"
+    v0 = kc.source_version(memo)
+    memo.write_text("{not json")
+    assert kc.source_version(memo) == v0
+    entries = json.loads(memo.read_text())
+    assert list(entries.values()) == [[p.relative_to(tmp_path).as_posix() for p in kc.kernel_sources(tmp_path)]]
+    (tmp_path / "imutool" / "kern.py").write_text(SMALL["imutool/kern.py"] + "# edited\n")
+    assert kc.source_version(memo) != v0 and len(json.loads(memo.read_text())) == 2
 
 
 def test_old_versions_are_pruned(tmp_path):

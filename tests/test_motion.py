@@ -30,6 +30,7 @@ def test_auto_tells_a_ship_from_a_hand(scenario, options, kind):
     assert choice.lp_tau_s == (EkfParams().ship_lp_tau if kind == "ship" else EkfParams().accel_lp_tau)
 
 
+@pytest.mark.slow
 def test_every_broad_trial_is_hand_held(shared):
     """The 16 BROAD trials (82–1074 °/s, low-frequency share ≤ 0.79): auto keeps the hand-held low-pass, so their
     figures are the hand-held filter's, unchanged."""

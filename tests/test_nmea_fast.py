@@ -273,6 +273,7 @@ def test_fast_path_takes_every_clean_writer_sentence(line):
     assert_equivalent(line)
 
 
+@pytest.mark.slow
 @settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(ANY_LINE)
 def test_fast_path_equals_full_path_on_corrupted_and_random_lines(line):
@@ -452,7 +453,7 @@ def _stream(data: st.DataObject) -> bytes:
     return "".join(a + b for a, b in zip(lines, ends, strict=True)).encode("latin-1", "replace")
 
 
-@pytest.mark.parametrize("policy", POLICIES)
+@pytest.mark.parametrize("policy", [POLICIES[0], *(pytest.param(p, marks=pytest.mark.slow) for p in POLICIES[1:])])
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_capture_output_equals_original_loop(tmp_path, monkeypatch, policy, data):

@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 from conftest import run_cli_on_pty
 
 from imutool.progress import Bar, chunk_ranges, estimate_rows, report, stages
@@ -69,6 +70,7 @@ def _run(args, cwd, tty: bool) -> tuple[int, str, str]:
     return run_cli_on_pty(args, cwd, env)
 
 
+@pytest.mark.slow
 def test_cli_bar_on_a_pty_and_silent_when_piped(tmp_path):
     args = ["simulate", "ship-roll", "--duration", "20", "-o"]
     rc, out, err = _run([*args, "a.csv"], tmp_path, tty=True)
@@ -82,6 +84,7 @@ def test_cli_bar_on_a_pty_and_silent_when_piped(tmp_path):
     assert rc == 0 and "step" not in err, err
 
 
+@pytest.mark.slow
 def test_streamed_convert_counts_rows_on_a_pty(tmp_path):
     rc, _, err = _run(["simulate", "static", "--duration", "60", "-o", "s.csv", "-q"], tmp_path, tty=False)
     assert rc == 0, err

@@ -74,6 +74,7 @@ def test_too_few_headings_and_no_motion_are_not_a_pass():
     jsonschema.validate(ev, load_schema())
 
 
+@pytest.mark.slow
 def test_nmea_dut_interface_and_pdf(tmp_path):
     dut, ref, _ = heading_test(offset_deg=0.1, **SHORT)
     nm = tmp_path / "dmc.nmea"

@@ -341,6 +341,7 @@ def _report(capsys, tmp_path: Path, args: list[str]) -> tuple[int, str, dict]:
     return code, out, json.loads((tmp_path / "ev.json").read_text())
 
 
+@pytest.mark.slow
 def test_two_seapath_logs_as_dut_and_reference_in_a_utc_window(tmp_path, capsys):
     """Issue 38: one Seapath against another in one call, no parser written; the DUT reads the table's roll + 0.30°.
     The window is given as UTC clock time; a lateral-acceleration log is merged onto the reference (--ref-with)."""
@@ -379,6 +380,7 @@ def test_two_seapath_logs_as_dut_and_reference_in_a_utc_window(tmp_path, capsys)
     assert "reference loaded: --ref-with" in out
 
 
+@pytest.mark.slow
 def test_clockless_reference_given_its_rate_header_rows_and_start(tmp_path, capsys):
     """A tilt table's log without a clock (a row of names, a row of units, 2 Hz) against a dated Seapath DUT."""
     ref_roll = _table_roll(1200)
@@ -423,6 +425,7 @@ def test_report_window_refusals(tmp_path, capsys):
     assert "nodate.csv: --start 2014-08-01T12:00:30Z: a UTC clock time, but the recording has no date" in out
 
 
+@pytest.mark.slow
 def test_reference_with_foreign_column_names_mapped_with_ref_columns(tmp_path, capsys):
     """An NMEA DUT (no --columns of its own to lend) against a ship's CSV log whose roll/pitch are HeelDeg/TrimDeg:
     --ref-columns maps them. A CSV DUT's --profile is not the reference's once it has its own mapping; without

@@ -50,6 +50,7 @@ def long_report(tmp_path_factory):
     return ev, pdf, pages
 
 
+@pytest.mark.slow
 @needs_pdftotext
 def test_every_json_row_is_in_the_pdf(long_report):
     ev, pdf, _ = long_report
@@ -74,6 +75,7 @@ def test_every_json_row_is_in_the_pdf(long_report):
     assert len(per["rows"]) > 27  # more rows than fit on a page: the table paginated without losing any
 
 
+@pytest.mark.slow
 @needs_pdftotext
 def test_summary_items_table_and_footers(long_report):
     ev, pdf, pages = long_report
@@ -97,6 +99,7 @@ def test_summary_items_table_and_footers(long_report):
     assert "unit" in flat and "deg" in flat and "Signature" in flat and "Witness (surveyor / recognised" in flat
 
 
+@pytest.mark.slow
 def test_pdf_pages_render_without_overprinting(long_report, tmp_path):
     """Footer and body never share pixels: the band between the body's bottom margin and the footer is empty."""
     if shutil.which("pdftoppm") is None:

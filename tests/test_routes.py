@@ -216,6 +216,7 @@ def fixed_clock(monkeypatch):
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # matplotlib's PDF creation date
 
 
+@pytest.mark.slow
 def test_report_inclinometer(data, tmp_path, monkeypatch, fixed_clock):
     args = ["report", "inclinometer", data["inc_dut"], "--reference", data["inc_ref"], "-o", "inc.pdf"]
     args += ["--align", "xcorr", "--angle-floor", "1.5"]

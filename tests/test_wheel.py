@@ -17,6 +17,9 @@ from pathlib import Path
 
 import pytest
 
+# building the wheel takes ~7 s: out of the quick loop; CI runs these (and installs the package as a user does)
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("imutool", "calibration", "formats")
 # files read at run time through importlib.resources or relative to a module's __file__
@@ -122,7 +125,6 @@ def test_console_script_declared(wheel, wheel_names):
     assert re.search(r"^imutool\s*=\s*imutool\.cli:main\s*$", text, flags=re.M), text
 
 
-@pytest.mark.slow
 def test_uninstall_leaves_nothing_behind_after_kernels_compiled(wheel, tmp_path):
     """A user's lifecycle in a fresh venv: install the wheel, run a compiled kernel (cold per-user cache, no
     NUMBA_CACHE_DIR), uninstall — nothing of imutool is left in site-packages (numba once cached kernels in the
