@@ -33,6 +33,12 @@ def _env(tmp_path: Path, **extra: str) -> dict:
     return env
 
 
+def _python(args: list[str], cwd: Path, env: dict, stdin: str | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, *args], input=stdin, env=env, cwd=cwd, capture_output=True, text=True, timeout=900
+    )
+
+
 def test_every_entry_is_in_signature_syntax():
     for module, name, text in ALL:
         types = kw.argument_types(text)
@@ -72,25 +78,10 @@ def test_what_the_second_process_compiles_the_next_one_loads(tmp_path):
     entries = [e for e in EKF_HELPERS if e[1] in ("_vertical_forms", "_add_rrt")]
     assert len(entries) == 2
     env = _env(tmp_path)
-    warm = subprocess.run(
-        [sys.executable, "-m", "formats.kernel_warm"],
-        input="\n".join("\t".join(e) for e in entries),
-        env=env,
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    warm = _python(["-m", "formats.kernel_warm"], ROOT, env, stdin="\n".join("\t".join(e) for e in entries))
     assert warm.returncode == 0 and warm.stdout == "" and warm.stderr == "", warm.stderr
     texts = {name: text for _, name, text in entries}
-    r = subprocess.run(
-        [sys.executable, "-c", CHECK, texts["_add_rrt"], texts["_vertical_forms"]],
-        env=env,
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    r = _python(["-c", CHECK, texts["_add_rrt"], texts["_vertical_forms"]], tmp_path, env)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["_add_rrt", "1", "0", "_vertical_forms", "1", "0"], r.stdout  # loaded, not compiled
     assert "compiling" not in r.stderr, r.stderr
@@ -129,18 +120,10 @@ RECORD = textwrap.dedent(
 def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
     """~40 s: one cold compile of the filter's kernels, with the smoother."""
     env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
-    run = [sys.executable, "-c", "from imutool.cli import main; main()"]
-    sim = ["simulate", "ship-roll", "--duration", "20", "-o", "r.csv"]
+    sim = ["-c", "from imutool.cli import main; main()", "simulate", "ship-roll", "--duration", "20", "-o", "r.csv"]
     sim_env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-sim"))  # the filter's own cache stays empty
-    assert subprocess.run(run + sim, cwd=tmp_path, env=sim_env, capture_output=True, timeout=300).returncode == 0
-    r = subprocess.run(
-        [sys.executable, "-c", RECORD, "filter", "r.csv", "-o", "est.csv", "--smooth", "-q"],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
+    assert _python(sim, tmp_path, sim_env).returncode == 0
+    r = _python(["-c", RECORD, "filter", "r.csv", "-o", "est.csv", "--smooth", "-q"], tmp_path, env)
     assert r.returncode == 0, r.stderr
     compiled = {tuple(line.split("\t")) for line in r.stdout.splitlines()}
     own = {e for e in compiled if e[1] in ("parse_block", "ekf_kernel")}  # the command's own: first and probe
