@@ -55,7 +55,7 @@ filter.)
   accel_gate (a shock); update skipped when its normalised innovation squared exceeds accel_nis_gate (off by
   default; forced back in after reject_timeout s of continuous rejection);
   magnetometer skipped when its norm or dip departs from the reference; rest detection (low rate, ‖a‖ ≈ g
-  for rest_time s) adds a zero-rate pseudo-measurement of the bias; GNSS velocity aiding (``_velocity_aiding``):
+  for rest_time s) adds a zero-rate pseudo-measurement of the bias; GNSS velocity aiding (compensation.py):
   between two velocity fixes ∫ R_I f dt = R_IN (Δv_s − g Δt), so the low-pass takes each interval's mean force
   less Δv_s/Δt (sway, surge and turn removed at any frequency; v_s the antenna's velocity + R (ω × r)); without
   it, the turn's kinematic acceleration a_ned = SȮG·[cos χ, sin χ, 0] + SOG·r·[−sin χ, cos χ, 0] (χ = COG, or the
@@ -113,7 +113,7 @@ from imutool.attitude.rest import _rest
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
 def _outputs(st, P, k, q_out, b_out, std_out):
     """Row k of the outputs: q (body→NED), the gyro bias (rad/s) and the roll/pitch/heading σ (rad). Returns the
     roll and pitch variances (rad²) for the self-check."""
@@ -149,7 +149,7 @@ def _outputs(st, P, k, q_out, b_out, std_out):
     return v0, v1
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy")
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
 def _self_check(st, prm, v0, v1):
     """The per-sample self-checks; v0, v1 the roll and pitch variances (rad²). The attitude's (the accelerometer's
     windowed NIS, the tilt check) and the heading's (the magnetometer's or the external heading's NIS: a magnetic

@@ -98,6 +98,12 @@ HEADING_GATE_SIGMA, HEADING_REJECT_MAX_S = 4.0, 5.0
 # LLVM fast-math flags that keep NaN/Inf semantics (the kernels test np.isfinite): contraction to FMA,
 # reassociation, reciprocal division, no signed zeros.
 _FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
+# The loop's sections (predict.py, accel.py, rest.py, compensation.py, magnetic.py, heading_input.py, kernel.py) are
+# compiled with _nrt=False: they allocate nothing and only borrow the kernel's arrays, so they need no reference
+# counts. With them, numba counted a reference to every array a section takes at each call (an atomic increment
+# and decrement; its pruning pass removes the pair only in a function of one exit and a simple branch structure):
+# 15-25 atomic pairs per sample, the split loop at ~40 % of the single loop's speed. A function they call is
+# compiled for them under the same rule.
 
 # ---- constant arguments of the compiled helpers ----------------------------------------------------------------
 # numba types a literal True or 3 passed to a compiled function as a type of its own and compiles that function
