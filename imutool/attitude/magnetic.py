@@ -122,7 +122,7 @@ def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, si
     return True
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
 def _mag_sample(st, P, prm, R, mx, my, mz, w0, w1, w2, dt, gate):
     """The magnetometer's gates and disturbance level at every finite sample m (µT, body), with the bias-free rate w
     (rad/s) and dt (s): the norm and dip gates, the peak-held deviation from the reference (S_MDIST), a new field
@@ -190,7 +190,7 @@ def _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use):
     _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
 def _mag_update(st, P, prm, R, dx, dev_m, w0, w1, w2, dt, mag_mode, gate):
     """The magnetometer update, when due (``mag_mode`` 1: heading, 2: full): the mean world-frame direction of the
     accepted samples since the last one (R = σ²/n, σ inflated by the deviation measure ``dev_m``), the reference's

@@ -55,7 +55,7 @@ def _rest_update(st, P, prm, dx, R):
     rmat(st[0], st[1], st[2], st[3], R)
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
 def _rest(st, P, prm, dx, R, gk0, gk1, gk2, ax, ay, az, dt, update_every):
     """Rest detection at one sample (gyro g_k rad/s, accelerometer a m/s², dt s; called where rest_time > 0 and the
     accelerometer sample is finite): the still samples' rates summed, the update when due (R is refreshed after
