@@ -234,7 +234,7 @@ def ekf_kernel(
         gk0, gk1, gk2, dt, w0, w1, w2, gap = _predict(
             st, P, prm, t[k], gyro[k, 0], gyro[k, 1], gyro[k, 2], cov_every_sample
         )
-        rmat(st[0], st[1], st[2], st[3], R)
+        rmat(st[0], st[1], st[2], st[3], R)  # R(q) body→NED, predicted
         ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
         acc_ok = np.isfinite(ax) and np.isfinite(ay) and np.isfinite(az)
         flag = 0
@@ -243,7 +243,7 @@ def ekf_kernel(
         if prm[P_REST_TIME] > 0 and acc_ok:
             flag |= _rest(st, P, prm, dx, R, gk0, gk1, gk2, ax, ay, az, dt, update_every)
         ri_now = False  # RI = R(q_I) computed for this sample
-        if use_va:
+        if use_va:  # kinematic compensation (compensation.py): velocity aiding, lever arm, the GNSS turn
             ri_now = _velocity_aiding(
                 st, R, RI, t[k], vel[k, 0], vel[k, 1], w0, w1, w2, arm_sa, ax, ay, az, dt, gap, acc_ok
             )
@@ -252,7 +252,7 @@ def ekf_kernel(
         if acc_ok and use_gnss > 0 and not use_va and np.isfinite(sog[k]) and (use_gnss == 2 or np.isfinite(cog[k])):
             ax, ay, az = _gnss_force(st, R, gk0, gk1, gk2, sog[k], cog[k], sogdot[k], use_gnss == 2, ax, ay, az)
         rej, force, na, dev_a, fed = False, False, 0.0, 0.0, False
-        if acc_ok:
+        if acc_ok:  # the accelerometer (accel.py): gate and tilt window, quasi-inertial low-pass, update
             rej, force, na, dev_a = _accel_gate(st, prm, R, ax, ay, az, dt, gap)
             if keep_f and (not rej or force):
                 f_out[k, 0], f_out[k, 1], f_out[k, 2] = ax, ay, az
@@ -276,7 +276,7 @@ def ekf_kernel(
             flag |= F_ACC_REJ
         elif acc_ok and st[S_CNT_A] >= update_every and na > 0:
             flag |= _accel_update(st, P, prm, R, RI, MLAG, X33, dx, ax, ay, az, na, dev_a, dt, force, ri_now, ext_meas)
-        mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
+        mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]  # the magnetometer (magnetic.py): gates, update when due
         if mag_mode > 0 and np.isfinite(mx) and np.isfinite(my) and np.isfinite(mz):
             rej_m, dev_m, flag_m = _mag_sample(st, P, prm, R, mx, my, mz, w0, w1, w2, dt, gate)
             flag |= flag_m
@@ -285,7 +285,7 @@ def ekf_kernel(
         if hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
             if _heading_input(st, P, prm, R, dx, t[k], hdg[k]):
                 flag |= F_HDG_USED
-        v0, v1 = _outputs(st, P, k, q_out, b_out, std_out)
+        v0, v1 = _outputs(st, P, k, q_out, b_out, std_out)  # outputs, then the per-sample self-check
         flags_out[k] = flag | _self_check(st, prm, v0, v1)
         if store:
             for i in range(6):
