@@ -19,9 +19,9 @@ import pytest
 
 import formats.kernel_warm as kw
 from imutool.attitude.kernel import ekf_kernel
-from imutool.attitude.warm import AFTER_THE_EKF, EKF_HELPERS, SMOOTH_KERNELS
+from imutool.attitude.warm import AFTER_THE_EKF, SMOOTH_KERNELS
 
-ALL = EKF_HELPERS + AFTER_THE_EKF + SMOOTH_KERNELS
+ALL = AFTER_THE_EKF + SMOOTH_KERNELS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,26 +48,26 @@ def test_every_entry_is_in_signature_syntax():
 
 def test_no_second_process_when_switched_off_cached_or_one_thread(monkeypatch):
     monkeypatch.setenv(kw.ENV_SWITCH, "0")
-    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
+    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
     monkeypatch.delenv(kw.ENV_SWITCH)
     monkeypatch.setenv("IMUTOOL_THREADS", "1")  # a batch worker's share of one core
-    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
+    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
     monkeypatch.delenv("IMUTOOL_THREADS")
     monkeypatch.setattr(kw, "_busy_cores", lambda: 64.0)  # every core busy: it would only slow the command
     monkeypatch.setattr(kw, "is_cached", lambda probe: False)
-    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
+    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
     monkeypatch.setattr(kw, "_busy_cores", lambda: 0.0)
     monkeypatch.setattr(kw, "is_cached", lambda probe: True)
-    assert kw.warm_in_background(ekf_kernel, EKF_HELPERS) is None
+    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
 
 
 CHECK = textwrap.dedent(
     """
-    import sys
+    import importlib, sys
     from formats.kernel_warm import argument_types
-    from imutool.attitude import covariance
-    for name, text in [("_add_rrt", sys.argv[1]), ("_vertical_forms", sys.argv[2])]:
-        fn = getattr(covariance, name)
+    for line in sys.stdin.read().splitlines():
+        module, name, text = line.split("\\t")
+        fn = getattr(importlib.import_module(module), name)
         fn.compile(argument_types(text))
         print(name, fn.stats.cache_hits.get(argument_types(text), 0), sum(fn.stats.cache_misses.values()))
     """
@@ -75,15 +75,16 @@ CHECK = textwrap.dedent(
 
 
 def test_what_the_second_process_compiles_the_next_one_loads(tmp_path):
-    entries = [e for e in EKF_HELPERS if e[1] in ("_vertical_forms", "_add_rrt")]
+    entries = [e for e in ALL if e[1] in ("pair_discrepancy_kernel", "zero_phase_lp_kernel")]
     assert len(entries) == 2
     env = _env(tmp_path)
-    warm = _python(["-m", "formats.kernel_warm"], ROOT, env, stdin="\n".join("\t".join(e) for e in entries))
+    lines = "\n".join("\t".join(e) for e in entries)
+    warm = _python(["-m", "formats.kernel_warm"], ROOT, env, stdin=lines)
     assert warm.returncode == 0 and warm.stdout == "" and warm.stderr == "", warm.stderr
-    texts = {name: text for _, name, text in entries}
-    r = _python(["-c", CHECK, texts["_add_rrt"], texts["_vertical_forms"]], tmp_path, env)
+    r = _python(["-c", CHECK], tmp_path, env, stdin=lines)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["_add_rrt", "1", "0", "_vertical_forms", "1", "0"], r.stdout  # loaded, not compiled
+    names = [e[1] for e in entries]
+    assert r.stdout.split() == [names[0], "1", "0", names[1], "1", "0"], r.stdout  # loaded, not compiled
     assert "compiling" not in r.stderr, r.stderr
 
 

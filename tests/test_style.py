@@ -117,3 +117,28 @@ def test_no_import_cycle():
             cycle = visit(m, [])
             assert cycle is None, " → ".join(cycle[cycle.index(cycle[-1]) :])
     assert "imutool.attitude.kernel" in graph and "imutool.quaternion" in graph["imutool.gyro_check"]
+
+
+MAX_MODULE_LINES, MAX_KERNEL_LINES = 600, 120
+
+
+def _is_njit(dec: ast.expr) -> bool:
+    f = dec.func if isinstance(dec, ast.Call) else dec
+    return (f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")) in ("njit", "jit")
+
+
+def test_attitude_modules_and_kernels_are_small():
+    """The attitude filter stays a package of small parts (issue 36): no module in imutool/attitude/ over 600 lines,
+    no numba function over 120 (from its decorator to the end of its body) — the EKF's loop is a short sequence of
+    one section per sensor (kernel.py), each section a function of its own."""
+    big = []
+    for f in sorted((ROOT / "imutool" / "attitude").glob("*.py")):
+        text = f.read_text(encoding="utf-8")
+        if (n := len(text.splitlines())) > MAX_MODULE_LINES:
+            big.append(f"{f.name}: {n} lines (at most {MAX_MODULE_LINES})")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef) and any(_is_njit(d) for d in node.decorator_list):
+                n = node.end_lineno - min(d.lineno for d in node.decorator_list) + 1
+                if n > MAX_KERNEL_LINES:
+                    big.append(f"{f.name}:{node.name}: {n} lines (at most {MAX_KERNEL_LINES})")
+    assert not big, big

@@ -8,9 +8,13 @@ One concept per module (docs/architecture.md, "The attitude package"):
   and its :data:`MIGRATIONS`.
 - :mod:`~imutool.attitude.layout` — the state vector's slots (``S_*``), the parameter vector's (``P_*``) and the
   per-sample flag bits (``F_*``).
-- :mod:`~imutool.attitude.kernel` — the per-sample loop (numba; the filter's equations are in its docstring), using
-  from :mod:`~imutool.attitude.covariance`, :mod:`~imutool.attitude.updates`, :mod:`~imutool.attitude.lowpass`,
-  :mod:`~imutool.attitude.magnetic` and the shared :mod:`imutool.quaternion` steps.
+- :mod:`~imutool.attitude.kernel` — the per-sample loop (numba; the filter's equations are in its docstring): one
+  call per section in a written order — :mod:`~imutool.attitude.predict` (gyro), :mod:`~imutool.attitude.accel`
+  (noise level, gate, quasi-inertial low-pass, update), :mod:`~imutool.attitude.rest`,
+  :mod:`~imutool.attitude.compensation` (lever arm, GNSS turn, velocity aiding), :mod:`~imutool.attitude.magnetic`
+  (gates, new field, update), :mod:`~imutool.attitude.heading_input` (a gyrocompass), then the outputs and the
+  per-sample self-check; the algebra in :mod:`~imutool.attitude.covariance` and :mod:`~imutool.attitude.updates`,
+  the low-passes in :mod:`~imutool.attitude.lowpass`, the shared :mod:`imutool.quaternion` steps.
 - :mod:`~imutool.attitude.run` — :func:`run_ekf` over arrays (initial state, chunks, :class:`AttitudeResult`).
 - :mod:`~imutool.attitude.rts`, :mod:`~imutool.attitude.smoother` — the RTS pass and the zero-lag smoother.
 - :mod:`~imutool.attitude.selfcheck` — :class:`SelfCheck`, the one accumulator of the self-check reports

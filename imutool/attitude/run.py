@@ -183,6 +183,68 @@ def _gnss_arrays(
     return sog, cog, sogdot, True
 
 
+def _arms(lever_arm: np.ndarray | None, antenna_arm: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The lever arm (3,) m body FRD of the sensor from the centre of rotation, and the sensor's position from the
+    GNSS antenna's (lever − antenna arm); zeros where not given."""
+    lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(lever)):
+        raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")
+    ant = np.zeros(3) if antenna_arm is None else np.asarray(antenna_arm, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(ant)):
+        raise ImutoolError("the antenna arm must be three finite numbers (m, body FRD)")
+    return lever, lever - ant
+
+
+def _summary(st: np.ndarray, n: int, every: int, gnss: bool, aiding: bool, heading_input: bool) -> dict:
+    """The run's counts from the state's counters (layout.py S_N*), as :attr:`AttitudeResult.summary` has them."""
+    summary = {
+        "samples": n,
+        "updates": int(st[S_NUPD]),
+        "update_every": every,
+        "accel_rejected": int(st[S_NAREJ]),
+        "mag_rejected": int(st[S_NMREJ]),
+        "mag_new_field": int(st[S_NMNEW]),
+        "rest_samples": int(st[S_NREST]),
+        "gaps": int(st[S_NGAPS]),
+        "gyro_nan_samples": int(st[S_NGNAN]),
+        "gnss_compensation": gnss,
+        "velocity_aiding": aiding,
+        "inconsistent_samples": int(st[S_NINC]),
+        "heading_inconsistent_samples": int(st[S_NHINC]),
+        "tilt_check_samples": int(st[S_NTILT]),
+        "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
+    }
+    if heading_input:
+        summary["heading_input_rejected"] = int(st[S_NHREJ])
+    return summary
+
+
+def _rows(x: np.ndarray | None, n: int, k: int, name: str) -> np.ndarray:
+    """An optional (n, k) float64 input of the kernel, contiguous; (0, k) where not given."""
+    if x is None:
+        return np.empty((0, k))
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    if x.shape != (n, k):
+        raise ImutoolError(f"{name} must be ({n}, {k}), not {x.shape}")
+    return x
+
+
+def _start_state(
+    state: np.ndarray | None, accel: np.ndarray, mag: np.ndarray | None, hdg: np.ndarray, params: EkfParams
+) -> np.ndarray:
+    """The state the kernel starts from (a copy): ``state`` carried from a previous chunk, or :func:`initial_state`."""
+    if state is None:  # the initial heading: a fix within 100 samples of the first valid accelerometer row (the
+        # same in memory and streamed); later fixes pull the heading in through the filter's updates
+        i_acc = _first_finite_row(accel)
+        near = hdg[max(i_acc, 0) : max(i_acc, 0) + 100] if len(hdg) else hdg
+        first = np.flatnonzero(np.isfinite(near))
+        state = initial_state(accel, mag, params, float(near[first[0]]) if len(first) else None)
+    st = np.array(state, dtype=np.float64)
+    if st.shape != (STATE_SIZE,):  # the kernel indexes it unchecked
+        raise ImutoolError(f"an EKF state must have {STATE_SIZE} entries, not {st.shape} (from another release?)")
+    return st
+
+
 def run_ekf(
     time: np.ndarray,
     gyro: np.ndarray,
@@ -239,15 +301,7 @@ def run_ekf(
     m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
     if dt_nominal is None:
         dt_nominal = nominal_dt(t)
-    if state is None:  # the initial heading: a fix within 100 samples of the first valid accelerometer row (the
-        # same in memory and streamed); later fixes pull the heading in through the filter's updates
-        i_acc = _first_finite_row(a)
-        near = hdg[max(i_acc, 0) : max(i_acc, 0) + 100] if len(hdg) else hdg
-        first = np.flatnonzero(np.isfinite(near))
-        state = initial_state(a, m if use_mag else None, params, float(near[first[0]]) if len(first) else None)
-    st = np.array(state, dtype=np.float64)
-    if st.shape != (STATE_SIZE,):  # the kernel indexes it unchecked
-        raise ImutoolError(f"an EKF state must have {STATE_SIZE} entries, not {st.shape} (from another release?)")
+    st = _start_state(state, a, m if use_mag else None, hdg, params)
     if dt_mag is None and use_mag:
         dt_mag = mag_interval(t, m)
     coef = EkfCoefficients.derive(params, dt_nominal, dt_mag)  # what depends on the rate, once per call
@@ -259,19 +313,8 @@ def run_ekf(
     heading_held = bool(len(hdg) and np.isfinite(hdg).any()) or bool(use_mag and np.isfinite(m).all(axis=1).any())
     # a speed without a course (the log's, --speed) is along the bow too
     gnss_code = np.int64(0 if not use_gnss else (1 if heading_held and cog_deg is not None else 2))
-    lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64).reshape(3)
-    if not np.all(np.isfinite(lever)):
-        raise ImutoolError("the lever arm must be three finite numbers (m, body FRD)")
-    if velocity_ne is None or not heading_held:
-        vel = np.empty((0, 2))
-    else:
-        vel = np.ascontiguousarray(velocity_ne, dtype=np.float64)
-        if vel.shape != (n, 2):
-            raise ImutoolError(f"velocity_ne must be ({n}, 2), not {vel.shape}")
-    ant = np.zeros(3) if antenna_arm is None else np.asarray(antenna_arm, dtype=np.float64).reshape(3)
-    if not np.all(np.isfinite(ant)):
-        raise ImutoolError("the antenna arm must be three finite numbers (m, body FRD)")
-    arm_sa = lever - ant
+    lever, arm_sa = _arms(lever_arm, antenna_arm)
+    vel = _rows(velocity_ne if heading_held else None, n, 2, "velocity_ne")
     q_out = np.empty((n, 4))
     b_out = np.empty((n, 3))
     std_out = np.empty((n, 3))
@@ -279,12 +322,7 @@ def run_ekf(
     p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
     keep_f = keep_cov or keep_force
     f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
-    if accel_measurement is None:
-        meas = np.empty((0, 3))
-    else:
-        meas = np.ascontiguousarray(accel_measurement, dtype=np.float64)
-        if meas.shape != (n, 3):
-            raise ImutoolError(f"accel_measurement must be ({n}, 3), not {meas.shape}")
+    meas = _rows(accel_measurement, n, 3, "accel_measurement")
     every = coef.samples_per_update
     cov_each = keep_cov if cov_every_sample is None else cov_every_sample
     mode, cov_flag = coef.mag_mode_code if use_mag else 0, bool(cov_each or every == 1)
@@ -316,25 +354,7 @@ def run_ekf(
             f_out[i0:i1] if keep_f else f_out,
             hdg[i0:i1] if len(hdg) else hdg,
         )
-    summary = {
-        "samples": n,
-        "updates": int(st[S_NUPD]),
-        "update_every": every,
-        "accel_rejected": int(st[S_NAREJ]),
-        "mag_rejected": int(st[S_NMREJ]),
-        "mag_new_field": int(st[S_NMNEW]),
-        "rest_samples": int(st[S_NREST]),
-        "gaps": int(st[S_NGAPS]),
-        "gyro_nan_samples": int(st[S_NGNAN]),
-        "gnss_compensation": bool(use_gnss or len(vel)),
-        "velocity_aiding": bool(len(vel)),
-        "inconsistent_samples": int(st[S_NINC]),
-        "heading_inconsistent_samples": int(st[S_NHINC]),
-        "tilt_check_samples": int(st[S_NTILT]),
-        "tilt_check_max_deg": round(float(np.degrees(np.arctan(np.sqrt(st[S_TILTMAX])))), 2),
-    }
-    if len(hdg):
-        summary["heading_input_rejected"] = int(st[S_NHREJ])
+    summary = _summary(st, n, every, bool(use_gnss or len(vel)), bool(len(vel)), bool(len(hdg)))
     return AttitudeResult(
         t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None, f_out if keep_f else None
     ), st

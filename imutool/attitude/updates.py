@@ -5,13 +5,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from imutool.attitude.covariance import _add_rrt
 from imutool.attitude.layout import ATT, S_BIASMAX
 from imutool.quaternion import qmul
 
 
-@njit(cache=True)
+@njit
 def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_bias=False, nis_extra=0.0):
     """Update with a unit-vector measurement: H = [[h×], 0], R = sig2·I (the zero block of H exploited;
     3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code.
@@ -101,60 +100,30 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     k51 = cb * (m50 * w01 + m51 * w11 + m52 * w12)
     k52 = cb * (m50 * w02 + m51 * w12 + m52 * w22)
     P[0, 0] = p00 - (k00 * m00 + k01 * m01 + k02 * m02)
-    v = p01 - (k00 * m10 + k01 * m11 + k02 * m12)
-    P[0, 1] = v
-    P[1, 0] = v
-    v = p02 - (k00 * m20 + k01 * m21 + k02 * m22)
-    P[0, 2] = v
-    P[2, 0] = v
-    v = p03 - (k00 * m30 + k01 * m31 + k02 * m32)
-    P[0, 3] = v
-    P[3, 0] = v
-    v = p04 - (k00 * m40 + k01 * m41 + k02 * m42)
-    P[0, 4] = v
-    P[4, 0] = v
-    v = p05 - (k00 * m50 + k01 * m51 + k02 * m52)
-    P[0, 5] = v
-    P[5, 0] = v
+    P[0, 1] = P[1, 0] = p01 - (k00 * m10 + k01 * m11 + k02 * m12)
+    P[0, 2] = P[2, 0] = p02 - (k00 * m20 + k01 * m21 + k02 * m22)
+    P[0, 3] = P[3, 0] = p03 - (k00 * m30 + k01 * m31 + k02 * m32)
+    P[0, 4] = P[4, 0] = p04 - (k00 * m40 + k01 * m41 + k02 * m42)
+    P[0, 5] = P[5, 0] = p05 - (k00 * m50 + k01 * m51 + k02 * m52)
     P[1, 1] = p11 - (k10 * m10 + k11 * m11 + k12 * m12)
-    v = p12 - (k10 * m20 + k11 * m21 + k12 * m22)
-    P[1, 2] = v
-    P[2, 1] = v
-    v = p13 - (k10 * m30 + k11 * m31 + k12 * m32)
-    P[1, 3] = v
-    P[3, 1] = v
-    v = p14 - (k10 * m40 + k11 * m41 + k12 * m42)
-    P[1, 4] = v
-    P[4, 1] = v
-    v = p15 - (k10 * m50 + k11 * m51 + k12 * m52)
-    P[1, 5] = v
-    P[5, 1] = v
+    P[1, 2] = P[2, 1] = p12 - (k10 * m20 + k11 * m21 + k12 * m22)
+    P[1, 3] = P[3, 1] = p13 - (k10 * m30 + k11 * m31 + k12 * m32)
+    P[1, 4] = P[4, 1] = p14 - (k10 * m40 + k11 * m41 + k12 * m42)
+    P[1, 5] = P[5, 1] = p15 - (k10 * m50 + k11 * m51 + k12 * m52)
     P[2, 2] = p22 - (k20 * m20 + k21 * m21 + k22 * m22)
-    v = p23 - (k20 * m30 + k21 * m31 + k22 * m32)
-    P[2, 3] = v
-    P[3, 2] = v
-    v = p24 - (k20 * m40 + k21 * m41 + k22 * m42)
-    P[2, 4] = v
-    P[4, 2] = v
-    v = p25 - (k20 * m50 + k21 * m51 + k22 * m52)
-    P[2, 5] = v
-    P[5, 2] = v
+    P[2, 3] = P[3, 2] = p23 - (k20 * m30 + k21 * m31 + k22 * m32)
+    P[2, 4] = P[4, 2] = p24 - (k20 * m40 + k21 * m41 + k22 * m42)
+    P[2, 5] = P[5, 2] = p25 - (k20 * m50 + k21 * m51 + k22 * m52)
     P[3, 3] = p33 - (k30 * m30 + k31 * m31 + k32 * m32)
-    v = p34 - (k30 * m40 + k31 * m41 + k32 * m42)
-    P[3, 4] = v
-    P[4, 3] = v
-    v = p35 - (k30 * m50 + k31 * m51 + k32 * m52)
-    P[3, 5] = v
-    P[5, 3] = v
+    P[3, 4] = P[4, 3] = p34 - (k30 * m40 + k31 * m41 + k32 * m42)
+    P[3, 5] = P[5, 3] = p35 - (k30 * m50 + k31 * m51 + k32 * m52)
     P[4, 4] = p44 - (k40 * m40 + k41 * m41 + k42 * m42)
-    v = p45 - (k40 * m50 + k41 * m51 + k42 * m52)
-    P[4, 5] = v
-    P[5, 4] = v
+    P[4, 5] = P[5, 4] = p45 - (k40 * m50 + k41 * m51 + k42 * m52)
     P[5, 5] = p55 - (k50 * m50 + k51 * m51 + k52 * m52)
     return accepted, nis
 
 
-@njit(cache=True)
+@njit
 def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0.0, bias_gate2=0.0, sig2_0=0.0):
     """Scalar heading update H = [r, 0] (r = world vertical in body axes) with the correction projected on the world
     vertical (Joseph form). Straight-line code. Returns the NIS y² / (S + nis_extra) (see :func:`_vec_update`).
@@ -235,7 +204,7 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0
     return y * y / (S + nis_extra)
 
 
-@njit(cache=True)
+@njit
 def _reset_heading(st, P, r0, r1, r2, y, s2):
     """Take a heading outright: turn q by y (rad) about the world vertical and let P forget the heading (its
     covariance along r, the world vertical in body axes, with everything) before setting its variance to s2
@@ -256,7 +225,7 @@ def _reset_heading(st, P, r0, r1, r2, y, s2):
     _add_rrt(P, ATT, ATT, s2, r0, r1, r2)
 
 
-@njit(cache=True)
+@njit
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)
