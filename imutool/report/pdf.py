@@ -378,21 +378,13 @@ class Layout:
 def _draw_page(fig: Any, ops: list[tuple]) -> None:
     from matplotlib.patches import Rectangle
 
+    from .pagetext import PageText
+
+    texts = []
     for op in ops:
         if op[0] == "text":
             _, x, y, s, size, weight, color, ha = op
-            fig.text(
-                x / PW,
-                y / PH,
-                s,
-                fontsize=size,
-                weight=weight,
-                color=color,
-                ha=ha,
-                va="baseline",
-                family=FONT,
-                parse_math=False,
-            )
+            texts.append((x / PW, y / PH, s, size, weight, color, ha))
         elif op[0] == "line":
             _, x0, y0, x1, y1, lw = op
             fig.add_artist(_line(x0, y0, x1, y1, lw))
@@ -401,6 +393,7 @@ def _draw_page(fig: Any, ops: list[tuple]) -> None:
             fig.add_artist(
                 Rectangle((x / PW, y / PH), w / PW, h / PH, transform=fig.transFigure, color=col, lw=0, zorder=-1)
             )
+    fig.add_artist(PageText(texts, FONT))  # after the rules and shading, as Text artists were drawn
 
 
 def _line(x0: float, y0: float, x1: float, y1: float, lw: float) -> Any:
