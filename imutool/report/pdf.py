@@ -184,8 +184,8 @@ class Layout:
     """Flows headings, paragraphs, key/value lists, tables (paginated, header repeated) and signature blocks onto
     A4 pages. Each page is a list of drawing operations in points (origin bottom left)."""
 
-    def __init__(self, title: str) -> None:
-        self.m = _Measure()
+    def __init__(self, title: str, measure: _Measure | None = None) -> None:
+        self.m = measure if measure is not None else _Measure()  # one shared by a report's layouts
         self.title = title
         self.pages: list[list[tuple]] = []
         self._new_page()
@@ -917,7 +917,7 @@ def render_pdf(ev: dict[str, Any], plots: dict[str, Any], path: str) -> int:
     head = Layout(ev["title"])
     head.heading(ev["title"], 14)
     summary_blocks(head, ev)
-    tail = Layout("Details per item")
+    tail = Layout("Details per item", head.m)
     tail.pages.clear()
     tail._new_page()
     tail.heading("Details per item (every row of the JSON)", 13)
