@@ -14,6 +14,7 @@ from click.testing import CliRunner
 
 import formats
 from formats import Recording
+from formats.nmea import checksum
 from imutool.cli import cli
 from imutool.report.inclinometer import InclinometerOptions, hrm_capture_check, inclinometer_evidence
 from imutool.report.pdf import load_schema
@@ -185,8 +186,16 @@ def test_hrm_capture_interface(tmp_path):
     lines[500] = lines[500][:-2] + ("00" if not lines[500].endswith("00") else "11")
     bad = tmp_path / "bad.nmea"
     bad.write_text("\r\n".join(lines), newline="")
+    # and one sentence's status field (A or V) wrong under a good checksum: a field format error
+    k = next(i for i in range(600, len(lines)) if "HRM" in lines[i])
+    d = lines[k].index("$")
+    f = lines[k][d + 1 : lines[k].index("*")].split(",")
+    body = ",".join(f[:5] + ["X"] + f[6:])
+    lines[k] = f"{lines[k][:d]}${body}*{checksum(body)}"
+    bad.write_text("\r\n".join(lines), newline="")
     cap = hrm_capture_check(str(bad))
     assert cap["checksum_bad"] == 1 and cap["hrm_sentences"] == len([x for x in lines if "HRM" in x])
+    assert cap["field_format_errors"] == 1 and cap["checksum_ok"] == cap["hrm_sentences"] - 1
     ref = formats.read(files["inclinometer_reference.csv"])
     dut = formats.read(nm)
     ev, _ = inclinometer_evidence(dut, ref, dut_path=nm)

@@ -153,3 +153,100 @@ def test_heading_follow_up_needs_twenty_degrees_per_second():
     fu = {it["id"]: it for it in ev["items"]}["follow_up_20"]
     assert fu["status"] == "pass" and fu["seconds_at_test_rate"] >= 5.0
     assert fu["raw_error_stats"]["n"] == fu["stats"]["n"] and fu["raw_status"] in ("pass", "fail")
+
+
+# words that kern (AV, To, T., Wa), make ligatures (fi, ffi, fl), and the report's own signs
+_WORDS = (
+    "AV To T. Wa L' office fluff affine fi of off -0.500 12.345 ± ° µT m/s² · • − — ≤ |error| (deg) "
+    "______ 2014-08-01T12:00:00Z MSC.363(92) stbd/port Heel, “quoted” sha256 3f2a9c01d4e7 p95 RMS"
+).split(" ")
+
+
+def test_wrap_widths_are_matplotlibs():
+    """A line's width summed from its words and joints is matplotlib's width of the whole line, and the wrap
+    breaks where a wrap that measures every growing line breaks."""
+    import random
+
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.textpath import TextToPath
+
+    from imutool.report.pdf import FONT, _Measure
+
+    tp, m, rng = TextToPath(), _Measure(), random.Random(7)
+
+    def mpl_width(s: str, size: float, weight: str) -> float:
+        prop = FontProperties(family=FONT, size=size, weight=weight)
+        return tp.get_text_width_height_descent(s, prop, ismath=False)[0] if s else 0.0
+
+    for _ in range(120):
+        words = [rng.choice(_WORDS) for _ in range(rng.randint(1, 8))]
+        if rng.random() < 0.2:
+            words.insert(rng.randint(0, len(words)), "")  # two spaces in a row
+        size, weight = rng.choice((6.0, 7.5, 8.5, 13.0)), rng.choice(("normal", "bold"))
+        ref = mpl_width(" ".join(words), size, weight)
+        assert m.line_width(words, size, weight) == pytest.approx(ref, abs=1e-6), (words, size, weight)
+
+    def greedy(text: str, width: float, size: float, weight: str) -> list[str]:  # main's wrap, line by line
+        out = []
+        for para in text.split("\n"):
+            line = ""
+            for word in para.split(" "):
+                cand = word if not line else line + " " + word
+                if mpl_width(cand, size, weight) <= width:
+                    line = cand
+                    continue
+                if line:
+                    out.append(line)
+                while mpl_width(word, size, weight) > width and len(word) > 1:
+                    k = len(word)
+                    while k > 1 and mpl_width(word[:k], size, weight) > width:
+                        k -= 1
+                    out.append(word[:k])
+                    word = word[k:]
+                line = word
+            out.append(line)
+        return out
+
+    for width in (40.0, 90.0, 150.0):
+        text = " ".join(rng.choice(_WORDS) for _ in range(30)) + "\n  " + "x" * 40 + " AV"
+        assert m.wrap(text, width, 8.5, "bold") == greedy(text, width, 8.5, "bold")
+
+
+def test_page_text_draws_as_text_artists(tmp_path):
+    """A layout page drawn by PageText writes the same PDF as the same page drawn with one Text per string."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    from imutool.report.pdf import A4, FONT, PH, PW, _draw_page
+
+    ops = [
+        ("rect", 48.0, 700.0, 200.0, 20.0, "#e6e9ef"),
+        ("text", 48.0, 780.0, "RESULT: PASS — ±1 °", 13.0, "bold", "white", "left"),
+        ("text", 300.0, 760.0, "-12.345", 7.5, "normal", "black", "right"),
+        ("text", 300.0, 750.0, "0.500", 7.5, "normal", "black", "right"),
+        ("text", 60.0, 740.0, "office AV To T. (deg)", 8.5, "normal", "#333333", "left"),
+        ("text", 60.0, 730.0, "", 8.5, "normal", "black", "left"),
+        ("line", 48.0, 720.0, 300.0, 720.0, 0.6),
+    ]
+
+    def write(path, draw) -> bytes:
+        fig = plt.figure(figsize=A4)
+        draw(fig)
+        with PdfPages(path, metadata={"CreationDate": None}) as pdf:
+            pdf.savefig(fig)
+        plt.close(fig)
+        return path.read_bytes()
+
+    def as_text_artists(fig) -> None:  # main's _draw_page: one Text per string
+        _draw_page(fig, [op for op in ops if op[0] != "text"])
+        fig.artists.pop()  # the (empty) PageText
+        for _, x, y, s, size, weight, color, ha in (op for op in ops if op[0] == "text"):
+            fig.text(x / PW, y / PH, s, fontsize=size, weight=weight, color=color, ha=ha, va="baseline",
+                     family=FONT, parse_math=False)  # fmt: skip
+
+    assert write(tmp_path / "page.pdf", lambda fig: _draw_page(fig, ops)) == write(
+        tmp_path / "text.pdf", as_text_artists
+    )

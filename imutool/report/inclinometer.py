@@ -281,6 +281,10 @@ _HRM_FIELDS = [
     ("reset_month", r"(\d{2})?"),
 ]
 
+# a sentence's fields after the address, joined by commas, against the field patterns joined the same way (no
+# pattern matches a comma, so this is each field against its own): one match per sentence, not one per field
+_HRM_FORMAT = {n: re.compile(",".join(pat for _n, pat in _HRM_FIELDS[:n])) for n in (5, 10)}
+
 
 def hrm_capture_check(path: str) -> dict[str, Any]:
     """Interface evidence of an HRM capture: checksum pass rate, field formats, status counts, talkers."""
@@ -313,9 +317,7 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
                 continue
             ck_ok += 1
             fields = body.split(",")[1:]
-            good = len(fields) in (5, 10) and all(
-                re.fullmatch(pat, fields[i]) is not None for i, (_n, pat) in enumerate(_HRM_FIELDS[: len(fields)])
-            )
+            good = len(fields) in _HRM_FORMAT and _HRM_FORMAT[len(fields)].fullmatch(",".join(fields)) is not None
             if not good:
                 fmt_bad += 1
                 if len(first_bad) < 5:

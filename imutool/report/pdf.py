@@ -90,35 +90,87 @@ def row_keys(rows: list[dict[str, Any]]) -> list[str]:
 
 # ---- text layout: blocks → pages of drawing operations ----------------------------------------------------------
 class _Measure:
+    """Text widths in points exactly as matplotlib measures them (``TextToPath.get_text_width_height_descent``),
+    at the cost of one measurement per word and per joint of two words instead of one per growing line.
+
+    matplotlib lays a string out at 100 px per em (``TextToPath.FONT_SCALE``, whatever the size) in 1/64 px: a
+    width is an integer sum of unhinted glyph advances, each with the kerning towards the next glyph, scaled by
+    size / 100. So a line's width is additive: the sum of its words' widths plus, for each joint ``a b``, the
+    width of ``a b`` less those of ``a`` and ``b`` (the space and the kerning of the pairs across it). Widths are
+    kept in those integer units (a word's for every size) and turned into points as matplotlib does, so a
+    wrapped line's width is bit for bit the width matplotlib gives the whole line."""
+
     def __init__(self) -> None:
         from matplotlib.font_manager import FontProperties
         from matplotlib.textpath import TextToPath
 
         self.tp = TextToPath()
-        self.props: dict[tuple[float, str], Any] = {}
-        self.FontProperties = FontProperties
-        self.cache: dict[tuple[str, float, str], float] = {}
+        self.scale = float(TextToPath.FONT_SCALE)  # px per em of the layout
+        self.props = {w: FontProperties(family=FONT, size=self.scale, weight=w) for w in ("normal", "bold")}
+        self.cache: dict[tuple[str, str], int] = {}  # (text, weight) -> width (1/64 px at 100 px per em)
+        self.joints: dict[tuple[str, str, str], int] = {}  # (a, b, weight) -> width("a b") - width(a) - width(b)
+        self.wraps: dict[tuple[str, float, float, str], list[str]] = {}
+
+    def units(self, text: str, weight: str = "normal") -> int:
+        """Width of ``text`` in 1/64 px at 100 px per em (an integer: matplotlib's layout is fixed point)."""
+        key = (text, weight)
+        u = self.cache.get(key)
+        if u is None:
+            if weight not in self.props:
+                from matplotlib.font_manager import FontProperties
+
+                self.props[weight] = FontProperties(family=FONT, size=self.scale, weight=weight)
+            w = self.tp.get_text_width_height_descent(text, self.props[weight], ismath=False)[0] if text else 0.0
+            u = self.cache[key] = round(w * 64.0)  # at size 100 the scale is 1: w is exactly u / 64
+        return u
+
+    def joint(self, a: str, b: str, weight: str = "normal") -> int:
+        """What joining ``a`` and ``b`` with a space adds to their widths (units of :meth:`units`): the space's
+        advance and the kerning of the pairs across it, (last character of ``a``, space) and (space, first of
+        ``b``). Measured on those characters alone, so a few hundred joints serve a report; a ligature ending or
+        starting a word kerns with the space as its character does in DejaVu Sans (no glyph of it kerns with a
+        space; the tests check ligature words)."""
+        a, b = a[-1:], b[:1]
+        key = (a, b, weight)
+        j = self.joints.get(key)
+        if j is None:
+            j = self.joints[key] = self.units(a + " " + b, weight) - self.units(a, weight) - self.units(b, weight)
+        return j
+
+    def points(self, units: int, size: float) -> float:
+        """Units of :meth:`units` in points at font ``size`` (the arithmetic of matplotlib's measurement)."""
+        return units / 64.0 * (size / self.scale)
 
     def width(self, text: str, size: float, weight: str = "normal") -> float:
-        key = (text, size, weight)
-        w = self.cache.get(key)
-        if w is None:
-            pk = (size, weight)
-            if pk not in self.props:
-                self.props[pk] = self.FontProperties(family=FONT, size=size, weight=weight)
-            w = self.tp.get_text_width_height_descent(text, self.props[pk], ismath=False)[0] if text else 0.0
-            self.cache[key] = w
-        return w
+        """Width of ``text`` in points at font ``size`` (pt)."""
+        return self.points(self.units(text, weight), size)
+
+    def line_width(self, words: list[str], size: float, weight: str = "normal") -> float:
+        """Width in points of ``words`` joined by single spaces, from the words' and the joints' widths (the
+        arithmetic of :meth:`wrap`; equal to :meth:`width` of the joined line)."""
+        units = self.units(words[0], weight) if words else 0
+        for a, b in itertools.pairwise(words):
+            units += self.joint(a, b, weight) + self.units(b, weight)
+        return self.points(units, size)
 
     def wrap(self, text: str, width: float, size: float, weight: str = "normal") -> list[str]:
         """Greedy word wrap to a width in points (words longer than the width are cut by characters)."""
+        key = (str(text), width, size, weight)
+        got = self.wraps.get(key)
+        if got is None:
+            got = self.wraps[key] = self._wrap(str(text), width, size, weight)
+        return list(got)
+
+    def _wrap(self, text: str, width: float, size: float, weight: str) -> list[str]:
         out: list[str] = []
-        for para in str(text).split("\n"):
-            line = ""
+        for para in text.split("\n"):
+            line, last, units = "", "", 0  # the line, its last word and its width (units)
             for word in para.split(" "):
-                cand = word if not line else line + " " + word
-                if self.width(cand, size, weight) <= width:
-                    line = cand
+                wu = self.units(word, weight)
+                cand = wu if not line else units + self.joint(last, word, weight) + wu
+                if self.points(cand, size) <= width:
+                    line = word if not line else line + " " + word
+                    last, units = word, cand
                     continue
                 if line:
                     out.append(line)
@@ -128,7 +180,7 @@ class _Measure:
                         k -= 1
                     out.append(word[:k])
                     word = word[k:]
-                line = word
+                line, last, units = word, word, self.units(word, weight)
             out.append(line)
         return out
 
@@ -137,8 +189,8 @@ class Layout:
     """Flows headings, paragraphs, key/value lists, tables (paginated, header repeated) and signature blocks onto
     A4 pages. Each page is a list of drawing operations in points (origin bottom left)."""
 
-    def __init__(self, title: str) -> None:
-        self.m = _Measure()
+    def __init__(self, title: str, measure: _Measure | None = None) -> None:
+        self.m = measure if measure is not None else _Measure()  # one shared by a report's layouts
         self.title = title
         self.pages: list[list[tuple]] = []
         self._new_page()
@@ -331,21 +383,13 @@ class Layout:
 def _draw_page(fig: Any, ops: list[tuple]) -> None:
     from matplotlib.patches import Rectangle
 
+    from .pagetext import PageText
+
+    texts = []
     for op in ops:
         if op[0] == "text":
             _, x, y, s, size, weight, color, ha = op
-            fig.text(
-                x / PW,
-                y / PH,
-                s,
-                fontsize=size,
-                weight=weight,
-                color=color,
-                ha=ha,
-                va="baseline",
-                family=FONT,
-                parse_math=False,
-            )
+            texts.append((x / PW, y / PH, s, size, weight, color, ha))
         elif op[0] == "line":
             _, x0, y0, x1, y1, lw = op
             fig.add_artist(_line(x0, y0, x1, y1, lw))
@@ -354,6 +398,7 @@ def _draw_page(fig: Any, ops: list[tuple]) -> None:
             fig.add_artist(
                 Rectangle((x / PW, y / PH), w / PW, h / PH, transform=fig.transFigure, color=col, lw=0, zorder=-1)
             )
+    fig.add_artist(PageText(texts, FONT))  # after the rules and shading, as Text artists were drawn
 
 
 def _line(x0: float, y0: float, x1: float, y1: float, lw: float) -> Any:
@@ -877,7 +922,7 @@ def render_pdf(ev: dict[str, Any], plots: dict[str, Any], path: str) -> int:
     head = Layout(ev["title"])
     head.heading(ev["title"], 14)
     summary_blocks(head, ev)
-    tail = Layout("Details per item")
+    tail = Layout("Details per item", head.m)
     tail.pages.clear()
     tail._new_page()
     tail.heading("Details per item (every row of the JSON)", 13)
