@@ -38,6 +38,13 @@ ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set in
 
 Entry = tuple[str, str, str]  # (module, function name, argument types)
 
+# the CSV writer's kernel, as every command that writes a CSV calls it
+CSV_WRITER: Entry = (
+    "formats.csv_engine",
+    "format_block",
+    "float64[:, ::1], uint64[:, ::1], int64, int64, int64, uint8[::1], int64[:, ::1], int64[::1]",
+)
+
 
 def type_text(t: types.Type) -> str:
     """A numba type in signature syntax: ``float64[:, ::1]`` for a 2-D C array, ``boolean``, ``int64``."""

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,7 @@ from formats.atomic import atomic_path
 from formats.csv import format_array
 from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
+from formats.kernel_warm import CSV_WRITER, warm_in_background
 from imutool.loading import input_notes, require_channels
 from imutool.quaternion import rmat
 from imutool.routes import OnInput, RouteResult, Stage, read_source
@@ -823,6 +825,8 @@ def run_ins_track(
     with ref_pos.
     """
     inputs: list[dict[str, Any]] = []
+    if output is not None and Path(output).suffix.lower() == ".csv":  # a cold cache: the writer compiles beside
+        warm_in_background(_ins_kernel, (), (CSV_WRITER,))  # the INS kernel, in a second process
     if stage is not None:
         stage("reading")
     rec, name, report = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)

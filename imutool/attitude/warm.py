@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import subprocess
 
-from formats.kernel_warm import Entry, warm_in_background
+from formats.kernel_warm import CSV_WRITER, Entry, warm_in_background
 from imutool.attitude.kernel import ekf_kernel
 
 _A = "float64[::1]"  # 1-D C array
@@ -29,11 +29,7 @@ AFTER_THE_EKF: tuple[Entry, ...] = (
         "pair_discrepancy_kernel",
         ", ".join([_A, _M, _M, _M, _F, _F, _M, _F, "int64", _A, _A]),
     ),
-    (
-        "formats.csv_engine",
-        "format_block",
-        f"{_M}, uint64[:, ::1], int64, int64, int64, uint8[::1], int64[:, ::1], int64[::1]",
-    ),
+    CSV_WRITER,
 )
 
 SMOOTH_KERNELS: tuple[Entry, ...] = (
