@@ -1,22 +1,26 @@
-"""A cold first run, on two cores: a second process compiles a command's kernel helpers while the first compiles.
+"""A cold first run on two cores: a second process compiles the kernels a command needs later.
 
 numba compiles in one thread (a process-wide lock), and most of a first run's time is numba's own Python passes
 (type inference ~55 %, lowering ~25 %, LLVM ~10 % in a profile of the filter's first run, 2026-11-28), so a cold
-cache cannot be compiled faster in one process. It can be split across processes. A kernel's helpers (the @njit
-functions it calls) are compiled when the kernel's type inference first reaches each call; a helper marked
-``cache=True`` is looked up in the cache first, and a cached helper's LLVM bitcode is linked into the kernel just as
-a freshly compiled one's (the same code, inlined or not as LLVM decides either way: the results are the same).
+cache cannot be compiled faster in one process. It can be split across processes, kernel by kernel: a command
+compiles its main kernel (the filter's EKF) while a second process compiles the kernels called from Python later
+(the gyro check's, the CSV writer's, the smoother's) into the same cache, where the command finds them.
+
+Only kernels called from Python are listed: a helper (an @njit function a kernel calls) is compiled into its
+kernel with the flags the kernel passes down (numba inherits ``fastmath``, ``error_model``, ``_nrt`` and
+``forceinline``), and numba's cache does not key on flags, so a helper compiled alone could be linked with other
+flags than its caller's.
 
 :func:`warm_in_background` is called by a command's library route before its work starts. When the command's main
-kernel is not in the cache yet and the machine has a second core, it starts ``python -m formats.kernel_warm``: that
-process compiles the listed functions with the argument types the kernels call them with, from the *last* needed
-to the first, while the command compiles from the first; each finds in the cache what the other finished. Nothing
-is waited for: the command never depends on the second process, which stays silent (a function it cannot compile
-is left to the command) and is never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
+kernel is not in the cache yet and a core is free, it starts ``python -m formats.kernel_warm``, which compiles the
+listed kernels in order with the argument types the command calls them with. Nothing is waited for: the command
+never depends on the second process, which stays silent (a kernel it cannot compile is left to the command), is
+killed if still running when the command ends, and is never started from inside itself
+(``IMUTOOL_KERNEL_WARM=0``).
 
 A list is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
-boolean"``), kept beside the command's kernels (e.g. :mod:`imutool.attitude.warm`); a test records
-a real cold compile and checks that every cached helper it compiled is listed with the types it was called with.
+boolean"``), kept beside the command's kernels (e.g. :mod:`imutool.attitude.warm`); a test records a real cold
+compile and checks that every kernel it compiled is listed with the types it was called with.
 """
 
 from __future__ import annotations
@@ -81,17 +85,15 @@ def is_cached(dispatcher) -> bool:
     return index is None or index.exists()
 
 
-def warm_in_background(probe, helpers: Sequence[Entry], later: Sequence[Entry] = ()) -> subprocess.Popen | None:
-    """Start the warming process if ``probe`` (the command's main kernel) is not cached yet: it compiles
-    ``helpers`` (the probe's, in the order the probe first calls them) from the last to the first, then ``later``
-    (kernels the command needs after the probe) in order.
+def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | None:
+    """Start the warming process for ``entries`` (in order) if ``probe`` (the command's main kernel) is not cached.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
     a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), no idle
     core (load average above the usable cores − 1: the second process would only slow the command), switched off,
     a cache that lasts only as long as this process, or the process could not be started.
     """
-    if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not (helpers or later):
+    if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not entries:
         return None
     if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > usable_cores() - 1:
         return None  # no core to spare: a second process would only take the command's share
@@ -100,7 +102,7 @@ def warm_in_background(probe, helpers: Sequence[Entry], later: Sequence[Entry] =
     env = dict(os.environ, **{ENV_SWITCH: "0"})  # the same environment: the same cache folder is chosen
     if env.get("NUMBA_CACHE_DIR"):
         env["NUMBA_CACHE_DIR"] = os.path.abspath(env["NUMBA_CACHE_DIR"])  # it starts in another folder
-    lines = "\n".join("\t".join(e) for e in [*reversed(helpers), *later])
+    lines = "\n".join("\t".join(e) for e in entries)
     try:
         proc = subprocess.Popen(
             [sys.executable, "-m", "formats.kernel_warm"],

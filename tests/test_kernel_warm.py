@@ -48,17 +48,17 @@ def test_every_entry_is_in_signature_syntax():
 
 def test_no_second_process_when_switched_off_cached_or_one_thread(monkeypatch):
     monkeypatch.setenv(kw.ENV_SWITCH, "0")
-    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None
     monkeypatch.delenv(kw.ENV_SWITCH)
     monkeypatch.setenv("IMUTOOL_THREADS", "1")  # a batch worker's share of one core
-    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None
     monkeypatch.delenv("IMUTOOL_THREADS")
     monkeypatch.setattr(kw, "_busy_cores", lambda: 64.0)  # every core busy: it would only slow the command
     monkeypatch.setattr(kw, "is_cached", lambda probe: False)
-    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None
     monkeypatch.setattr(kw, "_busy_cores", lambda: 0.0)
     monkeypatch.setattr(kw, "is_cached", lambda probe: True)
-    assert kw.warm_in_background(ekf_kernel, (), AFTER_THE_EKF) is None
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None
 
 
 CHECK = textwrap.dedent(

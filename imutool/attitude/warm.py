@@ -44,4 +44,4 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
 
 def warm_filter_kernels(smooth: bool = False) -> subprocess.Popen | None:
     """On a cold cache, compile the filter's helpers in a second process while this one compiles (see the top)."""
-    return warm_in_background(ekf_kernel, (), AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()))
+    return warm_in_background(ekf_kernel, AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()))
