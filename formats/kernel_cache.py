@@ -55,6 +55,7 @@ KEEP_VERSIONS = 3  # version folders kept (the current one included)
 _VERSION_DIR = re.compile(r"^kernels-[0-9a-f]{12}$")
 _SITE = Path(__file__).resolve().parent.parent  # the folder holding the three packages (site-packages or a clone)
 PACKAGES_FOLDER = str(_SITE)
+FOLDER_ENV = "IMUTOOL_KERNEL_FOLDER"  # set by formats.kernel_warm for its second process: the parent's folder
 
 # kernel groups: module-name prefix -> (what the user is told is compiling, about how long an empty cache takes to
 # compile it on this project's 2-core machine without other load, s; twice that and more under load). A module of
@@ -436,6 +437,10 @@ def cache_folder() -> Path | None:
         return _State.folder
     _State.version = source_version(memo=user_cache_root() / MEMO_NAME)
     name = f"kernels-{_State.version}"
+    given = os.environ.get(FOLDER_ENV, "")  # formats.kernel_warm's second process: its parent's folder
+    if given and Path(given).name == name and Path(given).is_absolute() and _usable(Path(given)):
+        _State.folder = Path(given)
+        return _State.folder
     uid = os.getuid() if hasattr(os, "getuid") else os.environ.get("USERNAME", "user")
     root = user_cache_root()
     candidates = [(root, False), (Path(tempfile.gettempdir()) / f"imutool-cache-{uid}", True)]

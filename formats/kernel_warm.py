@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import atexit
 import importlib
+import multiprocessing
 import os
 import subprocess
 import sys
@@ -36,7 +37,7 @@ from pathlib import Path
 from numba.core import sigutils, types
 
 from formats import kernel_cache
-from formats.threads import thread_budget, usable_cores
+from formats.threads import thread_budget
 
 ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set inside one); "1": even on a busy machine
 
@@ -93,24 +94,31 @@ def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | No
     core (load average above the usable cores − 1: the second process would only slow the command), switched off,
     a cache that lasts only as long as this process, or the process could not be started.
     """
-    if os.environ.get(ENV_SWITCH, "") == "0" or thread_budget() < 2 or not entries:
+    budget = thread_budget()
+    if os.environ.get(ENV_SWITCH, "") == "0" or budget < 2 or not entries or not sys.executable:
         return None
-    if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > usable_cores() - 1:
+    if getattr(sys, "frozen", False) or multiprocessing.parent_process() is not None:
+        return None  # a frozen program has no `python -c`; a pool worker (batch) never runs atexit
+    key = f"{getattr(probe, '__module__', '')}.{getattr(probe, '__qualname__', probe)}"
+    if key in _STARTED:
+        return None  # once per process: a cache that cannot be written stays cold, and is not compiled twice
+    if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > budget - 1:
         return None  # no core to spare: a second process would only take the command's share
-    if kernel_cache.cache_folder() is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
+    folder = kernel_cache.cache_folder()
+    if folder is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
         return None
-    env = dict(os.environ, **{ENV_SWITCH: "0"})  # the same environment: the same cache folder is chosen
-    if env.get("NUMBA_CACHE_DIR"):
-        env["NUMBA_CACHE_DIR"] = os.path.abspath(env["NUMBA_CACHE_DIR"])  # it starts in another folder
+    _STARTED.add(key)
+    env = dict(os.environ, **{ENV_SWITCH: "0", kernel_cache.FOLDER_ENV: str(folder.resolve())})
+    path = kernel_cache.PACKAGES_FOLDER
+    start = f"import sys; sys.path.insert(0, {path!r}); from formats.kernel_warm import _main; _main()"
     lines = "\n".join("\t".join(e) for e in entries)
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "formats.kernel_warm"],
+            [sys.executable, "-c", start],  # our packages first on the path, not a user's `formats`
             stdin=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             env=env,
-            cwd=kernel_cache.PACKAGES_FOLDER,  # `-m` imports from the folder it starts in: ours, not a user's
             close_fds=True,
         )
         assert proc.stdin is not None
@@ -120,6 +128,9 @@ def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | No
         return None
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
     return proc
+
+
+_STARTED: set[str] = set()  # the probes this process has started a warming process for
 
 
 def _busy_cores() -> float:
@@ -157,5 +168,5 @@ def _main() -> None:
     compile_entries(entries)  # type: ignore[arg-type]
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # python -m formats.kernel_warm (the command starts it with -c, see above)
     _main()

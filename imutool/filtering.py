@@ -174,7 +174,9 @@ def run_filter(
         raise ImutoolError(f"a log speed applies to the EKF (method ekf), not to method {method!r}")
     if method == "ekf":
         params = params if params is not None else EkfParams()
-        warm_filter_kernels(smooth)  # a cold cache: a second process compiles the helpers (formats.kernel_warm)
+        if isinstance(source, Recording) or os.path.isfile(source):  # not for an input that will be refused
+            csv_out = output is not None and os.fspath(output).lower().endswith(".csv")
+            warm_filter_kernels(smooth, csv_out)  # a cold cache: later kernels compile beside (formats.kernel_warm)
     if (
         not isinstance(source, Recording)
         and not load_options.get("with_files")  # merged in memory

@@ -825,8 +825,13 @@ def run_ins_track(
     with ref_pos.
     """
     inputs: list[dict[str, Any]] = []
-    if output is not None and Path(output).suffix.lower() == ".csv":  # a cold cache: the writer compiles beside
-        warm_in_background(_ins_kernel, (CSV_WRITER,))  # the INS kernel, in a second process
+    if (
+        output is not None
+        and Path(output).suffix.lower() == ".csv"
+        and (isinstance(source, Recording) or os.path.isfile(source))
+    ):
+        # a cold cache: the CSV writer compiles beside the INS kernel, in a second process
+        warm_in_background(_ins_kernel, (CSV_WRITER,))
     if stage is not None:
         stage("reading")
     rec, name, report = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)

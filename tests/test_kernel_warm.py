@@ -18,10 +18,11 @@ from pathlib import Path
 import pytest
 
 import formats.kernel_warm as kw
+from formats.kernel_warm import CSV_WRITER
 from imutool.attitude.kernel import ekf_kernel
 from imutool.attitude.warm import AFTER_THE_EKF, SMOOTH_KERNELS
 
-ALL = AFTER_THE_EKF + SMOOTH_KERNELS
+ALL = AFTER_THE_EKF + (CSV_WRITER,) + SMOOTH_KERNELS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -59,6 +60,57 @@ def test_no_second_process_when_switched_off_cached_or_one_thread(monkeypatch):
     monkeypatch.setattr(kw, "_busy_cores", lambda: 0.0)
     monkeypatch.setattr(kw, "is_cached", lambda probe: True)
     assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None
+
+
+def test_once_per_process_and_never_in_a_pool_worker(monkeypatch):
+    started = []
+
+    class FakePopen:
+        def __init__(self, args, **kw):
+            started.append(args)
+            self.stdin = open(os.devnull, "wb")  # noqa: SIM115 - closed by warm_in_background
+
+        def poll(self):
+            return 0
+
+    monkeypatch.setattr(kw.subprocess, "Popen", FakePopen)
+    monkeypatch.setattr(kw, "_busy_cores", lambda: 0.0)
+    monkeypatch.setattr(kw, "is_cached", lambda probe: False)
+    monkeypatch.setattr(kw, "thread_budget", lambda: 2)
+    monkeypatch.setattr(kw, "_STARTED", set())
+    monkeypatch.delenv(kw.ENV_SWITCH, raising=False)
+    monkeypatch.setattr(kw.multiprocessing, "parent_process", lambda: object())  # a batch pool's worker
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None and started == []
+    monkeypatch.setattr(kw.multiprocessing, "parent_process", lambda: None)
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is not None
+    assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None  # a cache that stays cold: not again
+    assert len(started) == 1 and started[0][1] == "-c"  # our packages first on sys.path, not `-m` from a cwd
+
+
+START = textwrap.dedent(
+    """
+    from formats.kernel_warm import warm_in_background
+    from imutool.attitude.kernel import ekf_kernel
+    from imutool.attitude.warm import AFTER_THE_EKF
+    proc = warm_in_background(ekf_kernel, AFTER_THE_EKF[:1])
+    assert proc is not None
+    assert proc.wait() == 0
+    """
+)
+
+
+def test_the_second_process_uses_the_parents_folder_for_a_tilde_cache_dir(tmp_path):
+    """NUMBA_CACHE_DIR='~/nc' in a user's folder: the kernels land in ~/nc, nothing in the working folder."""
+    work, home = tmp_path / "work", tmp_path / "home"
+    work.mkdir()
+    home.mkdir()
+    env = _env(tmp_path, NUMBA_CACHE_DIR="~/nc", HOME=str(home), **{kw.ENV_SWITCH: "1"})
+    r = _python(["-c", START], work, env)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert list(home.glob("nc/imutool/kernels-*/imutool/gyro_check.pair_discrepancy_kernel-*.nbi")), sorted(
+        p.as_posix() for p in tmp_path.rglob("*")
+    )
+    assert list(work.iterdir()) == []
 
 
 CHECK = textwrap.dedent(

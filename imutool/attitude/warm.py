@@ -2,9 +2,9 @@
 
 A cold ``imutool filter`` compiles the CSV parser, then the EKF kernel (most of the time: its sections and helpers
 are compiled into it, with its flags), then the gyro check's kernel and the CSV writer's (and, with ``--smooth``,
-the RTS pass and the zero-phase low-pass). :data:`AFTER_THE_EKF` and :data:`SMOOTH_KERNELS` list those later
-kernels with the argument types they are called with, so that a second process compiles them while the command
-compiles the EKF. The EKF kernel is the probe (not cached yet = a cold run).
+the RTS pass and the zero-phase low-pass). :data:`AFTER_THE_EKF`, ``CSV_WRITER`` (for a CSV output) and
+:data:`SMOOTH_KERNELS` list those later kernels with the argument types they are called with, so that a second
+process compiles them while the command compiles the EKF. The EKF kernel is the probe (not cached yet = a cold run).
 
 Only kernels called from Python belong here: a helper compiled on its own would not get the flags its caller
 passes down (numba inherits ``fastmath``, ``error_model``, ``_nrt`` and ``forceinline``) and numba's cache does not
@@ -29,7 +29,6 @@ AFTER_THE_EKF: tuple[Entry, ...] = (
         "pair_discrepancy_kernel",
         ", ".join([_A, _M, _M, _M, _F, _F, _M, _F, "int64", _A, _A]),
     ),
-    CSV_WRITER,
 )
 
 SMOOTH_KERNELS: tuple[Entry, ...] = (
@@ -42,6 +41,8 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
 )
 
 
-def warm_filter_kernels(smooth: bool = False) -> subprocess.Popen | None:
-    """On a cold cache, compile the filter's helpers in a second process while this one compiles (see the top)."""
-    return warm_in_background(ekf_kernel, AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()))
+def warm_filter_kernels(smooth: bool = False, csv_output: bool = False) -> subprocess.Popen | None:
+    """On a cold cache, compile the kernels the filter needs after the EKF in a second process (see the top):
+    the gyro check's, the CSV writer's with a CSV output, the smoother's with ``smooth``."""
+    later = AFTER_THE_EKF + ((CSV_WRITER,) if csv_output else ()) + (SMOOTH_KERNELS if smooth else ())
+    return warm_in_background(ekf_kernel, later)
