@@ -154,7 +154,7 @@ def compile_entries(entries: Sequence[Entry]) -> int:
         try:
             fn = getattr(importlib.import_module(module), name)
             fn.compile(argument_types(text))
-        except Exception:  # noqa: BLE001 - a helper this process cannot compile is left to the command
+        except Exception:  # noqa: BLE001 - a kernel this process cannot compile is left to the command
             continue
         done += 1
     return done
