@@ -1,26 +1,27 @@
-"""A cold first run on two cores: a second process compiles the kernels a command needs later.
+"""A cold first run on two cores: a second process compiles part of what a command needs into the same cache.
 
 numba compiles in one thread (a process-wide lock), and most of a first run's time is numba's own Python passes
-(type inference ~55 %, lowering ~25 %, LLVM ~10 % in a profile of the filter's first run, 2026-11-28), so a cold
-cache cannot be compiled faster in one process. It can be split across processes, kernel by kernel: a command
-compiles its main kernel (the filter's EKF) while a second process compiles the kernels called from Python later
-(the gyro check's, the CSV writer's, the smoother's) into the same cache, where the command finds them.
+(type inference, lowering; LLVM ~10 %), so a cold cache cannot be compiled much faster in one process. It can be
+split across processes: while a command compiles its parser and its main kernel, a second process compiles the
+kernels the command calls later (the gyro check's, the CSV writer's, the smoother's), then the main kernel's parts
+from the last one backwards (the EKF's sections, :mod:`imutool.attitude.warm`), into the same cache. The command
+loads each part it reaches that the second process has finished, and compiles the others itself; the two meet in
+the middle. numba links a part loaded from the cache as LLVM bitcode, so the kernel is the same machine code as
+when it compiles everything itself (a test compares them).
 
-Only kernels called from Python are listed: a helper (an @njit function a kernel calls) is compiled into its
-kernel with the flags the kernel passes down (numba inherits ``fastmath``, ``error_model``, ``_nrt`` and
-``forceinline``), and numba's cache does not key on flags, so a helper compiled alone could be linked with other
-flags than its caller's.
+A part compiled on its own must be the code its caller would have compiled: numba takes ``fastmath``,
+``error_model``, ``_nrt`` and ``forceinline`` from the caller for a function that does not set them, and its cache
+does not key on flags. So every part listed, and every helper it calls, states all four (and ``cache=True``).
 
 :func:`warm_in_background` is called by a command's library route before its work starts. When the command's main
-kernel is not in the cache yet and a core is free, it starts ``python -m formats.kernel_warm``, which compiles the
-listed kernels in order with the argument types the command calls them with. Nothing is waited for: the command
-never depends on the second process, which stays silent (a kernel it cannot compile is left to the command), is
-killed if still running when the command ends, and is never started from inside itself
-(``IMUTOOL_KERNEL_WARM=0``).
+kernel is not in the cache yet, it starts the second process, which compiles the listed entries in order with the
+argument types the command calls them with. Nothing is waited for: the command never depends on the second
+process, which stays silent (an entry it cannot compile is left to the command), is killed if still running when
+the command ends, and is never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
 
-A list is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
-boolean"``), kept beside the command's kernels (e.g. :mod:`imutool.attitude.warm`); a test records a real cold
-compile and checks that every kernel it compiled is listed with the types it was called with.
+An entry is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
+boolean"``), kept beside the command's kernels; a test records a real cold compile and checks that every kernel and
+part it compiled is listed with the types it was called with.
 """
 
 from __future__ import annotations
@@ -90,8 +91,9 @@ def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | No
     """Start the warming process for ``entries`` (in order) if ``probe`` (the command's main kernel) is not cached.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
-    a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), no idle
-    core (load average above the usable cores − 1: the second process would only slow the command), switched off,
+    a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), a
+    machine busy already (load average above the usable cores: the second process would only take the command's
+    share; below that it costs only its start-up, ~1.5 s CPU, as the two compile different parts), switched off,
     a cache that lasts only as long as this process, or the process could not be started.
     """
     budget = thread_budget()
@@ -102,8 +104,8 @@ def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | No
     key = f"{getattr(probe, '__module__', '')}.{getattr(probe, '__qualname__', probe)}"
     if key in _STARTED:
         return None  # once per process: a cache that cannot be written stays cold, and is not compiled twice
-    if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > budget - 1:
-        return None  # no core to spare: a second process would only take the command's share
+    if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > budget:
+        return None  # every core busy: a second process would only take the command's share
     folder = kernel_cache.cache_folder()
     if folder is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
         return None
@@ -127,6 +129,7 @@ def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | No
     except (OSError, ValueError):
         return None
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
+    kernel_cache.compiling_in_two_processes()
     return proc
 
 

@@ -20,7 +20,7 @@ import pytest
 import formats.kernel_warm as kw
 from formats.kernel_warm import CSV_WRITER
 from imutool.attitude.kernel import ekf_kernel
-from imutool.attitude.warm import AFTER_THE_EKF, SMOOTH_KERNELS
+from imutool.attitude.warm import AFTER_THE_EKF, EKF_SECTIONS, SMOOTH_KERNELS
 
 ALL = AFTER_THE_EKF + (CSV_WRITER,) + SMOOTH_KERNELS
 
@@ -146,17 +146,21 @@ RECORD = textwrap.dedent(
     import sys
     from numba.core import caching, event
     from formats.kernel_warm import type_text
-    seen = []
+    FLAGS = ("fastmath", "error_model", "_nrt", "forceinline")
+    seen, stack = [], []
     class Recorder(event.Listener):
         def on_start(self, ev):
-            pass
+            stack.append(ev.data["dispatcher"].py_func.__name__)
         def on_end(self, ev):
+            stack.pop()
             d = ev.data["dispatcher"]
             if d.py_func.__module__.split(".")[0] in ("imutool", "formats", "calibration") and not isinstance(
                 d._cache, caching.NullCache
             ):
                 types = ", ".join(type_text(a) for a in ev.data["args"])
-                seen.append((d.py_func.__module__, d.py_func.__name__, types))
+                caller = stack[-1] if stack else "-"
+                states = "yes" if all(f in d.targetoptions for f in FLAGS) else "no"
+                seen.append((caller, d.py_func.__module__, d.py_func.__name__, types, states))
     event.register("numba:compile", Recorder())
     from imutool.cli import main
     sys.argv = ["imutool", *sys.argv[1:]]
@@ -179,9 +183,17 @@ def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
     assert _python(sim, tmp_path, sim_env).returncode == 0
     r = _python(["-c", RECORD, "filter", "r.csv", "-o", "est.csv", "--smooth", "-q"], tmp_path, env)
     assert r.returncode == 0, r.stderr
-    compiled = {tuple(line.split("\t")) for line in r.stdout.splitlines()}
-    own = {e for e in compiled if e[1] in ("parse_block", "ekf_kernel")}  # the command's own: first and probe
-    assert {e[1] for e in own} == {"parse_block", "ekf_kernel"}, sorted(compiled)
+    rows = [tuple(line.split("\t")) for line in r.stdout.splitlines()]
+    top = {row[1:4] for row in rows if row[0] == "-"}
+    own = {e for e in top if e[1] in ("parse_block", "ekf_kernel")}  # the command's own: first and probe
+    assert {e[1] for e in own} == {"parse_block", "ekf_kernel"}, sorted(top)
     listed = set(ALL)
-    assert compiled - own - listed == set(), "compiled but not listed (add to imutool/attitude/warm.py)"
-    assert listed - compiled == set(), "listed but not compiled as listed (remove or correct the types)"
+    assert top - own - listed == set(), "compiled but not listed (add to imutool/attitude/warm.py)"
+    assert listed - top == set(), "listed but not compiled as listed (remove or correct the types)"
+    sections = [row[1:4] for row in rows if row[0] == "ekf_kernel"]
+    assert sections == list(EKF_SECTIONS), "the EKF's sections, in the order it calls them, with their types"
+    # every cached function the kernel reaches (its sections and their helpers) states the flags numba would
+    # otherwise take from its caller: compiled alone by the second process, it is the code the kernel would compile
+    inside = [row for row in rows if row[0] != "-"]
+    assert len(inside) > len(sections), inside
+    assert [row[2] for row in inside if row[4] != "yes"] == []

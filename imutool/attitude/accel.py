@@ -12,9 +12,9 @@ from numba import njit
 
 from imutool.attitude.covariance import _drop_vertical, _propagate_pending, _reset_cov, _shear_cov, _vertical_forms
 from imutool.attitude.layout import (
-    _FASTMATH,
     F_ACC_REJ,
     F_ACC_USED,
+    INLINED,
     LP_TAU_GROWTH,
     LP_TAU_START,
     P_ACC_ADAPT,
@@ -67,7 +67,7 @@ from imutool.attitude.updates import _apply_correction, _vec_update
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _accel_white_noise(st, prm, ax, ay, az, dt):
     """The accelerometer's white-noise level σ_w² (m²/s⁴, S_AVAR; its floor S_AFLOOR) from the raw sample a (m/s²)."""
     # from second differences (motion cancels to second order: a rotation at ω moves gravity by g·ω²·dt² per step,
@@ -93,7 +93,7 @@ def _accel_white_noise(st, prm, ax, ay, az, dt):
     st[S_APREV], st[S_APREV + 1], st[S_APREV + 2] = ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _accel_gate(st, prm, R, ax, ay, az, dt, gap):
     """The gate on the compensated force a (m/s², body; finite) and the tilt check's window. Returns (rejected,
     forced back in after reject_timeout s, ‖a‖ m/s², | ‖a‖ − g | m/s²). A rejected sample that is not forced
@@ -130,7 +130,7 @@ def _accel_gate(st, prm, R, ax, ay, az, dt, gap):
     return rej, force, na, dev_a
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _accel_low_pass(st, prm, RI, ax, ay, az, dt, aided, ri_now):
     """VQF's idea: the specific force a (m/s², body) low-passed in the gyro-integrated frame I, where gravity is
     (nearly) constant and translational acceleration averages out; second-order Butterworth, delay τ =
@@ -171,7 +171,7 @@ def _accel_low_pass(st, prm, RI, ax, ay, az, dt, aided, ri_now):
             st[S_WV + m], st[S_WY + m] = _butterworth_step(st[S_WV + m], st[S_WY + m], 0.0, lm, la, le, dt)
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _age_low_pass(st, RI, dt):
     """A row the low-pass skips (NaN, shock) still ages its content (α = 0): W += R_I·dt (s); RI = R(q_I) computed."""
     rmat(st[S_QI], st[S_QI + 1], st[S_QI + 2], st[S_QI + 3], RI)
@@ -179,7 +179,7 @@ def _age_low_pass(st, RI, dt):
         st[S_WY + m] += RI[m // 3, m % 3] * dt
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _accel_update(st, P, prm, R, RI, MLAG, X33, dx, ax, ay, az, na, dev_a, dt, force, ri_now, ext_meas):
     """The accelerometer update (eq. 7–9, 11–18), when due: z = the low-passed force back in the body frame
     (z = R_Iᵀ·LP; the raw or the smoother's force a m/s² of norm na otherwise), ẑ = Rᵀ(q)·[0, 0, −1], its NIS

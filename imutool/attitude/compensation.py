@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from imutool.attitude.layout import (
-    _FASTMATH,
+    CALLED,
     P_LEVER_TAU,
     S_QI,
     S_VA_BAD,
@@ -37,7 +37,7 @@ from imutool.attitude.layout import (
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(**CALLED)
 def _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok):
     """The specific force (m/s², body) less the lever arm's rotation terms; the rate's low-pass advanced by dt (s)."""
     if dt > 0:
@@ -63,7 +63,7 @@ def _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok):
     return ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(**CALLED)
 def _gnss_force(st, R, gk0, gk1, gk2, sog, cog, sogdot, along_bow, ax, ay, az):
     """The specific force (m/s², body) less the GNSS kinematic acceleration (sog m/s, cog rad, sogdot m/s²) of the
     turn: along the course, or ``along_bow`` where no heading is held (the course cannot be turned into body axes
@@ -83,7 +83,7 @@ def _gnss_force(st, R, gk0, gk1, gk2, sog, cog, sogdot, along_bow, ax, ay, az):
     return ax, ay, az
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(**CALLED)
 def _velocity_aiding(st, R, RI, tk, vn_k, ve_k, w0, w1, w2, arm_sa, ax, ay, az, dt, gap, acc_ok):
     """Velocity aiding's interval sums at one row (time tk s, the antenna's north/east velocity m/s, the bias-free
     rate w rad/s, the force a m/s² body); True if RI = R(q_I) was computed for this row."""

@@ -5,9 +5,9 @@ from __future__ import annotations
 from numba import njit
 
 from imutool.attitude.layout import (
-    _FASTMATH,
     ATT,
     BIAS,
+    INLINED,
     P_BIAS_RW,
     P_GYRO_NOISE,
     P_GYRO_SCALE,
@@ -59,7 +59,7 @@ def _propagate_cov(P, phi, T, qa, qb, F, tmp):
             P[j, i] = m
 
 
-@njit
+@njit(**INLINED)
 def _propagate_pending(st, P, prm):
     """Propagate P over the rotation and time accumulated since its last propagation (S_DQ, S_TACC), if any.
     Process noise (eq. 10) + the gyro scale-factor noise ∝ the angle turned: white rate noise of density ε·|ω|,
@@ -78,7 +78,7 @@ def _propagate_pending(st, P, prm):
         st[S_TACC] = 0.0
 
 
-@njit
+@njit(**INLINED)
 def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
     """P ← F P Fᵀ + Q as block algebra (the bias block of F is I), F = [[Φ, −T I], [0, I]], Φ = ΔRᵀ with ΔR =
     R(d) the rotation accumulated over T; Q = diag(qa I, qb I):
@@ -165,7 +165,7 @@ def _propagate_cov_q(P, d0, d1, d2, d3, T, qa, qb):
     P[5, 5] = c22 + qb
 
 
-@njit
+@njit(**INLINED)
 def _vertical_forms(P, r0, r1, r2):
     """rᵀ P_θθ r, rᵀ P_θb r, rᵀ P_bb r for a unit vector r (body axes)."""
     a = (
@@ -188,7 +188,7 @@ def _vertical_forms(P, r0, r1, r2):
     return a, x, b
 
 
-@njit
+@njit(**INLINED)
 def _drop_vertical(P, fa, fx, fb, r0, r1, r2, drop_att, drop_bias, dx):
     """Turn the vector update just made into one that leaves the attitude (drop_att) and/or the gyro bias
     (drop_bias) unchanged along r, the world vertical in body axes: gain K' = T K, T = I − Π, Π = diag(α r rᵀ,
@@ -214,7 +214,7 @@ def _drop_vertical(P, fa, fx, fb, r0, r1, r2, drop_att, drop_bias, dx):
         _add_rrt(P, ATT, BIAS, sx, r0, r1, r2)
 
 
-@njit(fastmath=_FASTMATH, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _add_rrt(P, i0, j0, s, r0, r1, r2):
     """P[i0:i0+3, j0:j0+3] += s·r rᵀ, mirrored into P[j0:j0+3, i0:i0+3] when that is another block.
 
@@ -230,7 +230,7 @@ def _add_rrt(P, i0, j0, s, r0, r1, r2):
                 P[j0 + j, i0 + i] += v
 
 
-@njit
+@njit(**INLINED)
 def _reset_cov(P, dx, r0, r1, r2):
     """Error-state reset after the correction dx (rad, body axes) was put into q; r = the world vertical in body
     axes before it. The tilt part of dx, dₜ = dx − (r·dx) r, moves the body-frame vertical; the heading uncertainty
@@ -271,7 +271,7 @@ def _reset_cov(P, dx, r0, r1, r2):
             P[j, i] = P[i, j]
 
 
-@njit
+@njit(**INLINED)
 def _shear_cov(P, M, s, X):
     """P ← T P Tᵀ with T = [[I, s·M], [0, I]]: the covariance in error coordinates δθ' = δθ + s·M δb (M 3×3;
     s = 1 there, s = −1 back). P_bb is unchanged, P'_ab = X = P_ab + s·M P_bb, P'_aa = P_aa + s(P_ab Mᵀ + M Xᵀ).

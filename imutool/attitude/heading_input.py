@@ -12,7 +12,7 @@ from numba import njit
 
 from imutool.attitude.covariance import _propagate_pending, _vertical_forms
 from imutool.attitude.layout import (
-    _FASTMATH,
+    CALLED,
     FALSE,
     HEADING_GATE_SIGMA,
     HEADING_REJECT_MAX_S,
@@ -25,7 +25,7 @@ from imutool.attitude.updates import _apply_correction, _heading_update, _reset_
 from imutool.quaternion import fast_atan2, rmat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(**CALLED)
 def _heading_input(st, P, prm, R, dx, tk, hk):
     """An external true heading hk (rad, NED) at time tk (s): a scalar update, a glitch skipped, or taken outright
     after a long glitch; True if it was used. R is refreshed."""

@@ -80,6 +80,7 @@ from imutool.attitude.layout import (
     F_HDG_INCONSISTENT,
     F_HDG_USED,
     F_INCONSISTENT,
+    INLINED,
     P_ACC_LAG,
     P_ACC_TAU,
     P_ACC_WN_GAIN,
@@ -113,7 +114,7 @@ from imutool.attitude.rest import _rest
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _outputs(st, P, k, q_out, b_out, std_out):
     """Row k of the outputs: q (body→NED), the gyro bias (rad/s) and the roll/pitch/heading σ (rad). Returns the
     roll and pitch variances (rad²) for the self-check."""
@@ -149,7 +150,7 @@ def _outputs(st, P, k, q_out, b_out, std_out):
     return v0, v1
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _self_check(st, prm, v0, v1):
     """The per-sample self-checks; v0, v1 the roll and pitch variances (rad²). The attitude's (the accelerometer's
     windowed NIS, the tilt check) and the heading's (the magnetometer's or the external heading's NIS: a magnetic

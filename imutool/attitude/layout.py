@@ -106,6 +106,13 @@ _FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 # body in the caller instead and brought the counts back): as calls, with their arrays passed field by field, the
 # loop ran 25 % slower. numba compiles a function they call under the same two flags, so the update algebra is
 # inlined into them too. The option-only sections (lever arm, GNSS, velocity aiding, heading input) stay calls.
+# numba takes fastmath, error_model, _nrt and forceinline from the caller when a function does not set them, and its
+# cache does not key on flags. So every section and helper the kernel reaches states all four (the values it took
+# from its callers before) and is cached on its own: compiled alone, by the second process of a cold run
+# (imutool/attitude/warm.py), or inside the kernel, it is the same code, and the kernel links it from the cache
+# as LLVM bitcode, so forceinline still inlines it.
+INLINED = dict(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True, cache=True)
+CALLED = dict(INLINED, forceinline=False)  # the option-only sections: called, not inlined
 
 # ---- constant arguments of the compiled helpers ----------------------------------------------------------------
 # numba types a literal True or 3 passed to a compiled function as a type of its own and compiles that function

@@ -13,11 +13,11 @@ from numba import njit
 
 from imutool.attitude.covariance import _propagate_pending, _reset_cov, _vertical_forms
 from imutool.attitude.layout import (
-    _FASTMATH,
     F_MAG_NEW,
     F_MAG_REJ,
     F_MAG_USED,
     FALSE,
+    INLINED,
     P_GAP_DT,
     P_MAG_BIAS,
     P_MAG_BIAS_GATE,
@@ -69,7 +69,7 @@ def _dip_gate(sin_dip, cos_gate, sin_gate):
     return np.arcsin(s), lo, hi
 
 
-@njit
+@njit(**INLINED)
 def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, sin_gate):
     """No lock-out of the magnetometer (VQF's new-field acceptance, Laidig & Seel 2023, Sec. IV-C). Called for a sample
     the gates reject, of norm ``nm`` (µT), dip sine ``sz`` and horizontal direction ``hx``, ``hy`` (north and east
@@ -122,7 +122,7 @@ def _new_field(st, P, prm, nm, sz, hx, hy, dt, turning, r0, r1, r2, cos_gate, si
     return True
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _mag_sample(st, P, prm, R, mx, my, mz, w0, w1, w2, dt, gate):
     """The magnetometer's gates and disturbance level at every finite sample m (µT, body), with the bias-free rate w
     (rad/s) and dt (s): the norm and dip gates, the peak-held deviation from the reference (S_MDIST), a new field
@@ -174,7 +174,7 @@ def _mag_sample(st, P, prm, R, mx, my, mz, w0, w1, w2, dt, gate):
     return rej, dev_m, flag
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(**INLINED)
 def _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use):
     """mag_mode "full": the paper's normalised 3-vector update with the mean world-frame field (m0, m1, m2) of
     n_use samples."""
@@ -190,7 +190,7 @@ def _mag_vector_update(st, P, prm, R, dx, m0, m1, m2, n_use):
     _reset_cov(P, dx, R[2, 0], R[2, 1], R[2, 2])
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _mag_update(st, P, prm, R, dx, dev_m, w0, w1, w2, dt, mag_mode, gate):
     """The magnetometer update, when due (``mag_mode`` 1: heading, 2: full): the mean world-frame direction of the
     accepted samples since the last one (R = σ²/n, σ inflated by the deviation measure ``dev_m``), the reference's

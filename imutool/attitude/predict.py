@@ -13,7 +13,7 @@ from numba import njit
 
 from imutool.attitude.covariance import _propagate_pending
 from imutool.attitude.layout import (
-    _FASTMATH,
+    INLINED,
     P_ACC_TAU,
     P_GAP_DT,
     P_GAP_RATE,
@@ -45,7 +45,7 @@ from imutool.attitude.layout import (
 from imutool.quaternion import qmul, rotvec_quat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _gap(st, P, prm, dt):
     """A step of dt (s) longer than gap_dt: the attitude variance grows by (gap_rate_sigma·dt)² (rad², at most 10)
     and what spans samples restarts — the tilt check's window, a candidate new field, the quasi-inertial low-pass
@@ -63,7 +63,7 @@ def _gap(st, P, prm, dt):
         st[S_MSUM + i], st[S_RSUM + i] = 0.0, 0.0
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _predict(st, P, prm, tk, gk0, gk1, gk2, cov_every_sample):
     """Predict (eq. 2–6, 10) with the gyro sample g_k (rad/s) at time tk (s). Returns the sample as used (a NaN one
     replaced by the previous), dt (s), the bias-free rate over the step w (rad/s; ``gyro_integration`` weights

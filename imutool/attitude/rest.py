@@ -12,8 +12,8 @@ from numba import njit
 
 from imutool.attitude.covariance import _propagate_pending, _reset_cov
 from imutool.attitude.layout import (
-    _FASTMATH,
     F_REST,
+    INLINED,
     P_GRAVITY,
     P_REST_ACC,
     P_REST_GYRO,
@@ -29,7 +29,7 @@ from imutool.attitude.updates import _apply_correction
 from imutool.quaternion import rmat
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False)
+@njit(**INLINED)
 def _rest_update(st, P, prm, dx, R):
     """The zero-rate pseudo-measurement of the bias, per axis, and R refreshed (s, rad/s). Sections of the loop that
     run rarely or only with an option are compiled apart (a call only where they run; the loop compiles faster)."""
@@ -55,7 +55,7 @@ def _rest_update(st, P, prm, dx, R):
     rmat(st[0], st[1], st[2], st[3], R)
 
 
-@njit(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
+@njit(**INLINED)
 def _rest(st, P, prm, dx, R, gk0, gk1, gk2, ax, ay, az, dt, update_every):
     """Rest detection at one sample (gyro g_k rad/s, accelerometer a m/s², dt s; called where rest_time > 0 and the
     accelerometer sample is finite): the still samples' rates summed, the update when due (R is refreshed after

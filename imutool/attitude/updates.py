@@ -6,11 +6,11 @@ import numpy as np
 from numba import njit
 
 from imutool.attitude.covariance import _add_rrt
-from imutool.attitude.layout import ATT, S_BIASMAX
+from imutool.attitude.layout import ATT, INLINED, S_BIASMAX
 from imutool.quaternion import qmul
 
 
-@njit
+@njit(**INLINED)
 def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_bias=False, nis_extra=0.0):
     """Update with a unit-vector measurement: H = [[h×], 0], R = sig2·I (the zero block of H exploited;
     3×3 innovation covariance inverted in closed form). Returns (accepted, NIS); dx filled. Straight-line code.
@@ -123,7 +123,7 @@ def _vec_update(P, h0, h1, h2, y0, y1, y2, sig2, nis_gate, force, dx, consider_b
     return accepted, nis
 
 
-@njit
+@njit(**INLINED)
 def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0.0, bias_gate2=0.0, sig2_0=0.0):
     """Scalar heading update H = [r, 0] (r = world vertical in body axes) with the correction projected on the world
     vertical (Joseph form). Straight-line code. Returns the NIS y² / (S + nis_extra) (see :func:`_vec_update`).
@@ -204,7 +204,7 @@ def _heading_update(P, r0, r1, r2, y, sig2, dx, consider_bias=False, nis_extra=0
     return y * y / (S + nis_extra)
 
 
-@njit
+@njit(**INLINED)
 def _reset_heading(st, P, r0, r1, r2, y, s2):
     """Take a heading outright: turn q by y (rad) about the world vertical and let P forget the heading (its
     covariance along r, the world vertical in body axes, with everything) before setting its variance to s2
@@ -225,7 +225,7 @@ def _reset_heading(st, P, r0, r1, r2, y, s2):
     _add_rrt(P, ATT, ATT, s2, r0, r1, r2)
 
 
-@njit
+@njit(**INLINED)
 def _apply_correction(st, dx):
     qc0, qc1, qc2, qc3 = 1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
     q0, q1, q2, q3 = qmul(st[0], st[1], st[2], st[3], qc0, qc1, qc2, qc3)

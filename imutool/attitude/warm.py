@@ -1,16 +1,22 @@
 """The filter's kernels for a cold first run, compiled two at a time (:mod:`formats.kernel_warm`).
 
-A cold ``imutool filter`` compiles the CSV parser, then the EKF kernel (most of the time: its sections and helpers
-are compiled into it, with its flags), then the gyro check's kernel and the CSV writer's (and, with ``--smooth``,
-the RTS pass and the zero-phase low-pass). :data:`AFTER_THE_EKF`, ``CSV_WRITER`` (for a CSV output) and
-:data:`SMOOTH_KERNELS` list those later kernels with the argument types they are called with, so that a second
-process compiles them while the command compiles the EKF. The EKF kernel is the probe (not cached yet = a cold run).
+A cold ``imutool filter`` compiles the CSV parser, then the EKF kernel (most of the time), then the gyro check's
+kernel and the CSV writer's (and, with ``--smooth``, the RTS pass and the zero-phase low-pass). While the command
+compiles the parser and the EKF, a second process compiles, in this order:
 
-Only kernels called from Python belong here: a helper compiled on its own would not get the flags its caller
-passes down (numba inherits ``fastmath``, ``error_model``, ``_nrt`` and ``forceinline``) and numba's cache does not
-key on flags. A kernel added to the command, or a changed argument list, must be listed here with its types
-(signature syntax: ``float64[:, ::1]`` a 2-D C array): ``tests/test_kernel_warm.py`` records a real cold compile
-and names what is missing or different."""
+1. the kernels the command calls after the EKF (:data:`AFTER_THE_EKF`, ``CSV_WRITER`` for a CSV output,
+   :data:`SMOOTH_KERNELS` with ``--smooth``);
+2. the EKF's sections (:data:`EKF_SECTIONS`) from the last to the first, while the command types the kernel from
+   the first section on. Each section is cached on its own with the flags it states itself
+   (:data:`imutool.attitude.layout.INLINED`), so the command loads what the second process has finished, as
+   LLVM bitcode that its kernel inlines as before, and compiles the rest; the two meet in the middle.
+
+The EKF kernel is the probe (not cached yet = a cold run). An entry is ``(module, function, argument types)`` in
+numba's signature syntax (``float64[:, ::1]`` a 2-D C array), in the types the command calls it with. A section or
+kernel added, or an argument list changed, must be listed here: ``tests/test_kernel_warm.py`` records a real cold
+compile and names what is missing or different. A helper that a section calls is not listed: it compiles with its
+section, with its own stated flags.
+"""
 
 from __future__ import annotations
 
@@ -22,12 +28,39 @@ from imutool.attitude.kernel import ekf_kernel
 _A = "float64[::1]"  # 1-D C array
 _M = "float64[:, ::1]"  # 2-D C array
 _F = "float64"
+_B = "boolean"
+
+
+def _types(*parts: str) -> str:
+    return ", ".join(parts)
+
+
+_STATE = (_A, _M, _A)  # st, P, prm
+
+# the EKF loop's sections in the order the kernel calls them (imutool/attitude/kernel.py)
+EKF_SECTIONS: tuple[Entry, ...] = (
+    ("imutool.attitude.predict", "_predict", _types(*_STATE, _F, _F, _F, _F, _B)),
+    ("imutool.attitude.accel", "_accel_white_noise", _types(_A, _A, _F, _F, _F, _F)),
+    ("imutool.attitude.rest", "_rest", _types(*_STATE, _A, _M, *[_F] * 7, "int64")),
+    ("imutool.attitude.compensation", "_velocity_aiding", _types(_A, _M, _M, *[_F] * 6, _A, *[_F] * 4, _B, _B)),
+    ("imutool.attitude.compensation", "_lever_arm", _types(_A, _A, _A, *[_F] * 7, _B)),
+    ("imutool.attitude.compensation", "_gnss_force", _types(_A, _M, *[_F] * 6, _B, _F, _F, _F)),
+    ("imutool.attitude.accel", "_accel_gate", _types(_A, _A, _M, _F, _F, _F, _F, _B)),
+    ("imutool.attitude.accel", "_accel_low_pass", _types(_A, _A, _M, _F, _F, _F, _F, _B, _B)),
+    ("imutool.attitude.accel", "_age_low_pass", _types(_A, _M, _F)),
+    ("imutool.attitude.accel", "_accel_update", _types(*_STATE, _M, _M, _M, _M, _A, *[_F] * 6, _B, _B, _B)),
+    ("imutool.attitude.magnetic", "_mag_sample", _types(*_STATE, _M, *[_F] * 7, _A)),
+    ("imutool.attitude.magnetic", "_mag_update", _types(*_STATE, _M, _A, *[_F] * 5, "int64", _A)),
+    ("imutool.attitude.heading_input", "_heading_input", _types(*_STATE, _M, _A, _F, _F)),
+    ("imutool.attitude.kernel", "_outputs", _types(_A, _M, "int64", _M, _M, _M)),
+    ("imutool.attitude.kernel", "_self_check", _types(_A, _A, _F, _F)),
+)
 
 AFTER_THE_EKF: tuple[Entry, ...] = (
     (
         "imutool.gyro_check",
         "pair_discrepancy_kernel",
-        ", ".join([_A, _M, _M, _M, _F, _F, _M, _F, "int64", _A, _A]),
+        _types(_A, _M, _M, _M, _F, _F, _M, _F, "int64", _A, _A),
     ),
 )
 
@@ -35,14 +68,14 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
     (
         "imutool.attitude.rts",
         "rts_kernel",
-        ", ".join([_A, _M, _M, _M, "float64[:, :, ::1]"] + [_F] * 7 + [_M, _M, "float64[:, :, ::1]"]),
+        _types(_A, _M, _M, _M, "float64[:, :, ::1]", *[_F] * 7, _M, _M, "float64[:, :, ::1]"),
     ),
-    ("imutool.attitude.smoother", "zero_phase_lp_kernel", ", ".join([_A, _M, _M, _M] + [_F] * 3 + [_M])),
+    ("imutool.attitude.smoother", "zero_phase_lp_kernel", _types(_A, _M, _M, _M, _F, _F, _F, _M)),
 )
 
 
 def warm_filter_kernels(smooth: bool = False, csv_output: bool = False) -> subprocess.Popen | None:
-    """On a cold cache, compile the kernels the filter needs after the EKF in a second process (see the top):
-    the gyro check's, the CSV writer's with a CSV output, the smoother's with ``smooth``."""
+    """On a cold cache, compile in a second process what the filter needs after the EKF (the gyro check's kernel,
+    the CSV writer's with a CSV output, the smoother's with ``smooth``), then the EKF's sections from the last."""
     later = AFTER_THE_EKF + ((CSV_WRITER,) if csv_output else ()) + (SMOOTH_KERNELS if smooth else ())
-    return warm_in_background(ekf_kernel, later)
+    return warm_in_background(ekf_kernel, later + tuple(reversed(EKF_SECTIONS)))
