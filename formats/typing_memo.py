@@ -9,11 +9,12 @@ lowering stage asks again for each operator and subscript. That was ~30 % of the
 :func:`install` wraps ``get_call_type`` with a dictionary keyed on exactly what the answer depends on: the function
 type (numba interns types; a new ``@overload`` registration makes a new type, so a new key), the typing context,
 the argument types (literal values included), the keyword arguments, and the compiler flag set in force
-(``ConfigStack``; numba makes a new one for each function it compiles and keeps it unchanged while typing). A
-question that raises is not kept: the next asker gets the same error from numba itself. Template side effects
-(registering the implementation the lowering stage looks up) happen on the first ask, as before; numba keeps them
-in class-level tables. The compiled code is unchanged: tests compare the machine code with and without the memo (a small mix
-of kernels, and the EKF kernel).
+(``ConfigStack``; numba makes one for each function it compiles and keeps it while typing). Only answers of plain
+templates are kept, those whose implementation key is the template's own ``key``: an ``@overload`` or
+``@intrinsic`` template compiles an implementation for the flags in force and numba looks it up by argument types
+only, so those are asked every time, as before. A kept answer's side effect (the implementation key numba records
+for the lowering stage) is replayed on each hit. A question that raises is not kept. The compiled code is
+unchanged: tests compare the machine code with and without the memo (a small mix of kernels, and the EKF kernel).
 
 The memo is process-wide (numba's typing tables are) and capped at :data:`MAX_ENTRIES`, then emptied; it holds the
 flag sets and contexts its keys name, so an id is never reused while it is in use. ``IMUTOOL_TYPING_MEMO=0``
