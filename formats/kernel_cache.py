@@ -564,6 +564,10 @@ class _CompileAnnouncer(event.Listener):
         if group is None or not cached:
             self._starts.append(None)
             return
+        self.announce(group)
+        self._starts.append((f"{module}.{func.__qualname__}", time.perf_counter()))
+
+    def announce(self, group: tuple[str, float]) -> None:
         what, seconds = group
         if what not in self.announced and not self.silent:
             self.announced.add(what)
@@ -571,12 +575,20 @@ class _CompileAnnouncer(event.Listener):
             seconds *= SHARED_SHARE if _State.shared else 1.0
             about = f", ~{seconds:.0f} s" if seconds >= 1 else ""
             print(f"imutool: compiling {what} ({when}{about})", file=sys.stderr, flush=True)
-        self._starts.append((f"{module}.{func.__qualname__}", time.perf_counter()))
 
     def on_end(self, ev) -> None:
         start = self._starts.pop() if self._starts else None
         if start is not None and self.times and not self.silent:
             print(f"imutool: compiled {start[0]} in {time.perf_counter() - start[1]:.1f} s", file=sys.stderr)
+
+
+def announce_compile(module: str) -> None:
+    """Say that the kernels of ``module`` are being compiled (once per group), for a command that waits while
+    another process compiles them (formats.kernel_warm.wait_for): numba's own event never fires in this one."""
+    announcer = getattr(event, "_imutool_announcer", None)
+    group = kernel_group(module)
+    if announcer is not None and group is not None:
+        announcer.announce(group)
 
 
 def _tolerant_save(numba_save):

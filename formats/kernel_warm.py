@@ -32,6 +32,7 @@ import multiprocessing
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -161,6 +162,26 @@ def compile_entries(entries: Sequence[Entry]) -> int:
             continue
         done += 1
     return done
+
+
+def wait_for(
+    dispatcher, proc: subprocess.Popen | None, meanwhile: Sequence[Entry] = (), timeout_s: float = 600.0
+) -> bool:
+    """For a command whose main kernel the second process ``proc`` compiles (its first entry): compile
+    ``meanwhile`` here first (what the command needs after that kernel), then wait until ``dispatcher`` is in the
+    cache, ``proc`` has ended or ``timeout_s`` s have passed. True when it is cached; on False the command compiles
+    it itself when it calls it. Without a second process (``proc`` None) nothing is compiled or waited for."""
+    if proc is None:
+        return False
+    compile_entries(meanwhile)
+    if not is_cached(dispatcher):
+        kernel_cache.announce_compile(getattr(dispatcher, "__module__", ""))
+    deadline = time.monotonic() + timeout_s
+    while not is_cached(dispatcher):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            return is_cached(dispatcher)
+        time.sleep(0.05)
+    return True
 
 
 def _main() -> None:

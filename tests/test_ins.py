@@ -209,3 +209,15 @@ def test_a_loop_closure_is_claimed_only_for_a_loop(tmp_path):
     assert s["loop"] is True and s["closed_loop_error_m"] < 0.5 and s["closed_loop_error_percent"] < 3.0
     s = summary(square, "--no-loop")
     assert s["loop"] is False and "closed_loop_error_m" not in s
+
+
+def test_interquartile_mean_is_scipys_trimmed_mean_bit_for_bit():
+    from scipy.stats import trim_mean
+
+    from imutool.ins import interquartile_mean
+
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3, 4, 5, 9, 100, 401):
+        x = rng.normal(size=(n, 3)) * [0.2, 0.2, 0.2] + [0.0, 0.0, -9.81]
+        assert np.array_equal(interquartile_mean(x), trim_mean(x, 0.25, axis=0)), n
+    assert np.isnan(interquartile_mean(np.zeros((0, 3)))).all()

@@ -114,6 +114,34 @@ def test_the_second_process_uses_the_parents_folder_for_a_tilde_cache_dir(tmp_pa
     assert list(work.iterdir()) == []
 
 
+WAIT = textwrap.dedent(
+    """
+    import subprocess, sys
+    from formats.kernel_warm import argument_types, is_cached, wait_for, warm_in_background
+    from imutool.gyro_check import pair_discrepancy_kernel as kernel
+    from imutool.attitude.warm import AFTER_THE_EKF
+    assert not is_cached(kernel)
+    proc = warm_in_background(kernel, AFTER_THE_EKF[:1])  # the second process compiles the kernel
+    assert proc is not None
+    print(wait_for(kernel, proc), is_cached(kernel))
+    misses = sum(kernel.stats.cache_misses.values())
+    kernel.compile(argument_types(AFTER_THE_EKF[0][2]))
+    print(sum(kernel.stats.cache_misses.values()) - misses, sum(kernel.stats.cache_hits.values()))
+    quit = subprocess.Popen([sys.executable, "-c", "pass"])  # a second process that ends without it
+    from imutool.attitude.kernel import ekf_kernel
+    print(wait_for(ekf_kernel, quit), wait_for(ekf_kernel, None))
+    """
+)
+
+
+def test_a_command_waits_for_the_kernel_the_second_process_compiles(tmp_path):
+    """ins: the second process compiles the main kernel; the command waits for it, says so, and loads it."""
+    r = _python(["-c", WAIT], ROOT, _env(tmp_path, **{kw.ENV_SWITCH: "1"}))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["True", "True", "0", "1", "False", "False"], r.stdout
+    assert r.stderr.count("imutool: compiling the filter's kernels") == 1, r.stderr  # announced while waiting
+
+
 CHECK = textwrap.dedent(
     """
     import importlib, sys
@@ -197,3 +225,18 @@ def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
     inside = [row for row in rows if row[0] != "-"]
     assert len(inside) > len(sections), inside
     assert [row[2] for row in inside if row[4] != "yes"] == []
+
+
+@pytest.mark.slow
+def test_the_ins_kernel_entry_is_what_a_cold_ins_compiles(tmp_path):
+    """~15 s: one cold `imutool ins`; its kernel is listed (imutool/ins.py:INS_KERNEL) with the types it is called
+    with, so the second process compiles the kernel the command then loads."""
+    from imutool.ins import INS_KERNEL
+
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
+    sim = ["-c", "from imutool.cli import main; main()", "simulate", "walk", "--duration", "20", "-o", "w.csv"]
+    assert _python(sim, tmp_path, dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-sim"))).returncode == 0
+    r = _python(["-c", RECORD, "ins", "w.csv", "-o", "track.csv", "--zupt", "-q"], tmp_path, env)
+    assert r.returncode == 0, r.stderr
+    top = {tuple(line.split("\t"))[1:4] for line in r.stdout.splitlines() if line.startswith("-\t")}
+    assert INS_KERNEL in top, sorted(top)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+
 # the accelerometer low-pass starts as the running mean of its samples for this fraction of τ (its first samples
 # averaged: 0.25 s at τ = 2.5 s), then runs as the Butterworth from that mean (docs/attitude.md, "The low-pass")
 LP_MEAN_START = 0.1

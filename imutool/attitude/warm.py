@@ -4,8 +4,8 @@ A cold ``imutool filter`` compiles the CSV parser, then the EKF kernel (most of 
 kernel and the CSV writer's (and, with ``--smooth``, the RTS pass and the zero-phase low-pass). While the command
 compiles the parser and the EKF, a second process compiles, in this order:
 
-1. the kernels the command calls after the EKF (:data:`AFTER_THE_EKF`, ``CSV_WRITER`` for a CSV output,
-   :data:`SMOOTH_KERNELS` with ``--smooth``);
+1. the kernels the command calls after the EKF (:data:`SMOOTH_KERNELS` with ``--smooth``, :data:`AFTER_THE_EKF`,
+   ``CSV_WRITER`` for a CSV output): left for the end, they were not ready when the command needed them;
 2. the EKF's sections (:data:`EKF_SECTIONS`) from the last to the first, while the command types the kernel from
    the first section on. Each section is cached on its own with the flags it states itself
    (:data:`imutool.attitude.layout.INLINED`), so the command loads what the second process has finished, as
@@ -77,5 +77,5 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
 def warm_filter_kernels(smooth: bool = False, csv_output: bool = False) -> subprocess.Popen | None:
     """On a cold cache, compile in a second process what the filter needs after the EKF (the gyro check's kernel,
     the CSV writer's with a CSV output, the smoother's with ``smooth``), then the EKF's sections from the last."""
-    later = AFTER_THE_EKF + ((CSV_WRITER,) if csv_output else ()) + (SMOOTH_KERNELS if smooth else ())
+    later = (SMOOTH_KERNELS if smooth else ()) + AFTER_THE_EKF + ((CSV_WRITER,) if csv_output else ())
     return warm_in_background(ekf_kernel, later + tuple(reversed(EKF_SECTIONS)))
