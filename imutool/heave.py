@@ -48,6 +48,7 @@ import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, ne
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_matrix
+from formats.kernel_warm import CSV_WRITER, Entry, warm_in_background
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
 from imutool.nmea_out import write_log
@@ -1238,6 +1239,18 @@ def heave_positive_down(out: Recording) -> None:
     out.meta["heave"] = str(out.meta.get("heave", "m")).replace("positive UP", "positive DOWN")
 
 
+# the heave kernels as the command calls them, for the second process of a cold run (formats.kernel_warm; argument
+# types in numba's signature syntax, checked against a real cold compile by tests/test_kernel_warm.py)
+HEAVE_KERNELS: tuple[Entry, ...] = (
+    ("imutool.heave", "_complementary_kernel", "float64[::1], float64[:, ::1], float64[:, ::1], float64, float64"),
+    (
+        "imutool.heave",
+        "_bank_kernel",
+        "float64[::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], float64[::1]",
+    ),
+)
+
+
 def run_heave(
     source: str | os.PathLike | Recording,
     output: str | os.PathLike | None = None,
@@ -1286,6 +1299,11 @@ def run_heave(
     if method in ROUTE_METHODS:  # before reading: a --cutoff no band-pass would use
         refuse_unused_cutoff(method, options.get("cutoff"))
     inputs: list[dict[str, Any]] = []
+    if isinstance(source, Recording) or os.path.isfile(source):
+        # a cold cache: a second process compiles the heave kernels and the CSV writer while this one compiles the
+        # CSV reader (formats.kernel_warm)
+        csv_out = output is not None and os.fspath(output).lower().endswith(".csv")
+        warm_in_background(_bank_kernel, HEAVE_KERNELS + ((CSV_WRITER,) if csv_out else ()))
     if stage is not None:
         stage("reading")
     rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)

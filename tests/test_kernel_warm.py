@@ -240,3 +240,17 @@ def test_the_ins_kernel_entry_is_what_a_cold_ins_compiles(tmp_path):
     assert r.returncode == 0, r.stderr
     top = {tuple(line.split("\t"))[1:4] for line in r.stdout.splitlines() if line.startswith("-\t")}
     assert INS_KERNEL in top, sorted(top)
+
+
+@pytest.mark.slow
+def test_the_heave_kernel_entries_are_what_a_cold_heave_compiles(tmp_path):
+    """~15 s: one cold `imutool heave`; its kernels are listed (imutool/heave.py:HEAVE_KERNELS) with their types."""
+    from imutool.heave import HEAVE_KERNELS
+
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
+    sim = ["-c", "from imutool.cli import main; main()", "simulate", "sea-state", "--duration", "120", "-o", "s.csv"]
+    assert _python(sim, tmp_path, dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-sim"))).returncode == 0
+    r = _python(["-c", RECORD, "heave", "s.csv", "-o", "heave.csv", "-q"], tmp_path, env)
+    assert r.returncode == 0, r.stderr
+    top = {tuple(line.split("\t"))[1:4] for line in r.stdout.splitlines() if line.startswith("-\t")}
+    assert set(HEAVE_KERNELS) <= top, sorted(top)
