@@ -66,13 +66,14 @@ FOLDER_ENV = "IMUTOOL_KERNEL_FOLDER"  # set by formats.kernel_warm for its secon
 # the three packages not listed here is announced by its own name. Kernels moved or re-timed: update this table.
 # Measured 2026-11-27 (IMUTOOL_KERNEL_TIMES=1 imutool selfcheck, empty cache, load 1): the EKF 29 s (+ RTS 8 s and
 # the zero-phase low-pass 1.4 s with --smooth), the gyro check 1.5 s, CSV 6 s, INS 7.5 s, heave 2.5 s, bags 5.6 s.
-# The EKF's option-only sections compiled apart (branch compile): 10-16 % less CPU than main in paired runs, ~26 s.
+# 2026-11-28, with numba's call typing memoised (formats/typing_memo.py): the EKF 18-23 s CPU alone, CSV reader
+# 2.5-3.5 s + writer 2.1-3.4 s, INS 5.2-5.4 s, heave 1.7 s; the others not re-timed (~25 % less).
 KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
-    ("imutool.attitude", "the filter's kernels", 26.0),
+    ("imutool.attitude", "the filter's kernels", 20.0),
     ("imutool.gyro_check", "the filter's kernels", 2.0),
     ("imutool.compass", "the compass filter's kernel", 2.0),
-    ("imutool.heave", "the heave filter's kernels", 3.0),
-    ("imutool.ins", "the INS kernels", 8.0),
+    ("imutool.heave", "the heave filter's kernels", 2.0),
+    ("imutool.ins", "the INS kernels", 5.0),
     ("imutool.gyrofree", "the gyro-free kernel", 3.0),
     ("imutool.roll", "the roll statistics kernel", 2.0),
     ("imutool.capture", "the bridge-frame decoder", 3.0),
