@@ -82,8 +82,9 @@ KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("formats.csv_engine", "the CSV reader and writer", 6.0),
     ("formats.bags", "the ROS bag kernels", 6.0),
 )
-# the share of those times a command waits while formats.kernel_warm's second process compiles beside it (the first
-# filter's EKF: 10 s against 20 s alone, 2026-11-28)
+# the share of a group's time a command waits when formats.kernel_warm's second process compiles the other half of
+# that group's kernel (the first filter's EKF sections, from the other end: 10 s against 20 s alone, 2026-11-28);
+# a group the command compiles alone, or waits for whole, is announced at its full time
 SHARED_SHARE = 0.5
 
 
@@ -437,12 +438,15 @@ class _State:
     folder: Path | None = None
     persistent = True  # False: a folder that lives only as long as this process
     version = ""
-    shared = False  # True once formats.kernel_warm started a second process compiling beside this one
+    shared: set[str] = set()  # the groups whose kernel a second process compiles half of (formats.kernel_warm)
 
 
-def compiling_in_two_processes() -> None:
-    """Announce shorter waits from now on: a second process compiles part of the kernels (formats.kernel_warm)."""
-    _State.shared = True
+def compiling_in_two_processes(module: str) -> None:
+    """Announce a shorter wait for the group of ``module``: a second process compiles half of its kernel's parts
+    from the other end (formats.kernel_warm). Other groups keep their full time."""
+    group = kernel_group(module)
+    if group is not None:
+        _State.shared.add(group[0])
 
 
 def cache_folder() -> Path | None:
@@ -573,7 +577,7 @@ class _CompileAnnouncer(event.Listener):
         if what not in self.announced and not self.silent:
             self.announced.add(what)
             when = "first run only" if _State.persistent else "no writable cache folder: every run"
-            seconds *= SHARED_SHARE if _State.shared else 1.0
+            seconds *= SHARED_SHARE if what in _State.shared else 1.0
             about = f", ~{seconds:.0f} s" if seconds >= 1 else ""
             print(f"imutool: compiling {what} ({when}{about})", file=sys.stderr, flush=True)
 

@@ -7,7 +7,7 @@ kernels the command calls later (the gyro check's, the CSV writer's, the smoothe
 from the last one backwards (the EKF's sections, :mod:`imutool.attitude.warm`), into the same cache. The command
 loads each part it reaches that the second process has finished, and compiles the others itself; the two meet in
 the middle. numba links a part loaded from the cache as LLVM bitcode, so the kernel is the same machine code as
-when it compiles everything itself (a test compares them).
+when it compiles everything itself (`tests/test_kernel_warm.py` compares them).
 
 A part compiled on its own must be the code its caller would have compiled: numba takes ``fastmath``,
 ``error_model``, ``_nrt`` and ``forceinline`` from the caller for a function that does not set them, and its cache
@@ -17,7 +17,8 @@ does not key on flags. So every part listed, and every helper it calls, states a
 kernel is not in the cache yet, it starts the second process, which compiles the listed entries in order with the
 argument types the command calls them with. Nothing is waited for: the command never depends on the second
 process, which stays silent (an entry it cannot compile is left to the command), is killed if still running when
-the command ends, and is never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
+the command ends (a command killed by a signal: the second process stops after the entry it is compiling), and is
+never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
 
 An entry is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
 boolean"``), kept beside the command's kernels; a test records a real cold compile and checks that every kernel and
@@ -88,8 +89,11 @@ def is_cached(dispatcher) -> bool:
     return index is None or index.exists()
 
 
-def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | None:
+def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = False) -> subprocess.Popen | None:
     """Start the warming process for ``entries`` (in order) if ``probe`` (the command's main kernel) is not cached.
+
+    ``splits_probe``: the entries end with the probe's own parts, from its last (the EKF's sections), so the command
+    compiles only about half of the probe's group and announces that share of its time.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
     a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), a
@@ -130,7 +134,8 @@ def warm_in_background(probe, entries: Sequence[Entry]) -> subprocess.Popen | No
     except (OSError, ValueError):
         return None
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
-    kernel_cache.compiling_in_two_processes()
+    if splits_probe:
+        kernel_cache.compiling_in_two_processes(getattr(probe, "__module__", ""))
     return proc
 
 
@@ -151,10 +156,14 @@ def _stop(proc: subprocess.Popen) -> None:
         proc.wait()
 
 
-def compile_entries(entries: Sequence[Entry]) -> int:
-    """Compile each entry in order (from the cache where it is there already); the number compiled or loaded."""
+def compile_entries(entries: Sequence[Entry], parent: int | None = None) -> int:
+    """Compile each entry in order (from the cache where it is there already); the number compiled or loaded.
+    With ``parent`` (a process id), stop before the next entry once that process has ended: a command killed by a
+    signal runs no exit handler, and its second process then finishes at most the entry it is compiling."""
     done = 0
     for module, name, text in entries:
+        if parent is not None and os.getppid() != parent:
+            break
         try:
             fn = getattr(importlib.import_module(module), name)
             fn.compile(argument_types(text))
@@ -164,18 +173,30 @@ def compile_entries(entries: Sequence[Entry]) -> int:
     return done
 
 
+WAIT_FACTOR = 6.0  # wait at most this many times the kernel group's compile estimate (kernel_cache.KERNEL_GROUPS)
+WAIT_FLOOR_S = 60.0  # and at least this long: a loaded machine compiles several times slower than the estimate
+
+
 def wait_for(
-    dispatcher, proc: subprocess.Popen | None, meanwhile: Sequence[Entry] = (), timeout_s: float = 600.0
+    dispatcher, proc: subprocess.Popen | None, meanwhile: Sequence[Entry] = (), timeout_s: float | None = None
 ) -> bool:
     """For a command whose main kernel the second process ``proc`` compiles (its first entry): compile
     ``meanwhile`` here first (what the command needs after that kernel), then wait until ``dispatcher`` is in the
-    cache, ``proc`` has ended or ``timeout_s`` s have passed. True when it is cached; on False the command compiles
-    it itself when it calls it. Without a second process (``proc`` None) nothing is compiled or waited for."""
+    cache, ``proc`` has ended or ``timeout_s`` s have passed (default: :data:`WAIT_FACTOR` times the group's
+    estimate, at least :data:`WAIT_FLOOR_S`). True when it is cached; on False the command compiles it itself when
+    it calls it. Without a second process (``proc`` None) nothing is compiled or waited for.
+
+    "Cached" is any signature of ``dispatcher`` (numba's index file exists): meant for a kernel that is always
+    called with the types listed in its entry."""
     if proc is None:
         return False
     compile_entries(meanwhile)
+    module = getattr(dispatcher, "__module__", "")
     if not is_cached(dispatcher):
-        kernel_cache.announce_compile(getattr(dispatcher, "__module__", ""))
+        kernel_cache.announce_compile(module)
+    if timeout_s is None:
+        group = kernel_cache.kernel_group(module)
+        timeout_s = max(WAIT_FLOOR_S, WAIT_FACTOR * (group[1] if group else 0.0))
     deadline = time.monotonic() + timeout_s
     while not is_cached(dispatcher):
         if proc.poll() is not None or time.monotonic() > deadline:
@@ -188,8 +209,9 @@ def _main() -> None:
     announcer = getattr(kernel_cache.event, "_imutool_announcer", None)
     if announcer is not None:
         announcer.silent = True  # the command says what compiles; this process has no one to tell
+    parent = os.getppid()
     entries = [tuple(line.split("\t")) for line in sys.stdin.read().splitlines() if line.count("\t") == 2]
-    compile_entries(entries)  # type: ignore[arg-type]
+    compile_entries(entries, parent)  # type: ignore[arg-type]
 
 
 if __name__ == "__main__":  # python -m formats.kernel_warm (the command starts it with -c, see above)

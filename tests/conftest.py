@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import re
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -91,3 +93,27 @@ def copy_sizes(monkeypatch) -> list[int]:
 
     monkeypatch.setattr(fcsv, "copy_range", counting_copy)
     return sizes
+
+
+def normalized_asm(text: str) -> str:
+    """Machine code with numba's mangled names numbered by first appearance (their flag hashes vary per process)."""
+    names: dict[str, str] = {}
+    text = re.sub(r"_ZN[0-9A-Za-z_$]+", lambda m: names.setdefault(m.group(0), f"SYM{len(names)}"), text)
+    return re.sub(r'(\.size\s+"\.const\.missing Environment: SYM\d+"), \d+', r"\1", text)  # the names' lengths
+
+
+# a cold compile of the EKF kernel in a fresh process (its cache folder and switches in the environment), printing the
+# kernel's machine code: tests/test_typing_memo.py and tests/test_kernel_warm.py compare such dumps
+EKF_KERNEL_ASM = textwrap.dedent(
+    """
+    import numpy as np
+    from imutool.attitude import EkfParams
+    from imutool.attitude.kernel import ekf_kernel
+    from imutool.attitude.run import run_ekf
+    t = np.arange(400) / 200.0
+    g = np.zeros((400, 3)); a = np.zeros((400, 3)); a[:, 2] = -9.81; m = np.tile([20.0, 0.0, 45.0], (400, 1))
+    run_ekf(t, g, a, m, EkfParams())
+    for sig in ekf_kernel.signatures:
+        print(ekf_kernel.inspect_asm(sig))
+    """
+)

@@ -275,3 +275,24 @@ def test_unwritable_root_falls_back_without_a_crash(monkeypatch, tmp_path):
     folder = kc.cache_folder()
     assert folder is not None and folder.is_dir() and not kc._State.persistent
     assert folder.parent == tmp_path / "tmp" and folder.name.startswith("imutool-kernels-")
+
+
+def test_only_the_group_split_between_two_processes_is_announced_at_its_share(monkeypatch, capsys):
+    """The filter's EKF sections are compiled from both ends, so its wait is about half; the CSV kernels (the command
+    compiles them alone) and the INS kernel (the command waits for all of it) keep their full estimates."""
+    announcer = kc._CompileAnnouncer()
+    monkeypatch.setattr(kc._State, "shared", set())
+    monkeypatch.setattr(kc._State, "persistent", True)
+    kc.compiling_in_two_processes("imutool.attitude.kernel")
+    for module in ("imutool.attitude.accel", "formats.csv_engine", "imutool.ins", "imutool.attitude.rest"):
+        group = kc.kernel_group(module)
+        assert group is not None
+        announcer.announce(group)
+    filter_s, csv_s, ins_s = (kc.kernel_group(m)[1] for m in ("imutool.attitude", "formats.csv_engine", "imutool.ins"))
+    assert filter_s * kc.SHARED_SHARE >= 1 and csv_s >= 1 and ins_s >= 1
+    said = capsys.readouterr().err.splitlines()
+    assert said == [
+        f"imutool: compiling the filter's kernels (first run only, ~{filter_s * kc.SHARED_SHARE:.0f} s)",
+        f"imutool: compiling the CSV reader and writer (first run only, ~{csv_s:.0f} s)",
+        f"imutool: compiling the INS kernels (first run only, ~{ins_s:.0f} s)",
+    ]  # once per group

@@ -16,6 +16,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import EKF_KERNEL_ASM, normalized_asm
 
 import formats.kernel_warm as kw
 from formats.kernel_warm import CSV_WRITER
@@ -86,6 +87,17 @@ def test_once_per_process_and_never_in_a_pool_worker(monkeypatch):
     assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is not None
     assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None  # a cache that stays cold: not again
     assert len(started) == 1 and started[0][1] == "-c"  # our packages first on sys.path, not `-m` from a cwd
+
+
+def test_the_second_process_stops_once_its_command_is_gone(monkeypatch):
+    """A command killed by a signal runs no exit handler: its second process notices its parent changed and stops
+    before the next entry."""
+    asked = []
+    monkeypatch.setattr(kw.importlib, "import_module", lambda name: asked.append(name) or os)
+    entries = [("m1", "getpid", ""), ("m2", "getpid", "")]
+    assert kw.compile_entries(entries, parent=os.getppid()) == 0 and asked == ["m1", "m2"]  # os.getpid: no compile
+    asked.clear()
+    assert kw.compile_entries(entries, parent=os.getppid() + 1) == 0 and asked == []
 
 
 START = textwrap.dedent(
@@ -254,3 +266,31 @@ def test_the_heave_kernel_entries_are_what_a_cold_heave_compiles(tmp_path):
     assert r.returncode == 0, r.stderr
     top = {tuple(line.split("\t"))[1:4] for line in r.stdout.splitlines() if line.startswith("-\t")}
     assert set(HEAVE_KERNELS) <= top, sorted(top)
+
+
+@pytest.mark.slow
+def test_the_ekf_kernel_is_the_same_machine_code_from_sections_compiled_apart(tmp_path):
+    """~60 s: the second process's sections, loaded by the command as bitcode, give the kernel it compiles alone.
+
+    One cache gets every section compiled on its own (as the second process does, from the last); a fresh process
+    then compiles the EKF kernel over them. Beside it, a fresh process compiles the kernel from an empty cache."""
+    split_env = _env(tmp_path, **{kw.ENV_SWITCH: "0", "NUMBA_CACHE_DIR": str(tmp_path / "split")})
+    whole_env = _env(tmp_path, **{kw.ENV_SWITCH: "0", "NUMBA_CACHE_DIR": str(tmp_path / "whole")})
+    lines = "\n".join("\t".join(e) for e in reversed(EKF_SECTIONS))
+    whole = subprocess.Popen(
+        [sys.executable, "-c", EKF_KERNEL_ASM], cwd=ROOT, env=whole_env, stdout=subprocess.PIPE, text=True
+    )
+    sections = _python(["-m", "formats.kernel_warm"], ROOT, split_env, stdin=lines)
+    assert sections.returncode == 0 and sections.stderr == "", sections.stderr
+    times = dict(split_env, IMUTOOL_KERNEL_TIMES="1")  # names each function compiled here, not loaded
+    split = _python(["-c", EKF_KERNEL_ASM], ROOT, times)
+    assert split.returncode == 0, split.stderr
+    compiled = [line.split()[2] for line in split.stderr.splitlines() if line.startswith("imutool: compiled ")]
+    assert compiled and all(
+        not name.startswith("imutool.attitude.") or name.endswith(".ekf_kernel") for name in compiled
+    ), compiled  # every section was loaded from the cache
+    whole_out, _ = whole.communicate(timeout=900)
+    assert whole.returncode == 0
+    one, two = normalized_asm(whole_out), normalized_asm(split.stdout)
+    assert len(one) > 100_000
+    assert one == two

@@ -10,13 +10,13 @@ compiles them once per flag set and looks the implementation up by argument type
 from __future__ import annotations
 
 import os
-import re
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import EKF_KERNEL_ASM, normalized_asm
 
 from formats import typing_memo
 
@@ -74,13 +74,6 @@ DUMP = textwrap.dedent(
 )
 
 
-def _normalized(text: str) -> str:
-    """Machine code with numba's mangled names numbered by first appearance (their flag hashes vary per process)."""
-    names: dict[str, str] = {}
-    text = re.sub(r"_ZN[0-9A-Za-z_$]+", lambda m: names.setdefault(m.group(0), f"SYM{len(names)}"), text)
-    return re.sub(r'(\.size\s+"\.const\.missing Environment: SYM\d+"), \d+', r"\1", text)  # the names' lengths
-
-
 def _dump(tmp_path: Path, memo: str) -> tuple[str, str]:
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update({typing_memo.ENV: memo, "NUMBA_CACHE_DIR": str(tmp_path / f"cache{memo}")})
@@ -89,7 +82,7 @@ def _dump(tmp_path: Path, memo: str) -> tuple[str, str]:
     )
     assert r.returncode == 0, r.stderr
     first, _, rest = r.stdout.partition("\n")
-    return first, _normalized(rest)
+    return first, normalized_asm(rest)
 
 
 def test_the_same_machine_code_with_and_without_the_memo(tmp_path):
@@ -137,21 +130,6 @@ def test_uninstall_gives_numba_its_own_typing_back():
             typing_memo.install()
 
 
-EKF_ASM = textwrap.dedent(
-    """
-    import numpy as np
-    from imutool.attitude import EkfParams
-    from imutool.attitude.kernel import ekf_kernel
-    from imutool.attitude.run import run_ekf
-    t = np.arange(400) / 200.0
-    g = np.zeros((400, 3)); a = np.zeros((400, 3)); a[:, 2] = -9.81; m = np.tile([20.0, 0.0, 45.0], (400, 1))
-    run_ekf(t, g, a, m, EkfParams())
-    for sig in ekf_kernel.signatures:
-        print(ekf_kernel.inspect_asm(sig))
-    """
-)
-
-
 @pytest.mark.slow
 def test_the_ekf_kernel_is_the_same_machine_code_with_and_without_the_memo(tmp_path):
     """~40 s: two cold compiles of the EKF kernel, at once."""
@@ -163,7 +141,7 @@ def test_the_ekf_kernel_is_the_same_machine_code_with_and_without_the_memo(tmp_p
         env.update({typing_memo.ENV: memo, "NUMBA_CACHE_DIR": str(tmp_path / memo), "IMUTOOL_KERNEL_WARM": "0"})
         procs.append(
             subprocess.Popen(
-                [sys.executable, "-c", EKF_ASM],
+                [sys.executable, "-c", EKF_KERNEL_ASM],
                 cwd=ROOT,
                 env=env,
                 stdout=subprocess.PIPE,
@@ -173,6 +151,6 @@ def test_the_ekf_kernel_is_the_same_machine_code_with_and_without_the_memo(tmp_p
         )
     outs = [p.communicate(timeout=900) for p in procs]
     assert all(p.returncode == 0 for p in procs), [o[1][-2000:] for o in outs]
-    on, off = (_normalized(o[0]) for o in outs)
+    on, off = (normalized_asm(o[0]) for o in outs)
     assert len(on) > 100_000
     assert on == off

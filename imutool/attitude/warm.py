@@ -78,4 +78,4 @@ def warm_filter_kernels(smooth: bool = False, csv_output: bool = False) -> subpr
     """On a cold cache, compile in a second process what the filter needs after the EKF (the gyro check's kernel,
     the CSV writer's with a CSV output, the smoother's with ``smooth``), then the EKF's sections from the last."""
     later = (SMOOTH_KERNELS if smooth else ()) + AFTER_THE_EKF + ((CSV_WRITER,) if csv_output else ())
-    return warm_in_background(ekf_kernel, later + tuple(reversed(EKF_SECTIONS)))
+    return warm_in_background(ekf_kernel, later + tuple(reversed(EKF_SECTIONS)), splits_probe=True)
