@@ -15,10 +15,11 @@ does not key on flags. So every part listed, and every helper it calls, states a
 
 :func:`warm_in_background` is called by a command's library route before its work starts. When the command's main
 kernel is not in the cache yet, it starts the second process, which compiles the listed entries in order with the
-argument types the command calls them with. Nothing is waited for: the command never depends on the second
-process, which stays silent (an entry it cannot compile is left to the command), is killed if still running when
-the command ends (a command killed by a signal: the second process stops after the entry it is compiling), and is
-never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
+argument types the command calls them with. The command never depends on the second process (a command that
+waits for a kernel, :func:`wait_for`, compiles it itself when the process ends or takes too long); that process
+stays silent (an entry it cannot compile is left to the command), is killed if still running when the command
+ends (a command killed by a signal: on POSIX the second process stops before its next entry, as its parent is
+gone), and is never started from inside itself (``IMUTOOL_KERNEL_WARM=0``).
 
 An entry is ``(module, function, argument types)`` in numba's signature syntax (``"float64[:, ::1], int64,
 boolean"``), kept beside the command's kernels; a test records a real cold compile and checks that every kernel and
@@ -117,7 +118,8 @@ def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = Fal
     _STARTED.add(key)
     env = dict(os.environ, **{ENV_SWITCH: "0", kernel_cache.FOLDER_ENV: str(folder.resolve())})
     path = kernel_cache.PACKAGES_FOLDER
-    start = f"import sys; sys.path.insert(0, {path!r}); from formats.kernel_warm import _main; _main()"
+    # the command's pid in the start line: a command killed while the second process imports numba is noticed
+    start = f"import sys; sys.path.insert(0, {path!r}); from formats.kernel_warm import _main; _main({os.getpid()})"
     lines = "\n".join("\t".join(e) for e in entries)
     try:
         proc = subprocess.Popen(
@@ -200,16 +202,17 @@ def wait_for(
     deadline = time.monotonic() + timeout_s
     while not is_cached(dispatcher):
         if proc.poll() is not None or time.monotonic() > deadline:
+            _stop(proc)  # too slow: the command compiles the kernel itself, not both of them at once
             return is_cached(dispatcher)
         time.sleep(0.05)
     return True
 
 
-def _main() -> None:
+def _main(parent: int | None = None) -> None:
+    """The second process: compile the entries on stdin, while ``parent`` (the command's pid) is its parent."""
     announcer = getattr(kernel_cache.event, "_imutool_announcer", None)
     if announcer is not None:
         announcer.silent = True  # the command says what compiles; this process has no one to tell
-    parent = os.getppid()
     entries = [tuple(line.split("\t")) for line in sys.stdin.read().splitlines() if line.count("\t") == 2]
     compile_entries(entries, parent)  # type: ignore[arg-type]
 

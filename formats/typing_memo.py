@@ -18,12 +18,12 @@ unchanged: tests compare the machine code with and without the memo (a small mix
 
 Because numba makes a new flag set for every function it compiles, an answer is reused within one function's
 compile (an EKF section asks ``float64 * float64`` hundreds of times), not across functions: the EKF's cold compile
-leaves ~1 400 entries. Keying on the flags' values instead would share answers across functions (430 entries) but
-saved no measurable time (EKF compile 21.5–22.9 s CPU against 23.1–23.6 s, 2026-11-28) for a key that would have to
-name every flag a template may read; not done. The memo is process-wide (numba's typing tables are) and capped at
-:data:`MAX_ENTRIES`, then emptied; it holds the flag sets and contexts its keys name, so an id is never reused while
-it is in use. ``IMUTOOL_TYPING_MEMO=0``
-switches it off. It is installed only over the numba versions whose ``get_call_type`` it was checked against;
+leaves ~1 400 entries. Keying on the flags' values instead would share answers across functions (430 entries) and
+saved ~1 s of ~23 s CPU (EKF compile 21.5–22.9 s against 23.1–23.6 s, two runs each, 2026-11-28; within this
+machine's wander), for a key that would have to name every flag a template may read: not done. The memo is
+process-wide (numba's typing tables are) and capped at :data:`MAX_ENTRIES`, then emptied; it holds the flag sets
+and contexts its keys name, so an id is never reused while it is in use. ``IMUTOOL_TYPING_MEMO=0`` switches it
+off. It is installed only over the numba versions whose ``get_call_type`` it was checked against;
 for any other, or if numba's internals moved, it stays off and numba works as shipped.
 """
 

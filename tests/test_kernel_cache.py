@@ -279,7 +279,7 @@ def test_unwritable_root_falls_back_without_a_crash(monkeypatch, tmp_path):
 
 def test_only_the_group_split_between_two_processes_is_announced_at_its_share(monkeypatch, capsys):
     """The filter's EKF sections are compiled from both ends, so its wait is about half; the CSV kernels (the command
-    compiles them alone) and the INS kernel (the command waits for all of it) keep their full estimates."""
+    compiles the parser itself) and the INS kernel (the command waits for all of it) keep their full estimates."""
     announcer = kc._CompileAnnouncer()
     monkeypatch.setattr(kc._State, "shared", set())
     monkeypatch.setattr(kc._State, "persistent", True)

@@ -13,6 +13,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -98,6 +99,44 @@ def test_the_second_process_stops_once_its_command_is_gone(monkeypatch):
     assert kw.compile_entries(entries, parent=os.getppid()) == 0 and asked == ["m1", "m2"]  # os.getpid: no compile
     asked.clear()
     assert kw.compile_entries(entries, parent=os.getppid() + 1) == 0 and asked == []
+
+
+ORPHAN = textwrap.dedent(
+    """
+    import os
+    from formats.kernel_warm import warm_in_background
+    from imutool.attitude.kernel import ekf_kernel
+    from imutool.attitude.warm import EKF_SECTIONS
+    proc = warm_in_background(ekf_kernel, tuple(reversed(EKF_SECTIONS)), splits_probe=True)
+    assert proc is not None
+    print(proc.pid, flush=True)
+    os._exit(0)  # as a command killed by a signal: no exit handler kills the second process
+    """
+)
+
+
+def _ended(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return True
+    return state in ("Z", "X")  # a zombie: ended, not reaped by a container's init
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
+def test_a_killed_commands_second_process_compiles_nothing_more(tmp_path):
+    """The command is gone before its second process has imported numba: that process compiles no entry."""
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "1"})
+    r = _python(["-c", ORPHAN], ROOT, env)
+    assert r.returncode == 0, r.stderr
+    pid = int(r.stdout.split()[0])
+    for _ in range(1200):  # up to 120 s; it ends within its start-up (~2 s)
+        if _ended(pid):
+            break
+        time.sleep(0.1)
+    assert _ended(pid)
+    compiled = sorted(p.name for p in (tmp_path / "numba").rglob("*.nbi"))
+    assert compiled == [], compiled  # the sections take ~15 s; a second process that went on would leave them
 
 
 START = textwrap.dedent(
