@@ -530,8 +530,7 @@ def stream_ekf(
     path, output = os.fspath(path), os.fspath(output)
     if params is None:
         params = EkfParams()
-    total = expected_rows(path)
-    checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict, rows_expected=total)
+    checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict)
     rows_read = duplicates = 0
     state = None
     dt_nom = dt_mag = None  # the IMU's and the magnetometer's nominal intervals (s), from the first chunk with them
@@ -551,6 +550,7 @@ def stream_ekf(
         read_input(path, **time_opts)  # the one-line refusal of a CSV-only option
     opts = {**mapping_options(path, columns, profile), **({"prefetch": True, **time_opts} if kind == "csv" else {})}
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
+    total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
     writer = chunk_writer(output, background=True)

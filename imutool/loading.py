@@ -320,19 +320,12 @@ def require_channels(rec: Recording, names: list[str] | tuple[str, ...], path: s
         raise ImutoolError(f"needs channel(s) {', '.join(missing)}; has {', '.join(rec.channels) or 'none'}", path=path)
 
 
-# the rows of a stream's start whose absurd samples are judged together: more than 1 % of them absurd is a unit
-# error, fewer a glitch bridged; so a start-up glitch is told from a unit error alike whatever the chunk size
-# (1 M rows: the streamed filter's chunk until 2026-11-28)
-ABSURD_JUDGE_ROWS = 1_000_000
-
-
 class ChunkChecks:
     """What :func:`load_recording` does to a whole file, done to a file read chunk by chunk (the streamed
     ``filter`` and ``convert``), so a large file is checked as a small one is.
 
     :meth:`prepare` bridges each chunk's absurd samples (counted over the run; more than 1 % of the rows seen so
-    far, and of at least the file's first :data:`ABSURD_JUDGE_ROWS` when ``rows_expected`` gives its size, is a
-    unit error; a run of them at a chunk's edge has no neighbour there and is set to NaN instead of
+    far is a unit error; a run of them at a chunk's edge has no neighbour there and is set to NaN instead of
     interpolated), applies the calibration and the mounting, and runs the plausibility checks (units, axes,
     gravity direction) on the first chunk only — the start of the file, where an in-memory load samples six
     stretches of the whole. :meth:`finish` accounts for every row the run dropped with the same > 1 % warning and
@@ -341,18 +334,11 @@ class ChunkChecks:
     """
 
     def __init__(
-        self,
-        path: str,
-        *,
-        mounting: str | None = None,
-        calibration_file: str | None = None,
-        strict: bool = False,
-        rows_expected: int | None = None,
+        self, path: str, *, mounting: str | None = None, calibration_file: str | None = None, strict: bool = False
     ):
         from formats import plausibility
 
         self.path = path
-        self._judge_rows = min(rows_expected or 0, ABSURD_JUDGE_ROWS)  # the absurd share's least denominator
         self.kind = formats.kind_of(path)
         self.mounting = mounting
         self.strict = strict
@@ -377,7 +363,7 @@ class ChunkChecks:
         for k in SENSOR_CHANNELS:
             if k in chunk.channels and not self._sensors.get(k):
                 self._sensors[k] = k not in all_nan_sensors(chunk)
-        chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd, out_of=max(self._rows, self._judge_rows))
+        chunk, _ = plausibility.bridge_absurd(chunk, rep=self._absurd, out_of=self._rows)
         if self.cal is not None:
             chunk = self.cal.apply(chunk)
         if self.mount is not None:

@@ -297,37 +297,3 @@ def test_z_up_after_a_bags_rep103_conversion_names_the_sensors_mounting(roll, tm
     assert "mounted" in axes and "--mounting x,-y,-z" in axes
     code, out, err = run(["info", bag, "--mounting", "x,-y,-z"], capsys)
     assert code == 0 and "AXES" not in err
-
-
-def test_a_streams_start_up_glitch_is_judged_alike_whatever_the_chunk_size(roll, tmp_path):
-    """Absurd samples at a stream's start are judged against the file's first rows (at most
-    ``ABSURD_JUDGE_ROWS``), not against the first chunk: a burst that is more than 1 % of a small chunk but less
-    than 1 % of the file is a glitch, bridged as a whole-file load bridges it, at any chunk size; a channel
-    absurd throughout is still a unit error in every chunk."""
-    from imutool.loading import ChunkChecks
-
-    n = len(roll)
-    glitch = roll.copy()
-    glitch["gyro"][100:140, 0] = 1e9  # 40 rows: 2 % of a 2 000-row chunk, < 1 % of the file
-    assert 40 < 0.01 * n
-
-    def streamed(rec, chunk_rows, rows_expected):
-        checks = ChunkChecks(str(tmp_path / "in.csv"), rows_expected=rows_expected)
-        m = len(rec)
-        parts = [checks.prepare(rec.select(slice(i, i + chunk_rows))) for i in range(0, m, chunk_rows)]
-        return np.concatenate([p["gyro"] for p in parts]), checks.finish(m, m)[1]
-
-    whole, whole_warnings = streamed(glitch, n, n)
-    assert not np.any(whole == 1e9) and any("absurd gyro" in w for w in whole_warnings)
-    small, small_warnings = streamed(glitch, 2000, n)
-    np.testing.assert_array_equal(small, whole)
-    assert small_warnings == whole_warnings
-    # judged against the first chunk alone (no size known), the same burst reads as a unit error and stays
-    unknown, unknown_warnings = streamed(glitch, 2000, None)
-    assert np.any(unknown == 1e9) and any("unit or scale error" in w for w in unknown_warnings)
-    # a gyro absurd throughout stays a unit error, chunk by chunk (whole chunks: a last chunk of a few rows is
-    # judged against the rows before it)
-    wrong = roll.select(slice(0, 12_000))
-    wrong["gyro"][:] = 1e3
-    out, warnings = streamed(wrong, 2000, len(wrong))
-    assert np.all(out == 1e3) and any("unit or scale error" in w for w in warnings)
