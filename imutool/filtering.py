@@ -60,11 +60,6 @@ from imutool.progress import Progress, report
 # run_filter, for the compass's deviation card only
 
 METHODS = ("ekf", "lpf", "accel", "compass")
-# rows per chunk of a streamed EKF run: 125 k (10 min at 200 Hz) keeps the reader, the EKF and the writer busy
-# together from the file's start to its end, where 1 M left one stage alone for a whole chunk at each end; a day at
-# 200 Hz streamed: 35.6 s and 0.39 GB peak against 40–42 s and 1.10 GB with 1 M, the output byte-identical
-# (2026-11-28, docs/attitude.md "Speed")
-STREAM_CHUNK_ROWS = 125_000
 
 
 @dataclass
@@ -139,7 +134,7 @@ def run_filter(
     order: int = 2,
     compass: Any = None,
     params_file: str | None = None,
-    chunk_rows: int = STREAM_CHUNK_ROWS,
+    chunk_rows: int = 1_000_000,
     stream_mb: float = 300.0,
     strict: bool = False,
     progress: Progress | None = None,
@@ -502,7 +497,7 @@ def stream_ekf(
     output: str | os.PathLike,
     params: Any,
     *,
-    chunk_rows: int = STREAM_CHUNK_ROWS,
+    chunk_rows: int = 1_000_000,
     use_gnss: bool = True,
     lever_arm: np.ndarray | None = None,
     antenna_arm: np.ndarray | None = None,

@@ -146,7 +146,7 @@ from imutool.routes import OnInput, RouteResult
 @click.option(
     "--chunk-rows",
     type=int,
-    default=125_000,
+    default=1_000_000,
     show_default=True,
     help="EKF on CSV/Parquet: stream the file in chunks of this many rows when larger than --stream-mb.",
 )
