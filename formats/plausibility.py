@@ -648,7 +648,8 @@ def bridge_absurd(
     neighbour) with valid neighbours on both sides are interpolated linearly in time; others are set to NaN.
     NaN samples are left alone. When more than ``max_fraction`` of a channel's samples are absurd nothing is
     changed and a warning says so (that is a unit or scale problem, not corruption); ``out_of``: judge that share
-    against this many samples when more than the recording's (a stream: the rows seen so far).
+    against this many samples when more than the recording's (a stream: the rows seen so far). A channel ``rep``
+    already holds a unit error for (a stream's earlier chunk) is left as it is in this chunk too.
     Returns (recording, report); the input is not modified.
     """
     rep = rep if rep is not None else PlausibilityReport()
@@ -668,7 +669,10 @@ def bridge_absurd(
         nb = int(np.count_nonzero(bad))
         if not nb:
             continue
-        if nb > max_fraction * max(len(a), out_of):  # a unit or scale problem, not corruption: left as it is
+        # a unit or scale problem, not corruption: left as it is; in a stream, once a chunk showed it, every later
+        # chunk too (judged alone, the 100th chunk of a channel absurd throughout is 1 % of the rows seen)
+        earlier_unit_error = rep.absurd.get(name, (0, 0, 0, 0.0))[2] > 0
+        if earlier_unit_error or nb > max_fraction * max(len(a), out_of):
             found.absurd[name] = [nb, len(a), nb, float(rec.time[np.argmax(bad)])]
             continue
         if out is rec:

@@ -297,3 +297,22 @@ def test_z_up_after_a_bags_rep103_conversion_names_the_sensors_mounting(roll, tm
     assert "mounted" in axes and "--mounting x,-y,-z" in axes
     code, out, err = run(["info", bag, "--mounting", "x,-y,-z"], capsys)
     assert code == 0 and "AXES" not in err
+
+
+def test_a_unit_error_found_in_a_stream_holds_for_the_rest_of_it(roll, tmp_path):
+    """A channel absurd throughout, streamed in many chunks: each chunk judged alone against the rows seen so
+    far would be 1 % of them from the 100th chunk on, and a short last chunk at once, and be set to NaN; once a
+    chunk showed the unit error, every later chunk is left as it is too, and no NaN is reported."""
+    from imutool.loading import ChunkChecks
+
+    wrong = roll.copy()  # 12 001 rows: 120 chunks of 100 rows and a last one of 1
+    assert len(wrong) % 100 and len(wrong) > 100 * 100
+    wrong["gyro"][:] = 1e3
+    checks = ChunkChecks(str(tmp_path / "in.csv"))
+    parts = [checks.prepare(wrong.select(slice(i, i + 100))) for i in range(0, len(wrong), 100)]
+    assert np.all(np.concatenate([p["gyro"] for p in parts]) == 1e3)
+    warnings = checks.finish(len(wrong), len(wrong))[1]
+    assert [w for w in warnings if "absurd gyro" in w or "unit or scale error" in w] == [
+        w for w in warnings if f"{len(wrong)} of {len(wrong)} gyro samples" in w
+    ]
+    assert len(warnings) >= 1
