@@ -599,22 +599,46 @@ def check_gravity_direction(
     )
 
 
-def sample_rows(rec: Recording, max_rows: int = 60_000, pieces: int = 6) -> Recording:
+SAMPLE_ROWS = 60_000  # rows the plausibility checks look at in a long recording
+SAMPLE_PIECES = 6  # in this many evenly spaced stretches
+
+
+def sample_stretches(n: int, max_rows: int = SAMPLE_ROWS, pieces: int = SAMPLE_PIECES) -> list[tuple[int, int]]:
+    """The rows [start, stop) of a recording of ``n`` rows that :func:`sample_rows` keeps: all of them, or
+    ``pieces`` evenly spaced contiguous stretches of ``max_rows`` rows in all."""
+    if n <= max_rows:
+        return [(0, n)]
+    k = max_rows // pieces
+    return [(int(a), int(a) + k) for a in np.linspace(0, n - k, pieces).astype(np.int64)]
+
+
+def sample_rows(rec: Recording, max_rows: int = SAMPLE_ROWS, pieces: int = SAMPLE_PIECES) -> Recording:
     """``rec`` itself, or for a long recording ``pieces`` evenly spaced contiguous stretches of ``max_rows`` rows
     in all (statistics of units and axes do not need every row; contiguous stretches keep the time structure
     the gyro/tilt comparison needs)."""
     n = len(rec)
     if n <= max_rows:
         return rec
-    k = max_rows // pieces
-    starts = np.linspace(0, n - k, pieces).astype(np.int64)
-    idx = (starts[:, None] + np.arange(k)[None, :]).ravel()
+    idx = np.concatenate([np.arange(a, b) for a, b in sample_stretches(n, max_rows, pieces)])
     return Recording(
         rec.time[idx],
         {c: rec.channels[c][idx] for c in _SENSORS if c in rec.channels},
         {c: u for c, u in rec.units.items() if c in _SENSORS},
         dict(rec.meta),
         {c: list(v) for c, v in rec.columns.items() if c in _SENSORS},
+    )
+
+
+def joined_rows(pieces: list[Recording]) -> Recording:
+    """The sensor channels of ``pieces`` (stretches of one recording, in order) as one recording: what
+    :func:`sample_rows` gives for a recording read chunk by chunk."""
+    first = pieces[0]
+    return Recording(
+        np.concatenate([p.time for p in pieces]),
+        {c: np.concatenate([p.channels[c] for p in pieces]) for c in _SENSORS if c in first.channels},
+        {c: u for c, u in first.units.items() if c in _SENSORS},
+        dict(first.meta),
+        {c: list(v) for c, v in first.columns.items() if c in _SENSORS},
     )
 
 

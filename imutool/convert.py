@@ -82,14 +82,14 @@ def stream_convert(
     if os.path.abspath(src) == os.path.abspath(dst):
         raise ImutoolError("output would overwrite the input", path=dst)
     opts: dict[str, Any] = mapping_options(src, columns, profile)
-    checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict)
+    total = expected_rows(src)
+    checks = ChunkChecks(src, mounting=mounting, calibration_file=calibration_file, strict=strict, rows_expected=total)
     time_opts = {"rate_hz": input_rate_hz, "time_column": time_column, "header_rows": header_rows}
     if formats.kind_of(src) == "csv":
         opts.update(time_opts)
     elif any(v is not None for v in time_opts.values()):
         read_input(src, **time_opts)  # the one-line refusal of a CSV-only option
     chunks = formats.iter_chunks(src, chunk_rows=chunk_rows, **opts)
-    total = expected_rows(src) if progress is not None else None
     rows_in = 0
     dropped_boundary = duplicates_dropped = 0
     actions: list[str] = []

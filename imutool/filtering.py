@@ -518,14 +518,15 @@ def stream_ekf(
     Memory is O(chunk_rows), not O(file). Rows whose time is not after the previous row's are dropped (counted
     in ``dropped_non_increasing_rows``); streaming cannot sort. Each chunk gets the input checks of an
     in-memory run (:class:`imutool.loading.ChunkChecks`: absurd samples bridged, calibration, mounting,
-    plausibility on the first chunk, the > 1 % dropped-rows warning): their report, with the input's warnings,
-    is the summary's ``validation``; the self-check's warnings are its ``warnings``. Both sets are written, at
-    the end, into the output's metadata (``warnings``, ``validation``).
+    plausibility on the stretches an in-memory load samples, the > 1 % dropped-rows warning): their report,
+    with the input's warnings, is the summary's ``validation``; the self-check's warnings are its ``warnings``.
+    Both sets are written, at the end, into the output's metadata (``warnings``, ``validation``).
     """
     path, output = os.fspath(path), os.fspath(output)
     if params is None:
         params = EkfParams()
-    checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict)
+    total = expected_rows(path)
+    checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict, rows_expected=total)
     rows_read = duplicates = 0
     state = None
     dt_nom = dt_mag = None  # the IMU's and the magnetometer's nominal intervals (s), from the first chunk with them
@@ -545,7 +546,6 @@ def stream_ekf(
         read_input(path, **time_opts)  # the one-line refusal of a CSV-only option
     opts = {**mapping_options(path, columns, profile), **({"prefetch": True, **time_opts} if kind == "csv" else {})}
     self_checks: SelfCheck | None = None  # the filter's self-checks, fed chunk by chunk (as in memory: one chunk)
-    total = expected_rows(path)
     # the output (CSV or Parquet) is converted and written by a background thread, and a Parquet input is read
     # one chunk ahead by another (the CSV reader prefetches by itself): one chunk more in memory for each
     writer = chunk_writer(output, background=True)

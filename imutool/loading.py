@@ -325,16 +325,26 @@ class ChunkChecks:
     ``filter`` and ``convert``), so a large file is checked as a small one is.
 
     :meth:`prepare` bridges each chunk's absurd samples (counted over the run; more than 1 % of the rows seen so
-    far is a unit error; a run of them at a chunk's edge has no neighbour there and is set to NaN instead of
-    interpolated), applies the calibration and the mounting, and runs the plausibility checks (units, axes,
-    gravity direction) on the first chunk only — the start of the file, where an in-memory load samples six
-    stretches of the whole. :meth:`finish` accounts for every row the run dropped with the same > 1 % warning and
-    returns the warnings, for stderr and the summary; :meth:`meta_warnings` adds the input's own for the
-    output's metadata. ``strict``: a warning raises an ImutoolError (inside a streamed writer: no output).
+    far is a unit error, and stays one; a run of them at a chunk's edge has no neighbour there and is set to NaN
+    instead of interpolated), applies the calibration and the mounting, and runs the plausibility checks (units,
+    axes, gravity direction). With ``rows_expected`` (the file's rows; for a CSV an estimate from its first MiB)
+    they look at the six stretches of the whole file an in-memory load looks at
+    (:func:`formats.plausibility.sample_stretches`), collected as the chunks pass and checked once the last one
+    is in (or at :meth:`finish`): a voyage that starts in harbour is judged on its motion, whatever the chunk
+    size. Without it, they look at the first chunk. :meth:`finish` accounts for every row the run dropped with
+    the same > 1 % warning and returns the warnings, for stderr and the summary; :meth:`meta_warnings` adds the
+    input's own for the output's metadata. ``strict``: a warning raises an ImutoolError (inside a streamed
+    writer: no output).
     """
 
     def __init__(
-        self, path: str, *, mounting: str | None = None, calibration_file: str | None = None, strict: bool = False
+        self,
+        path: str,
+        *,
+        mounting: str | None = None,
+        calibration_file: str | None = None,
+        strict: bool = False,
+        rows_expected: int | None = None,
     ):
         from formats import plausibility
 
@@ -348,10 +358,13 @@ class ChunkChecks:
 
             self.cal = load_calibration(calibration_file)
         self.mount = formats.parse_mounting(mounting) if mounting else None
-        self.warnings: list[str] = []  # the first chunk's plausibility warnings
+        self.warnings: list[str] = []  # the plausibility checks' warnings
         self.earlier: list[str] = []  # warnings the input file itself carries (an estimate's, ...)
         self._absurd = plausibility.PlausibilityReport()
         self._checked = False
+        # the rows [start, stop) the plausibility checks look at (None: the first chunk), and those collected
+        self._stretches = plausibility.sample_stretches(rows_expected) if rows_expected else None
+        self._sampled: list[Recording] = []
         self._rows = 0
         self._sensors: dict[str, bool] = {}  # sensor channel → some value seen (not NaN)
 
@@ -368,13 +381,31 @@ class ChunkChecks:
             chunk = self.cal.apply(chunk)
         if self.mount is not None:
             chunk = chunk.mounted(*self.mount)
-        if not self._checked and len(chunk):
-            self._checked = True
+        if len(chunk) and self._rows == len(chunk):  # the first rows
             self.earlier = merged_warnings(chunk.meta)
-            found = plausibility.check_recording(chunk, self.mounting, self.kind)
-            self.warnings += found.warnings
-            self._refuse(found.warnings)
+        if self._stretches is None:
+            if not self._checked and len(chunk):
+                self._check_plausibility([chunk])
+        elif not self._checked:
+            first = self._rows - len(chunk)  # the chunk's first row in the file
+            for a, b in self._stretches:
+                lo, hi = max(a, first) - first, min(b, self._rows) - first
+                if hi > lo:
+                    self._sampled.append(chunk.select(slice(lo, hi)))
+            if self._rows >= self._stretches[-1][1]:
+                self._check_plausibility(self._sampled)
         return chunk
+
+    def _check_plausibility(self, pieces: list[Recording]) -> None:
+        """Run the plausibility checks on ``pieces`` (once), keep their warnings and refuse under ``strict``."""
+        from formats import plausibility
+
+        self._checked = True
+        self._sampled = []
+        rec = pieces[0] if len(pieces) == 1 else plausibility.joined_rows(pieces)
+        found = plausibility.check_recording(rec, self.mounting, self.kind)
+        self.warnings += found.warnings
+        self._refuse(found.warnings)
 
     def finish(
         self,
@@ -390,6 +421,8 @@ class ChunkChecks:
         rows the reader skipped (or ``reader_meta``: the reader's metadata, e.g. a bag's, which hold them)."""
         from formats import plausibility
 
+        if not self._checked and self._sampled:  # fewer rows than expected: the stretches read so far
+            self._check_plausibility(self._sampled)
         require_samples(rows_read, rows_kept, self.path, duplicates)
         empty = [k for k, seen in self._sensors.items() if not seen]
         refuse_without_sensor_data(empty, list(self._sensors), self.path)

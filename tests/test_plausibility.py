@@ -316,3 +316,45 @@ def test_a_unit_error_found_in_a_stream_holds_for_the_rest_of_it(roll, tmp_path)
         w for w in warnings if f"{len(wrong)} of {len(wrong)} gyro samples" in w
     ]
     assert len(warnings) >= 1
+
+
+def test_a_streamed_voyage_that_starts_in_harbour_is_checked_on_its_motion(tmp_path, monkeypatch):
+    """The plausibility checks of a stream look at the stretches an in-memory load looks at, across the whole
+    file (its expected rows), not at the first chunk: a gyro in deg/s declared rad/s, still for the first
+    third (in harbour), is found in chunks of any size, with the whole-file check's warning, once the last
+    stretch is in; judged on the first chunk alone (no size known) it is not. The rows checked are the
+    whole-file sample's."""
+    import formats.plausibility as plaus
+    from imutool.loading import ChunkChecks
+
+    rec = simulate("ship-roll", duration=450, seed=2)  # 90 001 rows: six stretches of 10 000 are sampled
+    n, h = len(rec), len(rec) // 3
+    rec["gyro"][:h] = 0.0
+    rec["accel"][:h] = rec["accel"][h]
+    rec["mag"][:h] = rec["mag"][h]
+    rec["gyro"][h:] *= 180 / np.pi  # deg/s read as rad/s
+    whole = check_recording(rec).warnings
+    assert len(whole) == 1 and whole[0].startswith("UNITS: gyro rates are")
+    checked = []
+    real = plaus.check_recording
+    monkeypatch.setattr(plaus, "check_recording", lambda r, *a, **k: checked.append(r) or real(r, *a, **k))
+
+    def streamed(chunk_rows, rows_expected):
+        checked.clear()
+        checks = ChunkChecks(str(tmp_path / "in.csv"), rows_expected=rows_expected)
+        for i in range(0, n, chunk_rows):
+            checks.prepare(rec.select(slice(i, i + chunk_rows)))
+            if rows_expected == n and i + chunk_rows >= n:
+                assert checks.warnings == whole  # checked before the end, once the last stretch is in
+        return checks.finish(n, n)[1]
+
+    sample = plaus.sample_rows(rec)
+    for chunk_rows in (7_000, 20_000, n):
+        assert streamed(chunk_rows, n) == whole, chunk_rows
+        assert len(checked) == 1
+        np.testing.assert_array_equal(checked[0].time, sample.time)
+        np.testing.assert_array_equal(checked[0]["gyro"], sample["gyro"])
+    assert streamed(20_000, None) == []  # the first chunk alone: still, nothing to see
+    # an estimate above the file's rows (a CSV's): the stretches read so far are checked at the end
+    late = streamed(20_000, n + 3_000)
+    assert len(late) == 1 and late[0].startswith("UNITS: gyro rates are")
