@@ -614,7 +614,7 @@ def stream_ekf(
             if dt_nom is None:
                 dt_nom = nominal_dt(chunk.time)
                 summary["motion"] = motion.summary()
-                self_checks = SelfCheck(run_params, dt_nom, lever_arm)
+                self_checks = SelfCheck(run_params, dt_nom, lever_arm, samples_expected=total)
                 self_checks.motion = motion.kind
             sog, cog, vel = gnss_inputs(chunk, use_gnss)
             if "heading_true" in chunk.channels and getattr(params, "heading_input_latency", 0.0) > 0:

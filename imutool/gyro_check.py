@@ -158,17 +158,27 @@ class GyroScaleCheck:
     and gives the verdict (:meth:`report`). window s; gap_dt s (a longer step inside a pair drops the pair: the
     filter's gap_factor × the nominal step); gravity m/s²."""
 
-    def __init__(self, window: float = WINDOW_S, gap_dt: float = 0.5, gravity: float = 9.80665) -> None:
+    def __init__(
+        self,
+        window: float = WINDOW_S,
+        gap_dt: float = 0.5,
+        gravity: float = 9.80665,
+        samples_expected: int | None = None,
+    ) -> None:
         self.window, self.gap_dt, self.gravity = float(window), float(gap_dt), float(gravity)
         self.sums = np.zeros(len(CANDIDATES))
         self.counts = np.zeros(len(CANDIDATES))
         self.seen = self.checked = 0  # samples given, samples integrated (the budget is per run)
+        # the run's samples when known before its end (a stream's file): its budget is then spent in proportion to
+        # the samples seen, so the pairs spread over the run as in one call, whatever the chunk size
+        self.samples_expected = int(samples_expected or 0)
 
     def add(self, time: np.ndarray, gyro: np.ndarray, bias: np.ndarray, force: np.ndarray) -> None:
         """One chunk: time (N,) s, gyro and the filter's bias (N,3) rad/s, compensated force (N,3) m/s² (body)."""
         arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (time, gyro, bias, force)]
         self.seen += len(arrays[0])
-        budget = int(max(FULL_CHECK_SAMPLES, CHECKED_SHARE * self.seen)) - self.checked
+        run = max(self.seen, self.samples_expected)
+        budget = int(max(FULL_CHECK_SAMPLES, CHECKED_SHARE * run) * self.seen / run) - self.checked
         self.checked += pair_discrepancy_kernel(
             *arrays, self.window, self.gap_dt, CANDIDATES, self.gravity, budget, self.sums, self.counts
         )

@@ -153,3 +153,28 @@ def test_the_checked_share_is_per_run_whatever_the_chunk_size():
         used.append(chk.checked)
         assert chk.report()[0]["gyro_scale_check"]["pairs"] > 20
     assert max(used) <= max(100_000, 0.1 * n) + 400, used  # + one pair of 2-s windows at 100 Hz
+
+
+def test_a_streams_checked_pairs_spread_over_the_run_as_in_one_call():
+    """Given the run's samples, a stream in 10 000-row chunks spends the budget in proportion to the samples
+    seen (≈ 2 500 a chunk here, ± a pair), as one call spreads its pairs over the whole run; without them the
+    first chunks take the whole-run allowance first (all their pairs)."""
+    n = 400_000
+    t = np.arange(n) / 100.0
+    gyro = np.zeros((n, 3))
+    gyro[:, 0] = 0.3 * np.sin(t)
+    force = np.tile([0.0, 0.0, -9.80665], (n, 1))
+    whole = GyroScaleCheck()
+    whole.add(t, gyro, np.zeros((n, 3)), force)
+    for expected in (n, None):
+        chk = GyroScaleCheck(samples_expected=expected)
+        per_chunk = []
+        for i in range(0, n, 10_000):
+            before = chk.checked
+            chk.add(t[i : i + 10_000], gyro[i : i + 10_000], np.zeros((10_000, 3)), force[i : i + 10_000])
+            per_chunk.append(chk.checked - before)
+        if expected:
+            assert max(per_chunk) <= 2_500 + 400 and min(per_chunk) >= 2_500 - 400, per_chunk
+            assert abs(chk.checked - whole.checked) <= 400 * len(per_chunk) // 10, (chk.checked, whole.checked)
+        else:
+            assert per_chunk[0] >= 10_000, per_chunk  # every pair of the chunk (a sample counts in two pairs)

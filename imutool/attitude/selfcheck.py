@@ -290,10 +290,16 @@ class SelfCheck:
     (:meth:`report`). O(spans) memory: a streamed day keeps no per-sample array.
 
     ``params`` the run's parameters; ``dt_nominal`` (s) the IMU's nominal step (the gyro-scale check's gap
-    threshold); ``lever_arm`` (m, body FRD) as given to the filter, or None; ``max_spans`` spans kept per report."""
+    threshold); ``lever_arm`` (m, body FRD) as given to the filter, or None; ``max_spans`` spans kept per report;
+    ``samples_expected`` a stream's samples when known (the gyro-scale check spreads its budget over them)."""
 
     def __init__(
-        self, params: EkfParams, dt_nominal: float, lever_arm: np.ndarray | None = None, max_spans: int = 20
+        self,
+        params: EkfParams,
+        dt_nominal: float,
+        lever_arm: np.ndarray | None = None,
+        max_spans: int = 20,
+        samples_expected: int | None = None,
     ) -> None:
         self.params, self.lever_arm, self.max_spans = params, lever_arm, max_spans
         self.inconsistent = RunSpans(max_spans)
@@ -306,7 +312,9 @@ class SelfCheck:
         self.heading_given = self.mag_given = False  # a heading_true / mag channel in the input
         self.heading_updates = 0
         self.lag = HeadingLagTrack()  # the heading input's lag against the gyro
-        self.scale = GyroScaleCheck(gap_dt=params.gap_factor * dt_nominal, gravity=params.gravity)
+        self.scale = GyroScaleCheck(
+            gap_dt=params.gap_factor * dt_nominal, gravity=params.gravity, samples_expected=samples_expected
+        )
         self._scale_tail: tuple[np.ndarray, ...] | None = None  # what the next chunk's scale check starts from
         self.totals: dict[str, Any] = {}  # the filter's cumulative counters, from the last chunk
         self.t_first = self.t_last = np.nan
