@@ -59,11 +59,15 @@ def read(path: str | os.PathLike, **options) -> Recording:
     if kind == "csv":
         from .csv import read_csv
 
-        return read_csv(path, **options)
+        rec = read_csv(path, **options)
+        rec.restore_streams()  # a many-clock recording written by imutool: its streams from meta['streams']
+        return rec
     if kind == "parquet":
         from .parquet import read_parquet
 
-        return read_parquet(path, **options)
+        rec = read_parquet(path, **options)
+        rec.restore_streams()
+        return rec
     if kind in ("ros1", "ros2"):
         from .bags import read_bag
 

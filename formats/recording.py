@@ -146,6 +146,10 @@ class TimeReport:
     gaps: list[tuple[float, float]] = field(default_factory=list)  # (start time, length s)
     median_dt: float = float("nan")
     actions: list[str] = field(default_factory=list)
+    # many clocks: per stream, its median step (s) and gaps on its own samples; then ``median_dt``/``gaps`` are
+    # those of the stream with the most samples
+    stream_median_dt: dict[str, float] = field(default_factory=dict)
+    stream_gaps: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -158,6 +162,19 @@ class TimeReport:
             "gaps": [{"start_s": float(a), "length_s": float(b)} for a, b in self.gaps],
             "median_dt_s": float(self.median_dt),
             "actions": list(self.actions),
+            **(
+                {
+                    "streams": {
+                        k: {
+                            "median_dt_s": float(v),
+                            "gaps": [{"start_s": float(a), "length_s": float(b)} for a, b in self.stream_gaps[k]],
+                        }
+                        for k, v in self.stream_median_dt.items()
+                    }
+                }
+                if self.stream_median_dt
+                else {}
+            ),
         }
 
 
@@ -169,6 +186,13 @@ class Recording:
     array of shape (N,) or (N, k). ``units`` maps a channel name to its unit (see :mod:`formats.units`).
     ``meta`` holds sensor, frame, source file, rate, mounting, calibration applied, ...
     ``columns`` maps a channel to its CSV column names (filled in automatically).
+
+    **Many clocks.** A log of several streams (NMEA sentence types, bag topics, a ``--with`` file) is one table
+    whose rows are the union of every stream's sample times. ``meta['streams']`` maps a stream name to its
+    channels, and ``stream_rows`` a stream name to the boolean mask of the rows where that stream has a sample of
+    its own. A row of one stream is never a missing sample of another: take a channel on its own rows with
+    :meth:`series` or :meth:`stream`. A channel in no stream is sampled on every row (a single-clock recording has
+    no streams at all, and every method below then behaves as it always did).
     """
 
     time: np.ndarray
@@ -176,11 +200,17 @@ class Recording:
     units: dict[str, str] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
     columns: dict[str, list[str]] = field(default_factory=dict)
+    stream_rows: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.time = np.ascontiguousarray(self.time, dtype=np.float64)
         if self.time.ndim != 1:
             raise ImutoolError("time must be one-dimensional")
+        for k in list(self.stream_rows):
+            m = np.asarray(self.stream_rows[k], dtype=bool)
+            if m.shape != self.time.shape:
+                raise ImutoolError(f"stream {k!r} has {m.shape[0]} row flags for {self.time.shape[0]} rows")
+            self.stream_rows[k] = m
         for name in list(self.channels):
             self.channels[name] = self._check(name, self.channels[name])
             self.columns.setdefault(name, default_columns(name, self._width(self.channels[name])))
@@ -258,7 +288,116 @@ class Recording:
             dict(self.units),
             copy.deepcopy(self.meta),
             {k: list(v) for k, v in self.columns.items()},
+            {k: v.copy() for k, v in self.stream_rows.items()},
         )
+
+    # -- many clocks (class docstring) ----------------------------------------------------------------------
+    @property
+    def streams(self) -> dict[str, list[str]]:
+        """Stream name → its channels (empty for a single-clock recording)."""
+        return {k: list(v) for k, v in (self.meta.get("streams") or {}).items()}
+
+    @property
+    def multi_clock(self) -> bool:
+        """True when some channel is sampled on only part of the rows (its own stream's)."""
+        return any(not bool(m.all()) for m in self.stream_rows.values())
+
+    def stream_of(self, name: str) -> str | None:
+        """The stream a channel belongs to (None: sampled on every row)."""
+        for k, chans in (self.meta.get("streams") or {}).items():
+            if name in chans:
+                return k
+        return None
+
+    def own_rows(self, name: str) -> np.ndarray:
+        """Boolean mask of the rows that are samples of channel ``name`` (or of stream ``name``)."""
+        if name in self.stream_rows:
+            return self.stream_rows[name]
+        k = self.stream_of(name)
+        if k is not None and k in self.stream_rows:
+            return self.stream_rows[k]
+        return np.ones(len(self), dtype=bool)
+
+    def series(self, name: str, unit: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(time s, values) of a channel on its own samples only, values converted to ``unit`` if given."""
+        m = self.own_rows(name)
+        a = self.get(name, unit) if unit is not None else self[name]
+        if bool(m.all()):
+            return self.time, a
+        return self.time[m], a[m]
+
+    def stream(self, name: str) -> Recording:
+        """The recording of one stream on its own rows: ``name`` is a stream or one of its channels; the stream's
+        channels (or, for a channel in no stream, the channels in no stream) on their samples, the metadata kept
+        and ``meta['stream']`` naming it. A single-clock recording returns itself."""
+        if not self.stream_rows:
+            return self
+        key = name if name in self.stream_rows else self.stream_of(name)
+        if key is None:
+            inside = {c for chans in self.streams.values() for c in chans}
+            keep = [c for c in self.channels if c not in inside]
+            mask = np.ones(len(self), dtype=bool)
+        else:
+            keep = [c for c in self.streams.get(key, []) if c in self.channels]
+            mask = self.stream_rows[key]
+        out = Recording(
+            self.time[mask],
+            {c: self.channels[c][mask] for c in keep},
+            {c: self.units[c] for c in keep if c in self.units},
+            copy.deepcopy(self.meta),
+            {c: list(self.columns[c]) for c in keep},
+        )
+        out.meta.pop("streams", None)
+        if key is not None:
+            out.meta["stream"] = key
+        return out
+
+    def set_stream(self, name: str, channels: list[str], rows: np.ndarray) -> None:
+        """Declare stream ``name``: its channels and the boolean mask of the rows that are its samples."""
+        m = np.asarray(rows, dtype=bool)
+        if m.shape != self.time.shape:
+            raise ImutoolError(f"stream {name!r} has {m.shape[0]} row flags for {len(self)} rows")
+        streams = dict(self.meta.get("streams") or {})
+        for k in list(streams):
+            streams[k] = [c for c in streams[k] if c not in channels]
+            if not streams[k]:
+                del streams[k]
+                self.stream_rows.pop(k, None)
+        streams[name] = list(channels)
+        self.meta["streams"] = streams
+        self.stream_rows[name] = m
+
+    def restore_streams(self) -> None:
+        """Rebuild ``stream_rows`` from ``meta['streams']`` after a file round trip: a row is a sample of a stream
+        where any of its channels has a value (a sample whose every field was empty is not told apart from no
+        sample in a CSV, so it is not one here)."""
+        for k, chans in (self.meta.get("streams") or {}).items():
+            if k in self.stream_rows:
+                continue
+            m = np.zeros(len(self), dtype=bool)
+            for c in chans:
+                if c in self.channels:
+                    a = self.channels[c]
+                    f = np.isfinite(a) if a.dtype.kind == "f" else np.ones(a.shape, dtype=bool)
+                    m |= f.any(axis=1) if f.ndim > 1 else f
+            self.stream_rows[k] = m
+
+    def stream_summary(self) -> dict[str, dict[str, Any]]:
+        """Per stream: its channels, samples, first and last time (s), duration (s) and median rate (Hz)."""
+        out: dict[str, dict[str, Any]] = {}
+        for k, chans in self.streams.items():
+            t = self.time[self.own_rows(k)]
+            d = np.diff(t)
+            d = d[d > 0]
+            out[k] = {
+                "channels": list(chans),
+                "samples": int(t.size),
+                "start_s": float(t[0]) if t.size else float("nan"),
+                "end_s": float(t[-1]) if t.size else float("nan"),
+                "duration_s": float(t[-1] - t[0]) if t.size > 1 else 0.0,
+                "rate_hz": float(1.0 / np.median(d)) if d.size else float("nan"),
+            }
+        return out
 
     @property
     def duration(self) -> float:
@@ -288,6 +427,7 @@ class Recording:
             dict(self.units),
             copy.deepcopy(self.meta),
             {k: list(v) for k, v in self.columns.items()},
+            {k: take(v) for k, v in self.stream_rows.items()},
         )
 
     def slice_time(self, start: float | None = None, end: float | None = None) -> Recording:
@@ -394,12 +534,26 @@ class Recording:
                         dict(rec.units),
                         copy.deepcopy(rec.meta),
                         {k: list(v) for k, v in rec.columns.items()},
+                        {k: np.bincount(group, m.astype(float)) > 0 for k, m in rec.stream_rows.items()},
                     )
                     rep.actions.append(f"averaged {nd} rows sharing a timestamp with their first row")
                 else:
                     raise ImutoolError(f"unknown duplicates policy {duplicates!r} (drop, mean, error)")
-        t = rec.time
-        if len(rec) >= 2:
+        if rec.multi_clock:  # each stream's step and gaps on its own samples; the table's steps mean nothing
+            most = 0
+            for k in rec.stream_rows:
+                ts = rec.time[rec.stream_rows[k]]
+                if ts.size < 2:
+                    continue
+                d = np.diff(ts)
+                med = float(np.median(d))
+                gi = np.flatnonzero(d > gap_factor * med)
+                rep.stream_gaps[k] = [(float(ts[i]), float(d[i])) for i in gi]
+                rep.stream_median_dt[k] = med
+                if ts.size > most:
+                    most, rep.median_dt, rep.gaps = ts.size, med, rep.stream_gaps[k]
+        elif len(rec) >= 2:
+            t = rec.time
             d = np.diff(t)
             med = float(np.median(d))
             rep.median_dt = med
@@ -410,6 +564,7 @@ class Recording:
             m = np.isnan(a) if a.dtype.kind == "f" else np.zeros(a.shape, dtype=bool)
             if m.ndim > 1:
                 m = m.any(axis=1)
+            m &= rec.own_rows(k)  # another stream's row is not a missing sample of this channel
             c = int(np.count_nonzero(m))
             if c:
                 rep.nan_by_channel[k] = c
@@ -470,6 +625,47 @@ def parse_mounting(spec: str) -> tuple[str, tuple[float, float, float]]:
             raise ImutoolError(f"mounting {spec!r}: misalignment must be three numbers (roll,pitch,yaw deg)")
         angles = vals  # type: ignore[assignment]
     return remap, angles
+
+
+def join_streams(recordings: list[Recording], names: list[str], prefixes: list[str] | None = None) -> Recording:
+    """Join recordings that keep their own clocks into one many-clock recording, without resampling.
+
+    The table's rows are the union of every input's times; each input becomes a stream (``names[i]``) whose
+    channels have values on its own rows and NaN elsewhere (another stream's rows, never read as missing
+    samples: see :class:`Recording`). An input that is itself many-clock keeps its streams (named
+    ``names[i] + ':' + stream``). Channel names that clash take ``prefixes[i]`` (default ``r{i+1}_``).
+    """
+    if not recordings:
+        raise ImutoolError("join: no recordings given")
+    t = np.unique(np.concatenate([r.time for r in recordings]))
+    out = Recording(t, meta=copy.deepcopy(recordings[0].meta))
+    out.meta.pop("streams", None)
+    out.meta["joined_from"] = [r.meta.get("source", "?") for r in recordings]
+    for i, r in enumerate(recordings):
+        idx = np.searchsorted(t, r.time)
+        sub = r.streams or {names[i]: list(r.channels)}
+        renamed: dict[str, str] = {}
+        for name, a in r.channels.items():
+            new = name
+            if name in out.channels:
+                new = (prefixes[i] if prefixes else f"r{i + 1}_") + name
+            full = np.full((len(t),) + a.shape[1:], np.nan)
+            full[idx] = a
+            cols = r.columns.get(name) if new == name else None
+            out.add(new, full, r.units.get(name), columns=cols)
+            renamed[name] = new
+        inside = {c for chans in sub.values() for c in chans}
+        rest = [c for c in r.channels if c not in inside]
+        for k, chans in sub.items():
+            rows = np.zeros(len(t), dtype=bool)
+            rows[idx[r.own_rows(k)] if r.streams else idx] = True
+            label = names[i] if not r.streams else f"{names[i]}:{k}"
+            out.set_stream(label, [renamed[c] for c in chans if c in renamed], rows)
+        if rest and r.streams:
+            rows = np.zeros(len(t), dtype=bool)
+            rows[idx] = True
+            out.set_stream(names[i], [renamed[c] for c in rest], rows)
+    return out
 
 
 def merge(

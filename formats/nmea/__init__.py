@@ -1122,6 +1122,7 @@ def read_nmea(
         timing[k]["values_overwritten_at_same_time"] = int(n)
     units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
     rec = Recording(t[grp], data, units)
+    _declare_streams(rec, row_of, rows_vals, keys_sorted, n_rows)
     rec.meta.update(
         {
             "source": spath,
@@ -1155,6 +1156,35 @@ def read_nmea(
     if codes:
         rec.meta["status_codes"] = codes
     return rec
+
+
+def _declare_streams(
+    rec: Recording, row_of: np.ndarray, rows_vals: list[dict[str, float]], keys: list[str], n_rows: int
+) -> None:
+    """Each sentence type is a stream on its own rows (Recording's many clocks): a channel's samples are the rows
+    where a sentence that carries it arrived (an empty field there is a missing sample; another sentence's row is
+    not). Channels carried by the same sentence types share a stream, named by them (``PSXN23``, ``HDT+THS``)."""
+    key_rows: dict[str, np.ndarray] = {}
+    chan_keys: dict[str, set[str]] = {}
+    for r, v, key in zip(row_of, rows_vals, keys, strict=True):
+        key_rows.setdefault(key, np.zeros(n_rows, dtype=bool))[r] = True
+        for k in v:
+            ch = _CHANNELS.get(k)
+            if ch:
+                chan_keys.setdefault(ch[0], set()).add(key)
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name in rec.channels:
+        groups.setdefault(tuple(sorted(chan_keys.get(name, ()))), []).append(name)
+    masks = {}
+    for ks, chans in groups.items():
+        m = np.zeros(n_rows, dtype=bool)
+        for k in ks:
+            m |= key_rows[k]
+        masks[ks] = m
+    if all(bool(m.all()) for m in masks.values()):
+        return  # one clock: every channel has a sample on every row
+    for ks, chans in groups.items():
+        rec.set_stream("+".join(ks) or "other", chans, masks[ks])
 
 
 def _em3000_hint(text: str) -> str:
