@@ -37,6 +37,7 @@ from .common import (
     PASS,
     SCOPE,
     STANDARDS_FILE,
+    channel_on,
     check_tolerance,
     clean,
     input_record,
@@ -44,6 +45,7 @@ from .common import (
     judge,
     now_utc,
     overall,
+    own_samples,
     plateaus,
     set_clock,
     standards_cited,
@@ -339,12 +341,27 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
     }
 
 
-def _durations(t: np.ndarray) -> np.ndarray:
-    """Time each sample stands for (s): half the gaps to its neighbours (a non-uniform time base is allowed)."""
+def _durations(t: np.ndarray, gap_factor: float = 3.0) -> np.ndarray:
+    """Time each sample stands for (s): half the steps to its neighbours (a non-uniform time base is allowed),
+    each step counted up to ``gap_factor`` × the median step (a gap in the samples is not time they cover)."""
     if t.size < 2:
         return np.zeros(t.size)
     g = np.diff(t)
+    g = np.minimum(g, gap_factor * float(np.median(g)))
     return 0.5 * (np.concatenate([[g[0]], g]) + np.concatenate([g, [g[-1]]]))
+
+
+def _time_base(dut: Recording, ref: Recording) -> str:
+    """The conventions' time-base sentence: the reference heel's own samples, the DUT's interpolated onto them;
+    each named by its stream when it comes from a many-clock log."""
+    def of(rec: Recording, who: str) -> str:
+        k = rec.meta.get("stream")
+        return f"{who}'s heel samples" + (f" (stream {k} of a many-clock log, its own rows only)" if k else "")
+
+    return (
+        f"reference time (s): the {of(ref, 'reference')}; the {of(dut, 'DUT')} interpolated linearly onto "
+        "them inside the overlap (NaN across a gap in the DUT's samples)"
+    )
 
 
 def _judged_cycles(
@@ -505,8 +522,8 @@ def inclinometer_evidence(
     if info["decision_rule"].get("rule") == "guard band":
         o.guard_band = True
     o.check()
-    h_dut = heel_of(dut, dut_path or "DUT", dut_channel)
-    h_ref = heel_of(ref, ref_path or "reference", ref_channel)
+    heel_of(dut, dut_path or "DUT", dut_channel)  # refuses a missing or multi-column heel channel
+    heel_of(ref, ref_path or "reference", ref_channel)
     dch = dut_channel or ("heel" if "heel" in dut.channels else "roll")
     rch = ref_channel or ("heel" if "heel" in ref.channels else "roll")
     if (dut_path and ref_path and os.path.realpath(dut_path) == os.path.realpath(ref_path) and dch == rch) or (
@@ -516,6 +533,12 @@ def inclinometer_evidence(
             f"the reference is the DUT itself (same file, channel {dch!r}): a device cannot be its own reference",
             path=ref_path,
         )
+    # many clocks: each heel on its own samples (another sentence's row is not a missing heel sample); the
+    # reference's other channels (lateral acceleration) are taken onto the reference heel's times
+    ref_all = ref
+    dut, ref = own_samples(dut, dch), own_samples(ref, rch)
+    h_dut = heel_of(dut, dut_path or "DUT", dch)
+    h_ref = heel_of(ref, ref_path or "reference", rch)
     t = ref.time
     dts = _durations(t)
     crit_txt = (
@@ -600,9 +623,8 @@ def inclinometer_evidence(
         warnings.append(f"time lag at the search limit ±{o.max_lag_s} s: alignment unreliable (widen --max-lag)")
 
     # ---- lateral acceleration applied by the reference (m/s², + starboard) ---------------------------------
-    lat = None
-    if o.lat_accel_channel in ref.channels:
-        lat = np.asarray(ref[o.lat_accel_channel], float)
+    lat = channel_on(ref_all, o.lat_accel_channel, t)
+    if lat is not None:
         if lat.ndim != 1:
             raise ImutoolError(f"channel {o.lat_accel_channel!r} must be one column (m/s²)", path=ref_path)
     acc_mask = (np.abs(np.nan_to_num(lat)) >= o.lat_accel_min_ms2) if lat is not None else np.zeros(t.size, bool)
@@ -1142,7 +1164,7 @@ def inclinometer_evidence(
             "time_unit": "s",
             "sign": "heel + starboard down, − port (IEC 61162-1 HRM, P8); port amplitude positive",
             "frame": "vessel body FRD (x bow, y starboard, z down)",
-            "time_base": "reference time (s); DUT resampled linearly onto it",
+            "time_base": _time_base(dut, ref),
             "lateral_acceleration": "m/s², + starboard, kinematic (gravity excluded)",
         },
         "editions": EDITIONS,
