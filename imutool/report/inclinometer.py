@@ -568,7 +568,11 @@ def inclinometer_evidence(
     if overlap <= 0:
         raise ImutoolError("the DUT and reference recordings do not overlap in time (check the clocks)")
     lag, lag_rms = best_lag(dut.time[okd], h_dut[okd], t, h_ref, o.max_lag_s)
-    lag_at_edge = abs(abs(lag) - o.max_lag_s) < 1e-6
+    # a heel that stays within the plateau band everywhere has no motion to time: every lag fits as well
+    still_ref = float(np.nanmax(h_ref) - np.nanmin(h_ref)) <= o.step_band_deg
+    if still_ref:
+        lag = 0.0
+    lag_at_edge = not still_ref and abs(abs(lag) - o.max_lag_s) < 1e-6
     shift = lag if o.align == "xcorr" else 0.0
     # DUT on the reference time base, the lag removed: x_al(t) = x(t + lag)
     d = interp_to(t, dut.time[okd] - shift, h_dut[okd])
@@ -615,12 +619,24 @@ def inclinometer_evidence(
         "overlap_s": overlap,
     }
     warnings: list[str] = []
+    if both.sum() >= 10 and float(np.max(np.abs(e[both]))) == 0.0:
+        warnings.append(
+            "the DUT equals the reference on every compared sample (|error| 0, heel constant): the same device "
+            "or file? (a device cannot be its own reference)"
+        )
     if corr < 0:
         warnings.append("DUT and reference heel are anti-correlated: sign convention mismatch (HRM: + starboard)?")
     if overlap < 0.9 * ref.duration:
         warnings.append(f"the DUT covers only {overlap:.0f} s of the {ref.duration:.0f} s reference recording")
     if lag_at_edge:
         warnings.append(f"time lag at the search limit ±{o.max_lag_s} s: alignment unreliable (widen --max-lag)")
+    if still_ref:
+        alignment["lag_measurable"] = False
+        alignment["note"] = "no lag measured: the reference heel does not move; " + alignment["note"]
+        warnings.append(
+            f"the reference heel stays within {o.step_band_deg:g}° over the whole recording: no motion to "
+            "measure a time lag against (lag not measured, 0 s taken)"
+        )
 
     # ---- lateral acceleration applied by the reference (m/s², + starboard) ---------------------------------
     lat = channel_on(ref_all, o.lat_accel_channel, t)
