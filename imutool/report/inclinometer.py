@@ -354,6 +354,7 @@ def _durations(t: np.ndarray, gap_factor: float = 3.0) -> np.ndarray:
 def _time_base(dut: Recording, ref: Recording) -> str:
     """The conventions' time-base sentence: the reference heel's own samples, the DUT's interpolated onto them;
     each named by its stream when it comes from a many-clock log."""
+
     def of(rec: Recording, who: str) -> str:
         k = rec.meta.get("stream")
         return f"{who}'s heel samples" + (f" (stream {k} of a many-clock log, its own rows only)" if k else "")
@@ -593,7 +594,9 @@ def inclinometer_evidence(
             "(wrong file, channel, axis or clock?)",
             path=ref_path,
         )
-    if both.sum() > 2:
+    if both.sum() > 2 and still_ref:  # no spread of reference values: an offset, no scale
+        b1, b0 = float("nan"), float(np.mean(d[both] - h_ref[both]))
+    elif both.sum() > 2:
         b1, b0 = np.polyfit(h_ref[both], d[both], 1)
     else:
         b1, b0 = float("nan"), float("nan")
