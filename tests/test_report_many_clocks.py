@@ -292,3 +292,29 @@ def test_gofree_xdr_heel_is_not_silent(tmp_path):
     assert it["static_heel"]["stats"]["max_abs"] == pytest.approx(0.2, abs=1e-9)
     for i in ev["items"]:
         assert i["reason"], i["id"]  # no item without its reason
+
+
+def test_lateral_acceleration_from_its_own_stream():
+    """A reference whose lateral acceleration is a stream of its own (5 Hz beside a 10 Hz heel): taken from its
+    own samples onto the heel's times, the same as a single-clock reference carrying those values."""
+    from formats.recording import join_streams
+    from imutool.report.inclinometer import inclinometer_evidence
+    from imutool.sim.programmes import inclinometer_test
+
+    short = {"steps": (0.0, 5.0, -5.0, 0.0), "hold_s": 15.0, "dynamic": ((8.0, 10.0, 10.0, 5),), "long_s": 0.0}
+    dut, ref, _ = inclinometer_test(lat_accel_ms2=1.0, lat_accel_s=40.0, accel_coupling=0.5, **short)
+    heel = Recording(ref.time.copy(), {"roll": ref["roll"].copy()}, {"roll": "deg"})
+    acc = Recording(ref.time[::2] + 0.05, {"lat_accel": ref["lat_accel"][::2].copy()}, {"lat_accel": "m/s^2"})
+    many = join_streams([heel, acc], ["heel", "acc"])
+    assert many.multi_clock and len(many) == len(ref) + len(acc)
+    single = Recording(
+        ref.time.copy(),
+        {"roll": ref["roll"].copy(), "lat_accel": np.interp(ref.time, acc.time, acc["lat_accel"], np.nan, np.nan)},
+        {"roll": "deg", "lat_accel": "m/s^2"},
+    )
+    ev_many, _ = inclinometer_evidence(dut, many)
+    ev_single, _ = inclinometer_evidence(dut, single)
+    _approx_equal(_figures(ev_single), _figures(ev_many))
+    it = {i["id"]: i for i in ev_many["items"]}
+    assert it["lateral_acceleration"]["status"] != "not tested"
+    assert it["lateral_acceleration"]["duration_s"] > 10.0
