@@ -114,7 +114,13 @@ def load_for_fit(
     if isinstance(source, Recording):
         if opts.get("with_files"):
             src = str(source.meta.get("source", "<recording>"))
-            rec, _ = merge_with(source, src, list(opts["with_files"]), list(opts.get("with_offsets") or ()))
+            rec, _ = merge_with(
+                source,
+                src,
+                list(opts["with_files"]),
+                list(opts.get("with_offsets") or ()),
+                list(opts.get("with_prefixes") or ()),
+            )
             rec.meta["source"] = src
             return rec
         return source

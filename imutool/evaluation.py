@@ -207,7 +207,9 @@ def run_evaluate(
     inputs: list[dict[str, Any]] = []
     if not isinstance(estimate, Recording):
         opts = {k: v for k, v in load_options.items() if v is not None}
-        estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, **opts)[0]
+        estimate = load_input(
+            os.fspath(estimate), inputs, strict=strict, on_input=on_input, with_clock="own", **opts
+        )[0]
     loaded = None
     if ref_given:
         flags = ", ".join(sorted(reference_text(FLAGS[k]) for k in ref_given))
@@ -222,6 +224,7 @@ def run_evaluate(
             on_input=on_input,
             duplicates="drop",
             backwards="sort",
+            with_clock="own",
             **ref_given,
         )[0]
         loaded = how_loaded(reference, ref_given, reference=True)
@@ -387,7 +390,7 @@ def evaluate_angles(est: Recording, ref: Recording, max_lag_s: float) -> dict[st
     raw = _raw_angles(ref)
     gimbal = None
     if "pitch" in est.channels and "ref_pitch" in ref.channels:
-        pr = interp_to(est.time, ref.time, ref["ref_pitch"]) if ref is not est else ref["ref_pitch"]
+        pr = interp_to(est.time, ref.time, ref["ref_pitch"]) if _apart(est, ref) else ref["ref_pitch"]
         with np.errstate(invalid="ignore"):
             g = (np.abs(pr) > GIMBAL_PITCH_DEG) | (np.abs(np.asarray(est["pitch"], float)) > GIMBAL_PITCH_DEG)
         gimbal = g if g.any() else None
@@ -421,7 +424,7 @@ def evaluate_quaternion_rec(est: Recording, ref: Recording) -> dict[str, Any]:
     if "ref_q" not in ref.channels:
         raise ImutoolError("the reference has no ref_qw..ref_qz columns")
     qr = ref["ref_q"]
-    if ref is not est and (len(ref) != len(est) or not np.array_equal(ref.time, est.time)):
+    if _apart(est, ref) and (est.multi_clock or len(ref) != len(est) or not np.array_equal(ref.time, est.time)):
         qr = interp_to(est.time, ref.time, qr)
         qr = qr / np.linalg.norm(qr, axis=1, keepdims=True)
     mask = None
@@ -433,6 +436,12 @@ def evaluate_quaternion_rec(est: Recording, ref: Recording) -> dict[str, Any]:
     out = evaluate_quaternion(est["q"], qr, mask)
     out["rows"] = "movement rows" if mask is not None else "all rows"
     return out
+
+
+def _apart(est: Recording, ref: Recording) -> bool:
+    """Whether the reference's channels must be interpolated onto the estimate's rows: another recording, or one
+    of many clocks (a ``--with`` file's truth on its own rows, :func:`imutool.loading.merge_with`)."""
+    return ref is not est or est.multi_clock
 
 
 def _raw_angles(ref) -> dict[str, np.ndarray]:
@@ -501,19 +510,20 @@ def plot_errors(est: Recording, ref: Recording, path: str) -> None:
     if not names:
         raise ImutoolError("nothing to plot: no roll/pitch/heading with ref_* columns")
     clock = Clock.of(est)
-    x = clock.x(est.time)  # seconds from the start; dated: UTC clock ticks
     fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.8 * len(names)), squeeze=False, sharex=True)
     for i, n in enumerate(names):
-        r = interp_to(est.time, ref.time, unwrap_deg(ref[f"ref_{n}"]))
-        e = angle_diff_deg(est[n], r)  # on the circle: no ±360° spikes where an angle crosses ±180° or north
+        rows = est.own_rows(n)  # many clocks: the estimate's own samples (another stream's rows are not gaps)
+        x = clock.x(est.time[rows])  # seconds from the start; dated: UTC clock ticks
+        r = interp_to(est.time[rows], ref.time, unwrap_deg(ref[f"ref_{n}"]))
+        e = angle_diff_deg(est[n][rows], r)  # on the circle: no ±360° spikes where an angle crosses ±180° or north
         r = r % 360 if n == "heading" else angle_diff_deg(r)
         axes[i, 0].plot(x, r, "k-", lw=1, label="reference")
-        axes[i, 0].plot(x, est[n], "C0-", lw=0.8, label="estimate")
+        axes[i, 0].plot(x, est[n][rows], "C0-", lw=0.8, label="estimate")
         axes[i, 0].set_ylabel(f"{n} (deg)")
         axes[i, 0].legend(loc="upper right", fontsize=8)
         axes[i, 1].plot(x, e, "C3-", lw=0.8)
         if f"{n}_std" in est.channels:
-            s = est[f"{n}_std"]
+            s = est[f"{n}_std"][rows]
             axes[i, 1].fill_between(x, -2 * s, 2 * s, color="0.8", label="±2σ (filter)")
             axes[i, 1].legend(loc="upper right", fontsize=8)
         axes[i, 1].set_ylabel(f"{n} error (deg)")

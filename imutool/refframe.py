@@ -152,7 +152,7 @@ def vertical_disagreement(est: Recording, ref: Recording) -> float | None:
     de, dr = _down(est, ""), _down(ref, "ref_")
     if de is None or dr is None:
         return None
-    if ref is not est:
+    if ref is not est or est.multi_clock:  # another recording, or truth on its own rows (many clocks)
         dr = interp_to(est.time, ref.time, dr)
     dot = np.sum(de * dr, axis=1) / (np.linalg.norm(de, axis=1) * np.linalg.norm(dr, axis=1))
     dot = dot[np.isfinite(dot)]

@@ -105,9 +105,19 @@ def _input_options(f: Callable, rate_flag: str) -> Callable:
             "with_files",
             multiple=True,
             type=click.Path(exists=True),
-            help="Another recording (a sensor on another clock, e.g. one file per sensor) merged onto INPUT's "
-            "times by linear interpolation, over the span both cover; which file gave which channels is "
-            "recorded in the metadata. Repeatable; channel names must differ.",
+            help="Another recording (a sensor on another clock, e.g. one file per sensor) merged with INPUT: "
+            "interpolated onto INPUT's times over the span both cover where the command needs one grid (filter, "
+            "heave, calibrate...), kept on its own clock as a stream where it does not (evaluate); which file gave "
+            "which channels, and how, is recorded in the metadata. Repeatable; channel names must differ (else "
+            "--with-prefix).",
+        ),
+        click.option(
+            "--with-prefix",
+            "with_prefixes",
+            multiple=True,
+            metavar="P",
+            help="A prefix for a --with file's channel names (two logs of one kind, e.g. 'imu2_' → imu2_gyro): one "
+            "per --with, in order ('' for none).",
         ),
         click.option(
             "--with-offset",
@@ -185,6 +195,13 @@ def reference_options(f: Callable) -> Callable:
             type=FiniteFloat(),
             metavar="S",
             help="Seconds added to a --ref-with file's times: one per --ref-with, in order.",
+        ),
+        click.option(
+            "--ref-with-prefix",
+            "ref_with_prefixes",
+            multiple=True,
+            metavar="P",
+            help="A prefix for a --ref-with file's channel names: one per --ref-with, in order (as --with-prefix).",
         ),
         click.option(
             "--ref-start",
