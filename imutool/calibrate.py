@@ -27,7 +27,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from formats.frames import wrap_deg180
+from formats.frames import angle_diff_deg
 from imutool.loading import (
     FLAGS,
     how_loaded,
@@ -662,7 +662,7 @@ def deviation_card(
                 card,
                 o,
                 comp_at[ok],
-                wrap_deg180(ref_at[ok] - comp_at[ok]),
+                angle_diff_deg(ref_at[ok], comp_at[ok]),
                 title=f"Deviation card — {card.header.get('vessel') or os.path.basename(input_path)}",
             )
     details = {
