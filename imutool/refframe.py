@@ -72,13 +72,17 @@ def parse_ref_frame(value: str | None) -> str | None:
 
 
 def reference_to_ned(
-    ref: Recording, ref_frame: str | None = None, ref_mounting: str | None = None
+    ref: Recording,
+    ref_frame: str | None = None,
+    ref_mounting: str | None = None,
+    prefixes: tuple[str, ...] = ("ref_",),
 ) -> tuple[Recording, dict[str, Any]]:
-    """``ref`` with its ``ref_q`` and ``ref_roll/ref_pitch/ref_heading`` turned into the estimate's body FRD → NED:
-    q = W ⊗ q_ref ⊗ C*, W the world's rotation into NED (:data:`WORLD_TO_NED`), C the ``ref_mounting`` (reference
-    body → estimate body). Angles without a quaternion are taken as ZYX Euler angles in the declared world and
-    converted through one. Returns (recording, what was done: ``world``, ``mounting``, ``converted``, ``how``).
-    Neither given: the reference as it is (its world taken as NED)."""
+    """``ref`` with its orientation (``<prefix>q`` and ``<prefix>roll/pitch/heading`` for each of ``prefixes``:
+    ``ref_`` for truth columns, ``''`` as well for a report's reference file) turned into the estimate's body FRD →
+    NED: q = W ⊗ q_ref ⊗ C*, W the world's rotation into NED (:data:`WORLD_TO_NED`), C the ``ref_mounting``
+    (reference body → estimate body). Angles without a quaternion are taken as ZYX Euler angles in the declared
+    world and converted through one. Returns (recording, what was done: ``world``, ``mounting``, ``converted``,
+    ``how``). Neither given: the reference as it is (its world taken as NED)."""
     world = parse_ref_frame(ref_frame) or "ned"
     info: dict[str, Any] = {"world": world, "mounting": ref_mounting or None}
     if world == "ned" and not ref_mounting:
@@ -91,34 +95,36 @@ def reference_to_ned(
         remap, mis = parse_mounting(ref_mounting)
         c = rotation_about_axes(*np.radians(mis)) @ parse_axis_remap(remap)
     w, qc = WORLD_TO_NED[world], matrix_to_quat(c)
-    has_q = "ref_q" in ref.channels and np.shape(ref["ref_q"])[1:] == (4,)
-    has_angles = all(f"ref_{n}" in ref.channels for n in ANGLES)
-    if not has_q and not has_angles:
-        raise ImutoolError(
-            "--ref-frame/--ref-mounting: the reference has no orientation to convert (ref_qw..ref_qz, or ref_roll, "
-            "ref_pitch and ref_heading)"
-        )
     out = ref.copy()
-    if has_q:
-        q = np.asarray(ref["ref_q"], float)
-        how = "ref_q"
-    else:
-        q = euler_to_quat(*(np.radians(np.asarray(ref[f"ref_{n}"], float)) for n in ANGLES))
-        how = "ref_roll/ref_pitch/ref_heading (ZYX Euler in that world)"
-    q_ned = quat_multiply(quat_multiply(w, q), quat_conjugate(qc))
-    converted = []
-    if has_q:
-        out.channels["ref_q"] = q_ned
-        converted.append("ref_q")
-    angles = dict(zip(ANGLES, (np.degrees(a) for a in quat_to_euler(q_ned)), strict=True))
-    for n in ANGLES:
-        if f"ref_{n}" in ref.channels:
-            out.add(f"ref_{n}", angles[n], "deg")
-            converted.append(f"ref_{n}")
+    converted: list[str] = []
+    hows: list[str] = []
+    for prefix in prefixes:
+        has_q = f"{prefix}q" in ref.channels and np.shape(ref[f"{prefix}q"])[1:] == (4,)
+        has_angles = all(f"{prefix}{n}" in ref.channels for n in ANGLES)
+        if not has_q and not has_angles:
+            continue
+        if has_q:
+            q = np.asarray(ref[f"{prefix}q"], float)
+            hows.append(f"{prefix}q")
+        else:
+            q = euler_to_quat(*(np.radians(np.asarray(ref[f"{prefix}{n}"], float)) for n in ANGLES))
+            hows.append(f"{prefix}roll/{prefix}pitch/{prefix}heading (ZYX Euler in that world)")
+        q_ned = quat_multiply(quat_multiply(w, q), quat_conjugate(qc))
+        if has_q:
+            out.channels[f"{prefix}q"] = q_ned
+            converted.append(f"{prefix}q")
+        angles = dict(zip(ANGLES, (np.degrees(a) for a in quat_to_euler(q_ned)), strict=True))
+        for n in ANGLES:
+            if f"{prefix}{n}" in ref.channels:
+                out.add(f"{prefix}{n}", angles[n], "deg")
+                converted.append(f"{prefix}{n}")
+    if not converted:
+        names = " or ".join(f"{p}qw..{p}qz, or {p}roll, {p}pitch and {p}heading" for p in prefixes)
+        raise ImutoolError(f"--ref-frame/--ref-mounting: the reference has no orientation to convert ({names})")
     out.meta["ref_world"] = "ned"
     info["converted"] = converted
     info["how"] = (
-        f"{how} from a {world.upper()} world"
+        f"{'; '.join(hows)} from a {world.upper()} world"
         + (f" and reference body axes mounted {ref_mounting}" if ref_mounting else "")
         + " into body FRD → NED at load"
     )

@@ -242,3 +242,32 @@ def test_evaluate_start_end_window(tmp_path, capsys):
     assert code == 0 and json.loads(out)["angles"]["roll"]["rmse"] < 0.6
     code, _, err = run_main(["evaluate", str(p), "--start", "30", "--end", "20"], capsys)
     assert code == 2 and "--end" in err
+
+
+def test_heading_report_reference_in_an_enu_world(tmp_path):
+    """A heading report's reference gyro logged as ZYX angles in an ENU world (yaw from east): with --ref-frame enu
+    the evidence equals the NED reference's; the conversion is recorded with the reference input."""
+    from imutool.report.route import run_heading_report
+    from imutool.sim.programmes import heading_test
+
+    dut, ref, _ = heading_test(offset_deg=0.3, hold_s=15.0, rolling_s=40.0)
+    ref.add("pitch", np.zeros(len(ref)), "deg")
+    q_enu = quat_multiply(
+        quat_conjugate(Q_ENU_TO_NED), euler_to_quat(*np.radians([ref["roll"], ref["pitch"], ref["heading"]]))
+    )
+    enu = ref.copy()
+    for n, a in zip(("roll", "pitch", "heading"), quat_to_euler(q_enu), strict=True):
+        enu.add(n, np.degrees(a), "deg")
+    assert np.abs(angle_diff_deg(enu["heading"], ref["heading"])).max() > 45  # yaw from east is not heading
+    paths = [tmp_path / n for n in ("dut.csv", "ref.csv", "enu.csv")]
+    for rec, p in zip((dut, ref, enu), paths, strict=True):
+        formats.write(rec, p)
+    base = run_heading_report(paths[0], paths[1], tmp_path / "a.pdf").summary
+    conv = run_heading_report(paths[0], paths[2], tmp_path / "b.pdf", ref_frame="enu")
+    s = conv.summary
+    assert s["overall"] == base["overall"]
+    st, st0 = s["items"]["static"], base["items"]["static"]
+    assert abs(st["max_abs"] - st0["max_abs"]) < 0.01 and abs(st["rmse"] - st0["rmse"]) < 0.01
+    ev = conv.data["evidence"]
+    ref_in = ev["inputs"]["reference"]
+    assert ref_in["meta"]["reference_frame"]["world"] == "enu"

@@ -13,6 +13,7 @@ import numpy as np
 
 from formats.errors import ImutoolError
 from imutool.loading import load_recording, require_channels  # noqa: F401  (require_channels: re-exported)
+from imutool.refframe import REF_FRAMES
 from imutool.routes import with_inputs
 
 T = TypeVar("T")
@@ -215,6 +216,26 @@ def reference_options(f: Callable) -> Callable:
     for o in reversed(opts):
         f = o(f)
     return f
+
+
+def reference_frame_options(f: Callable) -> Callable:
+    """``--ref-frame`` and ``--ref-mounting``: the world and body axes of a command's reference orientation
+    (parameters ``ref_frame``, ``ref_mounting``; :func:`imutool.refframe.reference_to_ned`)."""
+    f = click.option(
+        "--ref-mounting",
+        default=None,
+        metavar="REMAP[;R,P,Y]",
+        help="The reference's body axes → the estimate's body axes (as --mounting), e.g. 'x,-y,-z' for a FLU "
+        "marker set against an FRD estimate.",
+    )(f)
+    return click.option(
+        "--ref-frame",
+        type=click.Choice(list(REF_FRAMES), case_sensitive=False),
+        default=None,
+        help="The reference's world: ned (as imutool), enu (x east, y north, z up) or zup (a motion-capture volume: "
+        "z up, x its own horizontal axis; heading then from that axis). Its orientation is converted into body "
+        "FRD → NED before comparing.",
+    )(f)
 
 
 class ClockTime(click.ParamType):

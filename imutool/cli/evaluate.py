@@ -17,13 +17,13 @@ from imutool.cli.common import (
     emit_summary,
     input_options,
     note_input,
+    reference_frame_options,
     reference_options,
     route_of,
     safe_outputs,
     strict_requested,
 )
 from imutool.evaluation import CHANNELS, parse_align_heading, run_evaluate
-from imutool.refframe import REF_FRAMES
 
 
 def _align(value: str | None) -> str | None:
@@ -100,21 +100,7 @@ def evaluate_route(
     help="Add a constant heading offset (deg) to the reference (a motion-capture frame's x axis is not north); "
     "'auto' estimates it as the circular mean of estimate − reference heading and reports it.",
 )
-@click.option(
-    "--ref-frame",
-    type=click.Choice(list(REF_FRAMES), case_sensitive=False),
-    default=None,
-    help="The reference's world: ned (as imutool), enu (x east, y north, z up) or zup (a motion-capture volume: "
-    "z up, x its own horizontal axis; heading then from that axis, see --align-heading). Converted into body FRD → "
-    "NED before comparing; without it a reference whose vertical disagrees with the estimate's is warned about.",
-)
-@click.option(
-    "--ref-mounting",
-    default=None,
-    metavar="REMAP[;R,P,Y]",
-    help="The reference's body axes → the estimate's body axes (as --mounting), e.g. 'x,-y,-z' for a FLU marker "
-    "set against an FRD estimate.",
-)
+@reference_frame_options
 @click.option(
     "--start",
     "t_start",
