@@ -207,9 +207,9 @@ def run_evaluate(
     inputs: list[dict[str, Any]] = []
     if not isinstance(estimate, Recording):
         opts = {k: v for k, v in load_options.items() if v is not None}
-        estimate = load_input(
-            os.fspath(estimate), inputs, strict=strict, on_input=on_input, with_clock="own", **opts
-        )[0]
+        estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, with_clock="own", **opts)[
+            0
+        ]
     loaded = None
     if ref_given:
         flags = ", ".join(sorted(reference_text(FLAGS[k]) for k in ref_given))

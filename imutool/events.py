@@ -47,7 +47,6 @@ from typing import Any
 
 import numpy as np
 
-import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError

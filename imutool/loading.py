@@ -116,11 +116,12 @@ def load_recording(
     (sensors on other clocks) merged with this one (:func:`merge_with`; with_offsets: seconds added to each one's
     times, in order; with_prefixes: a prefix for each one's channel names, in order — two logs of one kind;
     with_clock: ``grid`` interpolates them onto this one's times, for a command that needs one grid, ``own`` keeps
-    each on its own clock as a stream, :data:`WITH_CLOCKS`); topic/stamp: bag topic and time source; duplicates/backwards: validation policies
-    (:meth:`formats.Recording.validated`); mounting: sensor→body ``'x,-y,-z[;r,p,y]'`` (deg);
-    calibration_file: calibration TOML applied before mounting. The report holds rows read/kept/dropped and why,
-    samples bridged, ``warnings`` (implausible units or axes, rows dropped...) and ``plausibility_figures``; what
-    validation did and the warnings also go into ``rec.meta``. ``strict``: warnings raise an ImutoolError.
+    each on its own clock as a stream, :data:`WITH_CLOCKS`); topic/stamp: bag topic and time source;
+    duplicates/backwards: validation policies (:meth:`formats.Recording.validated`); mounting: sensor→body
+    ``'x,-y,-z[;r,p,y]'`` (deg); calibration_file: calibration TOML applied before mounting. The report holds
+    rows read/kept/dropped and why, samples bridged, ``warnings`` (implausible units or axes, rows dropped...) and
+    ``plausibility_figures``; what validation did and the warnings also go into ``rec.meta``. ``strict``: warnings
+    raise an ImutoolError.
     """
     from formats import plausibility
 

@@ -34,9 +34,9 @@ from formats.frames import (
     Q_FLU_TO_FRD,
     euler_to_quat,
     matrix_to_quat,
+    parse_axis_remap,
     quat_conjugate,
     quat_multiply,
-    parse_axis_remap,
     quat_to_euler,
     rotation_about_axes,
 )

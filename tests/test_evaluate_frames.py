@@ -52,7 +52,9 @@ def _estimate(truth: Recording, tilt_deg: float = 1.5) -> Recording:
 
 # -- item 7: on the circle -------------------------------------------------------------------------------------
 def test_angle_diff_is_on_the_circle_and_exact_inside():
-    d = angle_diff_deg(np.array([179.0, -179.0, 180.0, -180.0, 540.0, 0.1, np.nan]), np.array([-179, 179, 0, 0, 0, 0, 0]))
+    d = angle_diff_deg(
+        np.array([179.0, -179.0, 180.0, -180.0, 540.0, 0.1, np.nan]), np.array([-179, 179, 0, 0, 0, 0, 0])
+    )
     assert d[:4].tolist() == [-2.0, 2.0, 180.0, 180.0] and d[4] == 180.0 and d[5] == 0.1 and np.isnan(d[6])
     x = np.random.default_rng(1).uniform(-170, 170, 100)
     assert np.array_equal(angle_diff_deg(x, x / 3), x - x / 3)  # bit for bit inside ±180°

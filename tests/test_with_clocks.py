@@ -64,7 +64,10 @@ def test_with_keeps_its_own_clock_for_evaluate(tmp_path, capsys):
     assert abs(joined["angles"]["roll"]["rmse"] - 0.25) < 0.01
     assert abs(joined["angles"]["roll"]["rmse"] - apart["angles"]["roll"]["rmse"]) < 1e-3
     assert joined["angles"]["roll"]["n"] == apart["angles"]["roll"]["n"]
-    assert abs(joined["quaternion"]["total"]["rmse"] - 0.25) < 0.01 and joined["quaternion"]["n"] == apart["quaternion"]["n"]
+    assert (
+        abs(joined["quaternion"]["total"]["rmse"] - 0.25) < 0.01
+        and joined["quaternion"]["n"] == apart["quaternion"]["n"]
+    )
     code, out, err = run_main(["evaluate", str(pe), "--with", str(pr), "--json"], capsys)
     s = json.loads(out)
     assert code == 0 and abs(s["angles"]["roll"]["rmse"] - 0.25) < 0.01
