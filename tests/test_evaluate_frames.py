@@ -273,3 +273,24 @@ def test_heading_report_reference_in_an_enu_world(tmp_path):
     ev = conv.data["evidence"]
     ref_in = ev["inputs"]["reference"]
     assert ref_in["meta"]["reference_frame"]["world"] == "enu"
+
+
+def test_broad_sensor_truth_follows_the_mounting_through_filter(shared, tmp_path, capsys):
+    """BROAD declares its ref_q sensor→NED (its `ref_q*` header): `filter --mounting` turns it into body→NED with the
+    sensor channels (stated in the output's metadata), so `evaluate` compares like with like either way."""
+    rec = formats.read(shared("broad", "02_undisturbed_slow_rotation_B.csv")).select(slice(0, 15000))
+    src = tmp_path / "b02.csv"
+    formats.write(rec, src)
+    errs = {}
+    for mounting in (None, "y,x,-z"):
+        out = tmp_path / f"est_{mounting is not None}.csv"
+        extra = ["--mounting", mounting] if mounting else []
+        code, _, err = run_main(["filter", str(src), "-o", str(out), "-q", *extra], capsys)
+        assert code == 0, err
+        code, text, err = run_main(["evaluate", str(out), "--json"], capsys)
+        s = json.loads(text)
+        assert code == 0 and "warnings" not in s
+        errs[mounting] = s["quaternion"]["inclination"]["rmse"]
+    assert errs[None] < 3.0 and abs(errs["y,x,-z"] - errs[None]) < 0.5, errs
+    back = formats.read(tmp_path / "est_True.csv")
+    assert back.meta["ref_frame"] == "body" and "sensor→NED" in back.meta["ref_mounting"]
