@@ -12,7 +12,7 @@ Method (documented in docs/report.md):
    1/8 of the spectral peak period; :mod:`imutool.roll_period`) into alternating *excursions*: a starboard
    excursion starts when it rises above +h and ends when it falls below −h; a port excursion the other way round.
    The centre is the mean heel (a centred running mean over ``centre_window_s``, default 120 s) or 0 (a level
-   ship, e.g. a motion table: ``centre='zero'``); h is scaled to the roll (0.15 × its running RMS, at least
+   ship, e.g. a motion table: ``centre='zero'``); h is scaled to the roll (0.1 × its running RMS, at least
    0.05°) unless a fixed ``hysteresis_deg`` is given. Oscillations smaller than ±h (noise, ripples on a crest)
    never switch the state, so a crest with two humps is one excursion, while every real roll cycle, small or
    biased by a list, is counted (a fixed ±0.5° about 0° counted two or three cycles of small or listed roll as
@@ -270,6 +270,11 @@ def _crest_width(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: 
 
 
 D = ROLL_DEFAULTS
+
+MOTION_TABLE: dict[str, Any] = {"centre": "zero", "smooth_frac": 0.0}
+"""Settings for a motion table's programme (the inclinometer report, its simulated device): level is 0° (static
+steps would move a mean heel) and no smoothing (one programme spans roll periods of 4–30 s, and the smoothing is
+a fraction of the one spectral peak period of the window)."""
 
 
 def detect(

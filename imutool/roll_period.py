@@ -5,8 +5,10 @@ a fixed ±0.5° band around 0° (the method before issue 48) misses the small cy
 the crossings of the far side: two or three cycles count as one and the period comes out ~2× too long. Here the
 period is measured on the **detection series**:
 
-1. **centre**: the mean heel, a centred moving average over ``centre_window_s`` (default 120 s; ``centre="zero"``
-   keeps a level ship's 0°, e.g. a motion table);
+1. **centre**: the mean heel over ``centre_window_s`` (default 120 s): a centred moving average cuts the first
+   cycles, then the mean over whole cycles (:func:`cycle_mean_centre`: a window that is not a whole number of
+   periods would leak the roll into the centre, the amplitudes and the crossings); ``centre="zero"`` keeps a
+   level ship's 0°, e.g. a motion table;
 2. **detrended roll** r = heel − centre;
 3. **spectral peak period** Tp of r: Welch (Hann segments, 50 % overlap, zero-padded ×8, parabolic interpolation
    of the peak) on r resampled to its median sample interval; the segment is the whole window's periodogram peak
@@ -16,9 +18,9 @@ period is measured on the **detection series**:
    of its amplitude; sensor noise and ripples above ~2.5 × the peak frequency are damped); skipped when it would
    span fewer than 3 samples;
 5. **hysteresis scaled to the roll**: ``hysteresis_frac`` × the running RMS of the smoothed r over the centre
-   window (default 0.15 × RMS), at least ``hysteresis_min_deg`` (0.05°); a fixed ``hysteresis_deg`` overrides it.
-   At 0.15 × RMS the half-cycles a narrow-band roll loses are those with an amplitude below ~0.1 × its significant
-   amplitude (~1 %); at 0.5 × RMS ~12 %.
+   window (default 0.1 × RMS), at least ``hysteresis_min_deg`` (0.05°); a fixed ``hysteresis_deg`` overrides it.
+   At 0.1 × RMS a narrow-band (Rayleigh) roll loses the half-cycles with an amplitude below 0.1 σ (0.5 % of them);
+   at 0.5 × RMS 12 %, and each one lost merges two cycles into one.
 
 Three period estimates are then compared (:func:`period_estimates`): the **peak-to-peak** period (the method: mean
 time between successive maxima on the same side, MSC.363(92) §3, both sides pooled; periods over 3 × their median
@@ -183,23 +185,19 @@ class Detection:
     settings: dict[str, Any]
 
 
-def detection(
+def _series(
     t: np.ndarray,
-    heel_deg: np.ndarray,
+    x: np.ndarray,
+    c: np.ndarray,
+    tp: float,
     hysteresis_deg: float | None,
-    centre: str,
     centre_window_s: float,
-    max_period_s: float,
     hysteresis_frac: float,
     hysteresis_min_deg: float,
     smooth_frac: float,
-) -> Detection:
-    """Centre, smoothed detrended roll and hysteresis of a heel series (t s, heel deg) — steps 1–5 of the module
-    doc. ``centre`` is 'running' (mean heel) or 'zero'; the caller validates it."""
-    x = np.asarray(heel_deg, float)
-    c = running_mean(t, x, centre_window_s) if centre == "running" else np.zeros_like(x)
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(v, h, smoothing window s) of heel x about centre c: steps 4 and 5 of the module doc."""
     r = x - c
-    tp = spectral_peak_period(t, r, max_period_s)
     ok = np.isfinite(r)
     dt = float(np.median(np.diff(t[ok]))) if ok.sum() > 1 else 0.0
     w = smooth_frac * tp if np.isfinite(tp) else 0.0
@@ -212,14 +210,69 @@ def detection(
         h = np.maximum(hysteresis_frac * np.nan_to_num(rms), hysteresis_min_deg)
     else:
         h = np.full(x.shape, float(hysteresis_deg))
-    used = float(np.median(h)) if h.size else float("nan")
+    return v, h, float(w)
+
+
+def cycle_mean_centre(t: np.ndarray, x: np.ndarray, v: np.ndarray, h: np.ndarray, window_s: float) -> np.ndarray | None:
+    """The mean heel over whole roll cycles: each cycle (up-crossing to up-crossing of v with hysteresis h) has the
+    mean of its samples of x; the centre at a time is the duration-weighted mean of the cycles whose middle lies
+    within ±window_s/2 (the nearest cycle's where none does). A moving average over a window that is not a whole
+    number of periods leaks the roll into the centre (up to amplitude × period / (π × window), more at the ends of
+    the record where the window is cut): whole cycles do not. None with fewer than 2 cycles."""
+    ok = np.isfinite(x) & np.isfinite(v)
+    idx = np.flatnonzero(ok)
+    side, i0, _i1, _ie, _g = excursions(np.ascontiguousarray(v[idx]), np.ascontiguousarray(h[idx]))
+    up = idx[i0[side == 1]]
+    if up.size < 3:
+        return None
+    cs = np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))])
+    cn = np.concatenate([[0], np.cumsum(ok)])
+    a, b = up[:-1], up[1:]
+    mean = (cs[b] - cs[a]) / np.maximum(cn[b] - cn[a], 1)
+    dur = t[b] - t[a]
+    mid = 0.5 * (t[a] + t[b])
+    wsum = np.concatenate([[0.0], np.cumsum(dur)])
+    msum = np.concatenate([[0.0], np.cumsum(dur * mean)])
+    lo = np.searchsorted(mid, t - window_s / 2, side="left")
+    hi = np.searchsorted(mid, t + window_s / 2, side="right")
+    near = np.clip(np.searchsorted(mid, t), 0, mid.size - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(hi > lo, (msum[hi] - msum[lo]) / (wsum[hi] - wsum[lo]), mean[near])
+
+
+def detection(
+    t: np.ndarray,
+    heel_deg: np.ndarray,
+    hysteresis_deg: float | None,
+    centre: str,
+    centre_window_s: float,
+    max_period_s: float,
+    hysteresis_frac: float,
+    hysteresis_min_deg: float,
+    smooth_frac: float,
+) -> Detection:
+    """Centre, smoothed detrended roll and hysteresis of a heel series (t s, heel deg) — steps 1–5 of the module
+    doc. ``centre`` is 'running' (mean heel) or 'zero'; the caller validates it. The running centre is found in
+    two passes: a moving average cuts the first cycles, whose whole-cycle means (:func:`cycle_mean_centre`) are
+    the centre the cycles are then cut about."""
+    x = np.asarray(heel_deg, float)
+    c = running_mean(t, x, centre_window_s) if centre == "running" else np.zeros_like(x)
+    tp = spectral_peak_period(t, x - c, max_period_s)
+    args = (hysteresis_deg, centre_window_s, hysteresis_frac, hysteresis_min_deg, smooth_frac)
+    v, h, w = _series(t, x, c, tp, *args)
+    if centre == "running":
+        c2 = cycle_mean_centre(t, x, v, h, centre_window_s)
+        if c2 is not None:
+            c = c2
+            v, h, w = _series(t, x, c, tp, *args)
+    ok = np.isfinite(x)
     settings = {
         "hysteresis": "auto" if hysteresis_deg is None else "fixed",
-        "hysteresis_median_deg": round(used, 4),
-        "smoothing_s": round(float(w), 4),
-        "mean_heel_deg": round(float(np.nanmean(c)), 4) if ok.any() else None,
+        "hysteresis_median_deg": round(float(np.median(h)), 4) if h.size else None,
+        "smoothing_s": round(w, 4),
+        "mean_heel_deg": round(float(np.nanmean(c[ok])), 4) if ok.any() else None,
     }
-    return Detection(c, v, h, float(tp), float(w), settings)
+    return Detection(c, v, h, float(tp), w, settings)
 
 
 def typical(d: np.ndarray, max_period_s: float = 60.0) -> np.ndarray:
@@ -238,6 +291,8 @@ def zero_up_crossing_period(
     (linear between the samples: the mean interval is the same as between the zero crossings). Intervals over
     ``max_period_s`` or 3 × the median interval (gaps, calm stretches: :func:`typical`) are left out. (NaN, 0)
     with fewer than 2 crossings."""
+    ok = np.isfinite(v)  # the heel's own samples (a log of several streams has other streams' rows between)
+    t, v = np.asarray(t, float)[ok], np.ascontiguousarray(v[ok])
     side, i0, _i1, _ie, _gen = excursions(v, np.full(v.shape, float(deadband_deg)))
     up = i0[side == 1]
     up = up[up > 0]

@@ -40,13 +40,17 @@ def test_period_and_amplitudes_match_truth(noise):
     t, heel, true_peaks = chirp_roll(a_stbd=a_s, a_port=a_p)
     x = heel + np.random.default_rng(3).normal(0.0, noise, heel.size)
     rs = roll_stats(t, x)
+    level = roll_cycles(t, x, centre="zero")  # amplitudes from level (a level ship): the heel to each side
     for side, amp in ((STBD, a_s), (PORT, a_p)):
         c = rs.cycles.of_side(side)
         tp = true_peaks[side]
         assert len(c) >= len(tp) - 2  # every maximum found but the first/last (edges)
         j = np.array([np.argmin(np.abs(tp - x0)) for x0 in c.t_peak])
         assert np.all(np.abs(tp[j] - c.t_peak) < 0.1)
-        assert np.max(np.abs(c.amplitude_deg - amp)) < 0.1
+        assert np.max(np.abs(side * c.peak_deg - amp)) < 0.1  # the heel of the maximum, from level
+        assert np.max(np.abs(level.of_side(side).amplitude_deg - amp)) < 0.1
+        # by default from the mean heel (≈ (12 − 7)/π = 1.6° for this asymmetric roll): 10.4° and 8.6°
+        assert np.max(np.abs(c.amplitude_deg - (amp - side * (a_s - a_p) / np.pi))) < 0.5
         ok = np.isfinite(c.period_s)
         true_period = tp[j[ok]] - tp[j[ok] - 1]
         assert ok.sum() >= len(tp) - 3
@@ -73,10 +77,12 @@ def test_peak_hold_exact_with_resets():
 def test_hysteresis_ignores_small_oscillations_and_noise():
     t = np.arange(0, 200, 0.05)
     ripple = 0.3 * np.sin(2 * np.pi * t / 0.7)  # ±0.3° fast ripple, smaller than the 0.5° hysteresis
-    assert len(roll_cycles(t, ripple)) == 0
+    assert len(roll_cycles(t, ripple, hysteresis_deg=0.5)) == 0  # a fixed hysteresis
     heel = 10 * np.sin(2 * np.pi * t / 10.0) + ripple  # crests with several humps each
-    c = roll_cycles(t, heel)
-    assert abs(len(c) - 40) <= 1  # one excursion per half cycle, no extra ones from the ripple
+    c = roll_cycles(t, heel)  # the hysteresis scaled to the roll: 0.1 × 7.1° RMS
+    # one excursion per half cycle, no extra ones from the ripple (the first is dropped when the smoothed series
+    # starts outside the band, the last is still open)
+    assert 38 <= len(c) <= 41
     ok = np.isfinite(c.period_s)
     assert np.max(np.abs(c.period_s[ok] - 10.0)) < 0.1
 
@@ -85,7 +91,7 @@ def test_nan_samples_skipped_and_recording_start_inside_excursion_dropped():
     t = np.arange(0, 100, 0.1)
     heel = 8 * np.cos(2 * np.pi * t / 10.0)  # starts at a starboard maximum: that excursion is partial
     heel[200:210] = np.nan
-    c = roll_cycles(t, heel)
+    c = roll_cycles(t, heel, centre="zero")  # level ship (the gap would move a mean heel by 0.1°)
     assert c.t_peak[0] > 4.0  # the partial first excursion (peak at t=0) is not reported
     assert np.all(np.isfinite(c.amplitude_deg))
     assert np.max(np.abs(c.amplitude_deg - 8.0)) < 0.05
@@ -146,9 +152,13 @@ def test_roll_cli(tmp_path):
     src = tmp_path / "est.csv"
     formats.write(rec, src)
     out, cyc = tmp_path / "roll_stats.csv", tmp_path / "cycles.csv"
-    r = CliRunner().invoke(cli, ["roll", str(src), "-o", str(out), "--cycles", str(cyc), "--json"])
+    args = ["roll", str(src), "-o", str(out), "--cycles", str(cyc), "--json", "--centre", "zero"]
+    r = CliRunner().invoke(cli, args)
     assert r.exit_code == 0, r.output
     s = json.loads(r.stdout)
+    est = s["period_estimates"]
+    for k in ("peak_to_peak_s", "zero_up_crossing_s", "spectral_peak_s"):
+        assert 8.0 < est[k] < 12.0, est  # the chirp's period runs from 8 to 12 s
     assert s["starboard"]["excursions"] >= 10 and s["port"]["excursions"] >= 10
     assert abs(s["starboard"]["amplitude_mean_deg"] - 12.0) < 0.1
     back = formats.read(out)
