@@ -106,8 +106,13 @@ def test_running_centre_for_a_listing_ship():
     pt = c.of_side(PORT)
     ok = np.isfinite(st.period_s)
     assert np.max(np.abs(st.period_s[ok] - 12.0)) < 0.1
-    assert np.max(np.abs(st.peak_deg - 13.0)) < 0.1  # amplitudes stay absolute heel (relative to level)
+    assert np.max(np.abs(st.peak_deg - 13.0)) < 0.1  # the maxima stay absolute heel (relative to level)
     assert np.max(np.abs(pt.peak_deg - 3.0)) < 0.1
+    # amplitudes from the mean heel: 5° to each side (not 13° and "3° to port", a heel that never went to port)
+    assert np.max(np.abs(st.amplitude_deg - 5.0)) < 0.1 and np.max(np.abs(pt.amplitude_deg - 5.0)) < 0.1
+    s = roll_stats(t, heel, centre_window_s=60.0).summary()
+    assert abs(s["mean_heel_deg"] - 8.0) < 0.05 and s["amplitude_from"] == "mean heel"
+    assert abs(s["starboard"]["heel_max_deg"] - 13.0) < 0.1 and abs(s["port"]["heel_max_deg"] + 3.0) < 0.1
 
 
 def test_per_sample_values_are_causal():
@@ -243,3 +248,119 @@ def test_low_rate_peak_time_is_interpolated():
     assert np.max(np.abs(c.t_peak - true)) < 0.1
     ok = np.isfinite(c.period_s)
     assert np.max(np.abs(c.period_s[ok] - 11.0)) < 0.15
+
+
+# -- issue 48: the period of small, irregular, biased sea roll -------------------------------------------------------
+
+OLD = {"hysteresis_deg": 0.5, "centre": "zero", "smooth_frac": 0.0}  # the method before issue 48 (±0.5° about 0°)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_listed_irregular_roll_period_not_doubled(seed):
+    """A ship listed 2.35° in a narrow-band JONSWAP roll (4° significant, known Tz): about 0° with ±0.5° most port
+    crossings are missed (periods 1.5-2× Tz); about the mean heel with a scaled hysteresis within 5 %."""
+    from imutool.sim.sea import irregular_roll
+
+    t, x, truth = irregular_roll(duration=1200.0, seed=seed, significant_deg=4.0, list_deg=2.35)
+    tz = truth["tz_s"]
+    old = roll_stats(t, x, **OLD).summary()
+    assert old["starboard"]["period_mean_s"] > 1.4 * tz and old["port"]["period_mean_s"] > 1.4 * tz
+    rs = roll_stats(t, x)
+    s = rs.summary()
+    for side in ("starboard", "port"):
+        assert abs(s[side]["period_mean_s"] / tz - 1) < 0.05, (side, s[side], tz)
+    est = s["period_estimates"]
+    assert abs(est["peak_to_peak_s"] / tz - 1) < 0.05 and abs(est["zero_up_crossing_s"] / tz - 1) < 0.05
+    assert abs(est["spectral_peak_s"] / truth["tp_s"] - 1) < 0.05
+    assert abs(s["mean_heel_deg"] - 2.35) < 0.1 and not rs.warnings
+    # the per-sample period HRM sends comes from the same cycles
+    per = rs.roll_period[np.isfinite(rs.roll_period)]
+    assert abs(np.median(per) / tz - 1) < 0.1
+    # amplitudes from the mean heel: the significant amplitude is 4°, so the mean half-cycle is ~2.5° on each side
+    for side in ("starboard", "port"):
+        assert 1.8 < s[side]["amplitude_mean_deg"] < 3.2, s[side]
+
+
+def test_period_disagreement_warns_on_bimodal_roll_not_on_a_clean_one(tmp_path):
+    """Swell (16 s) and wind-sea roll (6 s) of equal energy: peak-to-peak ~8 s, spectral peak ~16 s → a warning
+    naming the three periods (stderr, JSON); a narrow-band roll alone → none."""
+    from imutool.sim.sea import irregular_roll
+
+    t, a, _ = irregular_roll(duration=1200.0, seed=0, roll_period=6.0, significant_deg=3.0)
+    _, b, _ = irregular_roll(duration=1200.0, seed=10, roll_period=16.0, significant_deg=3.0, noise_deg=0.0)
+    rs = roll_stats(t, a + b)
+    assert len(rs.warnings) == 1 and rs.periods["spread"] > 0.5
+    w = rs.warnings[0]
+    assert "peak-to-peak" in w and "zero-up-crossing" in w and "spectral peak" in w
+    clean = roll_stats(t, a)
+    assert clean.warnings == [] and clean.periods["spread"] < 0.15
+    # through the command: stderr and the JSON summary
+    src = tmp_path / "bimodal.csv"
+    formats.write(Recording(t, {"roll": a + b}), src)
+    r = CliRunner().invoke(cli, ["roll", str(src), "-o", str(tmp_path / "o.csv"), "--json"])
+    assert r.exit_code == 0, r.output
+    assert "roll period estimates disagree" in r.stderr
+    assert json.loads(r.stdout)["warnings"] == rs.warnings
+
+
+def test_any_window_and_the_minimum_window():
+    """The array functions work on any window (the live mode's trailing windows): 2 min of a 12 s roll gives the
+    period; a window of under 4 periods gives no mean period and no cross-check (no warning either)."""
+    from imutool.sim.sea import irregular_roll
+
+    t, x, truth = irregular_roll(duration=600.0, seed=3, significant_deg=3.0, list_deg=1.0)
+    for a in (0.0, 200.0, 480.0):
+        m = (t >= a) & (t < a + 120.0)
+        est = roll_stats(t[m], x[m]).periods
+        assert est["peak_to_peak_s"] is not None and abs(est["peak_to_peak_s"] / truth["tz_s"] - 1) < 0.2
+    m = t < 20.0
+    rs = roll_stats(t[m], x[m])
+    assert rs.periods["peak_to_peak_s"] is None and rs.periods["spread"] is None and rs.warnings == []
+
+
+@pytest.mark.parametrize(
+    "name, window",
+    [
+        ("3012_1 camera", (28.0, 50.0)),
+        ("3012_1 camera", (50.0, 64.0)),
+        ("3012_1 accel", (28.0, 50.0)),
+        ("4061_1 camera", (24.0, 53.0)),
+        ("3012_1 camera", None),
+        ("4061_1 camera", None),
+    ],
+)
+def test_real_flume_roll_period_within_10_percent_of_zero_crossing(shared, name, window):
+    """NTNU flume (camera roll; the accelerometer pair's roll of 3012_1): the method's mean period within 10 % of
+    the zero-up-crossing period, whole records (calm before the waves) and their rolling windows; on 4061_1 (roll
+    locked, 0.3-0.7° left) the old ±0.5°-about-0° method gave 2-3× the 1.17 s wave period."""
+    rec_name, kind = name.split()
+    p = shared("ntnu_waves", f"{rec_name}.csv")
+    rec = formats.read(p)
+    t = rec.time
+    if kind == "camera":
+        x = np.degrees(rec["roll"])
+    else:
+        import imutool.gyrofree as G
+
+        r = G.planar_roll(t, rec["acc_heave_ps"], rec["acc_heave_sb"], [0, -0.13, 0], [0, 0.13, 0], [0, 0, -1])
+        x = np.degrees(r["roll"])
+    if window:
+        m = (t >= window[0]) & (t < window[1])
+        t, x = t[m], x[m]
+    est = roll_stats(t, x).periods
+    assert abs(est["peak_to_peak_s"] / est["zero_up_crossing_s"] - 1) < 0.10, est
+    if rec_name == "4061_1" and window:
+        assert abs(est["peak_to_peak_s"] - 1.158) < 0.06  # the wave period (MANIFEST)
+        old = roll_stats(t, x, **OLD).summary()
+        assert old["starboard"]["period_mean_s"] > 2.0 and old["port"]["period_mean_s"] > 1.8
+
+
+def test_real_sailing_log_period_cross_check(shared):
+    """gpsd bundg_zeus_9 (XDR heel at 1 Hz): the method within 10 % of the zero-up-crossing period; the spectral
+    peak (a 148 s log at 1 Hz, the boat's roll aliased) disagrees and the warning says so."""
+    rec = formats.read(shared("nmea_gpsd", "bundg_zeus_9.log"))
+    t, x = rec.series("roll")
+    rs = roll_stats(t, x)
+    est = rs.periods
+    assert abs(est["peak_to_peak_s"] / est["zero_up_crossing_s"] - 1) < 0.10, est
+    assert len(rs.warnings) == 1 and "spectral peak" in rs.warnings[0]
