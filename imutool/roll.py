@@ -53,6 +53,7 @@ from imutool.roll_period import (  # noqa: F401  (running_mean, excursions: re-e
     excursions,
     period_estimates,
     running_mean,
+    typical,
 )
 from imutool.routes import OnInput, RouteResult, load_input
 
@@ -156,11 +157,11 @@ class RollStats:
         out["amplitude_from"] = "mean heel" if self.settings.get("centre") == "running" else "level (0°)"
         for name, s in (("port", PORT), ("starboard", STBD)):
             c = self.cycles.of_side(s)
-            per = c.period_s[np.isfinite(c.period_s)]
+            per = typical(c.period_s, self.settings.get("max_period_s", D["max_period_s"]))
             out[name] = {
                 "excursions": len(c),
-                "periods": int(per.size),
-                "period_mean_s": float(per.mean()) if per.size else None,
+                "periods": int(np.isfinite(c.period_s).sum()),
+                "period_mean_s": float(per.mean()) if per.size else None,  # over the typical periods (≤ 3 × median)
                 "amplitude_mean_deg": float(c.amplitude_deg.mean()) if len(c) else None,
                 "amplitude_max_deg": float(c.amplitude_deg.max()) if len(c) else None,
                 "heel_max_deg": float(np.max(s * c.peak_deg)) if len(c) else None,  # from level, + to this side

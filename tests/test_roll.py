@@ -255,6 +255,12 @@ def test_low_rate_peak_time_is_interpolated():
 OLD = {"hysteresis_deg": 0.5, "centre": "zero", "smooth_frac": 0.0}  # the method before issue 48 (±0.5° about 0°)
 
 
+def old_periods(t, x):
+    """Mean starboard and port periods as the method before issue 48 reported them (every period, no calm filter)."""
+    c = roll_cycles(t, x, **OLD)
+    return [np.nanmean(c.of_side(s).period_s) for s in (STBD, PORT)]
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_listed_irregular_roll_period_not_doubled(seed):
     """A ship listed 2.35° in a narrow-band JONSWAP roll (4° significant, known Tz): about 0° with ±0.5° most port
@@ -263,8 +269,7 @@ def test_listed_irregular_roll_period_not_doubled(seed):
 
     t, x, truth = irregular_roll(duration=1200.0, seed=seed, significant_deg=4.0, list_deg=2.35)
     tz = truth["tz_s"]
-    old = roll_stats(t, x, **OLD).summary()
-    assert old["starboard"]["period_mean_s"] > 1.4 * tz and old["port"]["period_mean_s"] > 1.4 * tz
+    assert min(old_periods(t, x)) > 1.4 * tz
     rs = roll_stats(t, x)
     s = rs.summary()
     for side in ("starboard", "port"):
@@ -351,8 +356,7 @@ def test_real_flume_roll_period_within_10_percent_of_zero_crossing(shared, name,
     assert abs(est["peak_to_peak_s"] / est["zero_up_crossing_s"] - 1) < 0.10, est
     if rec_name == "4061_1" and window:
         assert abs(est["peak_to_peak_s"] - 1.158) < 0.06  # the wave period (MANIFEST)
-        old = roll_stats(t, x, **OLD).summary()
-        assert old["starboard"]["period_mean_s"] > 2.0 and old["port"]["period_mean_s"] > 1.8
+        assert min(old_periods(t, x)) > 2.0
 
 
 def test_real_sailing_log_period_cross_check(shared):

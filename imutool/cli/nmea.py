@@ -210,6 +210,8 @@ def nmea_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """
     res = nmea_route(on_input=note_input, **options)
     s, plan = res.summary, (res.data or {})["plan"]
+    for w in s.get("warnings") or []:
+        click.echo(f"warning: {s['input']}: {w}", err=True)
     counts, output, serial_port = s["sentences"], s["output"], s["serial"]
     lines = [
         f"{s['input']}: {sum(counts.values())} sentences ({', '.join(f'{k} {v}' for k, v in counts.items())})"

@@ -57,9 +57,12 @@ class Hysteresis(click.ParamType):
         if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
             return None
         try:
-            return float(value)
+            v = float(value)
         except (TypeError, ValueError):
             self.fail(f"{value!r}: expected 'auto' or a number of degrees", param, ctx)
+        if not 0 <= v <= 90:
+            self.fail(f"{value!r}: expected 'auto' or a hysteresis in [0, 90] deg", param, ctx)
+        return v
 
 
 def _frac_option(flag: str, dest: str, text: str):

@@ -267,7 +267,7 @@ def irregular_roll(
     phase = rng.uniform(0, 2 * np.pi, w.size)
     t = np.arange(int(round(duration * rate_hz))) / rate_hz
     x = np.zeros_like(t)
-    for a, om, ph in zip(amp, w, phase):
+    for a, om, ph in zip(amp, w, phase, strict=True):
         x += a * np.cos(om * t + ph)
     m0, m2 = np.sum(amp**2) / 2, np.sum(amp**2 * w**2) / 2
     x *= significant_deg / (2 * np.sqrt(m0)) if m0 > 0 else 0.0
