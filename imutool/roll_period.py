@@ -11,9 +11,9 @@ period is measured on the **detection series**:
    level ship's 0°, e.g. a motion table;
 2. **detrended roll** r = heel − centre;
 3. **spectral peak period** Tp of r: Welch (Hann segments, 50 % overlap, zero-padded ×8, parabolic interpolation
-   of the peak) on r resampled to its median sample interval; the segment is the whole window's periodogram peak
-   × 8 or a quarter of the window, whichever is longer (never longer than the window); periods longer than
-   ``max_period_s`` are not searched;
+   of the peak) on r resampled to its median sample interval; a segment spans 32 periods of the whole window's
+   periodogram peak (the whole window when shorter: one periodogram); periods longer than ``max_period_s`` are not
+   searched;
 4. **smoothing**: a centred moving average of r over ``smooth_frac`` × Tp (default 1/8: the roll peak keeps 97 %
    of its amplitude; sensor noise and ripples above ~2.5 × the peak frequency are damped); skipped when it would
    span fewer than 3 samples;
@@ -48,6 +48,7 @@ from numba import njit
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 
 MIN_CYCLES = 3
+NFFT_MAX = 2**20  # zero-padding stops here (a day at 50 Hz is 4.3 M samples)
 """Zero-up-crossing intervals (and same-side periods) needed before a period estimate is reported."""
 
 
@@ -158,12 +159,12 @@ def spectral_peak_period(t: np.ndarray, r: np.ndarray, max_period_s: float = 60.
         return float("nan")
     x = x - x.mean()
     fmin = 1.0 / max_period_s
-    f, p = periodogram(x, fs, window="hann", nfft=8 * x.size)
+    f, p = periodogram(x, fs, window="hann", nfft=max(x.size, min(8 * x.size, NFFT_MAX)))
     f0 = _peak(f, p, fmin)
     if not f0 > 0:
         return float("nan")
-    nseg = int(min(x.size, max(x.size // 4, round(8.0 / f0 * fs))))
-    f, p = welch(x, fs, window="hann", nperseg=nseg, noverlap=nseg // 2, nfft=8 * nseg)
+    nseg = int(min(x.size, round(32.0 / f0 * fs)))
+    f, p = welch(x, fs, window="hann", nperseg=nseg, noverlap=nseg // 2, nfft=max(nseg, min(8 * nseg, NFFT_MAX)))
     fp = _peak(f, p, fmin)
     return 1.0 / fp if fp > 0 else float("nan")
 
