@@ -46,7 +46,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import input_notes
+from imutool.loading import input_notes, merged_warnings
 from imutool.roll_period import (  # noqa: F401  (running_mean, excursions: re-exported)
     Detection,
     detection,
@@ -206,7 +206,7 @@ class RollStats:
             "period_estimates": self.periods,
         }
         if self.warnings:
-            rec.meta["warnings"] = list(self.warnings)
+            rec.meta["warnings"] = merged_warnings(rec.meta, list(self.warnings))
         return rec
 
 

@@ -306,6 +306,7 @@ def test_period_disagreement_warns_on_bimodal_roll_not_on_a_clean_one(tmp_path):
     assert r.exit_code == 0, r.output
     assert "roll period estimates disagree" in r.stderr
     assert json.loads(r.stdout)["warnings"] == rs.warnings
+    assert formats.read(tmp_path / "o.csv").meta["warnings"] == rs.warnings  # and the output's metadata
 
 
 def test_any_window_and_the_minimum_window():
