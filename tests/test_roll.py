@@ -369,3 +369,17 @@ def test_real_sailing_log_period_cross_check(shared):
     est = rs.periods
     assert abs(est["peak_to_peak_s"] / est["zero_up_crossing_s"] - 1) < 0.10, est
     assert len(rs.warnings) == 1 and "spectral peak" in rs.warnings[0]
+
+
+def test_hrm_period_check_in_the_nmea_summary(tmp_path):
+    """HRM's periods come from roll_stats: imutool nmea reports their cross-check (and warns on a bimodal roll)."""
+    from imutool.nmea_out import run_nmea
+    from imutool.sim.sea import irregular_roll
+
+    t, a, _ = irregular_roll(duration=600.0, seed=0, roll_period=6.0, significant_deg=3.0)
+    _, b, _ = irregular_roll(duration=600.0, seed=10, roll_period=16.0, significant_deg=3.0, noise_deg=0.0)
+    for x, warned in ((a + b, True), (a, False)):
+        res = run_nmea(Recording(t, {"roll": x}), tmp_path / f"o{warned}.nmea", sentences="HRM")
+        est = res.summary["hrm_period_estimates"]
+        assert est == roll_stats(t, x).periods
+        assert bool(res.summary["warnings"]) is warned
