@@ -791,7 +791,20 @@ def run_nmea(
         "deviation": card_from or deviation,
         "generated_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }
+    if "HRM" in counts:
+        summary.update(hrm_period_check(rec, kw.get("roll_kw")))
     return RouteResult(summary, inputs, data={"plan": plan})
+
+
+def hrm_period_check(rec: Recording, roll_kw: dict | None) -> dict[str, Any]:
+    """The three roll period estimates of the heel HRM's periods come from (:func:`imutool.roll.roll_stats` with
+    the same settings) and, when they disagree, the warning: ``{"hrm_period_estimates": ..., "warnings": [...]}``."""
+    from imutool.roll import roll_stats
+
+    heel, _ = _ch(rec, ("heel", "roll"), "deg")
+    kw = {k: v for k, v in (roll_kw or {}).items() if k not in ("resets_s", "utc_start")}
+    rs = roll_stats(rec.time, heel, **kw)
+    return {"hrm_period_estimates": rs.periods, "warnings": [f"HRM roll period: {w}" for w in rs.warnings]}
 
 
 def sentence_kind(s: str) -> str:
