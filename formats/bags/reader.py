@@ -266,7 +266,7 @@ def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag
     notes: list[str] = []
     if kind == "imu":
         q_abs = f[:, 4] == -1
-        g_abs = f[:, 17] == -1
+        g_abs = f[:, 16] == -1
         a_abs = f[:, 28] == -1
         zero_q = np.all(f[:, 0:4] == 0, axis=1)  # not an orientation: a driver that has none
         if zero_q.all() and not q_abs.all():
@@ -276,8 +276,9 @@ def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag
             q[q_abs | zero_q] = np.nan
             rec.add("q", q)
             conv.append(READ_Q)
-            if zero_q.any():
-                notes.append(f"{topic}: {int(zero_q.sum())} orientation(s) of [0, 0, 0, 0] read as missing")
+            if (zero_q & ~q_abs).any():
+                n0 = int((zero_q & ~q_abs).sum())
+                notes.append(f"{topic}: {n0} orientation(s) of [0, 0, 0, 0] read as missing")
         if not g_abs.all():
             g = f[:, 13:16] * FLIP
             g[g_abs] = np.nan
