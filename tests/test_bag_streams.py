@@ -128,3 +128,105 @@ def test_many_clock_nmea_log_to_bag(shared, tmp_path):
         assert np.isfinite(back["q"]).all()
         r_in = rec.stream("roll")
         assert np.allclose(back.time, r_in.time, atol=1e-6)
+
+
+# -- GNSS topics: NavSatFix / TwistStamped read on their own streams, every other topic named --------------------
+NAVSAT, TWIST, ODOM = "sensor_msgs/msg/NavSatFix", "geometry_msgs/msg/TwistStamped", "nav_msgs/msg/Odometry"
+
+
+def _gnss_bag(path: Path, kind: str) -> Path:
+    """A bag written with rosbags' own writer: Imu at 50 Hz, NavSatFix and TwistStamped at 5 Hz, Odometry."""
+    from rosbags.typesys import Stores, get_typestore
+
+    ros1 = kind == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    T, H = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
+    V, Q = ts.types["geometry_msgs/msg/Vector3"], ts.types["geometry_msgs/msg/Quaternion"]
+    Tw = ts.types["geometry_msgs/msg/Twist"]
+
+    def hdr(ns, frame="gps"):
+        st = T(ns // 10**9, ns % 10**9)
+        return H(0, st, frame) if ros1 else H(st, frame)
+
+    t0 = 1_700_000_000 * 10**9
+    msgs: dict[str, tuple[str, list]] = {"/imu": (IMU, []), "/fix": (NAVSAT, []), "/vel": (TWIST, [])}
+    msgs["/odom"] = (ODOM, [])
+    for i in range(100):
+        ns = t0 + i * 20_000_000
+        cov = np.zeros(9)
+        m = ts.types[IMU](hdr(ns, "imu"), Q(0, 0, 0, 1), cov, V(0.01, 0.02, 0.03), cov, V(0, 0, 9.8), cov)
+        msgs["/imu"][1].append((ns, m))
+    St = ts.types["sensor_msgs/msg/NavSatStatus"]
+    for i in range(10):
+        ns = t0 + 3_000_000 + i * 200_000_000
+        status = -1 if i == 4 else 0
+        pc = np.diag([0.25, 1.0, 4.0]).ravel()
+        fix = ts.types[NAVSAT](hdr(ns), St(status, 1), 63.4 + i * 1e-5, 10.4 - i * 2e-5, 30.0 + i, pc, 2)
+        msgs["/fix"][1].append((ns, fix))
+        vel = ts.types[TWIST](hdr(ns + 1_000_000), Tw(V(1.0, 2.0, 0.5), V(0, 0, 0.1)))  # ENU: east 1, north 2, up 0.5
+        msgs["/vel"][1].append((ns + 1_000_000, vel))
+    P = ts.types["geometry_msgs/msg/PoseWithCovariance"]
+    TC = ts.types["geometry_msgs/msg/TwistWithCovariance"]
+    Pose, Pt = ts.types["geometry_msgs/msg/Pose"], ts.types["geometry_msgs/msg/Point"]
+    for i in range(7):
+        ns = t0 + i * 100_000_000
+        od = ts.types[ODOM](
+            hdr(ns, "odom"), "base_link", P(Pose(Pt(0, 0, 0), Q(0, 0, 0, 1)), np.zeros(36)),
+            TC(Tw(V(1, 0, 0), V(0, 0, 0)), np.zeros(36)),
+        )  # fmt: skip
+        msgs["/odom"][1].append((ns, od))
+    if ros1:
+        from rosbags.rosbag1 import Writer
+
+        w = Writer(path)
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        w = Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    with w:
+        for name, (msgtype, lst) in msgs.items():
+            conn = w.add_connection(name, msgtype, typestore=ts)
+            for t, m in lst:
+                w.write(conn, t, ts.serialize_ros1(m, msgtype) if ros1 else ts.serialize_cdr(m, msgtype))
+    return path
+
+
+@pytest.mark.parametrize("kind", ["ros1", "sqlite3"])
+def test_gnss_topics_named_are_read_on_their_own_streams(tmp_path, kind):
+    bag = _gnss_bag(tmp_path / ("g.bag" if kind == "ros1" else "g_ros2"), kind)
+    rec = read_bag(bag, topic="/imu,/fix,/vel")
+    assert rec.multi_clock
+    assert {k: int(m.sum()) for k, m in rec.stream_rows.items()} == {"/imu": 100, "/fix": 10, "/vel": 10}
+    t, lat = rec.series("lat")
+    assert len(t) == 10 and np.isnan(lat[4]) and np.allclose(lat[[0, 9]], [63.4, 63.4 + 9e-5])
+    assert np.allclose(rec.series("gnss_height")[1][[0, 9]], [30.0, 39.0])
+    assert np.allclose(rec.series("gnss_lat_std")[1], 1.0) and np.allclose(rec.series("gnss_lon_std")[1], 0.5)
+    assert np.allclose(rec.series("vel_n")[1], 2.0) and np.allclose(rec.series("vel_e")[1], 1.0)
+    assert np.allclose(rec.series("vel_d")[1], -0.5)  # ENU up 0.5 → NED down -0.5
+    assert len(rec.series("gyro")[0]) == 100 and np.isfinite(rec.series("gyro")[1]).all()
+    assert rec.meta["bag"]["topics_not_read"] == [{"topic": "/odom", "type": ODOM, "messages": 7}]
+
+
+def test_topics_not_read_are_named_with_type_and_count(tmp_path, capsys):
+    import json
+
+    from imutool.cli import main
+
+    bag = _gnss_bag(tmp_path / "g.bag", "ros1")
+    rec = read_bag(bag)
+    assert not rec.multi_clock and len(rec) == 100  # unnamed GNSS topics do not change the IMU recording
+    assert {(t["topic"], t["messages"]) for t in rec.meta["bag"]["topics_not_read"]} == {
+        ("/fix", 10),
+        ("/vel", 10),
+        ("/odom", 7),
+    }
+    with pytest.raises(SystemExit) as e:
+        main(["info", str(bag)])
+    out, err = capsys.readouterr()
+    assert e.value.code in (0, None)
+    assert "NOT READ" in err and "/fix (sensor_msgs/msg/NavSatFix, 10 msgs; name it in --topic" in err
+    assert "bag topic not read: /odom (nav_msgs/msg/Odometry, 7 msgs)" in out
+    with pytest.raises(SystemExit):
+        main(["info", str(bag), "--json"])
+    s = json.loads(capsys.readouterr().out)
+    assert len(s["bag_topics_not_read"]) == 3
