@@ -132,11 +132,12 @@ def nmea_route(
 @click.option("--no-header", is_flag=True, help="Leave out the '#' header block of the file (conventions, flags).")
 @click.option(
     "--heading-ref",
-    type=click.Choice(HEADING_REFS),
+    type=click.Choice(("auto", *HEADING_REFS)),
     default=LINE_OPTIONS["heading_ref"],
     show_default=True,
     help="What the input `heading` channel is: compass (sensor reading, deviation not applied), magnetic "
-    "(deviation applied) or true.",
+    "(deviation applied) or true; auto: what the recording says (an NMEA log's heading is true, a filter's "
+    "from the magnetometer magnetic, meta heading_reference), else magnetic (said in the summary).",
 )
 @click.option(
     "--heading-source",
@@ -219,6 +220,9 @@ def nmea_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
         + (f" → {serial_port}" if serial_port else ""),
         f"  rate {plan.rate.describe()}",
     ]
+    if any(x in plan.sentences for x in ("HDG", "HDT", "THS", "PASHR")):
+        hr = s["heading_reference"]
+        lines.append(f"  heading input {hr['reference']}: {hr['why']}")
     if "PASHR" in plan.sentences or "TSS1" in plan.sentences:
         lines.append(
             f"  heave positive {s['heave_positive']}; UTC "
