@@ -370,6 +370,12 @@ class EkfStepper:
             t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None, f_out if keep_f else None
         )
 
+    def counters(self) -> dict:
+        """The run's counters so far (updates, rejections, gaps, self-check samples...)."""
+        if self.state is None or self._coef is None:
+            return {"samples": self.samples}
+        return _summary(self.state, self.samples, self._coef[0], *self._flags)
+
 
 def run_ekf(
     time: np.ndarray,

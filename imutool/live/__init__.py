@@ -6,3 +6,8 @@ Modules, one concept each: `hub` (snapshots for displays), `sources` (live and r
 UDP, TCP writers on their own threads), `sentences` (the scheduler of IEC 61162 sentences),
 `config` (the TOML file) and `route` (`run_live`).
 """
+
+from imutool.live.hub import LiveHub, LiveSnapshot, Subscription
+from imutool.live.route import run_live
+
+__all__ = ["LiveHub", "LiveSnapshot", "Subscription", "run_live"]

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import collections
 import threading
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Callable
 
 __all__ = ["LiveHub", "LiveSnapshot", "Subscription"]
 
