@@ -24,6 +24,12 @@ from imutool.live.sources import DECODERS
 @click.option("--replay", type=click.Path(exists=True), default=None, help="Replay a recording imutool reads.")
 @click.option("--speed", type=float, default=None, help="Replay speed (× real time; 0: as fast as it goes). [1]")
 @click.option("--protocol", default=None, help=f"Serial IMU protocol: {', '.join(sorted(DECODERS))}. [bridge]")
+@click.option(
+    "--clock",
+    type=click.Choice(["host", "sensor"]),
+    default=None,
+    help="Sample times: the sensor's clock fitted to the host's (host) or the sensor's alone (sensor). [host]",
+)
 @click.option("--baud", type=int, default=None, help="Serial IMU baud rate. [115200]")
 @click.option("--i2c", default=None, help="Linux I2C bus of an MPU6050 (+HMC5883L), e.g. 1.")
 @click.option("--modbus-profile", default=None, help="Modbus register profile (TOML) for PORT.")

@@ -21,7 +21,7 @@ import numpy as np
 
 from formats import Recording
 from formats.frames import quat_to_euler, quat_to_matrix
-from formats.saturation import clipped
+from formats.saturation import FLOORS, clipped
 from imutool.attitude import EkfParams, EkfStepper, mag_interval, nominal_dt
 from imutool.attitude.motion import choose_motion, params_for_motion
 from imutool.attitude.selfcheck import SampleFlag, has_flag
@@ -35,6 +35,7 @@ from .sentences import SentenceScheduler
 from .sources import AuxNmea, SampleBlock, Source
 from .status import LiveStatus
 
+CLIP_TAIL = 8  # samples before a block taken into its saturation check (a range limit held 3 samples is a limit)
 HUB_RATE_HZ = 10.0  # snapshots per second of input time handed to the hub
 
 
@@ -95,6 +96,7 @@ class LiveEngine:
         self._tail_acc = np.empty((0, 3))
         self._tail_gyr = np.empty((0, 3))
         self._last_snap: LiveSnapshot | None = None
+        self._pending: list[bytes] = []
         self.heading_known = False
         self.heading_ref = opts.heading_ref
         self._silent_t = 0.0
@@ -120,11 +122,14 @@ class LiveEngine:
                 self._silence()
                 continue
             self._last_arrival = time.monotonic()
-            if self.feed(blk):
+            end = self.feed(blk)
+            self._flush()
+            if end:
                 self.stop_reason = f"duration {self.opts.duration_s:g} s reached"
                 break
         if self.held:  # a source that ended inside the start-up span: filter what was held
             self._start()
+        self._flush()
         return self.summary()
 
     def reset_peak(self, who: str, utc: float) -> None:
@@ -147,6 +152,7 @@ class LiveEngine:
         if names:
             s = replace(self._last_snap, utc=time.time(), status="V", cause=self.status.cause)
             self._emit(self.sched.lines(s, names))
+            self._flush()
             self.hub.publish(s)
 
     def feed(self, blk: SampleBlock) -> bool:
@@ -244,11 +250,7 @@ class LiveEngine:
         assert self.stepper is not None
         n = len(blk)
         # saturation: the capture's rule on this block with the last samples before it (a flat top spans blocks)
-        acc_w = np.concatenate([self._tail_acc, blk.accel])
-        gyr_w = np.concatenate([self._tail_gyr, blk.gyro])
-        clip_a = clipped(acc_w, "accel").mask[-n:]
-        clip_g = clipped(gyr_w, "gyro").mask[-n:]
-        self._tail_acc, self._tail_gyr = acc_w[-200:], gyr_w[-200:]
+        clip_a, clip_g = self._clipping(blk)
         accel = blk.accel
         if clip_a.any():
             accel = np.array(accel, dtype=np.float64)
@@ -259,10 +261,11 @@ class LiveEngine:
         std = np.degrees(res.std)
         incons = has_flag(res.flags, SampleFlag.INCONSISTENT)
         # rate of turn: the bias-corrected body rate about the world vertical (deg/min, + clockwise seen from above)
-        w_ned = np.einsum("nij,nj->ni", quat_to_matrix(res.q), blk.gyro - res.bias)
+        R = quat_to_matrix(res.q)
+        w_ned = np.einsum("nij,nj->ni", R, blk.gyro - res.bias)
         rot = np.degrees(w_ned[:, 2]) * 60.0
-        heave = self.heave.add(blk.t, res.q, blk.accel) if self.heave is not None else None
-        sat = clip_a.any(axis=1) | clip_g.any(axis=1) if clip_a.ndim == 2 else clip_a | clip_g
+        heave = self.heave.add(blk.t, R, blk.accel) if self.heave is not None else None
+        sat = _rows_any(clip_a) | _rows_any(clip_g)
         self.samples += n
         self.saturated_samples += int(sat.sum())
         self.inconsistent_samples += int(incons.sum())
@@ -280,6 +283,8 @@ class LiveEngine:
             start = i + 1
             if not names:
                 continue
+            if "HRM" in names:
+                self.roll.refresh()  # a cycle completed in this block is in this HRM
             snap = self._snapshot(
                 float(blk.t[i]), roll[i], pitch[i], hdg[i], rot[i], None if heave is None else heave[i], status
             )
@@ -291,6 +296,21 @@ class LiveEngine:
             self._last_snap = snap
         if self.recorder is not None:
             self._record(blk, roll, pitch, hdg, std, heave)
+
+    def _clipping(self, blk: SampleBlock) -> tuple[np.ndarray, np.ndarray]:
+        """(accel, gyro) clipped masks of the block: capture's rule (:func:`formats.saturation.clipped`) on the
+        block with the last samples before it (a flat top spans blocks); skipped while every value lies within the
+        floors below which no sensor's range ends."""
+        out = []
+        for name, x, tail in (("accel", blk.accel, "_tail_acc"), ("gyro", blk.gyro, "_tail_gyr")):
+            n = len(x)
+            w = np.concatenate([getattr(self, tail), x])
+            setattr(self, tail, w[-CLIP_TAIL:])
+            if not np.nanmax(np.abs(w), initial=0.0) >= FLOORS[name]:
+                out.append(np.zeros(x.shape, bool))
+            else:
+                out.append(clipped(w, name).mask[-n:])
+        return out[0], out[1]
 
     def _due_rows(self, t: np.ndarray) -> list[tuple[int, list[str]]]:
         """[(row, [names due at it])] in row order; '_HUB' for the hub's snapshots."""
@@ -359,7 +379,14 @@ class LiveEngine:
             self.hub.publish(snap)
 
     def _emit(self, data: bytes) -> None:
+        """Queue sentences; they go to the outputs at the end of the block (:meth:`_flush`), one hand-over each."""
         if data:
+            self._pending.append(data)
+
+    def _flush(self) -> None:
+        if self._pending:
+            data = b"".join(self._pending)
+            self._pending.clear()
             for out in self.outputs:
                 out.send(data)
 
@@ -400,6 +427,10 @@ class LiveEngine:
             out["recording"] = {"rows": self.recorder.rows, "files": self.recorder.files,
                                 "stopped": self.recorder.stopped}  # fmt: skip
         return out
+
+
+def _rows_any(mask: np.ndarray) -> np.ndarray:
+    return mask.any(axis=1) if mask.ndim == 2 else mask
 
 
 def _select(blk: SampleBlock, keep: np.ndarray) -> SampleBlock:

@@ -14,6 +14,7 @@ counted, and a client that cannot take anything for ``client_timeout_s`` is clos
 
 from __future__ import annotations
 
+import collections
 import os
 import queue
 import select
@@ -25,7 +26,8 @@ from urllib.parse import parse_qs, urlparse
 
 from formats.errors import ImutoolError
 
-QUEUE_LINES = 256
+QUEUE_LINES = 256  # blocks of sentences an output (or a TCP client) may hold before it drops
+POLL_S = 0.002  # s: how often an idle writer looks for new sentences
 
 
 class Output:
@@ -35,7 +37,8 @@ class Output:
 
     def __init__(self, url: str, maxsize: int = QUEUE_LINES) -> None:
         self.url = url
-        self.q: queue.Queue[bytes | None] = queue.Queue(maxsize)
+        self.q: collections.deque[bytes | None] = collections.deque()
+        self.maxsize = maxsize
         self.sent = 0
         self.dropped = 0
         self.errors = 0
@@ -47,20 +50,33 @@ class Output:
         return self
 
     def send(self, data: bytes) -> None:
-        """Queue ``data`` (one or more CRLF-ended lines); dropped and counted when the queue is full."""
-        try:
-            self.q.put_nowait(data)
-        except queue.Full:
+        """Queue ``data`` (one or more CRLF-ended lines); dropped and counted when the queue is full. No lock and
+        no wake-up of the writer (that hands the GIL over at every line): the writer polls every ``POLL_S``."""
+        if len(self.q) >= self.maxsize:
             self.dropped += 1
+        else:
+            self.q.append(data)
+
+    def _get(self, timeout: float) -> bytes | None:
+        """The next queued item, waiting up to ``timeout`` s (polling); b'' when none came."""
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                return self.q.popleft()
+            except IndexError:
+                if self._stop.is_set() or time.monotonic() >= end:
+                    return b""
+                time.sleep(POLL_S)
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self.q.get(timeout=0.2)
-            except queue.Empty:
-                continue
+        while True:
+            data = self._get(0.2)
             if data is None:
                 break
+            if not data:
+                if self._stop.is_set():
+                    break
+                continue
             try:
                 self.write(data)
                 self.sent += 1
@@ -72,10 +88,7 @@ class Output:
 
     def close(self, timeout: float = 1.0) -> None:
         """Flush what is queued (up to ``timeout`` s), then close."""
-        try:
-            self.q.put(None, timeout=timeout)
-        except queue.Full:
-            pass
+        self.q.append(None)
         self._thread.join(timeout)
         self._stop.set()
         self._close()
@@ -138,10 +151,7 @@ class TcpServerOutput(Output):
 
     def _run(self) -> None:  # one thread: accept, fan out, write without blocking
         while not self._stop.is_set():
-            try:
-                data = self.q.get(timeout=0.02)
-            except queue.Empty:
-                data = b""
+            data = self._get(0.02)
             if data is None:
                 self._pump(final=True)
                 break

@@ -42,6 +42,9 @@ class LiveRoll:
         self._t: deque[np.ndarray] = deque()
         self._x: deque[np.ndarray] = deque()
         self._next_eval = -np.inf
+        self._last_eval = -np.inf
+        self._side = 0  # the Schmitt trigger's side: +1 above +h last, -1 below -h last, 0 not yet
+        self._dirty = False
         self.amp_port: float | None = None
         self.amp_stbd: float | None = None
         self.period: float | None = None
@@ -108,8 +111,32 @@ class LiveRoll:
         while len(self._t) > 1 and self._t[0][-1] < t[-1] - self.window_s:
             self._t.popleft()
             self._x.popleft()
-        if t[-1] >= self._next_eval:
+        # an excursion can only have completed where the heel crossed a threshold (the Schmitt trigger of
+        # roll_cycles): evaluate then (at most every every_s), and every max_period_s to let stale values go
+        h = self.hysteresis_deg
+        crossed = False
+        if ok.any():
+            hi, lo = bool((x[ok] > h).any()), bool((x[ok] < -h).any())
+            if (hi and self._side < 0) or (lo and self._side > 0) or (hi and lo) or self._side == 0:
+                crossed = True
+                last_hi = np.flatnonzero(x > h)
+                last_lo = np.flatnonzero(x < -h)
+                a = last_hi[-1] if last_hi.size else -1
+                b = last_lo[-1] if last_lo.size else -1
+                self._side = 1 if a > b else -1 if b > a else self._side
+        self._dirty = self._dirty or crossed
+        due = t[-1] >= self._next_eval
+        if (self._dirty and due) or t[-1] >= self._last_eval + self.max_period_s:
             self._next_eval = t[-1] + self.every_s
+            self._last_eval = float(t[-1])
+            self._dirty = False
+            self.evaluate()
+
+    def refresh(self) -> None:
+        """Evaluate now if an excursion may have completed since the last evaluation."""
+        if self._dirty and self._t:
+            self._dirty = False
+            self._last_eval = float(self._t[-1][-1])
             self.evaluate()
 
     def window(self) -> tuple[np.ndarray, np.ndarray]:

@@ -79,6 +79,7 @@ def run_live(
     replay: str | os.PathLike | None = None,
     speed: float = LIVE_DEFAULTS["speed"],
     protocol: str = LIVE_DEFAULTS["protocol"],
+    clock: str = "host",
     baud: int = LIVE_DEFAULTS["baud"],
     i2c: str | None = None,
     modbus_profile: str | None = None,
@@ -108,8 +109,9 @@ def run_live(
     log: Callable[[str], None] | None = None,
     opener: Callable | None = None,
     handle_signals: bool = True,
+    replay_block_s: float = 0.25,
 ) -> RouteResult:
-    """Read a live IMU (``port`` with ``protocol`` at ``baud``; ``i2c`` bus; ``port`` + ``modbus_profile``) or
+    """Read a live IMU (``port`` with ``protocol`` at ``baud``, times from the ``clock`` host|sensor; ``i2c`` bus; ``port`` + ``modbus_profile``) or
     ``replay`` a recording at ``speed`` × real time (0: as fast as it goes), and keep writing the inclinometer's
     sentences to ``outputs`` (URLs, see :mod:`imutool.live.outputs`) until stopped or ``duration`` s of input.
 
@@ -119,6 +121,7 @@ def run_live(
     ``sentences`` and ``rates`` ({name: Hz} or 'XDR=20' strings) choose what is sent; ``talker`` its talker ID.
     ``record`` a folder for the raw samples and estimates (rotating every ``rotate_s``); ``peak_state`` the file
     that keeps the peak-hold and its reset's UTC (default ``record/peak_hold.json`` when recording).
+    ``replay_block_s``: the input time a replay at speed 0 hands over at once (s).
     ``consumers``: extra readers of the hub (``start(hub) -> handle`` with ``stop()``), e.g. a web page.
     """
     logf = log or log_line
@@ -152,7 +155,9 @@ def run_live(
     utc_of = None
     if replay is not None:
         rec, _validation = load_recording(os.fspath(replay))
-        source: Any = ReplaySource(rec, speed, description=f"replay of {os.fspath(replay)} at {speed:g}x")
+        source: Any = ReplaySource(
+            rec, speed, block_s=replay_block_s, description=f"replay of {os.fspath(replay)} at {speed:g}x"
+        )
         utc_of = _replay_clock(rec)
     elif i2c is not None:
         source = i2c_source(i2c, rate_hz)
@@ -161,7 +166,7 @@ def run_live(
         source = modbus_source(port, modbus_profile, rate_hz)
     else:
         assert port is not None
-        source = SerialImu(port, baud, protocol, opener=opener, log=logf)
+        source = SerialImu(port, baud, protocol, opener=opener, log=logf, clock=clock)
     aux_src = AuxNmea(aux, aux_baud, opener=opener) if aux else None
 
     outs: list[Output] = []

@@ -75,15 +75,21 @@ def register_decoder(name: str, factory: Callable[..., FrameDecoder]) -> None:
 
 
 class BridgeFrames:
-    """The capture's bridge protocol (text or binary) as a :class:`FrameDecoder`: the MCU's clock is mapped to the
-    host's monotonic clock (:class:`imutool.capture.clock.FrameClock`), so frames keep their own spacing."""
+    """The capture's bridge protocol (text or binary) as a :class:`FrameDecoder`. ``clock='host'``: the MCU's clock
+    mapped to the host's monotonic clock (:class:`imutool.capture.clock.FrameClock`: offset and drift fitted to the
+    arrivals), so frames keep their own spacing; ``clock='sensor'``: the MCU's clock alone (unwrapped), offset to
+    the host's at the first frame — for a sensor whose clock is trusted, or frames replayed faster than real time."""
 
-    def __init__(self, binary: bool = False, scales: Any = None) -> None:
+    def __init__(self, binary: bool = False, scales: Any = None, clock: str = "host") -> None:
         from imutool.capture.bridge import BridgeDecoder  # numba kernels: only this protocol needs them
         from imutool.capture.clock import FrameClock
 
         self.dec = BridgeDecoder(binary=binary, scales=scales)
         self.clock = FrameClock()
+        if clock not in ("host", "sensor"):
+            raise ImutoolError(f"clock {clock!r}: expected host or sensor")
+        self.sensor_clock = clock == "sensor"
+        self._t0: float | None = None
         self.stats: dict[str, int] = {}
 
     def feed(self, data: bytes, t_mono: float) -> SampleBlock:
@@ -101,12 +107,21 @@ class BridgeFrames:
         if not len(seq):
             return SampleBlock.empty()
         ch = counts_to_si(seq, t_us, counts, self.dec.scales)
-        t = self.clock.map(t_us, seq, t_mono)
+        if self.sensor_clock:
+            us, _cut = self.clock._unwrap_us(t_us)  # (a restart of the MCU shows as times that go back: dropped)
+            if self._t0 is None:
+                self._t0 = t_mono - us[0] * 1e-6
+            t = us * 1e-6 + self._t0
+        else:
+            t = self.clock.map(t_us, seq, t_mono)
         return SampleBlock(np.asarray(t, float), ch["gyro"], ch["accel"], ch["mag"])
 
 
 register_decoder("bridge", lambda **kw: BridgeFrames(binary=False, **kw))
 register_decoder("bridge-binary", lambda **kw: BridgeFrames(binary=True, **kw))
+# Raw-IMU serial protocols of MEMS units (e.g. an Xsens MTData2, a VectorNav binary, a WitMotion 0x55 frame)
+# plug in the same way: a module with a FrameDecoder calls register_decoder("xsens-mt", XsensFrames) on import
+# and is imported from here (none is written yet).
 
 
 class SerialImu:
@@ -120,13 +135,14 @@ class SerialImu:
         protocol: str = "bridge",
         opener: Callable | None = None,
         log: Callable[[str], None] | None = None,
+        clock: str = "host",
     ) -> None:
         from imutool.capture.runtime import CaptureStats
         from imutool.capture.serial_capture import SerialSource
 
         if protocol not in DECODERS:
             raise ImutoolError(f"serial protocol {protocol!r}: known {', '.join(sorted(DECODERS))}")
-        self.decoder = DECODERS[protocol]()
+        self.decoder = DECODERS[protocol](clock=clock)
         self._cstats = CaptureStats(started_utc="")
         self.port = SerialSource(port, baud, self._cstats, max_backoff=2.0, opener=opener, log=log)
         self.port.batch_s = 0.0  # the engine wants each frame as soon as it is there (latency)
