@@ -113,7 +113,8 @@ def run_live(
 ) -> RouteResult:
     """Read a live IMU (``port`` with ``protocol`` at ``baud``, times from the ``clock`` host|sensor; ``i2c``
     bus; ``port`` + ``modbus_profile``) or ``replay`` a recording at ``speed`` × real time (0: as fast as it
-    goes), and keep writing the inclinometer's sentences to ``outputs`` (URLs, see :mod:`imutool.live.outputs`) until stopped or ``duration`` s of input.
+    goes), and keep writing the inclinometer's sentences to ``outputs`` (URLs, see :mod:`imutool.live.outputs`)
+    until stopped or ``duration`` s of input.
 
     The estimator is ``filter``'s EKF (``params``/``params_file``, ``motion`` ship|handheld|auto — auto decided
     on the first ``settle_s`` — ``lever_arm``/``antenna_arm`` m body FRD, ``mounting``, ``calibration_file``);
