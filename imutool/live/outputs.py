@@ -27,6 +27,7 @@ from urllib.parse import parse_qs, urlparse
 from formats.errors import ImutoolError
 
 QUEUE_LINES = 256  # blocks of sentences an output (or a TCP client) may hold before it drops
+CLIENT_SNDBUF = 65536  # bytes of a TCP client's kernel send buffer (~10 s of sentences at 10 Hz)
 POLL_S = 0.002  # s: how often an idle writer looks for new sentences
 
 
@@ -174,6 +175,7 @@ class TcpServerOutput(Output):
                 return
             s.setblocking(False)
             s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, CLIENT_SNDBUF)  # a slow client holds little
             self.clients.append(_Client(s, addr, QUEUE_LINES))
             self.clients_seen += 1
 

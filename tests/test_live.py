@@ -1,0 +1,184 @@
+"""`imutool live`: the small-block EKF equals `filter`, the hub, the roll statistics, status and outputs."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import formats
+from imutool.attitude import EkfParams, EkfStepper, mag_interval, nominal_dt, run_ekf
+from imutool.filtering import run_filter
+from imutool.live import LiveHub, LiveSnapshot, run_live
+from imutool.live.outputs import TcpServerOutput
+from imutool.live.rollstats import LiveRoll
+from imutool.live.sentences import SentenceScheduler, parse_rates
+from imutool.roll import roll_cycles
+from imutool.sim import run_simulate
+
+PARAMS = EkfParams(motion="ship")
+LEVER = [0.0, 0.0, -2.0]
+
+
+@pytest.fixture(scope="module")
+def ship_csv(tmp_path_factory):
+    """A 10-minute ship recording at 50 Hz (simulated, seeded)."""
+    path = tmp_path_factory.mktemp("ship") / "ship.csv"
+    run_simulate("ship-roll", path, seed=5, duration=600.0, rate_hz=50.0)
+    return path
+
+
+def _estimates(folder):
+    files = sorted(folder.glob("estimate_*.csv"))
+    assert files, "no estimate file recorded"
+    return formats.read(files[0])
+
+
+def test_stepper_in_any_blocks_equals_one_call(ship_csv):
+    rec = formats.read(ship_csv)
+    t, g, a, m = rec.time[:6000], rec["gyro"][:6000], rec["accel"][:6000], rec["mag"][:6000]
+    whole, _ = run_ekf(t, g, a, m, PARAMS)
+    # the intervals fixed up front (as the engine does from its start-up span)
+    stepper = EkfStepper(PARAMS, dt_nominal=nominal_dt(t), dt_mag=mag_interval(t, m), heading_held=True)
+    qs, rng, i = [], np.random.default_rng(1), 0
+    while i < len(t):
+        j = min(len(t), i + int(rng.integers(1, 40)))
+        qs.append(stepper.step(t[i:j], g[i:j], a[i:j], m[i:j]).q)
+        i = j
+    assert np.array_equal(np.concatenate(qs), whole.q)  # bit for bit
+
+
+def test_replay_equals_filter(ship_csv, tmp_path):
+    """A replay's live output equals `filter` on the same file (roll/pitch/heading within 1e-6 deg)."""
+    ref = run_filter(ship_csv, params=PARAMS, lever_arm=LEVER).recording
+    res = run_live(
+        replay=ship_csv, speed=0, record=tmp_path / "rec", motion="ship", lever_arm=LEVER, settle_s=20,
+        sentences=["HRM"], log=lambda m: None, handle_signals=False, replay_block_s=0.37,
+    )  # fmt: skip
+    est = _estimates(tmp_path / "rec")
+    assert res.summary["samples"] == len(ref) == len(est)
+    assert np.array_equal(est.time, ref.time)
+    for ch in ("roll", "pitch"):
+        assert np.max(np.abs(est[ch] - ref[ch])) < 1e-6, ch
+    dh = (est["heading"] - ref["heading"] + 180.0) % 360.0 - 180.0
+    assert np.max(np.abs(dh)) < 1e-6
+    assert res.summary["status"] == "A" and res.summary["settled"]
+
+
+def test_duration_stops_on_input_time(ship_csv):
+    lines: list[str] = []
+    res = run_live(
+        replay=ship_csv, speed=0, duration=100, motion="ship", settle_s=20, log=lines.append,
+        handle_signals=False,
+    )  # fmt: skip
+    assert res.summary["stop_reason"].startswith("duration")
+    assert 99.9 <= res.summary["input_span_s"] <= 100.0
+    assert lines[-1].startswith("stopped (duration 100 s reached)")
+
+
+def test_hub_drops_oldest_and_closes():
+    hub = LiveHub()
+    sub = hub.subscribe(maxsize=3)
+    for i in range(10):
+        hub.publish(_snap(float(i)))
+    assert sub.dropped == 7
+    assert [sub.get(0).t for _ in range(3)] == [7.0, 8.0, 9.0]
+    assert hub.latest().t == 9.0
+    assert [s.t for s in hub.history(5)] == [4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
+    hub.request_reset("web")
+    assert [w for w, _ in hub.take_resets()] == ["web"] and hub.take_resets() == []
+    stopped = []
+    hub.on_stop(lambda: stopped.append(1))
+    got = []
+    th = threading.Thread(target=lambda: got.append(sub.get(5.0)))
+    th.start()
+    hub.close("end of input")
+    th.join(2.0)
+    assert got == [None] and stopped == [1] and hub.closed
+    json.dumps(_snap(1.0).as_dict())
+
+
+def _snap(t: float, **kw) -> LiveSnapshot:
+    base = dict(
+        utc=1.8e9 + t, t=t, roll_deg=1.0, pitch_deg=0.5, heading_deg=10.0, heading_ref="magnetic", rot_deg_min=0.0,
+        heave_m=None, roll_amp_port_deg=None, roll_amp_stbd_deg=None, roll_period_s=None, peak_port_deg=0.0,
+        peak_stbd_deg=1.0, peak_reset_utc=None, status="A", cause="", settled=True,
+    )  # fmt: skip
+    base.update(kw)
+    return LiveSnapshot(**base)
+
+
+def test_live_roll_equals_roll_cycles_on_its_window_and_keeps_the_reset(tmp_path):
+    t = np.arange(0, 300, 0.02)
+    heel = 12 * np.sin(2 * np.pi * t / 9.0) + 3 * np.sin(2 * np.pi * t / 31.0)
+    state = tmp_path / "peak.json"
+    lr = LiveRoll(window_s=120.0, state_path=state)
+    for i in range(0, len(t), 7):
+        lr.add(t[i : i + 7], heel[i : i + 7])
+    lr.refresh()
+    lr.evaluate()
+    w = t >= t[-1] - 120.0
+    cyc = roll_cycles(t[w], heel[w])
+    last_port = np.flatnonzero(cyc.side == -1)[-1]
+    last_stbd = np.flatnonzero(cyc.side == 1)[-1]
+    assert lr.amp_port == pytest.approx(cyc.amplitude_deg[last_port], abs=1e-9)
+    assert lr.amp_stbd == pytest.approx(cyc.amplitude_deg[last_stbd], abs=1e-9)
+    assert lr.period == pytest.approx(cyc.period_s[-1], abs=1e-9)
+    assert lr.peak_stbd == pytest.approx(heel.max()) and lr.peak_port == pytest.approx(-heel.min())
+    lr.reset(1_800_000_000.0)
+    lr.add(t[:10] + 400, np.full(10, 2.0))
+    lr.save()
+    again = LiveRoll(state_path=state)  # a restart keeps the reset and the peak since it
+    assert again.reset_iso == "2027-01-15T08:00:00Z"
+    assert again.peak_stbd == 2.0 and again.peak_port == 0.0
+
+
+def test_scheduler_rates_and_talker():
+    rates = parse_rates("HRM,XDR", ["XDR=20"])
+    assert rates == {"HRM": 1.0, "XDR": 20.0}
+    sch = SentenceScheduler(rates, talker="HE")
+    due = [sch.due(k * 0.01) for k in range(200)]
+    assert sum("XDR" in d for d in due) == 40 and sum("HRM" in d for d in due) == 2
+    line = sch.lines(_snap(0.0, status="V"), ["HRM", "XDR"]).decode()
+    assert line.startswith("$HEHRM,1.0,") and ",V," in line and "$HEXDR,A,0.50,D,PTCH,A,1.00,D,ROLL" in line
+    with pytest.raises(Exception, match="sentence"):
+        parse_rates("HRM,FOO")
+
+
+def test_tcp_client_that_stops_reading_does_not_stall_the_others():
+    out = TcpServerOutput("tcp://127.0.0.1:0", "127.0.0.1", 0, client_timeout_s=1.0).start()
+    stuck = socket.create_connection(("127.0.0.1", out.port))
+    stuck.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    good = socket.create_connection(("127.0.0.1", out.port))
+    time.sleep(0.2)
+    got = bytearray()
+    good.setblocking(False)
+
+    def drain() -> None:
+        try:
+            while chunk := good.recv(1 << 16):
+                got.extend(chunk)
+        except BlockingIOError:
+            pass
+
+    line = b"$IIXDR," + b"0" * 60 + b"*00\r\n"
+    for _ in range(2000):  # ~1.4 MB: far more than the stuck client's socket buffers
+        for _ in range(10):
+            out.send(line)  # never blocks
+        time.sleep(0.001)
+        drain()
+    end = time.monotonic() + 3
+    while time.monotonic() < end and got.count(b"\r\n") < out.sent:
+        time.sleep(0.01)
+        drain()
+    out.close()
+    s = out.stats()
+    assert s["client_dropped"] > 0 or s["clients_closed_stuck"] == 1
+    assert s["sent"] + s["dropped"] == 20000
+    assert got.count(b"\r\n") >= 0.9 * s["sent"]  # the reading client got (nearly) all that was accepted
+    stuck.close()
+    good.close()
