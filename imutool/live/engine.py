@@ -37,6 +37,7 @@ from .status import LiveStatus
 
 CLIP_TAIL = 8  # samples before a block taken into its saturation check (a range limit held 3 samples is a limit)
 HUB_RATE_HZ = 10.0  # snapshots per second of input time handed to the hub
+PEAK_SAVE_S = 10.0  # s of input between writes of the peak-hold state file
 
 
 @dataclass
@@ -97,6 +98,7 @@ class LiveEngine:
         self._tail_gyr = np.empty((0, 3))
         self._last_snap: LiveSnapshot | None = None
         self._pending: list[bytes] = []
+        self._saved_at = -np.inf
         self.heading_known = False
         self.heading_ref = opts.heading_ref
         self._silent_t = 0.0
@@ -130,6 +132,7 @@ class LiveEngine:
         if self.held:  # a source that ended inside the start-up span: filter what was held
             self._start()
         self._flush()
+        self.roll.save()
         return self.summary()
 
     def reset_peak(self, who: str, utc: float) -> None:
@@ -285,6 +288,9 @@ class LiveEngine:
                 continue
             if "HRM" in names:
                 self.roll.refresh()  # a cycle completed in this block is in this HRM
+                if blk.t[i] - self._saved_at >= PEAK_SAVE_S:  # the peak-hold survives a restart
+                    self._saved_at = float(blk.t[i])
+                    self.roll.save()
             snap = self._snapshot(
                 float(blk.t[i]), roll[i], pitch[i], hdg[i], rot[i], None if heave is None else heave[i], status
             )
