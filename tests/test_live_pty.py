@@ -142,7 +142,7 @@ def checked(lines: list[str]) -> dict[str, list]:
             out.setdefault("TSS1", []).append(parse_tss1(ln))
             continue
         s = parse_sentence(ln, checksum_policy="require")
-        key = s.sentence_type if not s.talker.startswith("P") else "PASHR"
+        key = s.type
         if key in ("XDR", "ROT", "HDT", "THS", "HDG"):
             pynmea2.parse(ln, check=True)
         out.setdefault(key, []).append(s)
@@ -194,6 +194,7 @@ def test_acceptance_replay_through_ptys(ship, tmp_path):
     assert summary["stop_reason"] == "SIGTERM"
     assert err.strip().splitlines()[-1].split(" imutool live: ")[1].startswith("stopped (SIGTERM)")
     assert summary["samples"] == len(ship)
+    (tmp_path / "out_pty.nmea").write_bytes(bytes(rd_pty.data))  # kept for a failure's inspection
     by = checked(rd_pty.lines())
     by_udp = checked(rd_udp.lines())
     assert set(by) == {"HRM", "XDR", "PASHR", "TSS1", "ROT"} and set(by_udp) == set(by)
@@ -204,6 +205,9 @@ def test_acceptance_replay_through_ptys(ship, tmp_path):
     params = EkfParams(motion="ship")
     ref = run_filter(raw, params=params, lever_arm=[0.0, 0.0, -2.0]).recording
     t_p = pashr_times(by["PASHR"], float(ref.time[0]))
+    during = t_p <= ref.time[-1] + 1e-3  # (after the input stopped: V sentences on, the last values held)
+    assert during[: during.sum()].all() and not during[-1]
+    by["PASHR"], t_p = [s for s, d in zip(by["PASHR"], during, strict=True) if d], t_p[during]
     i = np.searchsorted(ref.time, t_p - 5e-4)
     assert np.all(np.abs(ref.time[i] - t_p) < 1e-3)  # each PASHR carries a sample's time
     roll_p = np.array([_f(s.fields[3]) for s in by["PASHR"]])
@@ -222,6 +226,9 @@ def test_acceptance_replay_through_ptys(ship, tmp_path):
             hrm_t.append(pashr_times([parse_sentence(nxt)], float(ref.time[0]))[0])
             hrm.append(parse_sentence(ln).fields)
     hrm_t = np.array(hrm_t)
+    assert {f[4] for f, t in zip(hrm, hrm_t, strict=True) if t > ref.time[-1] + 1.0} == {"V"}  # samples stopped
+    hrm = [f for f, t in zip(hrm, hrm_t, strict=True) if t <= ref.time[-1] + 1e-3]
+    hrm_t = hrm_t[hrm_t <= ref.time[-1] + 1e-3]
     status = [f[4] for f in hrm]
     assert status[0] == "V" and status[-1] == "A"
     first_a = status.index("A")

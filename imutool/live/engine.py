@@ -153,7 +153,7 @@ class LiveEngine:
         t = self.t_last + quiet
         names = self.sched.due(t)
         if names:
-            s = replace(self._last_snap, utc=time.time(), status="V", cause=self.status.cause)
+            s = replace(self._last_snap, utc=self._utc(t), t=t, status="V", cause=self.status.cause)
             self._emit(self.sched.lines(s, names))
             self._flush()
             self.hub.publish(s)
