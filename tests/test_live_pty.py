@@ -298,7 +298,7 @@ def test_unplug_replug_garbage_and_sigkill(ship, tmp_path):
             return bytes(rng.integers(0, 256, 40, dtype=np.uint8)) + bytes(bad)
         return data
 
-    f1 = Feeder(m_in, frames[:1000], speed=1.0, garbage=garbage)  # 20 s
+    f1 = Feeder(m_in, frames[:2000], speed=1.0, garbage=garbage)  # 40 s (settled after ~25 s)
     f1.start()
     f1.join(60)
     t_unplug = time.monotonic()
@@ -308,16 +308,16 @@ def test_unplug_replug_garbage_and_sigkill(ship, tmp_path):
     time.sleep(3.0)
     m2, s2, name2 = open_pty()
     link.symlink_to(name2)
-    f2 = Feeder(m2, frames_of(ship.select(slice(1000, 1750)), t_offset_us=20_000_000, seq0=1000), speed=1.0)
+    f2 = Feeder(m2, frames_of(ship.select(slice(2000, 2750)), t_offset_us=40_000_000, seq0=2000), speed=1.0)
     f2.start()
     f2.join(60)
     proc.send_signal(signal.SIGKILL)
-    proc.communicate(timeout=30)
+    _, err = proc.communicate(timeout=30)
     rd.stop = True
     hrm = [(t, ln) for t, chunk in rd.arrivals for ln in chunk.decode().split("\r\n") if ln.startswith("$IIHRM")]
     status = [(t, parse_sentence(ln).fields[4]) for t, ln in hrm]
     before = [s for t, s in status if t < t_unplug]
-    assert before[-1] == "A"
+    assert before[-1] == "A", err
     first_v = next(t for t, s in status if t > t_unplug and s == "V")
     assert first_v - t_unplug < 1.6  # V within 1 s (+ one HRM interval of 0.2 s and the port's read timeout)
     after = [s for t, s in status if t > t_unplug + 4.0]
@@ -326,7 +326,7 @@ def test_unplug_replug_garbage_and_sigkill(ship, tmp_path):
     raw = formats.read(next(rec_dir.glob("raw_*.csv")))
     est = formats.read(next(rec_dir.glob("estimate_*.csv")))
     n = min(len(raw), len(est))
-    assert n > 1500
+    assert n > 2500
     assert np.all(np.diff(raw.time) > 0) and np.array_equal(raw.time[:n], est.time[:n])
     assert np.isfinite(est["roll"][:n]).all() and np.isfinite(raw["gyro"][:n]).all()
     for p in list(rec_dir.glob("*.csv")):
@@ -342,7 +342,7 @@ def test_unplug_replug_garbage_and_sigkill(ship, tmp_path):
 
 def test_garbage_counted_in_summary(ship, tmp_path):
     m_in, s_in, name_in = open_pty()
-    proc = live([name_in, "--clock", "sensor", "--motion", "ship", "--settle", "2", "--json", "--duration", "20"])
+    proc = live([name_in, "--clock", "sensor", "--motion", "ship", "--settle", "2", "--json", "--duration", "40"])
     wait_ready(proc)
 
     def garbage(i: int, data: bytes) -> bytes:
@@ -352,7 +352,7 @@ def test_garbage_counted_in_summary(ship, tmp_path):
             return b"\x00\xff garbage \xfe" + bytes(bad)
         return data
 
-    Feeder(m_in, frames_of(ship.select(slice(0, 1200))), speed=10.0, garbage=garbage).start()
+    Feeder(m_in, frames_of(ship.select(slice(0, 2400))), speed=10.0, garbage=garbage).start()
     out, err = proc.communicate(timeout=120)
     s = json.loads(out)
     assert s["stop_reason"].startswith("duration")
@@ -377,7 +377,7 @@ def test_full_disk_stops_the_recording_not_the_outputs(ship, tmp_path):
         rd = Reader(sock=udp)
         rd.start()
         proc = live([
-            "--replay", str(path), "--speed", "0", "--record", str(mnt / "rec"), "--motion", "ship",
+            "--replay", str(path), "--speed", "30", "--record", str(mnt / "rec"), "--motion", "ship",
             "--settle", "5", "--out", f"udp://127.0.0.1:{udp.getsockname()[1]}", "--sentences", "XDR", "--json",
         ])  # fmt: skip
         out, err = proc.communicate(timeout=300)
@@ -388,6 +388,6 @@ def test_full_disk_stops_the_recording_not_the_outputs(ship, tmp_path):
         assert "recording stopped: " in err and "(the outputs go on)" in err
         assert 2995 <= s["sentences"]["XDR"] <= 3001  # 300 s at 10 Hz: every sentence went out
         time.sleep(0.5)
-        assert len(rd.lines()) >= 2900
+        assert len(rd.lines()) >= 2900  # and arrived (a replay paced at 30x: the UDP reader keeps up)
     finally:
         subprocess.run(["umount", str(mnt)], capture_output=True)

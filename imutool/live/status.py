@@ -44,6 +44,7 @@ class LiveStatus:
         self._inconsistent_until = -float("inf")
         self._std_ok = False
         self._t = -float("inf")
+        self.tilt_std_deg = float("inf")
         self.status = "V"
         self.cause = "starting"
         self.changes = 0
@@ -60,6 +61,7 @@ class LiveStatus:
         if inconsistent:
             self._inconsistent_until = t_last + self.hold_s
         self._std_ok = tilt_std_deg <= self.max_tilt_std_deg
+        self.tilt_std_deg = tilt_std_deg
         if not self.settled and t_last - self.t0 >= self.settle_s and self._std_ok:
             self.settled = True
             self.log(f"filter settled after {t_last - self.t0:.1f} s")
@@ -72,7 +74,10 @@ class LiveStatus:
         out = []
         if not self.settled:
             since = 0.0 if self.t0 is None else self._t - self.t0
-            out.append(f"settling ({since:.0f} of {self.settle_s:.0f} s after start)")
+            if since < self.settle_s:
+                out.append(f"settling ({since:.0f} of {self.settle_s:.0f} s after start)")
+            else:
+                out.append(f"settling (roll/pitch sigma {self.tilt_std_deg:.2f} > {self.max_tilt_std_deg} deg)")
         if self.stale_for > self.stale_s:
             out.append(f"no samples for {self.stale_for:.1f} s")
         if self._t <= self._saturated_until:
