@@ -182,3 +182,42 @@ def test_tcp_client_that_stops_reading_does_not_stall_the_others():
     assert got.count(b"\r\n") >= 0.9 * s["sent"]  # the reading client got (nearly) all that was accepted
     stuck.close()
     good.close()
+
+
+class _FakePort:
+    """A serial port that hands out bridge frames of a steady 50 Hz MCU clock, a few per read."""
+
+    def __init__(self, *a, **k) -> None:
+        from imutool.capture.bridge import Frame, encode_text
+
+        self.frames = [encode_text(Frame(i, i * 20_000, (0, 0, 16384, 0, 0, 0, 100, 0, 300, 0))) for i in range(400)]
+        self.i = 0
+        self.in_waiting = 0
+
+    def read(self, n: int) -> bytes:
+        chunk = b"".join(self.frames[self.i : self.i + 5])
+        self.i += 5
+        return chunk
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("clock", ["host", "sensor"])
+def test_a_host_clock_jump_does_not_move_the_time_stamps(monkeypatch, clock):
+    from imutool.live import sources
+
+    imu = sources.SerialImu("fake", 115200, "bridge", opener=_FakePort, clock=clock)
+    times = []
+    for k in range(60):
+        if k == 30:  # the host's clock steps an hour ahead (NTP, an operator): monotonic time does not
+            real = time.time
+            monkeypatch.setattr(time, "time", lambda: real() + 3600.0)
+        blk = imu.read(0.01)
+        if blk is not None:
+            times.append(blk.t)
+    t = np.concatenate(times)
+    assert len(t) == 300
+    assert np.all(np.diff(t) > 0) and np.max(np.diff(t)) < 1.0
+    if clock == "sensor":
+        assert np.allclose(np.diff(t), 0.02, atol=1e-6)
