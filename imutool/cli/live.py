@@ -70,8 +70,9 @@ def live_cmd(config_file: str | None, as_json: bool, quiet: bool, **given: Any) 
         options["rates"] = list(options["rates"])
     if "outputs" in options:
         options["outputs"] = list(options["outputs"])
-    res = run_live(**options)
-    emit_summary(res.full_summary(), as_json, quiet)
+    res = run_live(**options, log=(lambda m: None) if quiet else None)
+    if as_json:  # (the one summary line is in the log, stderr)
+        emit_summary(res.full_summary(), True, quiet)
 
 
 _ = default_of  # (defaults live in run_live: LIVE_DEFAULTS)
