@@ -209,9 +209,9 @@ def test_a_host_clock_jump_does_not_move_the_time_stamps(monkeypatch, clock):
 
     imu = sources.SerialImu("fake", 115200, "bridge", opener=_FakePort, clock=clock)
     times = []
+    real = time.time
     for k in range(60):
         if k == 30:  # the host's clock steps an hour ahead (NTP, an operator): monotonic time does not
-            real = time.time
             monkeypatch.setattr(time, "time", lambda: real() + 3600.0)
         blk = imu.read(0.01)
         if blk is not None:
@@ -221,3 +221,26 @@ def test_a_host_clock_jump_does_not_move_the_time_stamps(monkeypatch, clock):
     assert np.all(np.diff(t) > 0) and np.max(np.diff(t)) < 1.0
     if clock == "sensor":
         assert np.allclose(np.diff(t), 0.02, atol=1e-6)
+
+
+def test_config_file_runs_the_service_and_refuses_unknown_keys(ship_csv, tmp_path, capsys):
+    from formats.errors import ImutoolError
+    from imutool.cli import main
+    from imutool.live.config import read_config
+
+    cfg = tmp_path / "live.toml"
+    cfg.write_text(
+        f'[source]\nreplay = "{ship_csv}"\nspeed = 0\n[filter]\nmotion = "ship"\nsettle_s = 10\n'
+        f'lever_arm = [0.0, 0.0, -2.0]\n[output]\nsentences = ["HRM", "XDR"]\nrates = {{ XDR = 5 }}\n'
+        f'talker = "HE"\n[record]\nrecord = "{tmp_path / "rec"}"\n'
+    )
+    with pytest.raises(SystemExit) as e:
+        main(["live", "--config", str(cfg), "--duration", "30", "--json"])
+    assert e.value.code in (0, None)
+    s = json.loads(capsys.readouterr().out)
+    assert s["sentences"] == {"HRM": 30, "XDR": 150}  # the file's rates, the command line's duration
+    assert s["stop_reason"] == "duration 30 s reached" and s["recording"]["rows"] == 1500
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[output]\nsentence = ['HRM']\n")
+    with pytest.raises(ImutoolError, match="unknown key 'sentence'"):
+        read_config(str(bad))

@@ -366,23 +366,21 @@ class LiveEngine:
         return self.opts.utc_of(t) if self.opts.utc_of is not None else t
 
     def _settling_output(self, blk: SampleBlock) -> None:
-        """While the start-up span is held: V sentences with empty values, at their rates."""
-        t = float(blk.t[-1])
-        self.status.samples(t, False, False, np.inf)
-        status = self.status.update()
-        names = self.sched.due(t)
-        hub_due = t >= self._hub_next
-        if not names and not hub_due:
-            return
+        """While the start-up span is held: V sentences with empty values, each at the row where it falls due."""
         nan = float("nan")
-        snap = LiveSnapshot(self._utc(t), t, nan, nan, None, self.heading_ref, None, None, None, None, None,
-                            self.roll.peak_port, self.roll.peak_stbd, self.roll.reset_iso, status,
-                            self.status.cause, False)  # fmt: skip
-        if names:
-            self._emit(self.sched.lines(snap, names))
-        if hub_due:
-            self._hub_next = t + 1.0 / HUB_RATE_HZ
-            self.hub.publish(snap)
+        for i, names in self._due_rows(blk.t):
+            t = float(blk.t[i])
+            self.status.samples(t, False, False, np.inf)
+            status = self.status.update()
+            snap = LiveSnapshot(self._utc(t), t, nan, nan, None, self.heading_ref, None, None, None, None, None,
+                                self.roll.peak_port, self.roll.peak_stbd, self.roll.reset_iso, status,
+                                self.status.cause, False)  # fmt: skip
+            sentences = [s for s in names if s != "_HUB"]
+            if sentences:
+                self._emit(self.sched.lines(snap, sentences))
+            if "_HUB" in names:
+                self.hub.publish(snap)
+        self.status.samples(float(blk.t[-1]), False, False, np.inf)
 
     def _emit(self, data: bytes) -> None:
         """Queue sentences; they go to the outputs at the end of the block (:meth:`_flush`), one hand-over each."""
