@@ -244,3 +244,46 @@ def test_config_file_runs_the_service_and_refuses_unknown_keys(ship_csv, tmp_pat
     bad.write_text("[output]\nsentence = ['HRM']\n")
     with pytest.raises(ImutoolError, match="unknown key 'sentence'"):
         read_config(str(bad))
+
+
+def test_hub_consumers_see_snapshots_and_reset_the_peak_hold(ship_csv, tmp_path):
+    """`run_live(consumers=[start])`: a reader started with the engine gets snapshots (status, cause, roll), asks
+    for a peak-hold reset through the hub (performed, logged and kept), is stopped at the end."""
+    seen: list[LiveSnapshot] = []
+    handles = []
+
+    class Handle:
+        def __init__(self, hub: LiveHub) -> None:
+            self.sub, self.stopped, self.hub = hub.subscribe(10_000), False, hub
+            self.th = threading.Thread(target=self.run, daemon=True)
+            self.th.start()
+
+        def run(self) -> None:
+            while (s := self.sub.get(5.0)) is not None:
+                seen.append(s)
+                if s.t >= 200.0 and not any(x.peak_reset_utc for x in seen):
+                    self.hub.request_reset("bridge display")
+
+        def stop(self) -> None:
+            self.stopped = True
+
+    def start(hub: LiveHub) -> Handle:
+        handles.append(Handle(hub))
+        return handles[-1]
+
+    logs: list[str] = []
+    res = run_live(
+        replay=ship_csv, speed=0, duration=300, motion="ship", settle_s=20, consumers=[start], log=logs.append,
+        handle_signals=False, record=tmp_path / "rec", replay_block_s=0.05,
+    )  # fmt: skip
+    handles[0].th.join(5.0)
+    assert handles[0].stopped and handles[0].hub.closed
+    assert seen[0].status == "V" and "settling" in seen[0].cause and seen[-1].status == "A"
+    assert 2900 <= len(seen) + handles[0].sub.dropped <= 3001  # 10 a second of input
+    assert res.summary["peak_hold_resets"] and any("peak-hold reset by bridge display" in m for m in logs)
+    after = [s for s in seen if s.peak_reset_utc]
+    assert after and after[0].t >= 200.0 and after[-1].peak_reset_utc == res.summary["peak_hold_resets"][0]
+    est = _estimates(tmp_path / "rec")
+    since = est["roll"][est.time >= after[0].t - 1.0]  # (the reset fell within the block before this snapshot)
+    assert after[-1].peak_stbd_deg <= since.max() + 1e-9 and after[-1].peak_port_deg <= -since.min() + 1e-9
+    assert after[-1].peak_stbd_deg >= est["roll"][est.time >= after[0].t].max() - 1e-9
