@@ -287,3 +287,17 @@ def test_hub_consumers_see_snapshots_and_reset_the_peak_hold(ship_csv, tmp_path)
     since = est["roll"][est.time >= after[0].t - 1.0]  # (the reset fell within the block before this snapshot)
     assert after[-1].peak_stbd_deg <= since.max() + 1e-9 and after[-1].peak_port_deg <= -since.min() + 1e-9
     assert after[-1].peak_stbd_deg >= est["roll"][est.time >= after[0].t].max() - 1e-9
+
+
+def test_i2c_source_polls_the_capture_drivers():
+    from imutool.capture.fake_i2c import FakeHMC5883L, FakeMPU6050, FakeSMBus
+    from imutool.live.sources import i2c_source
+
+    bus = FakeSMBus({0x68: FakeMPU6050(accel_counts=(0, 0, 16384)), 0x1E: FakeHMC5883L(counts_xyz=(100, 0, 300))})
+    src = i2c_source("fake", rate_hz=200.0, mag="hmc5883l", bus_obj=bus)
+    blocks = [b for b in (src.read(0.05) for _ in range(20)) if b is not None]
+    assert len(blocks) >= 10 and all(len(b) == 1 for b in blocks)
+    t = np.concatenate([b.t for b in blocks])
+    assert np.all(np.diff(t) > 0)
+    assert abs(np.linalg.norm(blocks[0].accel[0]) - 9.80665) < 0.01 and np.linalg.norm(blocks[0].mag[0]) > 0
+    assert src.stats["frames"] == len(blocks) and src.stats["read_errors"] == 0
