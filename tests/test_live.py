@@ -301,3 +301,25 @@ def test_i2c_source_polls_the_capture_drivers():
     assert np.all(np.diff(t) > 0)
     assert abs(np.linalg.norm(blocks[0].accel[0]) - 9.80665) < 0.01 and np.linalg.norm(blocks[0].mag[0]) > 0
     assert src.stats["frames"] == len(blocks) and src.stats["read_errors"] == 0
+
+
+def test_saturation_gives_v_with_its_cause_and_a_after(ship_csv, tmp_path):
+    rec = formats.read(ship_csv).select(slice(0, 6000))  # 120 s
+    acc = np.array(rec["accel"])
+    acc[4000:4010, 2] = -16.0  # the accelerometer held at a range limit beyond 1.5 g for 10 samples (t = 80 s)
+    rec.channels["accel"] = acc
+    path = tmp_path / "clipped.csv"
+    formats.write(rec, path)
+    hub = LiveHub()
+    sub = hub.subscribe(100_000)
+    logs: list[str] = []
+    res = run_live(replay=path, speed=0, motion="ship", settle_s=20, hub=hub, log=logs.append, handle_signals=False)
+    snaps = []
+    while (s := sub.get(0)) is not None:
+        snaps.append(s)
+    sat = [s for s in snaps if "input saturated" in s.cause]
+    assert sat and all(s.status == "V" for s in sat)
+    assert 79.9 <= sat[0].t <= 80.3 and sat[-1].t <= 80.2 + 2.0 + 0.2  # held for HOLD_S after the last one
+    assert [s.status for s in snaps if 60 < s.t < 79.9] == ["A"] * len([s for s in snaps if 60 < s.t < 79.9])
+    assert snaps[-1].status == "A" and res.summary["saturated_samples"] == 10
+    assert any("status V: input saturated" in m for m in logs)
