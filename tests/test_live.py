@@ -323,3 +323,28 @@ def test_saturation_gives_v_with_its_cause_and_a_after(ship_csv, tmp_path):
     assert [s.status for s in snaps if 60 < s.t < 79.9] == ["A"] * len([s for s in snaps if 60 < s.t < 79.9])
     assert snaps[-1].status == "A" and res.summary["saturated_samples"] == 10
     assert any("status V: input saturated" in m for m in logs)
+
+
+def test_aux_port_gives_gnss_velocity_and_gyrocompass_heading():
+    pytest.importorskip("serial", reason="the second port needs pyserial")
+    import os
+
+    from formats.nmea.framing import checksum
+    from imutool.capture.serve import open_pty
+    from imutool.live.sources import AuxNmea
+
+    master, slave, name = open_pty()
+    aux = AuxNmea(name, 4800, max_age_s=0.5)
+    for body in ("GPRMC,120000.00,A,5400.0,N,01000.0,E,10.0,90.0,061226,,,A", "HEHDT,87.5,T", "garbage"):
+        os.write(master, f"${body}*{checksum(body)}\r\n".encode())
+    deadline = time.monotonic() + 5
+    while len(aux.values) < 3 and time.monotonic() < deadline:
+        aux.poll()
+    now = time.monotonic()
+    got = aux.latest(now)
+    assert got["sog"] == pytest.approx(10.0 * 1852 / 3600) and got["cog"] == 90.0
+    assert got["heading_true"] == 87.5 and aux.stats["sentences"] == 2 and aux.stats["bad"] == 1
+    assert aux.latest(now + 1.0) == {}  # too old: not used
+    aux.close()
+    os.close(master)
+    os.close(slave)
