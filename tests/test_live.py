@@ -348,3 +348,21 @@ def test_aux_port_gives_gnss_velocity_and_gyrocompass_heading():
     aux.close()
     os.close(master)
     os.close(slave)
+
+
+def test_a_blocked_serial_output_drops_and_never_blocks():
+    import os
+
+    from imutool.capture.serve import open_pty
+    from imutool.live.outputs import open_output
+
+    master, slave, name = open_pty()  # nobody reads the master: the line fills and the writer blocks
+    out = open_output(f"serial://{name}?baud=4800")
+    line = b"$IIHRM," + b"1" * 60 + b"*00\r\n"
+    for _ in range(20_000):  # 1.4 MB: far beyond the terminal's buffer
+        out.send(line)
+    s = out.stats()
+    assert s["dropped"] > 0 and 20_000 - 1 <= s["sent"] + s["dropped"] + len(out.q) <= 20_000  # (one in its write)
+    os.close(master)  # the writer's blocked write fails now; close does not hang
+    out.close(timeout=1.0)
+    os.close(slave)
