@@ -101,7 +101,7 @@ class LiveEngine:
         self._saved_at = -np.inf
         self.heading_known = False
         self.heading_ref = opts.heading_ref
-        self._silent_t = 0.0
+        self._silent_base = 0.0
         self.stop_reason = ""
 
     # -------------------------------------------------------------------------------------------------- the loop
@@ -147,7 +147,24 @@ class LiveEngine:
         """No sample: after ``stale_s`` the status goes V and the sentences go on (V) on the host's clock."""
         quiet = time.monotonic() - self._last_arrival
         self.status.silence(quiet)
-        if quiet <= self.opts.stale_s or self._last_snap is None:
+        if quiet <= self.opts.stale_s:
+            return
+        if self._last_snap is None:  # nothing ever arrived: V with empty values, on the host's clock
+            nan = float("nan")
+            self.status.update()
+            now = time.time()
+            self._last_snap = LiveSnapshot(now, now, nan, nan, None, self.heading_ref, None, None, None, None, None,
+                                           self.roll.peak_port, self.roll.peak_stbd, self.roll.reset_iso, "V",
+                                           self.status.cause, False)  # fmt: skip
+            self._silent_base = now - quiet
+        if not np.isfinite(self.t_last):
+            t = self._silent_base + quiet
+            names = self.sched.due(t)
+            if names:
+                s = replace(self._last_snap, utc=t, t=t, status="V", cause=self.status.cause)
+                self._emit(self.sched.lines(s, names))
+                self._flush()
+                self.hub.publish(s)
             return
         self.status.update()
         t = self.t_last + quiet
@@ -174,6 +191,10 @@ class LiveEngine:
             end = True
         if len(blk):
             self.t_last = float(blk.t[-1])
+            if self.recorder is not None:  # the samples as they came, before calibration and mounting
+                n = len(blk)
+                mag = blk.mag if blk.mag is not None else np.full((n, 3), np.nan)
+                self._recorded(self.recorder.write_raw(np.column_stack([blk.t, blk.gyro, blk.accel, mag])))
             blk = self._prepare(blk)
             if self.stepper is None:
                 self.held.append(blk)
@@ -396,13 +417,13 @@ class LiveEngine:
 
     def _record(self, blk: SampleBlock, roll, pitch, hdg, std, heave) -> None:
         n = len(blk)
-        mag = blk.mag if blk.mag is not None else np.full((n, 3), np.nan)
-        raw = np.column_stack([blk.t, blk.gyro, blk.accel, mag])
         status_a = 1.0 if self.status.status == "A" else 0.0
         hv = heave if heave is not None and self.heave is not None and self.heave.settled else np.full(n, np.nan)
         est = np.column_stack([blk.t, roll, pitch, hdg % 360.0, std[:, 0], std[:, 1], hv, np.full(n, status_a)])
         assert self.recorder is not None
-        why = self.recorder.write(raw, est)
+        self._recorded(self.recorder.write_estimates(est))
+
+    def _recorded(self, why: str | None) -> None:
         if why:
             self.log(f"recording stopped: {why} (the outputs go on)")
 
