@@ -391,3 +391,25 @@ def test_full_disk_stops_the_recording_not_the_outputs(ship, tmp_path):
         assert len(rd.lines()) >= 2900  # and arrived (a replay paced at 30x: the UDP reader keeps up)
     finally:
         subprocess.run(["umount", str(mnt)], capture_output=True)
+
+
+def test_v_is_sent_while_no_sensor_has_spoken_yet(tmp_path):
+    m_in, s_in, name_in = open_pty()
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    udp.bind(("127.0.0.1", 0))
+    rd = Reader(sock=udp)
+    rd.start()
+    proc = live([name_in, "--out", f"udp://127.0.0.1:{udp.getsockname()[1]}", "--sentences", "HRM", "--rate",
+                 "HRM=2", "--motion", "ship"])  # fmt: skip
+    wait_ready(proc)
+    time.sleep(4.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    rd.stop = True
+    hrm = [parse_sentence(ln) for ln in rd.lines()]
+    assert len(hrm) >= 4 and {s.fields[4] for s in hrm} == {"V"} and all(s.fields[0] == "" for s in hrm)
+    assert "no samples for" in err and err.strip().splitlines()[-1].split(" imutool live: ")[1].startswith(
+        "stopped (SIGINT): 0 samples"
+    )
+    os.close(m_in)
+    os.close(s_in)
