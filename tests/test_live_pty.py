@@ -205,8 +205,11 @@ def test_acceptance_replay_through_ptys(ship, tmp_path):
     params = EkfParams(motion="ship")
     ref = run_filter(raw, params=params, lever_arm=[0.0, 0.0, -2.0]).recording
     t_p = pashr_times(by["PASHR"], float(ref.time[0]))
-    during = t_p <= ref.time[-1] + 1e-3  # (after the input stopped: V sentences on, the last values held)
-    assert during[: during.sum()].all() and not during[-1]
+    before = t_p < ref.time[0] - 1e-3  # V sentences while no sample had come yet (on the host's clock)
+    assert all(s.fields[3] == "" and s.fields[10] == "0" for s, b in zip(by["PASHR"], before, strict=True) if b)
+    after = t_p > ref.time[-1] + 1e-3  # after the input stopped: V sentences on, the last values held
+    during = ~before & ~after
+    assert during[before.sum() : before.sum() + during.sum()].all() and after[-1]
     by["PASHR"], t_p = [s for s, d in zip(by["PASHR"], during, strict=True) if d], t_p[during]
     i = np.searchsorted(ref.time, t_p - 5e-4)
     assert np.all(np.abs(ref.time[i] - t_p) < 1e-3)  # each PASHR carries a sample's time
