@@ -151,7 +151,7 @@ def _rss_mb() -> float:
     return float("nan")
 
 
-def memory(hours: float) -> dict:
+def memory(hours: float, progress: bool = True) -> dict:
     from imutool.live import LiveHub
     from imutool.live.engine import EngineOptions, LiveEngine
     from imutool.live.outputs import open_output
@@ -175,6 +175,9 @@ def memory(hours: float) -> dict:
         span = 0.0 if eng.t_first is None else eng.t_last - eng.t_first
         if not marks or span - marks[-1][0] >= 3600.0:
             marks.append((span, _rss_mb(), time.monotonic() - t0))
+            if progress:
+                print(f"  {span / 3600:.1f} h of input: RSS {marks[-1][1]:.1f} MB after {marks[-1][2]:.0f} s",
+                      flush=True)  # fmt: skip
         while sub.get(0) is not None:
             pass
         try:
