@@ -142,7 +142,7 @@ def run_live(
     """
     logf = log or log_line
     if replay is None and port is None and i2c is None:
-        raise ImutoolError("imutool live: give a source (a serial PORT, --i2c BUS) or --replay FILE")
+        raise ImutoolError("give a source: a serial PORT, --i2c BUS or --replay FILE")
     if params is None:
         params, _notes = params_from_options(params_file)
     if motion is not None:
