@@ -19,6 +19,9 @@ import numpy as np
 
 from imutool.roll import PORT, ROLL_DEFAULTS, STBD, roll_cycles
 
+SPAN_PERIODS = 4.0  # roll periods of heel handed to roll_cycles once a period is known (the cost grows with it)
+SPAN_MARGIN_S = 10.0
+
 
 def iso_utc(t: float) -> str:
     """Host UTC epoch seconds → ISO 8601 with Z, seconds resolution."""
@@ -140,14 +143,23 @@ class LiveRoll:
             self.evaluate()
 
     def window(self) -> tuple[np.ndarray, np.ndarray]:
-        """The trailing window (t s, heel deg) the statistics are computed on."""
+        """The trailing window (t s, heel deg) the statistics are computed on (the blocks joined once: kept as one
+        array, so the next join takes it and the few blocks since)."""
         tt, xx = np.concatenate(self._t), np.concatenate(self._x)
         keep = tt >= tt[-1] - self.window_s
-        return tt[keep], xx[keep]
+        tt, xx = tt[keep], xx[keep]
+        self._t, self._x = deque([tt]), deque([xx])
+        return tt, xx
 
     def evaluate(self) -> None:
         """Recompute amplitude and period on the trailing window."""
         t, x = self.window()
+        # the latest cycles of each side depend only on the samples since the excursion before them (the first,
+        # partial excursion of a window is dropped): a window of a few roll periods gives what the whole one does
+        if self.period is not None:
+            span = min(self.window_s, SPAN_PERIODS * self.period + SPAN_MARGIN_S)
+            keep = t >= t[-1] - span
+            t, x = t[keep], x[keep]
         ok = np.isfinite(x)
         if ok.sum() < 8:
             return
