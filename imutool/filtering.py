@@ -29,13 +29,13 @@ from formats.parquet import parquet_info
 from formats.units import factor_to_si
 from imutool.attitude import (
     EkfParams,
+    EkfStepper,
     SelfCheck,
     ekf_recording,
     mag_interval,
     nominal_dt,
     output_metadata,
     result_recording,
-    run_ekf,
 )
 from imutool.attitude.lever_estimate import LeverArmEstimate
 from imutool.attitude.motion import ANALYSIS_MAX_S, MotionChoice, choose_motion, params_for_motion
@@ -528,7 +528,7 @@ def stream_ekf(
     total = expected_rows(path)
     checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict, rows_expected=total)
     rows_read = duplicates = 0
-    state = None
+    stepper: EkfStepper | None = None  # the EKF with its state carried from chunk to chunk
     dt_nom = dt_mag = None  # the IMU's and the magnetometer's nominal intervals (s), from the first chunk with them
     t_last = -np.inf
     summary: dict[str, Any] = {
@@ -629,23 +629,17 @@ def stream_ekf(
                 dt_mag = mag_interval(chunk.time, chunk.channels.get("mag"))
             assert self_checks is not None  # made with the first chunk's nominal step
             accel, clipped_rows = drop_clipped(chunk["gyro"], chunk["accel"], self_checks, chunk.time)
-            res, state = run_ekf(
-                chunk.time,
-                chunk["gyro"],
-                accel,
-                chunk.channels.get("mag"),
-                run_params,
-                sog,
-                cog,
-                state=state,
-                dt_nominal=dt_nom,
-                lever_arm=lever_arm,
-                keep_force=True,
-                heading_deg=heading,
-                dt_mag=dt_mag,
+            if stepper is None:  # the filter's set-up, once: the intervals of the first chunk
+                stepper = EkfStepper(
+                    run_params, dt_nominal=dt_nom, dt_mag=dt_mag, lever_arm=lever_arm, antenna_arm=antenna_arm,
+                    keep_force=True,
+                )  # fmt: skip
+            elif stepper.dt_mag is None:
+                stepper.dt_mag = dt_mag
+            res = stepper.step(
+                chunk.time, chunk["gyro"], accel, chunk.channels.get("mag"), sog, cog, heading_deg=heading,
                 velocity_ne=vel,
-                antenna_arm=antenna_arm,
-            )
+            )  # fmt: skip
             flag_clipped(res, clipped_rows)
             self_checks.add(
                 res,

@@ -60,7 +60,7 @@ from imutool.attitude.recording import (
     result_recording,
 )
 from imutool.attitude.rts import rts_smooth
-from imutool.attitude.run import AttitudeResult, euler_std, initial_state, mag_interval, nominal_dt, run_ekf
+from imutool.attitude.run import AttitudeResult, EkfStepper, euler_std, initial_state, mag_interval, nominal_dt, run_ekf
 from imutool.attitude.selfcheck import (
     FlagSpans,
     SampleFlag,
@@ -124,6 +124,7 @@ __all__ = [
     "result_recording",
     "rts_smooth",
     "run_ekf",
+    "EkfStepper",
     "self_check",
     "tilt_check",
     "zero_lag_smooth",

@@ -245,6 +245,138 @@ def _start_state(
     return st
 
 
+class EkfStepper:
+    """The EKF advanced block by block with its state carried and its set-up done once: the one code path of
+    :func:`run_ekf` (one block), the streamed ``filter`` (a block per chunk) and ``imutool live`` (a block of a
+    few samples). Fed the same rows in any blocks it gives the same output to the last bit, provided the sample
+    intervals are fixed up front (``dt_nominal``, ``dt_mag``: given, or taken from the first block) and the
+    SOG derivative (the turn's tangential term) is not differentiated across blocks (it is taken within each
+    block, as a stream always did; pass ``sogdot`` to supply it).
+
+    ``heading_held`` (None: decided per block from its rows, as :func:`run_ekf` does) fixes whether a heading is
+    held (a magnetometer or an external heading), which lets the GNSS velocity be turned into body axes.
+    ``state`` continues a previous run. Units as :func:`run_ekf`.
+    """
+
+    def __init__(
+        self,
+        params: EkfParams | None = None,
+        *,
+        dt_nominal: float | None = None,
+        dt_mag: float | None = None,
+        lever_arm: np.ndarray | None = None,
+        antenna_arm: np.ndarray | None = None,
+        state: np.ndarray | None = None,
+        keep_cov: bool = False,
+        keep_force: bool = False,
+        cov_every_sample: bool | None = None,
+        heading_held: bool | None = None,
+    ) -> None:
+        self.params = params or EkfParams()
+        self.dt_nominal, self.dt_mag = dt_nominal, dt_mag
+        self.lever, self.arm_sa = _arms(lever_arm, antenna_arm)
+        self.state = None if state is None else np.array(state, dtype=np.float64)
+        self.keep_cov, self.keep_f = keep_cov, keep_cov or keep_force
+        self.cov_each = keep_cov if cov_every_sample is None else cov_every_sample
+        self.heading_held = heading_held
+        self.samples = 0
+        self._coef: tuple | None = None  # (every, prm, mag mode code) once the intervals are known
+        self._flags = (False, False, False)  # gnss, aiding, heading input: the summary's
+
+    def _setup(self, t: np.ndarray, m: np.ndarray, use_mag: bool) -> tuple:
+        if use_mag and self.dt_mag is None:  # the magnetometer's interval from the first block that has one
+            self.dt_mag = mag_interval(t, m)
+            self._coef = None if self.dt_mag is not None else self._coef
+        if self._coef is None:
+            if self.dt_nominal is None:
+                self.dt_nominal = nominal_dt(t)
+            coef = EkfCoefficients.derive(self.params, self.dt_nominal, self.dt_mag)  # once per run
+            self._coef = (coef.samples_per_update, coef.kernel_vector(self.params), coef.mag_mode_code)
+        return self._coef
+
+    def step(
+        self,
+        time: np.ndarray,
+        gyro: np.ndarray,
+        accel: np.ndarray,
+        mag: np.ndarray | None = None,
+        sog: np.ndarray | None = None,
+        cog_deg: np.ndarray | None = None,
+        *,
+        heading_deg: np.ndarray | None = None,
+        velocity_ne: np.ndarray | None = None,
+        accel_measurement: np.ndarray | None = None,
+        progress: Progress | None = None,
+    ) -> AttitudeResult:
+        """Advance over one block of rows (SI, as :func:`run_ekf`); returns the block's per-sample output with the
+        run's counters so far in its summary. The state is carried in ``self.state``."""
+        params = self.params
+        t = np.ascontiguousarray(time, dtype=np.float64)
+        n = len(t)
+        g = np.ascontiguousarray(gyro, dtype=np.float64)
+        a = np.ascontiguousarray(accel, dtype=np.float64)
+        if heading_deg is None:
+            hdg = np.empty(0)
+        else:
+            hdg = np.radians(np.asarray(heading_deg, dtype=np.float64))
+            if hdg.shape != (n,):
+                raise ImutoolError(f"heading_deg must be ({n},), not {hdg.shape}")
+            mag = None  # a gyrocompass heading, not the magnetometer's
+        use_mag = mag is not None and params.mag_mode != "off"
+        m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
+        if self.state is None:
+            self.state = _start_state(None, a, m if use_mag else None, hdg, params)
+            self.state[S_BIASMAX] = params.bias_max
+        elif self.state.shape != (STATE_SIZE,):  # the kernel indexes it unchecked
+            raise ImutoolError(
+                f"an EKF state must have {STATE_SIZE} entries, not {self.state.shape} (from another release?)"
+            )
+        every, prm, mode = self._setup(t, m, use_mag)
+        mode = mode if use_mag else 0
+        st = self.state
+        st[S_BIASMAX] = params.bias_max
+        sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
+        held = self.heading_held
+        if held is None:  # a heading held in this block (magnetometer or external)
+            held = bool(len(hdg) and np.isfinite(hdg).any()) or bool(use_mag and np.isfinite(m).all(axis=1).any())
+        # a speed without a course (the log's, --speed) is along the bow too
+        gnss_code = np.int64(0 if not use_gnss else (1 if held and cog_deg is not None else 2))
+        vel = _rows(velocity_ne if held else None, n, 2, "velocity_ne")
+        q_out = np.empty((n, 4))
+        b_out = np.empty((n, 3))
+        std_out = np.empty((n, 3))
+        flags = np.zeros(n, dtype=np.uint16)
+        keep_cov, keep_f = self.keep_cov, self.keep_f
+        p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
+        f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
+        meas = _rows(accel_measurement, n, 3, "accel_measurement")
+        cov_flag = bool(self.cov_each or every == 1)
+        # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
+        for i0, i1 in [(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress):
+            ekf_kernel(
+                t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1],
+                vel[i0:i1] if len(vel) else vel, prm, every, mode, cov_flag, gnss_code, self.lever, self.arm_sa, st,
+                q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1], p_store[i0:i1] if keep_cov else p_store,
+                meas[i0:i1] if len(meas) else meas, f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else hdg,
+            )  # fmt: skip
+        self.samples += n
+        self._flags = (
+            self._flags[0] or bool(use_gnss or len(vel)),
+            self._flags[1] or bool(len(vel)),
+            self._flags[2] or bool(len(hdg)),
+        )
+        summary = _summary(st, self.samples, every, *self._flags)
+        return AttitudeResult(
+            t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None, f_out if keep_f else None
+        )
+
+    def counters(self) -> dict:
+        """The run's counters so far (updates, rejections, gaps, self-check samples...)."""
+        if self.state is None or self._coef is None:
+            return {"samples": self.samples}
+        return _summary(self.state, self.samples, self._coef[0], *self._flags)
+
+
 def run_ekf(
     time: np.ndarray,
     gyro: np.ndarray,
@@ -267,6 +399,7 @@ def run_ekf(
     antenna_arm: np.ndarray | None = None,
 ) -> tuple[AttitudeResult, np.ndarray]:
     """Run the EKF over arrays (SI units, see module docstring). Returns (result, state for the next chunk).
+    One block of an :class:`EkfStepper`.
 
     ``state`` continues a previous chunk (streaming). ``keep_cov`` stores P per sample (needed by
     :func:`rts_smooth`; 288 bytes/sample) and the compensated specific force (:func:`zero_lag_smooth`; 24
@@ -285,79 +418,30 @@ def run_ekf(
     ``dt_mag`` (s) the magnetometer's own sample interval, which sets its σ per sample from
     ``mag_heading_density`` (default: :func:`mag_interval` of these rows; a stream passes its first chunk's).
     """
-    params = params or EkfParams()
-    t = np.ascontiguousarray(time, dtype=np.float64)
-    n = len(t)
-    g = np.ascontiguousarray(gyro, dtype=np.float64)
-    a = np.ascontiguousarray(accel, dtype=np.float64)
-    if heading_deg is None:
-        hdg = np.empty(0)
-    else:
-        hdg = np.radians(np.asarray(heading_deg, dtype=np.float64))
-        if hdg.shape != (n,):
-            raise ImutoolError(f"heading_deg must be ({n},), not {hdg.shape}")
-        mag = None  # a gyrocompass heading, not the magnetometer's
-    use_mag = mag is not None and params.mag_mode != "off"
-    m = np.ascontiguousarray(mag, dtype=np.float64) if mag is not None else np.full((n, 3), np.nan)
-    if dt_nominal is None:
-        dt_nominal = nominal_dt(t)
-    st = _start_state(state, a, m if use_mag else None, hdg, params)
-    if dt_mag is None and use_mag:
-        dt_mag = mag_interval(t, m)
-    coef = EkfCoefficients.derive(params, dt_nominal, dt_mag)  # what depends on the rate, once per call
-    prm = coef.kernel_vector(params)
-    st[S_BIASMAX] = params.bias_max
-    sg, cg, sd, use_gnss = _gnss_arrays(t, sog, cog_deg, n)
-    # a heading held (magnetometer or external): the velocity can be turned into body axes; without one only the
-    # speed along the bow is used (the turn's centripetal term), and no velocity aiding
-    heading_held = bool(len(hdg) and np.isfinite(hdg).any()) or bool(use_mag and np.isfinite(m).all(axis=1).any())
-    # a speed without a course (the log's, --speed) is along the bow too
-    gnss_code = np.int64(0 if not use_gnss else (1 if heading_held and cog_deg is not None else 2))
-    lever, arm_sa = _arms(lever_arm, antenna_arm)
-    vel = _rows(velocity_ne if heading_held else None, n, 2, "velocity_ne")
-    q_out = np.empty((n, 4))
-    b_out = np.empty((n, 3))
-    std_out = np.empty((n, 3))
-    flags = np.zeros(n, dtype=np.uint16)
-    p_store = np.empty((n, 6, 6)) if keep_cov else np.empty((0, 6, 6))
-    keep_f = keep_cov or keep_force
-    f_out = np.full((n, 3), np.nan) if keep_f else np.empty((0, 3))
-    meas = _rows(accel_measurement, n, 3, "accel_measurement")
-    every = coef.samples_per_update
-    cov_each = keep_cov if cov_every_sample is None else cov_every_sample
-    mode, cov_flag = coef.mag_mode_code if use_mag else 0, bool(cov_each or every == 1)
-    # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
-    for i0, i1 in [(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress):
-        ekf_kernel(
-            t[i0:i1],
-            g[i0:i1],
-            a[i0:i1],
-            m[i0:i1],
-            sg[i0:i1],
-            cg[i0:i1],
-            sd[i0:i1],
-            vel[i0:i1] if len(vel) else vel,
-            prm,
-            every,
-            mode,
-            cov_flag,
-            gnss_code,
-            lever,
-            arm_sa,
-            st,
-            q_out[i0:i1],
-            b_out[i0:i1],
-            std_out[i0:i1],
-            flags[i0:i1],
-            p_store[i0:i1] if keep_cov else p_store,
-            meas[i0:i1] if len(meas) else meas,
-            f_out[i0:i1] if keep_f else f_out,
-            hdg[i0:i1] if len(hdg) else hdg,
-        )
-    summary = _summary(st, n, every, bool(use_gnss or len(vel)), bool(len(vel)), bool(len(hdg)))
-    return AttitudeResult(
-        t, q_out, b_out, std_out, flags, summary, p_store if keep_cov else None, f_out if keep_f else None
-    ), st
+    stepper = EkfStepper(
+        params,
+        dt_nominal=dt_nominal,
+        dt_mag=dt_mag,
+        lever_arm=lever_arm,
+        antenna_arm=antenna_arm,
+        state=None if state is None else _checked_state(state),
+        keep_cov=keep_cov,
+        keep_force=keep_force,
+        cov_every_sample=cov_every_sample,
+    )
+    res = stepper.step(
+        time, gyro, accel, mag, sog, cog_deg, heading_deg=heading_deg, velocity_ne=velocity_ne,
+        accel_measurement=accel_measurement, progress=progress,
+    )  # fmt: skip
+    res.summary["samples"] = len(res.time)
+    return res, stepper.state
+
+
+def _checked_state(state: np.ndarray) -> np.ndarray:
+    st = np.array(state, dtype=np.float64)
+    if st.shape != (STATE_SIZE,):  # the kernel indexes it unchecked
+        raise ImutoolError(f"an EKF state must have {STATE_SIZE} entries, not {st.shape} (from another release?)")
+    return st
 
 
 def euler_std(q: np.ndarray, P: np.ndarray) -> np.ndarray:

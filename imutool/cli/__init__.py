@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "report": ("report", "report_group", "Certification evidence reports (inclinometer, heading device)."),
     "nmea": ("nmea", "nmea_cmd", "Write NMEA 0183 sentences (HRM, XDR, HDG, THS) to a file or port."),
     "capture": ("capture", "capture_group", "Record serial NMEA, bridge frames, I2C or Modbus sensors."),
+    "live": ("live", "live_cmd", "Live inclinometer: IMU in, HRM/XDR/PASHR/TSS1/THS/ROT out to serial, UDP, TCP."),
     "events": ("events", "events_group", "Heavy-roll events, hourly roll statistics, parametric roll; fleet table."),
     "batch": ("batch", "batch_cmd", "Run any command over many files on local cores or a Dask cluster."),
     "selfcheck": ("selfcheck", "selfcheck_cmd", "Compile every kernel once and check a tiny end-to-end run."),
