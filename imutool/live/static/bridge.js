@@ -29,9 +29,9 @@
     const l = document.createElementNS(ns, "line");
     l.setAttribute("x1", x0); l.setAttribute("y1", y0); l.setAttribute("x2", x1); l.setAttribute("y2", y1);
     $("ticks").appendChild(l);
-    if (d % 10 === 0 || Math.abs(d) === MAXDEG) {
-      const [tx, ty] = pt(d, R - 48), t = document.createElementNS(ns, "text");
-      t.setAttribute("x", tx); t.setAttribute("y", ty + 7); t.textContent = Math.abs(d);
+    if (d % 10 === 0 && d !== 0) {
+      const [tx, ty] = pt(d, R + 24), t = document.createElementNS(ns, "text");
+      t.setAttribute("x", tx); t.setAttribute("y", ty + 6); t.textContent = Math.abs(d);
       $("ticks").appendChild(t);
     }
   }
@@ -40,7 +40,7 @@
   // ---- formatting ---------------------------------------------------------------------------------------
   const num = (v, d = 1) => (v === null || v === undefined || !isFinite(v)) ? "--.-" : Number(v).toFixed(d);
   const utcText = (epoch) => new Date(epoch * 1000).toISOString().slice(11, 19) + " UTC";
-  const isoText = (iso) => iso ? iso.replace("T", " ").replace(/\.\d+/, "").replace(/(Z|\+00:00)$/, "") + " UTC" : "never reset";
+  const isoText = (iso) => iso ? iso.replace("T", " ").replace(/\.\d+/, "").replace(/(Z|\+00:00)$/, "") + " UTC" : "never";
 
   function setStatus(letter, cause) {
     const el = $("status");
@@ -66,8 +66,8 @@
     $("peak-port").textContent = num(s.peak_port_deg); $("peak-stbd").textContent = num(s.peak_stbd_deg);
     $("peak-reset").textContent = isoText(s.peak_reset_utc);
     const pp = s.peak_port_deg, ps = s.peak_stbd_deg;
-    $("peak-p").setAttribute("d", pp > 0 ? arc(-clamp(pp) - 0.8, -clamp(pp) + 0.8, R + 4) : "M0,0");
-    $("peak-s").setAttribute("d", ps > 0 ? arc(clamp(ps) - 0.8, clamp(ps) + 0.8, R + 4) : "M0,0");
+    $("peak-p").setAttribute("d", pp > 0 ? arc(-clamp(pp) - 0.9, -clamp(pp) + 0.9, R) : "M0,0");
+    $("peak-s").setAttribute("d", ps > 0 ? arc(clamp(ps) - 0.9, clamp(ps) + 0.9, R) : "M0,0");
     $("pitch").textContent = num(s.pitch_deg);
     const hv = s.heave_m !== null && s.heave_m !== undefined && isFinite(s.heave_m);
     $("row-heave").hidden = !hv; if (hv) $("heave").textContent = num(s.heave_m, 2);
