@@ -42,7 +42,7 @@ def start_live(csv: Path, port: int, record: Path, duration: float, log: Path) -
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     args = [sys.executable, "-c", "from imutool.cli import main; main()", "live", "--replay", str(csv), "--speed",
             "2", "--motion", "ship", "--settle", "5", "--http", f"127.0.0.1:{port}", "--record", str(record),
-            "--duration", str(duration), "-q"]  # fmt: skip
+            "--duration", str(duration)]  # fmt: skip
     return subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=open(log, "w"), cwd=ROOT)
 
 

@@ -81,8 +81,9 @@ def live_cmd(
     if "outputs" in options:
         options["outputs"] = list(options["outputs"])
     options["consumers"] = display_consumers(http, signalk_push)
-    res = run_live(**options)
-    emit_summary(res.full_summary(), as_json, quiet)
+    res = run_live(**options, log=(lambda m: None) if quiet else None)
+    if as_json:  # (the one summary line is in the log, stderr)
+        emit_summary(res.full_summary(), True, quiet)
 
 
 def display_consumers(http: str | None, signalk_push: str | None) -> list:

@@ -75,6 +75,10 @@ RANGES: dict[str, Bound] = {
     "centre_window_s": POS,
     "max_period_s": POS,
     "duration": POS,
+    "live speed": (0, 10_000, False, False),  # replay speed (× real time; 0: as fast as it goes)
+    "live aux_baud": (50, 10_000_000, False, False),
+    "live rotate_s": (1, None, False, False),  # s between new recording files
+    "live settle_s": (0, 86_400, False, False),  # s of start-up with status V
     "replug_every": POS,
     "start_delay": NONNEG,
     "align_window": POS,

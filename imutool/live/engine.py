@@ -37,6 +37,7 @@ from .status import LiveStatus
 
 CLIP_TAIL = 8  # samples before a block taken into its saturation check (a range limit held 3 samples is a limit)
 HUB_RATE_HZ = 10.0  # snapshots per second of input time handed to the hub
+PEAK_SAVE_S = 10.0  # s of input between writes of the peak-hold state file
 
 
 @dataclass
@@ -97,9 +98,10 @@ class LiveEngine:
         self._tail_gyr = np.empty((0, 3))
         self._last_snap: LiveSnapshot | None = None
         self._pending: list[bytes] = []
+        self._saved_at = -np.inf
         self.heading_known = False
         self.heading_ref = opts.heading_ref
-        self._silent_t = 0.0
+        self._silent_base = 0.0
         self.stop_reason = ""
 
     # -------------------------------------------------------------------------------------------------- the loop
@@ -130,6 +132,7 @@ class LiveEngine:
         if self.held:  # a source that ended inside the start-up span: filter what was held
             self._start()
         self._flush()
+        self.roll.save()
         return self.summary()
 
     def reset_peak(self, who: str, utc: float) -> None:
@@ -144,13 +147,30 @@ class LiveEngine:
         """No sample: after ``stale_s`` the status goes V and the sentences go on (V) on the host's clock."""
         quiet = time.monotonic() - self._last_arrival
         self.status.silence(quiet)
-        if quiet <= self.opts.stale_s or self._last_snap is None:
+        if quiet <= self.opts.stale_s:
+            return
+        if self._last_snap is None:  # nothing ever arrived: V with empty values, on the host's clock
+            nan = float("nan")
+            self.status.update()
+            now = time.time()
+            self._last_snap = LiveSnapshot(now, now, nan, nan, None, self.heading_ref, None, None, None, None, None,
+                                           self.roll.peak_port, self.roll.peak_stbd, self.roll.reset_iso, "V",
+                                           self.status.cause, False)  # fmt: skip
+            self._silent_base = now - quiet
+        if not np.isfinite(self.t_last):
+            t = self._silent_base + quiet
+            names = self.sched.due(t)
+            if names:
+                s = replace(self._last_snap, utc=t, t=t, status="V", cause=self.status.cause)
+                self._emit(self.sched.lines(s, names))
+                self._flush()
+                self.hub.publish(s)
             return
         self.status.update()
         t = self.t_last + quiet
         names = self.sched.due(t)
         if names:
-            s = replace(self._last_snap, utc=time.time(), status="V", cause=self.status.cause)
+            s = replace(self._last_snap, utc=self._utc(t), t=t, status="V", cause=self.status.cause)
             self._emit(self.sched.lines(s, names))
             self._flush()
             self.hub.publish(s)
@@ -171,6 +191,10 @@ class LiveEngine:
             end = True
         if len(blk):
             self.t_last = float(blk.t[-1])
+            if self.recorder is not None:  # the samples as they came, before calibration and mounting
+                n = len(blk)
+                mag = blk.mag if blk.mag is not None else np.full((n, 3), np.nan)
+                self._recorded(self.recorder.write_raw(np.column_stack([blk.t, blk.gyro, blk.accel, mag])))
             blk = self._prepare(blk)
             if self.stepper is None:
                 self.held.append(blk)
@@ -285,6 +309,9 @@ class LiveEngine:
                 continue
             if "HRM" in names:
                 self.roll.refresh()  # a cycle completed in this block is in this HRM
+                if blk.t[i] - self._saved_at >= PEAK_SAVE_S:  # the peak-hold survives a restart
+                    self._saved_at = float(blk.t[i])
+                    self.roll.save()
             snap = self._snapshot(
                 float(blk.t[i]), roll[i], pitch[i], hdg[i], rot[i], None if heave is None else heave[i], status
             )
@@ -360,23 +387,21 @@ class LiveEngine:
         return self.opts.utc_of(t) if self.opts.utc_of is not None else t
 
     def _settling_output(self, blk: SampleBlock) -> None:
-        """While the start-up span is held: V sentences with empty values, at their rates."""
-        t = float(blk.t[-1])
-        self.status.samples(t, False, False, np.inf)
-        status = self.status.update()
-        names = self.sched.due(t)
-        hub_due = t >= self._hub_next
-        if not names and not hub_due:
-            return
+        """While the start-up span is held: V sentences with empty values, each at the row where it falls due."""
         nan = float("nan")
-        snap = LiveSnapshot(self._utc(t), t, nan, nan, None, self.heading_ref, None, None, None, None, None,
-                            self.roll.peak_port, self.roll.peak_stbd, self.roll.reset_iso, status,
-                            self.status.cause, False)  # fmt: skip
-        if names:
-            self._emit(self.sched.lines(snap, names))
-        if hub_due:
-            self._hub_next = t + 1.0 / HUB_RATE_HZ
-            self.hub.publish(snap)
+        for i, names in self._due_rows(blk.t):
+            t = float(blk.t[i])
+            self.status.samples(t, False, False, np.inf)
+            status = self.status.update()
+            snap = LiveSnapshot(self._utc(t), t, nan, nan, None, self.heading_ref, None, None, None, None, None,
+                                self.roll.peak_port, self.roll.peak_stbd, self.roll.reset_iso, status,
+                                self.status.cause, False)  # fmt: skip
+            sentences = [s for s in names if s != "_HUB"]
+            if sentences:
+                self._emit(self.sched.lines(snap, sentences))
+            if "_HUB" in names:
+                self.hub.publish(snap)
+        self.status.samples(float(blk.t[-1]), False, False, np.inf)
 
     def _emit(self, data: bytes) -> None:
         """Queue sentences; they go to the outputs at the end of the block (:meth:`_flush`), one hand-over each."""
@@ -392,13 +417,13 @@ class LiveEngine:
 
     def _record(self, blk: SampleBlock, roll, pitch, hdg, std, heave) -> None:
         n = len(blk)
-        mag = blk.mag if blk.mag is not None else np.full((n, 3), np.nan)
-        raw = np.column_stack([blk.t, blk.gyro, blk.accel, mag])
         status_a = 1.0 if self.status.status == "A" else 0.0
         hv = heave if heave is not None and self.heave is not None and self.heave.settled else np.full(n, np.nan)
         est = np.column_stack([blk.t, roll, pitch, hdg % 360.0, std[:, 0], std[:, 1], hv, np.full(n, status_a)])
         assert self.recorder is not None
-        why = self.recorder.write(raw, est)
+        self._recorded(self.recorder.write_estimates(est))
+
+    def _recorded(self, why: str | None) -> None:
         if why:
             self.log(f"recording stopped: {why} (the outputs go on)")
 

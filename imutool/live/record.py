@@ -51,14 +51,22 @@ class Recorder:
         except OSError as e:
             raise ImutoolError(f"cannot record: {e.strerror}", path=str(folder)) from None
 
-    def write(self, raw: np.ndarray, est: np.ndarray) -> str | None:
-        """Append a block (rows × RAW_COLUMNS, rows × EST_COLUMNS); returns why the recording stopped, once."""
+    def write_raw(self, raw: np.ndarray) -> str | None:
+        """Append raw rows (rows × RAW_COLUMNS); returns why the recording stopped, once."""
+        return self._write(self.raw, raw)
+
+    def write_estimates(self, est: np.ndarray) -> str | None:
+        """Append estimate rows (rows × EST_COLUMNS); returns why the recording stopped, once."""
+        why = self._write(self.est, est)
+        if why is None and not self.stopped:
+            self.rows += len(est)
+        return why
+
+    def _write(self, sink: CaptureCsv, rows: np.ndarray) -> str | None:
         if self.stopped:
             return None
         try:
-            self.raw.write_rows(raw)
-            self.est.write_rows(est)
-            self.rows += len(raw)
+            sink.write_rows(rows)
         except ImutoolError as e:  # DiskFull and any other write error: the outputs go on
             self.stopped = str(e)
             return self.stopped

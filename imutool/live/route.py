@@ -63,8 +63,23 @@ def log_line(msg: str, stream: Any = None) -> None:
     print(f"{now} imutool live: {msg}", file=stream or sys.stderr, flush=True)
 
 
-def warm_kernels(params: EkfParams) -> None:
-    """Compile (or load from the cache) the EKF's kernel on a few synthetic rows, before any port is opened."""
+def warm_kernels(params: EkfParams, protocol: str | None = None, record: bool = False) -> None:
+    """Compile (or load from the cache) the kernels a live run calls — the EKF's, the roll statistics', the bridge
+    decoder's and the CSV writer's — on a few synthetic rows, before any port is opened."""
+    from formats.csv import format_array
+    from imutool.roll import roll_cycles
+
+    tr = np.arange(200) * 0.1
+    roll_cycles(tr, 5.0 * np.sin(tr))
+    if record:
+        format_array(np.zeros((1, 3)))
+    if protocol in ("bridge", "bridge-binary"):
+        from imutool.capture.bridge import BridgeDecoder, Frame, encode_binary, encode_text
+
+        frame = Frame(0, 0, (0, 0, 16384, 0, 0, 0, 0, 0, 0, 0))
+        BridgeDecoder(binary=protocol == "bridge-binary").feed_arrays(
+            (encode_binary if protocol == "bridge-binary" else encode_text)(frame)
+        )
     n = 8
     t = np.arange(n) * 0.01
     acc = np.tile([0.0, 0.0, -9.81], (n, 1))
@@ -127,7 +142,7 @@ def run_live(
     """
     logf = log or log_line
     if replay is None and port is None and i2c is None:
-        raise ImutoolError("imutool live: give a source (a serial PORT, --i2c BUS) or --replay FILE")
+        raise ImutoolError("give a source: a serial PORT, --i2c BUS or --replay FILE")
     if params is None:
         params, _notes = params_from_options(params_file)
     if motion is not None:
@@ -150,7 +165,8 @@ def run_live(
         )
 
     t0 = time.monotonic()
-    warm_kernels(params)  # before the port is opened: no sample waits for a compile
+    serial_protocol = protocol if port is not None and modbus_profile is None and replay is None else None
+    warm_kernels(params, serial_protocol, record is not None)  # before the port is opened: no sample waits
     logf(f"kernels ready in {time.monotonic() - t0:.1f} s")
 
     utc_of = None

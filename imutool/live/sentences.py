@@ -4,17 +4,16 @@ Sentences (formatters of :mod:`formats.nmea`; angles in degrees, heel/roll + sta
 
 ========  =====  ===========================================================================================
 HRM       1 Hz   heel, roll period, amplitudes port/starboard, status A/V, peak-hold port/starboard, reset UTC
-XDR       10 Hz  pitch and roll (A, deg, PTCH / ROLL), then the heel (A, deg, HEEL)
+XDR       10 Hz  pitch and roll (A, deg, PTCH / ROLL; 2 decimals)
 PASHR     10 Hz  UTC time, true heading, roll, pitch, heave (+ up), σ; IMU status 1 only while status A
-TSS1      10 Hz  heave (cm, + up), status (U unaided settled / u unaided settling… here F/f: see below), roll
-HDT       1 Hz   heading (true where the heading is true; magnetic heading is sent as HDG instead)
-THS       1 Hz   heading with mode A (autonomous) or V (not valid)
+TSS1      10 Hz  heave (cm, + up), status U (unaided, settled: status A with heave) or u, TSS roll, pitch
+HDT       1 Hz   true heading (a gyrocompass input); a magnetometer's heading is sent as HDG instead
+THS       1 Hz   true heading with mode A (autonomous) or V (not valid); not sent without a true heading
 ROT       1 Hz   rate of turn (deg/min, − to port) with A/V
 ========  =====  ===========================================================================================
 
-TSS1's status letter: 'U' (unaided, settled) while A, 'u' (unaided, settling) while V. Rates are set per sentence
-(``--rate XDR=20``) up to the input's sample rate; the talker ID (``--talker``, default II) applies to all but
-PASHR and TSS1 (proprietary / talker-less).
+Rates are set per sentence (``--rate XDR=20``) on the input's clock; the talker ID (``--talker``, default II)
+applies to all but PASHR and TSS1 (proprietary / talker-less).
 """
 
 from __future__ import annotations

@@ -2,13 +2,15 @@
 
 Causes (each a short phrase; several may hold at once, joined by '; '):
 
-- ``settling (N s after start)`` — the filter's start-up: its roll/pitch σ must fall below ``max_tilt_std_deg``
-  and ``settle_s`` must have passed since the first sample (the engine also decides the motion model then);
+- ``settling (N of S s after start)`` / ``settling (roll/pitch sigma ...)`` — the filter's start-up: ``settle_s``
+  must have passed since the first sample (the engine decides an ``auto`` motion model then) and the roll/pitch
+  σ must be within ``max_tilt_std_deg`` (1°);
 - ``no samples for X s`` — nothing arrived for more than ``stale_s`` (1 s; the sensor unplugged or silent);
 - ``input saturated`` — an accelerometer or gyro sample at its range limit in the last ``hold_s``;
 - ``self-check inconsistent`` — the filter's own consistency test (windowed NIS, tilt window) failed in the last
   ``hold_s``;
-- ``filter out of bounds`` — the roll/pitch σ above ``max_tilt_std_deg`` after settling (e.g. after an outage);
+- ``filter out of bounds`` — the roll/pitch σ above 1.5 × ``max_tilt_std_deg`` after settling (e.g. after an
+  outage);
 - ``no heading`` — for the heading sentences only (HDT/THS/ROT carry their own V).
 
 Every change of status is logged with its UTC and the cause (``log``).
@@ -20,7 +22,8 @@ from collections.abc import Callable
 
 STALE_S = 1.0  # s without samples → V
 HOLD_S = 2.0  # s a saturation or inconsistency keeps the status V after its last sample
-MAX_TILT_STD_DEG = 0.5  # deg: roll/pitch σ above this → not trustworthy
+MAX_TILT_STD_DEG = 1.0  # deg: roll/pitch σ to reach before A (MSC.363(92) asks ±1° of the heel)
+OUT_OF_BOUNDS = 1.5  # × MAX_TILT_STD_DEG: once settled, V again above this (a margin: no A/V flicker at the edge)
 
 
 class LiveStatus:
@@ -44,6 +47,7 @@ class LiveStatus:
         self._inconsistent_until = -float("inf")
         self._std_ok = False
         self._t = -float("inf")
+        self.tilt_std_deg = float("inf")
         self.status = "V"
         self.cause = "starting"
         self.changes = 0
@@ -59,7 +63,9 @@ class LiveStatus:
             self._saturated_until = t_last + self.hold_s
         if inconsistent:
             self._inconsistent_until = t_last + self.hold_s
-        self._std_ok = tilt_std_deg <= self.max_tilt_std_deg
+        limit = self.max_tilt_std_deg * (OUT_OF_BOUNDS if self.settled else 1.0)
+        self._std_ok = tilt_std_deg <= limit
+        self.tilt_std_deg = tilt_std_deg
         if not self.settled and t_last - self.t0 >= self.settle_s and self._std_ok:
             self.settled = True
             self.log(f"filter settled after {t_last - self.t0:.1f} s")
@@ -72,7 +78,10 @@ class LiveStatus:
         out = []
         if not self.settled:
             since = 0.0 if self.t0 is None else self._t - self.t0
-            out.append(f"settling ({since:.0f} of {self.settle_s:.0f} s after start)")
+            if since < self.settle_s:
+                out.append(f"settling ({since:.0f} of {self.settle_s:.0f} s after start)")
+            else:
+                out.append(f"settling (roll/pitch sigma {self.tilt_std_deg:.2f} > {self.max_tilt_std_deg} deg)")
         if self.stale_for > self.stale_s:
             out.append(f"no samples for {self.stale_for:.1f} s")
         if self._t <= self._saturated_until:
