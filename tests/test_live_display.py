@@ -38,11 +38,11 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_live(csv: Path, port: int, record: Path, duration: float, log: Path) -> subprocess.Popen:
+def start_live(csv: Path, port: int, record: Path, duration: float, log: Path, out: tuple = ()) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     args = [sys.executable, "-c", "from imutool.cli import main; main()", "live", "--replay", str(csv), "--speed",
             "2", "--motion", "ship", "--settle", "5", "--http", f"127.0.0.1:{port}", "--record", str(record),
-            "--duration", str(duration)]  # fmt: skip
+            "--duration", str(duration), *out]  # fmt: skip
     return subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=open(log, "w"), cwd=ROOT)
 
 
@@ -107,7 +107,11 @@ def test_bridge_display_in_chromium(ship_csv, browser, tmp_path):
     port = free_port()
     rec = tmp_path / "rec"
     log = tmp_path / "live.log"
-    proc = start_live(ship_csv, port, rec, 70.0, log)
+    hrm = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # the HRM sentences (the reset goes to the VDR)
+    hrm.bind(("127.0.0.1", 0))
+    hrm.settimeout(0.2)
+    out = ("--out", f"udp://127.0.0.1:{hrm.getsockname()[1]}", "--sentences", "HRM")
+    proc = start_live(ship_csv, port, rec, 70.0, log, out)
     try:
         url = f"http://127.0.0.1:{port}/"
         wait_for(lambda: _get(browser, url), 60, "the page to load")
@@ -149,6 +153,15 @@ def test_bridge_display_in_chromium(ship_csv, browser, tmp_path):
             proc.kill()
     text = log.read_text()
     assert "peak-hold reset by the bridge display" in text, text[-2000:]
+    hrm_lines = []
+    try:
+        while True:
+            hrm_lines += hrm.recv(65536).decode().splitlines()
+    except TimeoutError:
+        hrm.close()
+    stamp = datetime.strptime(after["reset"], "%Y-%m-%d %H:%M:%S UTC")
+    fields = [ln.split("*")[0].split(",") for ln in hrm_lines if ln.startswith("$IIHRM")]
+    assert fields and any(f[8] == stamp.strftime("%H%M%S") and f[9] == f"{stamp.day:02d}" for f in fields), fields[-3:]
 
     est = estimates(rec)
     t_est, roll = est.time, est["roll"]
