@@ -14,6 +14,7 @@ import socket
 import subprocess
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -271,3 +272,37 @@ def test_own_stream_hello_and_rate(ship_csv):
     assert {"navigation.attitude", "navigation.rateOfTurn"} <= paths
     att = next(x["value"] for x in v["values"] if x["path"] == "navigation.attitude")
     assert set(att) == {"roll", "pitch", "yaw"} and abs(att["roll"]) < math.radians(60)
+
+
+def test_http_listen_address_and_offline_assets():
+    """--http: loopback by default, a warning for another address; the page's assets come from the package
+    and name no other host (no CDN)."""
+    from formats.errors import ImutoolError
+    from imutool.live.http import BridgeServer, parse_listen
+
+    assert parse_listen("8080") == ("127.0.0.1", 8080)
+    assert parse_listen("0.0.0.0:8081") == ("0.0.0.0", 8081)
+    assert parse_listen("[::1]:8082") == ("::1", 8082)
+    with pytest.raises(ImutoolError):
+        parse_listen("localhost:http")
+    logs: list[str] = []
+    srv = BridgeServer(LiveHub(), "0.0.0.0", 0, log=logs.append)
+    try:
+        assert any("not on loopback" in m for m in logs), logs
+        base = f"http://127.0.0.1:{srv.port}"
+        page = urllib.request.urlopen(f"{base}/", timeout=5).read().decode()
+        assets = [
+            urllib.request.urlopen(f"{base}/static/{n}", timeout=5).read().decode() for n in ("bridge.css", "bridge.js")
+        ]
+        assert get_json(f"{base}/api/latest") is None  # nothing published yet
+        with pytest.raises(urllib.error.HTTPError):
+            urllib.request.urlopen(f"{base}/static/../http.py", timeout=5)
+    finally:
+        srv.stop()
+    assert 'src="/static/bridge.js"' in page
+    for text in [page, *assets]:
+        assert "http://" not in text.replace("http://www.w3.org/2000/svg", "") and "https://" not in text
+    logs.clear()
+    srv = BridgeServer(LiveHub(), "127.0.0.1", 0, log=logs.append)
+    srv.stop()
+    assert not any("not on loopback" in m for m in logs)
