@@ -203,7 +203,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=60.0, help="latency run length (s)")
     ap.add_argument("--hours", type=float, default=24.0, help="the replayed span of the memory run (h)")
-    ap.add_argument("--only", choices=["latency", "memory"], default=None)
+    ap.add_argument("--only", choices=["latency", "memory", "display"], default=None)
     a = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f}")
     if a.only in (None, "latency"):
@@ -217,6 +217,10 @@ def main() -> None:
         print(f"{a.hours:g} h at 100 Hz as fast as it goes: {r['samples']} samples in {r['wall_s']} s "
               f"({r['rate_samples_per_s']} samples/s, {r['x_real_time']}x real time); RSS {r['rss_mb_at_1h']} MB "
               f"after 1 h, {r['rss_mb_end']} MB at the end: growth {r['rss_growth_mb']} MB")  # fmt: skip
+    if a.only in (None, "display"):  # the bridge page: its update rate and the server's CPU with 5 browsers
+        from benchmarks.live_display import display, report
+
+        print(report(display(5, 20.0)))
 
 
 if __name__ == "__main__":

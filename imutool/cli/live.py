@@ -8,9 +8,10 @@ from typing import Any
 
 import click
 
+from formats.errors import ImutoolError
 from imutool.cli.common import default_of, emit_summary
 from imutool.live.config import read_config
-from imutool.live.route import run_live
+from imutool.live.route import log_line, run_live
 from imutool.live.sentences import SENTENCES
 from imutool.live.sources import DECODERS
 
@@ -53,10 +54,19 @@ from imutool.live.sources import DECODERS
 @click.option("--mounting", default=None, help="Sensor → body axes, e.g. 'x,-y,-z[;r,p,y]'.")
 @click.option("--calibration", "calibration_file", default=None, help="Calibration file (TOML).")
 @click.option("--peak-state", default=None, help="File keeping the peak-hold and its reset UTC across restarts.")
+@click.option(
+    "--http",
+    default=None,
+    metavar="[HOST:]PORT",
+    help="Serve the bridge display and a Signal K stream (loopback unless HOST is given; needs imutool[live]).",
+)
+@click.option("--signalk-push", default=None, metavar="URL", help="Push Signal K deltas to a server (ws://HOST:PORT).")
 @click.option("--config", "config_file", type=click.Path(exists=True), default=None, help="TOML configuration.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("-q", "--quiet", is_flag=True)
-def live_cmd(config_file: str | None, as_json: bool, quiet: bool, **given: Any) -> None:
+def live_cmd(
+    config_file: str | None, as_json: bool, quiet: bool, http: str | None, signalk_push: str | None, **given: Any
+) -> None:
     """Read a live IMU (or replay a recording) and keep writing the inclinometer's sentences (HRM, XDR, PASHR,
     TSS1, HDT/THS, ROT) to serial ports, UDP and TCP until stopped. Status V while settling, when samples stop,
     on saturation or an inconsistent self-check; SIGUSR1 resets the peak-hold."""
@@ -70,9 +80,30 @@ def live_cmd(config_file: str | None, as_json: bool, quiet: bool, **given: Any) 
         options["rates"] = list(options["rates"])
     if "outputs" in options:
         options["outputs"] = list(options["outputs"])
+    options["consumers"] = display_consumers(http, signalk_push)
     res = run_live(**options, log=(lambda m: None) if quiet else None)
     if as_json:  # (the one summary line is in the log, stderr)
         emit_summary(res.full_summary(), True, quiet)
+
+
+def display_consumers(http: str | None, signalk_push: str | None) -> list:
+    """The hub's consumers of ``--http`` and ``--signalk-push`` (aiohttp, the extra ``imutool[live]``)."""
+    if http is None and signalk_push is None:
+        return []
+    try:
+        import aiohttp  # noqa: F401
+    except ImportError:
+        raise ImutoolError("--http and --signalk-push need aiohttp: pip install 'imutool[live]'") from None
+    from imutool.live.http import http_consumer
+    from imutool.live.signalk import SignalKPush
+
+    out: list = []
+    if http is not None:
+        out.append(http_consumer(http, log=log_line))
+    if signalk_push is not None:
+        url = signalk_push
+        out.append(lambda hub: SignalKPush(url, hub, log=log_line))
+    return out
 
 
 _ = default_of  # (defaults live in run_live: LIVE_DEFAULTS)
