@@ -8,7 +8,7 @@ jump of the host clock does not move them: ``t = mono - mono_at_start + utc_at_s
 
 A serial IMU protocol is a :class:`FrameDecoder` registered in :data:`DECODERS` (:func:`register_decoder`):
 ``feed(data, t_mono) -> SampleBlock`` and a ``stats`` dict of counts (``frames``, ``bad_checksum``,
-``malformed``, ``garbage_bytes``). The port itself (reopened with backoff when it vanishes) is capture's
+``malformed``, ``garbage_bytes``); factories are called with ``clock=`` and ``baud=``. The port itself (reopened with backoff when it vanishes) is capture's
 :class:`imutool.capture.serial_capture.SerialSource`.
 """
 
@@ -117,11 +117,51 @@ class BridgeFrames:
         return SampleBlock(np.asarray(t, float), ch["gyro"], ch["accel"], ch["mag"])
 
 
-register_decoder("bridge", lambda **kw: BridgeFrames(binary=False, **kw))
-register_decoder("bridge-binary", lambda **kw: BridgeFrames(binary=True, **kw))
-# Raw-IMU serial protocols of MEMS units (e.g. an Xsens MTData2, a VectorNav binary, a WitMotion 0x55 frame)
-# plug in the same way: a module with a FrameDecoder calls register_decoder("xsens-mt", XsensFrames) on import
-# and is imported from here (none is written yet).
+register_decoder("bridge", lambda baud=None, **kw: BridgeFrames(binary=False, **kw))
+register_decoder("bridge-binary", lambda baud=None, **kw: BridgeFrames(binary=True, **kw))
+
+
+class VendorFrames:
+    """A raw-IMU vendor protocol of :mod:`formats.imu_protocols` (VectorNav ASCII, WitMotion binary) as a
+    :class:`FrameDecoder`. These frames carry no usable device clock, so each sample is timed by the host: the
+    read's monotonic arrival time less the bytes that followed the sample's last byte in that read, at
+    10 bits a byte at ``baud``; times are kept strictly increasing (1 µs apart at least). The vendor's attitude
+    (deg, imutool's signs) rides along as ``extra`` vendor_roll / vendor_pitch / vendor_yaw."""
+
+    def __init__(self, protocol: str, clock: str = "host", baud: int | None = None, **options: Any) -> None:
+        from formats.imu_protocols import make_decoder
+
+        if clock != "host":
+            raise ImutoolError(f"serial protocol {protocol!r} has no device clock in its frames: use --clock host")
+        self.dec = make_decoder(protocol, **options)
+        self.byte_s = 10.0 / baud if baud else 0.0
+        self.conventions: str = self.dec.conventions
+        self._last = -np.inf
+        self.stats: dict[str, int] = {}
+
+    def feed(self, data: bytes, t_mono: float) -> SampleBlock:
+        s = self.dec.feed(data)
+        self.stats = self.dec.stats.as_dict()
+        if not len(s):
+            return SampleBlock.empty()
+        t = t_mono - (len(data) - s.end) * self.byte_s
+        for k in range(len(t)):  # (a few samples a read)
+            t[k] = self._last = max(float(t[k]), self._last + 1e-6)
+        mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
+        extra = {}
+        if s.attitude is not None:
+            extra = {f"vendor_{k}": s.attitude[:, i] for i, k in enumerate(("roll", "pitch", "yaw"))}
+        return SampleBlock(np.asarray(t, float), s.gyro, s.accel, mag, extra)
+
+
+def _register_vendor_protocols() -> None:
+    from formats.imu_protocols import PROTOCOLS
+
+    for name in PROTOCOLS:
+        register_decoder(name, lambda name=name, **kw: VendorFrames(name, **kw))
+
+
+_register_vendor_protocols()
 
 
 class SerialImu:
@@ -142,7 +182,9 @@ class SerialImu:
 
         if protocol not in DECODERS:
             raise ImutoolError(f"serial protocol {protocol!r}: known {', '.join(sorted(DECODERS))}")
-        self.decoder = DECODERS[protocol](clock=clock)
+        self.decoder = DECODERS[protocol](clock=clock, baud=baud)
+        conv = getattr(self.decoder, "conventions", None)
+        self.meta: dict[str, str] = {"protocol": protocol, **({"conventions": conv} if conv else {})}
         self._cstats = CaptureStats(started_utc="")
         self.port = SerialSource(port, baud, self._cstats, max_backoff=2.0, opener=opener, log=log)
         self.port.batch_s = 0.0  # the engine wants each frame as soon as it is there (latency)
