@@ -230,6 +230,27 @@ def test_live_adapter_times_and_registry():
         DECODERS["witmotion"](clock="sensor", baud=9600)
 
 
+def test_live_adapter_keeps_the_period_through_a_backlog():
+    """100 Hz frames read one at a time with arrival jitter, then a 0.5 s stall and its 50 frames read in two
+    pieces: the times keep the device's period (not the bytes' time, not squeezed), jitter does not reach them,
+    and a real pause of the device (10 s) starts again at the arrivals."""
+    from imutool.live.sources import DECODERS
+
+    dec = DECODERS["vectornav"](clock="host", baud=921600)
+    frames = _vn_stream(400)[0]
+    jitter = lambda k: 0.003 * ((k * 7) % 5) / 4  # noqa: E731  (0..3 ms of latency)
+    t = [dec.feed(frames[k], 10.0 + k * 0.01 + jitter(k)).t[0] for k in range(200)]
+    assert dec.period_s == pytest.approx(0.01, rel=5e-3)
+    assert np.ptp(np.diff(t[150:])) < 0.5e-3  # the jitter (3 ms) is gone from the spacing
+    a = dec.feed(b"".join(frames[200:225]), 10.0 + 249 * 0.01 + 0.001).t
+    b = dec.feed(b"".join(frames[225:250]), 10.0 + 249 * 0.01 + 0.0012).t
+    both = np.concatenate([[t[-1]], a, b])
+    d = np.diff(both)
+    assert np.median(d) == pytest.approx(0.01, rel=0.01) and d.min() > 0.008 and d.max() < 0.016  # not squeezed
+    late = dec.feed(frames[250], 10.0 + 260.0 * 0.01 + 10.0).t  # the device paused 10 s
+    assert late[0] == pytest.approx(10.0 + 260.0 * 0.01 + 10.0 - 10 / 921600, abs=1e-9)  # (its LF followed)
+
+
 # -- capture serial through a pty ---------------------------------------------------------------------------
 @pytest.mark.parametrize("name", sorted(PROTOCOLS))
 def test_capture_serial_vendor_protocol(tmp_path, name):

@@ -17,8 +17,8 @@ it; the data are four little-endian int16 (``(short)(H << 8 | L)``):
 The device sends one packet of each enabled type per output cycle, in ascending type order (0x51, 0x52, 0x53,
 0x54 by default), so a type not above the last one starts a new cycle. A sample is made as soon as the cycle's
 packets have all arrived (the set of a cycle's types is learned from the second cycle seen: accel + gyro needed,
-mag and angle when sent; until then a cycle is closed by the next one's start); a cycle that loses its accel or gyro packet is dropped
-(``incomplete``), one that loses its mag or angle gives NaN there.
+mag and angle when sent; until then a cycle is closed by the next one's start); a cycle that loses its accel or
+gyro packet is dropped (``incomplete``), one that loses its mag or angle gives NaN there.
 
 Signs and axes: the module's axes are printed on it, right-handed with Z up out of the board (a module lying
 flat at rest reads az = +1 g: the specific force, +up) and roll about X, pitch about Y, yaw about Z. Mounted
