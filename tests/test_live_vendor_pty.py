@@ -72,7 +72,7 @@ class RealTimeFeeder(threading.Thread):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("protocol", ["vectornav", "witmotion"])
-def test_live_reads_vendor_frames_from_a_pty(protocol):
+def test_live_reads_vendor_frames_from_a_pty(protocol, tmp_path):
     m_in, s_in, name_in = open_pty()
     udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     udp.bind(("127.0.0.1", 0))
@@ -81,6 +81,7 @@ def test_live_reads_vendor_frames_from_a_pty(protocol):
     proc = live([
         name_in, "--protocol", protocol, "--baud", "115200", "--out", f"udp://127.0.0.1:{udp.getsockname()[1]}",
         "--sentences", "XDR,HRM", "--rate", "XDR=20", "--motion", "ship", "--settle", "3", "--json",
+        "--record", str(tmp_path / "rec"),
     ])  # fmt: skip
     wait_ready(proc)
     feeder = RealTimeFeeder(m_in, protocol, seconds=20.0)
@@ -92,6 +93,8 @@ def test_live_reads_vendor_frames_from_a_pty(protocol):
     rd.stop = True
     os.close(m_in), os.close(s_in)
     assert proc.returncode == 0, err
+    raw = next((tmp_path / "rec").glob("raw_*.csv")).read_text()
+    assert f"protocol: {protocol}" in raw and "conventions: " in raw  # the vendor's signs in the metadata
     t_arr, roll, pitch = [], [], []
     for t, chunk in rd.arrivals:
         for ln in chunk.decode("ascii").split("\r\n"):
