@@ -165,6 +165,25 @@ def _vn_line(body: str) -> bytes:
     return f"${body}*{xor_checksum(body.encode()):02X}\r\n".encode()
 
 
+# The VN-100 User Manual's (UM001 rev 2.22, §7.2.3) example response of register 27 (Yaw, Pitch, Roll, Magnetic,
+# Acceleration and Angular Rates) — facts from the vendor's document: its checksum and its signs.
+VN_MANUAL_27 = (
+    "VNRRG,27,+006.380,+000.023,-001.953,+1.0640,-0.2531,+3.0614,+00.005,+00.344,-09.758,-0.001222,-0.000450,-0.001218"
+)
+
+
+def test_vectornav_manual_example():
+    assert xor_checksum(VN_MANUAL_27.encode()) == 0x4F  # the manual's '*4F'
+    assert xor_checksum(b"VNRRG,8,+006.271,+000.031,-002.000") == 0x66  # register 8's example, '*66'
+    s = make_decoder("vectornav").feed(_vn_line(VN_MANUAL_27.replace("VNRRG,27", "VNYMR")))
+    roll, pitch = np.degrees(accel_tilt(s.accel))
+    # the unit's own roll (−1.953°, pitch 0.023°) is what imutool's FRD specific-force convention gives from the
+    # accelerometer of the same sample (−2.02°, −0.03°): VectorNav's accel passes unchanged, signs and all
+    assert s.attitude[0] == pytest.approx([-1.953, 0.023, 6.380])
+    assert roll[0] == pytest.approx(-1.953, abs=0.1) and pitch[0] == pytest.approx(0.023, abs=0.1)
+    assert s.accel[0, 2] == pytest.approx(-9.758) and s.mag[0] == pytest.approx([106.40, -25.31, 306.14])
+
+
 def test_signs_vectornav_rest_and_nose_up():
     """As VectorNav sends them: at rest level accel ≈ (0, 0, −9.8); bow up 10°: accel_x = +g sin 10°."""
     rest = _vn_line("VNYMR,+010.000,+000.000,+000.000,+0.2000,+0.0100,+0.4000,+00.000,+00.000,-09.807,"

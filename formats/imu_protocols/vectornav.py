@@ -20,7 +20,9 @@ Signs and axes: VectorNav's body frame is x forward, y right, z down — imutool
 accelerometer output is the specific force (it reads about (0, 0, −9.8) m/s² at rest level: gravity along +z
 appears as −9.8), which is imutool's convention (+g upward at rest), so accel, gyro and mag pass unchanged
 (mag × 100: gauss → µT). Yaw, pitch, roll are the 3-2-1 Euler angles of the body in local NED: roll + right
-wing (starboard) down, pitch + nose up, yaw clockwise from north — imutool's signs.
+wing (starboard) down, pitch + nose up, yaw clockwise from north — imutool's signs. Check against the manual's
+own example of register 27 (roll −1.953°, accel (+0.005, +0.344, −9.758)): imutool's tilt from that accel is
+roll −2.02°, pitch −0.03° — the same signs with no conversion (tested).
 
 No device clock is in these sentences: samples are timed by their arrival at the host.
 """
