@@ -69,7 +69,13 @@ def capture_group() -> None:
 )
 @click.argument("port")
 @click.option("--baud", type=int, default=4800, show_default=True, help="Baud rate (NMEA 0183: 4800; -2: 38400).")
-@click.option("--protocol", type=click.Choice(["nmea", "bridge", "bridge-binary"]), default="nmea", show_default=True)
+@click.option(
+    "--protocol",
+    type=click.Choice(["nmea", "bridge", "bridge-binary", "vectornav", "witmotion"]),
+    default="nmea",
+    show_default=True,
+    help="vectornav: $VNYMR/$VNIMU ASCII; witmotion: WT901/JY901 0x55 packets (docs/capture.md).",
+)
 @click.option(
     "--checksum",
     type=click.Choice(["require", "accept-missing", "ignore"]),
@@ -112,7 +118,7 @@ def serial_cmd(
     as_json,
     quiet,
 ) -> None:
-    """Record from a serial/RS-485 PORT (NMEA 0183 or the imutool bridge protocol)."""
+    """Record from a serial/RS-485 PORT (NMEA 0183, the imutool bridge protocol, a VectorNav or WitMotion IMU)."""
     from imutool.capture.bridge import Scales
     from imutool.capture.serial_capture import capture_bridge, capture_nmea
 
@@ -126,6 +132,10 @@ def serial_cmd(
     )
     if protocol == "nmea":
         _run(lambda: capture_nmea(port, baud, output, checksum_policy=checksum, **kw), as_json, quiet)
+    elif protocol in ("vectornav", "witmotion"):
+        from imutool.capture.vendor import capture_vendor
+
+        _run(lambda: capture_vendor(port, baud, output, protocol, **kw), as_json, quiet)
     else:
         gain = mag_gain if mag_gain is not None else (1 if mag == "hmc5883l" else 8)
         scales = Scales("mpu6050", int(accel_range), int(gyro_range), mag, gain)

@@ -194,7 +194,8 @@ def run_live(
         for url in outputs:
             outs.append(open_output(url))
         if record is not None:
-            recorder = Recorder(record, {"source": source.description, "captured_by": "imutool live"}, rotate_s)
+            meta = {"source": source.description, **getattr(source, "meta", {}), "captured_by": "imutool live"}
+            recorder = Recorder(record, meta, rotate_s)
             recorder.event("started", source=source.description, outputs=list(outputs))
             if peak_state is None:
                 peak_state = os.path.join(os.fspath(record), "peak_hold.json")

@@ -8,8 +8,10 @@ jump of the host clock does not move them: ``t = mono - mono_at_start + utc_at_s
 
 A serial IMU protocol is a :class:`FrameDecoder` registered in :data:`DECODERS` (:func:`register_decoder`):
 ``feed(data, t_mono) -> SampleBlock`` and a ``stats`` dict of counts (``frames``, ``bad_checksum``,
-``malformed``, ``garbage_bytes``). The port itself (reopened with backoff when it vanishes) is capture's
-:class:`imutool.capture.serial_capture.SerialSource`.
+``malformed``, ``garbage_bytes``); factories are called with ``clock=`` and ``baud=``. The port itself (reopened
+with backoff when it vanishes) is capture's :class:`imutool.capture.serial_capture.SerialSource`. The raw-IMU
+vendor protocols of :mod:`formats.imu_protocols` (``vectornav``, ``witmotion``) are registered through
+:class:`VendorFrames`.
 """
 
 from __future__ import annotations
@@ -117,11 +119,82 @@ class BridgeFrames:
         return SampleBlock(np.asarray(t, float), ch["gyro"], ch["accel"], ch["mag"])
 
 
-register_decoder("bridge", lambda **kw: BridgeFrames(binary=False, **kw))
-register_decoder("bridge-binary", lambda **kw: BridgeFrames(binary=True, **kw))
-# Raw-IMU serial protocols of MEMS units (e.g. an Xsens MTData2, a VectorNav binary, a WitMotion 0x55 frame)
-# plug in the same way: a module with a FrameDecoder calls register_decoder("xsens-mt", XsensFrames) on import
-# and is imported from here (none is written yet).
+register_decoder("bridge", lambda baud=None, **kw: BridgeFrames(binary=False, **kw))
+register_decoder("bridge-binary", lambda baud=None, **kw: BridgeFrames(binary=True, **kw))
+
+
+class VendorFrames:
+    """A raw-IMU vendor protocol of :mod:`formats.imu_protocols` (VectorNav ASCII, WitMotion binary) as a
+    :class:`FrameDecoder`. These frames carry no device clock, so samples are timed by the host. A sample cannot
+    be later than its bound B: the read's monotonic arrival less the bytes that followed it (10 bits a byte at
+    ``baud``). Until the device's output period is known (``period_s``: the mean spacing of the arrivals since
+    the start, after 1 s and 20 samples) a sample is at B. Then the samples are paced: the last of a read
+    ``n`` periods after the previous sample, pulled 2 % of the way toward B, the others a period apart before it
+    (or, when B comes sooner, evenly up to B) — so a backlog read in pieces after the host stalled keeps its
+    true spacing, and arrival jitter does not reach the times; a lead of over ``gap_s`` (the device stopped)
+    restarts at B. Times are strictly increasing. The vendor's attitude (deg, imutool's signs) rides along as
+    ``extra`` vendor_roll, vendor_pitch, vendor_yaw."""
+
+    PULL = 0.02
+
+    def __init__(
+        self, protocol: str, clock: str = "host", baud: int | None = None, gap_s: float = 5.0, **options: Any
+    ) -> None:
+        from formats.imu_protocols import make_decoder
+
+        if clock != "host":
+            raise ImutoolError(f"serial protocol {protocol!r} has no device clock in its frames: use --clock host")
+        self.dec = make_decoder(protocol, **options)
+        self.byte_s = 10.0 / baud if baud else 0.0
+        self.gap_s = gap_s
+        self.conventions: str = self.dec.conventions
+        self._last = -np.inf
+        self._b0: float | None = None
+        self._n = 0
+        self.period_s: float | None = None
+        self.stats: dict[str, int] = {}
+
+    def feed(self, data: bytes, t_mono: float) -> SampleBlock:
+        s = self.dec.feed(data)
+        self.stats = self.dec.stats.as_dict()
+        n = len(s)
+        if not n:
+            return SampleBlock.empty()
+        bound = t_mono - (len(data) - s.end) * self.byte_s
+        b = float(bound[-1])
+        T = self.period_s
+        if T is None:
+            t = bound
+        else:
+            lead = b - (self._last + n * T)
+            if lead < 0:  # they arrived sooner than their periods allow: spread evenly up to B
+                t = self._last + (b - self._last) / n * np.arange(1, n + 1, dtype=float)
+            else:
+                t_end = b if lead > self.gap_s else b - lead * (1.0 - self.PULL)
+                t = t_end - T * np.arange(n - 1, -1, -1, dtype=float)
+        for k in range(n):  # (a few samples a read)
+            t[k] = self._last = max(float(t[k]), self._last + 1e-6)
+        if self._b0 is None:
+            self._b0, self._n = b, 1
+        else:
+            self._n += n
+        if b - self._b0 >= 1.0 and self._n >= 20:
+            self.period_s = (b - self._b0) / (self._n - 1)
+        mag = s.mag if s.mag is not None and np.isfinite(s.mag).any() else None
+        extra = {}
+        if s.attitude is not None:
+            extra = {f"vendor_{k}": s.attitude[:, i] for i, k in enumerate(("roll", "pitch", "yaw"))}
+        return SampleBlock(np.asarray(t, float), s.gyro, s.accel, mag, extra)
+
+
+def _register_vendor_protocols() -> None:
+    from formats.imu_protocols import PROTOCOLS
+
+    for name in PROTOCOLS:
+        register_decoder(name, lambda name=name, **kw: VendorFrames(name, **kw))
+
+
+_register_vendor_protocols()
 
 
 class SerialImu:
@@ -142,7 +215,9 @@ class SerialImu:
 
         if protocol not in DECODERS:
             raise ImutoolError(f"serial protocol {protocol!r}: known {', '.join(sorted(DECODERS))}")
-        self.decoder = DECODERS[protocol](clock=clock)
+        self.decoder = DECODERS[protocol](clock=clock, baud=baud)
+        conv = getattr(self.decoder, "conventions", None)
+        self.meta: dict[str, str] = {"protocol": protocol, **({"conventions": conv} if conv else {})}
         self._cstats = CaptureStats(started_utc="")
         self.port = SerialSource(port, baud, self._cstats, max_backoff=2.0, opener=opener, log=log)
         self.port.batch_s = 0.0  # the engine wants each frame as soon as it is there (latency)
