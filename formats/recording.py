@@ -382,22 +382,75 @@ class Recording:
                     m |= f.any(axis=1) if f.ndim > 1 else f
             self.stream_rows[k] = m
 
+    def held(self, name: str, t: np.ndarray, max_age_steps: float = 3.0) -> np.ndarray:
+        """Channel ``name`` at times ``t`` (s): its latest own sample at or before each time (sample and hold, never
+        another stream's row); NaN before its first sample and where that sample is older than ``max_age_steps``
+        × the channel's median step (a gap is not bridged)."""
+        ts, a = self.series(name)
+        a = np.asarray(a, dtype=float)
+        t = np.asarray(t, dtype=float)
+        out = np.full((len(t),) + a.shape[1:], np.nan)
+        if ts.size == 0:
+            return out
+        idx = np.searchsorted(ts, t, side="right") - 1
+        ok = idx >= 0
+        if ts.size > 1:
+            d = np.diff(ts)
+            d = d[d > 0]
+            if d.size:
+                ok &= (t - ts[np.maximum(idx, 0)]) <= max_age_steps * float(np.median(d))
+        out[ok] = a[idx[ok]]
+        return out
+
+    def on_clock(self, name: str, max_age_steps: float = 3.0) -> Recording:
+        """The recording on the clock of one stream (``name``: a stream or one of its channels): that stream's
+        channels on their own samples, every other channel held at its latest own sample at or before each time
+        (:meth:`held`), and ``meta['resampled']`` saying which channels were held onto which clock. A
+        single-clock recording returns itself. The one way a command puts channels of several clocks on a
+        common grid."""
+        if not self.multi_clock:
+            return self
+        base = self.stream(name)
+        key = base.meta.get("stream", "rows in no stream")
+        moved = [c for c in self.channels if c not in base.channels]
+        for c in moved:
+            base.add(c, self.held(c, base.time, max_age_steps), self.units.get(c), columns=self.columns.get(c))
+        if moved:
+            base.meta["resampled"] = (
+                f"{', '.join(moved)} held at their latest own sample at or before each {key} time "
+                f"(none older than {max_age_steps:g} of their own steps)"
+            )
+        return base
+
     def stream_summary(self) -> dict[str, dict[str, Any]]:
         """Per stream: its channels, samples, first and last time (s), duration (s) and median rate (Hz)."""
         out: dict[str, dict[str, Any]] = {}
         for k, chans in self.streams.items():
             t = self.time[self.own_rows(k)]
-            d = np.diff(t)
-            d = d[d > 0]
+            tm = self.stream_timing(k)
             out[k] = {
                 "channels": list(chans),
                 "samples": int(t.size),
                 "start_s": float(t[0]) if t.size else float("nan"),
                 "end_s": float(t[-1]) if t.size else float("nan"),
                 "duration_s": float(t[-1] - t[0]) if t.size > 1 else 0.0,
-                "rate_hz": float(1.0 / np.median(d)) if d.size else float("nan"),
+                "rate_hz": float(tm["rate_hz"]) if tm.get("rate_hz") else float("nan"),
+                "step_s": tm.get("step_s"),
+                "bursty": bool(tm.get("bursty")),
+                "gaps": int(tm.get("gaps", 0)),
+                "missing_s": float(tm.get("missing_s", 0.0)),
             }
         return out
+
+    def stream_timing(self, name: str, gap_factor: float = 3.0, max_gaps: int = 5) -> dict[str, Any]:
+        """Rate, bursts and gaps of a stream (or a channel's stream) on its own times
+        (:func:`formats.timing.stream_timing`; no gap shorter than the resolution its reader states in
+        ``meta['stream_time_resolution_s']``, e.g. NMEA sentences placed by their position between fixes)."""
+        from .timing import stream_timing
+
+        key = name if name in self.stream_rows else (self.stream_of(name) or name)
+        res = float((self.meta.get("stream_time_resolution_s") or {}).get(key, 0.0) or 0.0)
+        return stream_timing(self.time[self.own_rows(name)], gap_factor, max_gaps, min_gap_s=res)
 
     @property
     def duration(self) -> float:
@@ -545,10 +598,9 @@ class Recording:
                 ts = rec.time[rec.stream_rows[k]]
                 if ts.size < 2:
                     continue
-                d = np.diff(ts)
-                med = float(np.median(d))
-                gi = np.flatnonzero(d > gap_factor * med)
-                rep.stream_gaps[k] = [(float(ts[i]), float(d[i])) for i in gi]
+                tm = rec.stream_timing(k, gap_factor, max_gaps=ts.size)
+                med = float(tm.get("step_s") or np.median(np.diff(ts)))
+                rep.stream_gaps[k] = [(float(a), float(b)) for a, b in tm.get("first_gaps", [])]
                 rep.stream_median_dt[k] = med
                 if ts.size > most:
                     most, rep.median_dt, rep.gaps = ts.size, med, rep.stream_gaps[k]

@@ -1117,12 +1117,17 @@ def read_nmea(
     own_utc = {rows_key[i] for i, p in enumerate(rows_pos) if t_meta.get("_own", {}).get(p) is not None}
     fix_dt = float(t_meta.pop("_fix_interval_s", 0.0) or 0.0) if src == "nmea" else 0.0
     t_meta.pop("_own", None)
-    timing = _sentence_timing(t, keys_sorted, {k: 0.0 if k in own_utc else 2.0 * fix_dt for k in set(keys_sorted)})
+    resolution = {k: 0.0 if k in own_utc else 2.0 * fix_dt for k in set(keys_sorted)}
+    timing = _sentence_timing(t, keys_sorted, resolution)
     for k, n in overwritten.items():
         timing[k]["values_overwritten_at_same_time"] = int(n)
     units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
     rec = Recording(t[grp], data, units)
     _declare_streams(rec, row_of, rows_vals, keys_sorted, n_rows)
+    if rec.streams:  # a stream's times are known to its coarsest sentence's resolution: no gap below it
+        rec.meta["stream_time_resolution_s"] = {
+            k: max(resolution.get(x, 0.0) for x in k.split("+")) for k in rec.streams
+        }
     rec.meta.update(
         {
             "source": spath,
