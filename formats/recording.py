@@ -549,7 +549,9 @@ class Recording:
             same = np.diff(t) == 0
             nd = int(np.count_nonzero(same))
             rep.duplicates = nd
-            if nd:
+            if nd and rec.multi_clock:  # rows of different streams at one time are not duplicates
+                rec = _collapse_streams(rec, rep, duplicates, src)
+            elif nd:
                 idx = np.flatnonzero(same)
                 conflicting = 0
                 for a in rec.channels.values():
@@ -677,6 +679,64 @@ def parse_mounting(spec: str) -> tuple[str, tuple[float, float, float]]:
             raise ImutoolError(f"mounting {spec!r}: misalignment must be three numbers (roll,pitch,yaw deg)")
         angles = vals  # type: ignore[assignment]
     return remap, angles
+
+
+def _collapse_streams(rec: Recording, rep: TimeReport, duplicates: str, src: str) -> Recording:
+    """Rows sharing a time in a many-clock recording become one: a channel takes its first own sample there
+    (``drop``) or the mean of its own samples (``mean``); only two samples of one stream at one time are
+    duplicates (counted in ``rep``; ``error`` refuses them). Rows of different streams merged are counted too."""
+    t = rec.time
+    first = np.concatenate([[True], np.diff(t) != 0])
+    group = np.cumsum(first) - 1
+    ng = int(group[-1]) + 1
+    dup = conflicting = 0
+    for m in rec.stream_rows.values():
+        g = group[m]
+        dup += int(np.count_nonzero(np.diff(g) == 0))
+    rep.duplicates = dup
+    if dup and duplicates == "error":
+        raise ImutoolError(f"{dup} duplicate timestamps within a stream; use --duplicates drop|mean to accept", path=src)
+    if duplicates not in ("drop", "mean", "error"):
+        raise ImutoolError(f"unknown duplicates policy {duplicates!r} (drop, mean, error)")
+    chans = {}
+    for k, a in rec.channels.items():
+        own = np.flatnonzero(rec.own_rows(k))
+        a2 = a.reshape(len(a), -1).astype(float)
+        if duplicates == "mean":
+            cnt = np.bincount(group[own], minlength=ng).astype(float)
+            v = np.stack([np.bincount(group[own], a2[own, j], minlength=ng) for j in range(a2.shape[1])], axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                v = np.where(cnt[:, None] > 0, v / np.maximum(cnt, 1)[:, None], np.nan)
+        else:
+            fo = np.full(ng, len(a))
+            np.minimum.at(fo, group[own], own)  # the earliest own row of each time
+            v = np.where((fo < len(a))[:, None], a2[np.minimum(fo, len(a) - 1)], np.nan)
+            g = group[own]
+            rep_i = np.flatnonzero(np.diff(g) == 0)
+            if rep_i.size:
+                x, y = a2[own[rep_i]], a2[own[rep_i + 1]]
+                neq = ~((x == y) | (np.isnan(x) & np.isnan(y)))
+                conflicting = max(conflicting, int(np.count_nonzero(neq.any(axis=1))))
+        chans[k] = v.reshape((-1,) + a.shape[1:])
+    rep.duplicates_conflicting = conflicting
+    out = Recording(
+        t[first],
+        chans,
+        dict(rec.units),
+        copy.deepcopy(rec.meta),
+        {k: list(v) for k, v in rec.columns.items()},
+        {k: np.bincount(group, m.astype(float), minlength=ng) > 0 for k, m in rec.stream_rows.items()},
+    )
+    merged = len(rec) - ng - dup
+    if merged:
+        rep.actions.append(f"joined {merged} rows of different streams sharing a timestamp into one row each")
+    if dup:
+        how = "averaged with" if duplicates == "mean" else "dropped after"
+        rep.actions.append(
+            f"{dup} samples repeating a timestamp of their own stream {how} the first ({conflicting} with different "
+            "data)"
+        )
+    return out
 
 
 def join_streams(recordings: list[Recording], names: list[str], prefixes: list[str] | None = None) -> Recording:

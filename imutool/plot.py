@@ -61,17 +61,21 @@ def envelope(t: np.ndarray, y: np.ndarray, bucket: int) -> tuple[np.ndarray, np.
     return t2, y2
 
 
-def own_samples(t: np.ndarray, y: np.ndarray, gap_steps: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of one channel that hold a value (y is (N, k)), so that a channel whose samples sit on rows of
-    their own between NaN rows (an NMEA log's HDT among other sentences) draws as a line; a NaN row is put back
-    where NaN rows fill a step longer than ``gap_steps`` × the channel's median step (a real gap stays a gap)."""
-    ok = np.isfinite(y).any(axis=1)
+def own_samples(
+    t: np.ndarray, y: np.ndarray, gap_steps: float = 3.0, own: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of one channel that are its samples (y is (N, k)), so that a channel whose samples sit on rows of
+    their own between other streams' rows (an NMEA log's HDT among other sentences) draws as a line; a NaN row is
+    put back where a step is longer than ``gap_steps`` × the channel's median step (a real gap stays a gap).
+    ``own``: the channel's own rows of a many-clock recording (:meth:`formats.Recording.own_rows`; a NaN there is
+    a missing sample and breaks the line); without it, the rows that hold a value."""
+    ok = np.isfinite(y).any(axis=1) if own is None else np.asarray(own, dtype=bool)
     if ok.all() or ok.sum() < 2:
         return t, y
     idx = np.flatnonzero(ok)
     ts, ys = t[idx], y[idx]
     d = np.diff(ts)
-    brk = np.flatnonzero((d > gap_steps * float(np.median(d))) & (np.diff(idx) > 1))
+    brk = np.flatnonzero((d > gap_steps * float(np.median(d))) & (np.diff(idx) > 1 if own is None else True))
     if brk.size:
         ts = np.insert(ts, brk + 1, 0.5 * (ts[brk] + ts[brk + 1]))
         ys = np.insert(ys, brk + 1, np.nan, axis=0)
@@ -123,9 +127,11 @@ def _collect(
             )
             if not len(chunk):
                 continue
+            chunk.restore_streams()  # a many-clock CSV: each channel on its stream's own rows
             for n in names:
                 a = chunk[n].reshape(len(chunk), -1).astype(float)
-                parts.setdefault(n, []).append(envelope(*own_samples(chunk.time - t0, a), bucket))
+                own = chunk.own_rows(n) if chunk.multi_clock else None
+                parts.setdefault(n, []).append(envelope(*own_samples(chunk.time - t0, a, own=own), bucket))
         if template is None:
             raise ImutoolError("no data rows", path=path)
         distinct = 2 if span[1] > span[0] else (1 if np.isfinite(span[0]) else 0)  # rows at different times
@@ -144,7 +150,17 @@ def _collect(
     if start is not None or end is not None:
         rec = rec.slice_time(None if start is None else t0 + start, None if end is None else t0 + end)
     bucket = max(1, -(-2 * len(rec) // max_points))
-    out = {n: envelope(*own_samples(rec.time - t0, rec[n].reshape(len(rec), -1).astype(float)), bucket) for n in names}
+    out = {
+        n: envelope(
+            *own_samples(
+                rec.time - t0,
+                rec[n].reshape(len(rec), -1).astype(float),
+                own=rec.own_rows(n) if rec.multi_clock else None,
+            ),
+            bucket,
+        )
+        for n in names
+    }
     return out, rec, len(rec)
 
 

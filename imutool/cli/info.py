@@ -52,7 +52,11 @@ def _lines(s: dict[str, Any]) -> list[str]:
         if s["gaps"]["count"]
         else ""
     )
-    if multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
+    streams = s.get("streams") or {}
+    if streams:  # many clocks: the rows' rate and gaps mean nothing; each stream's do
+        rate = f"rate:      per stream ({len(streams)} streams, rows merged; each on its own samples):"
+        gaps = ""
+    elif multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
         rate = f"rate:      per sentence type ({len(sentence_timing)} types, rows merged; each on its own times):"
         gaps = ""
     out = [
@@ -62,7 +66,12 @@ def _lines(s: dict[str, Any]) -> list[str]:
         f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
         rate,
     ]
-    if multi:
+    if streams:
+        out += [f"  {k:<14} {describe(v['timing'])} ({', '.join(v['channels'])})" for k, v in streams.items()]
+        if sentence_timing:
+            out.append("NMEA sentence types (each on its own times):")
+            out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
+    elif multi:
         out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
     else:
         out.append(gaps)
