@@ -21,6 +21,7 @@ per sentence type.
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import math
 import os
 import re
@@ -1386,6 +1387,18 @@ def _f(a: np.ndarray | None, i: int) -> float | None:
     return x if math.isfinite(x) else None
 
 
+# the channel whose own samples time each written sentence (first present wins), for a many-clock recording
+_WRITE_DRIVERS: dict[str, tuple[str, ...]] = {
+    "HDT": ("heading",),
+    "THS": ("heading",),
+    "HDG": ("heading_sensor", "heading_mag"),
+    "ROT": ("rot", "heading"),
+    "XDR": ("roll", "pitch"),
+    "HRM": ("roll", "roll_period"),
+    "PASHR": ("roll", "pitch", "heading", "heave"),
+}
+
+
 def iter_sentences(
     rec: Recording,
     sentences: Iterable[str] = ("HDT",),
@@ -1409,6 +1422,20 @@ def iter_sentences(
             raise ImutoolError(f"cannot write sentence type {s!r} (writable: {', '.join(WRITABLE)})")
     n = len(rec)
     if n == 0:
+        return
+    if rec.multi_clock:  # each sentence on the clock of the channel it carries (Recording.on_clock)
+        groups: dict[str, list[str]] = {}
+        for s in sents:
+            drv = next((c for c in _WRITE_DRIVERS[s] if c in rec.channels), None)
+            groups.setdefault((rec.stream_of(drv) or drv) if drv else "", []).append(s)
+        off = utc_offset_s(rec)
+        gens = []
+        for key, ss in groups.items():
+            sub = rec.on_clock(key or next(iter(rec.stream_rows)))
+            if off is not None:
+                sub.meta["start_utc"] = datetime.fromtimestamp(float(sub.time[0]) + off, timezone.utc).isoformat()
+            gens.append(iter_sentences(sub, ss, rate_hz, talker, xdr_map))
+        yield from heapq.merge(*gens, key=lambda x: x[0])
         return
     t = rec.time
     if rate_hz is None:
