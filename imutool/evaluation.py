@@ -26,7 +26,7 @@ from formats.errors import ImutoolError
 from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
 from formats.recording import require_samples
 from imutool.clock import Clock
-from imutool.loading import FLAGS, how_loaded, reference_text, split_reference_options
+from imutool.loading import FLAGS, how_loaded, one_clock, reference_text, split_reference_options
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input, load_reference
 
 CHANNELS = ("angles", "quaternion", "heave", "position")
@@ -91,6 +91,12 @@ def evaluate(
             est = ref
         if align is not None:
             est, ref, summary["align_heading"] = align_reference_heading(est, ref, align)
+    if channel in ("heave", "position", "quaternion") and (est.multi_clock or ref.multi_clock):
+        drv = {"heave": "heave", "position": "pos", "quaternion": "q"}[channel]
+        same = ref is est
+        est = one_clock(est, (drv,))
+        ref = est if same else one_clock(ref, (f"ref_{drv}", drv))
+        notes += [f"{w}: {r.meta['clock']['note']}" for w, r in (("estimate", est), ("reference", ref)) if "clock" in r.meta]
     if channel == "heave":
         signs = {
             "estimate": str(est.meta.get("heave_positive", "up")),
@@ -325,17 +331,20 @@ def evaluate_angles(est: Recording, ref: Recording, max_lag_s: float) -> dict[st
     accelerometer/magnetometer angles of ``ref`` when it has the sensor channels)."""
     from imutool.metrics import evaluate_angle, interp_to
 
-    raw = _raw_angles(ref)
+    sensors = ref.on_clock("accel") if ref.multi_clock and "accel" in ref.channels else ref
+    raw = _raw_angles(sensors)
     out: dict[str, Any] = {}
     for name in ("roll", "pitch", "heading"):
         if name not in est.channels or f"ref_{name}" not in ref.channels:
             continue
+        # many clocks: each angle on its own samples (never another stream's row as a missing sample)
+        te, e = est.series(name)
+        tr, rv = ref.series(f"ref_{name}")
         r = raw.get(name)
         if r is not None:
-            r = interp_to(est.time, ref.time, r) if name != "heading" else _interp_wrapped(est.time, ref.time, r)
-        st = evaluate_angle(
-            est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading", max_lag_s=max_lag_s, raw=r
-        )
+            ts = sensors.time
+            r = interp_to(te, ts, r) if name != "heading" else _interp_wrapped(te, ts, r)
+        st = evaluate_angle(te, e, tr, rv, wrap=name == "heading", max_lag_s=max_lag_s, raw=r)
         out[name] = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in st.items()}
     return out
 

@@ -40,7 +40,7 @@ from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_euler
 from formats.units import convert, lookup
-from imutool.loading import input_notes
+from imutool.loading import input_notes, one_clock
 from imutool.routes import OnInput, RouteResult, load_input, read_source
 
 RATE_RW = 1e-4  # rad/s/√s: random walk of ω in the EKF's process noise
@@ -661,6 +661,7 @@ def run_gyrofree(
         layout = load_layout(os.fspath(layout))
     inputs: list[dict[str, Any]] = []
     rec, name, _ = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
+    rec = one_clock(rec, [c for s in layout.sensors for c in s.columns], inputs)  # many clocks: the array's
     if planar:
         names = list(planar)
         if len(names) != 2:

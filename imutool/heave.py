@@ -49,7 +49,7 @@ from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_matrix
 from formats.kernel_warm import CSV_WRITER, Entry, warm_in_background
-from imutool.loading import input_notes
+from imutool.loading import input_notes, one_clock
 from imutool.metrics import best_lag, error_stats, interp_to
 from imutool.nmea_out import write_log
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, read_source
@@ -1310,6 +1310,9 @@ def run_heave(
     cols = None
     if vertical:
         cols = [c if c in rec.channels else c.lower() if c.lower() in rec.channels else c for c in vertical]
+    # many clocks: the accelerometer's own samples (or the GNSS height's for a heave from height)
+    gnss_only = method == GNSS_METHOD or not (cols or "accel" in rec.channels)
+    rec = one_clock(rec, ("gnss_height",) if gnss_only else (*(cols or ()), "accel"), inputs)
     arm = None if lever_arm is None else np.asarray(lever_arm, dtype=float).reshape(-1)
     has_accel = bool(cols) or "accel" in rec.channels
     height_only = method == GNSS_METHOD or (not has_accel and "gnss_height" in rec.channels)

@@ -38,7 +38,7 @@ from formats.csv import format_array
 from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
 from formats.kernel_warm import CSV_WRITER, Entry, wait_for, warm_in_background
-from imutool.loading import input_notes, require_channels
+from imutool.loading import input_notes, one_clock, require_channels
 from imutool.quaternion import rmat
 from imutool.routes import OnInput, RouteResult, Stage, read_source
 
@@ -856,6 +856,7 @@ def run_ins_track(
     if stage is not None:
         stage("reading")
     rec, name, report = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
+    rec = one_clock(rec, ("gyro", "accel"), inputs)  # many clocks: the IMU's own samples
     require_channels(rec, ["gyro", "accel"], name)
     for opt, v in (
         ("--gyro-noise", gyro_noise_deg),

@@ -40,7 +40,7 @@ import formats
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import input_notes
+from imutool.loading import input_notes, one_clock
 from imutool.routes import OnInput, RouteResult, load_input
 
 STBD = 1
@@ -516,6 +516,7 @@ def run_roll(
     name = os.fspath(source)
     inputs: list[dict[str, Any]] = []
     rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec = one_clock(rec, ("heel", "roll"), inputs)  # many clocks: the heel's own samples
     heel = heel_of(rec, name)
     rs = roll_stats(
         rec.time,

@@ -29,7 +29,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from imutool.loading import input_notes, require_channels
+from imutool.loading import input_notes, one_clock, require_channels
 from imutool.routes import OnInput, RouteResult, Stage, read_source
 
 GRAVITY = 9.80665  # m/s², magnitude used by SHOE and MAG
@@ -379,6 +379,7 @@ def run_zvi(
     if stage is not None:
         stage("reading")
     rec, name, report = read_source(source, inputs, strict=strict, on_input=on_input, **load_options)
+    rec = one_clock(rec, ("gyro", "accel"), inputs)  # many clocks: the IMU's own samples
     require_channels(rec, ["gyro", "accel"], name)
     given = {
         "gamma": gamma,

@@ -285,3 +285,95 @@ def test_convert_to_nmea_each_sentence_on_its_stream(sea: Path, tmp_path: Path, 
     code, _, err = run_main(["convert", only, tmp_path / "r.nmea", "--sentences", "XDR"], capsys)
     assert code == 0, err
     assert [x for x in lines if "XDR" in x] == _sentences(tmp_path / "r.nmea")
+
+
+# -- the other routes: each on its channel's own samples, as on a file of that stream alone ---------------------
+def _same(a: dict, b: dict, skip: tuple[str, ...] = ()) -> list[str]:
+    """Keys whose values differ between two summaries (paths, loading reports and ``skip`` left out)."""
+    ignore = {"input", "output", "validation", "generated_utc", "cycles_output", "clock", "voyage", *skip}
+    return [k for k in set(a) | set(b) if k not in ignore and json.dumps(a.get(k), default=str) != json.dumps(b.get(k), default=str)]
+
+
+def test_roll_and_events_on_the_heel_stream(sea: Path, tmp_path: Path) -> None:
+    from imutool.events import run_events
+    from imutool.roll import run_roll
+
+    rec = formats.read(sea)
+    only = _stream_csv(rec, "roll", tmp_path / "roll.csv")
+    a = run_roll(sea, tmp_path / "a.csv")
+    b = run_roll(only, tmp_path / "b.csv")
+    assert _same(a.summary, b.summary) == []
+    assert a.full_summary()["validation"][0]["clock"]["stream"] == "PSXN,23"
+    ra, rb = formats.read(tmp_path / "a.csv"), formats.read(tmp_path / "b.csv")
+    assert len(ra) == N_S and np.array_equal(ra["roll_period"], rb["roll_period"], equal_nan=True)
+    assert "clock" in ra.meta  # the output says which clock it was computed on
+    ea, eb = run_events(sea).summary, run_events(only).summary
+    assert _same(ea, eb) == [] and ea["rows"] == N_S
+
+
+def test_heave_from_gnss_height_on_the_gga_stream(sea: Path, tmp_path: Path) -> None:
+    from imutool.heave import run_heave
+
+    rec = formats.read(sea)
+    only = _stream_csv(rec, "gnss_height", tmp_path / "gga.csv")
+    a = run_heave(sea, tmp_path / "a.csv", gnss_fix="any")
+    b = run_heave(only, tmp_path / "b.csv", gnss_fix="any")
+    assert _same(a.summary, b.summary) == []
+    ha, hb = formats.read(tmp_path / "a.csv"), formats.read(tmp_path / "b.csv")
+    assert len(ha) == len(hb) == N_S and np.allclose(ha["heave"], hb["heave"], equal_nan=True)
+
+
+def test_evaluate_a_many_clock_estimate(sea: Path, tmp_path: Path) -> None:
+    from imutool.evaluation import run_evaluate
+
+    rec = formats.read(sea)
+    only = _stream_csv(rec, "roll", tmp_path / "roll.csv")
+    t, roll = rec.series("roll")
+    ref = Recording(t.copy(), {"ref_roll": roll + 0.1}, {"ref_roll": "deg"}, {"source": "ref"})
+    formats.write(ref, tmp_path / "ref.csv")
+    a = run_evaluate(sea, tmp_path / "ref.csv").summary
+    b = run_evaluate(only, tmp_path / "ref.csv").summary
+    assert a["angles"]["roll"] == b["angles"]["roll"]
+    assert a["angles"]["roll"]["rmse"] == pytest.approx(0.1, abs=1e-9)
+
+
+def _imu_with_aux(tmp_path: Path, scenario: str, seconds: float) -> tuple[Path, Path]:
+    """A simulated IMU and a 1 Hz temperature stream on its own clock, joined as one many-clock CSV; and the IMU
+    alone."""
+    from imutool.sim import simulate
+
+    imu = simulate(scenario, duration=seconds, seed=3)
+    imu.meta.pop("streams", None)
+    keep = [c for c in imu.channels if c in ("gyro", "accel", "mag")]
+    imu = Recording(imu.time, {c: imu[c] for c in keep}, {c: imu.units[c] for c in keep}, dict(imu.meta))
+    ta = np.arange(imu.time[0] + 0.0037, imu.time[-1], 1.0)
+    aux = Recording(ta, {"temp": 20.0 + 0.01 * np.arange(len(ta))}, {"temp": "degC"})
+    j = join_streams([imu, aux], ["imu", "aux"])
+    assert j.multi_clock and len(j) == len(imu) + len(ta)
+    formats.write(j, tmp_path / "many.csv")
+    formats.write(imu, tmp_path / "imu.csv")
+    return tmp_path / "many.csv", tmp_path / "imu.csv"
+
+
+def test_filter_on_the_imu_stream(tmp_path: Path) -> None:
+    from imutool.filtering import run_filter
+
+    many, only = _imu_with_aux(tmp_path, "ship-roll", 30)
+    a = run_filter(many, tmp_path / "a.csv")
+    b = run_filter(only, tmp_path / "b.csv")
+    ra, rb = formats.read(tmp_path / "a.csv"), formats.read(tmp_path / "b.csv")
+    assert len(ra) == len(rb) and np.array_equal(ra.time, rb.time)
+    for c in ("roll", "pitch", "heading"):
+        assert np.allclose(ra[c], rb[c], equal_nan=True), c
+    assert a.validation["clock"]["stream"] == "imu"
+
+
+def test_zvi_on_the_imu_stream(tmp_path: Path) -> None:
+    from imutool.zvi import run_zvi
+
+    many, only = _imu_with_aux(tmp_path, "walk", 20)
+    a = run_zvi(many, tmp_path / "a.csv")
+    b = run_zvi(only, tmp_path / "b.csv")
+    za, zb = a.recording, b.recording
+    assert len(za) == len(zb) and np.array_equal(za["zvi"], zb["zvi"]) and za["zvi"].any()
+    assert _same(a.summary, b.summary) == []

@@ -53,7 +53,7 @@ def _lines(s: dict[str, Any]) -> list[str]:
         else ""
     )
     streams = s.get("streams") or {}
-    if streams:  # many clocks: the rows' rate and gaps mean nothing; each stream's do
+    if streams and not multi:  # many clocks: the rows' rate and gaps mean nothing; each stream's do
         rate = f"rate:      per stream ({len(streams)} streams, rows merged; each on its own samples):"
         gaps = ""
     elif multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
@@ -66,14 +66,13 @@ def _lines(s: dict[str, Any]) -> list[str]:
         f"time:      {_fmt_t(s['start_s'])} … {_fmt_t(s['end_s'])} s, duration {_fmt(s['duration_s'])} s",
         rate,
     ]
-    if streams:
-        out += [f"  {k:<14} {describe(v['timing'])} ({', '.join(v['channels'])})" for k, v in streams.items()]
-        if sentence_timing:
-            out.append("NMEA sentence types (each on its own times):")
-            out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
-    elif multi:
+    if multi:
         out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
-    else:
+    if streams:
+        if multi:
+            out.append(f"streams:   {len(streams)} (channels and the sentence types carrying them, on their own samples):")
+        out += [f"  {k:<14} {describe(v['timing'])} ({', '.join(v['channels'])})" for k, v in streams.items()]
+    if not (multi or streams):
         out.append(gaps)
         if sentence_timing:
             k, v = next(iter(sentence_timing.items()))
