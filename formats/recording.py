@@ -695,7 +695,9 @@ def _collapse_streams(rec: Recording, rep: TimeReport, duplicates: str, src: str
         dup += int(np.count_nonzero(np.diff(g) == 0))
     rep.duplicates = dup
     if dup and duplicates == "error":
-        raise ImutoolError(f"{dup} duplicate timestamps within a stream; use --duplicates drop|mean to accept", path=src)
+        raise ImutoolError(
+            f"{dup} duplicate timestamps within a stream; use --duplicates drop|mean to accept", path=src
+        )
     if duplicates not in ("drop", "mean", "error"):
         raise ImutoolError(f"unknown duplicates policy {duplicates!r} (drop, mean, error)")
     chans = {}
@@ -790,7 +792,8 @@ def merge(
     clock: a recording (its time base), an array of times, a rate in Hz (uniform grid over the common time
     span), or None (the time base of the first recording). Only the time span all inputs cover is kept
     (no extrapolation). Quaternion channels are interpolated component-wise and renormalised; channels whose
-    names clash get the given prefixes (or ``r1_``, ``r2_``...). Samples next to a NaN stay NaN.
+    names clash get the given prefixes (or ``r1_``, ``r2_``...). Samples next to a NaN stay NaN. A many-clock
+    input's channel is interpolated from its own samples (another stream's row is not a NaN of it).
     """
     if not recordings:
         raise ImutoolError("merge: no recordings given")
@@ -816,8 +819,9 @@ def merge(
             if name in seen:
                 new = (prefixes[i] if prefixes else f"r{i + 1}_") + name
             seen.add(new)
-            a2 = a.reshape(len(a), -1).astype(float)
-            cols = np.stack([np.interp(t, r.time, a2[:, j]) for j in range(a2.shape[1])], axis=1)
+            ts, a_own = r.series(name)  # many clocks: from the channel's own samples only
+            a2 = a_own.reshape(len(a_own), -1).astype(float)
+            cols = np.stack([np.interp(t, ts, a2[:, j]) for j in range(a2.shape[1])], axis=1)
             if a.ndim == 1:
                 cols = cols[:, 0]
             elif a.shape[1] == 4 and name.endswith("q"):

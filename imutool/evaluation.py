@@ -96,7 +96,9 @@ def evaluate(
         same = ref is est
         est = one_clock(est, (drv,))
         ref = est if same else one_clock(ref, (f"ref_{drv}", drv))
-        notes += [f"{w}: {r.meta['clock']['note']}" for w, r in (("estimate", est), ("reference", ref)) if "clock" in r.meta]
+        notes += [
+            f"{w}: {r.meta['clock']['note']}" for w, r in (("estimate", est), ("reference", ref)) if "clock" in r.meta
+        ]
     if channel == "heave":
         signs = {
             "estimate": str(est.meta.get("heave_positive", "up")),

@@ -163,7 +163,9 @@ def _own_timing(rec: Recording, meta: dict[str, Any], summary: dict[str, Any]) -
         return
     per_channel: dict[str, Any] = {}
     for name, a in rec.channels.items():
-        if st or a.dtype.kind != "f" or rec.multi_clock:  # an NMEA log or streams: they say it  # an NMEA log: its sentence types say it
+        if (
+            st or a.dtype.kind != "f" or rec.multi_clock
+        ):  # an NMEA log or streams: they say it  # an NMEA log: its sentence types say it
             continue
         ok = np.isfinite(a.reshape(len(a), -1)).any(axis=1)
         if 2 <= ok.sum() < 0.9 * len(rec):

@@ -284,6 +284,7 @@ def merge_with(
     merged = formats.merge([rec, *others], rec)
     kept = len(merged)
     meta = dict(rec.meta)
+    meta.pop("streams", None)  # a many-clock input: every channel now interpolated onto each of its rows
     meta["merged"] = {
         "time_base": f"{path} (its {len(rec)} sample times; the others interpolated linearly onto them)",
         "files": files,
@@ -463,7 +464,8 @@ def one_clock(
     present (the command's own check names what is missing), is returned as it is."""
     if not rec.multi_clock:
         return rec
-    drv = next((c for c in drivers if c in rec.channels), None)
+    by_column = {col: name for name, cols in rec.columns.items() for col in cols}
+    drv = next((c if c in rec.channels else by_column[c] for c in drivers if c in rec.channels or c in by_column), None)
     if drv is None:
         return rec
     out = rec.on_clock(drv)

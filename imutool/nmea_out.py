@@ -552,6 +552,7 @@ def header_lines(
     variation_deg: float | None,
     utc: str | None,
     talkers: dict[str, str],
+    clocks: str | None = None,
 ) -> list[str]:
     """The ``#`` header block of an NMEA log written by imutool (conventions, flags, rate; read back as
     comments by imutool's reader)."""
@@ -565,6 +566,8 @@ def header_lines(
         "angles deg; roll + starboard down; pitch + bow up; heading clockwise from north; ROT deg/min + to starboard",
         f"heave: m, positive {heave_positive.upper()} (--heave-positive {heave_positive}; TSS1 defines + up)",
     ]
+    if clocks:
+        lines.append(f"clocks (many-clock input: each sentence on its channel's own samples): {clocks}")
     if any(s in sentences for s in ("HDG", "HDT", "THS", "PASHR")):
         dev = f"card {card_from}" if card_from else ew(deviation_deg)
         lines.append(
@@ -611,6 +614,7 @@ class LogPlan:
     rate: RatePlan
     utc: str | None
     header: list[str]
+    clocks: str | None = None  # a many-clock input: which stream each sentence was taken on
 
 
 def plan_log(
@@ -642,6 +646,9 @@ def plan_log(
     )
     src = opts["heading_source"]
     talkers = {"HDG": "HC", "THS": TRUE_TALKER[src], **(opts["talkers"] or {})}
+    clocks = None
+    if rec.multi_clock:
+        clocks = "; ".join(f"{','.join(ss)} on {key or 'all rows'}" for key, _, ss in clock_groups(rec, sents))
     header = header_lines(
         source=source,
         sentences=sents,
@@ -654,8 +661,9 @@ def plan_log(
         variation_deg=opts["variation_deg"],
         utc=utc,
         talkers=talkers,
+        clocks=clocks,
     )
-    return LogPlan(sents, plan, utc, header)
+    return LogPlan(sents, plan, utc, header, clocks)
 
 
 def write_planned(
@@ -842,6 +850,7 @@ def run_nmea(
         **_written(plan, counts),
         "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
         "utc": plan.utc,
+        **({"clocks": plan.clocks} if plan.clocks else {}),
         "deviation": card_from or deviation,
         "generated_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }

@@ -199,7 +199,9 @@ def test_nmea_out_each_sentence_on_its_own_stream(sea: Path, tmp_path: Path, cap
     assert s["sentences"] == {"HRM": N_S, "XDR": N_S, "THS": 2 * N_S}
     lines = _sentences(o)
     assert all(",V," not in x and not x.startswith("$IIHRM,,") for x in lines if "HRM" in x)
-    code, _, err = run_main(["nmea", roll_csv, "-o", tmp_path / "r.nmea", "--sentences", "HRM,XDR", "--rate", "2"], capsys)
+    code, _, err = run_main(
+        ["nmea", roll_csv, "-o", tmp_path / "r.nmea", "--sentences", "HRM,XDR", "--rate", "2"], capsys
+    )
     assert code == 0, err
     code, _, err = run_main(
         ["nmea", head_csv, "-o", tmp_path / "h.nmea", "--sentences", "THS", "--heading-ref", "true", "--rate", "2"],
@@ -291,7 +293,11 @@ def test_convert_to_nmea_each_sentence_on_its_stream(sea: Path, tmp_path: Path, 
 def _same(a: dict, b: dict, skip: tuple[str, ...] = ()) -> list[str]:
     """Keys whose values differ between two summaries (paths, loading reports and ``skip`` left out)."""
     ignore = {"input", "output", "validation", "generated_utc", "cycles_output", "clock", "voyage", *skip}
-    return [k for k in set(a) | set(b) if k not in ignore and json.dumps(a.get(k), default=str) != json.dumps(b.get(k), default=str)]
+    return [
+        k
+        for k in set(a) | set(b)
+        if k not in ignore and json.dumps(a.get(k), default=str) != json.dumps(b.get(k), default=str)
+    ]
 
 
 def test_roll_and_events_on_the_heel_stream(sea: Path, tmp_path: Path) -> None:
@@ -360,7 +366,7 @@ def test_filter_on_the_imu_stream(tmp_path: Path) -> None:
 
     many, only = _imu_with_aux(tmp_path, "ship-roll", 30)
     a = run_filter(many, tmp_path / "a.csv")
-    b = run_filter(only, tmp_path / "b.csv")
+    run_filter(only, tmp_path / "b.csv")
     ra, rb = formats.read(tmp_path / "a.csv"), formats.read(tmp_path / "b.csv")
     assert len(ra) == len(rb) and np.array_equal(ra.time, rb.time)
     for c in ("roll", "pitch", "heading"):
@@ -377,3 +383,13 @@ def test_zvi_on_the_imu_stream(tmp_path: Path) -> None:
     za, zb = a.recording, b.recording
     assert len(za) == len(zb) and np.array_equal(za["zvi"], zb["zvi"]) and za["zvi"].any()
     assert _same(a.summary, b.summary) == []
+
+
+def test_merge_interpolates_each_channel_from_its_own_samples() -> None:
+    a = Recording(np.arange(0.0, 10.0, 1.0), {"roll": np.arange(10.0)}, {"roll": "deg"})
+    b = Recording(np.arange(0.5, 10.0, 1.0), {"heading": np.arange(0.5, 10.0, 1.0) * 2}, {"heading": "deg"})
+    j = join_streams([a, b], ["a", "b"])
+    m = formats.merge([j], np.arange(1.0, 9.0, 0.25))
+    assert np.allclose(m["roll"], np.arange(1.0, 9.0, 0.25)) and np.allclose(
+        m["heading"], np.arange(1.0, 9.0, 0.25) * 2
+    )

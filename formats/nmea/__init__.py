@@ -1182,7 +1182,7 @@ def _declare_streams(
     for name in rec.channels:
         groups.setdefault(tuple(sorted(chan_keys.get(name, ()))), []).append(name)
     masks = {}
-    for ks, chans in groups.items():
+    for ks in groups:
         m = np.zeros(n_rows, dtype=bool)
         for k in ks:
             m |= key_rows[k]

@@ -70,7 +70,9 @@ def _lines(s: dict[str, Any]) -> list[str]:
         out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
     if streams:
         if multi:
-            out.append(f"streams:   {len(streams)} (channels and the sentence types carrying them, on their own samples):")
+            out.append(
+                f"streams:   {len(streams)} (channels and the sentence types carrying them, on their own samples):"
+            )
         out += [f"  {k:<14} {describe(v['timing'])} ({', '.join(v['channels'])})" for k, v in streams.items()]
     if not (multi or streams):
         out.append(gaps)
