@@ -318,7 +318,7 @@ def test_roll_and_events_on_the_heel_stream(sea: Path, tmp_path: Path) -> None:
 
 
 def test_heave_from_gnss_height_on_the_gga_stream(sea: Path, tmp_path: Path) -> None:
-    from imutool.heave import run_heave
+    from imutool.routes.heave import run_heave
 
     rec = formats.read(sea)
     only = _stream_csv(rec, "gnss_height", tmp_path / "gga.csv")
@@ -375,7 +375,7 @@ def test_filter_on_the_imu_stream(tmp_path: Path) -> None:
 
 
 def test_zvi_on_the_imu_stream(tmp_path: Path) -> None:
-    from imutool.zvi import run_zvi
+    from imutool.routes.zvi import run_zvi
 
     many, only = _imu_with_aux(tmp_path, "walk", 20)
     a = run_zvi(many, tmp_path / "a.csv")
