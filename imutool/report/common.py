@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from formats import Recording
 from formats.errors import ImutoolError
 from imutool import __version__
 
@@ -203,15 +204,51 @@ def now_utc() -> str:
     return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def own_samples(rec: Recording, channel: str) -> Recording:
+    """The recording a report evaluates for ``channel``: on a many-clock log (several sentence types, topics or
+    ``--with`` files: :class:`formats.Recording`), the stream that carries it, on its own rows only (another
+    stream's row is not a missing sample of it); the file's streams are kept in ``meta["file_streams"]``
+    (:meth:`formats.Recording.stream_summary`) for the inputs record. A single-clock recording is returned as
+    it is."""
+    if not rec.multi_clock or channel not in rec.channels:
+        return rec
+    out = rec.stream(channel)
+    out.meta["file_streams"] = rec.stream_summary()
+    out.meta["file_rows"] = len(rec)
+    return out
+
+
+def channel_on(rec: Recording, name: str, t: np.ndarray) -> np.ndarray | None:
+    """Channel ``name`` of ``rec`` (its stored unit) at the times ``t`` (s): the values themselves where ``t``
+    are its own sample times, else interpolated linearly from its own samples (:func:`imutool.metrics.interp_to`:
+    NaN outside them and across a gap). None when ``rec`` has no such channel."""
+    from imutool.metrics import interp_to
+
+    if name not in rec.channels:
+        return None
+    ts, v = rec.series(name)
+    v = np.asarray(v, float)
+    if ts.shape == t.shape and np.array_equal(ts, t):
+        return v
+    return interp_to(t, ts, v)
+
+
 def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> dict[str, Any]:
     """Identification of one input: path, sha256, size, rows, rate, duration, channel used, how it was loaded
     (``loading``: the time and header options given, where its times came from, the files merged onto it; from
-    ``rec.meta["loading"]``, :func:`imutool.loading.how_loaded`), metadata."""
+    ``rec.meta["loading"]``, :func:`imutool.loading.how_loaded`), metadata. For a stream of a many-clock log
+    (:func:`own_samples`): ``rows``, ``rate_hz`` and ``duration_s`` are the stream's own samples, ``stream``
+    names it and ``streams`` lists every stream of the file (samples, rate, duration)."""
     if path is None:
         return {"path": None, "sha256": None, "kind": kind, "rows": int(len(rec)) if rec is not None else 0}
     if rec is None:
         return clean({"path": os.fspath(path), "sha256": sha256_of(path), "bytes": os.path.getsize(path), "kind": kind})
-    meta = {k: v for k, v in rec.meta.items() if k not in ("validation", "loading")}
+    meta = {k: v for k, v in rec.meta.items() if k not in ("validation", "loading", "file_streams", "file_rows")}
+    many = (
+        {"stream": rec.meta.get("stream"), "streams": rec.meta["file_streams"], "file_rows": rec.meta.get("file_rows")}
+        if rec.meta.get("file_streams")
+        else {}
+    )
     return clean(
         {
             "path": os.fspath(path),
@@ -222,6 +259,7 @@ def input_record(path: str | None, rec: Any, channel: str | None, kind: str) -> 
             "rate_hz": float(rec.rate_hz) if len(rec) > 1 else None,
             "duration_s": float(rec.duration),
             "channel": channel,
+            **many,
             "meta": meta,
             "validation": rec.meta.get("validation"),
             **({"loading": rec.meta["loading"]} if rec.meta.get("loading") else {}),

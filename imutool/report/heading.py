@@ -35,12 +35,14 @@ from .common import (
     NOT_TESTED,
     PASS,
     SCOPE,
+    channel_on,
     clean,
     input_record,
     item,
     judge,
     now_utc,
     overall,
+    own_samples,
     plateaus,
     set_clock,
     stats,
@@ -177,6 +179,25 @@ def heading_capture_check(path: str) -> dict[str, Any]:
     }
 
 
+def _moving_mean(x: np.ndarray, w: int) -> np.ndarray:
+    """Centred moving mean of x over w samples (as ``np.convolve(..., mode="same")``) of the finite samples only:
+    a missing sample is left out (NaN where the window holds none), never counted as 0."""
+    ok = np.isfinite(x)
+    k = np.ones(w)
+    num = np.convolve(np.where(ok, x, 0.0), k, mode="same")
+    den = np.convolve(ok.astype(float), k, mode="same")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.maximum(den, 1.0), np.nan)
+
+
+def _dut_roll(dut: Recording, t: np.ndarray) -> np.ndarray:
+    """The DUT's roll (deg) on the reference times t: as :func:`.common.channel_on` from its own samples; a
+    single-clock DUT by plain linear interpolation (ends held), as before many clocks."""
+    if dut.multi_clock:
+        return channel_on(dut, "roll", t)
+    return np.interp(t, dut.time, np.asarray(dut["roll"], float))
+
+
 def _unwrap_deg(h: np.ndarray) -> np.ndarray:
     ok = np.isfinite(h)
     out = np.full_like(h, np.nan)
@@ -210,8 +231,14 @@ def heading_evidence(
         raise ImutoolError(f"criterion must be 'max' or 'p95' (got {o.criterion!r})")
     if o.align not in ("xcorr", "none"):
         raise ImutoolError(f"align must be 'xcorr' or 'none' (got {o.align!r})")
-    h_dut, dch = heading_of(dut, dut_channel, dut_path or "DUT")
-    h_ref, rch = heading_of(ref, ref_channel, ref_path or "reference")
+    _, dch = heading_of(dut, dut_channel, dut_path or "DUT")
+    _, rch = heading_of(ref, ref_channel, ref_path or "reference")
+    # many clocks: each heading on its own samples (another sentence's row is not a missing heading); the
+    # platform roll is taken from its own samples onto the reference heading's times
+    dut_all, ref_all = dut, ref
+    dut, ref = own_samples(dut, dch), own_samples(ref, rch)
+    h_dut, _ = heading_of(dut, dch, dut_path or "DUT")
+    h_ref, _ = heading_of(ref, rch, ref_path or "reference")
     h_dut = (h_dut + dut_correction_deg) % 360.0
     t = ref.time
     okd = np.isfinite(h_dut)
@@ -234,7 +261,7 @@ def heading_evidence(
     u_ref = _unwrap_deg(h_ref)
     dt = float(np.median(np.diff(t)))
     w = max(1, int(round(o.rot_window_s / dt)))
-    ur = np.convolve(np.nan_to_num(u_ref), np.ones(w) / w, mode="same")
+    ur = _moving_mean(u_ref, w)  # a missing heading is left out of the mean, never taken as 0°
     rot = np.gradient(ur, t)
     rot[~np.isfinite(u_ref)] = np.nan
     rot[:w] = np.nan  # moving-average edge effects
@@ -262,11 +289,11 @@ def heading_evidence(
     items: list[dict[str, Any]] = []
 
     # ---- static error at equidistant headings --------------------------------------------------------------
-    roll = None  # platform roll (deg), from the reference, else the DUT: separates static from rolling holds
-    if "roll" in ref.channels:
-        roll = np.asarray(ref["roll"], float)
-    elif "roll" in dut.channels:
-        roll = np.interp(t, dut.time, np.asarray(dut["roll"], float))
+    # platform roll (deg), from the reference, else the DUT, on the reference heading's times (from the roll's own
+    # samples): separates static from rolling holds
+    roll = channel_on(ref_all, "roll", t)
+    if roll is None and "roll" in dut_all.channels:
+        roll = _dut_roll(dut_all, t)
     spans = plateaus(t, u_ref, o.step_band_deg, o.step_min_s, o.step_settle_s)
     if roll is not None:
 
@@ -431,9 +458,10 @@ def heading_evidence(
         from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
         win = max(3, int(round(o.roll_window_s / dt)))
-        rf = np.nan_to_num(roll)
+        fin = np.isfinite(roll)  # a missing roll is left out of the window's range, never taken as 0°
         rolling = (
-            maximum_filter1d(rf, win, mode="nearest") - minimum_filter1d(rf, win, mode="nearest")
+            maximum_filter1d(np.where(fin, roll, -np.inf), win, mode="nearest")
+            - minimum_filter1d(np.where(fin, roll, np.inf), win, mode="nearest")
         ) >= o.min_roll_range_deg
         m = quiet & np.isfinite(roll) & rolling
         secs = float(m.sum() * dt)
@@ -544,7 +572,11 @@ def heading_evidence(
             "sign": "heading clockwise from north in [0, 360); error = wrap180(DUT − reference); rate of "
             "turn + clockwise (°/s)",
             "frame": "NED (heading about the down axis)",
-            "time_base": "reference time (s); DUT resampled (unwrapped, linear) onto it",
+            "time_base": "reference time (s): the reference heading's own samples"
+            + (f" (stream {ref.meta['stream']} of a many-clock log)" if ref.meta.get("stream") else "")
+            + "; the DUT heading"
+            + (f" (stream {dut.meta['stream']})" if dut.meta.get("stream") else "")
+            + " resampled (unwrapped, linear) onto them; the platform roll from its own samples onto them",
         },
         "editions": EDITIONS,
         "criteria": [

@@ -37,6 +37,7 @@ from .common import (
     PASS,
     SCOPE,
     STANDARDS_FILE,
+    channel_on,
     check_tolerance,
     clean,
     input_record,
@@ -44,6 +45,7 @@ from .common import (
     judge,
     now_utc,
     overall,
+    own_samples,
     plateaus,
     set_clock,
     standards_cited,
@@ -339,12 +341,28 @@ def hrm_capture_check(path: str) -> dict[str, Any]:
     }
 
 
-def _durations(t: np.ndarray) -> np.ndarray:
-    """Time each sample stands for (s): half the gaps to its neighbours (a non-uniform time base is allowed)."""
+def _durations(t: np.ndarray, gap_factor: float = 3.0) -> np.ndarray:
+    """Time each sample stands for (s): half the steps to its neighbours (a non-uniform time base is allowed),
+    each step counted up to ``gap_factor`` × the median step (a gap in the samples is not time they cover)."""
     if t.size < 2:
         return np.zeros(t.size)
     g = np.diff(t)
+    g = np.minimum(g, gap_factor * float(np.median(g)))
     return 0.5 * (np.concatenate([[g[0]], g]) + np.concatenate([g, [g[-1]]]))
+
+
+def _time_base(dut: Recording, ref: Recording) -> str:
+    """The conventions' time-base sentence: the reference heel's own samples, the DUT's interpolated onto them;
+    each named by its stream when it comes from a many-clock log."""
+
+    def of(rec: Recording, who: str) -> str:
+        k = rec.meta.get("stream")
+        return f"{who}'s heel samples" + (f" (stream {k} of a many-clock log, its own rows only)" if k else "")
+
+    return (
+        f"reference time (s): the {of(ref, 'reference')}; the {of(dut, 'DUT')} interpolated linearly onto "
+        "them inside the overlap (NaN across a gap in the DUT's samples)"
+    )
 
 
 def _judged_cycles(
@@ -505,8 +523,8 @@ def inclinometer_evidence(
     if info["decision_rule"].get("rule") == "guard band":
         o.guard_band = True
     o.check()
-    h_dut = heel_of(dut, dut_path or "DUT", dut_channel)
-    h_ref = heel_of(ref, ref_path or "reference", ref_channel)
+    heel_of(dut, dut_path or "DUT", dut_channel)  # refuses a missing or multi-column heel channel
+    heel_of(ref, ref_path or "reference", ref_channel)
     dch = dut_channel or ("heel" if "heel" in dut.channels else "roll")
     rch = ref_channel or ("heel" if "heel" in ref.channels else "roll")
     if (dut_path and ref_path and os.path.realpath(dut_path) == os.path.realpath(ref_path) and dch == rch) or (
@@ -516,6 +534,12 @@ def inclinometer_evidence(
             f"the reference is the DUT itself (same file, channel {dch!r}): a device cannot be its own reference",
             path=ref_path,
         )
+    # many clocks: each heel on its own samples (another sentence's row is not a missing heel sample); the
+    # reference's other channels (lateral acceleration) are taken onto the reference heel's times
+    ref_all = ref
+    dut, ref = own_samples(dut, dch), own_samples(ref, rch)
+    h_dut = heel_of(dut, dut_path or "DUT", dch)
+    h_ref = heel_of(ref, ref_path or "reference", rch)
     t = ref.time
     dts = _durations(t)
     crit_txt = (
@@ -545,7 +569,11 @@ def inclinometer_evidence(
     if overlap <= 0:
         raise ImutoolError("the DUT and reference recordings do not overlap in time (check the clocks)")
     lag, lag_rms = best_lag(dut.time[okd], h_dut[okd], t, h_ref, o.max_lag_s)
-    lag_at_edge = abs(abs(lag) - o.max_lag_s) < 1e-6
+    # a heel that stays within the plateau band everywhere has no motion to time: every lag fits as well
+    still_ref = float(np.nanmax(h_ref) - np.nanmin(h_ref)) <= o.step_band_deg
+    if still_ref:
+        lag = 0.0
+    lag_at_edge = not still_ref and abs(abs(lag) - o.max_lag_s) < 1e-6
     shift = lag if o.align == "xcorr" else 0.0
     # DUT on the reference time base, the lag removed: x_al(t) = x(t + lag)
     d = interp_to(t, dut.time[okd] - shift, h_dut[okd])
@@ -566,7 +594,9 @@ def inclinometer_evidence(
             "(wrong file, channel, axis or clock?)",
             path=ref_path,
         )
-    if both.sum() > 2:
+    if both.sum() > 2 and still_ref:  # no spread of reference values: an offset, no scale
+        b1, b0 = float("nan"), float(np.mean(d[both] - h_ref[both]))
+    elif both.sum() > 2:
         b1, b0 = np.polyfit(h_ref[both], d[both], 1)
     else:
         b1, b0 = float("nan"), float("nan")
@@ -592,17 +622,28 @@ def inclinometer_evidence(
         "overlap_s": overlap,
     }
     warnings: list[str] = []
+    if both.sum() >= 10 and float(np.max(np.abs(e[both]))) == 0.0:
+        warnings.append(
+            "the DUT equals the reference on every compared sample (|error| 0, heel constant): the same device "
+            "or file? (a device cannot be its own reference)"
+        )
     if corr < 0:
         warnings.append("DUT and reference heel are anti-correlated: sign convention mismatch (HRM: + starboard)?")
     if overlap < 0.9 * ref.duration:
         warnings.append(f"the DUT covers only {overlap:.0f} s of the {ref.duration:.0f} s reference recording")
     if lag_at_edge:
         warnings.append(f"time lag at the search limit ±{o.max_lag_s} s: alignment unreliable (widen --max-lag)")
+    if still_ref:
+        alignment["lag_measurable"] = False
+        alignment["note"] = "no lag measured: the reference heel does not move; " + alignment["note"]
+        warnings.append(
+            f"the reference heel stays within {o.step_band_deg:g}° over the whole recording: no motion to "
+            "measure a time lag against (lag not measured, 0 s taken)"
+        )
 
     # ---- lateral acceleration applied by the reference (m/s², + starboard) ---------------------------------
-    lat = None
-    if o.lat_accel_channel in ref.channels:
-        lat = np.asarray(ref[o.lat_accel_channel], float)
+    lat = channel_on(ref_all, o.lat_accel_channel, t)
+    if lat is not None:
         if lat.ndim != 1:
             raise ImutoolError(f"channel {o.lat_accel_channel!r} must be one column (m/s²)", path=ref_path)
     acc_mask = (np.abs(np.nan_to_num(lat)) >= o.lat_accel_min_ms2) if lat is not None else np.zeros(t.size, bool)
@@ -1142,7 +1183,7 @@ def inclinometer_evidence(
             "time_unit": "s",
             "sign": "heel + starboard down, − port (IEC 61162-1 HRM, P8); port amplitude positive",
             "frame": "vessel body FRD (x bow, y starboard, z down)",
-            "time_base": "reference time (s); DUT resampled linearly onto it",
+            "time_base": _time_base(dut, ref),
             "lateral_acceleration": "m/s², + starboard, kinematic (gravity excluded)",
         },
         "editions": EDITIONS,

@@ -521,6 +521,18 @@ def summary_blocks(L: Layout, ev: dict[str, Any]) -> None:
                     f"{inp.get('channel', '-')}",
                 )
             )
+        if inp.get("streams"):  # a many-clock log: the channel's own stream, and the file's others
+            pairs.append(
+                (
+                    "streams",
+                    f"rows and rate above are stream {inp.get('stream')}'s own samples; the file's "
+                    f"{_fmt(inp.get('file_rows'))} rows hold "
+                    + "; ".join(
+                        f"{k}: {_fmt(v.get('samples'))} at {_fmt(v.get('rate_hz'), 2)} Hz"
+                        for k, v in inp["streams"].items()
+                    ),
+                )
+            )
         if inp.get("loading"):
             from imutool.loading import loading_text
 
