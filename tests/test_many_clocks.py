@@ -393,3 +393,34 @@ def test_merge_interpolates_each_channel_from_its_own_samples() -> None:
     assert np.allclose(m["roll"], np.arange(1.0, 9.0, 0.25)) and np.allclose(
         m["heading"], np.arange(1.0, 9.0, 0.25) * 2
     )
+
+
+def test_mounting_keeps_streams_and_plausibility_on_one_clock() -> None:
+    from formats import plausibility
+
+    t = np.arange(0.0, 20.0, 0.01)
+    g = np.zeros((len(t), 3))
+    a = np.tile([0.0, 0.0, -9.81], (len(t), 1))
+    imu = Recording(t, {"gyro": g, "accel": a}, {"gyro": "rad/s", "accel": "m/s^2"})
+    tm = np.arange(0.005, 20.0, 0.1)
+    mag = Recording(tm, {"mag": np.tile([20.0, 0.0, 40.0], (len(tm), 1))}, {"mag": "uT"})
+    j = join_streams([imu, mag], ["imu", "mag"])
+    m = j.mounted("x,-y,-z")
+    assert m.multi_clock and np.array_equal(m.own_rows("mag"), j.own_rows("mag"))
+    assert np.allclose(m.series("accel")[1][:, 2], 9.81)  # z flipped, on the IMU's own rows only
+    rep = plausibility.check_recording(j)  # on the IMU's clock: the mag's NaN rows are not missing samples
+    assert not any("mag" in w and "unit" in w for w in rep.warnings), rep.warnings
+
+
+def test_info_text_of_a_many_clock_csv(sea: Path, tmp_path: Path, capsys) -> None:
+    formats.write(formats.read(sea), tmp_path / "s.csv")
+    code, out, err = run_main(["info", tmp_path / "s.csv"], capsys)
+    assert code == 0, err
+    assert "PSXN,23        1 Hz, 60 samples in 59 s, 0 gaps (roll, pitch, heave)" in out
+    # a many-clock CSV from elsewhere (no NMEA sentence timing): the rate is per stream
+    a = Recording(np.arange(0.0, 10.0, 1.0), {"roll": np.arange(10.0)}, {"roll": "deg"})
+    b = Recording(np.arange(0.05, 10.0, 0.1), {"heading": np.arange(0.05, 10.0, 0.1)}, {"heading": "deg"})
+    formats.write(join_streams([a, b], ["att", "hdg"]), tmp_path / "j.csv")
+    code, out, err = run_main(["info", tmp_path / "j.csv"], capsys)
+    assert code == 0, err
+    assert "rate:      per stream (2 streams" in out and "att            1 Hz, 10 samples in 9 s, 0 gaps" in out
