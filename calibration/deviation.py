@@ -33,7 +33,7 @@ import numpy as np
 
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from formats.frames import wrap_deg180
+from formats.frames import angle_diff_deg, wrap_deg180
 
 NAMES = ("A", "B", "C", "D", "E")
 DEVIATION_LIMIT_DEG = 5.0  # adjust the compass above this (ISO 25862 as quoted; confidence C)
@@ -204,7 +204,7 @@ def fit_deviation(
             f"(noise gain of {worst} = {np.nanmax(gain):.1f} × the residual, limit {max_noise_gain:g}; a full "
             "swing gives 1.4). A card from this would be an extrapolation: swing the vessel through a full turn"
         )
-    d = wrap_deg180(r - c)
+    d = angle_diff_deg(r, c)
     coef, *_ = np.linalg.lstsq(x, d, rcond=None)
     res = d - x @ coef
     dof = max(1, c.size - terms)

@@ -151,6 +151,16 @@ def wrap_deg180(a: np.ndarray) -> np.ndarray:
     return (np.asarray(a, dtype=float) + 180.0) % 360.0 - 180.0
 
 
+def angle_diff_deg(a: np.ndarray, b: np.ndarray | float = 0.0) -> np.ndarray:
+    """``a − b`` compared on the circle: degrees in (−180, 180] (NaN kept). The one rule for every angle error
+    (roll, pitch, heading, heel): a roll of 179° against −179° is 2° apart, not 358°. Differences already within
+    ±180° are returned exactly as subtracted (bit for bit)."""
+    d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    with np.errstate(invalid="ignore"):
+        out = np.where(np.abs(d) <= 180.0, d, 180.0 - np.mod(180.0 - d, 360.0))
+        return np.where(out == -180.0, 180.0, out)
+
+
 def wrap_deg360(a: np.ndarray) -> np.ndarray:
     """Wrap angles in degrees to [0, 360)."""
     return np.asarray(a, dtype=float) % 360.0

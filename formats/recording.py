@@ -642,8 +642,12 @@ class Recording:
 
         body = R_mis · M · sensor, where M is the signed axis permutation (``"x,-y,-z"``) and R_mis the small
         misalignment rotation Rz(yaw)·Ry(pitch)·Rx(roll) (degrees, body axes). Vector channels listed are
-        rotated; quaternion channels ``q``/``ref_q`` (sensor→NED) become body→NED: q_b = q_s ⊗ q(C)ᵀ with
-        C = R_mis·M. The mounting is recorded in ``meta['mounting']``.
+        rotated; a quaternion ``q`` (a device's sensor→NED) becomes body→NED: q_b = q_s ⊗ q(C)ᵀ with C = R_mis·M.
+        Truth passed through (``ref_*``) is in its own frame and is left as it is — unless the recording declares
+        its ``ref_q`` sensor→NED (:func:`ref_is_sensor_frame`: ``meta['ref_frame'] = 'sensor'``, or a ``ref_q*``
+        header saying ``sensor->NED``, as BROAD's files do): then it is turned into body→NED as ``q`` is. Either
+        way ``meta['ref_frame']`` becomes ``'body'`` and ``meta['ref_mounting']`` says what was done. The mounting
+        is recorded in ``meta['mounting']``.
         """
         m = parse_axis_remap(remap) if isinstance(remap, str) else np.asarray(remap, dtype=float)
         r = rotation_about_axes(*np.radians(misalignment_deg)) @ m
@@ -652,9 +656,17 @@ class Recording:
             if name in out.channels:
                 out.channels[name] = out.channels[name] @ r.T
         qc = matrix_to_quat(r)  # rotates sensor vectors into body
-        for name in ("q", "ref_q"):
+        sensor_ref = ref_is_sensor_frame(self.meta)
+        for name in ("q", "ref_q") if sensor_ref else ("q",):
             if name in out.channels and out.channels[name].shape[1:] == (4,):
                 out.channels[name] = quat_multiply(out.channels[name], quat_conjugate(qc))
+        if any(n.startswith("ref_") for n in out.channels) or sensor_ref:
+            out.meta["ref_frame"] = REF_BODY
+            out.meta["ref_mounting"] = (
+                "ref_q declared sensor→NED: turned into body→NED by the mounting"
+                if sensor_ref and "ref_q" in out.channels
+                else "ref_* truth in its own (body) frame: not rotated by the mounting"
+            )
         spec = remap if isinstance(remap, str) else None
         out.meta["mounting"] = {
             "remap": spec if spec is not None else np.asarray(m).tolist(),
@@ -663,6 +675,21 @@ class Recording:
         }
         out.meta["frame"] = "vessel body FRD (x bow, y starboard, z down)"
         return out
+
+
+REF_SENSOR, REF_BODY = "sensor", "body"
+"""``meta['ref_frame']``: what a recording's ``ref_q`` rotates into NED — the sensor's axes (a mounting turns it into
+the body's, :meth:`Recording.mounted`) or the body's (left alone)."""
+
+
+def ref_is_sensor_frame(meta: dict[str, Any]) -> bool:
+    """Whether ``meta`` declares the reference quaternion sensor→NED: ``ref_frame: sensor``, or (no ``ref_frame``)
+    a ``ref_q*``/``ref_q`` header line that says ``sensor->NED`` (or ``sensor→NED``), as BROAD's files do."""
+    declared = meta.get("ref_frame")
+    if declared is not None:
+        return str(declared).strip().lower() == REF_SENSOR
+    text = " ".join(str(meta.get(k, "")) for k in ("ref_q*", "ref_q")).lower().replace(" ", "")
+    return "sensor->ned" in text or "sensor→ned" in text
 
 
 def parse_mounting(spec: str) -> tuple[str, tuple[float, float, float]]:

@@ -27,7 +27,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from formats.frames import wrap_deg180
+from formats.frames import angle_diff_deg
 from imutool.loading import (
     FLAGS,
     how_loaded,
@@ -114,7 +114,13 @@ def load_for_fit(
     if isinstance(source, Recording):
         if opts.get("with_files"):
             src = str(source.meta.get("source", "<recording>"))
-            rec, _ = merge_with(source, src, list(opts["with_files"]), list(opts.get("with_offsets") or ()))
+            rec, _ = merge_with(
+                source,
+                src,
+                list(opts["with_files"]),
+                list(opts.get("with_offsets") or ()),
+                list(opts.get("with_prefixes") or ()),
+            )
             rec.meta["source"] = src
             return rec
         return source
@@ -656,7 +662,7 @@ def deviation_card(
                 card,
                 o,
                 comp_at[ok],
-                wrap_deg180(ref_at[ok] - comp_at[ok]),
+                angle_diff_deg(ref_at[ok], comp_at[ok]),
                 title=f"Deviation card — {card.header.get('vessel') or os.path.basename(input_path)}",
             )
     details = {

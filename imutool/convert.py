@@ -308,6 +308,7 @@ def run_convert(
                 src,
                 list(opt["with_files"]),
                 list(opt["with_offsets"] or ()),
+                list(opt["with_prefixes"] or ()),
                 duplicates=duplicates,
                 backwards=backwards,
             )

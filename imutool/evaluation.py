@@ -23,10 +23,11 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from formats.frames import quat_multiply, quat_to_euler, wrap_deg180
+from formats.frames import angle_diff_deg, quat_multiply, quat_to_euler
 from formats.recording import require_samples
 from imutool.clock import Clock
 from imutool.loading import FLAGS, how_loaded, one_clock, reference_text, split_reference_options
+from imutool.refframe import frame_warning, parse_ref_frame, reference_to_ned, vertical_disagreement
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input, load_reference
 
 CHANNELS = ("angles", "quaternion", "heave", "position")
@@ -35,9 +36,19 @@ MIN_REFERENCE_ROWS = 10
 """Reference rows within the estimate's span below which no comparison is made (as a report's window needs ten
 samples): statistics of fewer describe the interpolation between them, not the estimate."""
 
-EVALUATE_DEFAULTS: dict[str, Any] = {"channel": None, "max_lag_s": 0.0, "plot": None, "align_heading": None}
-"""What is compared and how, unless said: every channel both have, no lag search (s), no plot, no heading offset.
-The defaults of :func:`evaluate` and :func:`run_evaluate` (and of the ``imutool evaluate`` options)."""
+EVALUATE_DEFAULTS: dict[str, Any] = {
+    "channel": None,
+    "max_lag_s": 0.0,
+    "plot": None,
+    "align_heading": None,
+    "ref_frame": None,
+    "ref_mounting": None,
+    "start": None,
+    "end": None,
+}
+"""What is compared and how, unless said: every channel both have, no lag search (s), no plot, no heading offset,
+the reference taken as body → NED, the whole estimate. The defaults of :func:`evaluate` and :func:`run_evaluate`
+(and of the ``imutool evaluate`` options)."""
 
 
 def load_for_evaluation(path: str | os.PathLike) -> Recording:
@@ -56,6 +67,10 @@ def evaluate(
     max_lag_s: float = EVALUATE_DEFAULTS["max_lag_s"],
     plot: str | os.PathLike | None = EVALUATE_DEFAULTS["plot"],
     align_heading: float | str | None = EVALUATE_DEFAULTS["align_heading"],
+    ref_frame: str | None = EVALUATE_DEFAULTS["ref_frame"],
+    ref_mounting: str | None = EVALUATE_DEFAULTS["ref_mounting"],
+    start: float | str | None = EVALUATE_DEFAULTS["start"],
+    end: float | str | None = EVALUATE_DEFAULTS["end"],
 ) -> dict[str, Any]:
     """Compare ``estimate`` with ``reference`` (paths or Recordings; default: the estimate's own ``ref_*``).
 
@@ -66,13 +81,26 @@ def evaluate(
     constant lag up to ± this many seconds. ``align_heading``: a constant heading offset (deg) added to the
     reference's heading (and its quaternion turned about down by it), or ``'auto'`` (the circular mean of
     estimate − reference heading, reported) — a motion-capture frame's x axis is not north. ``plot``: error plot
-    (.png/.pdf). Returns the summary dict (``span``: the compared times, with ISO UTC where dated).
+    (.png/.pdf). Every angle is compared on the circle (errors in (−180°, 180°]); roll and heading are left out
+    where |pitch| > :data:`imutool.metrics.GIMBAL_PITCH_DEG` (Euler angles are singular there; the quaternion
+    metrics cover those rows). ``ref_frame`` (``ned``, ``enu``, ``zup``) and ``ref_mounting`` (``REMAP[;R,P,Y]``)
+    declare the reference's world and body axes: it is converted into body FRD → NED
+    (:func:`imutool.refframe.reference_to_ned`; ``reference_frame`` in the summary); a reference whose vertical
+    lies more than 20° from the estimate's gravity direction on average is warned about (``warnings``).
+    ``start``/``end``: compare only that window of the estimate (s on its clock, or ISO 8601 UTC where it has a
+    date; as a report's ``--start/--end``). Returns the summary dict (``span``: the compared times, with ISO UTC
+    where dated).
     """
     if channel is not None and channel not in CHANNELS:
         raise ImutoolError(f"evaluate channel {channel!r}: expected one of {', '.join(CHANNELS)}")
     align = parse_align_heading(align_heading)
+    ref_frame = parse_ref_frame(ref_frame)
     est_path = _name(estimate)
     est = estimate if isinstance(estimate, Recording) else load_for_evaluation(estimate)
+    if start is not None or end is not None:
+        from imutool.report.route import evaluated_window  # the reports' window (heavy package: only for a window)
+
+        est = evaluated_window(est, start, end, est_path)
     if reference is None:
         ref, ref_path = est, None
     else:
@@ -81,6 +109,7 @@ def evaluate(
         check_overlap(est, ref, est_path, ref_path)
     summary: dict[str, Any] = {"estimate": est_path, "reference": ref_path or est_path}
     notes: list[str] = []
+    warnings: list[str] = []
     if channel not in ("heave", "position"):
         same = ref is est
         if not same:
@@ -89,6 +118,19 @@ def evaluate(
         ref = with_angles(est if same else ref, "ref_", notes)
         if same:
             est = ref
+        if ref_frame is not None or ref_mounting:
+            ref, frame = reference_to_ned(ref, ref_frame, ref_mounting)
+            if same:
+                est = ref
+        else:
+            frame = reference_to_ned(ref)[1]
+        angle = vertical_disagreement(est, ref)
+        if angle is not None:
+            frame["vertical_disagreement_deg"] = round(angle, 3)
+        summary["reference_frame"] = frame
+        w = frame_warning(angle, ref_frame is not None or bool(ref_mounting))
+        if w:
+            warnings.append(w)
         if align is not None:
             est, ref, summary["align_heading"] = align_reference_heading(est, ref, align)
     if channel in ("heave", "position", "quaternion") and (est.multi_clock or ref.multi_clock):
@@ -126,10 +168,12 @@ def evaluate(
                 )
         if channel == "quaternion" or (channel is None and "q" in est.channels and "ref_q" in ref.channels):
             summary["quaternion"] = evaluate_quaternion_rec(est, ref)
-        if len(summary) - ("align_heading" in summary) == 2:
+        if len(summary) - ("align_heading" in summary) - ("reference_frame" in summary) == 2:
             raise ImutoolError("nothing to compare: no matching estimate/ref_* channels", path=est_path)
     if notes:
         summary["derived"] = notes
+    if warnings:
+        summary["warnings"] = warnings
     summary["span"] = compared_span(est, ref)
     if plot:
         plot_errors(est, ref, os.fspath(plot))
@@ -145,6 +189,10 @@ def run_evaluate(
     max_lag_s: float = EVALUATE_DEFAULTS["max_lag_s"],
     plot: str | os.PathLike | None = EVALUATE_DEFAULTS["plot"],
     align_heading: float | str | None = EVALUATE_DEFAULTS["align_heading"],
+    ref_frame: str | None = EVALUATE_DEFAULTS["ref_frame"],
+    ref_mounting: str | None = EVALUATE_DEFAULTS["ref_mounting"],
+    start: float | str | None = EVALUATE_DEFAULTS["start"],
+    end: float | str | None = EVALUATE_DEFAULTS["end"],
     strict: bool = False,
     on_input: OnInput | None = None,
     **load_options: Any,
@@ -167,7 +215,9 @@ def run_evaluate(
     inputs: list[dict[str, Any]] = []
     if not isinstance(estimate, Recording):
         opts = {k: v for k, v in load_options.items() if v is not None}
-        estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, **opts)[0]
+        estimate = load_input(os.fspath(estimate), inputs, strict=strict, on_input=on_input, with_clock="own", **opts)[
+            0
+        ]
     loaded = None
     if ref_given:
         flags = ", ".join(sorted(reference_text(FLAGS[k]) for k in ref_given))
@@ -182,11 +232,21 @@ def run_evaluate(
             on_input=on_input,
             duplicates="drop",
             backwards="sort",
+            with_clock="own",
             **ref_given,
         )[0]
         loaded = how_loaded(reference, ref_given, reference=True)
     summary = evaluate(
-        estimate, reference, channel=channel, max_lag_s=max_lag_s, plot=plot, align_heading=align_heading
+        estimate,
+        reference,
+        channel=channel,
+        max_lag_s=max_lag_s,
+        plot=plot,
+        align_heading=align_heading,
+        ref_frame=ref_frame,
+        ref_mounting=ref_mounting,
+        start=start,
+        end=end,
     )
     if loaded is not None:
         summary["reference_loading"] = loaded
@@ -252,7 +312,7 @@ def align_reference_heading(
         if "heading" not in est.channels or "ref_heading" not in ref.channels:
             raise ImutoolError("--align-heading auto: needs a heading in the estimate and in the reference")
         r = interp_to(est.time, ref.time, unwrap_deg(ref["ref_heading"]))
-        d = np.radians(wrap_deg180(np.asarray(est["heading"], float) - r))
+        d = np.radians(angle_diff_deg(est["heading"], r))
         d = d[np.isfinite(d)]
         if d.size == 0:
             raise ImutoolError("--align-heading auto: the estimate and the reference headings do not overlap")
@@ -329,12 +389,15 @@ def _name(x: str | os.PathLike | Recording) -> str:
 
 
 def evaluate_angles(est: Recording, ref: Recording, max_lag_s: float) -> dict[str, Any]:
-    """Roll/pitch/heading of ``est`` vs ref_roll/ref_pitch/ref_heading of ``ref`` (deg; SNR against the raw
-    accelerometer/magnetometer angles of ``ref`` when it has the sensor channels)."""
-    from imutool.metrics import evaluate_angle, interp_to
+    """Roll/pitch/heading of ``est`` vs ref_roll/ref_pitch/ref_heading of ``ref`` (deg, compared on the circle;
+    SNR against the raw accelerometer/magnetometer angles of ``ref`` when it has the sensor channels). Roll and
+    heading leave out the rows where either pitch is beyond :data:`imutool.metrics.GIMBAL_PITCH_DEG` (``excluded``
+    counts them)."""
+    from imutool.metrics import GIMBAL_PITCH_DEG, evaluate_angle, interp_to, unwrap_deg
 
     sensors = ref.on_clock("accel") if ref.multi_clock and "accel" in ref.channels else ref
     raw = _raw_angles(sensors)
+    pitches = [x.series(n) if n in x.channels else None for x, n in ((est, "pitch"), (ref, "ref_pitch"))]
     out: dict[str, Any] = {}
     for name in ("roll", "pitch", "heading"):
         if name not in est.channels or f"ref_{name}" not in ref.channels:
@@ -342,19 +405,18 @@ def evaluate_angles(est: Recording, ref: Recording, max_lag_s: float) -> dict[st
         # many clocks: each angle on its own samples (never another stream's row as a missing sample)
         te, e = est.series(name)
         tr, rv = ref.series(f"ref_{name}")
+        gimbal = None
+        if name != "pitch" and all(p is not None for p in pitches):
+            pe, pr = (p[1] if np.array_equal(p[0], te) else interp_to(te, p[0], p[1]) for p in pitches)
+            with np.errstate(invalid="ignore"):
+                g = (np.abs(pr) > GIMBAL_PITCH_DEG) | (np.abs(np.asarray(pe, float)) > GIMBAL_PITCH_DEG)
+            gimbal = g if g.any() else None
         r = raw.get(name)
         if r is not None:
-            ts = sensors.time
-            r = interp_to(te, ts, r) if name != "heading" else _interp_wrapped(te, ts, r)
-        st = evaluate_angle(te, e, tr, rv, wrap=name == "heading", max_lag_s=max_lag_s, raw=r)
+            r = interp_to(te, sensors.time, unwrap_deg(r))
+        st = evaluate_angle(te, e, tr, rv, max_lag_s=max_lag_s, raw=r, exclude=gimbal)
         out[name] = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in st.items()}
     return out
-
-
-def _interp_wrapped(t, ts, a):
-    from imutool.metrics import interp_to, unwrap_deg
-
-    return interp_to(t, ts, unwrap_deg(a)) % 360.0
 
 
 def evaluate_quaternion_rec(est: Recording, ref: Recording) -> dict[str, Any]:
@@ -367,7 +429,7 @@ def evaluate_quaternion_rec(est: Recording, ref: Recording) -> dict[str, Any]:
     if "ref_q" not in ref.channels:
         raise ImutoolError("the reference has no ref_qw..ref_qz columns")
     qr = ref["ref_q"]
-    if ref is not est and (len(ref) != len(est) or not np.array_equal(ref.time, est.time)):
+    if _apart(est, ref) and (est.multi_clock or len(ref) != len(est) or not np.array_equal(ref.time, est.time)):
         qr = interp_to(est.time, ref.time, qr)
         qr = qr / np.linalg.norm(qr, axis=1, keepdims=True)
     mask = None
@@ -379,6 +441,12 @@ def evaluate_quaternion_rec(est: Recording, ref: Recording) -> dict[str, Any]:
     out = evaluate_quaternion(est["q"], qr, mask)
     out["rows"] = "movement rows" if mask is not None else "all rows"
     return out
+
+
+def _apart(est: Recording, ref: Recording) -> bool:
+    """Whether the reference's channels must be interpolated onto the estimate's rows: another recording, or one
+    of many clocks (a ``--with`` file's truth on its own rows, :func:`imutool.loading.merge_with`)."""
+    return ref is not est or est.multi_clock
 
 
 def _raw_angles(ref) -> dict[str, np.ndarray]:
@@ -447,22 +515,20 @@ def plot_errors(est: Recording, ref: Recording, path: str) -> None:
     if not names:
         raise ImutoolError("nothing to plot: no roll/pitch/heading with ref_* columns")
     clock = Clock.of(est)
-    x = clock.x(est.time)  # seconds from the start; dated: UTC clock ticks
     fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.8 * len(names)), squeeze=False, sharex=True)
     for i, n in enumerate(names):
-        wrap = n == "heading"
-        r = interp_to(est.time, ref.time, unwrap_deg(ref[f"ref_{n}"]) if wrap else ref[f"ref_{n}"])
-        e = est[n] - r
-        if wrap:
-            e = wrap_deg180(e)
-            r = r % 360
+        rows = est.own_rows(n)  # many clocks: the estimate's own samples (another stream's rows are not gaps)
+        x = clock.x(est.time[rows])  # seconds from the start; dated: UTC clock ticks
+        r = interp_to(est.time[rows], ref.time, unwrap_deg(ref[f"ref_{n}"]))
+        e = angle_diff_deg(est[n][rows], r)  # on the circle: no ±360° spikes where an angle crosses ±180° or north
+        r = r % 360 if n == "heading" else angle_diff_deg(r)
         axes[i, 0].plot(x, r, "k-", lw=1, label="reference")
-        axes[i, 0].plot(x, est[n], "C0-", lw=0.8, label="estimate")
+        axes[i, 0].plot(x, est[n][rows], "C0-", lw=0.8, label="estimate")
         axes[i, 0].set_ylabel(f"{n} (deg)")
         axes[i, 0].legend(loc="upper right", fontsize=8)
         axes[i, 1].plot(x, e, "C3-", lw=0.8)
         if f"{n}_std" in est.channels:
-            s = est[f"{n}_std"]
+            s = est[f"{n}_std"][rows]
             axes[i, 1].fill_between(x, -2 * s, 2 * s, color="0.8", label="±2σ (filter)")
             axes[i, 1].legend(loc="upper right", fontsize=8)
         axes[i, 1].set_ylabel(f"{n} error (deg)")

@@ -47,14 +47,13 @@ from typing import Any
 
 import numpy as np
 
-import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from imutool.batch import expand_inputs
-from imutool.loading import one_clock
+from imutool.loading import LOAD_OPTIONS, one_clock
 from imutool.roll import heel_of, roll_cycles
-from imutool.routes import RouteResult
+from imutool.routes import OnInput, RouteResult, load_input
 
 DEFAULTS: dict[str, Any] = {
     "threshold_deg": 20.0,
@@ -476,14 +475,25 @@ def run(
     *,
     events_csv: str | None = None,
     hourly_csv: str | None = None,
+    inputs: list[dict[str, Any]] | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
     **options: Any,
 ) -> dict[str, Any]:
     """Read ``path``, :func:`analyse` it and write the JSON result to ``output`` (and the tables as CSV);
-    returns the result. The same route for the CLI, ``imutool batch`` and Python users."""
+    returns the result. The same route for the CLI, ``imutool batch`` and Python users. ``options``: those of
+    :func:`analyse`, and the loading options every command takes (:data:`imutool.loading.LOAD_OPTIONS`:
+    ``columns``, ``profile``, ``time_column``, ``with_files`` ...; the file is loaded by
+    :func:`imutool.loading.load_recording`, rows out of time order sorted unless ``backwards`` says otherwise;
+    ``inputs`` collects its loading report, ``strict`` makes its warnings errors, ``on_input(path, report)``)."""
     for out in (output, events_csv, hourly_csv):
         if out and os.path.abspath(out) == os.path.abspath(path):
             raise ImutoolError("output would overwrite the input", path=out)
-    rec, _ = formats.read(path).validated(duplicates="drop", backwards="sort", source=path)
+    load = {k: options.pop(k) for k in list(options) if k in LOAD_OPTIONS}
+    load = {k: v for k, v in load.items() if v is not None}
+    load.setdefault("backwards", "sort")
+    load.setdefault("duplicates", "drop")
+    rec, _ = load_input(path, inputs if inputs is not None else [], strict=strict, on_input=on_input, **load)
     res = analyse(rec, path=path, **options)
     if output:
         with atomic_path(output) as tmp:
@@ -501,18 +511,25 @@ def run_events(
     *,
     events_csv: str | os.PathLike | None = None,
     hourly_csv: str | os.PathLike | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
     **options: Any,
 ) -> RouteResult:
     """:func:`run` as a command route: the route behind ``imutool events detect`` and ``imutool batch 'events
-    detect'``. ``options`` as :func:`analyse` (channels, ship/voyage, utc_start, path_regex, :data:`DEFAULTS`).
-    Returns the summary (input, output, ship, voyage, rows, max heel, event counts...) and the whole result
-    (``data``: events, hourly rows, notes, settings)."""
+    detect'``. ``options`` as :func:`analyse` (channels, ship/voyage, utc_start, path_regex, :data:`DEFAULTS`) and
+    the loading options (:data:`imutool.loading.LOAD_OPTIONS`). Returns the summary (input, output, ship, voyage,
+    rows, max heel, event counts...), the input's loading report and the whole result (``data``: events, hourly
+    rows, notes, settings)."""
     path = os.fspath(path)
+    inputs: list[dict[str, Any]] = []
     res = run(
         path,
         None if output is None else os.fspath(output),
         events_csv=None if events_csv is None else os.fspath(events_csv),
         hourly_csv=None if hourly_csv is None else os.fspath(hourly_csv),
+        inputs=inputs,
+        strict=strict,
+        on_input=on_input,
         **options,
     )
     summary = {
@@ -522,7 +539,7 @@ def run_events(
         "voyage": res["voyage"],
         **res["summary"],
     }
-    return RouteResult(summary, data=res)
+    return RouteResult(summary, inputs, data=res)
 
 
 def _json_default(o: Any) -> Any:

@@ -21,6 +21,7 @@ from formats.errors import ImutoolError
 from formats.recording import (
     SENSOR_CHANNELS,
     all_nan_sensors,
+    join_streams,
     missing_sensor_warnings,
     refuse_without_sensor_data,
     require_samples,
@@ -38,6 +39,7 @@ INPUT_ONLY_OPTIONS = (
     "header_rows",
     "with_files",
     "with_offsets",
+    "with_prefixes",
 )
 """The input's own: its mounting and calibration, its clock, header and ``--with`` files (a reference has its
 own clock options, :data:`REF_LOAD_OPTIONS`, and neither mounting nor calibration)."""
@@ -56,6 +58,7 @@ REF_LOAD_OPTIONS = {
     "ref_header_rows": ("header_rows", "--ref-header-rows"),
     "ref_with_files": ("with_files", "--ref-with"),
     "ref_with_offsets": ("with_offsets", "--ref-with-offset"),
+    "ref_with_prefixes": ("with_prefixes", "--ref-with-prefix"),
     "ref_start": ("start", "--ref-start"),
 }
 """How a command's second recording (its reference: ``evaluate``, ``report inclinometer|heading``) is loaded: each
@@ -77,6 +80,7 @@ FLAGS = {
     "header_rows": "--header-rows",
     "with_files": "--with",
     "with_offsets": "--with-offset",
+    "with_prefixes": "--with-prefix",
     "start": "--start",
 }
 """The command-line flag of each loading option that says how a file's columns, times and header are read (what
@@ -101,18 +105,23 @@ def load_recording(
     header_rows: int | None = None,
     with_files: tuple[str, ...] | list[str] = (),
     with_offsets: tuple[float, ...] | list[float] = (),
+    with_prefixes: tuple[str, ...] | list[str] = (),
+    with_clock: str = "grid",
 ) -> tuple[Recording, dict[str, Any]]:
     """Read ``path`` (any format imutool reads) → (recording, validation report dict).
 
     columns/profile: foreign CSV column mapping; input_rate_hz (``--rate``, Hz: a CSV without a time column gets
     t = n / rate), time_column (``NAME[:UNIT]``, unit s/ms/us/ns), header_rows (a CSV's header rows: names, then
     units): how a CSV's time and header are read (:func:`formats.csv.read_header`); with_files: other recordings
-    (sensors on other clocks) merged onto this one's times (:func:`merge_with`; with_offsets: seconds added to
-    each one's times, in order); topic/stamp: bag topic and time source; duplicates/backwards: validation policies
-    (:meth:`formats.Recording.validated`); mounting: sensor→body ``'x,-y,-z[;r,p,y]'`` (deg);
-    calibration_file: calibration TOML applied before mounting. The report holds rows read/kept/dropped and why,
-    samples bridged, ``warnings`` (implausible units or axes, rows dropped...) and ``plausibility_figures``; what
-    validation did and the warnings also go into ``rec.meta``. ``strict``: warnings raise an ImutoolError.
+    (sensors on other clocks) merged with this one (:func:`merge_with`; with_offsets: seconds added to each one's
+    times, in order; with_prefixes: a prefix for each one's channel names, in order — two logs of one kind;
+    with_clock: ``grid`` interpolates them onto this one's times, for a command that needs one grid, ``own`` keeps
+    each on its own clock as a stream, :data:`WITH_CLOCKS`); topic/stamp: bag topic and time source;
+    duplicates/backwards: validation policies (:meth:`formats.Recording.validated`); mounting: sensor→body
+    ``'x,-y,-z[;r,p,y]'`` (deg); calibration_file: calibration TOML applied before mounting. The report holds
+    rows read/kept/dropped and why, samples bridged, ``warnings`` (implausible units or axes, rows dropped...) and
+    ``plausibility_figures``; what validation did and the warnings also go into ``rec.meta``. ``strict``: warnings
+    raise an ImutoolError.
     """
     from formats import plausibility
 
@@ -136,11 +145,19 @@ def load_recording(
         require_samples(len(rec), distinct, path, len(t) - distinct if distinct == 1 else 0)
         report, warns = plausibility.dropped_rows(len(rec), len(rec), {}, rec.meta)
         checks.warnings += warns
-    if with_offsets and not with_files:
-        raise ImutoolError("--with-offset is the clock offset of a --with FILE: give the file too")
+    if (with_offsets or with_prefixes) and not with_files:
+        flag = "--with-offset is the clock offset" if with_offsets else "--with-prefix is the channel prefix"
+        raise ImutoolError(f"{flag} of a --with FILE: give the file too")
     if with_files:
         rec, merged = merge_with(
-            rec, path, list(with_files), list(with_offsets), duplicates=duplicates, backwards=backwards
+            rec,
+            path,
+            list(with_files),
+            list(with_offsets),
+            list(with_prefixes),
+            duplicates=duplicates,
+            backwards=backwards,
+            clock=with_clock,
         )
         report["with"] = merged["files"]
         checks.warnings += merged["warnings"]
@@ -218,48 +235,75 @@ def read_input(
     return formats.read(path, **opts)
 
 
+WITH_CLOCKS = ("grid", "own")
+"""How :func:`merge_with` joins a ``--with`` file: ``grid`` — interpolated onto the input's times, over the span
+every file covers (a command that needs one grid: the filter, heave, calibration, events, ...); ``own`` — each file
+a stream on its own clock (:func:`formats.recording.join_streams`: no resampling, every row of every file kept;
+``evaluate``, which takes each channel on its own samples)."""
+
+
 def merge_with(
     rec: Recording,
     path: str,
     with_files: list[str],
     with_offsets: list[float] | None = None,
+    with_prefixes: list[str] | None = None,
     *,
     duplicates: str = "drop",
     backwards: str = "error",
+    clock: str = "grid",
 ) -> tuple[Recording, dict[str, Any]]:
-    """``rec`` (read from ``path``) with the channels of ``with_files`` (sensors on other clocks) interpolated onto
-    its times by :func:`formats.merge` → (merged recording, {"files": per file, "warnings": [...]}).
+    """``rec`` (read from ``path``) with the channels of ``with_files`` (sensors on other clocks) → (merged
+    recording, {"files": per file, "warnings": [...]}).
 
     Each file is read as it is (a CSV's columns inferred), put in time order with the ``duplicates``/``backwards``
-    policies, and its times shifted by its offset (``with_offsets``, s, in order; none: 0). Only the span every
-    file covers is kept. A channel name two files share is refused (which one would be meant is not clear). The
-    metadata's ``merged`` says which file gave which channels, the time base and each offset.
+    policies, its times shifted by its offset (``with_offsets``, s, in order; none: 0) and its channels renamed with
+    its prefix (``with_prefixes``, in order; ``''`` or none: as they are) — two logs of one kind (two IMUs) need
+    one. ``clock`` (:data:`WITH_CLOCKS`): ``grid`` interpolates them onto ``rec``'s times by :func:`formats.merge`,
+    keeping only the span every file covers; ``own`` joins them without resampling
+    (:func:`formats.recording.join_streams`: one stream per file, named by its file name). Files that do not
+    overlap in time are refused (a clock offset is missing); so is a channel name two files share (which one
+    would be meant is not clear: give a prefix). The metadata's ``merged`` says which file gave which channels,
+    the time base and each offset and prefix.
     """
+    if clock not in WITH_CLOCKS:
+        raise ImutoolError(f"--with clock {clock!r}: expected one of {', '.join(WITH_CLOCKS)}")
     offsets = [float(v) for v in (with_offsets or [])]
     if offsets and len(offsets) != len(with_files):
         raise ImutoolError(
             f"--with-offset given {len(offsets)} time(s) for {len(with_files)} --with file(s): give one per file, "
             "in order (0 for none)"
         )
+    prefixes = [str(p) for p in (with_prefixes or [])]
+    if prefixes and len(prefixes) != len(with_files):
+        raise ImutoolError(
+            f"--with-prefix given {len(prefixes)} prefix(es) for {len(with_files)} --with file(s): give one per "
+            "file, in order ('' for none)"
+        )
     offsets = offsets or [0.0] * len(with_files)
+    prefixes = prefixes or [""] * len(with_files)
     owner = {name: path for name in rec.channels}
     others: list[Recording] = []
     files: list[dict[str, Any]] = [{"input": path, "channels": list(rec.channels), "offset_s": 0.0, "rows": len(rec)}]
     warnings: list[str] = []
-    for p, off in zip(with_files, offsets, strict=True):
+    for p, off, pre in zip(with_files, offsets, prefixes, strict=True):
         p = os.fspath(p)
         if not np.isfinite(off):
             raise ImutoolError(f"--with-offset {off}: not a finite number of seconds", path=p)
+        if pre and not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", pre):
+            raise ImutoolError(f"--with-prefix {pre!r}: letters, digits and _ only, starting with a letter", path=p)
         r = read_input(p)
         n_in = len(r)
         r, rep = r.validated(duplicates=duplicates, backwards=backwards, source=p)
         if not len(r):
             raise ImutoolError("no samples to merge (--with)", path=p)
+        if pre:
+            r = prefixed(r, pre)
         clash = [n for n in r.channels if n in owner]
         if clash:
             raise ImutoolError(
                 f"--with: channel(s) {', '.join(clash)} also in {owner[clash[0]]}; which one to use is not clear "
-                "(merge only files whose channels differ, e.g. one sensor per file)",
+                "(two logs of one kind: give each a prefix with --with-prefix, e.g. --with-prefix imu2_)",
                 path=p,
             )
         owner.update({n: p for n in r.channels})
@@ -270,6 +314,8 @@ def merge_with(
         if dropped:
             warnings.append(f"--with {p}: {dropped} of {n_in} rows dropped by validation")
         files.append({"input": p, "channels": list(r.channels), "offset_s": off, "rows": len(r)})
+        if pre:
+            files[-1]["prefix"] = pre
         others.append(r)
     t0 = max(float(r.time[0]) for r in (rec, *others))
     t1 = min(float(r.time[-1]) for r in (rec, *others))
@@ -281,12 +327,29 @@ def merge_with(
             f"--with: the files do not overlap in time ({spans}); give each one's clock offset with --with-offset",
             path=path,
         )
+    meta = dict(rec.meta)
+    if clock == "own":
+        names = _stream_names([path, *(f["input"] for f in files[1:])])
+        merged = join_streams([rec, *others], names)
+        for f, n in zip(files, names, strict=True):
+            f["stream"] = n
+        meta.pop("streams", None)
+        meta["streams"] = merged.meta.get("streams", {})
+        meta["merged"] = {
+            "time_base": f"each file on its own clock, one stream per file ({', '.join(names)}): the rows are the "
+            "union of their times, nothing interpolated",
+            "files": files,
+            "span_s": [t0, t1],
+            "rows_outside_common_span_dropped": 0,
+        }
+        merged.meta = meta
+        return merged, {"files": files[1:], "warnings": warnings}
     merged = formats.merge([rec, *others], rec)
     kept = len(merged)
-    meta = dict(rec.meta)
     meta.pop("streams", None)  # a many-clock input: every channel now interpolated onto each of its rows
     meta["merged"] = {
-        "time_base": f"{path} (its {len(rec)} sample times; the others interpolated linearly onto them)",
+        "time_base": f"{path} (its {len(rec)} sample times; the others interpolated linearly onto them: this command "
+        "needs one grid)",
         "files": files,
         "span_s": [t0, t1],
         "rows_outside_common_span_dropped": len(rec) - kept,
@@ -297,6 +360,28 @@ def merge_with(
             f"--with: {len(rec) - kept} of {len(rec)} rows of {path} outside the span every file covers dropped"
         )
     return merged, {"files": files[1:], "warnings": warnings}
+
+
+def prefixed(rec: Recording, prefix: str) -> Recording:
+    """``rec`` with every channel renamed ``prefix + name`` (units kept; CSV columns ``prefix + column``)."""
+    out = Recording(rec.time.copy(), meta=dict(rec.meta), stream_rows={k: v.copy() for k, v in rec.stream_rows.items()})
+    for name, a in rec.channels.items():
+        out.add(prefix + name, a.copy(), rec.units.get(name), columns=[prefix + c for c in rec.columns.get(name, [])])
+    if rec.streams:
+        out.meta["streams"] = {k: [prefix + c for c in v] for k, v in rec.streams.items()}
+    return out
+
+
+def _stream_names(paths: list[str]) -> list[str]:
+    """One stream name per file: its file name, numbered where two share one."""
+    out: list[str] = []
+    for p in paths:
+        base = os.path.basename(p) or p
+        name, k = base, 2
+        while name in out:
+            name, k = f"{base}#{k}", k + 1
+        out.append(name)
+    return out
 
 
 def merged_warnings(meta: dict[str, Any], *more: list[str]) -> list[str]:
@@ -547,8 +632,12 @@ def how_loaded(rec: Recording, given: dict[str, Any], reference: bool = False) -
     merged = rec.meta.get("merged")
     if isinstance(merged, dict) and merged.get("files"):
         out["merged"] = [
-            {"input": f["input"], "channels": f["channels"], "offset_s": f["offset_s"]} for f in merged["files"][1:]
+            {"input": f["input"], "channels": f["channels"], "offset_s": f["offset_s"]}
+            | ({"prefix": f["prefix"]} if f.get("prefix") else {})
+            for f in merged["files"][1:]
         ]
+        if "own clock" in str(merged.get("time_base", "")):
+            out["merged_clocks"] = "own (one stream per file, nothing interpolated)"
     return out
 
 

@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from formats.frames import quat_conjugate, quat_multiply, wrap_deg180
+from formats.frames import angle_diff_deg as angle_diff_deg  # the one rule for angle errors, re-exported
+from formats.frames import quat_conjugate, quat_multiply
 
 
 def error_stats(err: np.ndarray) -> dict[str, float]:
@@ -76,9 +77,7 @@ def _lag_grid_min(
     costs = np.empty(len(lags))
     for i, lag in enumerate(lags):
         r = interp_to(t - lag, t_ref, ref)
-        d = x - r
-        if wrap_deg:
-            d = wrap_deg180(d)
+        d = angle_diff_deg(x, r) if wrap_deg else x - r
         ok = np.isfinite(d)
         costs[i] = np.sqrt(np.mean(d[ok] ** 2)) if ok.sum() > 10 else np.inf
     k = int(np.argmin(costs))
@@ -97,7 +96,8 @@ def best_lag(
     """The constant lag L (s) in [−max, +max] minimising RMS of x(t) − ref(t − L), and that RMS.
 
     Positive L means x lags the reference (x at time t equals the reference at t − L).
-    Coarse grid then a parabolic refinement. ``wrap_deg`` wraps differences to ±180°. The search never goes
+    Coarse grid then a parabolic refinement. ``wrap_deg`` compares on the circle (differences in (−180°, 180°],
+    :func:`formats.frames.angle_diff_deg`). The search never goes
     beyond the two series' combined span (a larger lag leaves nothing to compare), and a range of more than
     :data:`MAX_LAG_STEPS` steps is searched on a coarser grid first, then at ``step_s`` around its best lag.
     """
@@ -162,12 +162,22 @@ def evaluate_quaternion(q_est: np.ndarray, q_ref: np.ndarray, mask: np.ndarray |
 
 
 def unwrap_deg(a: np.ndarray) -> np.ndarray:
-    """Unwrap an angle series in degrees (NaN kept)."""
+    """Unwrap an angle series in degrees (NaN kept): a roll that crosses ±180° or a heading that crosses north
+    becomes continuous, so that interpolating between two samples does not cross the circle the long way. A series
+    without a step beyond 180° comes back unchanged (bit for bit)."""
     a = np.asarray(a, float)
     out = a.copy()
     ok = np.isfinite(a)
+    if ok.sum() < 2 or not np.any(np.abs(np.diff(a[ok])) > 180.0):
+        return out
     out[ok] = np.degrees(np.unwrap(np.radians(a[ok])))
     return out
+
+
+GIMBAL_PITCH_DEG = 85.0
+"""|pitch| (deg) beyond which roll and heading are not compared as Euler angles: near ±90° pitch they are singular
+(a tenth of a degree of tilt turns roll and heading by tens of degrees); the quaternion's inclination and total
+errors cover those rows."""
 
 
 def evaluate_angle(
@@ -176,30 +186,31 @@ def evaluate_angle(
     t_ref: np.ndarray,
     ref: np.ndarray,
     *,
-    wrap: bool = False,
+    wrap: bool = True,
     max_lag_s: float = 0.0,
     raw: np.ndarray | None = None,
+    exclude: np.ndarray | None = None,
 ) -> dict:
     """Error statistics (deg) of one angle against a reference interpolated onto the estimate's time.
 
-    wrap: heading (errors wrapped to ±180°, reference unwrapped before interpolation). max_lag_s > 0 adds the
-    response time (the lag L minimising RMS of est(t) − ref(t − L), positive = estimate lags) and the RMSE
-    once that lag is removed. raw: the unfiltered measured angle on ``t`` → SNR_dB (paper eq. 20) and, with
-    the reference, the SNR improvement 10·log10(Σ(raw−ref)² / Σ(est−ref)²).
+    wrap: compare on the circle (the default, every angle: the reference unwrapped before interpolation, errors in
+    (−180°, 180°], :func:`formats.frames.angle_diff_deg` — a roll near ±180° or a heading near north); False: a
+    plain difference. max_lag_s > 0 adds the response time (the lag L minimising RMS of est(t) − ref(t − L),
+    positive = estimate lags) and the RMSE once that lag is removed. raw: the unfiltered measured angle on ``t`` →
+    SNR_dB (paper eq. 20) and, with the reference, the SNR improvement 10·log10(Σ(raw−ref)² / Σ(est−ref)²).
+    exclude: rows of ``t`` left out (e.g. near gimbal lock), counted as ``excluded``.
     """
+    est = np.asarray(est, float)
+    if exclude is not None:
+        est = np.where(np.asarray(exclude, bool), np.nan, est)
     r = interp_to(t, t_ref, unwrap_deg(ref) if wrap else ref)
-    e = np.asarray(est, float) - r
-    if wrap:
-        e = wrap_deg180(e)
+    e = angle_diff_deg(est, r) if wrap else est - r
     out = error_stats(e)
+    if exclude is not None:
+        out["excluded"] = int(np.count_nonzero(exclude))
     if max_lag_s > 0:
         lag, rms = best_lag(
-            t,
-            np.asarray(est, float) if not wrap else unwrap_deg(est),
-            t_ref,
-            unwrap_deg(ref) if wrap else ref,
-            max_lag_s,
-            wrap_deg=wrap,
+            t, unwrap_deg(est) if wrap else est, t_ref, unwrap_deg(ref) if wrap else ref, max_lag_s, wrap_deg=wrap
         )
         out["lag_s"] = lag
         out["rmse_lag_removed"] = rms
@@ -207,9 +218,9 @@ def evaluate_angle(
         raw = np.asarray(raw, float)
         if wrap:
             s = unwrap_deg(est)
-            rr = s + ((raw - s + 180.0) % 360.0 - 180.0)
+            rr = s + angle_diff_deg(raw, s)
         else:
-            s, rr = np.asarray(est, float), raw
+            s, rr = est, raw
         out["snr_db"] = snr_db(s, rr)
         er = rr - (r if not wrap else s - e)
         ok = np.isfinite(er) & np.isfinite(e)
@@ -225,7 +236,7 @@ def attitude_rmse(est, ref) -> dict:
     out = {}
     for name in ("roll", "pitch", "heading"):
         if name in est.channels and f"ref_{name}" in ref.channels:
-            st = evaluate_angle(est.time, est[name], ref.time, ref[f"ref_{name}"], wrap=name == "heading")
+            st = evaluate_angle(est.time, est[name], ref.time, ref[f"ref_{name}"])
             out[name] = round(st["rmse"], 4)
     return out
 

@@ -55,6 +55,7 @@ def test_evaluate_defaults_live_once():
         params = inspect.signature(func).parameters
         assert {k: params[k].default for k in EVALUATE_DEFAULTS} == EVALUATE_DEFAULTS
     cli_names = {"channel": "channel", "max_lag_s": "max_lag", "plot": "plot_path", "align_heading": "align_heading"}
+    cli_names |= {"ref_frame": "ref_frame", "ref_mounting": "ref_mounting", "start": "t_start", "end": "t_end"}
     params = inspect.signature(evaluate_route).parameters
     assert {k: params[cli_names[k]].default for k in EVALUATE_DEFAULTS} == EVALUATE_DEFAULTS
 

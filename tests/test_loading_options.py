@@ -154,6 +154,7 @@ def test_every_command_with_a_reference_file_takes_the_reference_loading_options
         "--ref-header-rows",
         "--ref-with",
         "--ref-with-offset",
+        "--ref-with-prefix",
         "--ref-start",
     }
     for words in (["evaluate"], ["report", "inclinometer"], ["report", "heading"], ["calibrate", "deviation"]):

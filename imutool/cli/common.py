@@ -13,6 +13,7 @@ import numpy as np
 
 from formats.errors import ImutoolError
 from imutool.loading import load_recording, require_channels  # noqa: F401  (require_channels: re-exported)
+from imutool.refframe import REF_FRAMES
 from imutool.routes import with_inputs
 
 T = TypeVar("T")
@@ -105,9 +106,19 @@ def _input_options(f: Callable, rate_flag: str) -> Callable:
             "with_files",
             multiple=True,
             type=click.Path(exists=True),
-            help="Another recording (a sensor on another clock, e.g. one file per sensor) merged onto INPUT's "
-            "times by linear interpolation, over the span both cover; which file gave which channels is "
-            "recorded in the metadata. Repeatable; channel names must differ.",
+            help="Another recording (a sensor on another clock, e.g. one file per sensor) merged with INPUT: "
+            "interpolated onto INPUT's times over the span both cover where the command needs one grid (filter, "
+            "heave, calibrate...), kept on its own clock as a stream where it does not (evaluate); which file gave "
+            "which channels, and how, is recorded in the metadata. Repeatable; channel names must differ (else "
+            "--with-prefix).",
+        ),
+        click.option(
+            "--with-prefix",
+            "with_prefixes",
+            multiple=True,
+            metavar="P",
+            help="A prefix for a --with file's channel names (two logs of one kind, e.g. 'imu2_' → imu2_gyro): one "
+            "per --with, in order ('' for none).",
         ),
         click.option(
             "--with-offset",
@@ -187,6 +198,13 @@ def reference_options(f: Callable) -> Callable:
             help="Seconds added to a --ref-with file's times: one per --ref-with, in order.",
         ),
         click.option(
+            "--ref-with-prefix",
+            "ref_with_prefixes",
+            multiple=True,
+            metavar="P",
+            help="A prefix for a --ref-with file's channel names: one per --ref-with, in order (as --with-prefix).",
+        ),
+        click.option(
             "--ref-start",
             type=ClockTime(),
             default=None,
@@ -198,6 +216,26 @@ def reference_options(f: Callable) -> Callable:
     for o in reversed(opts):
         f = o(f)
     return f
+
+
+def reference_frame_options(f: Callable) -> Callable:
+    """``--ref-frame`` and ``--ref-mounting``: the world and body axes of a command's reference orientation
+    (parameters ``ref_frame``, ``ref_mounting``; :func:`imutool.refframe.reference_to_ned`)."""
+    f = click.option(
+        "--ref-mounting",
+        default=None,
+        metavar="REMAP[;R,P,Y]",
+        help="The reference's body axes → the estimate's body axes (as --mounting), e.g. 'x,-y,-z' for a FLU "
+        "marker set against an FRD estimate.",
+    )(f)
+    return click.option(
+        "--ref-frame",
+        type=click.Choice(list(REF_FRAMES), case_sensitive=False),
+        default=None,
+        help="The reference's world: ned (as imutool), enu (x east, y north, z up) or zup (a motion-capture volume: "
+        "z up, x its own horizontal axis; heading then from that axis). Its orientation is converted into body "
+        "FRD → NED before comparing.",
+    )(f)
 
 
 class ClockTime(click.ParamType):

@@ -12,10 +12,12 @@ import click
 
 from formats.errors import ImutoolError
 from imutool.cli.common import (
+    ClockTime,
     default_of,
     emit_summary,
     input_options,
     note_input,
+    reference_frame_options,
     reference_options,
     route_of,
     safe_outputs,
@@ -40,6 +42,10 @@ def evaluate_route(
     max_lag: float = default_of(run_evaluate, "max_lag_s"),
     plot_path: str | None = default_of(run_evaluate, "plot"),
     align_heading: str | None = default_of(run_evaluate, "align_heading"),
+    ref_frame: str | None = default_of(run_evaluate, "ref_frame"),
+    ref_mounting: str | None = default_of(run_evaluate, "ref_mounting"),
+    t_start: float | str | None = default_of(run_evaluate, "start"),
+    t_end: float | str | None = default_of(run_evaluate, "end"),
     quiet: bool = True,
     on_input: Any = None,
     **load_options: Any,
@@ -53,6 +59,10 @@ def evaluate_route(
         max_lag_s=max_lag,
         plot=plot_path,
         align_heading=align_heading,
+        ref_frame=ref_frame,
+        ref_mounting=ref_mounting,
+        start=t_start,
+        end=t_end,
         strict=strict_requested(),
         on_input=on_input,
         **load_options,
@@ -90,6 +100,16 @@ def evaluate_route(
     help="Add a constant heading offset (deg) to the reference (a motion-capture frame's x axis is not north); "
     "'auto' estimates it as the circular mean of estimate − reference heading and reports it.",
 )
+@reference_frame_options
+@click.option(
+    "--start",
+    "t_start",
+    type=ClockTime(),
+    default=None,
+    help="Compare from this time: s on the estimate's clock, or a UTC time (2014-08-01T12:00:00Z) where it has a "
+    "date (as a report's --start); e.g. after the filter has settled.",
+)
+@click.option("--end", "t_end", type=ClockTime(), default=None, help="Compare up to this time (as --start).")
 @input_options
 @reference_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
@@ -102,6 +122,10 @@ def evaluate_cmd(
     max_lag: float,
     plot_path: str | None,
     align_heading: str | None,
+    ref_frame: str | None,
+    ref_mounting: str | None,
+    t_start: float | str | None,
+    t_end: float | str | None,
     as_json: bool,
     quiet: bool,
     **load_options: Any,
@@ -109,8 +133,21 @@ def evaluate_cmd(
     """Compare the estimate EST with a reference: per angle RMSE, max, p95, MAE, lag and SNR_dB (deg; heading
     errors wrapped), quaternion errors with the BROAD metrics (total, heading, inclination), heave, position."""
     summary = evaluate_route(
-        est_path, ref_path, channel, max_lag, plot_path, align_heading, on_input=note_input, **load_options
+        est_path,
+        ref_path,
+        channel,
+        max_lag,
+        plot_path,
+        align_heading,
+        ref_frame=ref_frame,
+        ref_mounting=ref_mounting,
+        t_start=t_start,
+        t_end=t_end,
+        on_input=note_input,
+        **load_options,
     ).summary
+    for w in summary.get("warnings") or []:
+        click.echo(f"warning: {w}", err=True)
     lines = None
     if "angles" in summary:
         lines = [f"{'angle':8s} {'RMSE':>7s} {'max':>7s} {'p95':>7s} {'MAE':>7s} {'lag s':>7s} {'SNR dB':>7s}"]
@@ -136,6 +173,9 @@ def evaluate_cmd(
             from imutool.loading import loading_text
 
             lines.append(f"reference loaded: {loading_text(ld)}")
+        fr = summary.get("reference_frame")
+        if fr and (fr.get("world") != "ned" or fr.get("mounting")):
+            lines.append(f"reference frame: {fr['how']}")
         lines.append(f"compared: {summary['span']['text']}")
     emit_summary(summary, as_json, quiet, lines)
 

@@ -12,7 +12,7 @@ from typing import Any
 import click
 
 from imutool import events as _events
-from imutool.cli.common import emit_summary, route_of, safe_outputs
+from imutool.cli.common import emit_summary, input_options, note_input, route_of, safe_outputs, strict_requested
 from imutool.routes import RouteResult
 
 D = _events.DEFAULTS
@@ -119,12 +119,14 @@ def events_group() -> None:
     metavar="REGEX",
     help="Ship/voyage from the path: named groups ship and voyage, e.g. '(?P<ship>[^/]+)/(?P<voyage>[^/]+)/'.",
 )
+@input_options
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @click.option("--quiet", "-q", is_flag=True)
 @safe_outputs("output", "events_csv", "hourly_csv")
 def detect_cmd(input_path: str, output: str | None, as_json: bool, quiet: bool, **options: Any) -> None:
-    """Heavy-roll events, hourly roll statistics (MSC.363(92)) and parametric-roll episodes of INPUT."""
-    r = detect_route(input_path, output, **options)
+    """Heavy-roll events, hourly roll statistics (MSC.363(92)) and parametric-roll episodes of INPUT (read with
+    the loading options every command takes: --columns, --time-column, --with ...)."""
+    r = detect_route(input_path, output, on_input=note_input, **options)
     res, s = r.data, r.summary
     para = [e for e in res["events"] if e["type"] == "parametric_roll"]
     lines = [
@@ -149,9 +151,11 @@ def detect_cmd(input_path: str, output: str | None, as_json: bool, quiet: bool, 
     emit_summary(r.summary, as_json, quiet, lines=lines)
 
 
-def detect_route(input_path: str, output: str | None, quiet: bool = True, **options: Any) -> RouteResult:
-    """Parsed options → :func:`imutool.events.run_events`."""
-    return _events.run_events(input_path, output, **options)
+def detect_route(
+    input_path: str, output: str | None, quiet: bool = True, on_input: Any = None, **options: Any
+) -> RouteResult:
+    """Parsed options → :func:`imutool.events.run_events` (the loading options go to its input)."""
+    return _events.run_events(input_path, output, strict=strict_requested(), on_input=on_input, **options)
 
 
 detect_cmd = route_of(detect_route, ("output", "events_csv", "hourly_csv"))(detect_cmd)

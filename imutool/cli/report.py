@@ -22,6 +22,7 @@ from imutool.cli.common import (
     input_options,
     note_input,
     output_options,
+    reference_frame_options,
     reference_options,
     route_of,
     safe_outputs,
@@ -168,7 +169,7 @@ def _common_options(f):
     ]
     for o in reversed(opts):
         f = o(f)
-    return reference_options(f)
+    return reference_frame_options(reference_options(f))
 
 
 @report_group.command(
@@ -329,6 +330,8 @@ def inclinometer_route(
     test_info_path: str | None,
     t_start: float | str | None,
     t_end: float | str | None,
+    ref_frame: str | None = None,
+    ref_mounting: str | None = None,
     quiet: bool = True,
     on_input: OnInput | None = None,
     **options: Any,
@@ -351,6 +354,8 @@ def inclinometer_route(
             test_info=test_info_path,
             t_start=t_start,
             t_end=t_end,
+            ref_frame=ref_frame,
+            ref_mounting=ref_mounting,
             strict=strict_requested(),
             on_input=on_input,
             stage=steps.stage,
@@ -415,6 +420,8 @@ def heading_route(
     test_info_path: str | None,
     t_start: float | str | None,
     t_end: float | str | None,
+    ref_frame: str | None = None,
+    ref_mounting: str | None = None,
     quiet: bool = True,
     on_input: OnInput | None = None,
     **options: Any,
@@ -437,6 +444,8 @@ def heading_route(
             test_info=test_info_path,
             t_start=t_start,
             t_end=t_end,
+            ref_frame=ref_frame,
+            ref_mounting=ref_mounting,
             strict=strict_requested(),
             on_input=on_input,
             stage=steps.stage,

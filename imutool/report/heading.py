@@ -22,7 +22,7 @@ import numpy as np
 
 from formats import Recording
 from formats.errors import ImutoolError
-from formats.frames import wrap_deg180
+from formats.frames import angle_diff_deg
 from formats.nmea import checksum
 from imutool.metrics import best_lag
 
@@ -249,14 +249,14 @@ def heading_evidence(
         raise ImutoolError("the DUT and reference recordings do not overlap in time (check the clocks)")
     # remove the mean (circular) error first so a constant offset does not bias the lag during one-way turns
     d0 = np.interp(t, dut.time[okd], _unwrap_deg(h_dut[okd]), left=np.nan, right=np.nan)
-    e0 = wrap_deg180(d0 - h_ref)
+    e0 = angle_diff_deg(d0, h_ref)
     e0 = e0[np.isfinite(e0)]
     mean_err = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(e0)))))) if e0.size else 0.0
     lag, lag_rms = best_lag(dut.time[okd], (h_dut[okd] - mean_err) % 360.0, t, h_ref, o.max_lag_s, wrap_deg=True)
     shift = lag if o.align == "xcorr" else 0.0
     u_dut = _unwrap_deg(h_dut[okd])
     d = np.interp(t, dut.time[okd] - shift, u_dut, left=np.nan, right=np.nan) % 360.0
-    e = wrap_deg180(d - h_ref)
+    e = angle_diff_deg(d, h_ref)
     both = np.isfinite(e)
     u_ref = _unwrap_deg(h_ref)
     dt = float(np.median(np.diff(t)))

@@ -24,7 +24,7 @@ import numpy as np
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.nmea import checksum
-from imutool.metrics import best_lag, interp_to
+from imutool.metrics import angle_diff_deg, best_lag, interp_to
 from imutool.roll import PORT, STBD, heel_of, pair_cycles, roll_cycles, roll_stats
 
 from .common import (
@@ -577,7 +577,7 @@ def inclinometer_evidence(
     shift = lag if o.align == "xcorr" else 0.0
     # DUT on the reference time base, the lag removed: x_al(t) = x(t + lag)
     d = interp_to(t, dut.time[okd] - shift, h_dut[okd])
-    e = d - h_ref
+    e = angle_diff_deg(d, h_ref)  # on the circle (formats.frames.angle_diff_deg: exact within ±180°)
     both = np.isfinite(e)
     if both.sum() >= 10 and float(np.max(np.abs(e[both]))) == 0.0 and float(np.ptp(h_ref[both])) > 0:
         raise ImutoolError(
@@ -674,7 +674,7 @@ def inclinometer_evidence(
             step_rows.append({"start_s": a, "end_s": b, "reference_deg": rv, "n": 0, "status": NOT_TESTED})
             continue
         rmean = float(np.mean(h_ref[mm])) if rv is None else rv
-        ee = d[mm] - (h_ref[mm] if rv is None else rv)
+        ee = angle_diff_deg(d[mm], h_ref[mm] if rv is None else rv)
         tl = float(tola(rmean))
         st, info_ = judge(ee, tl, o.criterion)
         errs_static.append(ee)
@@ -915,7 +915,7 @@ def inclinometer_evidence(
     else:
         dur, a, b, rv, m = max(holds, key=lambda h: h[0])
         rr = h_ref[m] if rv is None else np.full(m.sum(), rv)
-        ee = d[m] - rr
+        ee = angle_diff_deg(d[m], rr)
         tt = t[m] - t[m][0]
         coef, cov = np.polyfit(tt, ee, 1, cov=True) if m.sum() > 3 else (np.array([np.nan, np.nan]), None)
         slope = float(coef[0]) * 3600.0
@@ -981,14 +981,14 @@ def inclinometer_evidence(
         if not m.any():
             continue
         last = int(np.flatnonzero(m)[-1])
-        ee = dp[m] - rp[m]
+        ee = angle_diff_deg(dp[m], rp[m])
         e_peak.append(ee)
         peak_rows.append(
             {
                 "side": name,
                 "reference_deg": float(rp[last]),
                 "dut_deg": float(dp[last]),
-                "error_deg": float(dp[last] - rp[last]),
+                "error_deg": float(angle_diff_deg(dp[last], rp[last])),
                 "tolerance_deg": float(tola(rp[last])),
                 "max_abs_error_deg": float(np.max(np.abs(ee))),
             }

@@ -15,6 +15,7 @@ from typing import Any
 from formats import Recording
 from formats.errors import ImutoolError
 from imutool.loading import FLAGS, INPUT_ONLY_OPTIONS, MAPPING, how_loaded, split_reference_options
+from imutool.refframe import reference_to_ned
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, Stage, load_input, load_reference
 
 from .common import sha256_of
@@ -115,12 +116,15 @@ def _load_pair(
     strict: bool,
     on_input: OnInput | None,
     load_options: dict[str, Any],
+    frame: tuple[str | None, str | None] = (None, None),
 ) -> tuple[Recording, Recording, str, str]:
     """The DUT (mounting, calibration, the CSV time options and ``--with`` files applied) and the reference (none
     of those: its own clock and header, read with the reference's options ``ref_columns ... ref_with_files``,
     :data:`imutool.loading.REF_LOAD_OPTIONS`; the DUT's column mapping, ``--columns``/``--profile``, unless it is
     given its own, ``ref_columns``/``ref_profile``), windowed; with their names. How each was loaded is in its
-    ``meta["loading"]`` (:func:`imutool.loading.how_loaded`)."""
+    ``meta["loading"]`` (:func:`imutool.loading.how_loaded`). ``frame``: the reference's ``(ref_frame,
+    ref_mounting)``, its orientation converted into body FRD → NED (:func:`imutool.refframe.reference_to_ned`; what
+    was done in its ``meta["reference_frame"]`` and ``meta["loading"]["frame"]``)."""
     load_options, ref_given = split_reference_options(load_options)
     unknown = set(load_options) - set(LOAD_OPTIONS)
     if unknown:
@@ -148,6 +152,12 @@ def _load_pair(
             rec.meta["loading"] = how_loaded(rec, given, reference=loader is load_reference)
             recs.append(rec)
             names.append(name)
+    if frame[0] is not None or frame[1]:
+        ref, done = reference_to_ned(recs[1], frame[0], frame[1], prefixes=("", "ref_"))
+        ref.meta["reference_frame"] = done
+        if isinstance(ref.meta.get("loading"), dict):
+            ref.meta["loading"]["frame"] = done["how"]
+        recs[1] = ref
     d = evaluated_window(recs[0], t_start, t_end, names[0])
     r = evaluated_window(recs[1], t_start, t_end, names[1])
     return d, r, names[0], names[1]
@@ -189,6 +199,8 @@ def run_inclinometer_report(
     test_info: str | None = None,
     t_start: WindowTime = None,
     t_end: WindowTime = None,
+    ref_frame: str | None = None,
+    ref_mounting: str | None = None,
     strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
@@ -202,14 +214,19 @@ def run_inclinometer_report(
     date). Paths are loaded with ``load_options`` (:data:`imutool.loading.LOAD_OPTIONS`; the reference without
     mounting, calibration and the DUT's time, header and ``with`` options, but with its own ``ref_rate_hz``,
     ``ref_time_column``, ``ref_header_rows``, ``ref_with_files``, ``ref_with_offsets``; the DUT's column mapping
-    unless given its own ``ref_columns``/``ref_profile``). ``exit_status``: 0 PASS, 1 FAIL or INCOMPLETE."""
+    unless given its own ``ref_columns``/``ref_profile``). ``ref_frame``/``ref_mounting``: the reference's world
+    (``ned``, ``enu``, ``zup``) and body axes, its orientation converted into body FRD → NED at load
+    (:func:`imutool.refframe.reference_to_ned`: it needs a quaternion or roll, pitch and heading). ``exit_status``:
+    0 PASS, 1 FAIL or INCOMPLETE."""
     pdf, jpath = evidence_paths(output, json_path)
     ident = identification(device, config)
     info = load_test_info(test_info)
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
-    d, r, dut_name, ref_name = _load_pair(dut, reference, t_start, t_end, inputs, strict, on_input, load_options)
+    d, r, dut_name, ref_name = _load_pair(
+        dut, reference, t_start, t_end, inputs, strict, on_input, load_options, (ref_frame, ref_mounting)
+    )
     if stage is not None:
         stage("evaluating")
     ev, plots = inclinometer_evidence(
@@ -244,6 +261,8 @@ def run_heading_report(
     test_info: str | None = None,
     t_start: WindowTime = None,
     t_end: WindowTime = None,
+    ref_frame: str | None = None,
+    ref_mounting: str | None = None,
     strict: bool = False,
     on_input: OnInput | None = None,
     stage: Stage | None = None,
@@ -259,7 +278,9 @@ def run_heading_report(
     inputs: list[dict[str, Any]] = []
     if stage is not None:
         stage("reading")
-    d, r, dut_name, ref_name = _load_pair(dut, reference, t_start, t_end, inputs, strict, on_input, load_options)
+    d, r, dut_name, ref_name = _load_pair(
+        dut, reference, t_start, t_end, inputs, strict, on_input, load_options, (ref_frame, ref_mounting)
+    )
     if stage is not None:
         stage("evaluating")
     ev, plots = heading_evidence(
