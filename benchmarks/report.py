@@ -41,7 +41,7 @@ def main() -> None:
         for noise in (0.0, 0.05, 0.1):
             t, heel, tp = chirp(fs=fs)
             x = heel + np.random.default_rng(0).normal(0, noise, heel.size)
-            c = roll_stats(t, x).cycles
+            c = roll_stats(t, x, centre="zero").cycles  # amplitudes from level (the default: from the mean heel)
             pe, ae = [], []
             for side, amp in ((1, 12.0), (-1, 7.0)):
                 cs = c.of_side(side)
@@ -58,8 +58,10 @@ def main() -> None:
     )
     print("|---|---|---|---|---|")
     from imutool.report.common import tol_period
-    from imutool.roll import pair_cycles, roll_cycles
+    from imutool.roll import MOTION_TABLE, pair_cycles, roll_cycles
     from imutool.sim.programmes import sea_pair
+
+    rep = {"hysteresis_deg": 0.5, **MOTION_TABLE}  # the inclinometer report's settings
 
     for std in (0.5, 1.0, 6.0):
         n_max = n_j = 0
@@ -67,8 +69,8 @@ def main() -> None:
         e_all: list[float] = []
         for seed in (1, 2, 3, 4):
             dut, ref = sea_pair(std_deg=std, seed=seed)
-            cr = roll_cycles(ref.time, ref["roll"], crest_band_deg=0.05)
-            cd = roll_cycles(dut.time, dut["roll"], crest_band_deg=0.05)
+            cr = roll_cycles(ref.time, ref["roll"], crest_band_deg=0.05, **rep)
+            cd = roll_cycles(dut.time, dut["roll"], crest_band_deg=0.05, **rep)
             p = pair_cycles(cr, cd)
             n_max += len(cr)
             for k in range(2, len(cr)):

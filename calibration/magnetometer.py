@@ -612,8 +612,58 @@ def crosswalk(b: np.ndarray, a: np.ndarray, form: str) -> str:
     raise ImutoolError(f"unknown form {form!r} (matlab, fusion, magneto, json)")
 
 
+NORMALISED_TOL = 0.05  # a fitted |m| within 5 % of 1 (in whatever unit) is a normalised magnetometer
+CONSTANT_FIELD_REL_STD = 0.005  # raw |m| constant to 0.5 %: calibrated or normalised before it was logged
+
+
+def absent_information(fit: MagFit, field_given: bool = False) -> list[str]:
+    """What a fit cannot say about this magnetometer, one line each: the field strength of a normalised
+    magnetometer (|m| ≈ 1, unit-less: b and the field are in that unit, not µT), and the sensor's own iron when
+    |m| is already constant (the data were calibrated or normalised before they were logged)."""
+    out = []
+    if not field_given and abs(fit.field_ut - 1.0) <= NORMALISED_TOL:
+        out.append(
+            f"field strength unknown: the magnetometer is normalised (|m| = {fit.field_ut:.3g}), so b and the field "
+            "are in its normalised unit, not µT (give --field-ut to scale A to a known field)"
+        )
+    if fit.raw_rel_std < CONSTANT_FIELD_REL_STD:
+        out.append(
+            f"hard/soft iron unknown: |m| is already constant (relative std {100 * fit.raw_rel_std:.2g}% before "
+            "the fit): the data were calibrated or normalised before they were logged, so b ≈ 0 and A ≈ I say "
+            "nothing of the sensor's own iron"
+        )
+    return out
+
+
 def plot_before_after(m: np.ndarray, fit: MagFit, path: str, title: str = "Magnetometer calibration") -> None:
-    """Before/after plot: three projections of raw and corrected samples plus |m| histograms."""
+    """Before/after plot (:func:`before_after_figure`) written atomically to ``path`` (.png, .pdf, .svg)."""
+    import matplotlib.pyplot as plt
+
+    fig = before_after_figure(m, fit, title)
+    ext = str(path).rsplit(".", 1)[-1].lower()
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=ext if ext in ("png", "pdf", "svg") else "png", dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def _hist_bins(*values: np.ndarray, n: int = 60) -> np.ndarray:
+    """Common histogram bin edges of |m| values; a spread too small for ``n`` bins (a normalised or already
+    calibrated magnetometer: |m| constant) gets ±1 % around the mean."""
+    v = np.concatenate([np.asarray(x, float).ravel() for x in values])
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return np.linspace(0.0, 1.0, n + 1)
+    lo, hi = float(v.min()), float(v.max())
+    mid = 0.5 * (lo + hi)
+    half = max(0.5 * (hi - lo), 0.01 * abs(mid), 1e-9)
+    return np.linspace(mid - half, mid + half, n + 1)
+
+
+def before_after_figure(m: np.ndarray, fit: MagFit, title: str = "Magnetometer calibration") -> Any:
+    """Before/after figure: three projections of raw and corrected samples plus |m| histograms (the caller
+    saves and closes it)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -638,8 +688,9 @@ def plot_before_after(m: np.ndarray, fit: MagFit, path: str, title: str = "Magne
     axs[0, 0].legend(fontsize=7, markerscale=5)
     ax = axs[1, 1]
     nr, nc = np.linalg.norm(raw, axis=1), np.linalg.norm(cal, axis=1)
-    ax.hist(nr, bins=60, color="C3", alpha=0.6, label=f"raw: std/mean {100 * np.std(nr) / np.mean(nr):.1f}%")
-    ax.hist(nc, bins=60, color="C0", alpha=0.6, label=f"calibrated: {100 * np.std(nc) / np.mean(nc):.2f}%")
+    bins = _hist_bins(nr, nc)
+    ax.hist(nr, bins=bins, color="C3", alpha=0.6, label=f"raw: std/mean {100 * np.std(nr) / np.mean(nr):.1f}%")
+    ax.hist(nc, bins=bins, color="C0", alpha=0.6, label=f"calibrated: {100 * np.std(nc) / np.mean(nc):.2f}%")
     ax.set_xlabel("|m| (µT)")
     ax.legend(fontsize=8)
     fig.suptitle(
@@ -648,7 +699,4 @@ def plot_before_after(m: np.ndarray, fit: MagFit, path: str, title: str = "Magne
         fontsize=10,
     )
     fig.tight_layout()
-    ext = str(path).rsplit(".", 1)[-1].lower()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=ext if ext in ("png", "pdf", "svg") else "png", dpi=100)
-    plt.close(fig)
+    return fig

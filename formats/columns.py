@@ -142,9 +142,30 @@ def _infer_one(header: str) -> ColumnMap:
     return ColumnMap(header, target, unit)
 
 
+_QUAT_WORDS = ("orientation", "quaternion", "quat", "attitude")
+_REF_WORDS = ("vicon", "ref", "reference", "truth", "groundtruth", "mocap", "optitrack", "qualisys")
+
+
+def _quaternions(cols: list[ColumnMap]) -> None:
+    """Four columns ``<P> w, x, y, z`` whose name P says orientation/quaternion become ``qw..qz`` (body → world as
+    the file gives it), or ``ref_qw..ref_qz`` when P names a reference system (Vicon, mocap, truth...)."""
+    groups: dict[str, dict[str, ColumnMap]] = {}
+    for c in cols:
+        tokens = clean_name(c.source).split("_")
+        if len(tokens) >= 2 and tokens[-1] in ("w", "x", "y", "z") and any(w in tokens[:-1] for w in _QUAT_WORDS):
+            groups.setdefault("_".join(tokens[:-1]), {})[tokens[-1]] = c
+    for prefix, by_axis in groups.items():
+        if len(by_axis) != 4 or any(c.target.startswith(("gyro", "accel", "mag")) for c in by_axis.values()):
+            continue
+        ref = any(w in prefix.split("_") for w in _REF_WORDS)
+        for a, c in by_axis.items():
+            c.target, c.unit, c.unit_assumed = ("ref_q" if ref else "q") + a, None, False
+
+
 def infer_mapping(headers: list[str]) -> Mapping:
     """Infer the mapping of a foreign header row; raises ImutoolError where two columns claim one target."""
     cols = [_infer_one(h) for h in headers]
+    _quaternions(cols)
     seen: dict[str, str] = {}
     for c in cols:
         if c.target in seen:

@@ -110,6 +110,7 @@ def read_header(
     row from 0), recorded in the metadata.
     """
     prof = load_profile(profile) if profile else {}
+    rows_given = header_rows is not None or prof.get("header_rows") is not None
     header_rows = _header_rows(header_rows if header_rows is not None else prof.get("header_rows", 1), profile)
     if rate_hz is None and prof.get("rate_hz") is not None:
         rate_hz = prof["rate_hz"]
@@ -158,6 +159,8 @@ def read_header(
                     meta[k.strip()] = _parse_meta_value(v)
                 continue
             heading.append((line, lineno))
+            if len(heading) == 1 and header_rows == 1 and not rows_given and _has_blank_cells(line):
+                header_rows = 2  # a row of group names with blank cells: the axis row follows (module doc)
             if len(heading) < header_rows:
                 continue
             for nxt in f:
@@ -185,6 +188,11 @@ def read_header(
     if sep == ";" and b"," in first_data and b"." not in first_data:
         decimal = ","
     names = _split_header(header_line, sep)
+    grouped = False
+    if len(heading) == 2 and any(not n for n in names):
+        combined = _group_names(names, _split_header(heading[1][0], sep))
+        if combined is not None:
+            names, grouped = combined, True
     if any(not n for n in names):
         raise ImutoolError("the header row has an empty column name", path=path, line=lineno)
     if len(set(names)) < len(names):
@@ -197,7 +205,7 @@ def read_header(
         )
     if _looks_numeric(names):
         raise ImutoolError("the first row is numbers, not column names; add a header row", path=path, line=lineno)
-    unit_row = _unit_row(heading[1:], names, sep, path)
+    unit_row = _unit_row(heading[2 if grouped else 1 :], names, sep, path)
     lineno = heading[-1][1]
     mapping = None
     if not is_imutool or columns or profile or time_column or unit_row:
@@ -218,6 +226,8 @@ def read_header(
     hdr.rate_hz = rate_hz
     if header_rows > 1:
         hdr.meta["source_header_rows"] = header_rows
+    if grouped:
+        hdr.meta["source_header"] = "group names (blanks carried forward) + axis row"
     targets = [c.target for c in mapping.columns] if mapping is not None else names
     if rate_hz is not None and "time" in targets:
         src = mapping.columns[targets.index("time")].source if mapping is not None else "time"
@@ -226,6 +236,37 @@ def read_header(
             path=path,
         )
     return hdr
+
+
+def _has_blank_cells(line: str) -> bool:
+    """A header row with an empty cell between or after names (``Time;Orientation;;;;Accelerometer;;;``)."""
+    sep = "," if "," in line else (";" if ";" in line else ("\t" if "\t" in line else ","))
+    cells = _split_header(line, sep)
+    return len(cells) > 1 and bool(cells[0]) and any(not c for c in cells)
+
+
+def _group_names(groups: list[str], axes: list[str]) -> list[str] | None:
+    """Column names of a two-row header: a row of group names whose blank cells continue the group to their
+    left (``Time (s);Vicon Orientation;;;;IMU Acceleration;;;...``), then a row of axis labels
+    (``;W;X;Y;Z;X;Y;Z;...``): ``Time (s)``, ``Vicon Orientation W``, ..., ``IMU Acceleration X``. Trailing cells
+    empty in both rows (a trailing separator) are dropped. None when the second row is not such a row (numbers,
+    or a blank group name over a blank axis)."""
+    n = max(len(groups), len(axes))
+    groups = groups + [""] * (n - len(groups))
+    axes = axes + [""] * (n - len(axes))
+    while n and not groups[n - 1] and not axes[n - 1]:
+        n -= 1
+    if n < 2 or _looks_numeric([a for a in axes[:n] if a] or ["x"]):
+        return None
+    out: list[str] = []
+    group = ""
+    for g, a in zip(groups[:n], axes[:n], strict=True):
+        if g:
+            group = g
+        if not group and not a:
+            return None
+        out.append(f"{group} {a}".strip() if a else group)
+    return out
 
 
 def _header_rows(n: Any, profile: str | None) -> int:

@@ -76,6 +76,7 @@ KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("imutool.ins", "the INS kernels", 5.0),
     ("imutool.gyrofree", "the gyro-free kernel", 3.0),
     ("imutool.roll", "the roll statistics kernel", 2.0),
+    ("imutool.roll_period", "the roll statistics kernel", 2.0),
     ("imutool.capture", "the bridge-frame decoder", 3.0),
     ("calibration.magnetometer", "the magnetometer calibration kernel", 2.0),
     ("calibration.allan", "the Allan deviation kernel", 2.0),

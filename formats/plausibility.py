@@ -734,6 +734,24 @@ def bridge_absurd(
 
 
 # -- what validation did -------------------------------------------------------------------------------------
+GNSS_TOPIC_TYPES = (
+    "sensor_msgs/msg/NavSatFix",
+    "geometry_msgs/msg/TwistStamped",
+    "geometry_msgs/msg/TwistWithCovarianceStamped",
+)
+
+
+def topics_not_read_warning(topics: list[dict[str, Any]]) -> str:
+    """The warning naming every bag topic that was not read (``meta['bag']['topics_not_read']``), with its type,
+    message count and how to read it when imutool can."""
+
+    def one(t: dict[str, Any]) -> str:
+        how = "name it in --topic to read it" if t.get("type") in GNSS_TOPIC_TYPES else "a type imutool does not read"
+        return f"{t.get('topic')} ({t.get('type')}, {t.get('messages')} msgs; {how})"
+
+    return f"NOT READ: {len(topics)} bag topic(s): " + "; ".join(one(t) for t in topics)
+
+
 def dropped_rows(
     n_in: int,
     n_out: int,
@@ -791,6 +809,8 @@ def dropped_rows(
             f"{why}{fix}"
         )
     if isinstance(bag, dict):
+        if bag.get("topics_not_read"):
+            warns.append(topics_not_read_warning(bag["topics_not_read"]))
         if bag.get("partial_read"):
             warns.append(f"DROPPED: {bag['partial_read']}")
         lost = [n for n in bag.get("notes") or [] if "skipped" in str(n) or "could not" in str(n)]

@@ -209,11 +209,24 @@ def calibrate_mag(
         fit.quality(),
         with_files=list(with_files) or None,
     )
-    update_calibration(output, "mag", section, append)
-    if plot:
-        from calibration.magnetometer import plot_before_after
+    if plot:  # the plot first: a plot that fails leaves no calibration file behind (nor a plot)
+        import matplotlib.pyplot as plt
 
-        plot_before_after(m, fit, plot, title=f"{os.path.basename(input_path)} ({method})")
+        from calibration.magnetometer import before_after_figure
+
+        fig = before_after_figure(m, fit, title=f"{os.path.basename(input_path)} ({method})")
+        ext = str(plot).rsplit(".", 1)[-1].lower()
+        try:
+            with atomic_path(plot) as staged:
+                fig.savefig(staged, format=ext if ext in ("png", "pdf", "svg") else "png", dpi=100)
+                update_calibration(output, "mag", section, append)
+        finally:
+            plt.close(fig)
+    else:
+        update_calibration(output, "mag", section, append)
+    from calibration.magnetometer import absent_information
+
+    absent = absent_information(fit, field_given=field_ut is not None) if method == "sphere" else []
     summary = {
         "output": os.fspath(output),
         "method": method,
@@ -230,6 +243,7 @@ def calibrate_mag(
         "calibrated_field_rel_std_pct": round(100 * fit.cal_rel_std, 3),
         "samples": fit.n,
         "warnings": fit.warnings,
+        "information_absent": absent,
     }
     if method == "swing":
         summary["unobservable"] = fit.extra["section"]["unobservable"]

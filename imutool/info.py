@@ -118,6 +118,9 @@ def summarize(
         _per_stream(rec, summary)
     if rec_raw.meta.get("sentences"):  # an NMEA log: every sentence named and counted, read or not
         summary["nmea_sentences"] = sentence_summary(rec_raw.meta)
+    bag = rec_raw.meta.get("bag")
+    if isinstance(bag, dict) and bag.get("topics_not_read"):  # a bag: every topic not read, named and counted
+        summary["bag_topics_not_read"] = list(bag["topics_not_read"])
     _own_timing(rec, rec_raw.meta, summary)
     cm = rec_raw.meta.get("column_mapping")
     if cm:

@@ -108,6 +108,37 @@ class Headings:
     notes: list[str] = field(default_factory=list)
 
 
+def heading_reference(rec: Recording, heading_ref: str = "auto") -> tuple[str, str]:
+    """What the recording's heading is (compass, magnetic or true) and why: (reference, reason).
+
+    ``heading_ref`` other than ``'auto'`` is the caller's word. Else, in order: the channel's name
+    (``heading_true``, ``heading_mag``, ``heading_sensor``); ``meta['heading_reference']``; an NMEA log (its
+    ``heading`` is true: HDT, THS, PASHR, or HDG with deviation and variation; ``meta['signs']`` says so, also after
+    a CSV round trip); a filter's output (``meta['heading_source']``: an external true heading, or the
+    magnetometer); otherwise magnetic, said to be assumed."""
+    if heading_ref != "auto":
+        if heading_ref not in HEADING_REFS:
+            raise ImutoolError(f"heading reference {heading_ref!r}: use auto or one of {', '.join(HEADING_REFS)}")
+        return heading_ref, "as given (--heading-ref)"
+    named = {"heading_true": "true", "heading_mag": "magnetic", "heading_sensor": "compass"}
+    if "heading" not in rec.channels:
+        for ch, ref in named.items():
+            if ch in rec.channels:
+                return ref, f"the channel is {ch}"
+    meta = rec.meta
+    said = str(meta.get("heading_reference", "")).strip().lower()
+    if said in HEADING_REFS:
+        return said, f"the recording says so (heading_reference: {said})"
+    if meta.get("format") == "nmea0183" or "heading deg true" in str(meta.get("signs", "")):
+        return "true", "an NMEA log: its heading is true (HDT/THS/PASHR, or HDG with deviation and variation)"
+    src = str(meta.get("heading_source", ""))
+    if src.startswith("heading_true"):
+        return "true", f"the filter took its heading from a true heading ({src})"
+    if src.startswith("magnetometer"):
+        return "magnetic", "the filter's heading is from the magnetometer"
+    return "magnetic", "assumed: the recording does not say what its heading is (--heading-ref to say)"
+
+
 def resolve_headings(
     h: np.ndarray,
     heading_ref: str,
@@ -302,7 +333,7 @@ def nmea_lines(
     sentences: list[str] | tuple[str, ...],
     rate_hz: float | None = None,
     *,
-    heading_ref: str = "magnetic",
+    heading_ref: str = "auto",
     heading_source: str = "auto",
     deviation_deg: float | None = None,
     card: Any = None,
@@ -361,7 +392,9 @@ def nmea_lines(
     heel, _ = _ch(rec, ("heel", "roll"), "deg")
     pitch, _ = _ch(rec, ("pitch",), "deg")
     hdg, hname = _ch(rec, ("heading", "heading_true", "heading_mag", "heading_sensor"), "deg")
-    ref = {"heading_true": "true", "heading_mag": "magnetic", "heading_sensor": "compass"}.get(hname or "", heading_ref)
+    ref = {"heading_true": "true", "heading_mag": "magnetic", "heading_sensor": "compass"}.get(hname or "") or (
+        heading_reference(rec, heading_ref)[0]
+    )
     need_heading = [s for s in sents if s in ("HDG", "HDT", "THS")]
     if ("HRM" in sents or "XDR" in sents) and heel is None:
         raise ImutoolError(f"HRM/XDR need a 'roll' or 'heel' channel (deg); has {', '.join(rec.channels)}")
@@ -755,6 +788,8 @@ def write_log(
     sents = [s.strip().upper() for s in sentences if s.strip()]
     if len(rec) == 0:
         raise ImutoolError("the recording has no rows", path=path)
+    href, why = heading_reference(rec, kw.get("heading_ref", LINE_OPTIONS["heading_ref"]))
+    kw["heading_ref"] = href
     plan = plan_log(rec, sents, rate_hz=rate_hz, baud=baud, source=source, **kw)
     if plan is None:
         raise ImutoolError(
@@ -768,6 +803,7 @@ def write_log(
         **_written(plan, counts),
         "baud": baud,
         "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
+        "heading_reference": {"reference": href, "why": why},
         "utc": plan.utc,
     }
 
@@ -820,6 +856,8 @@ def run_nmea(
     sents = [x.strip().upper() for x in names if x.strip()]
     if len(rec) == 0:
         raise ImutoolError("the recording has no rows", path=name)
+    href, why = heading_reference(rec, kw.get("heading_ref", LINE_OPTIONS["heading_ref"]))
+    kw["heading_ref"] = href
     plan = plan_log(rec, sents, rate_hz=rate_hz, baud=baud, source=name, card_from=card_from, **kw)
     if plan is None:
         raise ImutoolError("no sentence written: the input lacks the channels for " + listed, path=name)
@@ -849,12 +887,26 @@ def run_nmea(
         "baud": baud,
         **_written(plan, counts),
         "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
+        "heading_reference": {"reference": href, "why": why},
         "utc": plan.utc,
         **({"clocks": plan.clocks} if plan.clocks else {}),
         "deviation": card_from or deviation,
         "generated_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }
+    if "HRM" in counts:
+        summary.update(hrm_period_check(rec, kw.get("roll_kw")))
     return RouteResult(summary, inputs, data={"plan": plan})
+
+
+def hrm_period_check(rec: Recording, roll_kw: dict | None) -> dict[str, Any]:
+    """The three roll period estimates of the heel HRM's periods come from (:func:`imutool.roll.roll_stats` with
+    the same settings) and, when they disagree, the warning: ``{"hrm_period_estimates": ..., "warnings": [...]}``."""
+    from imutool.roll import roll_stats
+
+    heel, _ = _ch(rec, ("heel", "roll"), "deg")
+    kw = {k: v for k, v in (roll_kw or {}).items() if k not in ("resets_s", "utc_start")}
+    rs = roll_stats(rec.time, heel, **kw)
+    return {"hrm_period_estimates": rs.periods, "warnings": [f"HRM roll period: {w}" for w in rs.warnings]}
 
 
 def sentence_kind(s: str) -> str:

@@ -8,17 +8,25 @@ last reset.
 
 Method (documented in docs/report.md):
 
-1. A Schmitt trigger with hysteresis ``h`` (deg) around a centre (0 = level ship, or a running mean for a ship
-   with a list) splits the heel into alternating *excursions*: a starboard excursion starts when heel − centre
-   rises above +h and ends when it falls below −h; a port excursion the other way round. Oscillations smaller
-   than ±h (noise, ripples on a crest) never switch the state, so a crest with two humps is one excursion.
-2. The extremum of each excursion is the largest |heel| sample in it, refined by a least-squares parabola
-   over ±``refine_frac`` × (excursion duration) around that sample, limited to the crest (contiguous samples
-   within 30 % of the excursion depth of the extremum); with fewer than 5 such samples (a low rate), the
+1. A Schmitt trigger with hysteresis ``h`` (deg) splits the **detection series** (heel − centre, smoothed over
+   1/8 of the spectral peak period; :mod:`imutool.roll_period`) into alternating *excursions*: a starboard
+   excursion starts when it rises above +h and ends when it falls below −h; a port excursion the other way round.
+   The centre is the mean heel (a centred running mean over ``centre_window_s``, default 120 s) or 0 (a level
+   ship, e.g. a motion table: ``centre='zero'``); h is scaled to the roll (0.1 × its running RMS, at least
+   0.05°) unless a fixed ``hysteresis_deg`` is given. Oscillations smaller than ±h (noise, ripples on a crest)
+   never switch the state, so a crest with two humps is one excursion, while every real roll cycle, small or
+   biased by a list, is counted (a fixed ±0.5° about 0° counted two or three cycles of small or listed roll as
+   one: periods ~2× too long, issue 48).
+2. The extremum of each excursion is its largest |heel − centre| raw sample, refined by a least-squares
+   parabola over ±``refine_frac`` × (excursion duration) around that sample, limited to the crest (contiguous
+   samples within 30 % of the excursion depth of the extremum); with fewer than 5 such samples (a low rate), the
    parabola through the top 3 samples (sub-sample time, noise-averaged value).
-3. Roll amplitude to a side = |refined extremum| of that excursion (port amplitude reported positive, as HRM).
-   Roll period of a side = time between the refined extrema of two consecutive excursions on that side
-   (port and starboard are tracked separately); periods longer than ``max_period_s`` are discarded.
+3. Roll amplitude to a side = |refined extremum − centre| of that excursion (port amplitude reported positive, as
+   HRM): **measured from the mean heel** by default (a ship listed 8° rolling ±5° has 5° to each side, not 13° and
+   "3° to port"), from level with ``centre='zero'``; the signed heel of the extremum from level is kept as
+   ``peak_deg``. Roll period of a side = time between the refined extrema of two consecutive excursions on that
+   side (port and starboard are tracked separately); periods longer than ``max_period_s`` are discarded. The mean
+   period is cross-checked against the zero-up-crossing and spectral peak periods (:mod:`imutool.roll_period`).
 4. The first excursion is dropped when the recording starts inside it (its extremum may precede the start);
    the last one, still open at the end, is not reported.
 5. Per-sample outputs are *causal*, as a device would display them: a cycle's values appear at the sample
@@ -34,90 +42,49 @@ from datetime import datetime, timedelta, timezone
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 import formats
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import input_notes, one_clock
+from imutool.loading import input_notes, merged_warnings, one_clock
+from imutool.roll_period import (  # noqa: F401  (running_mean, excursions: re-exported)
+    Detection,
+    detection,
+    excursions,
+    period_estimates,
+    running_mean,
+    typical,
+)
 from imutool.routes import OnInput, RouteResult, load_input
 
 STBD = 1
 PORT = -1
 
 ROLL_DEFAULTS: dict[str, Any] = {
-    "hysteresis_deg": 0.5,
-    "centre": "zero",
+    "hysteresis_deg": None,
+    "centre": "running",
     "centre_window_s": 120.0,
     "refine_frac": 0.2,
     "max_period_s": 60.0,
+    "hysteresis_frac": 0.1,
+    "hysteresis_min_deg": 0.05,
+    "smooth_frac": 0.125,
+    "disagree_frac": 0.15,
 }
-"""The detector's settings (deg, s, fraction of an excursion): the defaults of :func:`roll_stats` and :func:`run_roll`
-(and of the ``imutool roll`` / ``imutool nmea`` options)."""
-
-
-@njit(cache=True)
-def _excursions(v: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Schmitt-trigger excursions of v (heel − centre, deg) with hysteresis h (deg).
-
-    Returns side (+1 stbd / −1 port), start index, end index (first sample past the opposite threshold),
-    index of the extreme sample, and a 0/1 flag "genuine start" (entered from inside the ±h band).
-    """
-    n = v.shape[0]
-    side = np.zeros(n, np.int64)
-    i0 = np.zeros(n, np.int64)
-    i1 = np.zeros(n, np.int64)
-    ie = np.zeros(n, np.int64)
-    genuine = np.zeros(n, np.int64)
-    k = 0
-    s = 0
-    start = 0
-    ext = 0
-    best = 0.0
-    prev_in_band = False
-    gen = 0
-    for i in range(n):
-        x = v[i]
-        if np.isnan(x):
-            continue
-        if s == 0:
-            if x > h:
-                s = 1
-            elif x < -h:
-                s = -1
-            else:
-                prev_in_band = True
-                continue
-            start = i
-            ext = i
-            best = x * s
-            gen = 1 if prev_in_band else 0
-            continue
-        if x * s > best:
-            best = x * s
-            ext = i
-        if x * s < -h:
-            side[k] = s
-            i0[k] = start
-            i1[k] = i
-            ie[k] = ext
-            genuine[k] = gen
-            k += 1
-            s = -s
-            start = i
-            ext = i
-            best = x * s
-            gen = 1
-    return side[:k], i0[:k], i1[:k], ie[:k], genuine[:k]
+"""The detector's settings (deg, s, fractions): the defaults of :func:`roll_cycles`, :func:`roll_stats` and
+:func:`run_roll` (and of the ``imutool roll`` / ``imutool nmea`` options). ``hysteresis_deg`` None = scaled to the
+roll (``hysteresis_frac`` × running RMS, at least ``hysteresis_min_deg``); ``centre`` 'running' = the mean heel over
+``centre_window_s``; ``smooth_frac`` × the spectral peak period = the detection smoothing; ``disagree_frac``: the
+spread of the three period estimates that raises a warning (:mod:`imutool.roll_period`)."""
 
 
 @dataclass
 class RollCycles:
     """One row per completed excursion (a half roll cycle), in time order.
 
-    side: +1 starboard, −1 port. t_peak (s), peak_deg (signed heel at the extremum, deg), amplitude_deg
-    (|peak|, deg), period_s (time since the previous extremum on the same side, NaN if none), t_start/t_end
+    side: +1 starboard, −1 port. t_peak (s), peak_deg (signed heel at the extremum relative to level, deg),
+    amplitude_deg (|peak − centre|, deg: measured from the mean heel with ``centre='running'``, from level with
+    ``centre='zero'``), period_s (time since the previous extremum on the same side, NaN if none), t_start/t_end
     (s, threshold crossings bounding the excursion), i_end (sample index where the cycle becomes known).
     """
 
@@ -176,23 +143,33 @@ class RollStats:
     cycles: RollCycles
     settings: dict[str, Any] = field(default_factory=dict)
     resets_utc: list[str | None] = field(default_factory=list)
+    periods: dict[str, Any] = field(default_factory=dict)  # the three period estimates (imutool.roll_period)
+    warnings: list[str] = field(default_factory=list)  # their disagreement
 
     def summary(self) -> dict[str, Any]:
-        """Mean/max of periods and amplitudes per side, counts, final peak hold."""
+        """Mean/max of periods and amplitudes per side (amplitudes from the centre: the mean heel by default),
+        the mean heel, max heel to each side (from level), the period estimates side by side, counts, final peak
+        hold, warnings."""
         out: dict[str, Any] = {"samples": int(self.time.size), "cycles": len(self.cycles)}
+        out["period_mean_s"] = self.periods.get("peak_to_peak_s")  # the method's mean period (both sides)
+        out["period_estimates"] = dict(self.periods)
+        out["mean_heel_deg"] = self.settings.get("mean_heel_deg")
+        out["amplitude_from"] = "mean heel" if self.settings.get("centre") == "running" else "level (0°)"
         for name, s in (("port", PORT), ("starboard", STBD)):
             c = self.cycles.of_side(s)
-            per = c.period_s[np.isfinite(c.period_s)]
+            per = typical(c.period_s, self.settings.get("max_period_s", D["max_period_s"]))
             out[name] = {
                 "excursions": len(c),
-                "periods": int(per.size),
-                "period_mean_s": float(per.mean()) if per.size else None,
+                "periods": int(np.isfinite(c.period_s).sum()),
+                "period_mean_s": float(per.mean()) if per.size else None,  # over the typical periods (≤ 3 × median)
                 "amplitude_mean_deg": float(c.amplitude_deg.mean()) if len(c) else None,
                 "amplitude_max_deg": float(c.amplitude_deg.max()) if len(c) else None,
+                "heel_max_deg": float(np.max(s * c.peak_deg)) if len(c) else None,  # from level, + to this side
             }
         out["peak_hold_port_deg"] = _last_finite(self.peak_port)
         out["peak_hold_stbd_deg"] = _last_finite(self.peak_stbd)
         out["last_reset_utc"] = self.resets_utc[-1] if self.resets_utc else None
+        out["warnings"] = list(self.warnings)
         return out
 
     def as_recording(self, meta: dict[str, Any] | None = None) -> Recording:
@@ -226,7 +203,10 @@ class RollStats:
             **self.settings,
             "resets_utc": self.resets_utc,
             "convention": "heel + starboard down; amp_port/peak_port positive (HRM)",
+            "period_estimates": self.periods,
         }
+        if self.warnings:
+            rec.meta["warnings"] = merged_warnings(rec.meta, list(self.warnings))
         return rec
 
 
@@ -274,18 +254,6 @@ def _refine(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, 
     return float(t[ie]), float(x[ie])
 
 
-def running_mean(t: np.ndarray, x: np.ndarray, window_s: float) -> np.ndarray:
-    """Centred moving average of x over window_s seconds (NaN ignored), for the centre of a listing ship."""
-    ok = np.isfinite(x)
-    cs = np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))])
-    cn = np.concatenate([[0], np.cumsum(ok)])
-    lo = np.searchsorted(t, t - window_s / 2, side="left")
-    hi = np.searchsorted(t, t + window_s / 2, side="right")
-    n = cn[hi] - cn[lo]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, (cs[hi] - cs[lo]) / np.maximum(n, 1), np.nan)
-
-
 def _crest_width(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, band: float) -> float:
     """Span (s) of the samples of the excursion [i0, i1) that come within ``band`` of its extremum x[ie].
 
@@ -302,45 +270,99 @@ def _crest_width(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: 
     return float(hi - lo)
 
 
-def roll_cycles(
+D = ROLL_DEFAULTS
+
+MOTION_TABLE: dict[str, Any] = {"centre": "zero", "smooth_frac": 0.0}
+"""Settings for a motion table's programme (the inclinometer report, its simulated device): level is 0° (static
+steps would move a mean heel) and no smoothing (one programme spans roll periods of 4–30 s, and the smoothing is
+a fraction of the one spectral peak period of the window)."""
+
+
+def detect(
     t: np.ndarray,
     heel_deg: np.ndarray,
-    hysteresis_deg: float = 0.5,
-    centre: str = "zero",
-    centre_window_s: float = 120.0,
-    refine_frac: float = 0.2,
-    max_period_s: float = 60.0,
-    crest_band_deg: float = 0.1,
-) -> RollCycles:
-    """Completed roll excursions of a heel series (t s, heel deg + stbd) per MSC.363(92) §3 (see module doc).
-
-    crest_band_deg (deg): band below the extremum that defines each cycle's crest width ``crest_s`` (the
-    ambiguity of the time of the maximum; used to refuse judging periods the data cannot resolve).
-    """
+    hysteresis_deg: float | None = D["hysteresis_deg"],
+    centre: str = D["centre"],
+    centre_window_s: float = D["centre_window_s"],
+    max_period_s: float = D["max_period_s"],
+    hysteresis_frac: float = D["hysteresis_frac"],
+    hysteresis_min_deg: float = D["hysteresis_min_deg"],
+    smooth_frac: float = D["smooth_frac"],
+) -> Detection:
+    """The checked detection series of a heel series (t s, heel deg + stbd): :func:`imutool.roll_period.detection`."""
     t = np.asarray(t, float)
     x = np.asarray(heel_deg, float)
     if t.shape != x.shape or t.ndim != 1:
         raise ImutoolError(f"roll: time and heel must be 1-D of equal length (got {t.shape}, {x.shape})")
-    if hysteresis_deg < 0:
-        raise ImutoolError(f"roll: hysteresis must be ≥ 0 deg (got {hysteresis_deg})")
-    if centre == "zero":
-        c = np.zeros_like(x)
-    elif centre == "running":
-        c = running_mean(t, x, centre_window_s)
-    else:
+    if hysteresis_deg is not None and not hysteresis_deg >= 0:
+        raise ImutoolError(f"roll: hysteresis must be ≥ 0 deg or auto (got {hysteresis_deg})")
+    if centre not in ("zero", "running"):
         raise ImutoolError(f"roll: centre must be 'zero' or 'running' (got {centre!r})")
-    side, i0, i1, ie, gen = _excursions(np.ascontiguousarray(x - c), float(hysteresis_deg))
+    for name, val in (("centre window", centre_window_s), ("max period", max_period_s)):
+        if not val > 0:
+            raise ImutoolError(f"roll: {name} must be > 0 s (got {val})")
+    for name, val in (("hysteresis fraction", hysteresis_frac), ("minimum hysteresis", hysteresis_min_deg)):
+        if not val >= 0:
+            raise ImutoolError(f"roll: {name} must be ≥ 0 (got {val})")
+    if not 0 <= smooth_frac < 1:
+        raise ImutoolError(f"roll: smoothing fraction must be in [0, 1) of the period (got {smooth_frac})")
+    return detection(
+        t, x, hysteresis_deg, centre, centre_window_s, max_period_s, hysteresis_frac, hysteresis_min_deg, smooth_frac
+    )
+
+
+def roll_cycles(
+    t: np.ndarray,
+    heel_deg: np.ndarray,
+    hysteresis_deg: float | None = D["hysteresis_deg"],
+    centre: str = D["centre"],
+    centre_window_s: float = D["centre_window_s"],
+    refine_frac: float = D["refine_frac"],
+    max_period_s: float = D["max_period_s"],
+    crest_band_deg: float = 0.1,
+    *,
+    hysteresis_frac: float = D["hysteresis_frac"],
+    hysteresis_min_deg: float = D["hysteresis_min_deg"],
+    smooth_frac: float = D["smooth_frac"],
+    det: Detection | None = None,
+) -> RollCycles:
+    """Completed roll excursions of a heel series (t s, heel deg + stbd) per MSC.363(92) §3 (see module doc).
+
+    Any window of samples works (no file knowledge): the centre, the smoothing and the scaled hysteresis come from
+    the window itself (:mod:`imutool.roll_period`; minimum window there). crest_band_deg (deg): band below the
+    extremum that defines each cycle's crest width ``crest_s`` (the ambiguity of the time of the maximum; used to
+    refuse judging periods the data cannot resolve). det: a detection already made of the same samples.
+    """
+    t = np.asarray(t, float)
+    x = np.asarray(heel_deg, float)
+    if det is None:
+        det = detect(
+            t,
+            x,
+            hysteresis_deg,
+            centre,
+            centre_window_s,
+            max_period_s,
+            hysteresis_frac,
+            hysteresis_min_deg,
+            smooth_frac,
+        )
+    r = x - det.centre  # peaks are refined on the raw heel about the centre, not on the smoothed series
+    side, i0, i1, ie, gen = excursions(np.ascontiguousarray(det.v), np.ascontiguousarray(det.h))
     keep = np.ones(side.size, bool)
     if side.size and gen[0] == 0:
         keep[0] = False
     side, i0, i1, ie = side[keep], i0[keep], i1[keep], ie[keep]
     n = side.size
     tp = np.empty(n)
-    pk = np.empty(n)
+    amp = np.empty(n)
     crest = np.empty(n)
     for k in range(n):
-        tp[k], pk[k] = _refine(t, x, int(i0[k]), int(i1[k]), int(ie[k]), int(side[k]), refine_frac)
-        crest[k] = _crest_width(t, x, int(i0[k]), int(i1[k]), int(ie[k]), int(side[k]), crest_band_deg)
+        a, b, e, sd = int(i0[k]), int(i1[k]), int(ie[k]), int(side[k])
+        e = a + int(np.nanargmax(sd * r[a:b]))  # the raw extreme sample of the excursion
+        tp[k], amp[k] = _refine(t, r, a, b, e, sd, refine_frac)
+        crest[k] = _crest_width(t, r, a, b, e, sd, crest_band_deg)
+    pk = amp + (np.interp(tp, t, det.centre) if n and np.any(det.centre != 0) else 0.0)
     period = np.full(n, np.nan)
     for s in (STBD, PORT):
         idx = np.flatnonzero(side == s)
@@ -349,7 +371,7 @@ def roll_cycles(
             # consecutive same-side excursions must have exactly one opposite excursion between them
             consecutive = np.diff(idx) == 2
             period[idx[1:]] = np.where(consecutive & (d <= max_period_s), d, np.nan)
-    return RollCycles(side.astype(np.int64), tp, pk, np.abs(pk), period, t[i0], t[i1], i1.astype(np.int64), crest)
+    return RollCycles(side.astype(np.int64), tp, pk, np.abs(amp), period, t[i0], t[i1], i1.astype(np.int64), crest)
 
 
 def pair_cycles(ref: RollCycles, dut: RollCycles) -> np.ndarray:
@@ -393,23 +415,34 @@ def _utc_of(t: float, utc_start: datetime | None) -> str | None:
 def roll_stats(
     t: np.ndarray,
     heel_deg: np.ndarray,
-    hysteresis_deg: float = ROLL_DEFAULTS["hysteresis_deg"],
-    centre: str = ROLL_DEFAULTS["centre"],
-    centre_window_s: float = ROLL_DEFAULTS["centre_window_s"],
-    refine_frac: float = ROLL_DEFAULTS["refine_frac"],
-    max_period_s: float = ROLL_DEFAULTS["max_period_s"],
+    hysteresis_deg: float | None = D["hysteresis_deg"],
+    centre: str = D["centre"],
+    centre_window_s: float = D["centre_window_s"],
+    refine_frac: float = D["refine_frac"],
+    max_period_s: float = D["max_period_s"],
     resets_s: list[float] | tuple[float, ...] = (),
     utc_start: datetime | None = None,
+    *,
+    hysteresis_frac: float = D["hysteresis_frac"],
+    hysteresis_min_deg: float = D["hysteresis_min_deg"],
+    smooth_frac: float = D["smooth_frac"],
+    disagree_frac: float = D["disagree_frac"],
 ) -> RollStats:
-    """Per-sample MSC.363(92) roll statistics (causal) and the cycle table.
+    """Per-sample MSC.363(92) roll statistics (causal), the cycle table and the period cross-check.
 
-    t: s; heel_deg: deg, + starboard down. resets_s: peak-hold reset times (s, same base as t); the
-    recording start is always a reset. utc_start: UTC of t = 0 (for the reset time/date; Unix-epoch times are
-    recognised without it).
+    t: s; heel_deg: deg, + starboard down; any window of samples (no file knowledge; minimum window in
+    :mod:`imutool.roll_period`). resets_s: peak-hold reset times (s, same base as t); the recording start is always
+    a reset. utc_start: UTC of t = 0 (for the reset time/date; Unix-epoch times are recognised without it). The
+    detector's settings: :data:`ROLL_DEFAULTS`. ``periods`` of the result: the peak-to-peak (this method),
+    zero-up-crossing and spectral peak periods side by side; ``warnings``: their disagreement (> disagree_frac).
     """
     t = np.asarray(t, float)
     x = np.asarray(heel_deg, float)
-    cyc = roll_cycles(t, x, hysteresis_deg, centre, centre_window_s, refine_frac, max_period_s)
+    det = detect(
+        t, x, hysteresis_deg, centre, centre_window_s, max_period_s, hysteresis_frac, hysteresis_min_deg, smooth_frac
+    )
+    cyc = roll_cycles(t, x, refine_frac=refine_frac, max_period_s=max_period_s, det=det)
+    periods, warns = period_estimates(cyc.period_s, t, det, hysteresis_min_deg, max_period_s, disagree_frac)
     n = t.size
 
     # causal step functions: value of the latest completed excursion at or before each sample
@@ -452,12 +485,19 @@ def roll_stats(
             peak_stbd[m] = np.where(np.isfinite(a), np.maximum(a, 0.0), np.nan)
             peak_port[m] = np.where(np.isfinite(b), np.maximum(b, 0.0), np.nan)
     settings = {
-        "hysteresis_deg": hysteresis_deg,
+        "hysteresis_deg": "auto" if hysteresis_deg is None else hysteresis_deg,
+        "hysteresis_frac": hysteresis_frac,
+        "hysteresis_min_deg": hysteresis_min_deg,
         "centre": centre,
         "centre_window_s": centre_window_s,
+        "smooth_frac": smooth_frac,
         "refine_frac": refine_frac,
         "max_period_s": max_period_s,
-        "definitions": "MSC.363(92) annex §3: period between successive maxima on the same side",
+        **det.settings,
+        "definitions": (
+            "MSC.363(92) annex §3: period between successive maxima on the same side; amplitude = |maximum − "
+            + ("mean heel| (the running centre)" if centre == "running" else "0| (level ship)")
+        ),
     }
     return RollStats(
         t,
@@ -474,6 +514,8 @@ def roll_stats(
         cyc,
         settings,
         [_utc_of(r, utc_start) for r in resets],
+        periods,
+        warns,
     )
 
 
@@ -497,11 +539,15 @@ def run_roll(
     output: str | os.PathLike | None = None,
     *,
     cycles_path: str | os.PathLike | None = None,
-    hysteresis_deg: float = ROLL_DEFAULTS["hysteresis_deg"],
-    centre: str = ROLL_DEFAULTS["centre"],
-    centre_window_s: float = ROLL_DEFAULTS["centre_window_s"],
-    refine_frac: float = ROLL_DEFAULTS["refine_frac"],
-    max_period_s: float = ROLL_DEFAULTS["max_period_s"],
+    hysteresis_deg: float | None = D["hysteresis_deg"],
+    centre: str = D["centre"],
+    centre_window_s: float = D["centre_window_s"],
+    refine_frac: float = D["refine_frac"],
+    max_period_s: float = D["max_period_s"],
+    hysteresis_frac: float = D["hysteresis_frac"],
+    hysteresis_min_deg: float = D["hysteresis_min_deg"],
+    smooth_frac: float = D["smooth_frac"],
+    disagree_frac: float = D["disagree_frac"],
     resets_s: list[float] | tuple[float, ...] = (),
     utc_start: datetime | None = None,
     strict: bool = False,
@@ -512,7 +558,8 @@ def run_roll(
     behind ``imutool roll`` and ``imutool batch roll``. Writes the per-sample statistics to ``output`` and the
     per-cycle table to ``cycles_path`` (when given); settings as :func:`roll_stats`. A path is loaded with
     ``load_options`` (columns, profile, ... calibration_file; ``strict``: its warnings are an error). The
-    result's ``data["stats"]`` is the :class:`RollStats`, ``recording`` the per-sample statistics."""
+    result's ``data["stats"]`` is the :class:`RollStats`, ``recording`` the per-sample statistics; the summary's
+    ``period_estimates`` the three periods side by side, ``warnings`` their disagreement."""
     name = os.fspath(source)
     inputs: list[dict[str, Any]] = []
     rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
@@ -528,6 +575,10 @@ def run_roll(
         max_period_s=max_period_s,
         resets_s=list(resets_s),
         utc_start=utc_start,
+        hysteresis_frac=hysteresis_frac,
+        hysteresis_min_deg=hysteresis_min_deg,
+        smooth_frac=smooth_frac,
+        disagree_frac=disagree_frac,
     )
     meta = {k: v for k, v in rec.meta.items() if k in ("sensor", "device", "frame", "mounting", "calibration")}
     meta["source"] = name

@@ -101,6 +101,31 @@ class Decoded:
     fallback: int = 0
 
 
+def ns_to_seconds(ns: np.ndarray) -> np.ndarray:
+    """int64 ns → float64 s (sec + nsec·1e-9: exact to 1 ns below ~4e6 s)."""
+    ns = np.asarray(ns, np.int64)
+    sec = ns // 1_000_000_000
+    return sec.astype(np.float64) + (ns - sec * 1_000_000_000).astype(np.float64) * 1e-9
+
+
+def pick_stamps(stamp_ns: np.ndarray, rec_ns: np.ndarray, stamp: str, topic: str, path: str) -> np.ndarray:
+    """The time of each message (int64 ns): the header stamp (``stamp='header'``) or the bag's record time
+    (``'record'``). Header stamps of zero on more than the first message are a driver that never filled them in:
+    ImutoolError suggesting ``--stamp record`` (one zero at the start is a legitimate t = 0 of simulated data)."""
+    if stamp == "header":
+        zero = stamp_ns == 0
+        if zero.sum() > 1 or (zero.any() and len(zero) == 1) or (zero.any() and not zero[0]):
+            raise ImutoolError(
+                f"{int(zero.sum())} of {len(zero)} messages on {topic} have a zero header stamp; "
+                "use --stamp record (the bag's record time) instead",
+                path=path,
+            )
+        return stamp_ns
+    if stamp == "record":
+        return rec_ns
+    raise ImutoolError(f"unknown stamp choice {stamp!r} (header, record)")
+
+
 def floats_of_msg(m: Any, kind: str) -> list[float]:
     """The float64 block of one message deserialised by rosbags, in the fixed-layout order."""
     if kind == "imu":

@@ -32,10 +32,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import ImutoolError
-from ..recording import Recording, merge
+from ..recording import Recording, join_streams, merge
 from ..units import CHANNEL_QUANTITY, factor_to_si
 from .backends import open_bag
-from .decode import Decoded, decode, decode_slow, std_md5
+from .decode import Decoded, decode, decode_slow, ns_to_seconds, pick_stamps, std_md5
+from .gnss import GNSS_TYPES, gnss_recording
 from .protocol import IMU, KIND, MAG, VEC3, BagReader, Topic
 from .rep103 import AXES, COV_SIGN, FLIP, READ_Q, READ_VECTOR, STD_NAMES, ros_to_frd_quat
 
@@ -152,7 +153,7 @@ def _recording(
     topics = bag.topics()
     if bag.truncated and not any(t.count for t in topics.values()):
         raise ImutoolError("bag is truncated: no complete chunk of messages to read", path=path)
-    imu_t, mag_t, notes = _select(topics, topic, path)
+    imu_t, mag_t, gnss, notes = _select(topics, topic, path)
     recs: list[Recording] = []
     info: dict[str, Any] = {}
     frame_ids: list[str] = []
@@ -188,8 +189,23 @@ def _recording(
         if len(rec) < n_imu:
             notes.append(f"{n_imu - len(rec)} IMU messages outside the magnetometer's time span dropped")
         conv.append("magnetometer interpolated onto the IMU clock")
-    else:
+    elif recs:
         rec = recs[0]
+    if gnss:  # each GNSS topic a stream of its own, on its own rows: never resampled
+        parts = [gnss_recording(bag, t, stamp, path) for t in gnss]
+        for t, (_, gi) in zip(gnss, parts, strict=True):
+            info[t.name] = gi
+            conv.append(gi.pop("conversion"))
+        names = [t.name for t in gnss]
+        if recs:
+            rec = join_streams([rec] + [r for r, _ in parts], [(imu_t or mag_t).name] + names)  # type: ignore[union-attr]
+        else:
+            rec = join_streams([r for r, _ in parts], names) if len(parts) > 1 else parts[0][0]
+    read = {t.name for t in (imu_t, mag_t, *gnss) if t is not None}
+    not_read = [
+        {"topic": t.name, "type": t.msgtype, "messages": t.count} for t in topics.values() if t.name not in read
+    ]
+    streams, stream_rows = rec.meta.get("streams"), rec.stream_rows
     rec.meta = {
         "source": path,
         "sensor": "ROS bag",
@@ -208,17 +224,16 @@ def _recording(
             "notes": notes + list(bag.notes),
         },
     }
+    if streams:
+        rec.meta["streams"] = streams
+        rec.stream_rows = stream_rows
+    if not_read:
+        rec.meta["bag"]["topics_not_read"] = not_read
     if bag.truncated:
         rec.meta["bag"]["partial_read"] = (
             f"truncated bag: {sum(v['messages'] for v in info.values())} messages recovered from complete chunks"
         )
     return rec
-
-
-def ns_to_seconds(ns: np.ndarray) -> np.ndarray:
-    ns = np.asarray(ns, np.int64)
-    sec = ns // 1_000_000_000
-    return sec.astype(np.float64) + (ns - sec * 1_000_000_000).astype(np.float64) * 1e-9
 
 
 def _cov_channels(rec: Recording, cov: np.ndarray, absent: np.ndarray, name: str, scale: float) -> str | None:
@@ -246,27 +261,13 @@ def _cov_channels(rec: Recording, cov: np.ndarray, absent: np.ndarray, name: str
 
 
 def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag_unit_scale: float) -> Recording:
-    if stamp == "header":
-        zero = dec.stamp_ns == 0
-        # one zero stamp at the start is a legitimate t = 0 (simulated data); more means unfilled stamps
-        if zero.sum() > 1 or (zero.any() and len(zero) == 1) or (zero.any() and not zero[0]):
-            raise ImutoolError(
-                f"{int(zero.sum())} of {len(zero)} messages on {topic} have a zero header stamp; "
-                "use --stamp record (the bag's record time) instead",
-                path=path,
-            )
-        ns = dec.stamp_ns
-    elif stamp == "record":
-        ns = dec.rec_ns
-    else:
-        raise ImutoolError(f"unknown stamp choice {stamp!r} (header, record)")
-    rec = Recording(ns_to_seconds(ns))
+    rec = Recording(ns_to_seconds(pick_stamps(dec.stamp_ns, dec.rec_ns, stamp, topic, path)))
     f = dec.floats
     conv: list[str] = []
     notes: list[str] = []
     if kind == "imu":
         q_abs = f[:, 4] == -1
-        g_abs = f[:, 17] == -1
+        g_abs = f[:, 16] == -1
         a_abs = f[:, 28] == -1
         zero_q = np.all(f[:, 0:4] == 0, axis=1)  # not an orientation: a driver that has none
         if zero_q.all() and not q_abs.all():
@@ -276,8 +277,9 @@ def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag
             q[q_abs | zero_q] = np.nan
             rec.add("q", q)
             conv.append(READ_Q)
-            if zero_q.any():
-                notes.append(f"{topic}: {int(zero_q.sum())} orientation(s) of [0, 0, 0, 0] read as missing")
+            if (zero_q & ~q_abs).any():
+                n0 = int((zero_q & ~q_abs).sum())
+                notes.append(f"{topic}: {n0} orientation(s) of [0, 0, 0, 0] read as missing")
         if not g_abs.all():
             g = f[:, 13:16] * FLIP
             g[g_abs] = np.nan
@@ -309,7 +311,11 @@ def to_recording(dec: Decoded, kind: str, stamp: str, topic: str, path: str, mag
     return rec
 
 
-def _select(topics: dict[str, Topic], topic: str | None, path: str) -> tuple[Topic | None, Topic | None, list[str]]:
+def _select(
+    topics: dict[str, Topic], topic: str | None, path: str
+) -> tuple[Topic | None, Topic | None, list[Topic], list[str]]:
+    """(Imu topic, magnetometer topic, GNSS topics named in ``topic``, notes); see :func:`read_bag`."""
+
     def listing() -> str:
         return "; ".join(f"{t.name} ({t.msgtype}, {t.count} msgs)" for t in topics.values()) or "none"
 
@@ -317,15 +323,21 @@ def _select(topics: dict[str, Topic], topic: str | None, path: str) -> tuple[Top
     wanted = [s.strip() for s in topic.split(",") if s.strip()] if topic else []
     imu_t: Topic | None = None
     mag_t: Topic | None = None
+    gnss: list[Topic] = []
     for w in wanted:
         if w not in topics:
             raise ImutoolError(f"topic {w!r} not in bag; topics: {listing()}", path=path)
         t = topics[w]
         kind = KIND.get(t.msgtype)
+        if t.msgtype in GNSS_TYPES:
+            if t not in gnss:
+                gnss.append(t)
+            continue
         if kind is None:
             raise ImutoolError(
                 f"topic {w} has type {t.msgtype}; imutool reads sensor_msgs/Imu, "
-                "sensor_msgs/MagneticField and geometry_msgs/Vector3Stamped",
+                "sensor_msgs/MagneticField, geometry_msgs/Vector3Stamped and (named in --topic) "
+                "sensor_msgs/NavSatFix, geometry_msgs/TwistStamped, geometry_msgs/TwistWithCovarianceStamped",
                 path=path,
             )
         if kind == "imu":
@@ -356,10 +368,10 @@ def _select(topics: dict[str, Topic], topic: str | None, path: str) -> tuple[Top
                 imu_t = cands[0]
             else:
                 mag_t = cands[0]
-    if imu_t is None and mag_t is None:
+    if imu_t is None and mag_t is None and not gnss:
         raise ImutoolError(
             "no sensor_msgs/Imu, sensor_msgs/MagneticField or magnetometer Vector3Stamped "
             f"topic with messages; topics: {listing()}",
             path=path,
         )
-    return imu_t, mag_t, notes
+    return imu_t, mag_t, gnss, notes

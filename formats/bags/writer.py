@@ -71,44 +71,58 @@ def _cov_names(rec: Recording, name: str) -> list[str]:
 
 
 def _imu_payloads(rec: Recording, fmt: str, frame_id: str) -> tuple[np.ndarray, list[str]]:
-    """Serialise Imu messages with numpy (fixed layout); returns (bytes as (n, size) uint8, size, used channels)."""
+    """Serialise Imu messages with numpy (fixed layout); returns (bytes as (n, size) uint8, used channels)."""
+    floats, used = imu_floats(rec)
+    return serialise(rec.time, floats, fmt, frame_id), used
+
+
+def imu_floats(rec: Recording) -> tuple[np.ndarray, list[str]]:
+    """The 37 float64s of each row's Imu message (REP-103) and the channels used.
+
+    A row without a value is "no data" as sensor_msgs/Imu says: its covariance[0] is -1 and the field is zeros
+    (an orientation of a quaternion with a NaN component, a gyro or accel row whose every axis is NaN). No NaN
+    goes into an orientation or a flagged field; a NaN covariance entry is written 0 (unknown).
+    """
     n = len(rec)
     used: list[str] = []
     floats = np.zeros((n, 37))
-    floats[:, 3] = 1.0  # identity orientation when absent (covariance[0] = -1 marks it absent)
+    q = None
     if "q" in rec and rec["q"].shape[1:] == (4,):
-        floats[:, 0:4] = frd_to_ros_quat(rec["q"])
+        q = rec["q"]
         used.append("q")
-        qsrc = True
     elif all(k in rec for k in ("roll", "pitch", "heading")):
         q = euler_to_quat(rec.get("roll", "rad"), rec.get("pitch", "rad"), rec.get("heading", "rad"))
-        floats[:, 0:4] = frd_to_ros_quat(q)
         used += ["roll", "pitch", "heading"]
-        qsrc = True
-    else:
-        floats[:, 4] = -1.0
-        qsrc = False
-    if qsrc:
+    if q is not None:
+        q_abs = ~np.all(np.isfinite(q), axis=1)
+        floats[:, 0:4] = frd_to_ros_quat(np.where(q_abs[:, None], [1.0, 0.0, 0.0, 0.0], q))
         c = _cov_from(rec, "q", 1.0)
         if c is not None:
-            floats[:, 4:13] = c * COV_SIGN
+            floats[:, 4:13] = np.nan_to_num(c * COV_SIGN, nan=0.0)
             used += _cov_names(rec, "q")
+    else:
+        q_abs = np.ones(n, bool)
+    floats[q_abs, 0:13] = 0.0  # "no data": a zero quaternion, covariance[0] = -1
+    floats[q_abs, 4] = -1.0
     for name, vs, cs in (("gyro", 13, 16), ("accel", 25, 28)):
+        absent = np.ones(n, bool)
         if name in rec and rec[name].shape[1:] == (3,):
             unit = "rad/s" if name == "gyro" else "m/s^2"
             v = rec.in_unit(name, unit)
+            absent = np.all(np.isnan(v), axis=1)
             floats[:, vs : vs + 3] = v * FLIP
             used.append(name)
             c = _cov_from(rec, name, 1.0)
             if c is not None:
-                floats[:, cs : cs + 9] = c * COV_SIGN
+                floats[:, cs : cs + 9] = np.nan_to_num(c * COV_SIGN, nan=0.0)
                 used += _cov_names(rec, name)
-        else:
-            floats[:, cs] = -1.0
-    return serialise(rec.time, floats, fmt, frame_id), used
+        floats[absent, vs : cs + 9] = 0.0
+        floats[absent, cs] = -1.0
+    return floats, used
 
 
 def _mag_payloads(rec: Recording, fmt: str, frame_id: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """MagneticField messages of the rows with a value (a row whose every axis is NaN is no sample)."""
     m = rec.get("mag", "uT") if rec.units.get("mag") else rec["mag"]
     keep = ~np.all(np.isnan(m), axis=1)
     floats = np.zeros((len(rec), 12))
@@ -116,7 +130,7 @@ def _mag_payloads(rec: Recording, fmt: str, frame_id: str) -> tuple[np.ndarray, 
     used = ["mag"]
     c = _cov_from(rec, "mag", 1.0)
     if c is not None:
-        floats[:, 3:12] = c * COV_SIGN * 1e-12
+        floats[:, 3:12] = np.nan_to_num(c * COV_SIGN * 1e-12, nan=0.0)
         used += _cov_names(rec, "mag")
     return serialise(rec.time[keep], floats[keep], fmt, frame_id), keep, used
 
@@ -224,14 +238,21 @@ def write_bag(
         raise ImutoolError(f"unknown ROS2 storage {storage!r} (sqlite3, mcap)")
     used: list[str] = []
     msgs: list[tuple[str, str, np.ndarray, np.ndarray]] = []
+    topic_streams: dict[str, str | None] = {}
+    notes: list[str] = []
     if has_imu:
-        pay, u = _imu_payloads(rec, fmt, fid)
-        used += u
-        msgs.append((topic, IMU, pay, _stamps_ns(rec.time)))
+        groups, notes = imu_topics(rec, topic)
+        for name, stream, sub in groups:
+            pay, u = _imu_payloads(sub, fmt, fid)
+            used += [c for c in u if c not in used]
+            msgs.append((name, IMU, pay, _stamps_ns(sub.time)))
+            topic_streams[name] = stream
     if has_mag:
-        pay, keep, u = _mag_payloads(rec, fmt, fid)
+        sub = rec if not rec.multi_clock else rec.select(rec.own_rows("mag"))
+        pay, keep, u = _mag_payloads(sub, fmt, fid)
         used += u
-        msgs.append((mag_topic, MAG, pay, _stamps_ns(rec.time[keep])))
+        msgs.append((mag_topic, MAG, pay, _stamps_ns(sub.time[keep])))
+        topic_streams[mag_topic] = rec.stream_of("mag")
     not_written = [k for k in rec.channels if k not in used]
     ts = typestore("ros1" if ros1 else "cdr")
     try:
@@ -278,7 +299,66 @@ def write_bag(
         "channels_written": used,
         "channels_not_written": not_written,
         "conversions": _out_conversions(used),
+        **({"streams": topic_streams} if rec.multi_clock else {}),
+        **({"notes": notes} if notes else {}),
     }
+
+
+def _token(stream: str) -> str:
+    """A stream's name as one ROS topic token ('HDT+PASHR' → 'hdt_pashr')."""
+    tok = re.sub(r"[^A-Za-z0-9]+", "_", stream).strip("_").lower() or "stream"
+    return "s" + tok if tok[0].isdigit() else tok
+
+
+def imu_topics(rec: Recording, topic: str = "/imu/data") -> tuple[list[tuple[str, str | None, Recording]], list[str]]:
+    """The Imu topics of a recording: [(topic name, stream or None, recording of that topic's rows)] and notes.
+
+    A single-clock recording is one topic on every row. A many-clock one (:class:`formats.recording.Recording`)
+    gets one topic per stream that carries an Imu field (orientation — ``q``, or ``roll``, ``pitch`` and
+    ``heading`` on the rows where all three are sampled —, ``gyro``, ``accel``), on that stream's own rows only:
+    ``topic`` when one stream carries them all, else ``topic/<stream>`` each. Samples of roll/pitch/heading on
+    rows where the other two have none cannot make an orientation: the notes count them.
+    """
+    fields: list[tuple[list[str], np.ndarray, str | None]] = []  # (channels, rows, stream)
+    if "q" in rec and rec["q"].shape[1:] == (4,):
+        fields.append((["q", *_cov_names(rec, "q")], rec.own_rows("q"), rec.stream_of("q")))
+    elif all(k in rec for k in ("roll", "pitch", "heading")):
+        rpy = ("roll", "pitch", "heading")
+        rows = rec.own_rows("roll") & rec.own_rows("pitch") & rec.own_rows("heading")
+        fields.append(([*rpy, *_cov_names(rec, "q")], rows, rec.stream_of("roll")))
+    for name in ("gyro", "accel"):
+        if name in rec and rec[name].shape[1:] == (3,):
+            fields.append(([name, *_cov_names(rec, name)], rec.own_rows(name), rec.stream_of(name)))
+    if not rec.multi_clock:
+        return [(topic, None, rec)], []
+    notes: list[str] = []
+    if "q" not in rec and fields and fields[0][0][0] == "roll":
+        for c in ("roll", "pitch", "heading"):
+            v = rec[c]
+            lost = int((rec.own_rows(c) & ~fields[0][1] & np.isfinite(v)).sum())
+            if lost:
+                notes.append(
+                    f"{c}: {lost} samples ({rec.stream_of(c)}) on rows without the other two of roll/pitch/heading "
+                    "not written (an Imu orientation needs all three)"
+                )
+    groups: dict[bytes, tuple[list[str], np.ndarray, str | None]] = {}
+    for chans, rows, stream in fields:
+        key = np.packbits(rows).tobytes()
+        if key in groups:
+            groups[key][0].extend(chans)
+        else:
+            groups[key] = (list(chans), rows, stream)
+    out = []
+    for chans, rows, stream in groups.values():
+        sub = rec.select(rows)
+        for c in list(sub.channels):
+            if c not in chans:
+                sub.remove(c)
+        sub.stream_rows = {}
+        sub.meta.pop("streams", None)
+        name = topic if len(groups) == 1 else f"{topic.rstrip('/')}/{_token(stream or 'rows')}"
+        out.append((name, stream, sub))
+    return out, notes
 
 
 def _out_conversions(used: list[str]) -> list[str]:

@@ -128,6 +128,7 @@ def mag_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     ]
     if method == "swing":
         lines.append(f"  not observable in a swing: {summary['unobservable']}")
+    lines += [f"  absent: {a}" for a in summary.get("information_absent") or []]
     lines += [f"  warning: {w}" for w in fit.warnings]
     emit_summary(summary, as_json, quiet, lines)
 

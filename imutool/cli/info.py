@@ -109,6 +109,8 @@ def _lines(s: dict[str, Any]) -> list[str]:
         ):
             if ns.get(group):
                 out.append(f"NMEA sentences {what}: " + ", ".join(f"{k} {n}" for k, n in ns[group].items()))
+    for t in s.get("bag_topics_not_read") or []:
+        out.append(f"bag topic not read: {t['topic']} ({t['type']}, {t['messages']} msgs)")
     if s["column_mapping"]:
         out.append(f"column mapping ({s['column_mapping']['origin']}):")
         out += [f"  {m}" for m in s["column_mapping"]["columns"]]

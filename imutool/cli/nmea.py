@@ -32,6 +32,7 @@ from imutool.nmea_out import (  # noqa: F401  (nmea_lines, TRUE_TALKER: re-expor
 from imutool.routes import OnInput, RouteResult
 
 KNOWN = SENTENCES  # kept for callers of the old name
+ROLL_EXTRA = ("hysteresis_frac", "hysteresis_min_deg", "smooth_frac", "disagree_frac")  # roll_options → roll_kw
 
 
 def nmea_route(
@@ -42,7 +43,7 @@ def nmea_route(
     xdr_roll_sign: str,
     xdr_pitch_sign: str,
     talker_opts: tuple[str, ...],
-    hysteresis_deg: float,
+    hysteresis_deg: float | None,
     centre: str,
     centre_window_s: float,
     refine_frac: float,
@@ -64,6 +65,7 @@ def nmea_route(
         talkers[k.strip().upper()] = v.strip().upper()
     utc0 = parse_utc(utc_start)
     roll_kw = {
+        **{k: options.pop(k) for k in ROLL_EXTRA if k in options},
         "hysteresis_deg": hysteresis_deg,
         "centre": centre,
         "centre_window_s": centre_window_s,
@@ -130,11 +132,12 @@ def nmea_route(
 @click.option("--no-header", is_flag=True, help="Leave out the '#' header block of the file (conventions, flags).")
 @click.option(
     "--heading-ref",
-    type=click.Choice(HEADING_REFS),
+    type=click.Choice(("auto", *HEADING_REFS)),
     default=LINE_OPTIONS["heading_ref"],
     show_default=True,
     help="What the input `heading` channel is: compass (sensor reading, deviation not applied), magnetic "
-    "(deviation applied) or true.",
+    "(deviation applied) or true; auto: what the recording says (an NMEA log's heading is true, a filter's "
+    "from the magnetometer magnetic, meta heading_reference), else magnetic (said in the summary).",
 )
 @click.option(
     "--heading-source",
@@ -208,6 +211,8 @@ def nmea_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """
     res = nmea_route(on_input=note_input, **options)
     s, plan = res.summary, (res.data or {})["plan"]
+    for w in s.get("warnings") or []:
+        click.echo(f"warning: {s['input']}: {w}", err=True)
     counts, output, serial_port = s["sentences"], s["output"], s["serial"]
     lines = [
         f"{s['input']}: {sum(counts.values())} sentences ({', '.join(f'{k} {v}' for k, v in counts.items())})"
@@ -215,6 +220,9 @@ def nmea_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
         + (f" → {serial_port}" if serial_port else ""),
         f"  rate {plan.rate.describe()}",
     ]
+    if any(x in plan.sentences for x in ("HDG", "HDT", "THS", "PASHR")):
+        hr = s["heading_reference"]
+        lines.append(f"  heading input {hr['reference']}: {hr['why']}")
     if "PASHR" in plan.sentences or "TSS1" in plan.sentences:
         lines.append(
             f"  heave positive {s['heave_positive']}; UTC "

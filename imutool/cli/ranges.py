@@ -122,6 +122,10 @@ RANGES: dict[str, Bound] = {
     "accel_std": POS,
     "tilt_gain": NONNEG,
     "hysteresis_deg": NONNEG,
+    "hysteresis_frac": FRACTION,  # roll: auto hysteresis = this × the roll's RMS
+    "hysteresis_min_deg": NONNEG,
+    "smooth_frac": (0, 1, False, True),  # roll: detection smoothing, a fraction of the spectral peak period
+    "disagree_frac": POS,  # roll: spread of the three period estimates that warns
     "refine_frac": FRACTION,
     "step_band_deg": POS,
     "turn_min_dps": POS,

@@ -48,23 +48,48 @@ def parse_resets(text: str | None) -> list[float]:
         raise ImutoolError(f"--reset {text!r}: expected comma-separated times in s") from None
 
 
+class Hysteresis(click.ParamType):
+    """``auto`` (None: scaled to the roll) or a fixed hysteresis in degrees."""
+
+    name = "auto|DEG"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float | None:
+        if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
+            return None
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r}: expected 'auto' or a number of degrees", param, ctx)
+        if not 0 <= v <= 90:
+            self.fail(f"{value!r}: expected 'auto' or a hysteresis in [0, 90] deg", param, ctx)
+        return v
+
+
+def _frac_option(flag: str, dest: str, text: str):
+    return click.option(flag, dest, type=float, default=default_of(run_roll, dest), show_default=True, help=text)
+
+
 def roll_options(f):
-    """Options of the roll-cycle detector shared by `roll` and `nmea`."""
+    """Options of the roll-cycle detector shared by `roll` and `nmea` (defaults: imutool.roll.ROLL_DEFAULTS)."""
     opts = [
         click.option(
             "--hysteresis",
             "hysteresis_deg",
-            type=float,
-            default=default_of(run_roll, "hysteresis_deg"),
+            type=Hysteresis(),
+            default="auto",
             show_default=True,
-            help="Hysteresis (deg) around the centre: oscillations smaller than ± this are ignored.",
+            help="Hysteresis (deg) around the centre: oscillations smaller than ± this are ignored; auto = "
+            "--hysteresis-frac × the roll's running RMS, at least --hysteresis-min.",
         ),
+        _frac_option("--hysteresis-frac", "hysteresis_frac", "Auto hysteresis: this fraction of the roll's RMS."),
+        _frac_option("--hysteresis-min", "hysteresis_min_deg", "Auto hysteresis: at least this (deg)."),
         click.option(
             "--centre",
             type=click.Choice(["zero", "running"]),
             default=default_of(run_roll, "centre"),
             show_default=True,
-            help="Centre of the port/starboard split: 0 (level ship) or a running mean (listing ship).",
+            help="Centre of the port/starboard split and of the amplitudes: the mean heel over --centre-window "
+            "(running) or 0 (zero: a level ship, e.g. a motion table).",
         ),
         click.option(
             "--centre-window",
@@ -72,7 +97,15 @@ def roll_options(f):
             type=float,
             default=default_of(run_roll, "centre_window_s"),
             show_default=True,
-            help="Running-mean window (s) for --centre running.",
+            help="Running-mean window (s) of --centre running (and of the auto hysteresis's RMS).",
+        ),
+        _frac_option(
+            "--smooth", "smooth_frac", "Detection smoothing: this fraction of the spectral peak period (0 = none)."
+        ),
+        _frac_option(
+            "--disagree",
+            "disagree_frac",
+            "Warn when the peak-to-peak, zero-up-crossing and spectral periods differ by more than this fraction.",
         ),
         click.option(
             "--refine",
@@ -148,13 +181,29 @@ def roll_cmd(input_path: str, output: str, as_json: bool, quiet: bool, **options
     """Roll statistics per IMO MSC.363(92) §3 from the `roll` (or HRM `heel`) channel of INPUT.
 
     Heel is in degrees, + starboard down. Roll period = time between successive maxima on the same side
-    (port and starboard tracked separately); amplitudes per side (port reported positive, as HRM); peak hold
+    (port and starboard tracked separately), cycles counted about the mean heel with a hysteresis scaled to the
+    roll, cross-checked against the zero-up-crossing and spectral peak periods (a warning when they disagree);
+    amplitudes per side from the mean heel (port reported positive, as HRM; --centre zero: from level); peak hold
     since the last reset. Per-sample values are causal: a cycle's values appear when it completes.
     """
     res = roll_route(input_path, output, quiet=quiet, on_input=note_input, **options)
     rs = res.data["stats"]
+    for w in rs.warnings:
+        click.echo(f"warning: {input_path}: {w}", err=True)
     lines = [f"{input_path}: {len(res.recording)} samples, {len(rs.cycles)} half-cycles → {output}"]
     s = rs.summary()
+    est = s["period_estimates"]
+
+    def sec(v: float | None) -> str:
+        return "-" if v is None else f"{v:.2f} s"
+
+    lines.append(
+        f"  period: peak-to-peak (same-side maxima) {sec(est['peak_to_peak_s'])}, zero-up-crossing "
+        f"{sec(est['zero_up_crossing_s'])}, spectral peak {sec(est['spectral_peak_s'])}"
+        + ("" if est["spread"] is None else f" (spread {100 * est['spread']:.0f} %)")
+    )
+    mh = s["mean_heel_deg"]
+    lines.append(f"  amplitudes from the {s['amplitude_from']}" + ("" if mh is None else f" (mean heel {mh:+.2f}°)"))
     for side in ("starboard", "port"):
         d = s[side]
         per = f"{d['period_mean_s']:.2f} s" if d["period_mean_s"] is not None else "-"

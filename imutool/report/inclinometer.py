@@ -25,7 +25,7 @@ from formats import Recording
 from formats.errors import ImutoolError
 from formats.nmea import checksum
 from imutool.metrics import angle_diff_deg, best_lag, interp_to
-from imutool.roll import PORT, STBD, heel_of, pair_cycles, roll_cycles, roll_stats
+from imutool.roll import MOTION_TABLE, PORT, STBD, heel_of, pair_cycles, roll_cycles, roll_stats
 
 from .common import (
     ALIGN,
@@ -255,7 +255,7 @@ def _dut_outputs(dut: Recording, heel: np.ndarray, o: InclinometerOptions) -> tu
             if k in dut.channels:
                 out[k] = np.asarray(dut[k], float)
         return out, SRC_DEVICE
-    rs = roll_stats(dut.time, heel, hysteresis_deg=o.hysteresis_deg)
+    rs = roll_stats(dut.time, heel, hysteresis_deg=o.hysteresis_deg, **MOTION_TABLE)
     return (
         {
             "amp_port": rs.amp_port,
@@ -754,9 +754,9 @@ def inclinometer_evidence(
     )
 
     # ---- reference and DUT roll cycles ----------------------------------------------------------------------
-    rs_ref = roll_stats(t, h_ref, hysteresis_deg=o.hysteresis_deg)
-    cr = roll_cycles(t, h_ref, o.hysteresis_deg, crest_band_deg=o.crest_band_deg)
-    cd = roll_cycles(t, d, o.hysteresis_deg, crest_band_deg=o.crest_band_deg)
+    rs_ref = roll_stats(t, h_ref, hysteresis_deg=o.hysteresis_deg, **MOTION_TABLE)
+    cr = roll_cycles(t, h_ref, o.hysteresis_deg, crest_band_deg=o.crest_band_deg, **MOTION_TABLE)
+    cd = roll_cycles(t, d, o.hysteresis_deg, crest_band_deg=o.crest_band_deg, **MOTION_TABLE)
     pair = pair_cycles(cr, cd)
     outs, out_src = _dut_outputs(dut, h_dut, o)
     outs_al = {k: interp_to(t, dut.time - shift, v) for k, v in outs.items()}

@@ -26,6 +26,7 @@ import formats
 from formats import Recording
 from formats.atomic import atomic_path
 from imutool.nmea_out import nmea_lines
+from imutool.roll import MOTION_TABLE
 from imutool.sim.sea import jonswap_shape
 from imutool.sim.sensor import GRAVITY
 
@@ -439,7 +440,9 @@ def write_sample_data(folder: str, seed: int = 1, rate_hz: float = 10.0) -> dict
     out["inclinometer_dut.nmea"] = os.path.join(folder, "inclinometer_dut.nmea")
     with atomic_path(out["inclinometer_dut.nmea"]) as tmp, open(tmp, "w", newline="") as fh:
         utc0 = datetime(2026, 1, 5, 8, 0, 0, tzinfo=timezone.utc)  # peak-hold reset = start of the test
-        for ts, s in nmea_lines(dut, ["HRM"], None, roll_kw={"utc_start": utc0}):
+        # the simulated device on a motion table: level is 0° and its cycle band a fixed ±0.5°
+        hrm_kw = {"utc_start": utc0, "hysteresis_deg": 0.5, **MOTION_TABLE}
+        for ts, s in nmea_lines(dut, ["HRM"], None, roll_kw=hrm_kw):
             fh.write(f"{ts:.3f} {s}\r\n")
     hd, hr, _ = heading_test(rate_hz=rate_hz, seed=seed, **SAMPLE_HEADING_ERRORS)
     for name, rec in (("heading_dut.csv", hd), ("heading_reference.csv", hr)):

@@ -228,3 +228,57 @@ def heave_platform(
         _accel_errors(accel_noise_ug, accel_bias_up, accel_bias_rw),
         meta,
     )
+
+
+def irregular_roll(
+    duration: float = 1800.0,
+    rate_hz: float = 2.0,
+    seed: int = 0,
+    roll_period: float = 12.0,
+    roll_damping: float = 0.08,
+    wave_period: float | None = None,
+    significant_deg: float = 5.0,
+    list_deg: float = 0.0,
+    noise_deg: float = 0.03,
+    quantum_deg: float = 0.01,
+    components: int = 200,
+    gamma: float = 3.3,
+) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+    """Irregular roll heel (deg, + starboard) in a JONSWAP sea, with its known periods: a roll-period benchmark.
+
+    Roll = JONSWAP wave slope (peak ``wave_period`` s, default the roll period) through a damped second-order roll
+    response (natural period ``roll_period`` s, damping ratio ``roll_damping``: narrow-band for ζ ≲ 0.1), scaled to
+    a significant amplitude 2σ = ``significant_deg``, plus a constant list (deg), white noise (deg, 1σ) and
+    rounding to ``quantum_deg``. Returns (t s, heel deg, truth) with truth ``tz_s`` = 2π√(m0/m2) of the roll
+    spectrum (the mean zero-up-crossing period), ``tp_s`` (its peak period), ``significant_deg``, ``list_deg``.
+    """
+    rng = np.random.default_rng(seed)
+    tw = roll_period if wave_period is None else float(wave_period)
+    wp = 2 * np.pi / tw
+    edges = np.linspace(0.3 * wp, 4.0 * wp, int(components) + 1)
+    dw = np.diff(edges)
+    w = edges[:-1] + dw * rng.uniform(0.2, 0.8, dw.size)
+
+    def spectrum(om: np.ndarray) -> np.ndarray:
+        h = _second_order(om, 2 * np.pi / roll_period, roll_damping)
+        return jonswap_shape(om, tw, gamma) * (om**2 / GRAVITY) ** 2 * np.abs(h) ** 2
+
+    amp = np.sqrt(2 * spectrum(w) * dw)
+    phase = rng.uniform(0, 2 * np.pi, w.size)
+    t = np.arange(int(round(duration * rate_hz))) / rate_hz
+    x = np.zeros_like(t)
+    for a, om, ph in zip(amp, w, phase, strict=True):
+        x += a * np.cos(om * t + ph)
+    m0, m2 = np.sum(amp**2) / 2, np.sum(amp**2 * w**2) / 2
+    x *= significant_deg / (2 * np.sqrt(m0)) if m0 > 0 else 0.0
+    fine = np.linspace(0.3 * wp, 4.0 * wp, 20000)
+    x = x + list_deg + rng.normal(0.0, noise_deg, t.size)
+    if quantum_deg > 0:
+        x = np.round(x / quantum_deg) * quantum_deg
+    truth = {
+        "tz_s": float(2 * np.pi * np.sqrt(m0 / m2)),
+        "tp_s": float(2 * np.pi / fine[np.argmax(spectrum(fine))]),
+        "significant_deg": float(significant_deg),
+        "list_deg": float(list_deg),
+    }
+    return t, x, truth
