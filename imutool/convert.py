@@ -186,18 +186,6 @@ def streams(
     )
 
 
-# the channel whose stream times an Imu message of a many-clock recording (first present wins)
-IMU_DRIVERS = ("q", "gyro", "accel", "roll", "pitch", "heading", "mag")
-
-
-def imu_clock(rec: formats.Recording) -> formats.Recording:
-    """A many-clock recording on the clock of its attitude/IMU stream (:data:`IMU_DRIVERS`): one Imu message per
-    own sample of that stream, the other channels held at their latest own sample (``meta['resampled']`` says
-    which), never a message on another stream's row (a NaN quaternion, a gyro of zeros)."""
-    drv = next((c for c in IMU_DRIVERS if c in rec.channels), None)
-    return rec.on_clock(drv) if drv else rec
-
-
 def run_convert(
     src: str | os.PathLike,
     dst: str | os.PathLike,
@@ -331,11 +319,6 @@ def run_convert(
     if mounting:
         conversions.append(f"mounting {mounting} applied (sensor → body)")
     opts: dict[str, Any] = {}
-    if kout in ("ros1", "ros2") and rec.multi_clock:
-        rec = imu_clock(rec)
-        if rec.meta.get("resampled"):
-            summary["resampled"] = rec.meta["resampled"]
-            conversions.append(f"resampled: {rec.meta['resampled']}")
     if kout in ("ros1", "ros2"):
         opts = {"topic": imu_topic, "mag_topic": mag_topic, "frame_id": frame_id}
         if kout == "ros2" and storage:
