@@ -65,6 +65,13 @@ RT_SHORT_WINDOW_S = 90.0  # s, the quick look for a change of sea,
 RT_CHANGE = 0.4  # relative disagreement of the two looks that marks a change of sea,
 RT_SPREAD = (0.08, 0.10)  # spectral spread ν: ≤ first → harmonic KF (line spectrum), ≥ second → bank,
 RT_SHAPE = "butterworth"  # and pole pattern (chosen on the whole benchmark grid, see docs/heave.md)
+# honest `settled` of the real-time heave (issue 48, docs/heave.md "settled and heave_std"):
+RT_STD_CORNER = 2**0.5  # the check integrator runs at the corner / this (its error (1/√2)^(n−2) of the output's),
+RT_STD_PERIODS = 2.0  # heave_std = RMS of (output − check) over this many periods (causal, exponential),
+RT_SIGNAL_PERIODS = 10.0  # the signal it is compared with: 4 × the RMS heave over this many periods,
+SETTLE_FRACTION = 0.1  # settled only while heave_std ≤ this × that significant heave (``settle_fraction``),
+RT_ONSET = 3.0  # a one-period acceleration RMS this many times its level at the last frequency estimate: an onset
+PLAUSIBILITY = 2.0  # two heaves disagreeing (RMS) beyond this × their stated σ: warned
 ATTITUDES = ("auto", "q", "ekf", "tilt", "ref")  # where the vertical comes from (run_heave's attitude)
 AUTO_USES_EKF = False  # --attitude auto: q columns, else the tilt filter (the EKF on request: same heave, slower)
 
@@ -627,6 +634,7 @@ class HeaveResult:
     heave_rate_delayed: np.ndarray
     settled_delayed: np.ndarray
     summary: dict[str, Any]
+    heave_std: np.ndarray | None = None  # m, one-sigma error bound of ``heave`` (realtime method; None otherwise)
 
 
 def _segment_model(fr, good, fd, sig, bandwidth, residual_noise, dt, sos, fs, per_harmonic, output_residual, q=1):
@@ -792,15 +800,16 @@ def corrected_integrator(
 
 
 @njit(cache=True)
-def _bank_kernel(a, ads, bds, cs, cvs, idx, frac):  # pragma: no cover - numba
+def _bank_kernel(a, ads, bds, cs, cvs, idx, frac, shift):  # pragma: no cover - numba
     """Run K discretised filters (trapezoidal, input linear between samples) on a; output at sample i the blend
-    (1 − frac)·filter idx + frac·filter idx+1 (heave, rate)."""
+    (1 − frac)·filter idx + frac·filter idx+1 (heave, rate), and the same blend ``shift`` corners lower (heave)."""
     n = a.shape[0]
     k_all, s = bds.shape
     x = np.zeros((k_all, s))
     xn = np.zeros(s)
     y = np.empty(n)
     v = np.empty(n)
+    ylo = np.empty(n)
     for i in range(n):
         if i > 0:
             u = 0.5 * (a[i - 1] + a[i])
@@ -823,7 +832,14 @@ def _bank_kernel(a, ads, bds, cs, cvs, idx, frac):  # pragma: no cover - numba
             v1 += cvs[k1, r] * x[k1, r]
         y[i] = (1.0 - w1) * y0 + w1 * y1
         v[i] = (1.0 - w1) * v0 + w1 * v1
-    return y, v
+        j0 = max(k0 - shift, 0)
+        j1 = max(k1 - shift, 0)
+        z0 = z1 = 0.0
+        for r in range(s):
+            z0 += cs[j0, r] * x[j0, r]
+            z1 += cs[j1, r] * x[j1, r]
+        ylo[i] = (1.0 - w1) * z0 + w1 * z1
+    return y, v, ylo
 
 
 def filter_settle_time(n: int, wc: float, shape: str = "binomial", tol: float = 0.01) -> float:
@@ -916,7 +932,8 @@ def heave_realtime(
             cur = goal
     lo, hi = float(lsm.min()), float(lsm.max())
     base = np.log(step)
-    k0 = int(np.floor(lo / base))
+    shift = max(1, int(round(np.log(RT_STD_CORNER) / base)))  # the check filter: this many corners lower
+    k0 = int(np.floor(lo / base)) - shift
     k1 = int(np.ceil(hi / base))
     corners = np.exp(base * np.arange(k0, max(k1, k0 + 1) + 1))
     corners = corners[corners < 0.45 * fs / 2]
@@ -936,13 +953,134 @@ def heave_realtime(
     idx = np.minimum(np.floor(pos).astype(np.int64), kk - 1)
     frac = pos - idx
     a0 = np.ascontiguousarray(np.asarray(a, float) - a[0])
-    y, v = _bank_kernel(a0, ads, bds, cs, cvs, idx, np.ascontiguousarray(frac))
+    y, v, ylo = _bank_kernel(a0, ads, bds, cs, cvs, idx, np.ascontiguousarray(frac), shift)
     info = {
         "realtime_filter": f"corrected double integrator, order {order} ({shape}), corner {ratio:g} × dominant",
         "realtime_corners_hz": [round(float(c), 5) for c in corners],
         "corner_hz": np.exp(lsm),
+        "heave_check": ylo,
     }
     return y, v, info
+
+
+def _ema(x: np.ndarray, fs: float, tau_s: float) -> np.ndarray:
+    """Causal exponential moving average of x (time constant ``tau_s`` s, from a zero state)."""
+    alpha = 1.0 - np.exp(-1.0 / (fs * max(tau_s, 1e-9)))
+    return signal.lfilter([alpha], [1.0, alpha - 1.0], x)
+
+
+def realtime_error_bound(
+    t: np.ndarray, heave: np.ndarray, check: np.ndarray, f: float, order: int = RT_ORDER
+) -> tuple[np.ndarray, np.ndarray]:
+    """(heave_std m, significant heave m) per sample, causal. ``check`` is the same corrected-integrator bank run
+    RT_STD_CORNER (r) times lower (:func:`heave_realtime`): its gain/phase error is r^−(n−2) of the output's (n =
+    ``order``) and its start-up transient is longer, so output − check measures the output's error from a corner
+    too close to the waves (a wrong frequency track, a new sea), from a start-up or onset transient, and from
+    low-frequency drift — the errors the integrator itself makes (not the sensor's: both filters see the same
+    input). heave_std = RMS of that difference over RT_STD_PERIODS periods of ``f`` (Hz) / (1 − r^−(n−2)) (the
+    share of the output's error the difference holds); significant heave = 4 × the RMS heave over
+    RT_SIGNAL_PERIODS periods."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    d = np.asarray(heave, float) - np.asarray(check, float)
+    share = 1.0 - RT_STD_CORNER ** -(order - 2)
+    std = np.sqrt(np.maximum(_ema(d * d, fs, RT_STD_PERIODS / f), 0.0)) / share
+    # the signal is the heave less its error: a transient or a drift is not a sea that would excuse it
+    w = max(1, int(round(RT_SIGNAL_PERIODS * fs / f)))
+    c = np.concatenate([[0.0], np.cumsum(np.asarray(heave, float) ** 2 - (d / share) ** 2)])
+    i = np.arange(1, len(d) + 1)
+    power = (c[i] - c[np.maximum(i - w, 0)]) / w  # the last w samples only: a start-up leaves the window
+    return std, 4.0 * np.sqrt(np.maximum(power, 0.0))
+
+
+def _moving_rms(x: np.ndarray, w: int) -> np.ndarray:
+    """Causal RMS about the window mean over the last ``w`` samples (fewer at the start)."""
+    c1 = np.concatenate([[0.0], np.cumsum(x)])
+    c2 = np.concatenate([[0.0], np.cumsum(x * x)])
+    i = np.arange(1, len(x) + 1)
+    lo = np.maximum(i - w, 0)
+    n = i - lo
+    m = (c1[i] - c1[lo]) / n
+    return np.sqrt(np.maximum((c2[i] - c2[lo]) / n - m * m, 0.0))
+
+
+def onset_unsettled(
+    t: np.ndarray, a: np.ndarray, tr: Tracking, f_first: float, settle_periods: float, periods: float = 2.0
+) -> np.ndarray:
+    """Samples (bool) a wave onset leaves unsettled, causal: where the RMS vertical acceleration of the last
+    ``periods`` periods exceeds RT_ONSET × its RMS over the 8 periods before the frequency estimate in force (still
+    water → waves, a sudden sea), the frequency track and the corner no longer describe the motion: unsettled from
+    there until a frequency estimate made ≥ 4 of its own periods after the onset, plus ``settle_periods``."""
+    fs = 1.0 / float(np.median(np.diff(t)))
+    a = np.asarray(a, float)
+    short = _moving_rms(a, max(2, int(round(periods * fs / f_first))))
+    ref = _moving_rms(a, max(2, int(round(8.0 * fs / f_first))))
+    out = np.zeros(len(t), bool)
+    starts = list(tr.start) + [len(t)]
+    k = 0
+    while k < len(tr.start):
+        i0, i1 = int(starts[k]), int(starts[k + 1])
+        level = max(float(ref[i0]), 1e-9)
+        above = np.flatnonzero(short[i0:i1] > RT_ONSET * level)
+        if not len(above):
+            k += 1
+            continue
+        j = i0 + int(above[0])
+        kk = k + 1
+        while kk < len(tr.start) and t[tr.start[kk]] < t[j] + 4.0 / tr.dominant[kk]:
+            kk += 1
+        end = t[tr.start[kk]] + settle_periods / tr.dominant[kk] if kk < len(tr.start) else np.inf
+        out[(t >= t[j]) & (t < end)] = True
+        k = kk
+    return out
+
+
+def _plausibility(
+    h: np.ndarray, std: np.ndarray, settled: np.ndarray, hd: np.ndarray, settled_d: np.ndarray
+) -> dict[str, Any]:
+    """Real-time heave against the delayed (zero-phase) heave on the samples both call settled: RMS difference
+    (m) against the RMS heave_std the real-time output claims; ``consistent`` while ≤ PLAUSIBILITY × it."""
+    m = (settled > 0.5) & (settled_d > 0.5)
+    if m.sum() < 10:
+        return {"compared": "real-time vs delayed heave", "samples": int(m.sum())}
+    diff = float(np.sqrt(np.mean((h - hd)[m] ** 2)))
+    sig = float(np.sqrt(np.mean(std[m] ** 2)))
+    return {
+        "compared": "real-time vs delayed heave",
+        "samples": int(m.sum()),
+        "rms_difference_m": diff,
+        "rms_heave_std_m": sig,
+        "consistent": bool(diff <= PLAUSIBILITY * sig),
+    }
+
+
+def realtime_warnings(
+    h: np.ndarray, std: np.ndarray, settled: np.ndarray, hd: np.ndarray, settled_d: np.ndarray, fraction: float
+) -> list[str]:
+    """The real-time heave's warnings: nothing settled (with the drift, if it drifts), and a disagreement with the
+    delayed heave beyond the stated σ."""
+    out = []
+    if not np.any(settled > 0.5):
+        i = int(np.nanargmax(np.abs(h)))
+        hd_max = float(np.nanmax(np.abs(hd)))
+        text = (
+            f"real-time heave: no sample settled — its error bound heave_std never fell below {fraction:g} × the "
+            f"recent significant heave (median heave_std {float(np.nanmedian(std)):.3g} m); the heave column is not "
+            "to be used"
+        )
+        if abs(h[i]) > 3.0 * hd_max:
+            text += (
+                f"; it drifts to {h[i]:+.2f} m where the zero-phase delayed heave stays within ±{hd_max:.2f} m "
+                "(too short a record, no waves, or an accelerometer/attitude not fit for heave)"
+            )
+        out.append(text)
+        return out
+    p = _plausibility(h, std, settled, hd, settled_d)
+    if p.get("consistent") is False:
+        out.append(
+            f"real-time heave disagrees with the delayed heave by {1000 * p['rms_difference_m']:.1f} mm RMS on its "
+            f"settled samples, beyond {PLAUSIBILITY:g} × its stated σ ({1000 * p['rms_heave_std_m']:.1f} mm RMS)"
+        )
+    return out
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -986,6 +1124,7 @@ def estimate_heave(
     lowpass_ratio: float = 4.0,
     shape: str | None = None,
     smooth_periods: float | None = None,
+    settle_fraction: float = SETTLE_FRACTION,
 ) -> HeaveResult:
     """Heave (m, positive up) from vertical acceleration a_up (m/s², positive up) sampled at times t (s).
 
@@ -994,9 +1133,10 @@ def estimate_heave(
     (0.2) × the first tracked dominant frequency (the value known after ``min_window_s``; the filter is fixed from
     then on). ``realtime``: ``order`` (RT_ORDER), ``shape`` (RT_SHAPE) and ``cutoff_ratio`` (RT_RATIO, × the
     tracked median heave frequency) of the corrected-integrator bank, ``window_s`` default RT_WINDOW_S, corner
-    smoothing ``smooth_periods``; ``cutoff`` is not used. ``delayed_cutoff`` default 0.35 × the
-    whole-record dominant frequency (the delayed output is offline anyway); its zero-phase low-pass ``lowpass``
-    Hz defaults to ``lowpass_ratio`` (4) × that frequency.
+    smoothing ``smooth_periods``; ``cutoff`` is not used; its ``settled`` needs the error bound ``heave_std`` ≤
+    ``settle_fraction`` × the recent significant heave (:func:`realtime_error_bound`). ``delayed_cutoff`` default
+    0.35 × the whole-record dominant frequency (the delayed output is offline anyway); its zero-phase low-pass
+    ``lowpass`` Hz defaults to ``lowpass_ratio`` (4) × that frequency.
     """
     if method not in METHODS:
         raise ImutoolError(f"unknown heave method {method!r}; choose one of {', '.join(METHODS)}")
@@ -1009,6 +1149,8 @@ def estimate_heave(
         order = RT_ORDER if method == "realtime" else 3
     if window_s is None:  # the bank's corner wants a steadier frequency than the KF's lines
         window_s = RT_WINDOW_S if method == "realtime" else 120.0
+    if not 0 < settle_fraction:
+        raise ImutoolError(f"--settle-fraction must be > 0, got {settle_fraction:g}")
     if harmonics < 1 or harmonics > 8:
         raise ImutoolError(f"--harmonics must be 1..8, got {harmonics}")
     t = np.asarray(t, float)
@@ -1078,6 +1220,7 @@ def estimate_heave(
         tr_bank = Tracking(tr.start, tr.freqs, tr.dominant, tr.window_s, np.minimum(tr.median, f_short), tr.spread)
         h, v, info = heave_realtime(t, a, tr_bank, ratio=cutoff_ratio, order=order, shape=shape, smooth_periods=sp)
         corner = info.pop("corner_hz")
+        h_check = info.pop("heave_check")
         fc = float(corner[tr.start[0]])
         # start-up of the bank: its transient after the motion began (the first sample, or a later onset of
         # waves found causally in the data before the first frequency estimate) must have died out
@@ -1145,9 +1288,16 @@ def estimate_heave(
             i0 = tr.start[k]
             i1 = tr.start[k + 1] if k + 1 < len(tr.start) else len(t)
             settled[(t >= t[i0]) & (t < t[i1 - 1] + settle_periods / min(f_short[k], tr.median[k]))] = 0.0
-        t_settle = float(t[np.argmax(settled > 0.5)]) if np.any(settled > 0.5) else float(t[-1])
     # the delayed output needs data on both sides: its first and last 1/f_c seconds are start-up/run-out
     settled_d = ((t >= t[0] + 1.0 / fcd) & (t <= t[-1] - 1.0 / fcd)).astype(float)
+    heave_std = None
+    warnings: list[str] = []
+    if bank_settle is not None:
+        heave_std, hs_now = realtime_error_bound(t, h, h_check, f_first, order)
+        settled[~(heave_std <= settle_fraction * hs_now)] = 0.0
+        settled[onset_unsettled(t, a, tr, f_first, settle_periods)] = 0.0
+        t_settle = float(t[np.argmax(settled > 0.5)]) if np.any(settled > 0.5) else float(t[-1])
+        warnings = realtime_warnings(h, heave_std, settled, hd, settled_d, settle_fraction)
     summary = {
         "method": method,
         "heave_convention": "m, positive UP",
@@ -1166,7 +1316,17 @@ def estimate_heave(
         "nan_samples_filled": nan_filled,
         **info,
     }
-    return HeaveResult(h, v, period, settled, hd, vd, settled_d, summary)
+    if heave_std is not None:
+        summary["settle_rule"] = (
+            f"heave_std ≤ {settle_fraction:g} × the significant heave of the last {RT_SIGNAL_PERIODS:g} periods"
+        )
+        summary["settled_share"] = round(float(np.mean(settled > 0.5)), 3)
+        ok = settled > 0.5
+        summary["heave_std_median_settled_m"] = float(np.median(heave_std[ok])) if ok.any() else None
+        summary["plausibility"] = _plausibility(h, heave_std, settled, hd, settled_d)
+    if warnings:
+        summary["warnings"] = warnings
+    return HeaveResult(h, v, period, settled, hd, vd, settled_d, summary, heave_std)
 
 
 def heave_recording(
@@ -1190,6 +1350,8 @@ def heave_recording(
     res = estimate_heave(rec.time, a, method=method, **options)
     out = Recording(rec.time.copy())
     out.add("heave", res.heave, "m")
+    if res.heave_std is not None:
+        out.add("heave_std", res.heave_std, "m")
     out.add("heave_rate", res.heave_rate, "m/s")
     out.add("heave_delayed", res.heave_delayed, "m")
     out.add("heave_rate_delayed", res.heave_rate_delayed, "m/s")
@@ -1200,6 +1362,11 @@ def heave_recording(
         if name in rec:
             out.add(name, rec[name], rec.units.get(name))
     summary = {**res.summary, **vinfo}
+    if vertical and len(vertical) >= 2 and res.heave_std is not None:
+        pair = _accelerometer_pair(rec, vertical, vertical_sign, method, options)
+        summary["plausibility_accelerometers"] = pair
+        if pair.get("consistent") is False:
+            summary["warnings"] = [*summary.get("warnings", []), pair["warning"]]
     out.meta.update(
         {
             "heave": f"m, positive UP (heave_delayed: zero-phase, latency {res.summary['delayed_latency_s']} s)",
@@ -1209,7 +1376,36 @@ def heave_recording(
             **input_notes(rec.meta),
         }
     )
+    if res.heave_std is not None:
+        out.meta["heave_std"] = "m, one-sigma error bound of heave (the integrator's own; not the sensor's)"
+        out.meta["settled"] = summary["settle_rule"]
+    if summary.get("warnings"):
+        out.meta["warnings"] = list(summary["warnings"])
     return out, summary
+
+
+def _accelerometer_pair(
+    rec: Recording, columns: list[str], sign: str, method: str, options: dict[str, Any]
+) -> dict[str, Any]:
+    """Two vertical accelerometers (the first two of ``columns``): the real-time heave of each, compared (RMS
+    difference, m) on the samples both call settled, against the σ the two claim together
+    (√(σ₁² + σ₂²), RMS); ``consistent`` while ≤ PLAUSIBILITY × it, else ``warning``."""
+    s = 1.0 if sign == "up" else -1.0
+    one = [estimate_heave(rec.time, s * np.asarray(rec[c], float), method=method, **options) for c in columns[:2]]
+    m = (one[0].settled > 0.5) & (one[1].settled > 0.5)
+    out: dict[str, Any] = {"compared": f"real-time heave of {columns[0]} vs {columns[1]}", "samples": int(m.sum())}
+    if m.sum() < 10 or one[0].heave_std is None or one[1].heave_std is None:
+        return out
+    diff = float(np.sqrt(np.mean((one[0].heave - one[1].heave)[m] ** 2)))
+    sig = float(np.sqrt(np.mean((one[0].heave_std ** 2 + one[1].heave_std ** 2)[m])))
+    out.update({"rms_difference_m": diff, "rms_heave_std_m": sig, "consistent": bool(diff <= PLAUSIBILITY * sig)})
+    if not out["consistent"]:
+        out["warning"] = (
+            f"the real-time heaves of {columns[0]} and {columns[1]} differ by {1000 * diff:.1f} mm RMS on the settled "
+            f"samples, beyond {PLAUSIBILITY:g} × the σ they claim ({1000 * sig:.1f} mm): a sensor's gain, axis or "
+            "lever (roll × its offset) is not what the heave assumes"
+        )
+    return out
 
 
 def _why_no_vertical(rec: Recording, vertical: list[str] | None, vinfo: dict[str, Any]) -> str:
@@ -1231,7 +1427,8 @@ HEAVE_KERNELS: tuple[Entry, ...] = (
     (
         "imutool.heave",
         "_bank_kernel",
-        "float64[::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], float64[::1]",
+        "float64[::1], float64[:, :, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1], int64[::1], "
+        "float64[::1], int64",
     ),
 )
 

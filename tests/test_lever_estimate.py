@@ -66,7 +66,8 @@ def test_no_estimate_where_it_does_not_belong():
     assert "lever_arm_estimate" not in zero.summary and zero.recording.meta["lever_arm_m"] == [0.0, 0.0, 0.0]
     short = run_filter(_bridge(100.0))
     assert short.summary["lever_arm_estimate"]["refused"].startswith("100 s of data")
-    assert not any("could be estimated" in w for w in short.summary.get("warnings", []))
+    # refused for want of data: said as a warning too, not only in the summary (issue 48)
+    assert any("none estimated (100 s of data" in w for w in short.summary["warnings"]), short.summary["warnings"]
 
 
 def test_an_unexcited_direction_is_left_at_zero():
@@ -141,3 +142,42 @@ def test_a_gap_in_the_recording_does_not_upset_the_estimate():
     assert "refused" not in est, est
     assert np.allclose(est["lever_arm_m"], whole["lever_arm_m"], atol=1.0), (est, whole)
     assert abs(est["gyro_scale_error"]) < 0.05, est
+
+
+def _random_ships(n: int, seed: int):
+    """``n`` ships of varied sea, heave, sway, accelerometer bias and lever arm (300 or 600 s)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        arm = (float(rng.uniform(-25, 10)), float(rng.uniform(-5, 5)), float(rng.uniform(-35, -3)))
+        yield (
+            arm,
+            simulate(
+                "ship-at-sea",
+                duration=float(rng.choice([300.0, 600.0])),
+                seed=int(rng.integers(1000)),
+                lever_arm=arm,
+                roll_significant_deg=float(rng.uniform(5, 30)),
+                heave_m=float(rng.uniform(0.5, 4)),
+                heave_period=float(rng.uniform(5, 12)),
+                sway_m=float(rng.uniform(0.2, 1.5)),
+                sway_period=float(rng.uniform(5, 12)),
+                accel_bias_mg=float(rng.uniform(0.5, 10)),
+            ),
+        )
+
+
+def test_the_claimed_sigma_covers_the_error():
+    """Issue 48: the bridge's x came out 4.1 m off with ±1.0 m claimed. The residual and the columns are both narrow
+    band at the wave periods; their chance correlation is what errs. With the Newey–West σ, |error| ≤ 2σ for ≥ 90 %
+    of the components (94 % on 58 fresh ships, 95 % on the 114 it was set on; 44 % before)."""
+    z = []
+    for arm, rec in _random_ships(16, seed=2026):
+        est = run_filter(rec).summary["lever_arm_estimate"]
+        if "refused" in est:
+            continue
+        z.extend(np.abs(np.array(est["lever_arm_m"]) - arm) / np.maximum(est["sd_m"], 1e-9))
+    assert len(z) >= 36
+    assert np.mean(np.array(z) <= 2.0) >= 0.85, np.round(z, 1)
+    bridge = run_filter(_bridge()).summary["lever_arm_estimate"]  # the issue's case
+    err = np.abs(np.array(bridge["lever_arm_m"]) - (-12.0, 0.0, -30.0))
+    assert np.all(err <= 2.0 * np.array(bridge["sd_m"]) + 0.05), (bridge, err)

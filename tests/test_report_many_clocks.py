@@ -22,7 +22,7 @@ from formats import Recording
 from formats.nmea import checksum
 from imutool.cli import cli
 from imutool.report.route import run_heading_report, run_inclinometer_report
-from imutool.roll import roll_cycles
+from imutool.roll import MOTION_TABLE, roll_cycles
 from imutool.sim.programmes import irregular_roll
 
 N_S = 624  # seconds of log: 624 one-second PSXN,23 samples per unit
@@ -161,7 +161,7 @@ def test_inclinometer_on_logs_equals_roll_only_csvs(logs):
         assert inp["file_rows"] > 4 * N_S and len(inp["streams"]) == 4
     assert "PSXN,23" in ev["conventions"]["time_base"]
     # periods judged are roll.py's on the reference's own roll samples
-    cyc = roll_cycles(ta, ra, 0.5, crest_band_deg=0.05)
+    cyc = roll_cycles(ta, ra, 0.5, crest_band_deg=0.05, **MOTION_TABLE)
     own = cyc.period_s[np.isfinite(cyc.period_s)]
     rows = it["roll_period"]["rows"]
     assert len(rows) >= 20

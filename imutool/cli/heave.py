@@ -215,6 +215,13 @@ def heave_route(
     help="Residual Δh random walk (fraction of std per √s).",
 )
 @click.option(
+    "--settle-fraction",
+    type=float,
+    default=default_of(estimate_heave, "settle_fraction"),
+    show_default=True,
+    help="Real-time heave: settled only while its error bound heave_std ≤ this × the recent significant heave.",
+)
+@click.option(
     "--nmea",
     "nmea_path",
     default=None,
@@ -255,6 +262,8 @@ def heave_route(
 def heave_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
     """Heave (m, positive UP), heave rate, dominant period, settled flag and a delayed zero-phase heave."""
     res = heave_route(quiet=quiet, on_input=note_input, **options)
+    for w in res.summary.get("warnings") or []:  # the inputs' own warnings were said as they were read
+        click.echo(f"warning: {w}", err=True)
     emit_summary(res.summary, as_json, quiet)
 
 
