@@ -111,10 +111,17 @@ def iter_chunks(path: str | os.PathLike, chunk_rows: int = 500_000, **options) -
     if kind == "csv":
         from .csv import iter_csv
 
-        return iter_csv(path, chunk_rows=chunk_rows, **options)
+        return _restored(iter_csv(path, chunk_rows=chunk_rows, **options))
     if kind == "parquet":
         from .parquet import iter_parquet
 
-        return iter_parquet(path, chunk_rows=chunk_rows)
+        return _restored(iter_parquet(path, chunk_rows=chunk_rows))
     rec = read(path, **options)
     return (rec.select(slice(i, i + chunk_rows)) for i in range(0, len(rec), chunk_rows))
+
+
+def _restored(chunks: Iterator[Recording]) -> Iterator[Recording]:
+    """Each chunk of a many-clock file with its streams' rows (:meth:`Recording.restore_streams`)."""
+    for chunk in chunks:
+        chunk.restore_streams()
+        yield chunk

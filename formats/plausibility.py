@@ -648,6 +648,11 @@ def check_recording(rec: Recording, mounting: str | None = None, kind: str | Non
     ``kind``: the input's format (:func:`formats.kind_of`); a bag's units and axes are named as the bag's. Long
     recordings are checked on :func:`sample_rows` (about 60 000 rows in six stretches)."""
     rep = PlausibilityReport()
+    if rec.multi_clock:  # sensors of several streams: compared on one sensor's clock (Recording.on_clock)
+        first = next((c for c in ("accel", "gyro", "mag") if c in rec.channels), None)
+        if first is None:
+            return rep
+        rec = rec.on_clock(first)
     rec = sample_rows(rec)
     check_accel_units(rec, rep, kind)
     check_gyro_units(rec, rep, kind)

@@ -382,22 +382,75 @@ class Recording:
                     m |= f.any(axis=1) if f.ndim > 1 else f
             self.stream_rows[k] = m
 
+    def held(self, name: str, t: np.ndarray, max_age_steps: float = 3.0) -> np.ndarray:
+        """Channel ``name`` at times ``t`` (s): its latest own sample at or before each time (sample and hold, never
+        another stream's row); NaN before its first sample and where that sample is older than ``max_age_steps``
+        × the channel's median step (a gap is not bridged)."""
+        ts, a = self.series(name)
+        a = np.asarray(a, dtype=float)
+        t = np.asarray(t, dtype=float)
+        out = np.full((len(t),) + a.shape[1:], np.nan)
+        if ts.size == 0:
+            return out
+        idx = np.searchsorted(ts, t, side="right") - 1
+        ok = idx >= 0
+        if ts.size > 1:
+            d = np.diff(ts)
+            d = d[d > 0]
+            if d.size:
+                ok &= (t - ts[np.maximum(idx, 0)]) <= max_age_steps * float(np.median(d))
+        out[ok] = a[idx[ok]]
+        return out
+
+    def on_clock(self, name: str, max_age_steps: float = 3.0) -> Recording:
+        """The recording on the clock of one stream (``name``: a stream or one of its channels): that stream's
+        channels on their own samples, every other channel held at its latest own sample at or before each time
+        (:meth:`held`), and ``meta['resampled']`` saying which channels were held onto which clock. A
+        single-clock recording returns itself. The one way a command puts channels of several clocks on a
+        common grid."""
+        if not self.multi_clock:
+            return self
+        base = self.stream(name)
+        key = base.meta.get("stream", "rows in no stream")
+        moved = [c for c in self.channels if c not in base.channels]
+        for c in moved:
+            base.add(c, self.held(c, base.time, max_age_steps), self.units.get(c), columns=self.columns.get(c))
+        if moved:
+            base.meta["resampled"] = (
+                f"{', '.join(moved)} held at their latest own sample at or before each {key} time "
+                f"(none older than {max_age_steps:g} of their own steps)"
+            )
+        return base
+
     def stream_summary(self) -> dict[str, dict[str, Any]]:
         """Per stream: its channels, samples, first and last time (s), duration (s) and median rate (Hz)."""
         out: dict[str, dict[str, Any]] = {}
         for k, chans in self.streams.items():
             t = self.time[self.own_rows(k)]
-            d = np.diff(t)
-            d = d[d > 0]
+            tm = self.stream_timing(k)
             out[k] = {
                 "channels": list(chans),
                 "samples": int(t.size),
                 "start_s": float(t[0]) if t.size else float("nan"),
                 "end_s": float(t[-1]) if t.size else float("nan"),
                 "duration_s": float(t[-1] - t[0]) if t.size > 1 else 0.0,
-                "rate_hz": float(1.0 / np.median(d)) if d.size else float("nan"),
+                "rate_hz": float(tm["rate_hz"]) if tm.get("rate_hz") else float("nan"),
+                "step_s": tm.get("step_s"),
+                "bursty": bool(tm.get("bursty")),
+                "gaps": int(tm.get("gaps", 0)),
+                "missing_s": float(tm.get("missing_s", 0.0)),
             }
         return out
+
+    def stream_timing(self, name: str, gap_factor: float = 3.0, max_gaps: int = 5) -> dict[str, Any]:
+        """Rate, bursts and gaps of a stream (or a channel's stream) on its own times
+        (:func:`formats.timing.stream_timing`; no gap shorter than the resolution its reader states in
+        ``meta['stream_time_resolution_s']``, e.g. NMEA sentences placed by their position between fixes)."""
+        from .timing import stream_timing
+
+        key = name if name in self.stream_rows else (self.stream_of(name) or name)
+        res = float((self.meta.get("stream_time_resolution_s") or {}).get(key, 0.0) or 0.0)
+        return stream_timing(self.time[self.own_rows(name)], gap_factor, max_gaps, min_gap_s=res)
 
     @property
     def duration(self) -> float:
@@ -496,7 +549,9 @@ class Recording:
             same = np.diff(t) == 0
             nd = int(np.count_nonzero(same))
             rep.duplicates = nd
-            if nd:
+            if nd and rec.multi_clock:  # rows of different streams at one time are not duplicates
+                rec = _collapse_streams(rec, rep, duplicates, src)
+            elif nd:
                 idx = np.flatnonzero(same)
                 conflicting = 0
                 for a in rec.channels.values():
@@ -545,10 +600,9 @@ class Recording:
                 ts = rec.time[rec.stream_rows[k]]
                 if ts.size < 2:
                     continue
-                d = np.diff(ts)
-                med = float(np.median(d))
-                gi = np.flatnonzero(d > gap_factor * med)
-                rep.stream_gaps[k] = [(float(ts[i]), float(d[i])) for i in gi]
+                tm = rec.stream_timing(k, gap_factor, max_gaps=ts.size)
+                med = float(tm.get("step_s") or np.median(np.diff(ts)))
+                rep.stream_gaps[k] = [(float(a), float(b)) for a, b in tm.get("first_gaps", [])]
                 rep.stream_median_dt[k] = med
                 if ts.size > most:
                     most, rep.median_dt, rep.gaps = ts.size, med, rep.stream_gaps[k]
@@ -654,6 +708,66 @@ def parse_mounting(spec: str) -> tuple[str, tuple[float, float, float]]:
     return remap, angles
 
 
+def _collapse_streams(rec: Recording, rep: TimeReport, duplicates: str, src: str) -> Recording:
+    """Rows sharing a time in a many-clock recording become one: a channel takes its first own sample there
+    (``drop``) or the mean of its own samples (``mean``); only two samples of one stream at one time are
+    duplicates (counted in ``rep``; ``error`` refuses them). Rows of different streams merged are counted too."""
+    t = rec.time
+    first = np.concatenate([[True], np.diff(t) != 0])
+    group = np.cumsum(first) - 1
+    ng = int(group[-1]) + 1
+    dup = conflicting = 0
+    for m in rec.stream_rows.values():
+        g = group[m]
+        dup += int(np.count_nonzero(np.diff(g) == 0))
+    rep.duplicates = dup
+    if dup and duplicates == "error":
+        raise ImutoolError(
+            f"{dup} duplicate timestamps within a stream; use --duplicates drop|mean to accept", path=src
+        )
+    if duplicates not in ("drop", "mean", "error"):
+        raise ImutoolError(f"unknown duplicates policy {duplicates!r} (drop, mean, error)")
+    chans = {}
+    for k, a in rec.channels.items():
+        own = np.flatnonzero(rec.own_rows(k))
+        a2 = a.reshape(len(a), -1).astype(float)
+        if duplicates == "mean":
+            cnt = np.bincount(group[own], minlength=ng).astype(float)
+            v = np.stack([np.bincount(group[own], a2[own, j], minlength=ng) for j in range(a2.shape[1])], axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                v = np.where(cnt[:, None] > 0, v / np.maximum(cnt, 1)[:, None], np.nan)
+        else:
+            fo = np.full(ng, len(a))
+            np.minimum.at(fo, group[own], own)  # the earliest own row of each time
+            v = np.where((fo < len(a))[:, None], a2[np.minimum(fo, len(a) - 1)], np.nan)
+            g = group[own]
+            rep_i = np.flatnonzero(np.diff(g) == 0)
+            if rep_i.size:
+                x, y = a2[own[rep_i]], a2[own[rep_i + 1]]
+                neq = ~((x == y) | (np.isnan(x) & np.isnan(y)))
+                conflicting = max(conflicting, int(np.count_nonzero(neq.any(axis=1))))
+        chans[k] = v.reshape((-1,) + a.shape[1:])
+    rep.duplicates_conflicting = conflicting
+    out = Recording(
+        t[first],
+        chans,
+        dict(rec.units),
+        copy.deepcopy(rec.meta),
+        {k: list(v) for k, v in rec.columns.items()},
+        {k: np.bincount(group, m.astype(float), minlength=ng) > 0 for k, m in rec.stream_rows.items()},
+    )
+    merged = len(rec) - ng - dup
+    if merged:
+        rep.actions.append(f"joined {merged} rows of different streams sharing a timestamp into one row each")
+    if dup:
+        how = "averaged with" if duplicates == "mean" else "dropped after"
+        rep.actions.append(
+            f"{dup} samples repeating a timestamp of their own stream {how} the first ({conflicting} with different "
+            "data)"
+        )
+    return out
+
+
 def join_streams(recordings: list[Recording], names: list[str], prefixes: list[str] | None = None) -> Recording:
     """Join recordings that keep their own clocks into one many-clock recording, without resampling.
 
@@ -705,7 +819,8 @@ def merge(
     clock: a recording (its time base), an array of times, a rate in Hz (uniform grid over the common time
     span), or None (the time base of the first recording). Only the time span all inputs cover is kept
     (no extrapolation). Quaternion channels are interpolated component-wise and renormalised; channels whose
-    names clash get the given prefixes (or ``r1_``, ``r2_``...). Samples next to a NaN stay NaN.
+    names clash get the given prefixes (or ``r1_``, ``r2_``...). Samples next to a NaN stay NaN. A many-clock
+    input's channel is interpolated from its own samples (another stream's row is not a NaN of it).
     """
     if not recordings:
         raise ImutoolError("merge: no recordings given")
@@ -731,8 +846,9 @@ def merge(
             if name in seen:
                 new = (prefixes[i] if prefixes else f"r{i + 1}_") + name
             seen.add(new)
-            a2 = a.reshape(len(a), -1).astype(float)
-            cols = np.stack([np.interp(t, r.time, a2[:, j]) for j in range(a2.shape[1])], axis=1)
+            ts, a_own = r.series(name)  # many clocks: from the channel's own samples only
+            a2 = a_own.reshape(len(a_own), -1).astype(float)
+            cols = np.stack([np.interp(t, ts, a2[:, j]) for j in range(a2.shape[1])], axis=1)
             if a.ndim == 1:
                 cols = cols[:, 0]
             elif a.shape[1] == 4 and name.endswith("q"):

@@ -319,7 +319,7 @@ def _write_marker(job: Job, result: JobResult, signature: str | None) -> None:
 class Call:
     """A runner calling a library function the way the commands do: ``func(job.input, job.output, **kwargs)``.
 
-    E.g. ``Call(imutool.filtering.run_filter, smooth=True)``, ``Call(imutool.heave.run_heave)``,
+    E.g. ``Call(imutool.filtering.run_filter, smooth=True)``, ``Call(imutool.routes.heave.run_heave)``,
     ``Call(imutool.convert.run_convert)``, ``Call(imutool.calibrate.calibrate_mag, method="swing")``. The result's
     ``full_summary()`` (a :class:`imutool.routes.RouteResult`: what the command's ``--json`` prints), else its
     ``summary`` (or the dict returned) is the job's summary. Picklable when ``func`` is a module-level function,

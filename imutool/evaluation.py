@@ -26,7 +26,7 @@ from formats.errors import ImutoolError
 from formats.frames import angle_diff_deg, quat_multiply, quat_to_euler
 from formats.recording import require_samples
 from imutool.clock import Clock
-from imutool.loading import FLAGS, how_loaded, reference_text, split_reference_options
+from imutool.loading import FLAGS, how_loaded, one_clock, reference_text, split_reference_options
 from imutool.refframe import frame_warning, parse_ref_frame, reference_to_ned, vertical_disagreement
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult, load_input, load_reference
 
@@ -133,6 +133,14 @@ def evaluate(
             warnings.append(w)
         if align is not None:
             est, ref, summary["align_heading"] = align_reference_heading(est, ref, align)
+    if channel in ("heave", "position", "quaternion") and (est.multi_clock or ref.multi_clock):
+        drv = {"heave": "heave", "position": "pos", "quaternion": "q"}[channel]
+        same = ref is est
+        est = one_clock(est, (drv,))
+        ref = est if same else one_clock(ref, (f"ref_{drv}", drv))
+        notes += [
+            f"{w}: {r.meta['clock']['note']}" for w, r in (("estimate", est), ("reference", ref)) if "clock" in r.meta
+        ]
     if channel == "heave":
         signs = {
             "estimate": str(est.meta.get("heave_positive", "up")),
@@ -387,29 +395,26 @@ def evaluate_angles(est: Recording, ref: Recording, max_lag_s: float) -> dict[st
     counts them)."""
     from imutool.metrics import GIMBAL_PITCH_DEG, evaluate_angle, interp_to, unwrap_deg
 
-    raw = _raw_angles(ref)
-    gimbal = None
-    if "pitch" in est.channels and "ref_pitch" in ref.channels:
-        pr = interp_to(est.time, ref.time, ref["ref_pitch"]) if _apart(est, ref) else ref["ref_pitch"]
-        with np.errstate(invalid="ignore"):
-            g = (np.abs(pr) > GIMBAL_PITCH_DEG) | (np.abs(np.asarray(est["pitch"], float)) > GIMBAL_PITCH_DEG)
-        gimbal = g if g.any() else None
+    sensors = ref.on_clock("accel") if ref.multi_clock and "accel" in ref.channels else ref
+    raw = _raw_angles(sensors)
+    pitches = [x.series(n) if n in x.channels else None for x, n in ((est, "pitch"), (ref, "ref_pitch"))]
     out: dict[str, Any] = {}
     for name in ("roll", "pitch", "heading"):
         if name not in est.channels or f"ref_{name}" not in ref.channels:
             continue
+        # many clocks: each angle on its own samples (never another stream's row as a missing sample)
+        te, e = est.series(name)
+        tr, rv = ref.series(f"ref_{name}")
+        gimbal = None
+        if name != "pitch" and all(p is not None for p in pitches):
+            pe, pr = (p[1] if np.array_equal(p[0], te) else interp_to(te, p[0], p[1]) for p in pitches)
+            with np.errstate(invalid="ignore"):
+                g = (np.abs(pr) > GIMBAL_PITCH_DEG) | (np.abs(np.asarray(pe, float)) > GIMBAL_PITCH_DEG)
+            gimbal = g if g.any() else None
         r = raw.get(name)
         if r is not None:
-            r = interp_to(est.time, ref.time, unwrap_deg(r))
-        st = evaluate_angle(
-            est.time,
-            est[name],
-            ref.time,
-            ref[f"ref_{name}"],
-            max_lag_s=max_lag_s,
-            raw=r,
-            exclude=gimbal if name != "pitch" else None,
-        )
+            r = interp_to(te, sensors.time, unwrap_deg(r))
+        st = evaluate_angle(te, e, tr, rv, max_lag_s=max_lag_s, raw=r, exclude=gimbal)
         out[name] = {k: (round(v, 5) if isinstance(v, float) else v) for k, v in st.items()}
     return out
 

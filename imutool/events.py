@@ -51,7 +51,7 @@ from formats import Recording
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
 from imutool.batch import expand_inputs
-from imutool.loading import LOAD_OPTIONS
+from imutool.loading import LOAD_OPTIONS, one_clock
 from imutool.roll import heel_of, roll_cycles
 from imutool.routes import OnInput, RouteResult, load_input
 
@@ -405,6 +405,7 @@ def analyse(
         raise ImutoolError(f"events: unknown setting(s) {', '.join(sorted(unknown))}")
     s = {**DEFAULTS, **settings}
     src = path or str(rec.meta.get("source", "recording"))
+    rec = one_clock(rec, (roll_channel,) if roll_channel else ("heel", "roll"))  # many clocks: the heel's samples
     heel = heel_of(rec, src, roll_channel)
     start = utc_start_of(rec, utc_start)
     cyc = roll_cycles(rec.time, heel, hysteresis_deg=s["hysteresis_deg"])
@@ -419,7 +420,7 @@ def analyse(
         for asked in (pitch_channel, heave_channel):
             if asked:
                 raise ImutoolError(f"no channel {asked!r}; has {', '.join(rec.channels)}", path=src)
-    notes = []
+    notes = [rec.meta["clock"]["note"]] if "clock" in rec.meta else []
     if wave_name is None:
         notes.append("no pitch or heave channel: parametric roll not assessed")
         para: list[dict[str, Any]] = []

@@ -52,7 +52,7 @@ from imutool.attitude.warm import warm_filter_kernels
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import STREAMABLE, chunk_writer, expected_rows
-from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, mapping_options, read_input
+from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, mapping_options, one_clock, read_input
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
 
@@ -115,6 +115,9 @@ def streams(
         except ImutoolError:
             pass  # unreadable: decided by the file size; reading it will say what is wrong
     return size > stream_mb * 1e6
+
+
+IMU_CLOCK = ("gyro", "accel", "mag")  # the stream whose samples a many-clock input is filtered on (first present)
 
 
 def run_filter(
@@ -208,6 +211,7 @@ def run_filter(
         rec, validation = load_recording(name, strict=strict, **load_options)
         if on_input is not None and len(rec):
             on_input(name, validation)
+    rec = one_clock(rec, IMU_CLOCK, [validation])  # many clocks: the IMU's own samples, the others held
     summary: dict[str, Any] = {"input": name, "output": None if output is None else os.fspath(output), "rows": len(rec)}
     if method == "ekf":
         if gnss is not None and use_gnss:
@@ -597,6 +601,9 @@ def stream_ekf(
             if len(chunk) == 0:
                 continue
             t_last = float(chunk.time[-1])
+            if chunk.multi_clock:  # many clocks: the IMU's own samples (others held within the chunk)
+                chunk = one_clock(chunk, IMU_CLOCK)
+                summary.setdefault("clock", chunk.meta.get("clock"))
             chunk = with_log_speed(checks.prepare(chunk), log_speed)
             for ch in ("gyro", "accel"):
                 if ch not in chunk.channels:

@@ -114,6 +114,8 @@ def summarize(
         "column_mapping": None,
         "validation_actions": list(rep.actions) + notes,
     }
+    if rec.multi_clock:
+        _per_stream(rec, summary)
     if rec_raw.meta.get("sentences"):  # an NMEA log: every sentence named and counted, read or not
         summary["nmea_sentences"] = sentence_summary(rec_raw.meta)
     bag = rec_raw.meta.get("bag")
@@ -129,6 +131,30 @@ def summarize(
     return summary
 
 
+def _per_stream(rec: Recording, summary: dict[str, Any]) -> None:
+    """A many-clock recording (formats.Recording): rate, samples, duration and gaps of each stream on its own
+    samples; the table's rows (the union of every stream's times) have no rate or gaps of their own, so the
+    top-level ``rate_hz`` and ``step_s`` are null and ``gaps`` sums the streams' gaps."""
+    streams = rec.stream_summary()
+    first: list[dict[str, Any]] = []
+    for k, v in streams.items():
+        tm = rec.stream_timing(k, max_gaps=10)
+        v["timing"] = tm
+        first += [{"stream": k, "start_s": a, "length_s": b} for a, b in tm.get("first_gaps", [])]
+    summary["streams"] = streams
+    summary["rate_hz"] = None
+    summary["step_s"] = {"median": None, "min": None, "max": None, "note": "per stream: see streams"}
+    summary["gaps"] = {
+        "count": int(sum(v["gaps"] for v in streams.values())),
+        "missing_s": float(sum(v["missing_s"] for v in streams.values())),
+        "first": sorted(first, key=lambda g: g["start_s"])[:10],
+        "rule": "per stream, on its own samples (see streams)",
+    }
+    for name, c in summary["channels"].items():
+        c["samples"] = int(np.count_nonzero(rec.own_rows(name)))
+        c["stream"] = rec.stream_of(name)
+
+
 def _own_timing(rec: Recording, meta: dict[str, Any], summary: dict[str, Any]) -> None:
     """Rates and gaps on each stream's own times: per NMEA sentence type (the reader's ``sentence_timing``), per
     channel whose samples sit on rows of their own (fewer than 90 % of the rows), and the rows themselves when
@@ -140,7 +166,9 @@ def _own_timing(rec: Recording, meta: dict[str, Any], summary: dict[str, Any]) -
         return
     per_channel: dict[str, Any] = {}
     for name, a in rec.channels.items():
-        if st or a.dtype.kind != "f":  # an NMEA log: its sentence types say it
+        if (
+            st or a.dtype.kind != "f" or rec.multi_clock
+        ):  # an NMEA log or streams: they say it  # an NMEA log: its sentence types say it
             continue
         ok = np.isfinite(a.reshape(len(a), -1)).any(axis=1)
         if 2 <= ok.sum() < 0.9 * len(rec):
@@ -148,7 +176,7 @@ def _own_timing(rec: Recording, meta: dict[str, Any], summary: dict[str, Any]) -
     if per_channel:
         summary["channel_timing"] = per_channel
     rows = stream_timing(rec.time)
-    if rows["bursty"] and not st:
+    if rows["bursty"] and not st and not rec.multi_clock:
         summary["rate_hz"] = rows["rate_hz"]
         summary["bursts"] = rows["burst"]
         summary["gaps"] = {

@@ -346,6 +346,7 @@ def merge_with(
         return merged, {"files": files[1:], "warnings": warnings}
     merged = formats.merge([rec, *others], rec)
     kept = len(merged)
+    meta.pop("streams", None)  # a many-clock input: every channel now interpolated onto each of its rows
     meta["merged"] = {
         "time_base": f"{path} (its {len(rec)} sample times; the others interpolated linearly onto them: this command "
         "needs one grid)",
@@ -534,7 +535,39 @@ class ChunkChecks:
             raise ImutoolError(strict_message(warnings), path=self.path)
 
 
-INPUT_NOTES = ("warnings", "validation")
+INPUT_NOTES = ("warnings", "validation", "clock")
+
+
+def one_clock(
+    rec: Recording, drivers: tuple[str, ...] | list[str], inputs: list[dict[str, Any]] | None = None
+) -> Recording:
+    """A many-clock input (formats.Recording: several streams) on the clock of the first of ``drivers`` it holds:
+    that stream's own samples, every other channel held at its latest own sample at or before each of them
+    (:meth:`formats.Recording.on_clock`) — what a command whose estimator needs one time base computes on, never
+    another stream's row as a missing sample. Says so in ``meta['clock']`` (carried into outputs by
+    :func:`input_notes`) and in the last report of ``inputs``. A single-clock recording, or none of ``drivers``
+    present (the command's own check names what is missing), is returned as it is."""
+    if not rec.multi_clock:
+        return rec
+    by_column = {col: name for name, cols in rec.columns.items() for col in cols}
+    drv = next((c if c in rec.channels else by_column[c] for c in drivers if c in rec.channels or c in by_column), None)
+    if drv is None:
+        return rec
+    out = rec.on_clock(drv)
+    key = rec.stream_of(drv) or drv
+    note: dict[str, Any] = {
+        "stream": key,
+        "samples": len(out),
+        "rows_in_table": len(rec),
+        "note": f"computed on the {key} stream's own {len(out)} samples (of {len(rec)} rows of {len(rec.streams)} "
+        "streams)",
+    }
+    if out.meta.get("resampled"):
+        note["resampled"] = out.meta["resampled"]
+    out.meta["clock"] = note
+    if inputs:
+        inputs[-1]["clock"] = note
+    return out
 
 
 def input_notes(meta: dict[str, Any]) -> dict[str, Any]:

@@ -30,6 +30,7 @@ Honesty rules:
 
 from __future__ import annotations
 
+import heapq
 import inspect
 import math
 import os
@@ -204,12 +205,54 @@ class RatePlan:
         )
 
 
-def input_rate(rec: Recording) -> float:
-    """Median sample rate (Hz) of the recording."""
+def input_rate(rec: Recording, sentences: list[str] | tuple[str, ...] | None = None) -> float:
+    """Median sample rate (Hz) of the recording; of a many-clock recording, that of the fastest stream that
+    drives one of ``sentences`` (each sentence on its own channel's clock, :func:`clock_groups`), never the
+    table's rows."""
+    if rec.multi_clock and sentences:
+        rates = [rec.stream_timing(key).get("rate_hz") or 0.0 for key, _, _ in clock_groups(rec, sentences) if key]
+        return max(rates) if rates and max(rates) > 0 else 1.0
     if len(rec) < 2:
         return 1.0
     dt = float(np.median(np.diff(rec.time)))
     return 1.0 / dt if dt > 0 else 1.0
+
+
+# the channel whose own samples time each sentence (first present name wins), for a many-clock recording
+_DRIVERS: dict[str, tuple[str, ...]] = {
+    "HRM": ("heel", "roll"),
+    "XDR": ("heel", "roll", "pitch"),
+    "HDG": ("heading", "heading_true", "heading_mag", "heading_sensor"),
+    "HDT": ("heading", "heading_true", "heading_mag", "heading_sensor"),
+    "THS": ("heading", "heading_true", "heading_mag", "heading_sensor"),
+    "ROT": ("rot", "gyro", "heading", "heading_true", "heading_mag", "heading_sensor"),
+    "PASHR": ("heel", "roll", "pitch", "heading", "heading_true", "heading_mag", "heave"),
+    "TSS1": ("heave",),
+}
+
+
+def clock_groups(
+    rec: Recording, sentences: list[str] | tuple[str, ...]
+) -> list[tuple[str | None, Recording, list[str]]]:
+    """The sentences grouped by the stream of the channel that drives them (:data:`_DRIVERS`), each group with
+    the recording on that stream's clock (:meth:`formats.Recording.on_clock`: the stream's own samples, other
+    channels held at their latest own sample): (stream, recording, sentences). A single-clock recording is one
+    group (stream None)."""
+    sents = [s.strip().upper() for s in sentences if s.strip()]
+    if not rec.multi_clock:
+        return [(None, rec, sents)]
+    groups: dict[str, list[str]] = {}
+    for s in sents:
+        driver = next((c for c in _DRIVERS.get(s, ()) if c in rec.channels), None)
+        key = (rec.stream_of(driver) or driver) if driver else None
+        groups.setdefault(key or "", []).append(s)
+    out = []
+    for key, ss in groups.items():
+        if not key:  # no channel for them: the checks of nmea_lines name what is missing
+            out.append((None, rec.on_clock(next(iter(rec.stream_rows))), ss))
+            continue
+        out.append((key, rec.on_clock(key), ss))
+    return out
 
 
 def plan_rate(row_bytes: int, baud: int, rate_hz: float | None, input_hz: float, fill: float = 0.9) -> RatePlan:
@@ -326,6 +369,15 @@ def nmea_lines(
         raise ImutoolError(f"THS mode {ths_mode!r}: use auto or one of A, E, M, S, V")
     n = len(rec)
     if n == 0:
+        return
+    if rec.multi_clock:  # each sentence on its own channel's clock, then all of them in time order
+        off = utc_start.timestamp() - float(rec.time[0]) if utc_start is not None else utc_offset_s(rec)
+        opts = {k: v for k, v in locals().items() if k in LINE_OPTIONS}
+        gens = []
+        for _, sub, ss in clock_groups(rec, sents):
+            o = dict(opts, utc_start=None if off is None else datetime.fromtimestamp(sub.time[0] + off, timezone.utc))
+            gens.append(nmea_lines(sub, ss, rate_hz, **o))
+        yield from heapq.merge(*gens, key=lambda x: x[0])
         return
     t = rec.time
     tk = {
@@ -505,6 +557,8 @@ def row_bytes(rec: Recording, sentences: list[str] | tuple[str, ...], sample_row
     """Largest number of bytes (with CR/LF) one output instant takes, over about ``sample_rows`` instants spread
     evenly over the whole recording (fields fill in as it goes: HRM's period and peak hold, ...), + 2 bytes a
     sentence of margin for wider numbers."""
+    if rec.multi_clock:  # sentences on different clocks may fall on one instant: count them all together
+        return sum(row_bytes(sub, ss, sample_rows, **kw) for _, sub, ss in clock_groups(rec, sentences))
     dur = float(rec.time[-1] - rec.time[0]) if len(rec) > 1 else 0.0
     probe = None if len(rec) <= sample_rows or dur <= 0 else sample_rows / dur
     per: dict[float, int] = {}
@@ -531,6 +585,7 @@ def header_lines(
     variation_deg: float | None,
     utc: str | None,
     talkers: dict[str, str],
+    clocks: str | None = None,
 ) -> list[str]:
     """The ``#`` header block of an NMEA log written by imutool (conventions, flags, rate; read back as
     comments by imutool's reader)."""
@@ -544,6 +599,8 @@ def header_lines(
         "angles deg; roll + starboard down; pitch + bow up; heading clockwise from north; ROT deg/min + to starboard",
         f"heave: m, positive {heave_positive.upper()} (--heave-positive {heave_positive}; TSS1 defines + up)",
     ]
+    if clocks:
+        lines.append(f"clocks (many-clock input: each sentence on its channel's own samples): {clocks}")
     if any(s in sentences for s in ("HDG", "HDT", "THS", "PASHR")):
         dev = f"card {card_from}" if card_from else ew(deviation_deg)
         lines.append(
@@ -590,6 +647,7 @@ class LogPlan:
     rate: RatePlan
     utc: str | None
     header: list[str]
+    clocks: str | None = None  # a many-clock input: which stream each sentence was taken on
 
 
 def plan_log(
@@ -610,7 +668,7 @@ def plan_log(
     nb = row_bytes(rec, sents, **kw)
     if nb == 0:
         return None
-    plan = plan_rate(nb, baud, rate_hz, input_rate(rec))
+    plan = plan_rate(nb, baud, rate_hz, input_rate(rec, sents))
     us = opts["utc_start"]
     off = us.timestamp() - float(rec.time[0]) if us is not None else utc_offset_s(rec)
     utc = (
@@ -621,6 +679,9 @@ def plan_log(
     )
     src = opts["heading_source"]
     talkers = {"HDG": "HC", "THS": TRUE_TALKER[src], **(opts["talkers"] or {})}
+    clocks = None
+    if rec.multi_clock:
+        clocks = "; ".join(f"{','.join(ss)} on {key or 'all rows'}" for key, _, ss in clock_groups(rec, sents))
     header = header_lines(
         source=source,
         sentences=sents,
@@ -633,8 +694,9 @@ def plan_log(
         variation_deg=opts["variation_deg"],
         utc=utc,
         talkers=talkers,
+        clocks=clocks,
     )
-    return LogPlan(sents, plan, utc, header)
+    return LogPlan(sents, plan, utc, header, clocks)
 
 
 def write_planned(
@@ -827,6 +889,7 @@ def run_nmea(
         "heave_positive": kw.get("heave_positive", LINE_OPTIONS["heave_positive"]),
         "heading_reference": {"reference": href, "why": why},
         "utc": plan.utc,
+        **({"clocks": plan.clocks} if plan.clocks else {}),
         "deviation": card_from or deviation,
         "generated_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }

@@ -61,17 +61,24 @@ def envelope(t: np.ndarray, y: np.ndarray, bucket: int) -> tuple[np.ndarray, np.
     return t2, y2
 
 
-def own_samples(t: np.ndarray, y: np.ndarray, gap_steps: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of one channel that hold a value (y is (N, k)), so that a channel whose samples sit on rows of
-    their own between NaN rows (an NMEA log's HDT among other sentences) draws as a line; a NaN row is put back
-    where NaN rows fill a step longer than ``gap_steps`` × the channel's median step (a real gap stays a gap)."""
-    ok = np.isfinite(y).any(axis=1)
+def own_samples(
+    t: np.ndarray, y: np.ndarray, gap_steps: float = 3.0, own: np.ndarray | None = None, gap_s: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of one channel that are its samples (y is (N, k)), so that a channel whose samples sit on rows of
+    their own between other streams' rows (an NMEA log's HDT among other sentences) draws as a line; a NaN row is
+    put back where a step is longer than ``gap_steps`` × the channel's median step (a real gap stays a gap).
+    ``own``: the channel's own rows of a many-clock recording (:meth:`formats.Recording.own_rows`; a NaN there is
+    a missing sample and breaks the line); without it, the rows that hold a value. ``gap_s``: the stream's own gap
+    rule (:meth:`formats.Recording.stream_timing`, aware of bursts and of the reader's time resolution) instead of
+    ``gap_steps`` × the median step."""
+    ok = np.isfinite(y).any(axis=1) if own is None else np.asarray(own, dtype=bool)
     if ok.all() or ok.sum() < 2:
         return t, y
     idx = np.flatnonzero(ok)
     ts, ys = t[idx], y[idx]
     d = np.diff(ts)
-    brk = np.flatnonzero((d > gap_steps * float(np.median(d))) & (np.diff(idx) > 1))
+    limit = gap_steps * float(np.median(d)) if gap_s is None else gap_s
+    brk = np.flatnonzero((d > limit) & (np.diff(idx) > 1 if own is None else True))
     if brk.size:
         ts = np.insert(ts, brk + 1, 0.5 * (ts[brk] + ts[brk + 1]))
         ys = np.insert(ys, brk + 1, np.nan, axis=0)
@@ -123,9 +130,11 @@ def _collect(
             )
             if not len(chunk):
                 continue
+            chunk.restore_streams()  # a many-clock CSV: each channel on its stream's own rows
             for n in names:
                 a = chunk[n].reshape(len(chunk), -1).astype(float)
-                parts.setdefault(n, []).append(envelope(*own_samples(chunk.time - t0, a), bucket))
+                own, gap = _own(chunk, n)
+                parts.setdefault(n, []).append(envelope(*own_samples(chunk.time - t0, a, own=own, gap_s=gap), bucket))
         if template is None:
             raise ImutoolError("no data rows", path=path)
         distinct = 2 if span[1] > span[0] else (1 if np.isfinite(span[0]) else 0)  # rows at different times
@@ -144,8 +153,20 @@ def _collect(
     if start is not None or end is not None:
         rec = rec.slice_time(None if start is None else t0 + start, None if end is None else t0 + end)
     bucket = max(1, -(-2 * len(rec) // max_points))
-    out = {n: envelope(*own_samples(rec.time - t0, rec[n].reshape(len(rec), -1).astype(float)), bucket) for n in names}
+    out = {}
+    for n in names:
+        own, gap = _own(rec, n)
+        y = rec[n].reshape(len(rec), -1).astype(float)
+        out[n] = envelope(*own_samples(rec.time - t0, y, own=own, gap_s=gap), bucket)
     return out, rec, len(rec)
+
+
+def _own(rec: Recording, name: str) -> tuple[np.ndarray | None, float | None]:
+    """A channel's own rows and its stream's gap limit (s) in a many-clock recording; (None, None) otherwise."""
+    if not rec.multi_clock:
+        return None, None
+    gap = rec.stream_timing(name).get("gap_longer_than_s")
+    return rec.own_rows(name), (float(gap) if gap else None)
 
 
 def _bytes_per_row(path: str, rows: int) -> float:

@@ -46,7 +46,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from imutool.loading import input_notes, merged_warnings
+from imutool.loading import input_notes, merged_warnings, one_clock
 from imutool.roll_period import (  # noqa: F401  (running_mean, excursions: re-exported)
     Detection,
     detection,
@@ -563,6 +563,7 @@ def run_roll(
     name = os.fspath(source)
     inputs: list[dict[str, Any]] = []
     rec, _ = load_input(name, inputs, strict=strict, on_input=on_input, **load_options)
+    rec = one_clock(rec, ("heel", "roll"), inputs)  # many clocks: the heel's own samples
     heel = heel_of(rec, name)
     rs = roll_stats(
         rec.time,

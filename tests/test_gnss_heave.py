@@ -14,7 +14,7 @@ from formats.nmea import checksum, decode, read_nmea
 from imutool.cli import cli, main
 from imutool.evaluation import evaluate
 from imutool.gnss_heave import detrend_height, height_heave
-from imutool.heave import run_heave
+from imutool.routes.heave import run_heave
 
 
 def _s(body: str) -> str:

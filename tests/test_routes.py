@@ -23,16 +23,16 @@ from formats import Recording
 from imutool.cli import cli
 from imutool.cli.common import json_default
 from imutool.events import run_events
-from imutool.gyrofree import run_gyrofree
-from imutool.heave import run_heave
-from imutool.ins import run_ins_track
 from imutool.nmea_out import run_nmea
 from imutool.report.heading import HeadingOptions
 from imutool.report.inclinometer import InclinometerOptions
 from imutool.report.route import run_heading_report, run_inclinometer_report
 from imutool.routes import RouteResult
+from imutool.routes.gyrofree import run_gyrofree
+from imutool.routes.heave import run_heave
+from imutool.routes.ins import run_ins_track
+from imutool.routes.zvi import run_zvi
 from imutool.sim import simulate
-from imutool.zvi import run_zvi
 
 INC_STEPS = {
     "steps": (0.0, 5.0, 10.0, 30.0, -5.0, -10.0, -30.0, 0.0),

@@ -21,6 +21,7 @@ per sentence type.
 from __future__ import annotations
 
 import dataclasses
+import heapq
 import math
 import os
 import re
@@ -1117,12 +1118,17 @@ def read_nmea(
     own_utc = {rows_key[i] for i, p in enumerate(rows_pos) if t_meta.get("_own", {}).get(p) is not None}
     fix_dt = float(t_meta.pop("_fix_interval_s", 0.0) or 0.0) if src == "nmea" else 0.0
     t_meta.pop("_own", None)
-    timing = _sentence_timing(t, keys_sorted, {k: 0.0 if k in own_utc else 2.0 * fix_dt for k in set(keys_sorted)})
+    resolution = {k: 0.0 if k in own_utc else 2.0 * fix_dt for k in set(keys_sorted)}
+    timing = _sentence_timing(t, keys_sorted, resolution)
     for k, n in overwritten.items():
         timing[k]["values_overwritten_at_same_time"] = int(n)
     units = {name: next(u for kk, (c, u) in _CHANNELS.items() if c == name) for name in order_keys}
     rec = Recording(t[grp], data, units)
     _declare_streams(rec, row_of, rows_vals, keys_sorted, n_rows)
+    if rec.streams:  # a stream's times are known to its coarsest sentence's resolution: no gap below it
+        rec.meta["stream_time_resolution_s"] = {
+            k: max(resolution.get(x, 0.0) for x in k.split("+")) for k in rec.streams
+        }
     rec.meta.update(
         {
             "source": spath,
@@ -1381,6 +1387,18 @@ def _f(a: np.ndarray | None, i: int) -> float | None:
     return x if math.isfinite(x) else None
 
 
+# the channel whose own samples time each written sentence (first present wins), for a many-clock recording
+_WRITE_DRIVERS: dict[str, tuple[str, ...]] = {
+    "HDT": ("heading",),
+    "THS": ("heading",),
+    "HDG": ("heading_sensor", "heading_mag"),
+    "ROT": ("rot", "heading"),
+    "XDR": ("roll", "pitch"),
+    "HRM": ("roll", "roll_period"),
+    "PASHR": ("roll", "pitch", "heading", "heave"),
+}
+
+
 def iter_sentences(
     rec: Recording,
     sentences: Iterable[str] = ("HDT",),
@@ -1404,6 +1422,20 @@ def iter_sentences(
             raise ImutoolError(f"cannot write sentence type {s!r} (writable: {', '.join(WRITABLE)})")
     n = len(rec)
     if n == 0:
+        return
+    if rec.multi_clock:  # each sentence on the clock of the channel it carries (Recording.on_clock)
+        groups: dict[str, list[str]] = {}
+        for s in sents:
+            drv = next((c for c in _WRITE_DRIVERS[s] if c in rec.channels), None)
+            groups.setdefault((rec.stream_of(drv) or drv) if drv else "", []).append(s)
+        off = utc_offset_s(rec)
+        gens = []
+        for key, ss in groups.items():
+            sub = rec.on_clock(key or next(iter(rec.stream_rows)))
+            if off is not None:
+                sub.meta["start_utc"] = datetime.fromtimestamp(float(sub.time[0]) + off, timezone.utc).isoformat()
+            gens.append(iter_sentences(sub, ss, rate_hz, talker, xdr_map))
+        yield from heapq.merge(*gens, key=lambda x: x[0])
         return
     t = rec.time
     if rate_hz is None:

@@ -1,6 +1,6 @@
 """`imutool gyrofree IN --layout L -o OUT`: angular rate, angular acceleration and attitude from accelerometers.
 
-Only option parsing and printing here; the work is :func:`imutool.gyrofree.run_gyrofree` (and
+Only option parsing and printing here; the work is :func:`imutool.routes.gyrofree.run_gyrofree` (and
 :func:`imutool.gyrofree.check_layout` for --check-layout), the route `imutool batch gyrofree` and a Python user take.
 """
 
@@ -23,8 +23,9 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.gyrofree import RATE_RW, layout_report, load_layout, run_gyrofree
+from imutool.gyrofree import RATE_RW, load_layout
 from imutool.routes import LOAD_OPTIONS, OnInput, RouteResult
+from imutool.routes.gyrofree import layout_report, run_gyrofree
 
 
 def gyrofree_route(
@@ -37,7 +38,7 @@ def gyrofree_route(
     on_input: OnInput | None = None,
     **options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.gyrofree.run_gyrofree`."""
+    """Parsed options → :func:`imutool.routes.gyrofree.run_gyrofree`."""
     layout = load_layout(layout_path)
     if not input_path or not output:
         raise ImutoolError("give INPUT and -o OUTPUT (or --check-layout)")
@@ -127,7 +128,7 @@ def _batch_route(check_layout_only: bool = False, quiet: bool = True, **options:
 
 
 def _layout_check(input_path: str | None, layout_path: str, **options: Any) -> dict[str, Any]:
-    """--check-layout: :func:`imutool.gyrofree.layout_report` with every loading option of a given INPUT
+    """--check-layout: :func:`imutool.routes.gyrofree.layout_report` with every loading option of a given INPUT
     (:data:`imutool.loading.LOAD_OPTIONS`: ``--columns ... --rate --time-column --header-rows --with``)."""
     load = {k: options[k] for k in LOAD_OPTIONS if options.get(k) is not None}
     return layout_report(layout_path, input_path, strict=strict_requested(), **load)

@@ -1,7 +1,7 @@
 """`imutool heave IN -o OUT`: real-time and delayed heave (m, positive up) from acceleration.
 
-Only option parsing and printing here; the work is :func:`imutool.heave.run_heave`, the route `imutool batch heave`
-and a Python user take (defaults live there).
+Only option parsing and printing here; the work is :func:`imutool.routes.heave.run_heave`, the route
+`imutool batch heave` and a Python user take (defaults live there).
 """
 
 from __future__ import annotations
@@ -21,9 +21,10 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.heave import ATTITUDES, ROUTE_METHODS, estimate_heave, run_heave
+from imutool.heave import ATTITUDES, ROUTE_METHODS, estimate_heave
 from imutool.progress import stages
 from imutool.routes import OnInput
+from imutool.routes.heave import run_heave
 
 OUTPUTS = ("output", "nmea_path")
 
@@ -39,7 +40,7 @@ def heave_route(
     on_input: OnInput | None = None,
     **options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.heave.run_heave` (progress stages on stderr unless ``quiet``)."""
+    """Parsed options → :func:`imutool.routes.heave.run_heave` (progress stages on stderr unless ``quiet``)."""
     with stages("heave", ["reading", "heave", "writing"], quiet) as steps:
         return run_heave(
             input_path,

@@ -52,7 +52,11 @@ def _lines(s: dict[str, Any]) -> list[str]:
         if s["gaps"]["count"]
         else ""
     )
-    if multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
+    streams = s.get("streams") or {}
+    if streams and not multi:  # many clocks: the rows' rate and gaps mean nothing; each stream's do
+        rate = f"rate:      per stream ({len(streams)} streams, rows merged; each on its own samples):"
+        gaps = ""
+    elif multi:  # rows of several sentence types: the rows' rate and gaps mean nothing; each type's do
         rate = f"rate:      per sentence type ({len(sentence_timing)} types, rows merged; each on its own times):"
         gaps = ""
     out = [
@@ -64,7 +68,13 @@ def _lines(s: dict[str, Any]) -> list[str]:
     ]
     if multi:
         out += [f"  {k:<14} {describe(v)}" for k, v in sentence_timing.items()]
-    else:
+    if streams:
+        if multi:
+            out.append(
+                f"streams:   {len(streams)} (channels and the sentence types carrying them, on their own samples):"
+            )
+        out += [f"  {k:<14} {describe(v['timing'])} ({', '.join(v['channels'])})" for k, v in streams.items()]
+    if not (multi or streams):
         out.append(gaps)
         if sentence_timing:
             k, v = next(iter(sentence_timing.items()))

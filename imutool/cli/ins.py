@@ -1,7 +1,7 @@
 """`imutool ins IN -o track.csv`: strapdown INS + error-state EKF with zero-velocity (and height) updates.
 
-Only option parsing and printing here; the work is :func:`imutool.ins.run_ins_track`, the route `imutool batch ins`
-and a Python user take (defaults live there).
+Only option parsing and printing here; the work is :func:`imutool.routes.ins.run_ins_track`, the route
+`imutool batch ins` and a Python user take (defaults live there).
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.ins import run_ins_track
 from imutool.progress import stages
 from imutool.routes import OnInput
+from imutool.routes.ins import run_ins_track
 from imutool.zvi import DETECTORS
 
 OUTPUTS = ("output", "plot_path", "strides_path")
@@ -40,7 +40,7 @@ def ins_route(
     on_input: OnInput | None = None,
     **options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.ins.run_ins_track` (progress stages on stderr unless ``quiet``)."""
+    """Parsed options → :func:`imutool.routes.ins.run_ins_track` (progress stages on stderr unless ``quiet``)."""
     with stages("ins", ["reading", "INS", "writing"], quiet) as steps:
         return run_ins_track(
             input_path,

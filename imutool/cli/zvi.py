@@ -1,7 +1,7 @@
 """`imutool zvi IN -o intervals.csv`: zero-velocity interval detection (paper eq. 43, SHOE, ARE, MV, MAG).
 
-Only option parsing and printing here; the work is :func:`imutool.zvi.run_zvi`, the route `imutool batch zvi` and a
-Python user take (the detectors' defaults live in :data:`imutool.zvi.DEFAULTS`).
+Only option parsing and printing here; the work is :func:`imutool.routes.zvi.run_zvi`, the route `imutool batch zvi`
+and a Python user take (the detectors' defaults live in :data:`imutool.zvi.DEFAULTS`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ from imutool.cli.common import (
 )
 from imutool.progress import stages
 from imutool.routes import OnInput
-from imutool.zvi import DETECTORS, run_zvi
+from imutool.routes.zvi import run_zvi
+from imutool.zvi import DETECTORS
 
 OUTPUTS = ("output", "flags_path", "plot_path")
 
@@ -37,7 +38,7 @@ def zvi_route(
     on_input: OnInput | None = None,
     **options: Any,
 ) -> Any:
-    """Parsed options → :func:`imutool.zvi.run_zvi` (progress stages on stderr unless ``quiet``)."""
+    """Parsed options → :func:`imutool.routes.zvi.run_zvi` (progress stages on stderr unless ``quiet``)."""
     with stages("zvi", ["reading", "detecting", "writing"], quiet) as steps:
         return run_zvi(
             input_path,

@@ -1,8 +1,8 @@
 """What every command's library route shares: the result it returns, loading its inputs with the report the
 command's summary carries, and that summary exactly as ``imutool <command> --json`` prints it.
 
-A library route (:func:`imutool.heave.run_heave`, :func:`imutool.ins.run_ins_track`,
-:func:`imutool.nmea_out.run_nmea`, :func:`imutool.zvi.run_zvi`, :func:`imutool.gyrofree.run_gyrofree`,
+A library route (:func:`imutool.routes.heave.run_heave`, :func:`imutool.routes.ins.run_ins_track`,
+:func:`imutool.nmea_out.run_nmea`, :func:`imutool.routes.zvi.run_zvi`, :func:`imutool.routes.gyrofree.run_gyrofree`,
 :func:`imutool.events.run_events` and ``run_fleet``, :func:`imutool.evaluation.run_evaluate`,
 :func:`imutool.report.route.run_inclinometer_report` and ``run_heading_report``,
 :func:`imutool.convert.run_convert`, :func:`imutool.roll.run_roll`,
