@@ -71,6 +71,9 @@ def test_python_call_equals_cli(roll_csv, tmp_path, capsys, case):
     assert len(est) == 6001 and "heading" in est.channels
     assert (res.recording is None) == (case == "ekf-streamed")
     assert res.summary.pop("output") == str(lib_out) and cli_summary["output"] == str(cli_out)
+    # the CLI's --json adds the input's warnings (RouteResult.full_summary) to the estimator's own
+    lib_warnings, cli_warnings = res.summary.pop("warnings", []), cli_summary.pop("warnings", [])
+    assert set(lib_warnings) <= set(cli_warnings)
     assert json.loads(json.dumps(res.summary, default=str)) == {k: cli_summary[k] for k in res.summary}
     if case == "ekf-smooth":  # the smoother summary: truth in the input → causal vs smoothed RMSE
         gain = res.summary["smoother_gain"]

@@ -19,8 +19,6 @@ import numpy as np
 
 from imutool.roll import PORT, ROLL_DEFAULTS, STBD, roll_cycles
 
-SPAN_PERIODS = 4.0  # roll periods of heel handed to roll_cycles once a period is known (the cost grows with it)
-SPAN_MARGIN_S = 10.0
 
 
 def iso_utc(t: float) -> str:
@@ -37,7 +35,7 @@ class LiveRoll:
         window_s: float = 120.0,
         every_s: float = 1.0,
         state_path: str | os.PathLike | None = None,
-        hysteresis_deg: float = ROLL_DEFAULTS["hysteresis_deg"],
+        hysteresis_deg: float | None = ROLL_DEFAULTS["hysteresis_deg"],
         max_period_s: float = ROLL_DEFAULTS["max_period_s"],
     ) -> None:
         self.window_s, self.every_s = float(window_s), float(every_s)
@@ -46,7 +44,6 @@ class LiveRoll:
         self._x: deque[np.ndarray] = deque()
         self._next_eval = -np.inf
         self._last_eval = -np.inf
-        self._side = 0  # the Schmitt trigger's side: +1 above +h last, -1 below -h last, 0 not yet
         self._dirty = False
         self.amp_port: float | None = None
         self.amp_stbd: float | None = None
@@ -114,20 +111,9 @@ class LiveRoll:
         while len(self._t) > 1 and self._t[0][-1] < t[-1] - self.window_s:
             self._t.popleft()
             self._x.popleft()
-        # an excursion can only have completed where the heel crossed a threshold (the Schmitt trigger of
-        # roll_cycles): evaluate then (at most every every_s), and every max_period_s to let stale values go
-        h = self.hysteresis_deg
-        crossed = False
-        if ok.any():
-            hi, lo = bool((x[ok] > h).any()), bool((x[ok] < -h).any())
-            if (hi and self._side < 0) or (lo and self._side > 0) or (hi and lo) or self._side == 0:
-                crossed = True
-                last_hi = np.flatnonzero(x > h)
-                last_lo = np.flatnonzero(x < -h)
-                a = last_hi[-1] if last_hi.size else -1
-                b = last_lo[-1] if last_lo.size else -1
-                self._side = 1 if a > b else -1 if b > a else self._side
-        self._dirty = self._dirty or crossed
+        # evaluated every every_s of input time: the cycles are cut about the window's own mean heel with a
+        # hysteresis scaled to its roll (imutool.roll_period), so no fixed threshold tells when one completed
+        self._dirty = True
         due = t[-1] >= self._next_eval
         if (self._dirty and due) or t[-1] >= self._last_eval + self.max_period_s:
             self._next_eval = t[-1] + self.every_s
@@ -154,12 +140,8 @@ class LiveRoll:
     def evaluate(self) -> None:
         """Recompute amplitude and period on the trailing window."""
         t, x = self.window()
-        # the latest cycles of each side depend only on the samples since the excursion before them (the first,
-        # partial excursion of a window is dropped): a window of a few roll periods gives what the whole one does
-        if self.period is not None:
-            span = min(self.window_s, SPAN_PERIODS * self.period + SPAN_MARGIN_S)
-            keep = t >= t[-1] - span
-            t, x = t[keep], x[keep]
+        # the whole trailing window, as `imutool roll` on it: the centre (a running mean heel), the hysteresis and
+        # the smoothing of imutool.roll_period are taken from the window itself, so a shorter span would differ
         ok = np.isfinite(x)
         if ok.sum() < 8:
             return
