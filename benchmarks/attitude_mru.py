@@ -120,7 +120,8 @@ def run_cell(job: tuple[dict, int, bool, dict]) -> dict:
     m = rec.meta
     turn_end = m["turn_start_s"] + abs(360.0 / m["turn_rate_dps"]) + TURN_RAMP_S if c["turn"] else np.inf
     t0 = time.perf_counter()
-    res = run_filter(rec, params=EkfParams(**overrides), lever_arm=np.array(m["lever_arm_m"]))
+    prm = EkfParams(**{"gnss_velocity_noise": max(c["vnoise"], 0.01), **overrides})  # the receiver's class, stated
+    res = run_filter(rec, params=prm, lever_arm=np.array(m["lever_arm_m"]))
     out = res.recording
     er, ep = out["roll"] - rec["ref_roll"], out["pitch"] - rec["ref_pitch"]
     sr, sp = out["roll_std"], out["pitch_std"]

@@ -9,6 +9,7 @@ from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
 from formats.saturation import clipped
+from imutool.attitude.aided import aided_result
 from imutool.attitude.layout import F_ACC_REJ
 from imutool.attitude.lever_estimate import LeverArmEstimate, analysis_span, estimate_lever_arm
 from imutool.attitude.motion import MotionChoice, choose_motion, params_for_motion
@@ -228,12 +229,20 @@ def ekf_recording(
     report = checks.report()
     summary.update(report.summary)
     warnings = report.warnings
+    aided = None
+    if vel is not None and params.aided and not smooth:  # roll and pitch from the velocity-aided filter
+        res, aided = aided_result(rec.time, gyro, accel, vel, res, run_params, lever_arm, antenna_arm)
+        summary["aided"] = aided.summary
     if lever_est is not None:
         summary["lever_arm_estimate"] = lever_est.summary()
         warnings = [m for m in (lever_est.message(),) if m] + warnings
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, run_params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
+    if aided is not None:
+        out.add("accel_bias", aided.accel_bias, "m/s^2")
+        out.add("accel_bias_std", aided.accel_bias_std, "m/s^2")
+        out.meta["aided"] = aided.summary
     out.meta["motion"] = summary["motion"] = motion.summary()
     out.meta.update(report.metadata)
     if lever_est is not None:
@@ -280,6 +289,8 @@ OUTPUT_DECIMALS = {
     "heading": 6,
     "q": 9,
     "gyro_bias": 9,
+    "accel_bias": 7,
+    "accel_bias_std": 7,
     "roll_std": 6,
     "pitch_std": 6,
     "heading_std": 6,
