@@ -46,7 +46,9 @@ A_INT, A_F, A_C, A_T, A_TURN = 133, 142, 145, 154, 155  # sums since the last pr
 A_TPREV, A_GPREV, A_FPREV, A_VLAST = 156, 157, 160, 163  # previous time, gyro, force; the previous row's velocity (2)
 A_INIT, A_TFIX, A_THDG, A_REJT = 165, 166, 167, 168  # started; last fix time; last heading update; time rejected
 A_NFIX, A_NREJ, A_NHELD, A_NHDG, A_TSTART = 169, 170, 171, 172, 173  # counts; the time the filter started
-A_SIZE = 174
+A_NIS = 174  # the velocity fixes' mean NIS per degree of freedom (running, over about NIS_FIXES fixes)
+A_SIZE = 175
+NIS_FIXES = 30.0
 # ---- its parameter vector ----
 (
     Q_GYRO,
@@ -292,7 +294,12 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
             y0 = vn + R[0, 0] * c0 + R[0, 1] * c1 + R[0, 2] * c2 - ast[A_V]
             y1 = ve + R[1, 0] * c0 + R[1, 1] * c1 + R[1, 2] * c2 - ast[A_V + 1]
             gate = prm[Q_GATE] if ast[A_REJT] < prm[Q_REJ_TIMEOUT] else 0.0
-            if _correct(ast, P, dx, K, TMP, 2, IV, IV + 1, y0, y1, rv, rv, gate) < 0:
+            # the self-check: a velocity whose errors are not white (a track-smoothed SOG/COG, a receiver worse
+            # than stated) or a gyro worse than the parameters say shows as a mean innovation ratio above 1
+            ratio = (y0 * y0 + y1 * y1) / (P[IV, IV] + P[IV + 1, IV + 1] + 2.0 * rv)
+            nis = _correct(ast, P, dx, K, TMP, 2, IV, IV + 1, y0, y1, rv, rv, gate)
+            ast[A_NIS] += (min(ratio, 100.0) - ast[A_NIS]) / NIS_FIXES
+            if nis < 0:
                 ast[A_NREJ] += 1
                 ast[A_REJT] += tk - ast[A_TFIX]
             else:
@@ -375,6 +382,7 @@ def aided_initial_state(params) -> np.ndarray:
     ast[A_BA : A_BA + 3] = params.init_accel_bias
     ast[A_VLAST : A_VLAST + 2] = np.nan
     ast[A_TFIX] = ast[A_THDG] = ast[A_TSTART] = -np.inf
+    ast[A_NIS] = 1.0
     return ast
 
 
@@ -423,6 +431,8 @@ def run_aided(
         "accel_bias_m_s2": [round(float(x), 5) for x in ast[A_BA : A_BA + 3]],
         "accel_bias_std_m_s2": [round(float(np.sqrt(ast[A_P + (IBA + i) * (NX + 1)])), 5) for i in range(3)],
         "gnss_velocity_noise_m_s": params.gnss_velocity_noise,
+        # ≈ 1 when the velocity's and the gyro's noise are as stated; well above: the σ are under-stated
+        "velocity_innovation_ratio": round(float(ast[A_NIS]), 3),
     }
     return AidedResult(q, std, ba, bas, summary), ast
 

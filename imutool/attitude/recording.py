@@ -242,6 +242,7 @@ def ekf_recording(
     if aided is not None:
         out.add("accel_bias", aided.accel_bias, "m/s^2")
         out.add("accel_bias_std", aided.accel_bias_std, "m/s^2")
+        out.meta[DECIMALS_KEY] = {**out.meta[DECIMALS_KEY], "accel_bias": 7, "accel_bias_std": 7}
         out.meta["aided"] = aided.summary
     out.meta["motion"] = summary["motion"] = motion.summary()
     out.meta.update(report.metadata)
@@ -289,8 +290,6 @@ OUTPUT_DECIMALS = {
     "heading": 6,
     "q": 9,
     "gyro_bias": 9,
-    "accel_bias": 7,
-    "accel_bias_std": 7,
     "roll_std": 6,
     "pitch_std": 6,
     "heading_std": 6,
