@@ -327,12 +327,16 @@ def _heading(ast, P, prm, dx, K, TMP, R, qe, hstd):
     he = np.arctan2(2 * (qe[0] * qe[3] + qe[1] * qe[2]), 1 - 2 * (qe[2] * qe[2] + qe[3] * qe[3]))
     h = np.arctan2(R[1, 0], R[0, 0])
     y = (he - h + np.pi) % (2 * np.pi) - np.pi
-    r = max(2.0 * hstd, prm[Q_HDG_FLOOR]) ** 2
+    # the first pass's heading σ is optimistic while its magnetometer settles (~ its heading time constant): at
+    # least HEADING_START_SIGMA then, falling off with HEADING_SETTLE_S
+    early = HEADING_START_SIGMA * np.exp(-(ast[A_TPREV] - ast[A_TSTART]) / HEADING_SETTLE_S)
+    r = max(2.0 * hstd, prm[Q_HDG_FLOOR], early) ** 2
     if _correct(ast, P, dx, K, TMP, 1, 2, 2, y, 0.0, r, r, 0.0) >= 0:
         ast[A_NHDG] += 1
 
 
 HEADING_FLOOR = np.radians(0.5)  # rad: the first pass's heading is never taken as better than this
+HEADING_START_SIGMA, HEADING_SETTLE_S = np.radians(10.0), 20.0  # ... nor, at the start, than this, for ~ this long
 AIDED_TRAPEZOID = True
 START_GYRO_BIAS_SIGMA = 0.002  # rad/s: σ of the first pass's gyro bias where the aided filter starts from it
 
