@@ -47,7 +47,8 @@ A_TPREV, A_GPREV, A_FPREV, A_VLAST = 156, 157, 160, 163  # previous time, gyro, 
 A_INIT, A_TFIX, A_THDG, A_REJT = 165, 166, 167, 168  # started; last fix time; last heading update; time rejected
 A_NFIX, A_NREJ, A_NHELD, A_NHDG, A_TSTART = 169, 170, 171, 172, 173  # counts; the time the filter started
 A_NIS = 174  # the velocity fixes' mean NIS per degree of freedom (running, over about NIS_FIXES fixes)
-A_SIZE = 175
+A_T0 = 175  # the time of the first row (s)
+A_SIZE = 176
 NIS_FIXES = 30.0
 # ---- its parameter vector ----
 (
@@ -67,8 +68,9 @@ NIS_FIXES = 30.0
     Q_GYRO_BIAS_SIGMA,
     Q_DT,
     Q_PREV_W,
-) = range(16)
-N_APRM = 16
+    Q_START_AFTER,
+) = range(17)
+N_APRM = 17
 PROPAGATE_EVERY_S = 1.0
 START_TILT_SIGMA, START_HEADING_SIGMA = np.radians(2.0), np.radians(5.0)  # rad: the least σ the filter starts with  # without a fix the covariance is propagated at least this often
 
@@ -118,33 +120,41 @@ def _propagate(ast, P, prm, PHI, TMP):
 
 
 @njit(**CALLED)
-def _correct(ast, P, dx, K, TMP, nz, h0, h1, y0, y1, r0, r1, gate):
-    """A measurement of the error-state components h0 (and h1 where nz = 2; innovations y, variances r): the gated
-    update, applied to the nominal state. Returns the NIS, or −NIS where it was gated out."""
-    s00 = P[h0, h0] + r0
-    i00, i01, i11 = 1.0 / s00, 0.0, 0.0
+def _correct(ast, P, dx, K, TMP, H, nz, y0, y1, r0, r1, gate):
+    """A measurement y = H δx + noise (nz = 1 or 2 rows of H (2, NX); innovations y, variances r): the gated update,
+    applied to the nominal state. Returns the NIS, or −NIS where it was gated out."""
+    for i in range(NX):  # TMP[:, :nz] = P Hᵀ
+        for r in range(nz):
+            s = 0.0
+            for m in range(NX):
+                s += P[i, m] * H[r, m]
+            TMP[i, r] = s
+    s00 = r0
+    s01, s11 = 0.0, r1
+    for m in range(NX):
+        s00 += H[0, m] * TMP[m, 0]
+        if nz == 2:
+            s01 += H[0, m] * TMP[m, 1]
+            s11 += H[1, m] * TMP[m, 1]
     if nz == 1:
+        i00, i01, i11 = 1.0 / s00, 0.0, 0.0
         nis = y0 * y0 / s00
     else:
-        s01, s11 = P[h0, h1], P[h1, h1] + r1
         det = s00 * s11 - s01 * s01
         i00, i01, i11 = s11 / det, -s01 / det, s00 / det
         nis = y0 * y0 * i00 + 2 * y0 * y1 * i01 + y1 * y1 * i11
     if gate > 0 and nis > gate:
         return -nis
     for i in range(NX):  # K = P Hᵀ S⁻¹
-        a = P[i, h0]
-        b = P[i, h1] if nz == 2 else 0.0
+        a = TMP[i, 0]
+        b = TMP[i, 1] if nz == 2 else 0.0
         K[i, 0] = a * i00 + b * i01
         K[i, 1] = a * i01 + b * i11
         dx[i] = K[i, 0] * y0 + K[i, 1] * y1
-    # P ← P − K H P (= P − K S Kᵀ, symmetric); the rows of H P are rows h0, h1 of P
+    # P ← P − K (H P) = P − K (P Hᵀ)ᵀ (symmetric)
     for i in range(NX):
         for j in range(i, NX):
-            TMP[i, j] = K[i, 0] * P[h0, j] + (K[i, 1] * P[h1, j] if nz == 2 else 0.0)
-    for i in range(NX):
-        for j in range(i, NX):
-            v = P[i, j] - TMP[i, j]
+            v = P[i, j] - K[i, 0] * TMP[j, 0] - (K[i, 1] * TMP[j, 1] if nz == 2 else 0.0)
             P[i, j] = v
             P[j, i] = v
     # the nominal state: q ← δq(ψ) ⊗ q (a world-frame error), v, b_g, b_a += their corrections
@@ -226,6 +236,7 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
     n = t.shape[0]
     P = ast[A_P : A_P + NX * NX].reshape((NX, NX))
     R, PHI, TMP, K, dx = np.empty((3, 3)), np.empty((NX, NX)), np.empty((NX, NX)), np.zeros((NX, 2)), np.zeros(NX)
+    H = np.zeros((2, NX))
     arm2 = arm[0] * arm[0] + arm[1] * arm[1] + arm[2] * arm[2]
     rv = prm[Q_VEL] ** 2 + prm[Q_GYRO] ** 2 / prm[Q_DT] * arm2  # the fix's variance, the lever term's noise in it
     for k in range(n):
@@ -278,7 +289,10 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
         ast[A_VLAST], ast[A_VLAST + 1] = vn, ve
         if fix and started and tk - ast[A_TFIX] < prm[Q_MIN_SPACING]:
             fix = False
-        if fix and not started and max(ekf_std[k, 0], ekf_std[k, 1]) <= prm[Q_START_SIGMA]:
+        if not started and not np.isfinite(ast[A_T0]):
+            ast[A_T0] = tk
+        settled = tk - ast[A_T0] >= prm[Q_START_AFTER] and max(ekf_std[k, 0], ekf_std[k, 1]) <= prm[Q_START_SIGMA]
+        if fix and not started and settled:
             _start(ast, P, prm, ekf_q[k], ekf_b[k], ekf_std[k])
             rmat(ast[A_Q], ast[A_Q + 1], ast[A_Q + 2], ast[A_Q + 3], R)
             w0, w1, w2 = g0 - ast[A_BG], g1 - ast[A_BG + 1], g2 - ast[A_BG + 2]
@@ -296,8 +310,16 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
             gate = prm[Q_GATE] if ast[A_REJT] < prm[Q_REJ_TIMEOUT] else 0.0
             # the self-check: a velocity whose errors are not white (a track-smoothed SOG/COG, a receiver worse
             # than stated) or a gyro worse than the parameters say shows as a mean innovation ratio above 1
+            # H: δv, and the lever term's gyro bias: the computed sensor velocity holds R (δb_g × r) = −R [r×] δb_g
+            for i in range(2):
+                for j in range(NX):
+                    H[i, j] = 0.0
+                H[i, IV + i] = 1.0
+                H[i, IBG] = R[i, 2] * arm[1] - R[i, 1] * arm[2]  # (−R [r×])[i, :]
+                H[i, IBG + 1] = R[i, 0] * arm[2] - R[i, 2] * arm[0]
+                H[i, IBG + 2] = R[i, 1] * arm[0] - R[i, 0] * arm[1]
             ratio = (y0 * y0 + y1 * y1) / (P[IV, IV] + P[IV + 1, IV + 1] + 2.0 * rv)
-            nis = _correct(ast, P, dx, K, TMP, 2, IV, IV + 1, y0, y1, rv, rv, gate)
+            nis = _correct(ast, P, dx, K, TMP, H, 2, y0, y1, rv, rv, gate)
             ast[A_NIS] += (min(ratio, 100.0) - ast[A_NIS]) / NIS_FIXES
             if nis < 0:
                 ast[A_NREJ] += 1
@@ -307,7 +329,7 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
                 ast[A_REJT] = 0.0
             ast[A_TFIX] = tk
             if tk - ast[A_THDG] >= prm[Q_HDG_EVERY] and np.isfinite(ekf_q[k, 0]):
-                _heading(ast, P, prm, dx, K, TMP, R, ekf_q[k], ekf_std[k, 2])
+                _heading(ast, P, prm, dx, K, TMP, H, R, ekf_q[k], ekf_std[k, 2])
                 ast[A_THDG] = tk
             rmat(ast[A_Q], ast[A_Q + 1], ast[A_Q + 2], ast[A_Q + 3], R)
         elif started and ast[A_T] >= PROPAGATE_EVERY_S:
@@ -322,7 +344,7 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
 
 
 @njit(**CALLED)
-def _heading(ast, P, prm, dx, K, TMP, R, qe, hstd):
+def _heading(ast, P, prm, dx, K, TMP, H, R, qe, hstd):
     """The first pass's heading (its q, its heading σ rad) as a measurement of ψ_D, σ twice that filter's."""
     he = np.arctan2(2 * (qe[0] * qe[3] + qe[1] * qe[2]), 1 - 2 * (qe[2] * qe[2] + qe[3] * qe[3]))
     h = np.arctan2(R[1, 0], R[0, 0])
@@ -331,14 +353,19 @@ def _heading(ast, P, prm, dx, K, TMP, R, qe, hstd):
     # least HEADING_START_SIGMA then, falling off with HEADING_SETTLE_S
     early = HEADING_START_SIGMA * np.exp(-(ast[A_TPREV] - ast[A_TSTART]) / HEADING_SETTLE_S)
     r = max(2.0 * hstd, prm[Q_HDG_FLOOR], early) ** 2
-    if _correct(ast, P, dx, K, TMP, 1, 2, 2, y, 0.0, r, r, 0.0) >= 0:
+    for j in range(NX):
+        H[0, j] = 0.0
+    H[0, 2] = 1.0
+    if _correct(ast, P, dx, K, TMP, H, 1, y, 0.0, r, r, 0.0) >= 0:
         ast[A_NHDG] += 1
 
 
 HEADING_FLOOR = np.radians(0.5)  # rad: the first pass's heading is never taken as better than this
 HEADING_START_SIGMA, HEADING_SETTLE_S = np.radians(10.0), 20.0  # ... nor, at the start, than this, for ~ this long
 AIDED_TRAPEZOID = True
-START_GYRO_BIAS_SIGMA = 0.002  # rad/s: σ of the first pass's gyro bias where the aided filter starts from it
+# the filter starts from the first pass once that has run this long (s; its gyro bias learned to about
+# START_GYRO_BIAS_SIGMA rad/s) and its roll and pitch σ are below aided_start_sigma_deg
+START_AFTER_S, START_GYRO_BIAS_SIGMA = 0.0, 0.002
 
 
 @dataclass
@@ -375,6 +402,7 @@ def aided_vector(params, dt_nominal: float) -> np.ndarray:
     prm[Q_BIAS_SIGMA] = params.accel_bias_sigma
     prm[Q_GYRO_BIAS_SIGMA] = START_GYRO_BIAS_SIGMA
     prm[Q_DT] = dt_nominal
+    prm[Q_START_AFTER] = START_AFTER_S
     prm[Q_PREV_W] = 0.5 if AIDED_TRAPEZOID else params.gyro_prev_weight()
     return prm
 
@@ -387,6 +415,7 @@ def aided_initial_state(params) -> np.ndarray:
     ast[A_VLAST : A_VLAST + 2] = np.nan
     ast[A_TFIX] = ast[A_THDG] = ast[A_TSTART] = -np.inf
     ast[A_NIS] = 1.0
+    ast[A_T0] = np.nan
     return ast
 
 
