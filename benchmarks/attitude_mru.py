@@ -141,9 +141,13 @@ def run_cell(job: tuple[dict, int, bool, dict]) -> dict:
                 "roll_max": float(np.abs(er[sel]).max()),
                 "pitch_rms": float(np.sqrt(np.mean(ep[sel] ** 2))),
                 "pitch_max": float(np.abs(ep[sel]).max()),
-                "cover": float(np.mean(np.concatenate([np.abs(er[sel]) <= 2 * sr[sel], np.abs(ep[sel]) <= 2 * sp[sel]]))),
+                "cover": float(
+                    np.mean(np.concatenate([np.abs(er[sel]) <= 2 * sr[sel], np.abs(ep[sel]) <= 2 * sp[sel]]))
+                ),
             }
-    r["cover"] = float(np.mean(np.concatenate([np.abs(er[scored]) <= 2 * sr[scored], np.abs(ep[scored]) <= 2 * sp[scored]])))
+    r["cover"] = float(
+        np.mean(np.concatenate([np.abs(er[scored]) <= 2 * sr[scored], np.abs(ep[scored]) <= 2 * sp[scored]]))
+    )
     r["ratio"] = res.summary.get("aided", {}).get("velocity_innovation_ratio")
     if "accel_bias" in out.channels:
         est = out["accel_bias"][-1]
@@ -215,10 +219,11 @@ def main() -> None:
         cb = [r["before"]["cover"] for r in runs if "before" in r]
         be = [r["bias_err_mg"] for r in runs if "bias_err_mg" in r]
         bes = "/".join(f"{x:.2f}" for x in np.max(be, axis=0)) if be else "–"
+        before = f"{100 * min(cb):.0f} %" if cb else "–"
+        cover = f"{100 * min(r['cover'] for r in runs):.0f}–{100 * max(r['cover'] for r in runs):.0f} %"
         print(
-            f"| {label(c)} | {fmt(runs, 'after', 'roll')} | {fmt(runs, 'after', 'pitch')} | {fmt(runs, 'before', 'roll')} "
-            f"| {(f'{100 * min(cb):.0f} %') if cb else '–'} | {100 * min(r['cover'] for r in runs):.0f}–{100 * max(r['cover'] for r in runs):.0f} % "
-            f"| {bes} | {max((r['ratio'] or 0) for r in runs):.2f} |"
+            f"| {label(c)} | {fmt(runs, 'after', 'roll')} | {fmt(runs, 'after', 'pitch')} "
+            f"| {fmt(runs, 'before', 'roll')} | {before} | {cover} | {bes} | {max(r['ratio'] or 0 for r in runs):.2f} |"
         )
     print(f"\n{len(jobs)} runs in {time.perf_counter() - t0:.0f} s on {args.jobs} processes")
 

@@ -72,7 +72,10 @@ NIS_FIXES = 30.0
 ) = range(17)
 N_APRM = 17
 PROPAGATE_EVERY_S = 1.0
-START_TILT_SIGMA, START_HEADING_SIGMA = np.radians(2.0), np.radians(5.0)  # rad: the least σ the filter starts with  # without a fix the covariance is propagated at least this often
+START_TILT_SIGMA, START_HEADING_SIGMA = (
+    np.radians(2.0),
+    np.radians(5.0),
+)  # rad: the least σ the filter starts with  # without a fix the covariance is propagated at least this often
 
 
 @njit(**CALLED)
