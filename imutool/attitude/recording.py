@@ -230,7 +230,9 @@ def ekf_recording(
     summary.update(report.summary)
     warnings = report.warnings
     aided = None
-    if vel is not None and params.aided and not smooth:  # roll and pitch from the velocity-aided filter
+    # roll and pitch from the velocity-aided filter, where the EKF aided with the velocity (a heading held: the
+    # aided filter takes the EKF's heading)
+    if vel is not None and params.aided and not smooth and res.summary.get("velocity_aiding"):
         res, aided = aided_result(rec.time, gyro, accel, vel, res, run_params, lever_arm, antenna_arm)
         summary["aided"] = aided.summary
     if lever_est is not None:
