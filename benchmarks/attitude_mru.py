@@ -124,8 +124,10 @@ def run_cell(job: tuple[dict, int, bool, dict]) -> dict:
     turn_end = m["turn_start_s"] + abs(360.0 / m["turn_rate_dps"]) + TURN_RAMP_S if c["turn"] else np.inf
     t0 = time.perf_counter()
     told = {"aided_gyro_bias_rw": np.radians(c["gyro_rw"])} if c["told"] else {}
-    # the receiver's class is stated (gnss_velocity_noise), the gyro's bias instability only in the "told" cell
-    prm = EkfParams(**{"gnss_velocity_noise": max(c["vnoise"], 0.01), **told, **overrides})
+    # the receiver's class and rate are stated (gnss_velocity_noise, gnss_min_interval), the gyro's bias
+    # instability only in the "told" cell
+    rx = {"gnss_velocity_noise": max(c["vnoise"], 0.01), "gnss_min_interval": 0.5 / c["rate"]}
+    prm = EkfParams(**{**rx, **told, **overrides})
     res = run_filter(rec, params=prm, lever_arm=np.array(m["lever_arm_m"]))
     out = res.recording
     er, ep = out["roll"] - rec["ref_roll"], out["pitch"] - rec["ref_pitch"]

@@ -108,7 +108,7 @@ def test_held_and_nan_separated_fixes_aid_alike():
     assert held.summary["velocity_fixes"] == nan_sep.summary["velocity_fixes"] > 100
     # a held value counted at every row would make 100 fixes a second: the σ would collapse
     every = np.where(np.isfinite(vel), vel + 1e-9 * np.arange(len(t))[:, None], np.nan)
-    over, _ = run_aided(t, g, a, every, res.q, res.bias, res.std, PRM, lever)
+    over, _ = run_aided(t, g, a, every, res.q, res.bias, res.std, EkfParams(gnss_min_interval=0.05), lever)
     used = over.summary["velocity_fixes"] + over.summary["velocity_rejected"]
     assert used > 8 * held.summary["velocity_fixes"]
 

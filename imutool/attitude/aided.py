@@ -48,7 +48,9 @@ A_INIT, A_TFIX, A_THDG, A_REJT = 165, 166, 167, 168  # started; last fix time; l
 A_NFIX, A_NREJ, A_NHELD, A_NHDG, A_TSTART = 169, 170, 171, 172, 173  # counts; the time the filter started
 A_NIS = 174  # the velocity fixes' mean NIS per degree of freedom (running, over about NIS_FIXES fixes)
 A_T0 = 175  # the time of the first row (s)
-A_SIZE = 176
+A_NRESTART = 176  # restarts after a divergence
+A_SIZE = 177
+RESTART_RATIO = 3.0  # the running innovation ratio beyond which the filter restarts from the first pass
 NIS_FIXES = 30.0
 # ---- its parameter vector ----
 (
@@ -324,6 +326,9 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
             ratio = (y0 * y0 + y1 * y1) / (P[IV, IV] + P[IV + 1, IV + 1] + 2.0 * rv)
             nis = _correct(ast, P, dx, K, TMP, H, 2, y0, y1, rv, rv, gate)
             ast[A_NIS] += (min(ratio, 100.0) - ast[A_NIS]) / NIS_FIXES
+            if ast[A_NIS] > RESTART_RATIO:  # diverged (a start from an unsettled first pass): start again from it
+                ast[A_INIT], ast[A_NIS] = 0.0, 1.0
+                ast[A_NRESTART] += 1
             if nis < 0:
                 ast[A_NREJ] += 1
                 ast[A_REJT] += tk - ast[A_TFIX]
@@ -469,8 +474,18 @@ def run_aided(
         "gnss_velocity_noise_m_s": params.gnss_velocity_noise,
         # ≈ 1 when the velocity's and the gyro's noise are as stated; well above: the σ are under-stated
         "velocity_innovation_ratio": round(float(ast[A_NIS]), 3),
+        "restarts": int(ast[A_NRESTART]),
     }
     return AidedResult(q, std, ba, bas, summary), ast
+
+
+def velocity_is_fixes(velocity_ne: np.ndarray) -> bool:
+    """Whether a velocity column holds fixes (held between them, or NaN between them) rather than an interpolation
+    that changes on most rows (``--gnss`` interpolates a file's fixes onto the IMU rows): the aided filter takes
+    fixes only; an interpolation is left to the EKF's velocity aiding."""
+    v = np.asarray(velocity_ne, dtype=np.float64)[:, 0]
+    both = np.isfinite(v[1:]) & np.isfinite(v[:-1])
+    return not (both.sum() > 10 and np.mean(v[1:][both] != v[:-1][both]) > 0.5)
 
 
 def aided_result(
@@ -482,13 +497,18 @@ def aided_result(
     params,
     lever_arm: np.ndarray | None,
     antenna_arm: np.ndarray | None,
-) -> tuple[object, AidedResult]:
+    dt_nominal: float | None = None,
+    state: np.ndarray | None = None,
+) -> tuple[object, AidedResult, np.ndarray]:
     """(the EKF's result with the aided filter's attitude and σ where it is running and no less certain, the aided
-    result): the second pass of :func:`~imutool.attitude.recording.ekf_recording` with a GNSS velocity. ``res`` an
+    result, its state for the next chunk): the second pass of :func:`~imutool.attitude.recording.ekf_recording`
+    (and of a streamed run, chunk by chunk) with a GNSS velocity. ``res`` an
     :class:`~imutool.attitude.run.AttitudeResult`; the arms (3,) m body FRD from the centre of rotation (None: 0)."""
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64)
     ant = np.zeros(3) if antenna_arm is None else np.asarray(antenna_arm, dtype=np.float64)
-    aided, _ = run_aided(time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant)
+    aided, ast = run_aided(
+        time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant, dt_nominal, state
+    )
     va = aided.std[:, 0] ** 2 + aided.std[:, 1] ** 2
     # the EKF's σ leaves out the accelerometer's bias (its tilt, b/g per axis): compared with it added
     vb = 2.0 * (params.accel_bias_sigma / params.gravity) ** 2
@@ -496,4 +516,4 @@ def aided_result(
     q, std = res.q.copy(), res.std.copy()
     q[use], std[use] = aided.q[use], aided.std[use]
     aided.summary["rows_used"] = int(use.sum())
-    return type(res)(res.time, q, res.bias, std, res.flags, res.summary, res.cov, res.force), aided
+    return type(res)(res.time, q, res.bias, std, res.flags, res.summary, res.cov, res.force), aided, ast

@@ -274,9 +274,10 @@ PARAMS: tuple[Param, ...] = (
     Param("gnss_nis_gate", 16.0, "1", (0.0, 1e6), UNUSED, None,
           "a velocity fix whose normalised innovation squared (2 degrees of freedom) exceeds this is an outlier: "
           "skipped and counted, for at most reject_timeout s running (0: off)"),
-    Param("gnss_min_interval", 0.05, "s", (0.0, 3600.0), UNUSED, None,
-          "velocity fixes closer than this to the previous one are not used (an interpolated column is not a fix "
-          "per row)"),
+    Param("gnss_min_interval", 0.2, "s", (0.0, 3600.0), UNUSED, None,
+          "velocity fixes closer than this to the previous one are not used: an interpolated velocity (--gnss "
+          "interpolates its fixes onto the IMU rows) is not a fix per row; set it to the receiver's interval there "
+          "(1 at 1 Hz), lower it for a receiver faster than 5 Hz that is held or NaN between fixes (0.05 at 10 Hz)"),
     Param("aided_gyro_noise", 0.0001, "rad/s/sqrt(Hz)", (1e-7, 1.0), UNUSED, None,
           "the aided filter's gyro white-noise density (the sensor's own figure: the velocity fixes, not a "
           "generous process noise, hold its tilt)"),
