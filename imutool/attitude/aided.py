@@ -51,6 +51,7 @@ A_T0 = 175  # the time of the first row (s)
 A_NRESTART = 176  # restarts after a divergence
 A_SIZE = 177
 RESTART_RATIO = 3.0  # the running innovation ratio beyond which the filter restarts from the first pass
+MAX_RESTARTS = 2  # more restarts than this over a run (or a streamed chunk): its output is not used
 NIS_FIXES = 30.0
 # ---- its parameter vector ----
 (
@@ -513,6 +514,9 @@ def aided_result(
     # the EKF's σ leaves out the accelerometer's bias (its tilt, b/g per axis): compared with it added
     vb = 2.0 * (params.accel_bias_sigma / params.gravity) ** 2
     use = np.isfinite(aided.q[:, 0]) & (va <= res.std[:, 0] ** 2 + res.std[:, 1] ** 2 + vb)
+    if aided.summary["restarts"] > MAX_RESTARTS:  # the velocity is not the hull's (a smoothed track) or the gyro
+        use[:] = False  # is worse than stated: the EKF's velocity aiding is the safer estimate
+        aided.summary["not_used"] = f"diverged {aided.summary['restarts']} times: the EKF's estimate is output"
     q, std = res.q.copy(), res.std.copy()
     q[use], std[use] = aided.q[use], aided.std[use]
     aided.summary["rows_used"] = int(use.sum())
