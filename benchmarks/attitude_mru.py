@@ -183,6 +183,25 @@ def speed() -> None:
             run_ekf(t, g, a, mg, lever_arm=lever, **kw)
             best = min(best, time.perf_counter() - t0)
         print(f"run_ekf, {label_}: {len(t) / best / 1e6:.2f} M samples/s ({len(t)} samples, best of 3)")
+    from imutool.attitude.aided import run_aided
+
+    res, _ = run_ekf(t, g, a, mg, lever_arm=lever, velocity_ne=vel)
+    prm = EkfParams()
+    run_aided(t[:2000], g[:2000], a[:2000], vel[:2000], res.q[:2000], res.bias[:2000], res.std[:2000], prm, lever)
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        run_aided(t, g, a, vel, res.q, res.bias, res.std, prm, lever)
+        best = min(best, time.perf_counter() - t0)
+    ekf = best
+    print(f"run_aided (the second pass): {len(t) / best / 1e6:.2f} M samples/s")
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        r, _ = run_ekf(t, g, a, mg, lever_arm=lever, velocity_ne=vel)
+        run_aided(t, g, a, vel, r.q, r.bias, r.std, prm, lever)
+        best = min(best, time.perf_counter() - t0)
+    print(f"EKF + aided pass with GNSS velocity: {len(t) / best / 1e6:.2f} M samples/s (aided alone {ekf:.3f} s)")
 
 
 def main() -> None:
