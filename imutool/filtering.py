@@ -658,7 +658,8 @@ def stream_ekf(
                 speed_used=sog is not None and vel is None,
             )
             aided = None
-            if vel is not None and params.aided and res.summary.get("velocity_aiding") and velocity_is_fixes(vel):
+            aid = vel is not None and params.aided and lever_est is None  # as ekf_recording
+            if aid and res.summary.get("velocity_aiding") and velocity_is_fixes(vel):
                 res, aided, aided_state = aided_result(
                     chunk.time, chunk["gyro"], accel, vel, res, run_params, lever_arm, antenna_arm, dt_nom, aided_state
                 )

@@ -231,14 +231,10 @@ def ekf_recording(
     warnings = report.warnings
     aided = None
     # roll and pitch from the velocity-aided filter, where the EKF aided with the velocity (a heading held: the
-    # aided filter takes the EKF's heading)
-    if (
-        vel is not None
-        and params.aided
-        and not smooth
-        and res.summary.get("velocity_aiding")
-        and velocity_is_fixes(vel)
-    ):
+    # aided filter takes the EKF's heading); not on an estimated lever arm (a metre off at 0.2 rad/s is 0.2 m/s
+    # in the sensor's velocity)
+    aid = vel is not None and params.aided and not smooth and lever_est is None
+    if aid and res.summary.get("velocity_aiding") and velocity_is_fixes(vel):
         res, aided, _ = aided_result(
             rec.time, gyro, accel, vel, res, run_params, lever_arm, antenna_arm, nominal_dt(rec.time)
         )
