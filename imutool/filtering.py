@@ -37,10 +37,12 @@ from imutool.attitude import (
     output_metadata,
     result_recording,
 )
+from imutool.attitude.aided import aided_result, velocity_is_fixes
 from imutool.attitude.lever_estimate import LeverArmEstimate
 from imutool.attitude.motion import ANALYSIS_MAX_S, MotionChoice, choose_motion, params_for_motion
 from imutool.attitude.recording import (
     LOG_SPEED,
+    add_aided_channels,
     clipped_nan,
     drop_clipped,
     flag_clipped,
@@ -533,6 +535,7 @@ def stream_ekf(
     checks = ChunkChecks(path, mounting=mounting, calibration_file=calibration_file, strict=strict, rows_expected=total)
     rows_read = duplicates = 0
     stepper: EkfStepper | None = None  # the EKF with its state carried from chunk to chunk
+    aided_state = None  # the aided pass's state carried from chunk to chunk
     dt_nom = dt_mag = None  # the IMU's and the magnetometer's nominal intervals (s), from the first chunk with them
     t_last = -np.inf
     summary: dict[str, Any] = {
@@ -656,7 +659,16 @@ def stream_ekf(
                 heading_deg=heading,
                 speed_used=sog is not None and vel is None,
             )
+            aided = None
+            aid = vel is not None and params.aided and lever_est is None  # as ekf_recording
+            if aid and res.summary.get("velocity_aiding") and velocity_is_fixes(vel):
+                res, aided, aided_state = aided_result(
+                    chunk.time, chunk["gyro"], accel, vel, res, run_params, lever_arm, antenna_arm, dt_nom, aided_state
+                )
+                summary["aided"] = aided.summary
             est = result_recording(chunk, res, params)
+            if aided is not None:
+                add_aided_channels(est, aided)
             est.meta["motion"] = summary["motion"]
             # the metadata as far as known (the heading source is final at the end: set_final_meta below)
             est.meta.update(output_metadata(lever_arm, {"heading_source": self_checks.heading_source()}))
@@ -665,7 +677,7 @@ def stream_ekf(
             summary["rows"] += len(chunk)
             # the input and the filter's arrays of this chunk let go before looking ahead (the next chunk taken
             # lets the reader parse one more): what is held is what was held before
-            chunk = accel = res = sog = cog = vel = heading = clipped_rows = None  # type: ignore[assignment]
+            chunk = accel = res = sog = cog = vel = heading = clipped_rows = aided = None  # type: ignore[assignment]
             if chunks.at_end():  # the last chunk: the final metadata first, so its rows go straight behind them
                 final = finish(w)
             w.write(est)

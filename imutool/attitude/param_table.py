@@ -264,6 +264,39 @@ PARAMS: tuple[Param, ...] = (
           "initial σ of each gyro-bias component"),
     Param("init_bias", (0.0, 0.0, 0.0), "rad/s", (-10.0, 10.0), UNUSED, None,
           "initial gyro bias [x, y, z]"),
+    Param("aided", True, "bool", (0, 1), UNUSED, None,
+          "with a GNSS velocity (vel_n/vel_e, sog/cog, --gnss), roll and pitch come from the velocity-aided filter "
+          "(imutool/attitude/aided.py: the velocity fixes as Kalman measurements, velocity and accelerometer-bias "
+          "states; false: the EKF's velocity aiding alone, as before)"),
+    Param("gnss_velocity_noise", 0.05, "m/s", (0.001, 10.0), UNUSED, None,
+          "σ of each GNSS velocity fix, north and east (a receiver's class: 0.05 single-frequency, 0.02 dual, 0.01 "
+          "RTK)"),
+    Param("gnss_nis_gate", 16.0, "1", (0.0, 1e6), UNUSED, None,
+          "a velocity fix whose normalised innovation squared (2 degrees of freedom) exceeds this is an outlier: "
+          "skipped and counted, for at most reject_timeout s running (0: off)"),
+    Param("gnss_min_interval", 0.2, "s", (0.0, 3600.0), UNUSED, None,
+          "velocity fixes closer than this to the previous one are not used: an interpolated velocity (--gnss "
+          "interpolates its fixes onto the IMU rows) is not a fix per row; set it to the receiver's interval there "
+          "(1 at 1 Hz), lower it for a receiver faster than 5 Hz that is held or NaN between fixes (0.05 at 10 Hz)"),
+    Param("aided_gyro_noise", 0.0001, "rad/s/sqrt(Hz)", (1e-7, 1.0), UNUSED, None,
+          "the aided filter's gyro white-noise density (the sensor's own figure: the velocity fixes, not a "
+          "generous process noise, hold its tilt)"),
+    Param("aided_gyro_bias_rw", 4e-05, "rad/s/sqrt(s)", (0.0, 1.0), UNUSED, None,
+          "the aided filter's gyro bias random walk (a MEMS gyro's bias wanders: 4e-5 ≈ 0.0023 °/s/√s)"),
+    Param("aided_gyro_scale_noise", 0.0005, "1", (0.0, 1.0), UNUSED, None,
+          "the aided filter's attitude noise per unit of angle turned (gyro scale factor and misalignment)"),
+    Param("aided_accel_noise", 0.005, "m/s^2/sqrt(Hz)", (1e-6, 10.0), UNUSED, None,
+          "the aided filter's accelerometer white-noise density (velocity random walk)"),
+    Param("accel_bias_sigma", 0.04, "m/s^2", (0.0, 10.0), UNUSED, None,
+          "prior σ of each accelerometer-bias component (a MEMS turn-on bias; 0.01 after a calibration); the tilt's σ "
+          "keeps it until a turn or a change of speed makes the bias observable"),
+    Param("accel_bias_rw", 5e-05, "m/s^2/sqrt(s)", (0.0, 10.0), UNUSED, None,
+          "accelerometer bias random walk: process noise of the aided filter's bias states"),
+    Param("init_accel_bias", (0.0, 0.0, 0.0), "m/s^2", (-10.0, 10.0), UNUSED, None,
+          "initial accelerometer bias [x, y, z] of the aided filter (a previous run's accel_bias estimate)"),
+    Param("aided_start_sigma_deg", 1.0, "deg", (0.0, 180.0), UNUSED, None,
+          "the aided filter starts from the EKF at the first velocity fix where the EKF's roll and pitch σ are "
+          "below this (the EKF's output before)"),
 )
 # fmt: on
 

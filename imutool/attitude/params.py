@@ -81,13 +81,14 @@ class EkfParams:
                 if self.motion not in MOTIONS:
                     raise ImutoolError(f"motion {self.motion!r}: expected {', '.join(MOTIONS)}")
                 continue
-            vals = v if name == "init_bias" else (v,)
+            vector = name in ("init_bias", "init_accel_bias")
+            vals = v if vector else (v,)
             try:
                 arr = np.asarray(vals, dtype=float)
             except (TypeError, ValueError):
                 raise ImutoolError(f"EKF parameter {name} = {v!r}: expected a number ({unit})") from None
-            if arr.shape != ((3,) if name == "init_bias" else (1,)):
-                want = "3 numbers" if name == "init_bias" else "one number"
+            if arr.shape != ((3,) if vector else (1,)):
+                want = "3 numbers" if vector else "one number"
                 raise ImutoolError(f"EKF parameter {name} = {v!r}: expected {want}")
             if not (np.all(np.isfinite(arr)) and np.all(arr >= lo) and np.all(arr <= hi)):
                 raise ImutoolError(f"EKF parameter {name} = {v!r} is outside [{lo:g}, {hi:g}] {unit}")
@@ -105,8 +106,9 @@ class EkfParams:
                 f"{source}: unknown EKF parameter(s) {', '.join(unknown)}; known: {', '.join(PARAM_DOC)}"
             )
         kw = dict(values)
-        if "init_bias" in kw and isinstance(kw["init_bias"], list):
-            kw["init_bias"] = tuple(kw["init_bias"])
+        for key in ("init_bias", "init_accel_bias"):
+            if key in kw and isinstance(kw[key], list):
+                kw[key] = tuple(kw[key])
         for k, v in kw.items():
             default = PARAMS_BY_NAME[k].default
             if isinstance(default, bool) and not isinstance(v, bool):

@@ -9,6 +9,7 @@ from formats.csv import DECIMALS_KEY
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
 from formats.saturation import clipped
+from imutool.attitude.aided import aided_result, velocity_is_fixes
 from imutool.attitude.layout import F_ACC_REJ
 from imutool.attitude.lever_estimate import LeverArmEstimate, analysis_span, estimate_lever_arm
 from imutool.attitude.motion import MotionChoice, choose_motion, params_for_motion
@@ -228,12 +229,25 @@ def ekf_recording(
     report = checks.report()
     summary.update(report.summary)
     warnings = report.warnings
+    aided = None
+    # roll and pitch from the velocity-aided filter, where the EKF aided with the velocity (a heading held: the
+    # aided filter takes the EKF's heading); not on an estimated lever arm (a metre off at 0.2 rad/s is 0.2 m/s
+    # in the sensor's velocity)
+    aid = vel is not None and params.aided and not smooth and lever_est is None
+    if aid and res.summary.get("velocity_aiding") and velocity_is_fixes(vel):
+        res, aided, _ = aided_result(
+            rec.time, gyro, accel, vel, res, run_params, lever_arm, antenna_arm, nominal_dt(rec.time)
+        )
+        summary["aided"] = aided.summary
     if lever_est is not None:
         summary["lever_arm_estimate"] = lever_est.summary()
         warnings = [m for m in (lever_est.message(),) if m] + warnings
     if smooth:
         res = zero_lag_smooth(res, gyro, accel, mag, run_params, sog, cog, lever_arm, heading_deg=heading)
     out = result_recording(rec, res, params)
+    if aided is not None:
+        add_aided_channels(out, aided)
+        out.meta["aided"] = aided.summary
     out.meta["motion"] = summary["motion"] = motion.summary()
     out.meta.update(report.metadata)
     if lever_est is not None:
@@ -292,6 +306,13 @@ OUTPUT_DECIMALS = {
 
 
 LABEL_CHANNELS = ("movement", "zvi")
+
+
+def add_aided_channels(out: Recording, aided) -> None:
+    """The aided filter's accelerometer bias and its σ (m/s², body FRD) as output channels."""
+    out.add("accel_bias", aided.accel_bias, "m/s^2")
+    out.add("accel_bias_std", aided.accel_bias_std, "m/s^2")
+    out.meta[DECIMALS_KEY] = {**out.meta[DECIMALS_KEY], "accel_bias": 7, "accel_bias_std": 7}
 
 
 def carry_labels(src: Recording, dst: Recording) -> None:

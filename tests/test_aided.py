@@ -1,0 +1,154 @@
+"""The GNSS-velocity-aided attitude filter (issue 50, imutool/attitude/aided.py): the velocity fixes as Kalman
+measurements, velocity and accelerometer-bias states, σ that covers the error."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imutool.attitude import EkfParams
+from imutool.attitude.aided import run_aided
+from imutool.attitude.recording import gnss_inputs
+from imutool.attitude.run import run_ekf
+from imutool.filtering import run_filter
+from imutool.sim import simulate
+
+G = 9.80665
+TURN_START, TURN_END = 40.0, 40.0 + 120.0 + 10.0  # the 360° turn at 3 °/s and its ramp
+
+
+def voyage(bias=(0.05, -0.05, 0.05), seed: int = 5, **kw):
+    """4 minutes of a bridge sensor (20 m above, 12 m aft of the roll centre; roll to 20° significant, heave 2 m,
+    sway 1 m) with a good MEMS gyro, a 5 mg accelerometer bias on each axis and a 1 Hz receiver (3 cm/s), a 360°
+    turn from 40 s."""
+    base = dict(
+        duration=240.0,
+        seed=seed,
+        lever_arm=(-12.0, 0.0, -20.0),
+        roll_significant_deg=20.0,
+        sway_m=1.0,
+        heave_period=7.5,
+        turn_start=TURN_START,
+        accel_bias_mg=0.0,
+        gyro_bias_rw_deg_s=0.0005,
+        gnss_vel_noise_mps=0.03,
+        gnss_columns="vel",
+    )
+    rec = simulate("ship-at-sea", **{**base, **kw})
+    rec.channels["accel"] = rec["accel"] + np.asarray(bias)
+    rec.meta["accel_bias_m_s2"] = list(bias)
+    return rec
+
+
+PRM = EkfParams(gnss_velocity_noise=0.03)
+
+
+@pytest.fixture(scope="module")
+def biased():
+    rec = voyage()
+    out = run_filter(rec, params=PRM, lever_arm=np.array(rec.meta["lever_arm_m"]))
+    return rec, out
+
+
+def test_the_bias_is_learned_in_a_turn_and_the_tilt_after_it_meets_the_bound(biased):
+    rec, res = biased
+    out = res.recording
+    t = rec.time - rec.time[0]
+    after = t > TURN_END
+    er, ep = (out["roll"] - rec["ref_roll"])[after], (out["pitch"] - rec["ref_pitch"])[after]
+    # measured 0.057° / 0.11° (pitch: the bias along the bow, which the roll does not modulate, is the one the
+    # gyro's bias instability over the turn confounds most; docs/attitude.md, "The limit")
+    assert np.sqrt(np.mean(er**2)) <= 0.08 and np.sqrt(np.mean(ep**2)) <= 0.13
+    assert np.abs(er).max() <= 0.4 and np.abs(ep).max() <= 0.4
+    err = np.abs(out["accel_bias"][-1] - np.array(rec.meta["accel_bias_m_s2"])) / G * 1e3  # mg
+    assert err[0] < 2.5 and err[1] < 1.0 and err[2] < 1.0, err
+    # before the turn the horizontal bias is not observable: the σ of the bias says so, and shrinks in the turn
+    sd = out["accel_bias_std"]
+    i0, i1 = np.searchsorted(t, TURN_START), np.searchsorted(t, TURN_END)
+    assert sd[i0, 0] > 2.5e-2 and sd[-1, 0] < 0.5 * sd[i0, 0] and sd[i1, 0] < 0.6 * sd[i0, 0]
+    s = res.summary["aided"]
+    assert s["velocity_fixes"] > 200 and s["held_rows_skipped"] > 20000 and s["velocity_rejected"] <= 10
+
+
+def test_the_sigma_covers_the_error_before_and_after_the_turn(biased):
+    """|error| ≤ 2σ on 90–98 % of the samples, the unobservable bias before the turn included (without its state
+    the EKF's σ covered 60 % there)."""
+    rec, res = biased
+    out = res.recording
+    t = rec.time - rec.time[0]
+    scored = t >= 20.0
+    e = np.concatenate([(out["roll"] - rec["ref_roll"])[scored], (out["pitch"] - rec["ref_pitch"])[scored]])
+    s = np.concatenate([out["roll_std"][scored], out["pitch_std"][scored]])
+    share = np.mean(np.abs(e) <= 2 * s)
+    assert 0.90 <= share <= 0.995, share
+
+
+def test_without_the_aided_filter_the_tilt_carries_the_bias(biased):
+    """The same voyage with the aided filter off (the EKF's velocity aiding alone): the bias stays in the tilt."""
+    rec, _ = biased
+    off = run_filter(rec, params=EkfParams(aided=False), lever_arm=np.array(rec.meta["lever_arm_m"])).recording
+    after = rec.time - rec.time[0] > TURN_END
+    ep = (off["pitch"] - rec["ref_pitch"])[after]
+    assert np.sqrt(np.mean(ep**2)) > 0.15
+    assert "accel_bias" not in off.channels
+
+
+def test_held_and_nan_separated_fixes_aid_alike():
+    """A held velocity is one fix at its first row; the same fixes between NaN rows give the same result."""
+    rec = voyage(duration=120.0)
+    t, g, a = rec.time, rec["gyro"], rec["accel"]
+    _, _, vel = gnss_inputs(rec)
+    lever = np.array(rec.meta["lever_arm_m"])
+    res, _ = run_ekf(t, g, a, rec["mag"], PRM, lever_arm=lever, velocity_ne=vel)
+    held, _ = run_aided(t, g, a, vel, res.q, res.bias, res.std, PRM, lever)
+    start = np.concatenate([[True], np.any(np.diff(vel, axis=0) != 0, axis=1)])
+    sparse = np.where(start[:, None], vel, np.nan)
+    nan_sep, _ = run_aided(t, g, a, sparse, res.q, res.bias, res.std, PRM, lever)
+    np.testing.assert_array_equal(held.q, nan_sep.q)
+    assert held.summary["velocity_fixes"] == nan_sep.summary["velocity_fixes"] > 100
+    # a held value counted at every row would make 100 fixes a second: the σ would collapse
+    every = np.where(np.isfinite(vel), vel + 1e-9 * np.arange(len(t))[:, None], np.nan)
+    over, _ = run_aided(t, g, a, every, res.q, res.bias, res.std, EkfParams(gnss_min_interval=0.05), lever)
+    used = over.summary["velocity_fixes"] + over.summary["velocity_rejected"]
+    assert used > 8 * held.summary["velocity_fixes"]
+
+
+def test_a_chunked_run_equals_one_run():
+    rec = voyage(duration=60.0)
+    t, g, a = rec.time, rec["gyro"], rec["accel"]
+    _, _, vel = gnss_inputs(rec)
+    lever = np.array(rec.meta["lever_arm_m"])
+    res, _ = run_ekf(t, g, a, rec["mag"], PRM, lever_arm=lever, velocity_ne=vel)
+    one, _ = run_aided(t, g, a, vel, res.q, res.bias, res.std, PRM, lever, dt_nominal=0.01)
+    k = 3217
+    first, st = run_aided(t[:k], g[:k], a[:k], vel[:k], res.q[:k], res.bias[:k], res.std[:k], PRM, lever, 0.01)
+    second, _ = run_aided(
+        t[k:], g[k:], a[k:], vel[k:], res.q[k:], res.bias[k:], res.std[k:], PRM, lever, 0.01, state=st
+    )
+    np.testing.assert_array_equal(one.q, np.concatenate([first.q, second.q]))
+
+
+def test_outliers_are_gated_and_counted():
+    rec = voyage(duration=120.0)
+    lever = np.array(rec.meta["lever_arm_m"])
+    clean = run_filter(rec, params=PRM, lever_arm=lever).summary["aided"]["velocity_rejected"]
+    vn = rec["vel_n"].copy()
+    start = np.flatnonzero(np.concatenate([[True], np.diff(vn) != 0]))
+    for j in range(50, 100, 10):  # five isolated fixes 3 m/s off, each held for its second
+        vn[start[j] : start[j + 1]] += 3.0
+    rec.channels["vel_n"] = vn
+    res = run_filter(rec, params=PRM, lever_arm=lever)
+    assert res.summary["aided"]["velocity_rejected"] == clean + 5
+    t = rec.time - rec.time[0]
+    er = (res.recording["roll"] - rec["ref_roll"])[t > 30]
+    assert np.abs(er).max() < 1.0
+
+
+def test_without_gnss_the_output_is_the_ekf_alone():
+    """No GNSS velocity: the aided filter does not run, and the output is the EKF's, whatever its parameters."""
+    rec = voyage(duration=60.0, speed_source="none")
+    a = run_filter(rec, lever_arm=np.array(rec.meta["lever_arm_m"])).recording
+    b = run_filter(rec, params=EkfParams(aided=False), lever_arm=np.array(rec.meta["lever_arm_m"])).recording
+    for ch in ("roll", "pitch", "heading", "roll_std", "pitch_std"):
+        np.testing.assert_array_equal(a[ch], b[ch])
+    assert "accel_bias" not in a.channels
