@@ -302,7 +302,7 @@ def _same(a: dict, b: dict, skip: tuple[str, ...] = ()) -> list[str]:
 
 def test_roll_and_events_on_the_heel_stream(sea: Path, tmp_path: Path) -> None:
     from imutool.events import run_events
-    from imutool.roll import run_roll
+    from imutool.routes.roll import run_roll
 
     rec = formats.read(sea)
     only = _stream_csv(rec, "roll", tmp_path / "roll.csv")

@@ -1,7 +1,7 @@
 """`imutool roll INPUT -o roll_stats.csv`: MSC.363(92) roll statistics (heel, period, amplitudes, peak hold).
 
-Only option parsing and printing here; the work is :func:`imutool.roll.run_roll`, the route `imutool batch roll` and
-a Python user take (the detector's defaults live in :data:`imutool.roll.ROLL_DEFAULTS`).
+Only option parsing and printing here; the work is :func:`imutool.routes.roll.run_roll`, the route
+`imutool batch roll` and a Python user take (the detector's defaults live in :data:`imutool.roll.ROLL_DEFAULTS`).
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from imutool.cli.common import (
     safe_outputs,
     strict_requested,
 )
-from imutool.roll import run_roll
 from imutool.routes import OnInput, RouteResult
+from imutool.routes.roll import run_roll
 
 OUTPUTS = ("output", "cycles_path")
 

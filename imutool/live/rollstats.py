@@ -20,7 +20,6 @@ import numpy as np
 from imutool.roll import PORT, ROLL_DEFAULTS, STBD, roll_cycles
 
 
-
 def iso_utc(t: float) -> str:
     """Host UTC epoch seconds → ISO 8601 with Z, seconds resolution."""
     return datetime.fromtimestamp(t, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
