@@ -495,7 +495,7 @@ def heave_readings(est: Recording, ref: Recording, out: dict[str, Any]) -> None:
     if rname is None:
         return
     for ch, flag in (("heave", "settled"), ("heave_delayed", "settled_delayed")):
-        if isinstance(out.get(ch), dict) and ch in est.channels:
+        if isinstance(out.get(ch), dict) and ch in est.channels and "not_evaluated" not in out[ch]:
             mask = np.asarray(est[flag]) > 0.5 if flag in est.channels else None
             out[ch]["readings"] = heave_accuracy(
                 est.time, est[ch], ref.time, ref[rname], lag_s=float(out[ch].get("lag_s", 0.0)), mask=mask

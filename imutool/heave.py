@@ -1454,8 +1454,9 @@ def _evaluate_at_reference(
             continue
         mask = np.asarray(est[flag]) > 0.5 if flag in est else np.ones(len(est), bool)
         x = np.where(mask, np.asarray(est[ch], float), np.nan)
-        if mask.sum() < 10:
-            raise ImutoolError("too few settled samples to evaluate heave")
+        if mask.sum() < 10:  # e.g. a real-time heave that never met its error bound (heave_std): said, not judged
+            out[ch] = _unjudged(int(mask.sum()), len(est))
+            continue
         lag = 0.0
         if max_lag_s > 0:
             step = min(float(np.median(np.diff(est.time))), max_lag_s / 10)
@@ -1466,6 +1467,26 @@ def _evaluate_at_reference(
         st["excluded_unsettled"] = int((~mask).sum())
         st["rmse_pct_of_significant"] = float(100 * st["rmse"] / sig) if sig > 0 else float("nan")
         out[ch] = st
+    return _judged(out)
+
+
+def _unjudged(n_settled: int, n: int) -> dict[str, Any]:
+    """The entry of an output with fewer than 10 settled samples: not evaluated, and why."""
+    return {
+        "n": 0,
+        "settled_samples": n_settled,
+        "excluded_unsettled": n - n_settled,
+        "not_evaluated": (
+            f"{n_settled} settled sample(s) of {n}: too few (< 10) to evaluate; the estimate never met its error bound"
+        ),
+    }
+
+
+def _judged(out: dict[str, Any]) -> dict[str, Any]:
+    """Refuse an evaluation in which no heave output had settled samples to compare."""
+    done = [k for k in ("heave", "heave_delayed") if k in out and "not_evaluated" not in out[k]]
+    if not done:
+        raise ImutoolError("too few settled samples to evaluate heave (no output settled for 10 samples)")
     return out
 
 
@@ -1505,7 +1526,8 @@ def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> di
         x = np.asarray(est[ch], float)
         tt, xx = est.time[mask], x[mask]
         if len(tt) < 10:
-            raise ImutoolError("too few settled samples to evaluate heave")
+            out[ch] = _unjudged(len(tt), len(est))
+            continue
         if max_lag_s > 0:
             # a lag grid finer than the sample interval (at 10 Hz a ±0.1 s search would have three points)
             step = min(float(np.median(np.diff(tt))), max_lag_s / 10)
@@ -1518,4 +1540,4 @@ def evaluate_heave(est: Recording, ref: Recording, max_lag_s: float = 0.1) -> di
         st["excluded_unsettled"] = int((~mask).sum())
         st["rmse_pct_of_significant"] = float(100 * st["rmse"] / sig) if sig > 0 else float("nan")
         out[ch] = st
-    return out
+    return _judged(out)

@@ -214,7 +214,7 @@ def test_version_of_the_real_packages_ignores_routes_and_follows_kernels_and_the
     memo = tmp_path / "cache" / kc.MEMO_NAME
     v0 = kc.source_version(memo)
     assert memo.is_file() and kc.source_version(memo) == v0
-    _edit(tmp_path / "imutool" / "routes.py", "def read_source(", "# a developer's edit\ndef read_source(")
+    _edit(tmp_path / "imutool" / "routes" / "__init__.py", "def read_source(", "# a developer's edit\ndef read_source(")
     report = tmp_path / "imutool" / "report" / "route.py"
     report.write_text(report.read_text(encoding="utf-8") + "# a developer's edit\n", encoding="utf-8")
     assert kc.source_version(memo) == v0

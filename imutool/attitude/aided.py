@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
-from formats.frames import quat_to_euler
+from formats.frames import euler_to_quat, quat_to_euler
 from imutool.attitude.layout import _FASTMATH, CALLED, INLINED
 from imutool.quaternion import qmul, qturn, rmat, rotvec_quat
 
@@ -518,6 +518,11 @@ def aided_result(
         use[:] = False  # is worse than stated: the EKF's velocity aiding is the safer estimate
         aided.summary["not_used"] = f"diverged {aided.summary['restarts']} times: the EKF's estimate is output"
     q, std = res.q.copy(), res.std.copy()
-    q[use], std[use] = aided.q[use], aided.std[use]
+    # roll and pitch from the aided pass; the heading stays the EKF's (the one that holds the magnetometer or the
+    # gyrocompass: the aided pass takes it as a measurement and lags it after a start or a jump)
+    ra, pa, _ = quat_to_euler(aided.q[use])
+    _, _, he = quat_to_euler(res.q[use])
+    q[use] = euler_to_quat(ra, pa, he)
+    std[use, :2] = aided.std[use, :2]
     aided.summary["rows_used"] = int(use.sum())
     return type(res)(res.time, q, res.bias, std, res.flags, res.summary, res.cov, res.force), aided, ast

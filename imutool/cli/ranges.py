@@ -169,6 +169,7 @@ RANGES: dict[str, Bound] = {
     "min_growth": NONNEG,
     "min_amplitude_deg": NONNEG,
     "min_lock": FRACTION,
+    "settle_fraction": (0, 1, True, False),  # heave: settled while heave_std ≤ this × the significant heave
     # order of a Butterworth filter (higher orders are numerically useless at sensor rates)
     "order": (1, 8, False, False),
     "heave order": (3, 8, False, False),
