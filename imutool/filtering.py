@@ -665,7 +665,8 @@ def stream_ekf(
                 res, aided, aided_state = aided_result(
                     chunk.time, chunk["gyro"], accel, vel, res, run_params, lever_arm, antenna_arm, dt_nom, aided_state
                 )
-                summary["aided"] = aided.summary
+                used = int(summary.get("aided", {}).get("rows_used", 0)) + int(aided.summary.get("rows_used", 0))
+                summary["aided"] = {**aided.summary, "rows_used": used}  # the counters of the run so far
             est = result_recording(chunk, res, params)
             if aided is not None:
                 add_aided_channels(est, aided)

@@ -129,6 +129,8 @@ class _Run:
         sea = simulate("sea-state", duration=120.0, seed=1)
         out, _ = heave_recording(sea)
         ev = evaluate_heave(out, sea)["heave_delayed"]
+        if "not_evaluated" in ev:
+            raise ImutoolError(f"delayed heave: {ev['not_evaluated']}")
         pct = float(ev["rmse_pct_of_significant"])
         if not (ev["n"] > 0 and pct <= HEAVE_RMSE_MAX_PCT):
             raise ImutoolError(f"delayed heave RMSE {pct:.1f} % of the significant heave > {HEAVE_RMSE_MAX_PCT} %")

@@ -424,3 +424,26 @@ def test_info_text_of_a_many_clock_csv(sea: Path, tmp_path: Path, capsys) -> Non
     code, out, err = run_main(["info", tmp_path / "j.csv"], capsys)
     assert code == 0, err
     assert "rate:      per stream (2 streams" in out and "att            1 Hz, 10 samples in 9 s, 0 gaps" in out
+
+
+def test_xdr_transducers_on_lines_of_their_own_are_streams_of_their_own(tmp_path, capsys):
+    """A device that sends XDR ROLL and XDR PITCH on lines of their own (50 ms apart): two streams, no missing
+    samples counted, and every XDR written by `imutool nmea` carries the pitch (held from its own stream)."""
+    from formats.nmea import xdr_sentence
+
+    t0, lines = 1_700_000_000.0, []
+    for i in range(300):
+        t = t0 + i * 0.1
+        lines.append(f"{t:.3f} " + xdr_sentence([("A", 6 * math.sin(0.2 * math.pi * i * 0.1), "D", "ROLL")]))
+        lines.append(f"{t + 0.05:.3f} " + xdr_sentence([("A", 2.0 + 0.01 * i, "D", "PITCH")]))
+    log = tmp_path / "xdr_split.log"
+    log.write_text("\n".join(lines) + "\n")
+    rec = formats.read(log)
+    assert set(rec.streams) == {"XDR:roll", "XDR:pitch"} and rec.multi_clock
+    _, rep = rec.validated()
+    assert rep.nan_by_channel == {}  # main counted 300 missing rolls and 300 missing pitches
+    code, _, err = run_main(["nmea", log, "-o", tmp_path / "o.nmea", "--sentences", "XDR"], capsys)
+    assert code == 0, err
+    xdr = [x for x in (tmp_path / "o.nmea").read_text().splitlines() if x.startswith("$") and "XDR" in x]
+    assert len(xdr) >= 290
+    assert sum(",PTCH," in x and "A,,D,PTCH" not in x for x in xdr[1:]) == len(xdr) - 1

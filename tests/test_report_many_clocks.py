@@ -283,7 +283,7 @@ def test_gofree_xdr_heel_is_not_silent(tmp_path):
     ref = tmp_path / "gofree_ref.log"
     ref.write_text("\r\n".join(out) + "\r\n", encoding="latin-1")
     ev = run_inclinometer_report(src, ref, tmp_path / "g.pdf").data["evidence"]
-    assert ev["inputs"]["dut"]["rows"] == 141 and ev["inputs"]["dut"]["stream"] == "XDR"
+    assert ev["inputs"]["dut"]["rows"] == 141 and ev["inputs"]["dut"]["stream"] == "XDR:roll"
     assert ev["inputs"]["dut"]["rate_hz"] == pytest.approx(1.0, abs=0.02)
     assert ev["alignment"]["lag_s"] == 0.0 and ev["alignment"]["lag_measurable"] is False
     assert any("does not move" in w or "stays within" in w for w in ev["warnings"])

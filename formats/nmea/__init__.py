@@ -1164,15 +1164,22 @@ def read_nmea(
     return rec
 
 
+_VARIABLE_CONTENT = {"XDR"}  # sentences whose channels vary from line to line (transducer ids)
+
+
 def _declare_streams(
     rec: Recording, row_of: np.ndarray, rows_vals: list[dict[str, float]], keys: list[str], n_rows: int
 ) -> None:
     """Each sentence type is a stream on its own rows (Recording's many clocks): a channel's samples are the rows
     where a sentence that carries it arrived (an empty field there is a missing sample; another sentence's row is
-    not). Channels carried by the same sentence types share a stream, named by them (``PSXN23``, ``HDT+THS``)."""
+    not). Channels carried by the same sentence types share a stream, named by them (``PSXN23``, ``HDT+THS``); an
+    XDR line is keyed by the channels it carries (``XDR:pitch/roll``, or ``XDR:roll`` and ``XDR:pitch`` when a
+    device sends each transducer on a line of its own)."""
     key_rows: dict[str, np.ndarray] = {}
     chan_keys: dict[str, set[str]] = {}
     for r, v, key in zip(row_of, rows_vals, keys, strict=True):
+        if key in _VARIABLE_CONTENT:  # e.g. XDR ROLL and XDR PITCH on lines of their own: a stream each
+            key = f"{key}:" + "/".join(sorted({_CHANNELS[k][0] for k in v if k in _CHANNELS}))
         key_rows.setdefault(key, np.zeros(n_rows, dtype=bool))[r] = True
         for k in v:
             ch = _CHANNELS.get(k)

@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
-from formats.frames import euler_to_quat, quat_to_euler
+from formats.frames import quat_multiply, quat_to_euler
 from imutool.attitude.layout import _FASTMATH, CALLED, INLINED
 from imutool.quaternion import qmul, qturn, rmat, rotvec_quat
 
@@ -465,7 +465,7 @@ def run_aided(
         aided_vector(params, dt_nominal), ast, q, std, ba, bas,
     )  # fmt: skip
     summary = {
-        "started_s": None if not np.isfinite(ast[A_TSTART]) else round(float(ast[A_TSTART] - t[0]), 3),
+        "started_s": None if not np.isfinite(ast[A_TSTART]) else round(float(ast[A_TSTART] - ast[A_T0]), 3),
         "velocity_fixes": int(ast[A_NFIX]),
         "velocity_rejected": int(ast[A_NREJ]),
         "held_rows_skipped": int(ast[A_NHELD]),
@@ -518,11 +518,14 @@ def aided_result(
         use[:] = False  # is worse than stated: the EKF's velocity aiding is the safer estimate
         aided.summary["not_used"] = f"diverged {aided.summary['restarts']} times: the EKF's estimate is output"
     q, std = res.q.copy(), res.std.copy()
-    # roll and pitch from the aided pass; the heading stays the EKF's (the one that holds the magnetometer or the
-    # gyrocompass: the aided pass takes it as a measurement and lags it after a start or a jump)
-    ra, pa, _ = quat_to_euler(aided.q[use])
+    # the aided pass's attitude turned about the world's down axis onto the EKF's heading (the one that holds the
+    # magnetometer or the gyrocompass: the aided pass takes it as a measurement and lags it after a start or a
+    # jump); a turn about down keeps the aided gravity direction exactly, also near pitch ±90°
+    _, _, ha = quat_to_euler(aided.q[use])
     _, _, he = quat_to_euler(res.q[use])
-    q[use] = euler_to_quat(ra, pa, he)
+    half = 0.5 * np.angle(np.exp(1j * (he - ha)))  # half the heading difference, wrapped to (−π, π]
+    turn = np.stack([np.cos(half), np.zeros_like(half), np.zeros_like(half), np.sin(half)], axis=1)
+    q[use] = quat_multiply(turn, aided.q[use])
     std[use, :2] = aided.std[use, :2]
     aided.summary["rows_used"] = int(use.sum())
     return type(res)(res.time, q, res.bias, std, res.flags, res.summary, res.cov, res.force), aided, ast

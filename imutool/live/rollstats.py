@@ -142,7 +142,8 @@ class LiveRoll:
         # the whole trailing window, as `imutool roll` on it: the centre (a running mean heel), the hysteresis and
         # the smoothing of imutool.roll_period are taken from the window itself, so a shorter span would differ
         ok = np.isfinite(x)
-        if ok.sum() < 8:
+        if ok.sum() < 8:  # no heel in the window: nothing current to show (a stale value is not shown)
+            self.amp_port = self.amp_stbd = self.period = self.period_port = self.period_stbd = None
             return
         cyc = roll_cycles(t[ok], x[ok], self.hysteresis_deg, max_period_s=self.max_period_s)
         out: dict[int, Any] = {}

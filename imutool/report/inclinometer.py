@@ -536,8 +536,11 @@ def inclinometer_evidence(
         )
     # many clocks: each heel on its own samples (another sentence's row is not a missing heel sample); the
     # reference's other channels (lateral acceleration) are taken onto the reference heel's times
-    ref_all = ref
+    ref_all, dut_all = ref, dut
     dut, ref = own_samples(dut, dch), own_samples(ref, rch)
+    for k in ("amp_port", "amp_stbd", "roll_period", "peak_port", "peak_stbd"):  # the device's own HRM fields,
+        if k in dut_all.channels and k not in dut.channels:  # when another sentence also carries its heel
+            dut.add(k, dut_all.held(k, dut.time), dut_all.units.get(k))
     h_dut = heel_of(dut, dut_path or "DUT", dch)
     h_ref = heel_of(ref, ref_path or "reference", rch)
     t = ref.time
