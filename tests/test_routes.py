@@ -408,7 +408,7 @@ def test_calibrate_deviation_and_show(more, tmp_path, monkeypatch):
 
 
 def test_roll(data, tmp_path, monkeypatch):
-    from imutool.roll import run_roll
+    from imutool.routes.roll import run_roll
 
     args = ["roll", data["att"], "-o", "rs.csv", "--cycles", "cy.csv", "--hysteresis", "0.7", "--reset", "30"]
     route = lambda: run_roll(data["att"], "rs.csv", cycles_path="cy.csv", hysteresis_deg=0.7, resets_s=[30.0])  # noqa: E731

@@ -151,7 +151,7 @@ def roll_route(
     on_input: OnInput | None = None,
     **options: Any,
 ) -> RouteResult:
-    """Parsed options → :func:`imutool.roll.run_roll` (``--reset`` and ``--utc-start`` parsed here)."""
+    """Parsed options → :func:`imutool.routes.roll.run_roll` (``--reset`` and ``--utc-start`` parsed here)."""
     return run_roll(
         input_path,
         output,

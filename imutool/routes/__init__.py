@@ -5,7 +5,7 @@ A library route (:func:`imutool.routes.heave.run_heave`, :func:`imutool.routes.i
 :func:`imutool.nmea_out.run_nmea`, :func:`imutool.routes.zvi.run_zvi`, :func:`imutool.routes.gyrofree.run_gyrofree`,
 :func:`imutool.events.run_events` and ``run_fleet``, :func:`imutool.evaluation.run_evaluate`,
 :func:`imutool.report.route.run_inclinometer_report` and ``run_heading_report``,
-:func:`imutool.convert.run_convert`, :func:`imutool.roll.run_roll`,
+:func:`imutool.convert.run_convert`, :func:`imutool.routes.roll.run_roll`,
 :func:`imutool.noise.allan_noise`, :func:`imutool.info.run_info`, :func:`imutool.plot.run_plot`,
 :func:`imutool.sim.run_simulate`, the calibration runs of :mod:`imutool.calibrate`; ``run_filter`` returns its own
 :class:`imutool.filtering.FilterResult`) takes an input path and the command's options with their defaults, reads,
