@@ -14,7 +14,7 @@ Each configuration runs the real command line (``imutool batch COMMAND DIR -o ..
 and prints wall time, files/s, rows/s and rows/s per worker (ideal scaling keeps rows/s per worker constant), and
 the summed time of the jobs themselves (job s; wall minus job s / workers ≈ start-up: pool or cluster,
 imports) and their CPU time per wall second (job cpu/s: how many cores a job kept busy; batch gives each of N
-workers cores ÷ N threads, formats/threads.py, so it stays at or under that share). One warm-up run first fills
+workers cores ÷ N threads, formats/jit/threads.py, so it stays at or under that share). One warm-up run first fills
 the numba cache so no configuration pays the JIT compile. The machine is
 shared; run on a quiet machine for figures worth quoting.
 """

@@ -41,8 +41,8 @@ from .columns import (
     resolve_unit,
 )
 from .errors import ImutoolError
+from .jit.threads import thread_budget
 from .recording import Recording, canonical_unit, group_columns
-from .threads import thread_budget
 
 MAGIC = "# imutool-csv: 1"
 
@@ -861,7 +861,7 @@ def column_decimals(rec: Recording) -> np.ndarray | None:
 
 def _threads() -> int:
     """Worker threads for the compiled kernels (they release the GIL): this process's thread budget
-    (:func:`formats.threads.thread_budget`: the usable cores, or a batch worker's share), at most 4."""
+    (:func:`formats.jit.threads.thread_budget`: the usable cores, or a batch worker's share), at most 4."""
     return max(1, min(4, thread_budget()))
 
 

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numba import uint64 as _u64
 
-from . import kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from .jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 
 # -- tables -------------------------------------------------------------------------------------------------
 _Q_MIN = -342  # smallest power of ten with a table entry

@@ -30,9 +30,9 @@ import numpy as np
 from . import units as _units
 from .atomic import AtomicChunkWriter
 from .errors import ImutoolError
+from .jit.threads import ENV as THREADS_ENV
+from .jit.threads import thread_budget
 from .recording import Recording, canonical_unit, group_columns
-from .threads import ENV as THREADS_ENV
-from .threads import thread_budget
 
 META_KEY = b"imutool"
 FINAL_META_KEY = b"imutool_final"  # metadata known only at the end of a streamed write (JSON), merged over "meta"
@@ -47,7 +47,7 @@ def _pa() -> Any:
         import pyarrow.parquet  # noqa: F401
     except ImportError:
         raise ImutoolError("Parquet needs pyarrow: pip install 'imutool[parquet]' (or pip install pyarrow)") from None
-    if os.environ.get(THREADS_ENV):  # a batch worker's share of the cores (formats/threads.py)
+    if os.environ.get(THREADS_ENV):  # a batch worker's share of the cores (formats/jit/threads.py)
         pyarrow.set_cpu_count(thread_budget())
     return pyarrow
 

@@ -41,7 +41,7 @@ from typing import Any
 
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
-from formats.threads import limit_threads, usable_cores
+from formats.jit.threads import limit_threads, usable_cores
 
 # what a directory walk picks up by default (a folder holding metadata.yaml is one ROS2 bag)
 DATA_PATTERNS = ("*.csv", "*.parquet", "*.pq", "*.bag", "*.mcap", "*.db3", "*.nmea")
@@ -415,7 +415,7 @@ def execute(
 
 @dataclass(frozen=True)
 class ThreadCapped:
-    """A job function run under a thread budget (:func:`formats.threads.limit_threads`) in its worker: N jobs
+    """A job function run under a thread budget (:func:`formats.jit.threads.limit_threads`) in its worker: N jobs
     at once on C cores get C ÷ N threads each, so their CSV, pyarrow, numba and BLAS pools never oversubscribe.
     ``threads`` None: the Dask worker's usable cores ÷ its threads (a remote cluster's machines are not ours)."""
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 

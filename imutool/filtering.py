@@ -181,7 +181,7 @@ def run_filter(
         params = params if params is not None else EkfParams()
         if isinstance(source, Recording) or os.path.isfile(source):  # not for an input that will be refused
             csv_out = output is not None and os.fspath(output).lower().endswith(".csv")
-            warm_filter_kernels(smooth, csv_out)  # a cold cache: later kernels compile beside (formats.kernel_warm)
+            warm_filter_kernels(smooth, csv_out)  # a cold cache: later kernels compile beside (formats.jit.warm)
     if (
         not isinstance(source, Recording)
         and not load_options.get("with_files")  # merged in memory

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.timing import stream_timing

@@ -52,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from imutool.quaternion import qturn, rmat
 
 WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that fast hand motion does not alias

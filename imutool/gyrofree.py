@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 import formats
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_euler

@@ -43,11 +43,11 @@ from scipy.interpolate import CubicSpline
 from scipy.linalg import expm
 
 import formats
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_matrix
-from formats.kernel_warm import Entry
+from formats.jit.warm import Entry
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to
 
@@ -1420,7 +1420,7 @@ def _why_no_vertical(rec: Recording, vertical: list[str] | None, vinfo: dict[str
 HEAVE_CHANNELS = ("heave", "heave_delayed", "heave_rate", "heave_rate_delayed", "ref_heave", "ref_heave_rate")
 
 
-# the heave kernels as the command calls them, for the second process of a cold run (formats.kernel_warm; argument
+# the heave kernels as the command calls them, for the second process of a cold run (formats.jit.warm; argument
 # types in numba's signature syntax, checked against a real cold compile by tests/test_kernel_warm.py)
 HEAVE_KERNELS: tuple[Entry, ...] = (
     ("imutool.heave", "_complementary_kernel", "float64[::1], float64[:, ::1], float64[:, ::1], float64, float64"),

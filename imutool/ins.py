@@ -29,11 +29,11 @@ import numpy as np
 from numba import njit
 
 import formats
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import euler_to_quat, quat_to_euler
-from formats.kernel_warm import Entry
+from formats.jit.warm import Entry
 from imutool.loading import input_notes
 from imutool.quaternion import rmat
 
@@ -419,7 +419,7 @@ def alignment_window(
     return max(a, i0), min(b, i1)
 
 
-# the INS kernel as run_ins calls it, for the second process of a cold run (formats.kernel_warm; the argument types in
+# the INS kernel as run_ins calls it, for the second process of a cold run (formats.jit.warm; the argument types in
 # numba's signature syntax, checked against a real cold compile by tests/test_kernel_warm.py)
 INS_KERNEL: Entry = (
     "imutool.ins",

@@ -1,7 +1,7 @@
 """``imutool selfcheck``: compile the numba kernels of the commands once and check a tiny end-to-end run.
 
 For a fresh install or a CI image: every step runs a library route a command runs, on a few seconds of simulated
-data with known truth, so its kernels are compiled into the per-user cache (:mod:`formats.kernel_cache`) with the
+data with known truth, so its kernels are compiled into the per-user cache (:mod:`formats.jit.cache`) with the
 types the commands use, and the result is checked against a bound a wrong implementation would break:
 
 1. simulate a ship rolling (30 s, 200 Hz) and round-trip it through the imutool CSV (bit-exact);
@@ -28,8 +28,8 @@ import numpy as np
 
 import formats
 from calibration.allan import allan_deviation
-from formats import kernel_cache
 from formats.errors import ImutoolError
+from formats.jit import cache as kernel_cache
 from imutool.calibrate import calibrate_mag
 from imutool.capture.bridge import BridgeDecoder, Frame, encode_binary
 from imutool.evaluation import evaluate

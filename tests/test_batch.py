@@ -303,7 +303,7 @@ def test_progress_is_the_shared_bar_and_respects_quiet(tmp_path):
 def _threads_seen(job: batch.Job) -> dict:
     """A job that reports the thread budget it ran under (in its worker process)."""
     from formats.csv import _threads
-    from formats.threads import thread_budget
+    from formats.jit.threads import thread_budget
 
     return {
         "rows": 1,
@@ -317,7 +317,7 @@ def _threads_seen(job: batch.Job) -> dict:
 def test_workers_share_the_cores_and_no_job_takes_more(tmp_path, scheduler):
     """N workers on C cores: each job's thread pools (CSV parser/writer, pyarrow, numba, BLAS) get C ÷ N threads,
     so N workers never oversubscribe; one worker (no pool) leaves a job the whole machine."""
-    from formats.threads import usable_cores
+    from formats.jit.threads import usable_cores
 
     if scheduler:
         pytest.importorskip("dask.distributed", reason="dask[distributed] not installed (the [dask] extra)")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-import formats.kernel_cache as kc
+import formats.jit.cache as kc
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNEL_PACKAGES = ("imutool", "calibration", "formats")
@@ -56,13 +56,13 @@ def test_cold_cache_says_it_compiles_once_and_caches_in_the_user_folder(tmp_path
 
 
 def test_every_kernel_module_imports_the_cache_before_its_first_kernel():
-    """A module whose kernels were decorated before formats.kernel_cache was imported would cache in the package."""
+    """A module whose kernels were decorated before formats.jit.cache was imported would cache in the package."""
     missing = []
     for pkg in KERNEL_PACKAGES:
         for py in sorted((ROOT / pkg).rglob("*.py")):
             text = py.read_text(encoding="utf-8")
             cached = ("cache=True", "**INLINED", "**CALLED")  # the last two: imutool/attitude/layout.py's flag sets
-            if not any(c in text for c in cached) or py.name == "kernel_cache.py":
+            if not any(c in text for c in cached) or py.as_posix().endswith("formats/jit/cache.py"):
                 continue
             tree = ast.parse(text)
             first_kernel = min(
@@ -72,16 +72,16 @@ def test_every_kernel_module_imports_the_cache_before_its_first_kernel():
             imports = [
                 n.lineno
                 for n in ast.walk(tree)
-                if (isinstance(n, ast.Import) and any(a.name == "formats.kernel_cache" for a in n.names))
+                if (isinstance(n, ast.Import) and any(a.name == "formats.jit.cache" for a in n.names))
                 or (
                     isinstance(n, ast.ImportFrom)
-                    and any(a.name == "kernel_cache" for a in n.names)
-                    and (n.module == "formats" or (n.level >= 1 and n.module is None and pkg == "formats"))
+                    and any(a.name == "cache" for a in n.names)
+                    and (n.module == "formats.jit" or (n.level >= 1 and n.module == "jit" and pkg == "formats"))
                 )
             ]
             if not imports or min(imports) > first_kernel:
                 missing.append(py.relative_to(ROOT).as_posix())
-    assert not missing, f"modules with cache=True kernels that do not import formats.kernel_cache first: {missing}"
+    assert not missing, f"modules with cache=True kernels that do not import formats.jit.cache first: {missing}"
 
 
 def test_locator_claims_our_files_only():

@@ -1,4 +1,4 @@
-"""A cold first run compiles on two cores: the filter's helpers in a second process (formats/kernel_warm.py).
+"""A cold first run compiles on two cores: the filter's helpers in a second process (formats/jit/warm.py).
 
 The slow test records what a cold ``imutool filter --smooth`` really compiles (numba's compile events, in a
 subprocess with an empty cache and no warming) and checks that :mod:`imutool.attitude.warm` lists every cached
@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 from conftest import EKF_KERNEL_ASM, normalized_asm
 
-import formats.kernel_warm as kw
-from formats.kernel_warm import CSV_WRITER
+import formats.jit.warm as kw
+from formats.jit.warm import CSV_WRITER
 from imutool.attitude.kernel import ekf_kernel
 from imutool.attitude.warm import AFTER_THE_EKF, EKF_SECTIONS, SMOOTH_KERNELS
 
@@ -104,7 +104,7 @@ def test_the_second_process_stops_once_its_command_is_gone(monkeypatch):
 ORPHAN = textwrap.dedent(
     """
     import os
-    from formats.kernel_warm import warm_in_background
+    from formats.jit.warm import warm_in_background
     from imutool.attitude.kernel import ekf_kernel
     from imutool.attitude.warm import EKF_SECTIONS
     proc = warm_in_background(ekf_kernel, tuple(reversed(EKF_SECTIONS)), splits_probe=True)
@@ -141,7 +141,7 @@ def test_a_killed_commands_second_process_compiles_nothing_more(tmp_path):
 
 START = textwrap.dedent(
     """
-    from formats.kernel_warm import warm_in_background
+    from formats.jit.warm import warm_in_background
     from imutool.attitude.kernel import ekf_kernel
     from imutool.attitude.warm import AFTER_THE_EKF
     proc = warm_in_background(ekf_kernel, AFTER_THE_EKF[:1])
@@ -168,7 +168,7 @@ def test_the_second_process_uses_the_parents_folder_for_a_tilde_cache_dir(tmp_pa
 WAIT = textwrap.dedent(
     """
     import subprocess, sys
-    from formats.kernel_warm import argument_types, is_cached, wait_for, warm_in_background
+    from formats.jit.warm import argument_types, is_cached, wait_for, warm_in_background
     from imutool.gyro_check import pair_discrepancy_kernel as kernel
     from imutool.attitude.warm import AFTER_THE_EKF
     assert not is_cached(kernel)
@@ -196,7 +196,7 @@ def test_a_command_waits_for_the_kernel_the_second_process_compiles(tmp_path):
 CHECK = textwrap.dedent(
     """
     import importlib, sys
-    from formats.kernel_warm import argument_types
+    from formats.jit.warm import argument_types
     for line in sys.stdin.read().splitlines():
         module, name, text = line.split("\\t")
         fn = getattr(importlib.import_module(module), name)
@@ -211,7 +211,7 @@ def test_what_the_second_process_compiles_the_next_one_loads(tmp_path):
     assert len(entries) == 2
     env = _env(tmp_path)
     lines = "\n".join("\t".join(e) for e in entries)
-    warm = _python(["-m", "formats.kernel_warm"], ROOT, env, stdin=lines)
+    warm = _python(["-m", "formats.jit.warm"], ROOT, env, stdin=lines)
     assert warm.returncode == 0 and warm.stdout == "" and warm.stderr == "", warm.stderr
     r = _python(["-c", CHECK], tmp_path, env, stdin=lines)
     assert r.returncode == 0, r.stderr
@@ -224,7 +224,7 @@ RECORD = textwrap.dedent(
     """
     import sys
     from numba.core import caching, event
-    from formats.kernel_warm import type_text
+    from formats.jit.warm import type_text
     FLAGS = ("fastmath", "error_model", "_nrt", "forceinline")
     seen, stack = [], []
     class Recorder(event.Listener):
@@ -319,7 +319,7 @@ def test_the_ekf_kernel_is_the_same_machine_code_from_sections_compiled_apart(tm
     whole = subprocess.Popen(
         [sys.executable, "-c", EKF_KERNEL_ASM], cwd=ROOT, env=whole_env, stdout=subprocess.PIPE, text=True
     )
-    sections = _python(["-m", "formats.kernel_warm"], ROOT, split_env, stdin=lines)
+    sections = _python(["-m", "formats.jit.warm"], ROOT, split_env, stdin=lines)
     assert sections.returncode == 0 and sections.stderr == "", sections.stderr
     times = dict(split_env, IMUTOOL_KERNEL_TIMES="1")  # names each function compiled here, not loaded
     split = _python(["-c", EKF_KERNEL_ASM], ROOT, times)

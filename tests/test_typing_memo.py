@@ -1,4 +1,4 @@
-"""numba's call typing asked once per distinct question (formats/typing_memo.py): the same machine code, sooner.
+"""numba's call typing asked once per distinct question (formats/jit/typing_memo.py): the same machine code, sooner.
 
 The memo is only sound if what numba compiles is unchanged. The tests compile the same functions in two fresh
 processes, with and without it, and compare the machine code, symbol names aside (numba mangles a hash of the
@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from conftest import EKF_KERNEL_ASM, normalized_asm
 
-from formats import typing_memo
+from formats.jit import typing_memo
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -61,8 +61,8 @@ DUMP = textwrap.dedent(
     import sys
     sys.path.insert(0, sys.argv[1])
     import numpy as np
-    import formats.kernel_cache  # installs the memo unless switched off
-    from formats import typing_memo
+    import formats.jit.cache  # installs the memo unless switched off
+    from formats.jit import typing_memo
     import kernels_for_memo as k
     a = np.linspace(-2.0, 2.0, 7)
     k.fast(a, 3); k.plain(a, 3)
@@ -105,7 +105,7 @@ def test_off_by_the_switch_and_on_an_unchecked_numba(monkeypatch):
     assert not typing_memo.supported()
     env = dict(os.environ, **{typing_memo.ENV: "0"})
     check = (
-        "import formats.kernel_cache; from formats import typing_memo as m; "
+        "import formats.jit.cache; from formats.jit import typing_memo as m; "
         "from numba.core.types.functions import BaseFunction as B; "
         "print(m.is_installed(), hasattr(B.get_call_type, '__wrapped__'))"
     )

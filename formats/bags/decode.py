@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .. import kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from ..errors import ImutoolError
+from ..jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from .protocol import RawMessages
 
 # float64s after the header: Imu orientation(4) + cov(9) + angular_velocity(3) + cov(9) + linear_acceleration(3)

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .. import kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from ..errors import ImutoolError
+from ..jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from .decode import u32
 from .protocol import BagBackend, RawMessages, Topic, count_by_id, norm_type
 

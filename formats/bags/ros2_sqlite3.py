@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from .. import kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from ..jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from .protocol import BagBackend, RawMessages, Topic, message_errors
 
 

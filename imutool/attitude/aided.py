@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.frames import quat_multiply, quat_to_euler
 from imutool.attitude.layout import _FASTMATH, CALLED, INLINED
 from imutool.quaternion import qmul, qturn, rmat, rotvec_quat

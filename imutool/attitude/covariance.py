@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from imutool.attitude.layout import (
     ATT,
     BIAS,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 
 # the accelerometer low-pass starts as the running mean of its samples for this fraction of τ (its first samples
 # averaged: 0.25 s at τ = 2.5 s), then runs as the Butterworth from that mean (docs/attitude.md, "The low-pass")

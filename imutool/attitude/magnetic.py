@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from imutool.attitude.covariance import _propagate_pending, _reset_cov, _vertical_forms
 from imutool.attitude.layout import (
     F_MAG_NEW,

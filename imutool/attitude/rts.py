@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-import formats.kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
 from imutool.attitude.covariance import _add_rrt, _propagate_cov
 from imutool.attitude.layout import _FASTMATH, ATT

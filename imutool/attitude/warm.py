@@ -1,4 +1,4 @@
-"""The filter's kernels for a cold first run, compiled two at a time (:mod:`formats.kernel_warm`).
+"""The filter's kernels for a cold first run, compiled two at a time (:mod:`formats.jit.warm`).
 
 A cold ``imutool filter`` compiles the CSV parser, then the EKF kernel (most of the time), then the gyro check's
 kernel and the CSV writer's (and, with ``--smooth``, the RTS pass and the zero-phase low-pass). While the command
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import subprocess
 
-from formats.kernel_warm import CSV_WRITER, Entry, warm_in_background
+from formats.jit.warm import CSV_WRITER, Entry, warm_in_background
 from imutool.attitude.kernel import ekf_kernel
 
 _A = "float64[::1]"  # 1-D C array

@@ -13,7 +13,7 @@ import numpy as np
 import formats
 from formats import Recording
 from formats.errors import ImutoolError
-from formats.kernel_warm import CSV_WRITER, warm_in_background
+from formats.jit.warm import CSV_WRITER, warm_in_background
 from imutool.heave import (
     GNSS_METHOD,
     HEAVE_CHANNELS,
@@ -98,7 +98,7 @@ def run_heave(
     inputs: list[dict[str, Any]] = []
     if isinstance(source, Recording) or os.path.isfile(source):
         # a cold cache: a second process compiles the heave kernels and the CSV writer while this one compiles the
-        # CSV reader (formats.kernel_warm)
+        # CSV reader (formats.jit.warm)
         csv_out = output is not None and os.fspath(output).lower().endswith(".csv")
         warm_in_background(_bank_kernel, HEAVE_KERNELS + ((CSV_WRITER,) if csv_out else ()))
     if stage is not None:

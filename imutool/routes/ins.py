@@ -15,7 +15,7 @@ from formats import Recording
 from formats.atomic import atomic_path
 from formats.csv import format_array
 from formats.errors import ImutoolError
-from formats.kernel_warm import CSV_WRITER, wait_for, warm_in_background
+from formats.jit.warm import CSV_WRITER, wait_for, warm_in_background
 from imutool.ins import (
     GYRO_NOISE_DEG,
     INS_KERNEL,
@@ -142,7 +142,7 @@ def run_ins_track(
     warm = None
     if isinstance(source, Recording) or os.path.isfile(source):
         # a cold cache: a second process compiles the INS kernel while this one compiles the CSV reader (and then
-        # the writer); formats.kernel_warm
+        # the writer); formats.jit.warm
         warm = warm_in_background(_ins_kernel, (INS_KERNEL,))
     if stage is not None:
         stage("reading")

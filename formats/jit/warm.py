@@ -40,8 +40,8 @@ from pathlib import Path
 
 from numba.core import sigutils, types
 
-from formats import kernel_cache
-from formats.threads import thread_budget
+from formats.jit import cache as kernel_cache
+from formats.jit.threads import thread_budget
 
 ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set inside one); "1": even on a busy machine
 
@@ -97,7 +97,7 @@ def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = Fal
     compiles only about half of the probe's group and announces that share of its time.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
-    a thread budget of one (one core, or a batch worker's share, :func:`formats.threads.thread_budget`), a
+    a thread budget of one (one core, or a batch worker's share, :func:`formats.jit.threads.thread_budget`), a
     machine busy already (load average above the usable cores: the second process would only take the command's
     share; below that it costs only its start-up, ~1.5 s CPU, as the two compile different parts), switched off,
     a cache that lasts only as long as this process, or the process could not be started.
@@ -119,7 +119,7 @@ def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = Fal
     env = dict(os.environ, **{ENV_SWITCH: "0", kernel_cache.FOLDER_ENV: str(folder.resolve())})
     path = kernel_cache.PACKAGES_FOLDER
     # the command's pid in the start line: a command killed while the second process imports numba is noticed
-    start = f"import sys; sys.path.insert(0, {path!r}); from formats.kernel_warm import _main; _main({os.getpid()})"
+    start = f"import sys; sys.path.insert(0, {path!r}); from formats.jit.warm import _main; _main({os.getpid()})"
     lines = "\n".join("\t".join(e) for e in entries)
     try:
         proc = subprocess.Popen(
@@ -217,5 +217,5 @@ def _main(parent: int | None = None) -> None:
     compile_entries(entries, parent)  # type: ignore[arg-type]
 
 
-if __name__ == "__main__":  # python -m formats.kernel_warm (the command starts it with -c, see above)
+if __name__ == "__main__":  # python -m formats.jit.warm (the command starts it with -c, see above)
     _main()

@@ -1,7 +1,7 @@
 """Where the compiled numba kernels of ``imutool``, ``calibration`` and ``formats`` are cached: a per-user folder.
 
-Every module with an ``@njit(cache=True)`` kernel imports this module first (``from formats import
-kernel_cache``); importing it puts :class:`KernelCacheLocator` at the front of numba's cache locators. The
+Every module with an ``@njit(cache=True)`` kernel imports this module first (``import
+formats.jit.cache``); importing it puts :class:`KernelCacheLocator` at the front of numba's cache locators. The
 locator claims only functions whose source file lies in our three packages (other libraries' numba caches are
 untouched) and caches them in
 
@@ -50,23 +50,23 @@ from pathlib import Path
 import numba
 from numba.core import caching, config, event
 
-from formats import typing_memo
+from formats.jit import typing_memo
 
-typing_memo.install()  # numba's call typing asked once per distinct question (formats/typing_memo.py)
+typing_memo.install()  # numba's call typing asked once per distinct question (formats/jit/typing_memo.py)
 
 PACKAGES = ("imutool", "calibration", "formats")
 KEEP_VERSIONS = 3  # version folders kept (the current one included)
 _VERSION_DIR = re.compile(r"^kernels-[0-9a-f]{12}$")
-_SITE = Path(__file__).resolve().parent.parent  # the folder holding the three packages (site-packages or a clone)
+_SITE = Path(__file__).resolve().parents[2]  # the folder holding the three packages (site-packages or a clone)
 PACKAGES_FOLDER = str(_SITE)
-FOLDER_ENV = "IMUTOOL_KERNEL_FOLDER"  # set by formats.kernel_warm for its second process: the parent's folder
+FOLDER_ENV = "IMUTOOL_KERNEL_FOLDER"  # set by formats.jit.warm for its second process: the parent's folder
 
 # kernel groups: module-name prefix -> (what the user is told is compiling, about how long an empty cache takes to
 # compile it on this project's 2-core machine without other load, s; twice that and more under load). A module of
 # the three packages not listed here is announced by its own name. Kernels moved or re-timed: update this table.
 # Measured 2026-11-27 (IMUTOOL_KERNEL_TIMES=1 imutool selfcheck, empty cache, load 1): the EKF 29 s (+ RTS 8 s and
 # the zero-phase low-pass 1.4 s with --smooth), the gyro check 1.5 s, CSV 6 s, INS 7.5 s, heave 2.5 s, bags 5.6 s.
-# 2026-11-28, with numba's call typing memoised (formats/typing_memo.py): the EKF 18-23 s CPU alone, CSV reader
+# 2026-11-28, with numba's call typing memoised (formats/jit/typing_memo.py): the EKF 18-23 s CPU alone, CSV reader
 # 2.5-3.5 s + writer 2.1-3.4 s, INS 5.2-5.4 s, heave 1.7 s; the others not re-timed (~25 % less).
 KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("imutool.attitude", "the filter's kernels", 20.0),
@@ -83,7 +83,7 @@ KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("formats.csv_engine", "the CSV reader and writer", 6.0),
     ("formats.bags", "the ROS bag kernels", 6.0),
 )
-# the share of a group's time a command waits when formats.kernel_warm's second process compiles the other half of
+# the share of a group's time a command waits when formats.jit.warm's second process compiles the other half of
 # that group's kernel (the first filter's EKF sections, from the other end: 10 s against 20 s alone, 2026-11-28);
 # a group the command compiles alone, or waits for whole, is announced at its full time
 SHARED_SHARE = 0.5
@@ -439,12 +439,12 @@ class _State:
     folder: Path | None = None
     persistent = True  # False: a folder that lives only as long as this process
     version = ""
-    shared: set[str] = set()  # the groups whose kernel a second process compiles half of (formats.kernel_warm)
+    shared: set[str] = set()  # the groups whose kernel a second process compiles half of (formats.jit.warm)
 
 
 def compiling_in_two_processes(module: str) -> None:
     """Announce a shorter wait for the group of ``module``: a second process compiles half of its kernel's parts
-    from the other end (formats.kernel_warm). Other groups keep their full time."""
+    from the other end (formats.jit.warm). Other groups keep their full time."""
     group = kernel_group(module)
     if group is not None:
         _State.shared.add(group[0])
@@ -456,7 +456,7 @@ def cache_folder() -> Path | None:
         return _State.folder
     _State.version = source_version(memo=user_cache_root() / MEMO_NAME)
     name = f"kernels-{_State.version}"
-    given = os.environ.get(FOLDER_ENV, "")  # formats.kernel_warm's second process: its parent's folder
+    given = os.environ.get(FOLDER_ENV, "")  # formats.jit.warm's second process: its parent's folder
     if given and Path(given).name == name and Path(given).is_absolute() and _usable(Path(given)):
         _State.folder = Path(given)
         return _State.folder
@@ -559,7 +559,7 @@ class _CompileAnnouncer(event.Listener):
         self.announced: set[str] = set()
         self._starts: list[tuple[str, float] | None] = []
         self.times = os.environ.get("IMUTOOL_KERNEL_TIMES", "") not in ("", "0")
-        self.silent = False  # True in formats.kernel_warm's second process
+        self.silent = False  # True in formats.jit.warm's second process
 
     def on_start(self, ev) -> None:
         disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
@@ -590,7 +590,7 @@ class _CompileAnnouncer(event.Listener):
 
 def announce_compile(module: str) -> None:
     """Say that the kernels of ``module`` are being compiled (once per group), for a command that waits while
-    another process compiles them (formats.kernel_warm.wait_for): numba's own event never fires in this one."""
+    another process compiles them (formats.jit.warm.wait_for): numba's own event never fires in this one."""
     announcer = getattr(event, "_imutool_announcer", None)
     group = kernel_group(module)
     if announcer is not None and group is not None:
