@@ -313,6 +313,29 @@ def _threads_seen(job: batch.Job) -> dict:
     }
 
 
+def test_a_worker_whose_numba_pool_runs_can_still_compile():
+    """A forked batch worker inherits numba with its thread pool launched; the thread limit must not change
+    NUMBA_NUM_THREADS under it, or the worker's first compile (a cold kernel cache) fails with numba's "Cannot set
+    NUMBA_NUM_THREADS to a different value once the threads have been launched" and every job fails."""
+    code = (
+        "import os, sys\n"
+        "os.environ.pop('NUMBA_NUM_THREADS', None)\n"
+        "import numba\n"
+        "numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)  # launches the pool, as a parent's kernels do\n"
+        "from formats.jit.threads import limit_threads\n"
+        "limit_threads(1)\n"
+        "f = numba.njit(lambda x: x + 1)  # a kernel not in any cache: compiled now\n"
+        "assert f(1) == 2 and numba.get_num_threads() == 1, numba.get_num_threads()\n"
+        "print('ok')\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_NUM_THREADS"}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1])
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: numba's pool has one thread, no change to refuse")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-800:]
+
+
 @pytest.mark.parametrize("scheduler", [None, pytest.param("local", marks=pytest.mark.slow)])
 def test_workers_share_the_cores_and_no_job_takes_more(tmp_path, scheduler):
     """N workers on C cores: each job's thread pools (CSV parser/writer, pyarrow, numba, BLAS) get C ÷ N threads,

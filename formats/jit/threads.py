@@ -43,9 +43,13 @@ def limit_threads(n: int) -> int:
     os.environ[ENV] = str(n)
     for name in LIBRARY_ENV:
         os.environ[name] = str(n)
-    os.environ.setdefault("NUMBA_NUM_THREADS", str(n))
     numba = sys.modules.get("numba")
-    if numba is not None:
+    if numba is None:
+        os.environ.setdefault("NUMBA_NUM_THREADS", str(n))
+    else:
+        # numba is loaded (a forked worker): its pool may already run, and numba re-reads NUMBA_NUM_THREADS at each
+        # compile and refuses a change once its threads are launched ("Cannot set NUMBA_NUM_THREADS ..." on a cold
+        # cache only), so the environment is left alone and the running pool is narrowed instead
         try:
             numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
         except (ValueError, AttributeError):
