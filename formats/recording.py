@@ -740,12 +740,11 @@ def _collapse_streams(rec: Recording, rep: TimeReport, duplicates: str, src: str
             fo = np.full(ng, len(a))
             np.minimum.at(fo, group[own], own)  # the earliest own row of each time
             v = np.where((fo < len(a))[:, None], a2[np.minimum(fo, len(a) - 1)], np.nan)
-            g = group[own]
-            rep_i = np.flatnonzero(np.diff(g) == 0)
-            if rep_i.size:
-                x, y = a2[own[rep_i]], a2[own[rep_i + 1]]
-                neq = ~((x == y) | (np.isnan(x) & np.isnan(y)))
-                conflicting = max(conflicting, int(np.count_nonzero(neq.any(axis=1))))
+        rep_i = np.flatnonzero(np.diff(group[own]) == 0)  # two own samples at one time: counted under every policy
+        if rep_i.size:
+            x, y = a2[own[rep_i]], a2[own[rep_i + 1]]
+            neq = ~((x == y) | (np.isnan(x) & np.isnan(y)))
+            conflicting = max(conflicting, int(np.count_nonzero(neq.any(axis=1))))
         chans[k] = v.reshape((-1,) + a.shape[1:])
     rep.duplicates_conflicting = conflicting
     out = Recording(
@@ -778,6 +777,12 @@ def join_streams(recordings: list[Recording], names: list[str], prefixes: list[s
     """
     if not recordings:
         raise ImutoolError("join: no recordings given")
+    for r, name in zip(recordings, names, strict=False):
+        if len(r.time) > 1 and not np.all(np.diff(r.time) > 0):  # a repeated time would keep only its last row
+            raise ImutoolError(
+                "join: its time is not strictly increasing (validate it first: --duplicates/--backwards)",
+                path=r.meta.get("source", name),
+            )
     t = np.unique(np.concatenate([r.time for r in recordings]))
     out = Recording(t, meta=copy.deepcopy(recordings[0].meta))
     out.meta.pop("streams", None)

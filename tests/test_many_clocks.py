@@ -149,10 +149,15 @@ def test_duplicates_across_streams_are_not_duplicates() -> None:
     r2.set_stream("B", ["heading"], np.isfinite(head))
     out, rep = r2.validated(duplicates="mean")
     assert rep.duplicates == 1 and np.allclose(out.series("roll")[1], [1, 3, 3])
+    assert rep.duplicates_conflicting == 1  # averaged, but still said: the two samples disagreed
     out, rep = r2.validated(duplicates="drop")
     assert np.allclose(out.series("roll")[1], [1, 2, 3]) and rep.duplicates_conflicting == 1
     with pytest.raises(formats.ImutoolError):
         r2.validated(duplicates="error")
+    # join_streams takes validated inputs: a repeated time would silently keep only its last row
+    rep_t = Recording(np.array([0.0, 1.0, 1.0]), {"pitch": np.array([1.0, 2.0, 5.0])}, {"pitch": "deg"})
+    with pytest.raises(formats.ImutoolError, match="not strictly increasing"):
+        join_streams([a, rep_t], ["A", "P"])
 
 
 def test_held_and_on_clock() -> None:
