@@ -74,6 +74,21 @@ def test_too_few_headings_and_no_motion_are_not_a_pass():
     jsonschema.validate(ev, load_schema())
 
 
+def test_the_dut_is_not_its_own_reference(tmp_path):
+    """The same file and channel as DUT and reference would pass every item with zero error: refused, as the
+    inclinometer report does; the same file with a variation correction is a different comparison (allowed)."""
+    dut, _, _ = heading_test(**SHORT)
+    path = tmp_path / "gyro.csv"
+    formats.write(dut, path)
+    rec = formats.read(path)
+    with pytest.raises(formats.ImutoolError, match="cannot be its own reference"):
+        heading_evidence(rec, formats.read(path), dut_path=str(path), ref_path=str(path))
+    with pytest.raises(formats.ImutoolError, match="cannot be its own reference"):
+        heading_evidence(rec, rec)
+    ev, _ = heading_evidence(rec, rec, dut_correction_deg=1.0)
+    assert abs(items(ev)["dynamic"]["amplitude_deg"] - 1.0) < 1e-6  # the correction is the whole error
+
+
 @pytest.mark.slow
 def test_nmea_dut_interface_and_pdf(tmp_path):
     dut, ref, _ = heading_test(offset_deg=0.1, **SHORT)

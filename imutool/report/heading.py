@@ -233,6 +233,12 @@ def heading_evidence(
         raise ImutoolError(f"align must be 'xcorr' or 'none' (got {o.align!r})")
     _, dch = heading_of(dut, dut_channel, dut_path or "DUT")
     _, rch = heading_of(ref, ref_channel, ref_path or "reference")
+    same_file = dut_path and ref_path and os.path.realpath(dut_path) == os.path.realpath(ref_path)
+    if (same_file or dut is ref) and dch == rch and dut_correction_deg == 0.0:
+        raise ImutoolError(
+            f"the reference is the DUT itself (same file, channel {dch!r}): a device cannot be its own reference",
+            path=ref_path,
+        )
     # many clocks: each heading on its own samples (another sentence's row is not a missing heading); the
     # platform roll is taken from its own samples onto the reference heading's times
     dut_all, ref_all = dut, ref
