@@ -7,7 +7,8 @@ exact shortest round-trip doubles). Reading ends with the channels as float64 Nu
 holds); writing starts from them. Write cases: ``input`` (17-digit doubles, exact) and ``estimate`` (the
 filter's output: 22 columns at 6/9/0 fixed decimals). Each write is checked for an exact round trip of its values.
 
-Imports and the first load of the compiled kernels are outside the timed part (the process CPU column has them).
+Imports and the first load of the compiled kernels are outside the timed part (wall and CPU of all threads); the
+peak RSS is the whole process's (Python, numpy, numba and the library imported: ~180–200 MB before any work).
 ``CSV_ENGINES_CHECK=1``: each child also checks its result (written values read back bit-exactly; polars' and
 pyarrow's read values bit-identical to imutool's).
 
@@ -92,7 +93,7 @@ else:
 print(f"import {time.perf_counter() - ti:.3f}")
 if op == "read":
     hdr = read_header(path)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if engine == "imutool":
         rec = read_csv(path)
         n = len(rec)
@@ -126,9 +127,9 @@ if op == "read":
         for b in pc.open_csv(path, read_options=ro, convert_options=co):
             arrs = [b.column(i).to_numpy(zero_copy_only=False) for i in range(b.num_columns)]
             n += b.num_rows
-    dt = time.perf_counter() - t0
+    dt, dc = time.perf_counter() - t0, time.process_time() - c0
     assert n == rows, (engine, n, rows)
-    print(f"{dt:.3f}")
+    print(f"{dt:.3f} {dc:.3f}")
     if os.environ.get("CSV_ENGINES_CHECK") and engine in ("polars", "pyarrow"):  # the same doubles, bit for bit
         ref = dict(zip(*flat(read_csv(path)), strict=True))
         assert all(np.array_equal(arrs[c].view(np.uint64), ref[c].view(np.uint64)) for c in hdr.names), engine
@@ -136,7 +137,7 @@ else:
     kind = op.split("-")[1]
     rec = recording(kind)
     out = path
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if engine == "imutool":
         write_csv(rec, out)
     else:  # the header by imutool; the rows by the library, fixed decimals by its own rounding, NaN empty
@@ -155,8 +156,8 @@ else:
                 cols = [a if (d := decimals_of(n, dec)) is None else pcc.round(a, d) for n, a in zip(names, cols)]
                 tab = pa.table(dict(zip(names, cols)))
                 pc.write_csv(tab, f, write_options=pc.WriteOptions(include_header=False, quoting_style="none"))
-    dt = time.perf_counter() - t0
-    print(f"{dt:.3f}")
+    dt, dc = time.perf_counter() - t0, time.process_time() - c0
+    print(f"{dt:.3f} {dc:.3f}")
     if os.environ.get("CSV_ENGINES_CHECK"):  # exact round trip of the values (outside the RSS figures)
         back = read_csv(out)
         ch = "gyro" if kind == "input" else "ref_roll"
@@ -176,7 +177,7 @@ WRITES = (
 
 
 def run_rss(engine: str, op: str, path: str, rows: int) -> tuple[float, float, float]:
-    """(seconds of the operation, peak RSS MB and CPU seconds of its whole process, from os.wait4)."""
+    """(wall and CPU seconds of the operation, all threads; peak RSS MB of its process, from os.wait4)."""
     p = subprocess.Popen(
         [sys.executable, "-c", CHILD, str(ROOT), engine, op, path, str(rows)],
         stdout=subprocess.PIPE,
@@ -186,7 +187,8 @@ def run_rss(engine: str, op: str, path: str, rows: int) -> tuple[float, float, f
     out, err = p.stdout.read(), p.stderr.read()
     if status:
         raise SystemExit(f"{engine} {op} failed:\n{err.decode()[-2000:]}")
-    return float(out.decode().splitlines()[1]), ru.ru_maxrss / 1024, ru.ru_utime + ru.ru_stime
+    wall, cpu = (float(v) for v in out.decode().splitlines()[1].split())
+    return wall, cpu, ru.ru_maxrss / 1024
 
 
 def main() -> None:
@@ -219,11 +221,11 @@ def main() -> None:
             res.setdefault((e, op), []).append(run_rss(e, op, p, a.rows))
         print(f"round {r + 1} done (load {os.getloadavg()[0]:.1f})", file=sys.stderr)
     print(f"{a.rows} rows, {a.repeat} rounds, load now {os.getloadavg()[0]:.1f}")
-    print(f"{'operation':<16}{'engine':<16}{'best s':>8}{'median s':>10}{'process CPU s':>15}{'peak RSS MB':>13}")
+    print(f"{'operation':<16}{'engine':<16}{'best s':>8}{'median s':>10}{'median CPU s':>14}{'peak RSS MB':>13}")
     for (e, op), v in res.items():
         ts = sorted(x[0] for x in v)
-        cpu = sorted(x[2] for x in v)[len(v) // 2]
-        print(f"{op:<16}{e:<16}{ts[0]:>8.2f}{ts[len(ts) // 2]:>10.2f}{cpu:>15.2f}{max(x[1] for x in v):>13.0f}")
+        cpu = sorted(x[1] for x in v)[len(v) // 2]
+        print(f"{op:<16}{e:<16}{ts[0]:>8.2f}{ts[len(ts) // 2]:>10.2f}{cpu:>14.2f}{max(x[2] for x in v):>13.0f}")
 
 
 if __name__ == "__main__":
