@@ -555,6 +555,30 @@ def test_read_csv_never_holds_the_files_text(tmp_path):
     )
 
 
+_row = st.one_of(
+    st.lists(st.floats(allow_nan=True, allow_infinity=True).map(repr), min_size=3, max_size=3).map(",".join),
+    st.lists(st.text("0123456789.-e", min_size=20, max_size=60), min_size=3, max_size=3).map(",".join),  # long
+    st.sampled_from(["", "# a comment, with commas", "1,2", "1,2,3,4", "x,1,2", " 1 , 2 ,3\r"]),
+)
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(_row, max_size=25), st.sampled_from([1, 7, 64, 4096]), st.booleans())
+def test_read_csv_in_any_block_size_reads_as_one_block(tmp_path_factory, rows, block, trailing_newline):
+    """The block reader (blocks of any size, lines longer than a block, no newline at the end) gives the same
+    rows, bits, skipped-row count and messages as one block holding the whole file."""
+    p = tmp_path_factory.mktemp("blk") / "b.csv"
+    p.write_text("time,a,b\n" + "\n".join(rows) + ("\n" if trailing_newline else ""))
+    results = []
+    for size in (block, 1 << 24):
+        try:
+            rec = read_csv(str(p), block_bytes=size)
+            results.append((_bits(rec.time).tolist(), _bits(rec["a"]).tolist(), dict(rec.meta)))
+        except ImutoolError as e:
+            results.append(str(e))
+    assert results[0] == results[1]
+
+
 def test_read_csv_with_no_good_row_says_why(tmp_path):
     p = tmp_path / "bad.csv"
     p.write_text("time,a\n1,2,3\nx,1\n")
