@@ -563,16 +563,17 @@ _row = st.one_of(
 
 
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(_row, max_size=25), st.sampled_from([1, 7, 64, 4096]), st.booleans())
-def test_read_csv_in_any_block_size_reads_as_one_block(tmp_path_factory, rows, block, trailing_newline):
+@given(st.lists(_row, max_size=25), st.sampled_from([1, 7, 64, 4096]), st.booleans(), st.booleans())
+def test_read_csv_in_any_block_size_reads_as_one_block(tmp_path_factory, rows, block, trailing_newline, strict):
     """The block reader (blocks of any size, lines longer than a block, no newline at the end) gives the same
-    rows, bits, skipped-row count and messages as one block holding the whole file."""
+    rows, bits, skipped-row count and messages — or, ``strict``, the same refusal — as one block holding the whole
+    file."""
     p = tmp_path_factory.mktemp("blk") / "b.csv"
     p.write_text("time,a,b\n" + "\n".join(rows) + ("\n" if trailing_newline else ""))
     results = []
     for size in (block, 1 << 24):
         try:
-            rec = read_csv(str(p), block_bytes=size)
+            rec = read_csv(str(p), strict=strict, block_bytes=size)
             results.append((_bits(rec.time).tolist(), _bits(rec["a"]).tolist(), dict(rec.meta)))
         except ImutoolError as e:
             results.append(str(e))
