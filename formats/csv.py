@@ -19,6 +19,7 @@ import json
 import os
 import queue
 import shutil
+import sys
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -682,28 +683,32 @@ def _last_newline(buf: np.ndarray, end: int) -> int:
     return -1
 
 
-def _iter_csv(path: str, hdr: CsvHeader, chunk_rows: int, strict: bool, block_bytes: int) -> Iterator[Recording]:
+def _iter_csv(
+    path: str, hdr: CsvHeader, chunk_rows: int, strict: bool, block_bytes: int, rep: ReadReport | None = None
+) -> Iterator[Recording]:
     """The chunks of ``chunk_rows`` rows: blocks of ``block_bytes`` read into one reused buffer (the part line at
     a block's end moved to its front), parsed in pieces by threads, and each chunk's channels copied once out of
-    the pieces (no joined block or chunk array in between)."""
+    the pieces (no joined block or chunk array in between). ``rep``: the report the skipped rows are counted in
+    (a new one by default)."""
     done = 0  # rows yielded so far
-    rep = ReadReport()
+    rep = ReadReport() if rep is None else rep
     parser = _BlockParser(hdr, path, strict, rep)
     pending: list[np.ndarray] = []
     npending = 0
-    buf = np.empty(block_bytes, np.uint8)
     carry = 0  # bytes of an unfinished line at the front of buf
     nthreads = _threads()
     pool = ThreadPoolExecutor(nthreads, thread_name_prefix="imutool-parse") if nthreads > 1 else None
     try:
         with open(path, "rb") as f:
             f.seek(hdr.data_offset)
+            # one block, or less for a smaller file (+1: the read that finds the end has room)
+            buf = np.empty(max(1, min(block_bytes, os.fstat(f.fileno()).st_size - hdr.data_offset + 1)), np.uint8)
             while True:
-                if buf.size < carry + block_bytes:  # a line longer than a block: room for it and a block more
+                if carry >= buf.size:  # a line longer than the buffer: room for it and a block more
                     grown = np.empty(carry + block_bytes, np.uint8)
                     grown[:carry] = buf[:carry]
                     buf = grown
-                got = f.readinto(memoryview(buf)[carry : carry + block_bytes])
+                got = f.readinto(memoryview(buf)[carry:])
                 eof = not got
                 total = carry + got
                 if eof:
@@ -722,6 +727,8 @@ def _iter_csv(path: str, hdr: CsvHeader, chunk_rows: int, strict: bool, block_by
                 carry = total - end
                 if carry:
                     buf[:carry] = buf[end:total].copy()
+                if eof:  # the text is parsed: let it go before the last chunk's channels are copied
+                    buf = np.empty(0, np.uint8)
                 while npending >= chunk_rows or (eof and npending):
                     take = min(chunk_rows, npending)
                     yield _to_recording(hdr, pending, path, rep, done, take)
@@ -751,29 +758,35 @@ def read_csv(
     rate_hz: float | None = None,
     time_column: str | None = None,
     header_rows: int | None = None,
+    block_bytes: int = 16 << 20,
 ) -> Recording:
     """Read a whole CSV (imutool or foreign) into a Recording (SI units for sensor channels).
 
     ``rate_hz`` (a file without a time column), ``time_column`` (``NAME[:UNIT]``), ``header_rows`` (names, then
     units): as :func:`read_header`.
 
+    The rows are read as :func:`iter_csv` reads them, in blocks of ``block_bytes`` parsed by threads, as one chunk:
+    the file's text is never held whole (peak memory: the parsed rows twice, while they are copied into the
+    channels, and one block).
+
     Malformed rows are counted and skipped (``meta['skipped_rows']``, first ones with line numbers in
     ``meta['skipped_rows_first']``); ``strict=True`` raises ImutoolError at the first one instead.
     """
     hdr = read_header(path, columns, profile, rate_hz=rate_hz, time_column=time_column, header_rows=header_rows)
     rep = ReadReport()
+    chunks = _iter_csv(path, hdr, sys.maxsize, strict, block_bytes, rep)
     try:
-        buf = np.fromfile(path, dtype=np.uint8, offset=hdr.data_offset)
+        whole = next(chunks, None)
     except OSError as e:
         raise ImutoolError(f"cannot read: {e.strerror}", path=path) from None
-    pieces = _parse_parallel(_BlockParser(hdr, path, strict, rep), buf, buf.size)
-    del buf
-    if sum(a.shape[0] for a in pieces) == 0:
+    finally:
+        chunks.close()  # the parse threads stop; the parsed pieces are let go
+    if whole is None:
         msg = "no data rows"
         if rep.bad_rows:
             msg += f" ({rep.bad_rows} malformed rows skipped; first: {rep.first_bad[0]})"
         raise ImutoolError(msg, path=path)
-    return _to_recording(hdr, pieces, path, rep)
+    return whole
 
 
 def _fmt_meta(v: Any) -> str:

@@ -525,6 +525,68 @@ def test_parallel_read_of_big_file_matches_streamed_read(tmp_path):
     assert chunks[-1].meta["skipped_rows_first"] == whole.meta["skipped_rows_first"]
 
 
+def test_read_csv_never_holds_the_files_text(tmp_path):
+    """read_csv reads in blocks (as iter_csv does): its peak allocation is the parsed values twice (pieces, then
+    channels) and one block — here ~0.8 × the size of the file's text, which it held whole before (peak ≈ 1.4 ×
+    the file). Values and skipped rows as the streamed reader's."""
+    import tracemalloc
+
+    rng = np.random.default_rng(4)
+    n = 120_000
+    values = rng.standard_normal((n, 4)) * 1e-7  # 23 characters each ("-1.2345678901234567e-08")
+    text = format_array(np.column_stack([np.arange(n) * 0.01, values])).split(b"\n")
+    text[777] = b"0.5,1,2"
+    p = tmp_path / "big.csv"
+    p.write_bytes(b"# imutool-csv: 1\ntime,a_x,a_y,a_z,b\n" + b"\n".join(text))
+    size = p.stat().st_size
+    tracemalloc.start()
+    try:
+        rec = read_csv(str(p), block_bytes=1 << 18)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < size, (peak, size)
+    streamed = list(iter_csv(str(p), chunk_rows=10**9))
+    assert len(rec) == n - 1 and np.array_equal(_bits(rec["a"]), _bits(streamed[0]["a"]))
+    assert (
+        rec.meta["skipped_rows_first"]
+        == streamed[0].meta["skipped_rows_first"]
+        == ["line 780: wrong number of fields (3 fields, expected 5)"]
+    )
+
+
+_row = st.one_of(
+    st.lists(st.floats(allow_nan=True, allow_infinity=True).map(repr), min_size=3, max_size=3).map(",".join),
+    st.lists(st.text("0123456789.-e", min_size=20, max_size=60), min_size=3, max_size=3).map(",".join),  # long
+    st.sampled_from(["", "# a comment, with commas", "1,2", "1,2,3,4", "x,1,2", " 1 , 2 ,3\r"]),
+)
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(_row, max_size=25), st.sampled_from([1, 7, 64, 4096]), st.booleans(), st.booleans())
+def test_read_csv_in_any_block_size_reads_as_one_block(tmp_path_factory, rows, block, trailing_newline, strict):
+    """The block reader (blocks of any size, lines longer than a block, no newline at the end) gives the same
+    rows, bits, skipped-row count and messages — or, ``strict``, the same refusal — as one block holding the whole
+    file."""
+    p = tmp_path_factory.mktemp("blk") / "b.csv"
+    p.write_text("time,a,b\n" + "\n".join(rows) + ("\n" if trailing_newline else ""))
+    results = []
+    for size in (block, 1 << 24):
+        try:
+            rec = read_csv(str(p), strict=strict, block_bytes=size)
+            results.append((_bits(rec.time).tolist(), _bits(rec["a"]).tolist(), dict(rec.meta)))
+        except ImutoolError as e:
+            results.append(str(e))
+    assert results[0] == results[1]
+
+
+def test_read_csv_with_no_good_row_says_why(tmp_path):
+    p = tmp_path / "bad.csv"
+    p.write_text("time,a\n1,2,3\nx,1\n")
+    with pytest.raises(ImutoolError, match=r"no data rows \(2 malformed rows skipped; first: line 2: wrong number"):
+        read_csv(str(p))
+
+
 def test_in_background_passes_items_and_raises_the_worker_error_in_order():
     from formats.csv import in_background
 
