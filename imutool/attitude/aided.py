@@ -35,11 +35,11 @@ from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.frames import quat_multiply, quat_to_euler
+from imutool.attitude.aided_layout import IBA, IBG, IV, N_COLS, N_DX, N_PHI, N_PP, N_PQ, N_ROW, N_START, NX, euler_std
+from imutool.attitude.aided_rts import node_capacity, smooth_aided
 from imutool.attitude.layout import _FASTMATH, CALLED, INLINED
 from imutool.quaternion import qmul, qturn, rmat, rotvec_quat
 
-NX = 11  # error state: ψ (0-2), δv_NE (3-4), δb_g (5-7), δb_a (8-10)
-IV, IBG, IBA = 3, 5, 8
 # ---- the aided filter's state vector (carried between chunks) ----
 A_Q, A_V, A_BG, A_BA, A_P = 0, 4, 6, 9, 12  # q (4), v_NE (2), b_g (3), b_a (3), P (121, row-major 11×11)
 A_INT, A_F, A_C, A_T, A_TURN = 133, 142, 145, 154, 155  # sums since the last propagation: ∫R dt, ∫f_n dt, ∫[f_n×]A dt
@@ -51,9 +51,6 @@ A_T0 = 175  # the time of the first row (s)
 A_NRESTART = 176  # restarts after a divergence
 A_NNODE = 177  # nodes recorded for the smoother in this call (its capacity exceeded: −1)
 A_SIZE = 178
-# ---- a smoother node (a propagation, and the updates at its row): one row of ``nodes`` ----
-N_ROW, N_START, N_DX, N_PHI, N_PP, N_PQ = 0, 1, 2, 13, 134, 255  # row; chain start; Σ corrections; Φ, P⁻, P⁺
-N_COLS = 376
 RESTART_RATIO = 3.0  # the running innovation ratio beyond which the filter restarts from the first pass
 MAX_RESTARTS = 2  # more restarts than this over a run (or a streamed chunk): its output is not used
 NIS_FIXES = 30.0
@@ -78,11 +75,8 @@ NIS_FIXES = 30.0
     Q_START_AFTER,
 ) = range(17)
 N_APRM = 17
-PROPAGATE_EVERY_S = 1.0
-START_TILT_SIGMA, START_HEADING_SIGMA = (
-    np.radians(2.0),
-    np.radians(5.0),
-)  # rad: the least σ the filter starts with  # without a fix the covariance is propagated at least this often
+PROPAGATE_EVERY_S = 1.0  # s: without a fix the covariance is propagated at least this often
+START_TILT_SIGMA, START_HEADING_SIGMA = np.radians(2.0), np.radians(5.0)  # rad: the least σ the filter starts with
 
 
 @njit(**CALLED)
@@ -204,42 +198,16 @@ def _start(ast, P, prm, q, b, std):
 
 
 @njit(**INLINED)
-def _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std):
-    """Row k: q, the roll/pitch/heading σ (rad), b_a and its σ (m/s²)."""
+def _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std, smoothed):
+    """Row k: q, the roll/pitch/heading σ (rad), b_a and its σ (m/s²; the σ not where the smoother sets them)."""
     for i in range(4):
         q_out[k, i] = ast[A_Q + i]
     for i in range(3):
         ba_out[k, i] = ast[A_BA + i]
-        ba_std[k, i] = np.sqrt(max(P[IBA + i, IBA + i], 0.0))
-    euler_std(R, P, std_out, k)
-
-
-@njit(**INLINED)
-def euler_std(R, P, std_out, k):
-    """std_out[k] = the roll/pitch/heading σ (rad) of the world-frame attitude error whose covariance is P[:3, :3]:
-    δ(φ,θ,ψ) = E Rᵀ ψ, E the body-rate → Euler-rate matrix."""
-    sp = min(1.0, max(-1.0, -R[2, 0]))
-    cp = max(np.sqrt(1 - sp * sp), 1e-6)
-    hr = np.sqrt(R[2, 1] * R[2, 1] + R[2, 2] * R[2, 2])
-    sr, cr = (R[2, 1] / hr, R[2, 2] / hr) if hr > 1e-12 else (0.0, 1.0)
-    tp = sp / cp
-    for row in range(3):
-        if row == 0:
-            e0, e1, e2 = 1.0, sr * tp, cr * tp
-        elif row == 1:
-            e0, e1, e2 = 0.0, cr, -sr
-        else:
-            e0, e1, e2 = 0.0, sr / cp, cr / cp
-        # m = e Rᵀ (a row in world axes)
-        m0 = e0 * R[0, 0] + e1 * R[0, 1] + e2 * R[0, 2]
-        m1 = e0 * R[1, 0] + e1 * R[1, 1] + e2 * R[1, 2]
-        m2 = e0 * R[2, 0] + e1 * R[2, 1] + e2 * R[2, 2]
-        v = (
-            m0 * (m0 * P[0, 0] + 2 * m1 * P[0, 1] + 2 * m2 * P[0, 2])
-            + m1 * (m1 * P[1, 1] + 2 * m2 * P[1, 2])
-            + m2 * m2 * P[2, 2]
-        )
-        std_out[k, row] = np.sqrt(max(v, 0.0))
+    if not smoothed:
+        for i in range(3):
+            ba_std[k, i] = np.sqrt(max(P[IBA + i, IBA + i], 0.0))
+        euler_std(R, P, std_out, k)
 
 
 @njit(**CALLED)
@@ -399,7 +367,7 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
             _propagate(ast, P, prm, PHI, TMP)
             _node_update(nodes, _node_open(nodes, ast, k, PHI, P, 0.0), P, dx, False)
         if started:
-            _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std)
+            _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std, nodes.shape[0] > 0 and ast[A_NNODE] >= 0)
         else:
             for i in range(4):
                 q_out[k, i] = np.nan
@@ -506,7 +474,6 @@ def run_aided(
     (:func:`~imutool.attitude.run.run_ekf`) attitude, gyro bias (rad/s) and roll/pitch/heading σ (rad); arm_sa (3,)
     m body FRD the sensor's position from the antenna; ``params`` an :class:`~imutool.attitude.params.EkfParams`;
     ``smooth``: a whole recording (no state in or out), smoothed backward (:mod:`imutool.attitude.aided_rts`)."""
-    from imutool.attitude.aided_rts import node_capacity, smooth_aided
 
     t = np.ascontiguousarray(time, dtype=np.float64)
     n = len(t)
@@ -522,10 +489,12 @@ def run_aided(
     def c(x: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(x, dtype=np.float64)
 
-    aided_kernel(
-        t, c(gyro), c(accel), c(velocity_ne), c(ekf_q), c(ekf_bias), c(ekf_std), arm,
-        aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes,
-    )  # fmt: skip
+    start = ast.copy()
+    inputs = (t, c(gyro), c(accel), c(velocity_ne), c(ekf_q), c(ekf_bias), c(ekf_std), arm)
+    aided_kernel(*inputs, aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes)
+    if ast[A_NNODE] < 0:  # more nodes than the bound allowed (never expected): the forward pass, unsmoothed
+        ast, nodes = start, nodes[:0]
+        aided_kernel(*inputs, aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes)
     summary = {
         "started_s": None if not np.isfinite(ast[A_TSTART]) else round(float(ast[A_TSTART] - ast[A_T0]), 3),
         "velocity_fixes": int(ast[A_NFIX]),
@@ -541,7 +510,7 @@ def run_aided(
     }
     result = AidedResult(q, std, ba, bas, summary)
     if smooth:
-        summary["smoothed"] = smooth_aided(t, nodes, int(ast[A_NNODE]), result)
+        summary["smoothed"] = smooth_aided(t, nodes, int(ast[A_NNODE]) if len(nodes) else 0, result)
     return result, ast
 
 

@@ -21,21 +21,23 @@ import numpy as np
 from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
-from imutool.attitude.aided import IBA, N_DX, N_PHI, N_PP, N_PQ, N_ROW, N_START, NX, euler_std
+from imutool.attitude.aided_layout import IBA, N_DX, N_PHI, N_PP, N_PQ, N_ROW, N_START, NX, euler_std
 from imutool.attitude.layout import _FASTMATH, CALLED
-from imutool.quaternion import qmul, rmat, rotvec_quat
+from imutool.quaternion import qmul, rmat
 
 
 @njit(**CALLED)
 def _gain(nodes, j, G, L, FP):
     """G = P⁺_j Φ_{j+1}ᵀ (P⁻_{j+1})⁻¹ (NX × NX): Cholesky P⁻ = L Lᵀ, then P⁻ Gᵀ = Φ P⁺ column by column."""
     pq, ph, pp = N_PQ, N_PHI, N_PP
-    for i in range(NX):  # FP = Φ_{j+1} P⁺_j
+    for i in range(NX):  # FP = Φ_{j+1} P⁺_j (Φ is I but for a few blocks: its zeros skipped)
         for c in range(NX):
-            s = 0.0
-            for m in range(NX):
-                s += nodes[j + 1, ph + i * NX + m] * nodes[j, pq + m * NX + c]
-            FP[i, c] = s
+            FP[i, c] = 0.0
+        for m in range(NX):
+            a = nodes[j + 1, ph + i * NX + m]
+            if a != 0.0:
+                for c in range(NX):
+                    FP[i, c] += a * nodes[j, pq + m * NX + c]
     for c in range(NX):
         for i in range(c, NX):
             s = nodes[j + 1, pp + i * NX + c]
@@ -92,41 +94,49 @@ def _backward(nodes, nn, es, Ps, G, L, FP, D):
                 Ps[j, c, i] = v
 
 
-@njit(cache=True, fastmath=_FASTMATH, nogil=True)
+@njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
 def aided_rts_kernel(t, nodes, nn, q, std, ba, ba_std):
     """Smooth the forward pass's rows in place: q (N,4), std (N,3) rad, ba and ba_std (N,3) m/s² (NaN rows, where
     the forward pass was not running, stay NaN); nodes (≥ nn, N_COLS) its record."""
     es, Ps = np.empty((nn, NX)), np.empty((nn, NX, NX))
     _backward(nodes, nn, es, Ps, np.empty((NX, NX)), np.zeros((NX, NX)), np.empty((NX, NX)), np.empty((NX, NX)))
-    R, Pi, e = np.empty((3, 3)), np.empty((NX, NX)), np.empty(NX)
-    j = 0
-    for k in range(int(nodes[0, N_ROW]), t.shape[0]):
-        while j + 1 < nn and nodes[j + 1, N_ROW] <= k:
-            j += 1
-        if not np.isfinite(q[k, 0]):
-            continue
+    R, Pi = np.empty((3, 3)), np.empty((3, 3))
+    # per interval: the smoothed ψ, δb_a (6), the ψ block (9) and δb_a σ (3) at its two ends
+    e0, e1, v0, v1 = np.empty(6), np.empty(6), np.empty(12), np.empty(12)
+    for j in range(nn):
         nxt = j + 1 < nn and nodes[j + 1, N_START] == 0
         k0 = int(nodes[j, N_ROW])
-        f = 0.0
-        if nxt:
-            span = t[int(nodes[j + 1, N_ROW])] - t[k0]
-            f = (t[k] - t[k0]) / span if span > 0 else 0.0
-        for i in range(NX):
-            e[i] = es[j, i]
-            if nxt:
-                e[i] += f * (es[j + 1, i] + nodes[j + 1, N_DX + i] - es[j, i])
+        k1 = int(nodes[j + 1, N_ROW]) if j + 1 < nn else t.shape[0]
         for i in range(3):
-            for c in range(3):
-                Pi[i, c] = Ps[j, i, c] + (f * (Ps[j + 1, i, c] - Ps[j, i, c]) if nxt else 0.0)
-            v = Ps[j, IBA + i, IBA + i] + (f * (Ps[j + 1, IBA + i, IBA + i] - Ps[j, IBA + i, IBA + i]) if nxt else 0.0)
-            ba_std[k, i] = np.sqrt(max(v, 0.0))
-            ba[k, i] += e[IBA + i]
-        d0, d1, d2, d3 = rotvec_quat(e[0], e[1], e[2])
-        a0, a1, a2, a3 = qmul(d0, d1, d2, d3, q[k, 0], q[k, 1], q[k, 2], q[k, 3])
-        nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-        q[k, 0], q[k, 1], q[k, 2], q[k, 3] = a0 / nq, a1 / nq, a2 / nq, a3 / nq
-        rmat(q[k, 0], q[k, 1], q[k, 2], q[k, 3], R)
-        euler_std(R, Pi, std, k)
+            for side in range(2):
+                jj = j + side if nxt else j
+                dx = side == 1 and nxt
+                ee = e1 if side == 1 else e0
+                vv = v1 if side == 1 else v0
+                ee[i] = es[jj, i] + (nodes[jj, N_DX + i] if dx else 0.0)
+                ee[3 + i] = es[jj, IBA + i] + (nodes[jj, N_DX + IBA + i] if dx else 0.0)
+                for c in range(3):
+                    vv[3 * i + c] = Ps[jj, i, c]
+                vv[9 + i] = np.sqrt(max(Ps[jj, IBA + i, IBA + i], 0.0))  # σ, interpolated as it is
+        span = t[k1] - t[k0] if nxt else 0.0
+        inv = 1.0 / span if span > 0 else 0.0
+        for k in range(k0, k1):
+            if not np.isfinite(q[k, 0]):
+                continue
+            f = (t[k] - t[k0]) * inv
+            g = 1.0 - f
+            for i in range(3):
+                for c in range(3):
+                    Pi[i, c] = g * v0[3 * i + c] + f * v1[3 * i + c]
+                ba_std[k, i] = g * v0[9 + i] + f * v1[9 + i]
+                ba[k, i] += g * e0[3 + i] + f * e1[3 + i]
+            # q ← δq(ψ) ⊗ q, δq ≈ [1, ψ/2] (|ψ| ≲ 0.01 rad: the error is of order |ψ|³), normalised
+            p0, p1, p2 = g * e0[0] + f * e1[0], g * e0[1] + f * e1[1], g * e0[2] + f * e1[2]
+            a0, a1, a2, a3 = qmul(1.0, 0.5 * p0, 0.5 * p1, 0.5 * p2, q[k, 0], q[k, 1], q[k, 2], q[k, 3])
+            nq = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+            q[k, 0], q[k, 1], q[k, 2], q[k, 3] = a0 / nq, a1 / nq, a2 / nq, a3 / nq
+            rmat(q[k, 0], q[k, 1], q[k, 2], q[k, 3], R)
+            euler_std(R, Pi, std, k)
 
 
 def node_capacity(time: np.ndarray, velocity_ne: np.ndarray) -> int:
