@@ -383,6 +383,110 @@ def calibrate_accel(
     return CalibrationRun(summary, inputs, rec, fit=cal)
 
 
+def _meta_dict(value: Any) -> dict[str, Any]:
+    """A metadata entry that is a table (a dict, or its JSON text as a CSV header carries it); else {}."""
+    if isinstance(value, dict):
+        return value
+    if isinstance(value, str) and value.strip().startswith("{"):
+        import json
+
+        try:
+            out = json.loads(value)
+        except ValueError:
+            return {}
+        return out if isinstance(out, dict) else {}
+    return {}
+
+
+def calibrate_accel_bias(
+    source: str | os.PathLike | Recording,
+    output: str | os.PathLike,
+    *,
+    at: float | None = None,
+    append: bool = False,
+    sensor: str | None = None,
+    strict: bool = False,
+    on_input: OnInput | None = None,
+    stage: Stage | None = None,
+    **load_options: Any,
+) -> CalibrationRun:
+    """The accelerometer bias a GNSS-aided ``imutool filter`` run estimated (its output's ``accel_bias_x/y/z``, m/s²
+    body FRD, at ``at`` s from the start, else at its last row) written as section ``[accel]`` of ``output``: the
+    bias in sensor axes (a mounting the run applied is undone), T = I. Where the run's input was calibrated with an
+    ``[accel]`` section (the output's metadata says so) the estimate is a residual: it is folded into that
+    section, b ← b + T⁻¹ r, which needs ``append`` to that same file. Applied with ``--calibration``, the bias
+    leaves the tilt of every estimator (the EKF alone carries b/g of it: 1 mg ≈ 0.057°)."""
+    from calibration.file import load_calibration, provenance, update_calibration
+
+    input_path = _source_name(source)
+    check_toml_output(output, append)
+    inputs: list[dict[str, Any]] = []
+    _stage(stage, "reading")
+    rec = load_for_fit(source, load_options, (), on_input=_noting(inputs, on_input), strict=strict)
+    _stage(stage, "fitting")
+    require_channels(rec, ["accel_bias"], input_path)
+    ba = rec.get("accel_bias", "m/s^2") if rec.units.get("accel_bias") else rec["accel_bias"]
+    sd = rec.channels.get("accel_bias_std")
+    t = rec.time - rec.time[0]
+    ok = np.flatnonzero(np.all(np.isfinite(ba), axis=1) & (t <= (np.inf if at is None else at)))
+    if not ok.size:
+        when = "" if at is None else f" up to {at} s"
+        raise ImutoolError(f"no finite accel_bias row{when} (the aided filter did not run)", path=input_path)
+    k = int(ok[-1])
+    body = np.asarray(ba[k], dtype=float)
+    std = np.asarray(sd[k], dtype=float) if sd is not None else np.full(3, np.nan)
+    mount = _meta_dict(rec.meta.get("mounting"))
+    c = np.asarray(mount.get("matrix_sensor_to_body", np.eye(3)), dtype=float)
+    resid, resid_std = c.T @ body, np.abs(c.T) @ std  # body = C · sensor
+    applied = [str(a) for a in _meta_dict(rec.meta.get("calibration")).get("applied", [])]
+    fold = any(a.startswith("accel") for a in applied)
+    note = ""
+    if fold:
+        old = load_calibration(output).sections.get("accel") if append and os.path.exists(output) else None
+        if old is None:
+            cal_file = _meta_dict(rec.meta.get("calibration")).get("file", "")
+            raise ImutoolError(
+                f"the filter run applied an [accel] calibration ({cal_file}): its estimate is a residual; append "
+                "it to that file (--append -o that file) to fold it into the section",
+                path=input_path,
+            )
+        tm = np.asarray(old.get("T", np.eye(3)), dtype=float)
+        bias = np.asarray(old.get("bias", [0.0, 0.0, 0.0]), dtype=float) + np.linalg.solve(tm, resid)
+        section = {**old, "bias": bias.tolist()}
+        section.pop("provenance", None)
+        note = "folded into the existing [accel] section: b + T⁻¹ r"
+    else:
+        tm = np.eye(3)
+        bias = resid
+        section = {"model": "f = T (f_meas - b)", "units": "b: m/s^2; T: 1", "kind": "offset", "T": tm.tolist()}
+        section["bias"] = bias.tolist()
+        if append and os.path.exists(output) and "accel" in load_calibration(output).sections:
+            note = "replaced the file's [accel] section (the filter ran on uncalibrated accelerometer data)"
+    section["bias_std"] = resid_std.tolist()
+    quality = {"row_time_s": round(float(t[k]), 3), "estimate_body_m_s2": body.tolist()}
+    if "aided" in rec.meta:
+        quality["aided"] = str(rec.meta["aided"])[:500]
+    section["provenance"] = provenance(
+        input_path,
+        "GNSS-aided filter's accelerometer-bias estimate",
+        sensor or str(rec.meta.get("sensor", "")),
+        quality,
+    )
+    update_calibration(output, "accel", section, append)
+    summary = {
+        "output": os.fspath(output),
+        "row_time_s": round(float(t[k]), 3),
+        "bias_m_s2": bias.tolist(),
+        "bias_std_m_s2": resid_std.tolist(),
+        "bias_mg": (bias / 9.80665e-3).tolist(),
+        "mounting_undone": bool(mount),
+        "folded": fold,
+    }
+    if note:
+        summary["note"] = note
+    return CalibrationRun(summary, inputs, rec, fit=None)
+
+
 # -- deviation card --------------------------------------------------------------------------------------------
 REF_NAMES = (
     "heading_mag",

@@ -40,7 +40,7 @@ def voyage(bias=(0.05, -0.05, 0.05), seed: int = 5, **kw):
     return rec
 
 
-PRM = EkfParams(gnss_velocity_noise=0.03)
+PRM = EkfParams(gnss_velocity_noise=0.03, aided_gyro_bias_rw=float(np.radians(0.0005)))  # the gyro's figure told
 
 
 @pytest.fixture(scope="module")
@@ -56,18 +56,52 @@ def test_the_bias_is_learned_in_a_turn_and_the_tilt_after_it_meets_the_bound(bia
     t = rec.time - rec.time[0]
     after = t > TURN_END
     er, ep = (out["roll"] - rec["ref_roll"])[after], (out["pitch"] - rec["ref_pitch"])[after]
-    # measured 0.057° / 0.11° (pitch: the bias along the bow, which the roll does not modulate, is the one the
-    # gyro's bias instability over the turn confounds most; docs/attitude.md, "The limit")
-    assert np.sqrt(np.mean(er**2)) <= 0.08 and np.sqrt(np.mean(ep**2)) <= 0.13
-    assert np.abs(er).max() <= 0.4 and np.abs(ep).max() <= 0.4
-    err = np.abs(out["accel_bias"][-1] - np.array(rec.meta["accel_bias_m_s2"])) / G * 1e3  # mg
-    assert err[0] < 2.5 and err[1] < 1.0 and err[2] < 1.0, err
-    # before the turn the horizontal bias is not observable: the σ of the bias says so, and shrinks in the turn
-    sd = out["accel_bias_std"]
-    i0, i1 = np.searchsorted(t, TURN_START), np.searchsorted(t, TURN_END)
-    assert sd[i0, 0] > 2.5e-2 and sd[-1, 0] < 0.5 * sd[i0, 0] and sd[i1, 0] < 0.6 * sd[i0, 0]
+    # measured 0.015° / 0.012° (smoothed, the gyro's bias instability told; the forward pass 0.037 / 0.034, told
+    # nothing 0.057 / 0.11: docs/attitude.md, "The limit")
+    assert np.sqrt(np.mean(er**2)) <= 0.03 and np.sqrt(np.mean(ep**2)) <= 0.03
+    assert np.abs(er).max() <= 0.1 and np.abs(ep).max() <= 0.1
+    err = np.abs(out["accel_bias"][-1] - np.array(rec.meta["accel_bias_m_s2"])) / G * 1e3  # mg (0.12 / 0.15 / 0.53)
+    assert err[0] < 0.5 and err[1] < 0.5 and err[2] < 1.0, err
     s = res.summary["aided"]
     assert s["velocity_fixes"] > 200 and s["held_rows_skipped"] > 20000 and s["velocity_rejected"] <= 10
+    assert s["smoothed"] is True
+
+
+@pytest.fixture(scope="module")
+def forward(biased):
+    rec, _ = biased
+    prm = EkfParams(gnss_velocity_noise=0.03, aided_gyro_bias_rw=PRM.aided_gyro_bias_rw, aided_smoother=False)
+    return run_filter(rec, params=prm, lever_arm=np.array(rec.meta["lever_arm_m"]))
+
+
+def test_forward_pass_bias_sigma_shrinks_in_the_turn(biased, forward):
+    """The forward pass: before the turn the horizontal bias is not observable, its σ says so and shrinks in the
+    turn; the smoothed σ before the turn is the one after it (the turn seen from the whole voyage)."""
+    rec, smoothed = biased
+    t = rec.time - rec.time[0]
+    sd = forward.recording["accel_bias_std"]
+    i0, i1 = np.searchsorted(t, TURN_START), np.searchsorted(t, TURN_END)
+    assert sd[i0, 0] > 2.5e-2 and sd[-1, 0] < 0.5 * sd[i0, 0] and sd[i1, 0] < 0.6 * sd[i0, 0]
+    ss = smoothed.recording["accel_bias_std"]
+    assert ss[i0, 0] < 0.6 * sd[i0, 0] and abs(ss[i0, 0] - ss[-1, 0]) < 0.3 * ss[-1, 0]
+    np.testing.assert_allclose(ss[-1], sd[-1], rtol=1e-6)  # the last node: smoothed = forward
+
+
+def test_the_smoother_carries_the_turns_bias_back_before_it(biased, forward):
+    """Offline the whole voyage is known: the bias the turn reveals corrects the tilt before the turn too (the
+    forward pass carries the bias's tilt there), and the bias estimate is the same along the voyage."""
+    rec, smoothed = biased
+    t = rec.time - rec.time[0]
+    before = (t >= 20.0) & (t < TURN_START)
+    err = {}
+    for name, res in (("forward", forward), ("smoothed", smoothed)):
+        out = res.recording
+        e = np.concatenate([(out["roll"] - rec["ref_roll"])[before], (out["pitch"] - rec["ref_pitch"])[before]])
+        err[name] = np.sqrt(np.mean(e**2))
+    assert err["smoothed"] < 0.03 and err["smoothed"] < 0.2 * err["forward"], err  # measured 0.010 / 0.38
+    ba = smoothed.recording["accel_bias"]
+    truth = np.array(rec.meta["accel_bias_m_s2"])
+    assert np.abs(ba[before] - truth).max() / G * 1e3 < 1.0  # mg, as at the end
 
 
 def test_the_sigma_covers_the_error_before_and_after_the_turn(biased):
@@ -80,7 +114,10 @@ def test_the_sigma_covers_the_error_before_and_after_the_turn(biased):
     e = np.concatenate([(out["roll"] - rec["ref_roll"])[scored], (out["pitch"] - rec["ref_pitch"])[scored]])
     s = np.concatenate([out["roll_std"][scored], out["pitch_std"][scored]])
     share = np.mean(np.abs(e) <= 2 * s)
-    assert 0.90 <= share <= 0.995, share
+    # a bias-dominated error is nearly constant, so the share is near 0 or 1 on one voyage; the σ must cover it,
+    # and not by inflating (the tilt's σ after the turn is measured 0.044°; RMS of error/σ 0.40)
+    assert share >= 0.90, share
+    assert np.mean(out["roll_std"][t > TURN_END]) < 0.06
 
 
 def test_without_the_aided_filter_the_tilt_carries_the_bias(biased):
@@ -152,3 +189,44 @@ def test_without_gnss_the_output_is_the_ekf_alone():
     for ch in ("roll", "pitch", "heading", "roll_std", "pitch_std"):
         np.testing.assert_array_equal(a[ch], b[ch])
     assert "accel_bias" not in a.channels
+
+
+def test_calibrate_accel_bias_takes_the_estimate_and_applying_it_removes_the_tilt_bias(tmp_path):
+    """The user's round trip on a sensor mounted upside down (sensor axes x,-y,-z of the body's): `filter` with the
+    mounting estimates the bias in body axes, `calibrate accel-bias` writes it in sensor axes, and the EKF alone
+    (no aided pass) run with that calibration no longer carries the bias's tilt (5 mg ≈ 0.29°)."""
+    from click.testing import CliRunner
+
+    import formats
+    from calibration.file import load_calibration
+    from imutool.cli import cli
+
+    body = (0.05, -0.05, 0.05)
+    rec = voyage(bias=body)
+    flip = np.array([1.0, -1.0, -1.0])  # x,-y,-z: its own inverse
+    for ch in ("gyro", "accel", "mag"):
+        rec.channels[ch] = rec[ch] * flip
+    src, est, cal = tmp_path / "voyage.csv", tmp_path / "est.csv", tmp_path / "cal.toml"
+    formats.write(rec, src)
+    arm = ",".join(str(x) for x in rec.meta["lever_arm_m"])
+    told = f"aided_gyro_bias_rw={PRM.aided_gyro_bias_rw}"
+    common = ["--mounting", "x,-y,-z", f"--lever-arm={arm}", "--param", "gnss_velocity_noise=0.03", "-q"]
+
+    def imutool(*args: str) -> None:
+        r = CliRunner().invoke(cli, list(args))
+        assert r.exit_code == 0, r.output
+
+    imutool("filter", str(src), "-o", str(est), *common, "--param", told)
+    imutool("calibrate", "accel-bias", str(est), "-o", str(cal))
+    b = np.array(load_calibration(cal).sections["accel"]["bias"])
+    np.testing.assert_allclose(b, np.array(body) * flip, atol=1e-2 * G * 0.1)  # within 1 mg, in sensor axes
+    errs = {}
+    for name, extra in (("raw", []), ("calibrated", ["--calibration", str(cal)])):
+        out = tmp_path / f"ekf_{name}.csv"
+        imutool("filter", str(src), "-o", str(out), *common, "--param", "aided=false", *extra)
+        r = formats.read(out)
+        t = r.time - r.time[0]
+        after = t > TURN_END
+        errs[name] = (np.mean((r["roll"] - r["ref_roll"])[after]), np.mean((r["pitch"] - r["ref_pitch"])[after]))
+    raw, calibrated = np.abs(errs["raw"]), np.abs(errs["calibrated"])
+    assert max(raw) > 0.15 and max(calibrated) < 0.3 * max(raw), errs

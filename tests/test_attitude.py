@@ -782,12 +782,12 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
     assert "note:" in err and "update_every = 1" in err and "--update-every 0" in err
     assert "mag_noise_deg = 20" in err and "--param mag_noise_deg=0" in err and "mag_reference_tau = 0" in err
     assert "mag_new_time" in err and "mag_bias_gate" in err  # saved before the new-field acceptance and the gate
-    assert err.count("note:") == 6  # and the motion model's and the lever-arm estimate's (a version-0 file)
+    assert err.count("note:") == 7  # and the motion model's, the lever-arm estimate's, the aided smoother's (v0)
     code, out, err = run_main(
         ["filter", src, "-o", tmp_path / "o2.csv", "--params", old, "--update-every", "0", "--json"], capsys
     )
     assert code == 0 and json.loads(out)["update_every"] == 4  # 200 Hz: every 4th
-    assert "update_every = 1" not in err and err.count("note:") == 5 and "mag_noise_deg = 20" in err
+    assert "update_every = 1" not in err and err.count("note:") == 6 and "mag_noise_deg = 20" in err
     code, out, err = run_main(
         [
             "filter",
@@ -803,18 +803,18 @@ def test_params_toml_round_trip_and_cli(tmp_path, capsys):
         ],
         capsys,
     )
-    assert code == 0 and err.count("note:") == 3 and "mag_new_time" in err
+    assert code == 0 and err.count("note:") == 4 and "mag_new_time" in err
     last_release = tmp_path / "last_release.toml"  # saved with mag_heading_density, before mag_new_time
     last_release.write_text("[ekf]\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n")
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2c.csv", "--params", last_release], capsys)
-    assert code == 0 and err.count("note:") == 3 and "mag_new_time" in err
+    assert code == 0 and err.count("note:") == 4 and "mag_new_time" in err
     two_stage = tmp_path / "two_stage.toml"  # saved before the Butterworth: every key of its day, no smoother_lp_tau
     two_stage.write_text(
         "[ekf]\naccel_lp_tau = 3.0\ngyro_scale_noise = 0.003\naccel_noise_gain = 2.8\n"
         "mag_new_time = 20.0\nmag_heading_density = 1.2\nmag_noise_deg = 0.0\n"
     )
     code, out, err = run_main(["filter", src, "-o", tmp_path / "o2d.csv", "--params", two_stage], capsys)
-    assert code == 0 and err.count("note:") == 3 and "Butterworth" in err and "has no smoother_lp_tau" in err
+    assert code == 0 and err.count("note:") == 4 and "Butterworth" in err and "has no smoother_lp_tau" in err
     code, out, err = run_main(
         ["filter", src, "-o", tmp_path / "o2e.csv", "--params", f.with_name("used.toml"), "--param", "accel_lp_tau=2"],
         capsys,
@@ -1862,11 +1862,12 @@ def test_params_file_version_and_migrations(tmp_path, capsys):
         "butterworth_lowpass",
         "motion_model",
         "lever_arm_estimate",
+        "aided_smoother",
     ]
     notes = v0.notes()
-    assert len(notes) == 7 and "before 2026-11-26" in notes[0] and "commit 1816144" in notes[3]
+    assert len(notes) == 8 and "before 2026-11-26" in notes[0] and "commit 1816144" in notes[3]
     later = v0.notes(EkfParams(update_every=0, mag_noise_deg=20.0), {"update_every"})  # --update-every 0 given
-    assert len(later) == 6 and later[0].startswith(f"{old} sets mag_noise_deg = 20")
+    assert len(later) == 7 and later[0].startswith(f"{old} sets mag_noise_deg = 20")
     run = CliRunner().invoke(cli, ["filter", str(_roll(tmp_path)), "-o", str(tmp_path / "e.csv"), "--params", str(old)])
     assert run.exit_code == 0, run.output
     assert [line for line in run.stderr.splitlines() if line.startswith("note: ")] == [f"note: {n}" for n in notes]
@@ -1876,7 +1877,13 @@ def test_params_file_version_and_migrations(tmp_path, capsys):
         "mag_new_field",
         "motion_model",
         "lever_arm_estimate",
+        "aided_smoother",
     ]
+    v3 = tmp_path / "v3.toml"  # saved with the aided pass, before it was smoothed
+    v3.write_text("version = 3\n[ekf]\naided = true\n")
+    m3 = read_params_file(str(v3))
+    assert [m.name for m in m3.migrations] == ["aided_smoother"] and "aided_smoother=false" in m3.notes()[0]
+    assert m3.notes(EkfParams(aided_smoother=False), {"aided_smoother"}) == []
 
     for text, needle in (
         (f"version = {PARAMS_VERSION + 1}\n[ekf]\ngyro_noise = 0.001\n", "newer than this imutool"),

@@ -35,11 +35,11 @@ from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.frames import quat_multiply, quat_to_euler
+from imutool.attitude.aided_layout import IBA, IBG, IV, N_COLS, N_DX, N_PHI, N_PP, N_PQ, N_ROW, N_START, NX, euler_std
+from imutool.attitude.aided_rts import node_capacity, smooth_aided
 from imutool.attitude.layout import _FASTMATH, CALLED, INLINED
 from imutool.quaternion import qmul, qturn, rmat, rotvec_quat
 
-NX = 11  # error state: ψ (0-2), δv_NE (3-4), δb_g (5-7), δb_a (8-10)
-IV, IBG, IBA = 3, 5, 8
 # ---- the aided filter's state vector (carried between chunks) ----
 A_Q, A_V, A_BG, A_BA, A_P = 0, 4, 6, 9, 12  # q (4), v_NE (2), b_g (3), b_a (3), P (121, row-major 11×11)
 A_INT, A_F, A_C, A_T, A_TURN = 133, 142, 145, 154, 155  # sums since the last propagation: ∫R dt, ∫f_n dt, ∫[f_n×]A dt
@@ -49,7 +49,8 @@ A_NFIX, A_NREJ, A_NHELD, A_NHDG, A_TSTART = 169, 170, 171, 172, 173  # counts; t
 A_NIS = 174  # the velocity fixes' mean NIS per degree of freedom (running, over about NIS_FIXES fixes)
 A_T0 = 175  # the time of the first row (s)
 A_NRESTART = 176  # restarts after a divergence
-A_SIZE = 177
+A_NNODE = 177  # nodes recorded for the smoother in this call (its capacity exceeded: −1)
+A_SIZE = 178
 RESTART_RATIO = 3.0  # the running innovation ratio beyond which the filter restarts from the first pass
 MAX_RESTARTS = 2  # more restarts than this over a run (or a streamed chunk): its output is not used
 NIS_FIXES = 30.0
@@ -74,22 +75,19 @@ NIS_FIXES = 30.0
     Q_START_AFTER,
 ) = range(17)
 N_APRM = 17
-PROPAGATE_EVERY_S = 1.0
-START_TILT_SIGMA, START_HEADING_SIGMA = (
-    np.radians(2.0),
-    np.radians(5.0),
-)  # rad: the least σ the filter starts with  # without a fix the covariance is propagated at least this often
+PROPAGATE_EVERY_S = 1.0  # s: without a fix the covariance is propagated at least this often
+START_TILT_SIGMA, START_HEADING_SIGMA = np.radians(2.0), np.radians(5.0)  # rad: the least σ the filter starts with
 
 
 @njit(**CALLED)
 def _propagate(ast, P, prm, PHI, TMP):
     """P ← Φ P Φᵀ + Q over the interval summed since the last propagation (module docstring); the sums restart."""
     T = ast[A_T]
-    if T <= 0.0:
-        return
     for i in range(NX):
         for j in range(NX):
             PHI[i, j] = 1.0 if i == j else 0.0
+    if T <= 0.0:
+        return
     F0, F1, F2 = ast[A_F], ast[A_F + 1], ast[A_F + 2]
     # −[F×] rows N, E: [F×] = [[0, −F2, F1], [F2, 0, −F0], [−F1, F0, 0]]
     PHI[IV, 1], PHI[IV, 2] = F2, -F1
@@ -200,46 +198,98 @@ def _start(ast, P, prm, q, b, std):
 
 
 @njit(**INLINED)
-def _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std):
-    """Row k: q, the roll/pitch/heading σ (rad; δ(φ,θ,ψ) = E Rᵀ ψ, E the body-rate → Euler-rate matrix), b_a and
-    its σ (m/s²)."""
+def _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std, smoothed):
+    """Row k: q, the roll/pitch/heading σ (rad), b_a and its σ (m/s²; the σ not where the smoother sets them)."""
     for i in range(4):
         q_out[k, i] = ast[A_Q + i]
     for i in range(3):
         ba_out[k, i] = ast[A_BA + i]
-        ba_std[k, i] = np.sqrt(max(P[IBA + i, IBA + i], 0.0))
-    sp = min(1.0, max(-1.0, -R[2, 0]))
-    cp = max(np.sqrt(1 - sp * sp), 1e-6)
-    hr = np.sqrt(R[2, 1] * R[2, 1] + R[2, 2] * R[2, 2])
-    sr, cr = (R[2, 1] / hr, R[2, 2] / hr) if hr > 1e-12 else (0.0, 1.0)
-    tp = sp / cp
-    for row in range(3):
-        if row == 0:
-            e0, e1, e2 = 1.0, sr * tp, cr * tp
-        elif row == 1:
-            e0, e1, e2 = 0.0, cr, -sr
-        else:
-            e0, e1, e2 = 0.0, sr / cp, cr / cp
-        # m = e Rᵀ (a row in world axes)
-        m0 = e0 * R[0, 0] + e1 * R[0, 1] + e2 * R[0, 2]
-        m1 = e0 * R[1, 0] + e1 * R[1, 1] + e2 * R[1, 2]
-        m2 = e0 * R[2, 0] + e1 * R[2, 1] + e2 * R[2, 2]
-        v = (
-            m0 * (m0 * P[0, 0] + 2 * m1 * P[0, 1] + 2 * m2 * P[0, 2])
-            + m1 * (m1 * P[1, 1] + 2 * m2 * P[1, 2])
-            + m2 * m2 * P[2, 2]
-        )
-        std_out[k, row] = np.sqrt(max(v, 0.0))
+    if not smoothed:
+        for i in range(3):
+            ba_std[k, i] = np.sqrt(max(P[IBA + i, IBA + i], 0.0))
+        euler_std(R, P, std_out, k)
+
+
+@njit(**CALLED)
+def _node_open(nodes, ast, k, PHI, P, start):
+    """A smoother node at row k: Φ into it, P⁻ = P⁺ = P, no correction yet; its index (−1: none kept)."""
+    m = int(ast[A_NNODE])
+    if m < 0 or m >= nodes.shape[0]:
+        if nodes.shape[0] > 0:
+            ast[A_NNODE] = -1.0  # capacity exceeded: the run is not smoothed
+        return -1
+    nodes[m, N_ROW], nodes[m, N_START] = k, start
+    for i in range(NX):
+        nodes[m, N_DX + i] = 0.0
+        for j in range(NX):
+            nodes[m, N_PHI + i * NX + j] = PHI[i, j]
+            nodes[m, N_PP + i * NX + j] = P[i, j]
+            nodes[m, N_PQ + i * NX + j] = P[i, j]
+    ast[A_NNODE] = m + 1
+    return m
+
+
+@njit(**CALLED)
+def _node_update(nodes, m, P, dx, add):
+    """Node m after an update: the correction dx added (if ``add``), P⁺ = P."""
+    if m < 0:
+        return
+    for i in range(NX):
+        if add:
+            nodes[m, N_DX + i] += dx[i]
+        for j in range(NX):
+            nodes[m, N_PQ + i * NX + j] = P[i, j]
+
+
+@njit(**CALLED)
+def _at_fix(ast, P, prm, PHI, TMP, K, dx, H, R, arm, rv, w0, w1, w2, vn, ve, tk, qe, hstd, nodes, k):
+    """A new velocity fix (vn, ve m/s, the antenna's) at row k, time tk, with the bias-free rate w (rad/s) and the
+    first pass's q and heading σ (qe, hstd rad): propagate, update (gated), the heading now and then, a node."""
+    _propagate(ast, P, prm, PHI, TMP)
+    m = _node_open(nodes, ast, k, PHI, P, 0.0)
+    # the sensor's velocity: the antenna's plus R (ω × r)
+    c0, c1, c2 = w1 * arm[2] - w2 * arm[1], w2 * arm[0] - w0 * arm[2], w0 * arm[1] - w1 * arm[0]
+    y0 = vn + R[0, 0] * c0 + R[0, 1] * c1 + R[0, 2] * c2 - ast[A_V]
+    y1 = ve + R[1, 0] * c0 + R[1, 1] * c1 + R[1, 2] * c2 - ast[A_V + 1]
+    gate = prm[Q_GATE] if ast[A_REJT] < prm[Q_REJ_TIMEOUT] else 0.0
+    # the self-check: a velocity whose errors are not white (a track-smoothed SOG/COG, a receiver worse
+    # than stated) or a gyro worse than the parameters say shows as a mean innovation ratio above 1
+    # H: δv, and the lever term's gyro bias: the computed sensor velocity holds R (δb_g × r) = −R [r×] δb_g
+    for i in range(2):
+        for j in range(NX):
+            H[i, j] = 0.0
+        H[i, IV + i] = 1.0
+        H[i, IBG] = R[i, 2] * arm[1] - R[i, 1] * arm[2]  # (−R [r×])[i, :]
+        H[i, IBG + 1] = R[i, 0] * arm[2] - R[i, 2] * arm[0]
+        H[i, IBG + 2] = R[i, 1] * arm[0] - R[i, 0] * arm[1]
+    ratio = (y0 * y0 + y1 * y1) / (P[IV, IV] + P[IV + 1, IV + 1] + 2.0 * rv)
+    nis = _correct(ast, P, dx, K, TMP, H, 2, y0, y1, rv, rv, gate)
+    ast[A_NIS] += (min(ratio, 100.0) - ast[A_NIS]) / NIS_FIXES
+    if ast[A_NIS] > RESTART_RATIO:  # diverged (a start from an unsettled first pass): start again from it
+        ast[A_INIT], ast[A_NIS] = 0.0, 1.0
+        ast[A_NRESTART] += 1
+    _node_update(nodes, m, P, dx, nis >= 0)
+    if nis < 0:
+        ast[A_NREJ] += 1
+        ast[A_REJT] += tk - ast[A_TFIX]
+    else:
+        ast[A_NFIX] += 1
+        ast[A_REJT] = 0.0
+    ast[A_TFIX] = tk
+    if tk - ast[A_THDG] >= prm[Q_HDG_EVERY] and np.isfinite(qe[0]):
+        _node_update(nodes, m, P, dx, _heading(ast, P, prm, dx, K, TMP, H, R, qe, hstd))
+        ast[A_THDG] = tk
 
 
 @njit(cache=True, fastmath=_FASTMATH, nogil=True, error_model="numpy")
-def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out, std_out, ba_out, ba_std):
+def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out, std_out, ba_out, ba_std, nodes):
     """Run the aided filter over one chunk (state ``ast`` carried in place; module docstring). t (N,) s; gyro (N,3)
     rad/s; acc (N,3) m/s²; vel (N,2) the GNSS north/east velocity (m/s; held, or NaN between fixes); ekf_q (N,4),
     ekf_b (N,3) rad/s, ekf_std (N,3) rad: the first pass's attitude, gyro bias and σ (the start, the heading); arm
     (3,) m body FRD the sensor's position from the antenna. Outputs q_out (N,4) (NaN before the start), std_out (N,3)
-    roll/pitch/heading σ rad, ba_out/ba_std (N,3) m/s²."""
+    roll/pitch/heading σ rad, ba_out/ba_std (N,3) m/s²; nodes (M, N_COLS) the smoother's record (M = 0: none)."""
     n = t.shape[0]
+    ast[A_NNODE] = 0.0
     P = ast[A_P : A_P + NX * NX].reshape((NX, NX))
     R, PHI, TMP, K, dx = np.empty((3, 3)), np.empty((NX, NX)), np.empty((NX, NX)), np.zeros((NX, 2)), np.zeros(NX)
     H = np.zeros((2, NX))
@@ -306,45 +356,18 @@ def aided_kernel(t, gyro, acc, vel, ekf_q, ekf_b, ekf_std, arm, prm, ast, q_out,
             ast[A_V] = vn + R[0, 0] * c0 + R[0, 1] * c1 + R[0, 2] * c2  # the sensor's: the antenna's + R (ω × r)
             ast[A_V + 1] = ve + R[1, 0] * c0 + R[1, 1] * c1 + R[1, 2] * c2
             ast[A_TFIX], ast[A_THDG], ast[A_TSTART] = tk, tk, tk
+            _node_open(nodes, ast, k, PHI, P, 1.0)
             started = True
         elif fix and started:
-            _propagate(ast, P, prm, PHI, TMP)
-            # the sensor's velocity: the antenna's plus R (ω × r)
-            c0, c1, c2 = w1 * arm[2] - w2 * arm[1], w2 * arm[0] - w0 * arm[2], w0 * arm[1] - w1 * arm[0]
-            y0 = vn + R[0, 0] * c0 + R[0, 1] * c1 + R[0, 2] * c2 - ast[A_V]
-            y1 = ve + R[1, 0] * c0 + R[1, 1] * c1 + R[1, 2] * c2 - ast[A_V + 1]
-            gate = prm[Q_GATE] if ast[A_REJT] < prm[Q_REJ_TIMEOUT] else 0.0
-            # the self-check: a velocity whose errors are not white (a track-smoothed SOG/COG, a receiver worse
-            # than stated) or a gyro worse than the parameters say shows as a mean innovation ratio above 1
-            # H: δv, and the lever term's gyro bias: the computed sensor velocity holds R (δb_g × r) = −R [r×] δb_g
-            for i in range(2):
-                for j in range(NX):
-                    H[i, j] = 0.0
-                H[i, IV + i] = 1.0
-                H[i, IBG] = R[i, 2] * arm[1] - R[i, 1] * arm[2]  # (−R [r×])[i, :]
-                H[i, IBG + 1] = R[i, 0] * arm[2] - R[i, 2] * arm[0]
-                H[i, IBG + 2] = R[i, 1] * arm[0] - R[i, 0] * arm[1]
-            ratio = (y0 * y0 + y1 * y1) / (P[IV, IV] + P[IV + 1, IV + 1] + 2.0 * rv)
-            nis = _correct(ast, P, dx, K, TMP, H, 2, y0, y1, rv, rv, gate)
-            ast[A_NIS] += (min(ratio, 100.0) - ast[A_NIS]) / NIS_FIXES
-            if ast[A_NIS] > RESTART_RATIO:  # diverged (a start from an unsettled first pass): start again from it
-                ast[A_INIT], ast[A_NIS] = 0.0, 1.0
-                ast[A_NRESTART] += 1
-            if nis < 0:
-                ast[A_NREJ] += 1
-                ast[A_REJT] += tk - ast[A_TFIX]
-            else:
-                ast[A_NFIX] += 1
-                ast[A_REJT] = 0.0
-            ast[A_TFIX] = tk
-            if tk - ast[A_THDG] >= prm[Q_HDG_EVERY] and np.isfinite(ekf_q[k, 0]):
-                _heading(ast, P, prm, dx, K, TMP, H, R, ekf_q[k], ekf_std[k, 2])
-                ast[A_THDG] = tk
+            _at_fix(
+                ast, P, prm, PHI, TMP, K, dx, H, R, arm, rv, w0, w1, w2, vn, ve, tk, ekf_q[k], ekf_std[k, 2], nodes, k
+            )
             rmat(ast[A_Q], ast[A_Q + 1], ast[A_Q + 2], ast[A_Q + 3], R)
         elif started and ast[A_T] >= PROPAGATE_EVERY_S:
             _propagate(ast, P, prm, PHI, TMP)
+            _node_update(nodes, _node_open(nodes, ast, k, PHI, P, 0.0), P, dx, False)
         if started:
-            _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std)
+            _outputs(ast, P, R, k, q_out, std_out, ba_out, ba_std, nodes.shape[0] > 0 and ast[A_NNODE] >= 0)
         else:
             for i in range(4):
                 q_out[k, i] = np.nan
@@ -367,6 +390,8 @@ def _heading(ast, P, prm, dx, K, TMP, H, R, qe, hstd):
     H[0, 2] = 1.0
     if _correct(ast, P, dx, K, TMP, H, 1, y, 0.0, r, r, 0.0) >= 0:
         ast[A_NHDG] += 1
+        return True
+    return False
 
 
 HEADING_FLOOR = np.radians(0.5)  # rad: the first pass's heading is never taken as better than this
@@ -440,13 +465,16 @@ def run_aided(
     arm_sa: np.ndarray | None = None,
     dt_nominal: float | None = None,
     state: np.ndarray | None = None,
+    smooth: bool = False,
 ) -> tuple[AidedResult, np.ndarray]:
     """The GNSS-velocity-aided filter over arrays (module docstring); returns (result, state for the next chunk).
 
     time (N,) s; gyro (N,3) rad/s; accel (N,3) m/s² (NaN: a missing or clipped sample); velocity_ne (N,2) m/s the
     antenna's north/east velocity (held between fixes or NaN); ekf_q/ekf_bias/ekf_std the first pass's
     (:func:`~imutool.attitude.run.run_ekf`) attitude, gyro bias (rad/s) and roll/pitch/heading σ (rad); arm_sa (3,)
-    m body FRD the sensor's position from the antenna; ``params`` an :class:`~imutool.attitude.params.EkfParams`."""
+    m body FRD the sensor's position from the antenna; ``params`` an :class:`~imutool.attitude.params.EkfParams`;
+    ``smooth``: a whole recording (no state in or out), smoothed backward (:mod:`imutool.attitude.aided_rts`)."""
+
     t = np.ascontiguousarray(time, dtype=np.float64)
     n = len(t)
     if dt_nominal is None:
@@ -456,14 +484,17 @@ def run_aided(
     ast = aided_initial_state(params) if state is None else np.array(state, dtype=np.float64)
     arm = np.zeros(3) if arm_sa is None else np.ascontiguousarray(arm_sa, dtype=np.float64)
     q, std, ba, bas = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+    nodes = np.empty((node_capacity(t, velocity_ne) if smooth and n else 0, N_COLS))
 
     def c(x: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(x, dtype=np.float64)
 
-    aided_kernel(
-        t, c(gyro), c(accel), c(velocity_ne), c(ekf_q), c(ekf_bias), c(ekf_std), arm,
-        aided_vector(params, dt_nominal), ast, q, std, ba, bas,
-    )  # fmt: skip
+    start = ast.copy()
+    inputs = (t, c(gyro), c(accel), c(velocity_ne), c(ekf_q), c(ekf_bias), c(ekf_std), arm)
+    aided_kernel(*inputs, aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes)
+    if ast[A_NNODE] < 0:  # more nodes than the bound allowed (never expected): the forward pass, unsmoothed
+        ast, nodes = start, nodes[:0]
+        aided_kernel(*inputs, aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes)
     summary = {
         "started_s": None if not np.isfinite(ast[A_TSTART]) else round(float(ast[A_TSTART] - ast[A_T0]), 3),
         "velocity_fixes": int(ast[A_NFIX]),
@@ -477,7 +508,10 @@ def run_aided(
         "velocity_innovation_ratio": round(float(ast[A_NIS]), 3),
         "restarts": int(ast[A_NRESTART]),
     }
-    return AidedResult(q, std, ba, bas, summary), ast
+    result = AidedResult(q, std, ba, bas, summary)
+    if smooth:
+        summary["smoothed"] = smooth_aided(t, nodes, int(ast[A_NNODE]) if len(nodes) else 0, result)
+    return result, ast
 
 
 def velocity_is_fixes(velocity_ne: np.ndarray) -> bool:
@@ -500,6 +534,7 @@ def aided_result(
     antenna_arm: np.ndarray | None,
     dt_nominal: float | None = None,
     state: np.ndarray | None = None,
+    smooth: bool = False,
 ) -> tuple[object, AidedResult, np.ndarray]:
     """(the EKF's result with the aided filter's attitude and σ where it is running and no less certain, the aided
     result, its state for the next chunk): the second pass of :func:`~imutool.attitude.recording.ekf_recording`
@@ -508,7 +543,7 @@ def aided_result(
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64)
     ant = np.zeros(3) if antenna_arm is None else np.asarray(antenna_arm, dtype=np.float64)
     aided, ast = run_aided(
-        time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant, dt_nominal, state
+        time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant, dt_nominal, state, smooth
     )
     va = aided.std[:, 0] ** 2 + aided.std[:, 1] ** 2
     # the EKF's σ leaves out the accelerometer's bias (its tilt, b/g per axis): compared with it added

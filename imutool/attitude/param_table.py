@@ -268,6 +268,9 @@ PARAMS: tuple[Param, ...] = (
           "with a GNSS velocity (vel_n/vel_e, sog/cog, --gnss), roll and pitch come from the velocity-aided filter "
           "(imutool/attitude/aided.py: the velocity fixes as Kalman measurements, velocity and accelerometer-bias "
           "states; false: the EKF's velocity aiding alone, as before)"),
+    Param("aided_smoother", True, "bool", (0, 1), UNUSED, None,
+          "offline (filter on a whole recording, not streamed or live): the aided filter smoothed backward (RTS), "
+          "so the accelerometer bias a turn reveals corrects the tilt before it too (false: the forward pass)"),
     Param("gnss_velocity_noise", 0.05, "m/s", (0.001, 10.0), UNUSED, None,
           "σ of each GNSS velocity fix, north and east (a receiver's class: 0.05 single-frequency, 0.02 dual, 0.01 "
           "RTK)"),

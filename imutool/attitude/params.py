@@ -245,7 +245,7 @@ class EkfCoefficients:
 # The format's version, written by EkfParams.to_toml as `version = N` above the [ekf] table. A file without one is
 # version 0: every file saved before versions existed (2026-11-27). Raise it when a parameter's meaning changes,
 # with a Migration below saying what changed.
-PARAMS_VERSION = 3
+PARAMS_VERSION = 4
 MOTIONS = ("auto", "ship", "handheld")  # EkfParams.motion (imutool/attitude/motion.py)
 
 
@@ -342,6 +342,16 @@ def _motion_notes(path: str, keys: frozenset[str], used: Any, overridden: frozen
     ]
 
 
+def _aided_smoother_notes(path: str, keys: frozenset[str], used: Any, overridden: frozenset[str]) -> list[str]:
+    if "aided_smoother" in overridden or not (used.aided and used.aided_smoother):
+        return []
+    return [
+        f"{path} was saved before the aided pass was smoothed (version < 4, 2026-12-06): with a GNSS velocity, "
+        "filter on a whole recording now smooths the velocity-aided pass backward (the accelerometer bias a turn "
+        "reveals corrects the tilt before it too); --param aided_smoother=false for the forward pass of before"
+    ]
+
+
 # Every change of a parameter's meaning since files were first saved, oldest first. Version 0 had no version key,
 # so which of its changes a file predates is guessed from the keys it gives (every file is saved with every
 # parameter of its day) and the values the old defaults wrote.
@@ -396,6 +406,14 @@ MIGRATIONS: tuple[Migration, ...] = (
         3,
         None,
         _lever_estimate_notes,
+    ),
+    Migration(
+        "aided_smoother",
+        "2026-12-06",
+        "offline, the GNSS-velocity-aided pass is smoothed backward (aided_smoother)",
+        4,
+        None,
+        _aided_smoother_notes,
     ),
 )
 

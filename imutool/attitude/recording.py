@@ -236,8 +236,9 @@ def ekf_recording(
     aid = vel is not None and params.aided and not smooth and lever_est is None
     if aid and res.summary.get("velocity_aiding") and velocity_is_fixes(vel):
         res, aided, _ = aided_result(
-            rec.time, gyro, accel, vel, res, run_params, lever_arm, antenna_arm, nominal_dt(rec.time)
-        )
+            rec.time, gyro, accel, vel, res, run_params, lever_arm, antenna_arm, nominal_dt(rec.time),
+            smooth=params.aided_smoother,
+        )  # fmt: skip
         summary["aided"] = aided.summary
     if lever_est is not None:
         summary["lever_arm_estimate"] = lever_est.summary()

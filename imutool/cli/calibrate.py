@@ -16,6 +16,7 @@ from imutool.calibrate import (
     REF_NAMES,
     CalibrationRun,
     calibrate_accel,
+    calibrate_accel_bias,
     calibrate_gyro,
     calibrate_mag,
     deviation_card,
@@ -531,6 +532,59 @@ def accel_route(
 
 
 accel_cmd = route_of(accel_route, ("output",), append="append")(accel_cmd)
+
+
+# -- accel-bias ------------------------------------------------------------------------------------------------
+@calibrate_group.command(
+    "accel-bias",
+    epilog="Example: imutool filter voyage.csv -o est.csv --lever-arm=-12,0,-20 && "
+    "imutool calibrate accel-bias est.csv -o cal.toml",
+)
+@click.argument("input_path", metavar="FILTERED")
+@click.option("-o", "--output", required=True, help="Calibration file (.toml).")
+@click.option(
+    "--at",
+    type=float,
+    default=None,
+    help="Take the estimate at this time (s from the start; default: the last row, which a whole-recording "
+    "run smooths over the voyage).",
+)
+@click.option(
+    "--append",
+    is_flag=True,
+    help="Merge into an existing calibration file (needed when the filter run applied that file's [accel]: the "
+    "estimate is then folded into it).",
+)
+@click.option("--sensor", default=None, help="Sensor id for the provenance.")
+@input_options
+@output_options
+@safe_outputs("output", append="append")
+def accel_bias_cmd(as_json: bool, quiet: bool, **options: Any) -> None:
+    """The accelerometer bias a GNSS-aided `imutool filter` run estimated (its accel_bias_x/y/z), as [accel]."""
+    run = accel_bias_route(quiet=quiet, on_input=note_input, **options)
+    s = run.summary
+    lines = [
+        f"accel bias from {options['input_path']} at {s['row_time_s']} s → {options['output']}",
+        "  model f = T (f_meas − b), sensor axes",
+        f"  b (m/s²) = {np.array2string(np.array(s['bias_m_s2']), precision=5)} "
+        f"± {np.array2string(np.array(s['bias_std_m_s2']), precision=5)}",
+    ]
+    if "note" in s:
+        lines.append(f"  note: {s['note']}")
+    emit_summary(s, as_json, quiet, lines)
+
+
+def accel_bias_route(
+    input_path: str, output: str, quiet: bool = True, on_input: OnInput | None = None, **options: Any
+) -> CalibrationRun:
+    """Parsed options → :func:`imutool.calibrate.calibrate_accel_bias` (progress on stderr unless ``quiet``)."""
+    with _steps(quiet) as steps:
+        return calibrate_accel_bias(
+            input_path, output, strict=strict_requested(), on_input=on_input, stage=steps.stage, **options
+        )
+
+
+accel_bias_cmd = route_of(accel_bias_route, ("output",), append="append")(accel_bias_cmd)
 
 
 # -- show ------------------------------------------------------------------------------------------------------
