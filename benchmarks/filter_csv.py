@@ -20,6 +20,7 @@ Usage::
     python benchmarks/filter_csv.py --rows 500000 --repeat 3 --stages
     python benchmarks/filter_csv.py --repeat 0 --stages   # the stages alone (wall and CPU per stage, per thread)
     python benchmarks/filter_csv.py --repeat 8 --baseline ../main   # A/B: another clone in the same rounds
+    python benchmarks/filter_csv.py --repeat 0 --stages --baseline ../main   # the stages of both
     python benchmarks/filter_csv.py --repeat 0 --day      # the day: streamed imutool against the peer, once each
 """
 
@@ -33,7 +34,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
+if str(ROOT) not in sys.path and not os.environ.get("IMUTOOL_BENCH_TREE"):  # (--stages of a --baseline: its tree)
     sys.path.insert(0, str(ROOT))
 
 POLARS = """
@@ -223,9 +224,12 @@ def stage_run(src: str, out: str) -> None:
         print(f"not timed (not found in this tree): {', '.join(missing)}")
 
 
-def stages(src: Path, out: Path) -> None:
-    """Where the time goes: :func:`stage_run` in a fresh process (its imports and kernel loads as a user's)."""
-    subprocess.run([sys.executable, __file__, "--stage-run", str(src), str(out)], check=True, cwd=out.parent)
+def stages(src: Path, out: Path, tree: Path = ROOT) -> None:
+    """Where the time goes: :func:`stage_run` in a fresh process (its imports and kernel loads as a user's), with
+    ``tree`` (a clone of imutool) on its path."""
+    env = dict(os.environ, PYTHONPATH=str(tree), IMUTOOL_BENCH_TREE=str(tree))
+    print(f"stages of {tree}:", flush=True)
+    subprocess.run([sys.executable, __file__, "--stage-run", str(src), str(out)], check=True, cwd=out.parent, env=env)
 
 
 def peers(src: Path, work: Path, tree_sides: dict[str, Path]) -> dict[str, tuple[list[str], Path | None]]:
@@ -349,10 +353,11 @@ def main() -> None:
             print(f"outputs byte-identical: {same}")
     if a.day:
         day_case(src, work, a.keep)
-    if a.stages:
-        out = work / "est_stages.csv"
-        out.unlink(missing_ok=True)
-        stages(src, out)
+    if a.stages:  # (with --baseline: its stages too, first)
+        for tree in reversed(trees.values()):
+            out = work / "est_stages.csv"
+            out.unlink(missing_ok=True)
+            stages(src, out, tree)
 
 
 if __name__ == "__main__":
