@@ -22,7 +22,7 @@ true arm's).
 The attitude f_g is taken from: the filter's, run once on the span with no arm, is itself bent by the arm it was not
 told of — a share c < 1 of a_r (what passes its low-pass) goes into its tilt, so a regression on it comes out short
 by that share. Until issue 52 the filter was re-run told each estimate and the regression repeated (three runs: the
-error shrinks by c each time). Now the wave band of the vertical is the gyro's own (:func:`gyro_attitude`): the
+error shrinks by c each time). Now the wave band of the vertical is the gyro's own (:func:`gyro_vertical`): the
 gyro, integrated from the filter's attitude with the filter's bias, carries the rotation at wave periods without
 any share of the accelerometer, and the filter keeps only what is slow (the filter's vertical seen in the gyro's
 frame, low-passed by the complement of the same HP: a heading jump of the filter does not enter). One filter run,
@@ -197,7 +197,7 @@ def lever_arm_regression(
 
     ``time`` s, ``gyro`` rad/s and ``accel`` m/s² (N,3) body FRD, ``q`` (N,4) the filter's body→NED attitude,
     ``bias`` (N,3) its gyro bias (rad/s). Rows are averaged in blocks to ~ANALYSIS_HZ first. ``wave_from_gyro``: R
-    with the gyro's wave band (:func:`gyro_attitude`), so that a filter not told the arm gives the arm in one
+    with the gyro's wave band (:func:`gyro_vertical`), so that a filter not told the arm gives the arm in one
     regression; otherwise ``q`` as it is (a filter told the arm)."""
     t = np.asarray(time, dtype=np.float64)
     span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
@@ -222,8 +222,8 @@ def lever_arm_regression(
     box = max(1, int(round(0.5 * HIGHPASS_S / h)))
     rot = quat_to_matrix(np.asarray(q))
     if wave_from_gyro and m > 1:
-        # gravity's force with the gyro's wave band (gyro_attitude): −g Rᵀm, m the block's vertical in the NED frame
-        vertical = gyro_attitude(_block_quats(np.asarray(q), idx, m), _fill_nan(w), h, box)
+        # gravity's force with the gyro's wave band (gyro_vertical): −g Rᵀm, m the block's vertical in the NED frame
+        vertical = gyro_vertical(_block_quats(np.asarray(q), idx, m), _fill_nan(w), h, box)
         f_g = np.einsum("nji,nj->ni", rot, -GRAVITY * vertical[idx])  # per row, its block's vertical
     else:
         f_g = np.einsum("nji,j->ni", rot, np.array([0.0, 0.0, -GRAVITY]))
@@ -324,7 +324,7 @@ def estimate_lever_arm(
 ) -> LeverArmEstimate:
     """The lever arm of the span ``time``/``gyro``/``accel`` (as :func:`lever_arm_regression`): ``run(arm)`` runs
     the filter on the same span with that lever arm (None: none) and returns its (q, gyro bias). One run with no arm
-    and one regression on its attitude with the gyro's wave band (:func:`gyro_attitude`; module docstring); only
+    and one regression on its attitude with the gyro's wave band (:func:`gyro_vertical`; module docstring); only
     where that finds a gyro scale error above SCALE_NOTE, FALLBACK_RUNS more runs told the arm (the iteration of
     before issue 52), on which the refusal of a wrong gyro rests."""
     q, bias = run(None)
@@ -383,7 +383,7 @@ def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v + w * t + np.cross(u, t)
 
 
-def gyro_attitude(q_blocks: np.ndarray, rate_blocks: np.ndarray, h: float, box: int) -> np.ndarray:
+def gyro_vertical(q_blocks: np.ndarray, rate_blocks: np.ndarray, h: float, box: int) -> np.ndarray:
     """The vertical (M,3), a unit vector in the filter's NED frame, whose body-frame direction Rᵀm is the gyro's at
     wave periods and the filter's below: ``q_blocks`` (M,4) the filter's body→NED attitude per block,
     ``rate_blocks`` (M,3) rad/s its bias-corrected body rate per block (gaps filled), ``h`` s between blocks,
