@@ -140,9 +140,18 @@ def quat_to_euler(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ZYX Euler angles (roll, pitch, heading) in radians from body→NED quaternions; heading in [0, 2π)."""
     q = np.asarray(q, dtype=float)
     w, x, y, z = np.moveaxis(q, -1, 0)
+    if w.ndim == 0:
+        roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+        heading = np.mod(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), 2 * np.pi)
+        return roll, pitch, heading
+    # the same values, bit for bit, faster on many rows: the components contiguous (strided arithmetic costs 4×) and
+    # mod 2π as a conditional 2π added (np.mod costs more than the two arctan2; the same single rounding; -0 → +0)
+    w, x, y, z = np.ascontiguousarray(np.moveaxis(q, -1, 0))
     roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
     pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-    heading = np.mod(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)), 2 * np.pi)
+    heading = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    heading += np.where(heading < 0.0, 2 * np.pi, 0.0)
     return roll, pitch, heading
 
 

@@ -46,6 +46,11 @@ def clipped(values: np.ndarray, channel: str, min_run: int = MIN_RUN) -> Clippin
     mask = np.zeros(len(x), dtype=bool)
     limits: list[tuple[float, ...]] = []
     floor = FLOORS[channel]
+    if len(x):  # the usual case first, in two passes over the whole array: every value finite or NaN and short of
+        flat = x.reshape(-1)  # the floor, no axis holds anything there (fmax/fmin ignore NaN; ±inf: the long way)
+        hi, lo = float(np.fmax.reduce(flat)), float(np.fmin.reduce(flat))
+        if np.isfinite(hi) and np.isfinite(lo) and hi < floor and -lo < floor:
+            return Clipping(mask, [()] * x.shape[1])
     for axis in range(x.shape[1]):
         col = x[:, axis]
         found: list[float] = []

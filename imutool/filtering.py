@@ -452,18 +452,26 @@ def _stream_lever_arm(
     the same rows and inputs an in-memory run estimates from."""
     if lever_arm is not None or motion.kind != "ship" or not params.lever_arm_estimate or not held:
         return lever_arm, None
-    accel, gyro, mags, sogs, cogs, vels, headings = [], [], [], [], [], [], []
-    for chunk in held:
-        gyro.append(chunk.in_unit("gyro", "rad/s"))
-        accel.append(clipped_nan(chunk["accel"]))
-        mags.append(chunk.channels.get("mag"))
+    accel, gyro, mags, sogs, cogs, vels, headings, times = [], [], [], [], [], [], [], []
+    t0 = next((c.time[0] for c in held if len(c)), 0.0)
+    for chunk in held:  # only the rows of the span (analysis_span: the first ANALYSIS_MAX_S; times increase)
+        n = int(np.searchsorted(chunk.time - t0, ANALYSIS_MAX_S, side="right"))
+        if n == 0:
+            break
+        times.append(chunk.time[:n])
+        gyro.append(chunk.in_unit("gyro", "rad/s")[:n])
+        accel.append(clipped_nan(chunk["accel"])[:n])  # the chunk's clipping, as the filter's pass finds it
+        mag = chunk.channels.get("mag")
+        mags.append(None if mag is None else mag[:n])
         sog, cog, vel = gnss_inputs(chunk, use_gnss)
-        sogs.append(sog), cogs.append(cog), vels.append(vel), headings.append(heading_channel(chunk))
+        sogs.append(None if sog is None else sog[:n]), cogs.append(None if cog is None else cog[:n])
+        heading = heading_channel(chunk)
+        vels.append(None if vel is None else vel[:n]), headings.append(None if heading is None else heading[:n])
 
     def joined(parts: list) -> np.ndarray | None:
         return None if any(p is None for p in parts) else np.concatenate([np.asarray(p, float) for p in parts])
 
-    time = np.concatenate([c.time for c in held])
+    time = np.concatenate(times)
     return ship_lever_arm(
         params, motion, None, time, joined(gyro), joined(accel), joined(mags), run_params,
         joined(sogs), joined(cogs), joined(vels), joined(headings), antenna_arm,

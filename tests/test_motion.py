@@ -106,3 +106,24 @@ def test_a_turn_without_any_speed_is_said_and_with_one_is_not():
             assert 55 < a < 90 and 170 < b < 220, (a, b)  # the turn: 60 s + 120 s at 3 °/s + its ramps
         else:
             assert not said and "turns_without_speed_s" not in s
+
+
+def test_the_motion_of_a_long_recording_is_that_of_its_first_ten_minutes():
+    """Issue 52: the motion is judged on the first ANALYSIS_MAX_S only, and now only those rows are looked at (a 2 M-row
+    file: 143 → 28 ms per million rows). The statistics are those of the first span cut by hand, with a corrupt or
+    missing start (judged from the first usable row); what follows the span changes nothing."""
+    from imutool.attitude.motion import ANALYSIS_MAX_S, motion_statistics
+
+    rec = simulate("ship-roll", duration=900.0, seed=2)
+    t, g = rec.time, rec.in_unit("gyro", "rad/s")
+    t, g = t - t[0] + 100.0, np.array(g)
+    g[:50] = np.nan  # a missing start
+    g[50:60] = 1e6  # and a corrupt one: the span starts at row 60
+    cut = t - t[60] <= ANALYSIS_MAX_S
+    cut[:60] = False
+    whole, first = motion_statistics(t, g), motion_statistics(t[cut], g[cut])
+    assert whole == first and np.isfinite(whole).all(), (whole, first)
+    later = t - t[0] > ANALYSIS_MAX_S + 60.0
+    g2 = g.copy()
+    g2[later] *= 50.0  # rows after the span change nothing
+    assert motion_statistics(t, g2) == whole

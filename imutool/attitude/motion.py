@@ -57,14 +57,31 @@ class MotionChoice:
         return out
 
 
+def _usable(t: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Rows that are motion: finite, and within any gyro's range (beyond: corrupt; an in-memory run has bridged
+    them, a stream's first chunks are judged before it does, so both leave them out and judge the same motion)."""
+    return np.isfinite(g).all(axis=1) & np.isfinite(t) & (np.abs(g).max(axis=1, initial=0.0) < PHYSICAL_LIMITS["gyro"])
+
+
+def _first_span(t: np.ndarray, g: np.ndarray, head: int = 10_000) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``t`` (s) and ``g`` up to ANALYSIS_MAX_S after the first usable one, where the times increase
+    (views: a whole recording's later rows are not looked at); otherwise all of them."""
+    if len(t) < 2 or not np.all(t[1:] > t[:-1]):  # (NaN fails too)
+        return t, g
+    ok = _usable(t[:head], g[:head])
+    if not ok.any():
+        return t, g
+    end = int(np.searchsorted(t, t[int(np.argmax(ok))] + ANALYSIS_MAX_S, side="right"))
+    return t[:end], g[:end]
+
+
 def motion_statistics(time: np.ndarray, gyro: np.ndarray) -> tuple[float, float, float]:
     """(99th percentile of the rotation rate, deg/s; share of its power between 0.02 Hz and SHIP_BAND_HZ of that
     above 0.02 Hz; dominant period, s) of the first ANALYSIS_MAX_S of ``gyro`` (N,3) rad/s; NaN where too short."""
     t = np.asarray(time, dtype=np.float64)
     g = np.asarray(gyro, dtype=np.float64).reshape(len(t), 3)
-    # rows beyond any gyro's range are corrupt, not motion (an in-memory run has bridged them, a stream's first
-    # chunks are judged before it does): left out, so both judge the same motion
-    ok = np.isfinite(g).all(axis=1) & np.isfinite(t) & (np.abs(g).max(axis=1, initial=0.0) < PHYSICAL_LIMITS["gyro"])
+    t, g = _first_span(t, g)
+    ok = _usable(t, g)
     t, g = t[ok], g[ok]
     if len(t) < 16 or t[-1] - t[0] <= 0:
         return np.nan, np.nan, np.nan

@@ -138,8 +138,8 @@ def ship_lever_arm(
 ) -> tuple[np.ndarray | None, LeverArmEstimate | None]:
     """(the lever arm the filter runs with, the estimate or None): ``lever_arm`` when given; on ship motion
     without one (and ``params.lever_arm_estimate``) the one :func:`estimate_lever_arm` finds on the first rows of
-    the inputs (the filter's own inputs: SI, body FRD; ``accel`` with clipped samples NaN), the filter run on them
-    with ``run_params`` as the whole run is. An in-memory run and a stream pass the same rows."""
+    the inputs (the filter's own inputs: SI, body FRD; ``accel`` with clipped samples NaN), the filter run once on
+    them with no arm and ``run_params`` as the whole run is. An in-memory run and a stream pass the same rows."""
     if lever_arm is not None or motion.kind != "ship" or not params.lever_arm_estimate or len(time) == 0:
         return lever_arm, None
     span = analysis_span(time)
