@@ -255,10 +255,15 @@ def _at_fix(ast, P, prm, PHI, TMP, K, dx, H, R, arm, rv, w0, w1, w2, vn, ve, tk,
     # the self-check: a velocity whose errors are not white (a track-smoothed SOG/COG, a receiver worse
     # than stated) or a gyro worse than the parameters say shows as a mean innovation ratio above 1
     # H: δv, and the lever term's gyro bias: the computed sensor velocity holds R (δb_g × r) = −R [r×] δb_g
+    a0, a1, a2 = y0 + ast[A_V] - vn, y1 + ast[A_V + 1] - ve, R[2, 0] * c0 + R[2, 1] * c1 + R[2, 2] * c2  # R (ω × r)
     for i in range(2):
         for j in range(NX):
             H[i, j] = 0.0
         H[i, IV + i] = 1.0
+    # the lever term's attitude error: R_true (ω × r) = R (ω × r) − [R (ω × r)×] ψ, so z holds +[a×] ψ (a = R (ω × r))
+    H[0, 1], H[0, 2] = -a2, a1
+    H[1, 0], H[1, 2] = a2, -a0
+    for i in range(2):
         H[i, IBG] = R[i, 2] * arm[1] - R[i, 1] * arm[2]  # (−R [r×])[i, :]
         H[i, IBG + 1] = R[i, 0] * arm[2] - R[i, 2] * arm[0]
         H[i, IBG + 2] = R[i, 1] * arm[0] - R[i, 0] * arm[1]
