@@ -56,9 +56,9 @@ def test_the_bias_is_learned_in_a_turn_and_the_tilt_after_it_meets_the_bound(bia
     t = rec.time - rec.time[0]
     after = t > TURN_END
     er, ep = (out["roll"] - rec["ref_roll"])[after], (out["pitch"] - rec["ref_pitch"])[after]
-    # measured 0.044° / 0.036° (smoothed, the gyro's bias instability told; the filter's σ 0.042°). Before the lever
-    # term's attitude Jacobian (issue 50's unmodelled error) this seed gave 0.015 / 0.012 with that same σ — its luckiest
-    # of seeds 0–9 (their mean 0.044 / 0.032, worst 0.086; now mean 0.037 / 0.032, worst 0.084)
+    # measured 0.044° / 0.036° (smoothed, the gyro's bias instability told; the filter's σ 0.042°). Before the
+    # lever term's attitude Jacobian (issue 50's unmodelled error) this seed gave 0.015 / 0.012 with that same σ —
+    # its luckiest of seeds 0–9 (their mean 0.044 / 0.032, worst 0.086; now mean 0.037 / 0.032, worst 0.084)
     assert np.sqrt(np.mean(er**2)) <= 0.06 and np.sqrt(np.mean(ep**2)) <= 0.06
     assert np.abs(er).max() <= 0.1 and np.abs(ep).max() <= 0.1
     err = np.abs(out["accel_bias"][-1] - np.array(rec.meta["accel_bias_m_s2"])) / G * 1e3  # mg (0.60 / 0.77 / 0.47)

@@ -17,8 +17,9 @@ propagated only at a fix (and at least once a second without one, so the σ keep
 
 Measurements: each new GNSS velocity fix (a row where the velocity changes, or a finite row after NaN rows; held
 repeats are not counted again), moved from the antenna to the sensor by R (ω × r) (r the sensor's position from the
-antenna, body FRD), z = v_gnss + [R (ω × r)]_NE − v, H = [0, I₂, 0, 0], R_v = σ_v² + (σ_ω |r|)² (the gyro's noise
-on the lever term); gated on its normalised innovation squared (skipped and counted above ``gnss_nis_gate``, taken
+antenna, body FRD), z = v_gnss + [R (ω × r)]_NE − v, H = [[a×]_NE, I₂, −[R [r×]]_NE, 0] with a = R (ω × r) (the
+lever term turns with the attitude error and holds the gyro bias), R_v = σ_v² + (σ_ω |r|)² (the gyro's noise on the
+lever term); gated on its normalised innovation squared (skipped and counted above ``gnss_nis_gate``, taken
 again after ``reject_timeout`` s of continuous rejection). The heading is the first pass's (the EKF's magnetometer
 or external heading), a scalar measurement of ψ_D at most once per ``heading_input_interval``, σ twice that
 filter's heading σ (its errors are correlated over tens of seconds). There is no accelerometer tilt update: with the
