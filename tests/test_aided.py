@@ -56,12 +56,13 @@ def test_the_bias_is_learned_in_a_turn_and_the_tilt_after_it_meets_the_bound(bia
     t = rec.time - rec.time[0]
     after = t > TURN_END
     er, ep = (out["roll"] - rec["ref_roll"])[after], (out["pitch"] - rec["ref_pitch"])[after]
-    # measured 0.015° / 0.012° (smoothed, the gyro's bias instability told; the forward pass 0.037 / 0.034, told
-    # nothing 0.057 / 0.11: docs/attitude.md, "The limit")
-    assert np.sqrt(np.mean(er**2)) <= 0.03 and np.sqrt(np.mean(ep**2)) <= 0.03
+    # measured 0.044° / 0.036° (smoothed, the gyro's bias instability told; the filter's σ 0.042°). Before the
+    # lever term's attitude Jacobian (issue 50's unmodelled error) this seed gave 0.015 / 0.012 with that same σ —
+    # its luckiest of seeds 0–9 (their mean 0.044 / 0.032, worst 0.086; now mean 0.037 / 0.032, worst 0.084)
+    assert np.sqrt(np.mean(er**2)) <= 0.06 and np.sqrt(np.mean(ep**2)) <= 0.06
     assert np.abs(er).max() <= 0.1 and np.abs(ep).max() <= 0.1
-    err = np.abs(out["accel_bias"][-1] - np.array(rec.meta["accel_bias_m_s2"])) / G * 1e3  # mg (0.12 / 0.15 / 0.53)
-    assert err[0] < 0.5 and err[1] < 0.5 and err[2] < 1.0, err
+    err = np.abs(out["accel_bias"][-1] - np.array(rec.meta["accel_bias_m_s2"])) / G * 1e3  # mg (0.60 / 0.77 / 0.47)
+    assert np.all(err < 1.0), err  # the issue's 1 mg after a 360° turn (seeds 0–9: worst 1.38 mg, before 1.57)
     s = res.summary["aided"]
     assert s["velocity_fixes"] > 200 and s["held_rows_skipped"] > 20000 and s["velocity_rejected"] <= 10
     assert s["smoothed"] is True
@@ -98,7 +99,9 @@ def test_the_smoother_carries_the_turns_bias_back_before_it(biased, forward):
         out = res.recording
         e = np.concatenate([(out["roll"] - rec["ref_roll"])[before], (out["pitch"] - rec["ref_pitch"])[before]])
         err[name] = np.sqrt(np.mean(e**2))
-    assert err["smoothed"] < 0.03 and err["smoothed"] < 0.2 * err["forward"], err  # measured 0.010 / 0.38
+    # measured 0.049 / 0.37 (before the lever term's Jacobian 0.010 / 0.38, this seed's luck: seeds 0–9 had a mean
+    # of 0.071 and a worst of 0.267; now 0.041 and 0.068)
+    assert err["smoothed"] < 0.07 and err["smoothed"] < 0.2 * err["forward"], err
     ba = smoothed.recording["accel_bias"]
     truth = np.array(rec.meta["accel_bias_m_s2"])
     assert np.abs(ba[before] - truth).max() / G * 1e3 < 1.0  # mg, as at the end
@@ -115,7 +118,7 @@ def test_the_sigma_covers_the_error_before_and_after_the_turn(biased):
     s = np.concatenate([out["roll_std"][scored], out["pitch_std"][scored]])
     share = np.mean(np.abs(e) <= 2 * s)
     # a bias-dominated error is nearly constant, so the share is near 0 or 1 on one voyage; the σ must cover it,
-    # and not by inflating (the tilt's σ after the turn is measured 0.044°; RMS of error/σ 0.40)
+    # and not by inflating (the tilt's σ after the turn is measured 0.042°; RMS of error/σ 1.04)
     assert share >= 0.90, share
     assert np.mean(out["roll_std"][t > TURN_END]) < 0.06
 
@@ -128,6 +131,37 @@ def test_without_the_aided_filter_the_tilt_carries_the_bias(biased):
     ep = (off["pitch"] - rec["ref_pitch"])[after]
     assert np.sqrt(np.mean(ep**2)) > 0.15
     assert "accel_bias" not in off.channels
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_noise_free_voyage_errors_fall_inside_sigma(seed):
+    """Every sensor error-free but a known 5 mg accelerometer bias, a 10 Hz receiver, the filter told nothing of the
+    gyro (its bias may wander): what is left is the model's own error, which must lie inside the filter's σ. The lever
+    term R (ω × r) (20 m, roll rates of 0.2 rad/s: ~4 m/s) turns with the attitude error; without that Jacobian in H
+    the filter was overconfident (bias 3.1 σ off, pitch 4–14 σ on seeds 1 and 3; now ≤ 0.8 σ and ≤ 1.1 σ)."""
+    rec = simulate(
+        "ship-at-sea",
+        duration=240.0,
+        seed=seed,
+        lever_arm=(-12.0, 0.0, -20.0),
+        roll_significant_deg=20.0,
+        sway_m=1.0,
+        heave_period=7.5,
+        turn_start=TURN_START,
+        noise=0,
+        gnss_rate_hz=10.0,
+        gnss_columns="vel",
+    )
+    bias = np.array([0.05, -0.05, 0.05])
+    rec.channels["accel"] = rec["accel"] + bias
+    prm = EkfParams(gnss_velocity_noise=0.03, gnss_min_interval=0.05)
+    out = run_filter(rec, params=prm, lever_arm=np.array(rec.meta["lever_arm_m"])).recording
+    z = np.abs(out["accel_bias"][-1] - bias) / out["accel_bias_std"][-1]
+    assert np.all(z <= 1.0), z
+    scored = rec.time - rec.time[0] >= 20.0
+    for ch in ("roll", "pitch"):
+        e = np.abs(out[ch] - rec[f"ref_{ch}"])[scored]
+        assert np.all(e <= 3.0 * out[f"{ch}_std"][scored]), (ch, np.max(e / out[f"{ch}_std"][scored]))
 
 
 def test_held_and_nan_separated_fixes_aid_alike():

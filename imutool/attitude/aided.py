@@ -17,8 +17,9 @@ propagated only at a fix (and at least once a second without one, so the σ keep
 
 Measurements: each new GNSS velocity fix (a row where the velocity changes, or a finite row after NaN rows; held
 repeats are not counted again), moved from the antenna to the sensor by R (ω × r) (r the sensor's position from the
-antenna, body FRD), z = v_gnss + [R (ω × r)]_NE − v, H = [0, I₂, 0, 0], R_v = σ_v² + (σ_ω |r|)² (the gyro's noise
-on the lever term); gated on its normalised innovation squared (skipped and counted above ``gnss_nis_gate``, taken
+antenna, body FRD), z = v_gnss + [R (ω × r)]_NE − v, H = [[a×]_NE, I₂, −[R [r×]]_NE, 0] with a = R (ω × r) (the
+lever term turns with the attitude error and holds the gyro bias), R_v = σ_v² + (σ_ω |r|)² (the gyro's noise on the
+lever term); gated on its normalised innovation squared (skipped and counted above ``gnss_nis_gate``, taken
 again after ``reject_timeout`` s of continuous rejection). The heading is the first pass's (the EKF's magnetometer
 or external heading), a scalar measurement of ψ_D at most once per ``heading_input_interval``, σ twice that
 filter's heading σ (its errors are correlated over tens of seconds). There is no accelerometer tilt update: with the
@@ -255,10 +256,15 @@ def _at_fix(ast, P, prm, PHI, TMP, K, dx, H, R, arm, rv, w0, w1, w2, vn, ve, tk,
     # the self-check: a velocity whose errors are not white (a track-smoothed SOG/COG, a receiver worse
     # than stated) or a gyro worse than the parameters say shows as a mean innovation ratio above 1
     # H: δv, and the lever term's gyro bias: the computed sensor velocity holds R (δb_g × r) = −R [r×] δb_g
+    a0, a1, a2 = y0 + ast[A_V] - vn, y1 + ast[A_V + 1] - ve, R[2, 0] * c0 + R[2, 1] * c1 + R[2, 2] * c2  # R (ω × r)
     for i in range(2):
         for j in range(NX):
             H[i, j] = 0.0
         H[i, IV + i] = 1.0
+    # the lever term's attitude error: R_true (ω × r) = R (ω × r) − [R (ω × r)×] ψ, so z holds +[a×] ψ (a = R (ω × r))
+    H[0, 1], H[0, 2] = -a2, a1
+    H[1, 0], H[1, 2] = a2, -a0
+    for i in range(2):
         H[i, IBG] = R[i, 2] * arm[1] - R[i, 1] * arm[2]  # (−R [r×])[i, :]
         H[i, IBG + 1] = R[i, 0] * arm[2] - R[i, 2] * arm[0]
         H[i, IBG + 2] = R[i, 1] * arm[0] - R[i, 0] * arm[1]
