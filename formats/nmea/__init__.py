@@ -561,8 +561,8 @@ def format_sentence(
         if len(decs) != len(fields):
             raise ImutoolError(f"{addr}: {len(decs)} decimals for {len(fields)} fields")
     parts = [_fmt(v, d) for v, d in zip(fields, decs, strict=True)]
-    for p in parts:
-        if any(c in _RESERVED or not (" " <= c <= "~") for c in p):
+    for v, p in zip(fields, parts, strict=True):  # a number's text is digits, '.' and '-': only text is checked
+        if isinstance(v, str) and any(c in _RESERVED or not (" " <= c <= "~") for c in p):
             raise ImutoolError(f"{addr}: field {p[:20]!r} holds a reserved or non-printable character")
     body = ",".join([addr] + parts)
     out = f"${body}*{checksum(body)}"
