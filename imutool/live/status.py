@@ -9,7 +9,7 @@ Causes (each a short phrase; several may hold at once, joined by '; '):
 - ``input saturated`` — an accelerometer or gyro sample at its range limit in the last ``hold_s``;
 - ``self-check inconsistent`` — the filter's own consistency test (windowed NIS, tilt window) failed in the last
   ``hold_s``;
-- the windowed self-checks of :mod:`.checks` (gyro scale, stuck input, implausible accelerometer), each with
+- the windowed self-checks of :mod:`.checks` (gyro scale, stuck input, accelerometer far from g), each with
   its own window and a clearing hysteresis;
 - ``filter out of bounds`` — the roll/pitch σ above 1.5 × ``max_tilt_std_deg`` after settling (e.g. after an
   outage);
