@@ -521,15 +521,18 @@ def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, f
 
 # -- writing single sentences -------------------------------------------------------------------------------------
 def _fmt(v: Any, d: int | None) -> str:
-    if v is None:
+    if type(v) is float or type(v) is np.float64:  # the usual field: straight to the number's text
+        x = float(v)
+    elif v is None:
         return ""
-    if isinstance(v, str):
+    elif isinstance(v, str):
         return v
-    if isinstance(v, (bool, np.bool_)):
+    elif isinstance(v, (bool, np.bool_)):
         return "A" if v else "V"
-    if isinstance(v, (int, np.integer)):
+    elif isinstance(v, (int, np.integer)):
         return str(int(v))
-    x = float(v)
+    else:
+        x = float(v)
     if not math.isfinite(x):
         return ""
     if d is None:

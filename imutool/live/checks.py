@@ -39,6 +39,7 @@ STUCK_MIN_SAMPLES = 50  # ... and this many samples (a slow polled source)
 ACCEL_WINDOW_S = 10.0  # s: the mean |specific force| window
 ACCEL_BAND = (0.3, 3.0)  # × g: the plausible mean magnitude (units are off by 9.81 or 1000; vigorous hand motion 1.5)
 CLEAR_S = 10.0  # s a check must pass before its cause clears
+CHECK_EVERY_S = 0.25  # s of input between two runs of the checks (on the samples since)
 AXES = ("gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z")
 
 
@@ -49,6 +50,7 @@ class LiveChecks:
 
     def __init__(self, dt_nominal: float, gap_factor: float = 5.0, gravity: float = 9.80665) -> None:
         self.gap_dt, self.gravity = gap_factor * float(dt_nominal), float(gravity)
+        self._pending: list[tuple[np.ndarray, ...]] = []  # blocks not yet checked (CHECK_EVERY_S)
         self._buf: list[tuple[np.ndarray, ...]] = []  # samples of the open gyro-scale bucket
         self._buckets: deque[tuple[float, np.ndarray, np.ndarray]] = deque()  # (t_end, sums, counts)
         self._last = np.full(6, np.nan)  # last value of each axis
@@ -63,14 +65,22 @@ class LiveChecks:
     # ---------------------------------------------------------------------------------------------------- input
     def add(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, bias: np.ndarray, force: np.ndarray) -> None:
         """One block: time (N,) s, gyro (N,3) rad/s and accel (N,3) m/s² as filtered (calibrated, mounted), the
-        filter's gyro bias (N,3) rad/s and compensated specific force (N,3) m/s²."""
+        filter's gyro bias (N,3) rad/s and compensated specific force (N,3) m/s². The checks run every
+        ``CHECK_EVERY_S`` of input on the blocks since (a live block is often one sample)."""
         if not len(t):
             return
+        self._pending.append((t, gyro, accel, bias, force))
+        if float(t[-1]) - float(self._pending[0][0][0]) < CHECK_EVERY_S:
+            return
+        if len(self._pending) == 1:
+            t, gyro, accel, bias, force = (np.asarray(a, float) for a in self._pending[0])
+        else:
+            t, gyro, accel, bias, force = (np.concatenate(a) for a in zip(*self._pending, strict=True))
+        self._pending.clear()
         t_end = float(t[-1])
         self._stuck(t, np.concatenate([gyro, accel], axis=1))
         self._accel(t_end, accel)
-        self._buf.append((np.asarray(t, float), np.asarray(gyro, float), np.asarray(bias, float),
-                          np.asarray(force, float)))  # fmt: skip
+        self._buf.append((t, gyro, bias, force))
         if t_end - float(self._buf[0][0][0]) >= SCALE_BUCKET_S:
             self._scale_bucket(t_end)
 
