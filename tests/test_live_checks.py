@@ -66,11 +66,21 @@ def test_clean_replay_stays_a_after_settling(ship, tmp_path):
         # a gyro read in the wrong range: every rate twice too large
         ("gyro x2", "gyro", lambda g: 2.0 * g, "gyro scale check (rates", SCALE_WINDOW_S + 10.0),
         # the accelerometer's y register frozen at its last value
-        ("stuck accel y", "accel", lambda a: np.column_stack([a[:, 0], np.full(len(a), a[0, 1]), a[:, 2]]),
-         "stuck input (accel y", STUCK_S + 0.5),
+        (
+            "stuck accel y",
+            "accel",
+            lambda a: np.column_stack([a[:, 0], np.full(len(a), a[0, 1]), a[:, 2]]),
+            "stuck input (accel y",
+            STUCK_S + 0.5,
+        ),
         # the whole sensor frozen: every axis repeats one frame (accel here, gyro below)
-        ("flatlined", "both", lambda x: np.broadcast_to(x[:1], x.shape).copy(), "stuck input (all six axes", STUCK_S
-         + 0.5),
+        (
+            "flatlined",
+            "both",
+            lambda x: np.broadcast_to(x[:1], x.shape).copy(),
+            "stuck input (all six axes",
+            STUCK_S + 0.5,
+        ),
         # the accelerometer in g read as m/s²
         ("accel units", "accel", lambda a: a / 9.80665, "accelerometer far from g", 0.9 * 10.0 + 0.5),
     ],
