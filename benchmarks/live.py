@@ -2,13 +2,15 @@
 
     python benchmarks/live.py                      # latency at 100 and 200 Hz, CPU at 100 Hz, a day replayed
     python benchmarks/live.py --seconds 60 --hours 24
-    python benchmarks/live.py --only latency|memory
+    python benchmarks/live.py --only latency|memory|engine|display
 
 Latency: bridge text frames of a rolling ship written one by one, paced at 100 / 200 Hz, into a pseudo-terminal
 that `imutool live --clock sensor` reads; its XDR and PASHR (at the sample rate) read from another pseudo-terminal.
 A PASHR's time stamp names its sample (the first PASHR is the first sample; the MCU clock is exact), so each
 line's latency is its arrival minus the write of its sample. p50/p99 over the run after the start-up span.
 CPU: the live process's user+system time over the steady part of the 100 Hz run, as a share of one core.
+Engine: the engine alone in this process, one sample per block, XDR/PASHR at the sample rate to a null output:
+CPU per block (``--only engine``; the live process's CPU less its port and output threads).
 Memory: a day of samples at 100 Hz (a 10-minute ship recording tiled, times continued) through the engine as fast
 as it goes, with HRM 1 Hz, XDR/PASHR 10 Hz to UDP and a hub subscriber; RSS at the first and the last hour.
 """
@@ -199,11 +201,43 @@ def memory(hours: float, progress: bool = True) -> dict:
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}  # fmt: skip
 
 
+def engine_cpu(rate: float, seconds: float) -> dict:
+    """The engine alone, in this process: a simulated ship fed one sample per block (as a serial IMU gives them),
+    XDR and PASHR at the sample rate to an output that only counts; CPU per block after the first 10 s."""
+    from imutool.attitude import EkfParams
+    from imutool.live.engine import EngineOptions, LiveEngine
+    from imutool.live.hub import LiveHub
+    from imutool.live.sources import SampleBlock
+
+    rec = simulate("ship-roll", seed=3, duration=seconds, rate_hz=rate)
+    g, a, m = rec["gyro"], rec["accel"], rec["mag"]
+
+    class Null:
+        def send(self, data: bytes) -> None:
+            pass
+
+        def stats(self) -> dict:
+            return {}
+
+    opts = EngineOptions(params=EkfParams(motion="ship"), settle_s=5, rates={"XDR": rate, "PASHR": rate})
+    eng = LiveEngine(TiledSource(rec, 1.0), opts, [Null()], LiveHub(), log=lambda m: None)  # type: ignore[list-item]
+    n0 = int(10 * rate)
+    c0 = 0.0
+    for i in range(len(rec)):
+        if i == n0:
+            c0 = time.process_time()
+        eng.feed(SampleBlock(rec.time[i : i + 1], g[i : i + 1], a[i : i + 1], m[i : i + 1]))
+        eng._flush()
+    cpu = time.process_time() - c0
+    blocks = len(rec) - n0
+    return {"rate_hz": rate, "us_per_block": 1e6 * cpu / blocks, "cpu_share": cpu / (blocks / rate)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=60.0, help="latency run length (s)")
     ap.add_argument("--hours", type=float, default=24.0, help="the replayed span of the memory run (h)")
-    ap.add_argument("--only", choices=["latency", "memory", "display"], default=None)
+    ap.add_argument("--only", choices=["latency", "memory", "display", "engine"], default=None)
     a = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f}")
     if a.only in (None, "latency"):
@@ -212,6 +246,11 @@ def main() -> None:
             cpu = f", CPU {100 * r['cpu_share']:.1f} % of one core" if "cpu_share" in r else ""
             print(f"latency at {rate:.0f} Hz: p50 {r['p50_ms']:.1f} ms, p99 {r['p99_ms']:.1f} ms, "
                   f"max {r['max_ms']:.1f} ms over {r['lines']} PASHR lines{cpu}")  # fmt: skip
+    if a.only in (None, "engine"):
+        for rate in (100.0, 200.0):
+            r = engine_cpu(rate, 150.0)
+            print(f"engine alone at {rate:.0f} Hz, one sample per block: {r['us_per_block']:.0f} us per block, "
+                  f"{100 * r['cpu_share']:.1f} % of one core")  # fmt: skip
     if a.only in (None, "memory"):
         r = memory(a.hours)
         print(f"{a.hours:g} h at 100 Hz as fast as it goes: {r['samples']} samples in {r['wall_s']} s "

@@ -222,12 +222,13 @@ def _refine(t: np.ndarray, x: np.ndarray, i0: int, i1: int, ie: int, side: int, 
     # excursion with a sharp peak would otherwise bend a wide parabola off the peak)
     sx = side * x[i0:i1]
     top = side * x[ie] - 0.3 * (side * x[ie] - np.nanmin(sx))
-    a = ie
-    while a > lo and np.isfinite(x[a - 1]) and side * x[a - 1] >= top:
-        a -= 1
-    b = ie + 1
-    while b < hi and np.isfinite(x[b]) and side * x[b] >= top:
-        b += 1
+    with np.errstate(invalid="ignore"):  # NaN is not in the crest (a comparison with NaN is False)
+        left = side * x[lo:ie] >= top if ie > lo else np.zeros(0, bool)
+        right = side * x[ie + 1 : hi] >= top if hi > ie + 1 else np.zeros(0, bool)
+    out = np.flatnonzero(~left)
+    a = lo + int(out[-1]) + 1 if out.size else min(lo, ie)
+    out = np.flatnonzero(~right)
+    b = ie + 1 + (int(out[0]) if out.size else right.size)
     lo, hi = a, b
     tt = t[lo:hi] - t[ie]
     xx = x[lo:hi]

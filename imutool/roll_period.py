@@ -148,23 +148,43 @@ def _peak(f: np.ndarray, p: np.ndarray, fmin: float) -> float:
     return float(f[k])
 
 
+def _welch_hann(x: np.ndarray, fs: float, nseg: int) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided Welch PSD (Hann segments of ``nseg`` samples, 50 % overlap, each zero-padded ×8 up to NFFT_MAX,
+    its mean removed): :func:`scipy.signal.welch`'s density, computed with one real FFT per segment and no
+    set-up (the live roll statistics call it once a second). A segment of the whole series is the periodogram."""
+    from scipy.fft import rfft
+    from scipy.signal import get_window
+
+    nfft = max(nseg, min(8 * nseg, NFFT_MAX))
+    win = get_window("hann", nseg)
+    step = nseg - nseg // 2
+    starts = range(0, x.size - nseg + 1, step)
+    p = np.zeros(nfft // 2 + 1)
+    for a in starts:
+        seg = x[a : a + nseg]
+        z = rfft((seg - seg.mean()) * win, n=nfft)
+        p += z.real * z.real + z.imag * z.imag
+    p *= 1.0 / (fs * float(np.sum(win * win)) * len(starts))
+    p[1 : -1 if nfft % 2 == 0 else None] *= 2.0
+    return np.fft.rfftfreq(nfft, 1.0 / fs), p
+
+
 def spectral_peak_period(t: np.ndarray, r: np.ndarray, max_period_s: float = 60.0) -> float:
     """Peak period (s) of the spectrum of the detrended roll r (deg) by Welch's method (module doc, step 3).
 
     NaN when fewer than 8 finite samples or no peak below ``max_period_s``."""
-    from scipy.signal import periodogram, welch
-
     x, fs = _uniform(np.asarray(t, float), np.asarray(r, float))
     if x.size < 8:
         return float("nan")
     x = x - x.mean()
     fmin = 1.0 / max_period_s
-    f, p = periodogram(x, fs, window="hann", nfft=max(x.size, min(8 * x.size, NFFT_MAX)))
+    f, p = _welch_hann(x, fs, x.size)  # the periodogram of the whole window
     f0 = _peak(f, p, fmin)
     if not f0 > 0:
         return float("nan")
     nseg = int(min(x.size, round(32.0 / f0 * fs)))
-    f, p = welch(x, fs, window="hann", nperseg=nseg, noverlap=nseg // 2, nfft=max(nseg, min(8 * nseg, NFFT_MAX)))
+    if nseg != x.size:  # a window shorter than 32 periods: its one segment is the periodogram already made
+        f, p = _welch_hann(x, fs, nseg)
     fp = _peak(f, p, fmin)
     return 1.0 / fp if fp > 0 else float("nan")
 

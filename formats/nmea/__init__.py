@@ -521,15 +521,18 @@ def decode_fast(line: str, xdr_map: dict[str, Any] | None = None) -> dict[str, f
 
 # -- writing single sentences -------------------------------------------------------------------------------------
 def _fmt(v: Any, d: int | None) -> str:
-    if v is None:
+    if type(v) is float or type(v) is np.float64:  # the usual field: straight to the number's text
+        x = float(v)
+    elif v is None:
         return ""
-    if isinstance(v, str):
+    elif isinstance(v, str):
         return v
-    if isinstance(v, (bool, np.bool_)):
+    elif isinstance(v, (bool, np.bool_)):
         return "A" if v else "V"
-    if isinstance(v, (int, np.integer)):
+    elif isinstance(v, (int, np.integer)):
         return str(int(v))
-    x = float(v)
+    else:
+        x = float(v)
     if not math.isfinite(x):
         return ""
     if d is None:
@@ -561,8 +564,8 @@ def format_sentence(
         if len(decs) != len(fields):
             raise ImutoolError(f"{addr}: {len(decs)} decimals for {len(fields)} fields")
     parts = [_fmt(v, d) for v, d in zip(fields, decs, strict=True)]
-    for p in parts:
-        if any(c in _RESERVED or not (" " <= c <= "~") for c in p):
+    for v, p in zip(fields, parts, strict=True):  # a number's text is digits, '.' and '-': only text is checked
+        if isinstance(v, str) and any(c in _RESERVED or not (" " <= c <= "~") for c in p):
             raise ImutoolError(f"{addr}: field {p[:20]!r} holds a reserved or non-printable character")
     body = ",".join([addr] + parts)
     out = f"${body}*{checksum(body)}"

@@ -146,7 +146,8 @@ class SerialSource:
         try:
             data = self._ser.read(1)  # blocks up to the port timeout (50 ms) for the first byte
             if data:
-                time.sleep(self.batch_s)  # let a batch accumulate: far fewer wake-ups at high rates
+                if self.batch_s > 0:
+                    time.sleep(self.batch_s)  # let a batch accumulate: far fewer wake-ups at high rates
                 n = self._ser.in_waiting
                 if n:
                     data += self._ser.read(n)

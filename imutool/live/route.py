@@ -64,9 +64,11 @@ def log_line(msg: str, stream: Any = None) -> None:
 
 
 def warm_kernels(params: EkfParams, protocol: str | None = None, record: bool = False) -> None:
-    """Compile (or load from the cache) the kernels a live run calls — the EKF's, the roll statistics', the bridge
-    decoder's and the CSV writer's — on a few synthetic rows, before any port is opened."""
+    """Compile (or load from the cache) the kernels a live run calls — the EKF's, the roll statistics', the
+    gyro-scale self-check's, the bridge decoder's and the CSV writer's — on a few synthetic rows, before any port
+    is opened."""
     from formats.csv import format_array
+    from imutool.gyro_check import GyroScaleCheck
     from imutool.roll import roll_cycles
 
     tr = np.arange(200) * 0.1
@@ -84,7 +86,8 @@ def warm_kernels(params: EkfParams, protocol: str | None = None, record: bool = 
     t = np.arange(n) * 0.01
     acc = np.tile([0.0, 0.0, -9.81], (n, 1))
     mag = np.tile([20.0, 0.0, 40.0], (n, 1))
-    EkfStepper(params, dt_nominal=0.01).step(t, np.zeros((n, 3)), acc, mag)
+    EkfStepper(params, dt_nominal=0.01, keep_force=True).step(t, np.zeros((n, 3)), acc, mag)
+    GyroScaleCheck().add(t, np.zeros((n, 3)), np.zeros((n, 3)), acc)
     EkfStepper(params, dt_nominal=0.01).step(t, np.zeros((n, 3)), acc, None, heading_deg=np.zeros(n))
 
 

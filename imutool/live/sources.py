@@ -92,20 +92,18 @@ class BridgeFrames:
             raise ImutoolError(f"clock {clock!r}: expected host or sensor")
         self.sensor_clock = clock == "sensor"
         self._t0: float | None = None
-        self.stats: dict[str, int] = {}
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """The decoder's counts (made when asked: a live frame is often decoded alone)."""
+        s = self.dec.stats
+        return {"frames": s.frames, "bad_checksum": s.bad_checksum, "malformed": s.malformed,
+                "garbage_bytes": s.garbage_bytes, "dropped": s.dropped}  # fmt: skip
 
     def feed(self, data: bytes, t_mono: float) -> SampleBlock:
         from imutool.capture.bridge import counts_to_si
 
         seq, t_us, counts = self.dec.feed_arrays(data)
-        s = self.dec.stats
-        self.stats = {
-            "frames": s.frames,
-            "bad_checksum": s.bad_checksum,
-            "malformed": s.malformed,
-            "garbage_bytes": s.garbage_bytes,
-            "dropped": s.dropped,
-        }
         if not len(seq):
             return SampleBlock.empty()
         ch = counts_to_si(seq, t_us, counts, self.dec.scales)
@@ -225,7 +223,10 @@ class SerialImu:
         self._offset = time.time() - time.monotonic()
         self.description = f"serial {port} @ {baud} baud ({protocol})"
         self.finished = False
-        self.stats: dict[str, Any] = {}
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        return {**self.decoder.stats, "reopened": self._cstats.reopen_count}
 
     @property
     def connected(self) -> bool:
@@ -233,11 +234,9 @@ class SerialImu:
 
     def read(self, timeout: float) -> SampleBlock | None:
         data, _tw, tm = self.port.read()
-        self.stats = {**self.decoder.stats, "reopened": self._cstats.reopen_count}
         if not data:
             return None
         blk = self.decoder.feed(data, tm)
-        self.stats = {**self.decoder.stats, "reopened": self._cstats.reopen_count}
         if not len(blk):
             return None
         if not getattr(self.decoder, "utc_times", False):

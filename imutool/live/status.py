@@ -9,6 +9,8 @@ Causes (each a short phrase; several may hold at once, joined by '; '):
 - ``input saturated`` — an accelerometer or gyro sample at its range limit in the last ``hold_s``;
 - ``self-check inconsistent`` — the filter's own consistency test (windowed NIS, tilt window) failed in the last
   ``hold_s``;
+- the windowed self-checks of :mod:`.checks` (gyro scale, stuck input, accelerometer far from g), each with
+  its own window and a clearing hysteresis;
 - ``filter out of bounds`` — the roll/pitch σ above 1.5 × ``max_tilt_std_deg`` after settling (e.g. after an
   outage);
 - ``no heading`` — for the heading sentences only (HDT/THS/ROT carry their own V).
@@ -52,6 +54,7 @@ class LiveStatus:
         self.cause = "starting"
         self.changes = 0
         self.v_seconds: dict[str, float] = {}
+        self.check_causes: list[str] = []  # the windowed self-checks' (imutool.live.checks), set by the engine
 
     def samples(self, t_last: float, saturated: bool, inconsistent: bool, tilt_std_deg: float) -> None:
         """A block arrived: its last time (s), whether any row was saturated or flagged inconsistent, the σ."""
@@ -90,6 +93,7 @@ class LiveStatus:
             out.append("self-check inconsistent")
         if self.settled and not self._std_ok:
             out.append("filter out of bounds")
+        out += self.check_causes
         return out
 
     def update(self) -> str:
