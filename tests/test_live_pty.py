@@ -355,8 +355,11 @@ def test_garbage_counted_in_summary(ship, tmp_path):
             return b"\x00\xff garbage \xfe" + bytes(bad)
         return data
 
-    Feeder(m_in, frames_of(ship.select(slice(0, 2400))), speed=10.0, garbage=garbage).start()
+    feeder = Feeder(m_in, frames_of(ship.select(slice(0, 2400))), speed=10.0, garbage=garbage)
+    feeder.start()
     out, err = proc.communicate(timeout=120)
+    feeder.stop = True  # it has frames beyond --duration: stopped before its pty's descriptor is closed (and reused
+    feeder.join(10)  # by the next test's file, which it would fill with garbage)
     s = json.loads(out)
     assert s["stop_reason"].startswith("duration")
     st = s["source_stats"]
