@@ -28,7 +28,6 @@ from formats.errors import ImutoolError
 
 QUEUE_LINES = 256  # blocks of sentences an output (or a TCP client) may hold before it drops
 CLIENT_SNDBUF = 65536  # bytes of a TCP client's kernel send buffer (~10 s of sentences at 10 Hz)
-POLL_S = 0.002  # s: how often an idle writer looks for new sentences
 
 
 class Output:
@@ -44,6 +43,8 @@ class Output:
         self.dropped = 0
         self.errors = 0
         self._stop = threading.Event()
+        self._wake = threading.Event()  # set by send() when the writer waits on an empty queue
+        self._idle = False
         self._thread = threading.Thread(target=self._run, name=f"live-out {url}", daemon=True)
 
     def start(self) -> Output:
@@ -51,23 +52,36 @@ class Output:
         return self
 
     def send(self, data: bytes) -> None:
-        """Queue ``data`` (one or more CRLF-ended lines); dropped and counted when the queue is full. No lock and
-        no wake-up of the writer (that hands the GIL over at every line): the writer polls every ``POLL_S``."""
+        """Queue ``data`` (one or more CRLF-ended lines); dropped and counted when the queue is full. The writer is
+        woken only when it sleeps on an empty queue (one event per burst, not per line; never blocks here)."""
         if len(self.q) >= self.maxsize:
             self.dropped += 1
         else:
             self.q.append(data)
+            if self._idle:
+                self._wake.set()
 
     def _get(self, timeout: float) -> bytes | None:
-        """The next queued item, waiting up to ``timeout`` s (polling); b'' when none came."""
-        end = time.monotonic() + timeout
-        while True:
-            try:
+        """The next queued item, waiting up to ``timeout`` s for one; b'' when none came."""
+        try:
+            return self.q.popleft()
+        except IndexError:
+            pass
+        self._wake.clear()
+        self._idle = True
+        try:
+            try:  # queued between the first look and the flag: taken without sleeping
                 return self.q.popleft()
             except IndexError:
-                if self._stop.is_set() or time.monotonic() >= end:
-                    return b""
-                time.sleep(POLL_S)
+                pass
+            if not self._stop.is_set():
+                self._wake.wait(timeout)
+        finally:
+            self._idle = False
+        try:
+            return self.q.popleft()
+        except IndexError:
+            return b""
 
     def _run(self) -> None:
         while True:
@@ -90,6 +104,7 @@ class Output:
     def close(self, timeout: float = 1.0) -> None:
         """Flush what is queued (up to ``timeout`` s), then close."""
         self.q.append(None)
+        self._wake.set()
         self._thread.join(timeout)
         self._stop.set()
         self._close()
