@@ -34,6 +34,7 @@ RANGES: dict[str, Bound] = {
     "end": ANY,
     "t_start": ANY,
     "t_end": ANY,
+    "calibrate accel-bias at": NONNEG,  # s from the recording's start where the bias is taken (None: the last row)
     "time_offset": ANY,
     "with_offsets": ANY,  # --with-offset: a --with file's clock offset (s)
     "ref_with_offsets": ANY,  # --ref-with-offset: the same for a --ref-with file of the reference
