@@ -146,7 +146,7 @@ from imutool.routes import OnInput, RouteResult
 @click.option(
     "--chunk-rows",
     type=int,
-    default=1_000_000,
+    default=250_000,  # imutool.filtering.STREAM_CHUNK_ROWS (not imported here: it loads numba)
     show_default=True,
     help="EKF on CSV/Parquet: stream the file in chunks of this many rows when larger than --stream-mb.",
 )
