@@ -207,7 +207,7 @@ def test_a_gyro_worse_than_stated_widens_its_bias_instability_instead_of_giving_
     a = res.summary["aided"]
     assert "not_used" not in a and a["rows_used"] > 0.8 * len(rec), a
     assert a["gyro_bias_rw_used"] == pytest.approx(4 * EkfParams().aided_gyro_bias_rw)
-    assert any("state the gyro's own figure" in w for w in res.summary["warnings"])
+    assert any("state the gyro's figure" in w for w in res.summary["warnings"])
     after = rec.time - rec.time[0] > 180.0 + 130.0
     out = res.recording
     for ch in ("roll", "pitch"):  # measured 0.16 / 0.11 (the EKF's 0.41 / 0.78 on this seed)

@@ -55,9 +55,8 @@ A_RW_SCALE = 178  # the gyro bias instability used, as a multiple of aided_gyro_
 A_SIZE = 179
 RESTART_RATIO = 3.0  # the running innovation ratio beyond which the filter restarts from the first pass
 MAX_RESTARTS = 2  # more restarts than this over a run (or a streamed chunk): its output is not used
-# a pass that restarted is run again with the gyro's bias instability widened (×WIDEN_FACTOR, at most WIDEN_TRIES
-# times) and the one that restarts least is kept: a gyro whose bias wanders more than stated (the commonest cause)
-# is then followed, and the summary says so
+# a pass that restarted is run again with the gyro's bias instability × WIDEN_FACTOR (at most WIDEN_TRIES times) and
+# the one that restarts least kept: a gyro whose bias wanders more than stated (the commonest cause) is then followed
 WIDEN_FACTOR, WIDEN_TRIES = 4.0, 2
 NIS_FIXES = 30.0
 # ---- its parameter vector ----
@@ -570,17 +569,14 @@ def aided_result(
             best = (restarts, aided, ast)
         if restarts == 0 or attempt == WIDEN_TRIES:
             break
-        # diverged (restarted): the gyro's bias wanders more than stated, the commonest cause; the same input with
-        # the width × 4, kept where it restarts less (a smoothed track, which is not the hull's velocity, diverges
-        # at any width and is left to the EKF below)
-        state = state.copy()
-        state[A_RW_SCALE] *= WIDEN_FACTOR
+        # restarted: the same input, the width × 4 (a smoothed track, which is not the hull's velocity, diverges at
+        # any width and is left to the EKF below)
+        state[A_RW_SCALE] *= WIDEN_FACTOR  # (run_aided copies the state)
     restarts, aided, ast = best
     if "gyro_bias_rw_used" in aided.summary and restarts <= MAX_RESTARTS:
+        used, told = aided.summary["gyro_bias_rw_used"], params.aided_gyro_bias_rw
         aided.summary["note"] = (
-            f"the aided pass diverged with the stated gyro bias instability (aided_gyro_bias_rw "
-            f"{params.aided_gyro_bias_rw:g} rad/s/√s) and ran with {aided.summary['gyro_bias_rw_used']:g}: "
-            "state the gyro's own figure"
+            f"aided pass diverged with aided_gyro_bias_rw {told:g}, ran with {used:g} rad/s/√s: state the gyro's figure"
         )
     va = aided.std[:, 0] ** 2 + aided.std[:, 1] ** 2
     # the EKF's σ leaves out the accelerometer's bias (its tilt, b/g per axis): compared with it added
