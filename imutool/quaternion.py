@@ -98,3 +98,19 @@ def rmat(q0, q1, q2, q3, r):
     r[2, 0] = 2 * (q1 * q3 - q0 * q2)
     r[2, 1] = 2 * (q2 * q3 + q0 * q1)
     r[2, 2] = 1 - 2 * (q1 * q1 + q2 * q2)
+
+
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
+def rotate(q0, q1, q2, q3, f0, f1, f2):
+    """R(q) f: the body vector f in the world frame, for q body→NED; the same operations as :func:`rmat` and the
+    product row by row, without the matrix in memory."""
+    r00 = 1 - 2 * (q2 * q2 + q3 * q3)
+    r01 = 2 * (q1 * q2 - q0 * q3)
+    r02 = 2 * (q1 * q3 + q0 * q2)
+    r10 = 2 * (q1 * q2 + q0 * q3)
+    r11 = 1 - 2 * (q1 * q1 + q3 * q3)
+    r12 = 2 * (q2 * q3 - q0 * q1)
+    r20 = 2 * (q1 * q3 - q0 * q2)
+    r21 = 2 * (q2 * q3 + q0 * q1)
+    r22 = 1 - 2 * (q1 * q1 + q2 * q2)
+    return r00 * f0 + r01 * f1 + r02 * f2, r10 * f0 + r11 * f1 + r12 * f2, r20 * f0 + r21 * f1 + r22 * f2
