@@ -100,6 +100,8 @@ _E16 = np.uint64(10**16)
 _E17 = np.uint64(10**17)
 _E15 = np.uint64(10**15)
 _E8 = np.uint64(10**8)
+_E6 = np.uint64(10**6)
+_E9 = np.uint64(10**9)
 _U5 = np.uint64(5)
 _U50 = np.uint64(50)
 _U100 = np.uint64(100)
@@ -634,8 +636,17 @@ def format_block(
                         out[p] = 48
                         p += 1
                         continue
-                    ip = v // P10U[dj]
-                    fp = v - ip * P10U[dj]
+                    # the decimals the outputs use divide by a constant (a multiply and a shift, where a division
+                    # by a table's power of ten is a 64-bit divide, ~40 cycles); the fraction two digits a step
+                    if dj == 6:
+                        ip = v // _E6
+                        fp = v - ip * _E6
+                    elif dj == 9:
+                        ip = v // _E9
+                        fp = v - ip * _E9
+                    else:
+                        ip = v // P10U[dj]
+                        fp = v - ip * P10U[dj]
                     k = 0
                     while True:  # integer part, reversed
                         tmp[k] = 48 + int(ip % _U10)
@@ -647,14 +658,23 @@ def format_block(
                         out[p] = tmp[i]
                         p += 1
                     nd = dj
-                    while nd > 0 and fp % _U10 == _U0:
+                    while nd > 1 and fp % _U100 == _U0:
+                        fp = fp // _U100
+                        nd -= 2
+                    if nd > 0 and fp % _U10 == _U0:
                         fp = fp // _U10
                         nd -= 1
                     if nd > 0:
                         out[p] = 46
-                        for i in range(nd, 0, -1):
-                            out[p + i] = 48 + int(fp % _U10)
-                            fp = fp // _U10
+                        i = nd
+                        while i > 1:
+                            two = int(fp % _U100)
+                            fp = fp // _U100
+                            out[p + i] = DIGIT_PAIRS[2 * two + 1]
+                            out[p + i - 1] = DIGIT_PAIRS[2 * two]
+                            i -= 2
+                        if i == 1:
+                            out[p + 1] = 48 + int(fp)
                         p += nd + 1
                     continue
             c, nd, e = shortest_digits(ax, b)

@@ -630,6 +630,36 @@ def test_background_writer_equals_foreground_and_reports_disk_errors(tmp_path):
     assert not (tmp_path / "full.csv").exists()
 
 
+def _fixed_reference(x: float, d: int) -> str:
+    """The fixed-decimals field as the engine defines it, in Python: |x|·10^d (one float product) + 0.5 truncated,
+    integer and fraction, the fraction's trailing zeros dropped; a value that rounds to 0 is ``0``."""
+    ax = abs(x)
+    if ax == 0.0:
+        return "-0" if math.copysign(1.0, x) < 0 else "0"
+    v = int(ax * float(f"1e{d}") + 0.5)
+    if v == 0:
+        return "0"
+    ip, fp = divmod(v, 10**d)
+    frac = f"{fp:0{d}d}".rstrip("0") if d else ""
+    return ("-" if x < 0 else "") + str(ip) + ("." + frac if frac else "")
+
+
+def test_fixed_decimals_every_digit_against_a_reference():
+    """Every decimal count 0–MAX_DECIMALS, values from 1e-12 to 1e8 of either sign (the fraction written two digits
+    a step, the common counts 6 and 9 divided by constants): the same text as the engine's definition in Python."""
+    rng = np.random.default_rng(52)
+    n = 4000
+    x = rng.uniform(-1, 1, n) * 10.0 ** rng.uniform(-12, 8, n)
+    x[:40] = np.round(x[:40], 3)  # trailing zeros
+    x[40:50] = rng.integers(-1000, 1000, 10)  # whole numbers
+    for d in range(eng.MAX_DECIMALS + 1):
+        keep = np.abs(x) * 10.0**d < 9e15  # beyond that the exact form (tested elsewhere)
+        col = x[keep][:, None]
+        got = format_array(col, decimals=np.array([d])).decode().splitlines()
+        want = [_fixed_reference(float(v), d) for v in col[:, 0]]
+        assert got == want, [(g, w) for g, w in zip(got, want, strict=True) if g != w][:5]
+
+
 def test_fixed_decimals_columns(tmp_path):
     """``csv_decimals`` metadata: chosen channels rounded to n decimals (stated in the header), others exact."""
     x = np.array([[1.23456789, -4e-7, 359.99999949, np.nan, -2.5e-3, 1e20]])
