@@ -79,6 +79,36 @@ def test_parser_bit_identical_to_float_on_random_decimals():
     assert np.array_equal(_bits(got), _bits(ref))
 
 
+def test_fraction_digits_read_four_at_a_time_are_exact_at_every_length():
+    """The reader takes a fraction's digits four at a time where four follow: every fraction length 0–24 (the
+    groups, the single digits after them, the long-token path beyond 19 digits), with an exponent, a row of several
+    fields and a token at the very end of the buffer, gives float()'s double; a letter inside a group is refused."""
+    rng = np.random.default_rng(52)
+    toks = []
+    for nf in range(25):
+        for ni in (0, 1, 3):
+            for _ in range(20):
+                digs = "".join(rng.choice(list("0123456789"), ni + nf))
+                tok = ("-" if rng.random() < 0.3 else "") + (digs[:ni] or "0") + "." + digs[ni:]
+                toks.append(tok + (f"e{int(rng.integers(-30, 30))}" if rng.random() < 0.3 else ""))
+    got = _parse_tokens(toks)
+    assert np.array_equal(_bits(got), _bits(np.array([float(t) for t in toks])))
+    for tail in ("", "\n"):  # the last token ends the buffer, with and without its newline
+        data = ("1.25,0.123456789012,3.14159265\n2.5,-0.00000001,7." + "1234" * 3 + tail).encode()
+        buf = np.frombuffer(data, np.uint8)
+        out = np.empty((3, 3))
+        fb, bad = np.empty((8, 4), np.int64), np.empty((8, 3), np.int64)
+        res = eng.parse_block(buf, 0, buf.size, 3, 44, 46, out, 0, False, fb, bad, eng.T_HI, eng.T_LO)
+        assert res[1] == 2 and res[3] == 0, res
+        assert out[:2].tolist() == [[1.25, 0.123456789012, 3.14159265], [2.5, -0.00000001, 7.123412341234]]
+    data = b"1.12x45678,2.0\n0.5,0.25\n"
+    buf = np.frombuffer(data, np.uint8)
+    out = np.empty((3, 2))
+    fb, bad = np.empty((8, 4), np.int64), np.empty((8, 3), np.int64)
+    res = eng.parse_block(buf, 0, buf.size, 2, 44, 46, out, 0, False, fb, bad, eng.T_HI, eng.T_LO)
+    assert res[1] == 1 and res[3] == 1 and bad[0, 1] == 2 and out[0].tolist() == [0.5, 0.25], (res, bad[:1])
+
+
 def test_writer_round_trips_random_bit_patterns_and_is_short():
     rng = np.random.default_rng(4)
     x = rng.integers(0, 2**64 - 1, 50000, dtype=np.uint64, endpoint=True).view(np.float64)
