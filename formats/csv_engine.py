@@ -28,6 +28,7 @@ import math
 import numpy as np
 from numba import njit
 from numba import uint64 as _u64
+from numba.cpython.unsafe.numbers import leading_zeros
 
 from .jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 
@@ -151,26 +152,9 @@ def decimal_to_double(w: np.uint64, q: int) -> float:
         return 0.0
     if q > _Q_MAX:
         return math.inf
-    # normalise w (count leading zeros by halving steps)
-    lz = 0
-    if (w >> _S32) == _U0:
-        lz += 32
-        w <<= _S32
-    if (w >> _S48) == _U0:
-        lz += 16
-        w <<= _S16
-    if (w >> _S56) == _U0:
-        lz += 8
-        w <<= _S8
-    if (w >> _S60) == _U0:
-        lz += 4
-        w <<= _S4
-    if (w >> _S62) == _U0:
-        lz += 2
-        w <<= _S2
-    if (w >> _U63) == _U0:
-        lz += 1
-        w <<= _U1
+    # normalise w (its leading zeros: one instruction)
+    lz = int(leading_zeros(w))
+    w <<= _u64(lz)
     i = q - _W_MIN
     # 64x64 -> 128-bit products, written out (numba calls in this hot path cost more than the work)
     b = T_HI[i]
