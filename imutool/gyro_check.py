@@ -87,8 +87,9 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, factors, g, ma
     consecutive windows into sums (C,) and the number of pairs into counts (C,). t (N,) s; gyro, bias (N,3) rad/s
     body; force (N,3) m/s² body (NaN rows skipped); window s; a step > gap_dt s inside a pair drops the pair; at
     most ~max_samples samples are integrated (pairs evenly spread; ≤ 0: none). Returns the number of samples
-    integrated. The rate over a step is the sample at its end (the filter's default, ``gyro_integration =
-    "rectangular"``).
+    integrated and the index where the last complete window starts (0 where fewer than two windows start: where a
+    stream's next chunk takes over, :meth:`imutool.attitude.selfcheck.SelfCheck._add_scale`). The rate over a step
+    is the sample at its end (the filter's default, ``gyro_integration = "rectangular"``).
 
     Each sample turns every candidate's quaternion before the next sample is read (the candidates side by side,
     one array per component): the candidates' steps are independent, so the step by the exponential's series and
@@ -105,8 +106,9 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, factors, g, ma
             m += 1
             starts[m] = k
     n_pairs = m - 1  # windows [starts[p], starts[p+1]) and [starts[p+1], starts[p+2])
+    last = starts[m - 1] if m >= 1 else 0  # the last complete window's first sample
     if n_pairs <= 0 or max_samples <= 0:
-        return 0
+        return 0, last
     used = 0
     per_pair = 2.0 * n / (m + 1.0)
     stride = max(1, int(np.ceil(n_pairs * per_pair / max_samples)))
@@ -191,7 +193,7 @@ def pair_discrepancy_kernel(t, gyro, bias, force, window, gap_dt, factors, g, ma
             d2 = a2[si] / ca - b2[si] / cb
             sums[si] += (d0 * d0 + d1 * d1 + d2 * d2) / (g * g)
             counts[si] += 1.0
-    return used
+    return used, last
 
 
 class GyroScaleCheck:
@@ -213,6 +215,7 @@ class GyroScaleCheck:
         # the run's samples when known before its end (a stream's file): its budget is then spent in proportion to
         # the samples seen, so the pairs spread over the run as in one call, whatever the chunk size
         self.samples_expected = int(samples_expected or 0)
+        self.last_window_start = 0  # in the last add's arrays: where its last complete window starts
 
     def add(self, time: np.ndarray, gyro: np.ndarray, bias: np.ndarray, force: np.ndarray) -> None:
         """One chunk: time (N,) s, gyro and the filter's bias (N,3) rad/s, compensated force (N,3) m/s² (body)."""
@@ -220,9 +223,10 @@ class GyroScaleCheck:
         self.seen += len(arrays[0])
         run = max(self.seen, self.samples_expected)
         budget = int(max(FULL_CHECK_SAMPLES, CHECKED_SHARE * run) * self.seen / run) - self.checked
-        self.checked += pair_discrepancy_kernel(
+        used, self.last_window_start = pair_discrepancy_kernel(
             *arrays, self.window, self.gap_dt, CANDIDATES, self.gravity, budget, self.sums, self.counts
         )
+        self.checked += used
 
     def _mean_j2(self) -> np.ndarray | None:
         """J² (rad²) of every candidate, the mean over the pairs seen; None without a pair."""

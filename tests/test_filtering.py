@@ -406,8 +406,8 @@ def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
     """SelfCheck carries the gyro-scale check's last complete window (and the open one) into the next chunk: where
     that window starts is where the check's kernel cuts it (windows from the first sample, each starting at the
     first sample `window` s or more after the last start), whatever the sample spacing, so no pair is lost or
-    counted twice at a chunk edge."""
-    from imutool.attitude.selfcheck import _last_pair_start
+    counted twice at a chunk edge. The kernel returns that index (it cuts the windows anyway)."""
+    from imutool.gyro_check import CANDIDATES, pair_discrepancy_kernel
 
     def kernel_cut(t, window):
         starts = [0]
@@ -416,12 +416,18 @@ def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
                 starts.append(k)
         return starts[-2] if len(starts) >= 2 else 0
 
+    def last_start(t, window, budget=0):
+        z = np.zeros((len(t), 3))
+        sums, counts = np.zeros(len(CANDIDATES)), np.zeros(len(CANDIDATES))
+        return pair_discrepancy_kernel(t, z, z, z + 1.0, window, 1.0, CANDIDATES, 9.8, budget, sums, counts)[1]
+
     rng = np.random.default_rng(3)
     for _ in range(200):
         t = 1e5 + np.cumsum(rng.uniform(0.001, 0.5, rng.integers(1, 300)))
         for window in (0.0, 0.01, 2.0, 7.3):
-            assert _last_pair_start(t, window) == kernel_cut(t, window)
-    assert _last_pair_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12
+            assert last_start(t, window) == kernel_cut(t, window)
+        assert last_start(t, 2.0, budget=10**6) == kernel_cut(t, 2.0)
+    assert last_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12
 
 
 def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_path, monkeypatch, copy_sizes):

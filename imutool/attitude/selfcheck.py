@@ -319,6 +319,7 @@ class SelfCheck:
             gap_dt=params.gap_factor * dt_nominal, gravity=params.gravity, samples_expected=samples_expected
         )
         self._scale_tail: tuple[np.ndarray, ...] | None = None  # what the next chunk's scale check starts from
+        self._scale_buf: tuple[np.ndarray, ...] | None = None  # the tail and the next chunk, joined
         self.totals: dict[str, Any] = {}  # the filter's cumulative counters, from the last chunk
         self.t_first = self.t_last = np.nan
         self.motion = "handheld"  # the motion model's choice (imutool/attitude/motion.py): set by the caller
@@ -416,13 +417,21 @@ class SelfCheck:
         that followed it, still open), which the check pairs again from there (its windows are cut from the first
         sample of what it is given, each ``window`` s long: :func:`imutool.gyro_check.pair_discrepancy_kernel`)."""
         overlap = 0
-        if self._scale_tail is not None:
+        if self._scale_tail is not None:  # behind the tail, in buffers kept from chunk to chunk (no new pages)
             overlap = len(self._scale_tail[0])
-            arrays = tuple(np.concatenate([a, b]) for a, b in zip(self._scale_tail, arrays, strict=True))
+            n = overlap + len(arrays[0])
+            if self._scale_buf is None or len(self._scale_buf[0]) < n:
+                self._scale_buf = tuple(np.empty((n, *np.shape(a)[1:])) for a in arrays)
+            joined = []
+            for buf, a, b in zip(self._scale_buf, self._scale_tail, arrays, strict=True):
+                buf[:overlap] = a
+                buf[overlap:n] = b
+                joined.append(buf[:n])
+            arrays = tuple(joined)
         self.scale.add(*arrays)
         self.scale.seen -= overlap  # the samples carried over were counted with their own chunk
-        i = _last_pair_start(np.asarray(arrays[0], float), self.scale.window)
-        self._scale_tail = tuple(np.array(a[i:]) for a in arrays)
+        i = self.scale.last_window_start  # where the kernel's last complete window starts
+        self._scale_tail = tuple(np.array(a[i:], dtype=np.float64) for a in arrays)
 
     def heading_source(self) -> str:
         """Where the heading comes from, as far as the run has gone (final after the last chunk)."""
@@ -561,24 +570,6 @@ def _turning(t: np.ndarray, psi: np.ndarray, start: int) -> tuple[np.ndarray, fl
             if (r_in >= TURN_RATE).any():
                 best = max(best or 0.0, float(r_in[r_in >= TURN_RATE].max()))
     return turning, best
-
-
-def _last_pair_start(t: np.ndarray, window: float) -> int:
-    """The index where the last complete window starts, of those the gyro-scale check cuts from ``t[0]`` (s): each
-    starts at the first sample ``window`` s or more after the start of the one before (the same subtraction as
-    its kernel); 0 where fewer than two windows start."""
-    starts = [0]
-    while True:
-        s0 = starts[-1]
-        k = max(int(np.searchsorted(t, t[s0] + window, side="left")), s0 + 1)
-        while k > s0 + 1 and t[k - 1] - t[s0] >= window:
-            k -= 1
-        while k < len(t) and t[k] - t[s0] < window:
-            k += 1
-        if k >= len(t):
-            break
-        starts.append(k)
-    return starts[-2] if len(starts) >= 2 else 0
 
 
 LEVER_ARM_FRAME = "body FRD, sensor relative to the centre of rotation"
