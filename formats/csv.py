@@ -840,7 +840,11 @@ def format_array(data: np.ndarray, sep: str = ",", decimals: np.ndarray | None =
     return b"".join(parts)
 
 
-def _format_block(data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.ndarray | None = None) -> bytes:
+def _format_block(
+    data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.ndarray | None = None
+) -> bytes | memoryview:
+    """Rows data[r0:r1] as CSV lines: a view of the formatted bytes (written or joined as they are, not copied
+    into a ``bytes`` first: 160 bytes a row of an estimate, a copy of the whole output otherwise)."""
     n = r1 - r0
     if decimals is None:
         decimals = np.full(data.shape[1], -1, np.int64)
@@ -849,7 +853,7 @@ def _format_block(data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.nda
     nbytes, nfail = _eng.format_block(data, data.view(np.uint64), r0, r1, ord(sep), out, fails, decimals)
     if nfail:  # never seen; Python's repr is exact too
         return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n" for row in data[r0:r1].tolist()).encode()
-    return out[:nbytes].tobytes()
+    return memoryview(out)[:nbytes]
 
 
 DECIMALS_KEY = "csv_decimals"
