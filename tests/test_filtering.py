@@ -444,6 +444,12 @@ def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_pa
     assert len(rows) == 6001
     assert copied == [len(b"".join(rows[:5000]))]  # the first two chunks, once; the last one written in place
     # the same file when the metadata are given at the end (the writer then copies every row)
+    # the last chunk formatted on two threads in blocks of 300 rows while the rows before it are copied: the same
+    monkeypatch.setattr(fcsv, "_WRITE_BLOCK_ROWS", 300)
+    monkeypatch.setattr(fcsv, "_threads", lambda: 2)
+    overlapped = tmp_path / "overlapped.csv"
+    run_filter(roll_csv, overlapped, stream_mb=0, chunk_rows=2500)
+    assert overlapped.read_bytes() == text and copied[-1] == copied[0]
     monkeypatch.setattr(fcsv.CsvWriter, "set_final_meta", _set_at_close)
     late = tmp_path / "late.csv"
     run_filter(roll_csv, late, stream_mb=0, chunk_rows=2500)
