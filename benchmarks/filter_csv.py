@@ -68,7 +68,9 @@ heading = np.degrees(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))) %
 pl.DataFrame({"time": t, "roll": roll, "pitch": pitch, "heading": heading, "q_w": w, "q_x": x, "q_y": y, "q_z": z}
              ).write_csv(sys.argv[2])
 """
-FILTER = "from imutool.cli import main; main()"
+# what the `imutool` executable runs: its console script (pyproject: imutool.cli:run, which ends the process without
+# Python's module teardown; a clone from before it has main only)
+FILTER = "from imutool import cli; getattr(cli, 'run', cli.main)()"
 
 
 def make_csv(path: Path, rows: int) -> None:
