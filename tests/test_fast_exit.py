@@ -1,5 +1,6 @@
 """The `imutool` executable (`imutool.cli:run`) ends the process without Python's module teardown: the same outputs,
-stdout, stderr and exit status as `main`, the atexit handlers run and the worker threads joined first."""
+stdout, stderr and exit status as `main`, the atexit handlers run and the worker threads joined first (a thread pool
+never shut down stopped as Python's exit stops it, not waited for forever)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ PRELUDE = (
     "    time.sleep(1.0)\n"
     "    mark.with_suffix('.thread').write_text('joined')\n"
     "threading.Thread(target=late).start()\n"
+    "from concurrent.futures import ThreadPoolExecutor\n"
+    "ThreadPoolExecutor(2).submit(time.sleep, 0.01)  # a pool never shut down: its workers told to stop, no hang\n"
 )
 
 
@@ -28,7 +31,7 @@ def _imutool(entry: str, args: list[str], mark: Path, fast: str = "1") -> subpro
     code = PRELUDE + f"from imutool.cli import {entry}\n{entry}()\n"
     env = dict(os.environ, PYTHONPATH=str(ROOT), IMUTOOL_FAST_EXIT=fast)
     return subprocess.run(
-        [sys.executable, "-c", code, str(mark), *args], capture_output=True, text=True, env=env, timeout=600
+        [sys.executable, "-c", code, str(mark), *args], capture_output=True, text=True, env=env, timeout=300
     )
 
 

@@ -169,9 +169,15 @@ def _exit_now(code: object) -> None:
     else:  # sys.exit("message"): said on stderr, status 1
         print(code, file=sys.stderr)
         status = 1
-    for t in threading.enumerate():
-        if t is not threading.main_thread() and not t.daemon:
-            t.join()
+    # Python's own order: threading's exit hooks (a thread pool told to stop) and the non-daemon threads joined,
+    # then the atexit handlers
+    shutdown = getattr(threading, "_shutdown", None)
+    if shutdown is not None and threading.current_thread() is threading.main_thread():
+        shutdown()
+    else:
+        for t in threading.enumerate():
+            if t is not threading.current_thread() and not t.daemon:
+                t.join()
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
