@@ -23,7 +23,8 @@ PRELUDE = (
     "    mark.with_suffix('.thread').write_text('joined')\n"
     "threading.Thread(target=late).start()\n"
     "from concurrent.futures import ThreadPoolExecutor\n"
-    "ThreadPoolExecutor(2).submit(time.sleep, 0.01)  # a pool never shut down: its workers told to stop, no hang\n"
+    "pool = ThreadPoolExecutor(2)  # a pool kept and never shut down: its workers told to stop, no hang\n"
+    "pool.submit(time.sleep, 0.01)\n"
 )
 
 
