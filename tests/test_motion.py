@@ -158,3 +158,39 @@ def test_the_turns_evaluated_every_step_are_those_of_every_sample(seed, monkeypa
     for chunk in (len(t), 7001):  # (chunks add the angle up in another order: the rate's last bits differ)
         assert found[step_s, chunk] == found[0.0, chunk], found
         assert found[0.0, chunk][0] == every[0] and found[0.0, chunk][1] == pytest.approx(every[1], rel=1e-12)
+
+
+@pytest.mark.parametrize("trial", [0, 1, 3])
+def test_a_rate_hovering_at_the_turn_threshold_gives_the_spans_of_every_sample(trial, monkeypatch):
+    """A slow turn whose 20-s rate hovers about TURN_RATE (0.5 °/s, with noise; a gap; uneven sampling) crosses it
+    many times between two evaluations that agree: the check still finds the spans and the largest rate of every
+    sample, in one chunk and in chunks of 997 and 3 rows (evaluating only where two evaluations disagreed joined or
+    dropped whole turns here, and depended on the chunks)."""
+    from imutool.attitude import selfcheck as sc
+
+    rng = np.random.default_rng(trial)
+    n = 30_000
+    dt = 0.01 * (1 + 0.3 * rng.random(n)) if trial % 2 else np.full(n, 0.01)
+    t = np.cumsum(dt)
+    if trial % 3 == 0:
+        t[n // 2 :] += 5.0
+    wz = np.radians(0.5 + 0.02 * np.sin(t / 3.0) + 0.05 * np.sin(t * 7))
+    wz += np.radians(rng.standard_normal(n) * (2.0 if trial == 1 else 0.2))
+    q = np.zeros((n, 4))
+    q[:, 0] = 1.0
+    gyro = np.zeros((n, 3))
+    gyro[:, 2] = wz
+    found = {}
+    for step in (0.0, sc.TURN_STEP_S):
+        monkeypatch.setattr(sc, "TURN_STEP_S", step)
+        for chunk in (n, 997, 3):
+            check = sc.SelfCheck(EkfParams(), 0.01)
+            for i in range(0, n, chunk):
+                check._add_turns(
+                    t[i : i + chunk], q[i : i + chunk], gyro[i : i + chunk], np.zeros((len(t[i : i + chunk]), 3))
+                )
+            found[step, chunk] = ([tuple(s) for s in check.turns.spans], check.turn_rate_max)
+        monkeypatch.undo()
+    assert found[0.0, n][0], found[0.0, n]  # a turn is found
+    for chunk in (n, 997, 3):
+        assert found[sc.TURN_STEP_S, chunk] == found[0.0, chunk], chunk

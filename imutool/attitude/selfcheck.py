@@ -336,8 +336,9 @@ class SelfCheck:
         chunks joined by the last TURN_SMOOTH_S of the integrated angle).
 
         The angle is integrated at every sample; its average rate is evaluated every TURN_STEP_S and, between two
-        evaluations on either side of TURN_RATE, at every sample (:func:`_turning`): the spans' ends and the
-        largest rate are those of the rate at every sample (tests/test_selfcheck.py), at a fifth of the cost."""
+        evaluations that a sample between could disagree with, at every sample (:func:`_turning`, a bound on the
+        rate's change): the spans' ends and the largest rate are those of the rate at every sample
+        (tests/test_motion.py), at about half of the cost."""
         t = np.asarray(time, dtype=np.float64)
         om = np.asarray(gyro, dtype=np.float64) - bias
         if not np.isfinite(om).all():  # (nan_to_num itself, on every row, cost more than the rest of this check)
@@ -526,21 +527,34 @@ def _vertical_rate(q: np.ndarray, om: np.ndarray) -> np.ndarray:
     return out
 
 
+def _turn_window(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each sample index ``at``: the first sample j of the TURN_SMOOTH_S before it, the span t[at] − t[j] (s)
+    and whether it is full (≥ 0.9 TURN_SMOOTH_S: the first seconds have no rate yet)."""
+    ta = t[at]
+    j = np.searchsorted(t, ta - TURN_SMOOTH_S, side="left")
+    span = ta - t[j]
+    return j, span, span >= 0.9 * TURN_SMOOTH_S
+
+
 def _turn_rate(t: np.ndarray, psi: np.ndarray, at: np.ndarray) -> np.ndarray:
     """The heading's rate (deg/s) over the TURN_SMOOTH_S before each sample ``at`` (indices into t, s, and psi, the
     integrated angle, deg); 0 where less than 0.9 TURN_SMOOTH_S of samples lie before it."""
-    ta = t[at]
-    j = np.searchsorted(t, ta - TURN_SMOOTH_S, side="left")  # the rate over the last TURN_SMOOTH_S
-    span = ta - t[j]
-    full = span >= 0.9 * TURN_SMOOTH_S  # the first seconds have no rate yet
+    j, span, full = _turn_window(t, at)
     return np.where(full, (psi[at] - psi[j]) / np.where(full, span, 1.0), 0.0)
 
 
 def _turning(t: np.ndarray, psi: np.ndarray, start: int) -> tuple[np.ndarray, float | None]:
     """Per sample from ``start`` on: is the rate of :func:`_turn_rate` beyond TURN_RATE; and the largest such rate
-    (deg/s; None where none is). The rate is evaluated every TURN_STEP_S; between two evaluations that disagree, at
-    every sample; around the largest evaluated rate, at every sample within a step. A crossing there and back
-    between two evaluations that agree (within TURN_STEP_S, of a rate averaged over TURN_SMOOTH_S) is not seen."""
+    (deg/s; None where none is) — the same as the rate evaluated at every sample, at a fraction of the cost.
+
+    The rate is evaluated every TURN_STEP_S, and at every sample between two evaluations a and b wherever a sample
+    between them could differ: r = A/S (A the angle turned over the window, S its span ≥ 0.9 TURN_SMOOTH_S), and for
+    any k between a and b, |A_k − A_a| ≤ ΔA = (c_b − c_a) + (c_jb − c_ja) with c the cumulative |turned angle| and j
+    the window's first sample, |S_k − S_a| ≤ ΔS = (t_b − t_a) + (t_jb − t_ja) and S_k ≥ S_min = t_a − t_jb, so
+    |r_k − r_a| ≤ (ΔA + |r_a| ΔS) / S_min = m. An interval is evaluated at every sample where the ends disagree,
+    either end's |r| lies within m of TURN_RATE, S_min < 0.9 TURN_SMOOTH_S (a sample between may have no full
+    window: the first seconds, a gap), or max(|r_a|, |r_b|) + m reaches the largest evaluated rate; elsewhere every
+    sample between is on its ends' side."""
     n = len(t) - start
     if n <= 0:
         return np.zeros(0, dtype=bool), None
@@ -549,22 +563,31 @@ def _turning(t: np.ndarray, psi: np.ndarray, start: int) -> tuple[np.ndarray, fl
     at = np.arange(start, len(t), d)
     if at[-1] != len(t) - 1:
         at = np.append(at, len(t) - 1)
-    rate = _turn_rate(t, psi, at)
-    hit = np.abs(rate) >= TURN_RATE
-    turning = np.repeat(hit[:-1], np.diff(at))  # each evaluation holds to the next
+    j, span, full = _turn_window(t, at)
+    rate = np.abs(np.where(full, (psi[at] - psi[j]) / np.where(full, span, 1.0), 0.0))
+    hit = rate >= TURN_RATE
+    turning = np.repeat(hit[:-1], np.diff(at))  # each evaluation holds to the next, unless refined below
     turning = np.append(turning, hit[-1])
-    refine = np.flatnonzero(hit[:-1] != hit[1:])  # the rate crossed TURN_RATE between at[i] and at[i + 1]
-    best = None
-    if hit.any():
-        i = int(np.argmax(np.where(hit, np.abs(rate), -1.0)))
-        best = float(abs(rate[i]))
-        near = np.arange(max(start, at[i] - d), min(len(t), at[i] + d + 1))
-        r_near = np.abs(_turn_rate(t, psi, near))
-        if (r_near >= TURN_RATE).any():
-            best = max(best, float(r_near[r_near >= TURN_RATE].max()))
-    if len(refine):
-        inside = np.concatenate([np.arange(at[i] + 1, at[i + 1]) for i in refine])
-        if len(inside):
+    best = float(rate[hit].max()) if hit.any() else None
+    if len(at) > 1:
+        c = np.empty(len(psi))  # the cumulative |angle turned| (deg)
+        c[0] = 0.0
+        np.cumsum(np.abs(np.diff(psi)), out=c[1:])
+        d_angle = (c[at[1:]] - c[at[:-1]]) + (c[j[1:]] - c[j[:-1]])
+        d_span = (t[at[1:]] - t[at[:-1]]) + (t[j[1:]] - t[j[:-1]])
+        s_min = t[at[:-1]] - t[j[1:]]
+        partial = s_min < 0.9 * TURN_SMOOTH_S
+        top = np.maximum(rate[:-1], rate[1:])
+        # the bound, widened by rounding's share (the rates' last bits)
+        m = (d_angle + top * d_span) / np.where(partial, 1.0, s_min) * (1.0 + 1e-9) + 1e-12
+        near = np.minimum(np.abs(rate[:-1] - TURN_RATE), np.abs(rate[1:] - TURN_RATE)) <= m
+        refine = (hit[:-1] != hit[1:]) | near | partial
+        if best is not None:
+            refine |= top + m >= best  # a larger rate could lie between
+        lo, hi = at[:-1][refine] + 1, at[1:][refine]
+        counts = hi - lo
+        if counts.sum() > 0:
+            inside = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
             r_in = np.abs(_turn_rate(t, psi, inside))
             turning[inside - start] = r_in >= TURN_RATE
             if (r_in >= TURN_RATE).any():
