@@ -50,7 +50,7 @@ from imutool.attitude.recording import (
     heading_channel,
     ship_lever_arm,
 )
-from imutool.attitude.warm import warm_filter_kernels
+from imutool.filter_warm import warm_filter_kernels
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import STREAMABLE, chunk_writer, expected_rows

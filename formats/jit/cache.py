@@ -50,7 +50,7 @@ from pathlib import Path
 import numba
 from numba.core import caching, config, event
 
-from formats.jit import typing_memo
+from formats.jit import claims, typing_memo
 
 typing_memo.install()  # numba's call typing asked once per distinct question (formats/jit/typing_memo.py)
 
@@ -381,6 +381,30 @@ def _write_memo(memo: Path | None, tree: str, files: list[str]) -> None:
                 pass
 
 
+def _source_tree() -> tuple[bytes, dict[Path, bytes], "hashlib._Hash"]:
+    """(numba's, Python's versions; every library file's text; their hash): read once per process."""
+    if _State.tree is None:
+        head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()
+        texts: dict[Path, bytes] = {}
+        tree = hashlib.blake2b(head, digest_size=16)
+        for path in _library_sources():
+            try:
+                texts[path] = path.read_bytes()
+            except OSError:
+                texts[path] = b"<unreadable>"
+            tree.update(path.relative_to(_SITE).as_posix().encode() + b"\0" + texts[path] + b"\0")
+        _State.tree = (head, texts, tree)
+    return _State.tree
+
+
+def new_source_tree() -> bool:
+    """True when no process has used these library files with this cache yet (the source scan's memo has no
+    answer for them, :func:`source_version`): a first run, whose kernels are not cached (~15 ms, no scan)."""
+    if _State.folder is not None:
+        return False
+    return _read_memo(user_cache_root() / MEMO_NAME, _source_tree()[2].hexdigest()) is None
+
+
 def source_version(memo: Path | None = None) -> str:
     """12 hex digits that change with the files that can reach a compiled kernel and numba's and Python's version.
 
@@ -388,15 +412,7 @@ def source_version(memo: Path | None = None) -> str:
     file, so only the first process after a change of any file pays for the scan (~0.3 s; reading and hashing the
     files ~15 ms).
     """
-    head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()
-    texts: dict[Path, bytes] = {}
-    tree = hashlib.blake2b(head, digest_size=16)
-    for path in _library_sources():
-        try:
-            texts[path] = path.read_bytes()
-        except OSError:
-            texts[path] = b"<unreadable>"
-        tree.update(path.relative_to(_SITE).as_posix().encode() + b"\0" + texts[path] + b"\0")
+    head, texts, tree = _source_tree()
     files = _read_memo(memo, tree.hexdigest())
     if files is None:
         files = [p.relative_to(_SITE).as_posix() for p in kernel_sources(_SITE, texts)]
@@ -440,6 +456,7 @@ class _State:
     persistent = True  # False: a folder that lives only as long as this process
     version = ""
     shared: set[str] = set()  # the groups whose kernel a second process compiles half of (formats.jit.warm)
+    tree = None  # (versions, library files' texts, their hash), read once (_source_tree)
 
 
 def compiling_in_two_processes(module: str) -> None:
@@ -455,6 +472,7 @@ def cache_folder() -> Path | None:
     if _State.folder is not None:
         return _State.folder
     _State.version = source_version(memo=user_cache_root() / MEMO_NAME)
+    _State.tree = None  # the files' texts are not needed any more
     name = f"kernels-{_State.version}"
     given = os.environ.get(FOLDER_ENV, "")  # formats.jit.warm's second process: its parent's folder
     if given and Path(given).name == name and Path(given).is_absolute() and _usable(Path(given)):
@@ -609,9 +627,39 @@ def _tolerant_save(numba_save):
             locator = getattr(getattr(self, "_impl", None), "locator", None)
             if not isinstance(locator, KernelCacheLocator):
                 raise
+        finally:
+            if claims.sharing():
+                path = _claim_file(self, sig)
+                if path is not None:
+                    claims.release(path)  # saved (or not savable): a process waiting for it loads or compiles it
 
     save_overload._imutool_tolerant = True  # type: ignore[attr-defined]
     return save_overload
+
+
+def _claim_file(cache, sig) -> Path | None:
+    """The claim file of ``sig`` of one of our cached functions (formats.jit.claims), None for another library's."""
+    if not isinstance(getattr(getattr(cache, "_impl", None), "locator", None), KernelCacheLocator):
+        return None
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    return claims.claim_path(index, sig) if index else None
+
+
+def _shared_load(numba_load):
+    """numba's ``Cache.load_overload``, except that while two processes share a cold compile
+    (formats.jit.claims), a miss of one of our functions claims it, or waits for the other process's copy."""
+
+    def load_overload(self, sig, target_context):
+        data = numba_load(self, sig, target_context)
+        if data is not None or not claims.sharing():
+            return data
+        path = _claim_file(self, sig)
+        if path is None:
+            return data
+        return claims.claim_or_wait(path, lambda: numba_load(self, sig, target_context))
+
+    load_overload._imutool_shared = True  # type: ignore[attr-defined]
+    return load_overload
 
 
 def _install() -> None:
@@ -619,6 +667,9 @@ def _install() -> None:
     save = getattr(cache_cls, "save_overload", None)
     if save is not None and not getattr(save, "_imutool_tolerant", False):
         cache_cls.save_overload = _tolerant_save(save)  # type: ignore[union-attr]
+    load = getattr(cache_cls, "load_overload", None)
+    if load is not None and not getattr(load, "_imutool_shared", False):
+        cache_cls.load_overload = _shared_load(load)  # type: ignore[union-attr]
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     locators = getattr(impl, "_locator_classes", None)
     if isinstance(locators, list):

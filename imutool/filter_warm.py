@@ -23,7 +23,10 @@ from __future__ import annotations
 import subprocess
 
 from formats.jit.warm import CSV_WRITER, Entry, warm_in_background
-from imutool.attitude.kernel import ekf_kernel
+
+# the probe: the EKF kernel not in the cache yet = a cold run (found by its cache file's name: this module imports no
+# kernel, so that the command can start the second process before it imports the filter, imutool/cli/filter.py)
+EKF_KERNEL: Entry = ("imutool.attitude.kernel", "ekf_kernel", "")
 
 _A = "float64[::1]"  # 1-D C array
 _M = "float64[:, ::1]"  # 2-D C array
@@ -77,5 +80,5 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
 def warm_filter_kernels(smooth: bool = False, csv_output: bool = False) -> subprocess.Popen | None:
     """On a cold cache, compile in a second process what the filter needs after the EKF (the gyro check's kernel,
     the CSV writer's with a CSV output, the smoother's with ``smooth``), then the EKF's sections from the last."""
-    later = (SMOOTH_KERNELS if smooth else ()) + AFTER_THE_EKF + ((CSV_WRITER,) if csv_output else ())
-    return warm_in_background(ekf_kernel, later + tuple(reversed(EKF_SECTIONS)), splits_probe=True)
+    later = AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()) + ((CSV_WRITER,) if csv_output else ())
+    return warm_in_background(EKF_KERNEL, tuple(reversed(EKF_SECTIONS)) + tuple(reversed(later)), splits_probe=True)
