@@ -23,7 +23,7 @@ import formats.jit.warm as kw
 from formats.jit import claims
 from formats.jit.warm import CSV_WRITER
 from imutool.attitude.kernel import ekf_kernel
-from imutool.filter_warm import AFTER_THE_EKF, EKF_SECTIONS, SMOOTH_KERNELS
+from imutool.filter_warm import AFTER_THE_EKF, EKF_SECTIONS, HEADING_SECTION, SMOOTH_KERNELS
 
 ALL = AFTER_THE_EKF + (CSV_WRITER,) + SMOOTH_KERNELS
 
@@ -275,12 +275,42 @@ def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
     assert top - own - listed == set(), "compiled but not listed (add to imutool/filter_warm.py)"
     assert listed - top == set(), "listed but not compiled as listed (remove or correct the types)"
     sections = [row[1:4] for row in rows if row[0] == "ekf_kernel"]
+    # no GNSS nor external heading in the input: their sections are left out of the kernel (kernel.py)
     assert sections == list(EKF_SECTIONS), "the EKF's sections, in the order it calls them, with their types"
     # every cached function the kernel reaches (its sections and their helpers) states the flags numba would
     # otherwise take from its caller: compiled alone by the second process, it is the code the kernel would compile
     inside = [row for row in rows if row[0] != "-"]
     assert len(inside) > len(sections), inside
     assert [row[2] for row in inside if row[4] != "yes"] == []
+
+
+HEADING_FILE = textwrap.dedent(
+    """
+    import sys
+    import formats
+    rec = formats.read(sys.argv[1])
+    with open(sys.argv[2], "w") as f:
+        f.write("time,heading_true\\n")
+        for t, h in zip(rec.time[::20], rec["ref_heading"][::20]):
+            f.write(f"{float(t)!r},{float(h)!r}\\n")
+    """
+)
+
+
+@pytest.mark.slow
+def test_the_heading_section_is_what_a_cold_filter_with_heading_compiles(tmp_path):
+    """~40 s: with --heading the kernel has the external heading's section (left out of the default kernel), called
+    with the types listed, between the magnetometer's and the outputs."""
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
+    sim = ["-c", "from imutool.cli import main; main()", "simulate", "ship-roll", "--duration", "20", "-o", "r.csv"]
+    sim_env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-sim"))
+    assert _python(sim, tmp_path, sim_env).returncode == 0
+    assert _python(["-c", HEADING_FILE, "r.csv", "h.csv"], tmp_path, sim_env).returncode == 0
+    r = _python(["-c", RECORD, "filter", "r.csv", "-o", "est.csv", "--heading", "h.csv", "-q"], tmp_path, env)
+    assert r.returncode == 0, r.stderr
+    rows = [tuple(line.split("\t")) for line in r.stdout.splitlines()]
+    sections = [row[1:4] for row in rows if row[0] == "ekf_kernel"]
+    assert sections == [*EKF_SECTIONS[:-2], HEADING_SECTION, *EKF_SECTIONS[-2:]]
 
 
 @pytest.mark.slow

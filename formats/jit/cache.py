@@ -46,6 +46,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numba
 from numba.core import caching, config, event
@@ -381,7 +382,7 @@ def _write_memo(memo: Path | None, tree: str, files: list[str]) -> None:
                 pass
 
 
-def _source_tree() -> tuple[bytes, dict[Path, bytes], "hashlib._Hash"]:
+def _source_tree() -> tuple[bytes, dict[Path, bytes], Any]:
     """(numba's, Python's versions; every library file's text; their hash): read once per process."""
     if _State.tree is None:
         head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()

@@ -214,7 +214,7 @@ def filter_route(
         from imutool.filter_warm import warm_filter_kernels  # light: numba, not the filter
 
         # a cold cache: the second process starts before the filter's modules are imported here (~1 s), not after
-        warm_filter_kernels(smooth, output.lower().endswith(".csv"))
+        warm_filter_kernels(smooth, output.lower().endswith(".csv"), heading_path is not None)
     from imutool.attitude.params import params_from_options  # here, not at the top: `--help` loads no numba
     from imutool.compass import CompassParams
     from imutool.filtering import parse_speed, run_filter
