@@ -383,19 +383,17 @@ def _write_memo(memo: Path | None, tree: str, files: list[str]) -> None:
 
 
 def _source_tree() -> tuple[bytes, dict[Path, bytes], Any]:
-    """(numba's, Python's versions; every library file's text; their hash): read once per process."""
-    if _State.tree is None:
-        head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()
-        texts: dict[Path, bytes] = {}
-        tree = hashlib.blake2b(head, digest_size=16)
-        for path in _library_sources():
-            try:
-                texts[path] = path.read_bytes()
-            except OSError:
-                texts[path] = b"<unreadable>"
-            tree.update(path.relative_to(_SITE).as_posix().encode() + b"\0" + texts[path] + b"\0")
-        _State.tree = (head, texts, tree)
-    return _State.tree
+    """(numba's, Python's versions; every library file's text; their hash)."""
+    head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()
+    texts: dict[Path, bytes] = {}
+    tree = hashlib.blake2b(head, digest_size=16)
+    for path in _library_sources():
+        try:
+            texts[path] = path.read_bytes()
+        except OSError:
+            texts[path] = b"<unreadable>"
+        tree.update(path.relative_to(_SITE).as_posix().encode() + b"\0" + texts[path] + b"\0")
+    return head, texts, tree
 
 
 def new_source_tree() -> bool:
@@ -403,7 +401,8 @@ def new_source_tree() -> bool:
     answer for them, :func:`source_version`): a first run, whose kernels are not cached (~15 ms, no scan)."""
     if _State.folder is not None:
         return False
-    return _read_memo(user_cache_root() / MEMO_NAME, _source_tree()[2].hexdigest()) is None
+    _State.tree = _source_tree()  # kept for this process's source_version, read next
+    return _read_memo(user_cache_root() / MEMO_NAME, _State.tree[2].hexdigest()) is None
 
 
 def source_version(memo: Path | None = None) -> str:
@@ -413,7 +412,8 @@ def source_version(memo: Path | None = None) -> str:
     file, so only the first process after a change of any file pays for the scan (~0.3 s; reading and hashing the
     files ~15 ms).
     """
-    head, texts, tree = _source_tree()
+    head, texts, tree = _State.tree or _source_tree()
+    _State.tree = None
     files = _read_memo(memo, tree.hexdigest())
     if files is None:
         files = [p.relative_to(_SITE).as_posix() for p in kernel_sources(_SITE, texts)]
@@ -457,7 +457,7 @@ class _State:
     persistent = True  # False: a folder that lives only as long as this process
     version = ""
     shared: set[str] = set()  # the groups whose kernel a second process compiles half of (formats.jit.warm)
-    tree = None  # (versions, library files' texts, their hash), read once (_source_tree)
+    tree = None  # (versions, library files' texts, their hash) read by new_source_tree for source_version
 
 
 def compiling_in_two_processes(module: str) -> None:
@@ -473,7 +473,6 @@ def cache_folder() -> Path | None:
     if _State.folder is not None:
         return _State.folder
     _State.version = source_version(memo=user_cache_root() / MEMO_NAME)
-    _State.tree = None  # the files' texts are not needed any more
     name = f"kernels-{_State.version}"
     given = os.environ.get(FOLDER_ENV, "")  # formats.jit.warm's second process: its parent's folder
     if given and Path(given).name == name and Path(given).is_absolute() and _usable(Path(given)):
