@@ -1,13 +1,15 @@
 """A cold first run on two cores: a second process compiles part of what a command needs into the same cache.
 
 numba compiles in one thread (a process-wide lock), and most of a first run's time is numba's own Python passes
-(type inference, lowering; LLVM ~10 %), so a cold cache cannot be compiled much faster in one process. It can be
+(type inference, lowering; LLVM a third), so a cold cache cannot be compiled much faster in one process. It can be
 split across processes: while a command compiles its parser and its main kernel, a second process compiles the
-kernels the command calls later (the gyro check's, the CSV writer's, the smoother's), then the main kernel's parts
-from the last one backwards (the EKF's sections, :mod:`imutool.filter_warm`), into the same cache. The command
+main kernel's parts from the last one backwards (the EKF's sections, :mod:`imutool.filter_warm`), then the kernels
+the command calls later (the CSV writer's, the smoother's, the gyro check's), into the same cache. The command
 loads each part it reaches that the second process has finished, and compiles the others itself; the two meet in
-the middle. numba links a part loaded from the cache as LLVM bitcode, so the kernel is the same machine code as
-when it compiles everything itself (`tests/test_kernel_warm.py` compares them).
+the middle, each function compiled once: while they share the work, a process claims a function before compiling
+it and the other waits for a claimed one instead of compiling it too (:mod:`formats.jit.claims`). numba links a
+part loaded from the cache as LLVM bitcode, so the kernel is the same machine code as when it compiles everything
+itself (`tests/test_kernel_warm.py` compares them).
 
 A part compiled on its own must be the code its caller would have compiled: numba takes ``fastmath``,
 ``error_model``, ``_nrt`` and ``forceinline`` from the caller for a function that does not set them, and its cache
