@@ -90,4 +90,8 @@ def warm_filter_kernels(
     output, the smoother's with ``smooth``, the gyro check's)."""
     sections = EKF_SECTIONS[:-2] + ((HEADING_SECTION,) if heading else ()) + EKF_SECTIONS[-2:]
     later = AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()) + ((CSV_WRITER,) if csv_output else ())
-    return warm_in_background(EKF_KERNEL, tuple(reversed(sections)) + tuple(reversed(later)), splits_probe=True)
+    # the command, while it waits for a section the second process is compiling, compiles what it needs later from
+    # the first it needs (formats.jit.claims): the two take those kernels from opposite ends too
+    return warm_in_background(
+        EKF_KERNEL, tuple(reversed(sections)) + tuple(reversed(later)), splits_probe=True, meanwhile=later
+    )

@@ -132,3 +132,54 @@ def test_the_second_process_skips_what_the_command_has_claimed(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["0", "False", "1", "True", "False"], r.stdout
+
+
+MEANWHILE = textwrap.dedent(
+    """
+    import subprocess, sys
+    from numba.core.compiler import Flags
+    from numba.core.cpu import FastMathOptions
+    from numba.core.targetconfig import ConfigStack
+    from formats.jit import claims
+    from formats.jit.warm import CSV_WRITER, _one_at_a_time, argument_types
+    import formats.csv_engine as engine
+    sig = argument_types(CSV_WRITER[2])
+    if sys.argv[1] == "waiting":  # compiled while waiting inside a compile with other flags (the EKF kernel's)
+        other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+        claims.share_with(other.pid, lambda: other.poll() is None)
+        claims.while_waiting(_one_at_a_time([CSV_WRITER]))
+        claim = claims.claim_path(sys.argv[2], ("float64",))
+        claim.write_text(str(other.pid))
+        outer = Flags()
+        outer.fastmath = FastMathOptions(True)
+        outer.error_model = "numpy"
+        with ConfigStack().enter(outer):
+            assert claims.claim_or_wait(claim, lambda: engine.format_block.signatures or None)
+        other.kill()
+    else:
+        engine.format_block.compile(sig)
+    print(engine.format_block.inspect_asm(sig))
+    """
+)
+
+
+def test_a_kernel_compiled_while_waiting_is_the_kernel_compiled_alone(tmp_path):
+    """The command compiles a later kernel while it waits inside the EKF kernel's compile: with the flags it has
+    when called on its own (numba would give it the EKF's fastmath and error model), so the same machine code."""
+    from conftest import normalized_asm
+
+    out = {}
+    for how in ("alone", "waiting"):
+        env = dict(_env(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / how))
+        r = subprocess.run(
+            [sys.executable, "-c", MEANWHILE, how, str(tmp_path / "k.f-1.py311.nbi")],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert r.returncode == 0, r.stderr
+        out[how] = normalized_asm(r.stdout)
+    assert len(out["alone"]) > 10_000
+    assert out["waiting"] == out["alone"]

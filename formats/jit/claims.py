@@ -19,6 +19,7 @@ states its own flags (:mod:`formats.jit.warm`), and ``tests/test_kernel_warm.py`
 from __future__ import annotations
 
 import atexit
+import contextlib
 import hashlib
 import os
 import time
@@ -33,6 +34,14 @@ class _Sharing:
     peer: int | None = None  # the other process's pid while two processes share the compile
     alive: Callable[[], bool] = staticmethod(lambda: False)  # is the other process still running
     mine: set[Path] = set()  # the claims this process holds
+    meanwhile: Callable[[], bool] | None = None  # compiles one more thing this process needs later; False: none left
+    busy = False  # in meanwhile (a wait inside it waits)
+
+
+def while_waiting(work: Callable[[], bool] | None) -> None:
+    """What this process does instead of idling while it waits for the other's function: ``work()`` compiles one
+    function it will need later (claimed, so the other skips it) and returns False when there is none left."""
+    _Sharing.meanwhile = work
 
 
 def share_with(peer: int, alive: Callable[[], bool]) -> None:
@@ -50,6 +59,7 @@ def sharing() -> bool:
 def stop_sharing() -> None:
     """Forget the other process and give up every claim of this one (at exit, or when the other has ended)."""
     _Sharing.peer = None
+    _Sharing.meanwhile = None
     release_all()
 
 
@@ -107,9 +117,34 @@ def release(path: Path) -> None:
             pass
 
 
-def release_all() -> None:
-    for path in list(_Sharing.mine):
+def release_all(keep: frozenset[Path] | set[Path] = frozenset()) -> None:
+    """Give up this process's claims, except ``keep``."""
+    for path in list(_Sharing.mine - set(keep)):
         release(path)
+
+
+def held() -> frozenset[Path]:
+    """The claims this process holds now."""
+    return frozenset(_Sharing.mine)
+
+
+@contextlib.contextmanager
+def _outside_any_compile():
+    """The wait happens inside numba's compile of a caller, and numba gives a function that does not state
+    ``fastmath``, ``error_model``, ``_nrt`` or ``forceinline`` those of the compile it happens in (its thread's flag
+    stack): a kernel compiled while waiting sees an empty stack, as when the command calls it."""
+    from numba.core.utils import ThreadLocalStack
+
+    tls, attr = ThreadLocalStack._tls, "stack_flags"
+    outer = getattr(tls, attr, None)
+    setattr(tls, attr, [])
+    try:
+        yield
+    finally:
+        if outer is None:
+            delattr(tls, attr)
+        else:
+            setattr(tls, attr, outer)
 
 
 def claim_or_wait(path: Path, load: Callable[[], object]) -> object:
@@ -137,4 +172,15 @@ def claim_or_wait(path: Path, load: Callable[[], object]) -> object:
             return data
         if time.monotonic() > deadline:
             return None
+        if _Sharing.meanwhile is not None and not _Sharing.busy:
+            _Sharing.busy = True
+            try:
+                with _outside_any_compile():
+                    more = _Sharing.meanwhile()
+            finally:
+                _Sharing.busy = False
+            if more:
+                deadline = time.monotonic() + WAIT_S  # the wait starts again after that compile
+                continue
+            _Sharing.meanwhile = None
         time.sleep(POLL_S)

@@ -107,7 +107,9 @@ def _probe_key(probe) -> str:
     return f"{getattr(probe, '__module__', '')}.{getattr(probe, '__qualname__', probe)}"
 
 
-def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = False) -> subprocess.Popen | None:
+def warm_in_background(
+    probe, entries: Sequence[Entry], splits_probe: bool = False, meanwhile: Sequence[Entry] = ()
+) -> subprocess.Popen | None:
     """Start the warming process for ``entries`` (in order) if ``probe`` (the command's main kernel) is not cached.
 
     ``splits_probe``: the entries end with the probe's own parts, from its last (the EKF's sections), so the command
@@ -158,12 +160,28 @@ def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = Fal
         return None
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
     claims.share_with(proc.pid, lambda: proc.poll() is None)  # each function compiled once (formats.jit.claims)
+    if meanwhile:
+        claims.while_waiting(_one_at_a_time(meanwhile))
     if splits_probe:
         kernel_cache.compiling_in_two_processes(probe[0] if isinstance(probe, tuple) else probe.__module__)
     return proc
 
 
 _STARTED: set[str] = set()  # the probes this process has started a warming process for
+
+
+def _one_at_a_time(entries: Sequence[Entry]):
+    """For :func:`formats.jit.claims.while_waiting`: each call compiles the next of ``entries`` that is neither
+    cached nor claimed by the other process; False once none is left."""
+    left = list(entries)
+
+    def work() -> bool:
+        while left:
+            if compile_entries([left.pop(0)]):
+                return True
+        return False
+
+    return work
 
 
 def _busy_cores() -> float:
@@ -188,6 +206,7 @@ def compile_entries(entries: Sequence[Entry], parent: int | None = None) -> int:
     for module, name, text in entries:
         if parent is not None and os.getppid() != parent:
             break
+        before = claims.held()  # (the command's, when it compiles an entry while it waits: its kernel's claim)
         try:
             fn = getattr(importlib.import_module(module), name)
             args = argument_types(text)
@@ -196,7 +215,7 @@ def compile_entries(entries: Sequence[Entry], parent: int | None = None) -> int:
                 continue  # the other process is compiling it (where the two meet): the next one
             fn.compile(args)
         except Exception:  # noqa: BLE001 - a kernel this process cannot compile is left to the command
-            claims.release_all()  # what it had claimed for it: the command compiles that itself
+            claims.release_all(keep=before)  # what it had claimed for it: the other process may compile that
             continue
         done += 1
     return done
