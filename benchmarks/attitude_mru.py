@@ -22,6 +22,14 @@ Usage::
     python benchmarks/attitude_mru.py --quick      # 5-minute voyages (turn from 90 s), 1 seed
     python benchmarks/attitude_mru.py              # 10-minute voyages (turn from 180 s), seeds 0-2
     python benchmarks/attitude_mru.py --speed      # samples/s of the filter with and without GNSS velocity
+    python benchmarks/attitude_mru.py --seeds 10 --factor heave   # base + one axis's cells, seeds 0-9
+    python benchmarks/attitude_mru.py --limit      # the idealised limit of the accelerometer bias (below)
+
+``--limit``: the information limit of the accelerometer bias in one turn, from an exact linear model of a level
+platform (horizontal errors only: velocity, tilt, gyro bias, accelerometer bias; δv̇ = (g + heave's acceleration)
+J ψ + R b_a, ψ̇ = −R δb_g, the gyro bias a random walk of q, velocity fixes with σ_v): the Kalman filter of that
+model holds the Cramér–Rao bound, which its final σ of b_a is. Beside it the rough estimate from the Brownian
+bridge of the gyro bias inside the turn, g q √(π/6) Ω^−1.5 (docs/attitude.md, "The limit").
 """
 
 from __future__ import annotations
@@ -69,13 +77,14 @@ START_S = 60.0  # scored from here (the filter's start-up before)
 TURN_RAMP_S = 10.0
 
 
-def cells(quick: bool) -> list[dict]:
+def cells(quick: bool, factors: list[str] | None = None) -> list[dict]:
     out = [dict(BASE)]
     for factor, levels in LEVELS.items():
-        if quick and factor not in QUICK:
+        if (quick and factor not in QUICK) or (factors and factor not in factors):
             continue
         out += [{**BASE, factor: v} for v in levels]
-    if not quick:  # the gyro's bias instability not told (the default aided_gyro_bias_rw, 0.0023 °/s/√s)
+    if not quick and (not factors or "told" in factors):  # the gyro's bias instability not told (the default
+        # aided_gyro_bias_rw, 0.0023 °/s/√s)
         out += [{**BASE, "gyro_rw": g, "told": False} for g in (0.0005, 0.01)]
     return out
 
@@ -148,6 +157,8 @@ def run_cell(job: tuple[dict, int, bool, dict]) -> dict:
                 "cover": float(
                     np.mean(np.concatenate([np.abs(er[sel]) <= 2 * sr[sel], np.abs(ep[sel]) <= 2 * sp[sel]]))
                 ),
+                "roll_sigma": float(np.nanmean(sr[sel])),
+                "pitch_sigma": float(np.nanmean(sp[sel])),
             }
     r["cover"] = float(
         np.mean(np.concatenate([np.abs(er[scored]) <= 2 * sr[scored], np.abs(ep[scored]) <= 2 * sp[scored]]))
@@ -167,6 +178,69 @@ def fmt(runs: list[dict], part: str, what: str) -> str:
         return "–"
     worst = f" ({max(v):.3f})" if len(v) > 1 else ""
     return f"{np.mean(v):.3f}{worst} / {max(mx):.2f}"
+
+
+def level_limit(
+    q_deg: float = 0.002,
+    turn_dps: float = 3.0,
+    sigma_v: float = 0.03,
+    rate_hz: float = 1.0,
+    heave_m: float = 0.0,
+    heave_period: float = 7.5,
+    before: float = 180.0,
+    after: float = 290.0,
+    arw_deg: float = 0.005,
+    dt: float = 0.1,
+) -> float:
+    """The accelerometer bias's σ (mg) after a 360° turn at ``turn_dps`` on a level platform (module docstring,
+    ``--limit``): q the gyro's rate random walk (°/s/√s), arw its white noise (°/s/√Hz), a sinusoidal heave of
+    ``heave_m`` (amplitude, m) modulating the vertical force."""
+    q, om, arw = np.radians(q_deg), np.radians(turn_dps), np.radians(arw_deg)
+    span = 2 * np.pi / om
+    p = np.diag([sigma_v**2] * 2 + [np.radians(1.0) ** 2] * 2 + [0.002**2] * 2 + [0.05**2] * 2)
+    j = np.array([[0.0, -1.0], [1.0, 0.0]])
+    qd = np.zeros((8, 8))
+    qd[2:4, 2:4] = np.eye(2) * arw**2 * dt
+    qd[4:6, 4:6] = np.eye(2) * q**2 * dt
+    h = np.zeros((2, 8))
+    h[:, :2] = np.eye(2)
+    every = max(1, int(round(1.0 / (rate_hz * dt))))
+    for k, t in enumerate(np.arange(0.0, before + span + after, dt)):
+        chi = om * np.clip(t - before, 0.0, span)
+        rz = np.array([[np.cos(chi), -np.sin(chi)], [np.sin(chi), np.cos(chi)]])
+        w = 2 * np.pi / heave_period
+        f = np.zeros((8, 8))
+        f[0:2, 2:4] = (G + heave_m * w**2 * np.sin(w * t)) * j
+        f[0:2, 6:8] = rz
+        f[2:4, 4:6] = -rz
+        phi = np.eye(8) + f * dt + f @ f * dt**2 / 2
+        p = phi @ p @ phi.T + qd
+        if k % every == 0:
+            s = h @ p @ h.T + np.eye(2) * sigma_v**2
+            gain = p @ h.T @ np.linalg.inv(s)
+            p = (np.eye(8) - gain @ h) @ p
+    return float(np.sqrt(p[6, 6]) / G * 1e3)
+
+
+def limits() -> None:
+    print("| gyro q °/s/√s | turn °/s | σ_v m/s | fixes Hz | heave m | limit mg | bridge estimate mg |")
+    print("|---|---|---|---|---|---|---|")
+    rows = [
+        (0.002, 3.0, 0.03, 1.0, 0.0),
+        (0.002, 3.0, 0.038, 1.0, 0.0),
+        (0.002, 3.0, 0.001, 1.0, 0.0),
+        (0.002, 3.0, 0.03, 10.0, 0.0),
+        (0.002, 3.0, 0.05, 1.0, 0.0),
+        (0.002, 3.0, 0.038, 1.0, 1.0),
+        (0.002, 3.0, 0.038, 1.0, 2.0),
+        (0.0005, 3.0, 0.03, 1.0, 0.0),
+        (0.01, 3.0, 0.03, 1.0, 0.0),
+        (0.002, 1.5, 0.03, 1.0, 0.0),
+        (0.002, 6.0, 0.03, 1.0, 0.0),
+    ]
+    for q, om, sv, f, hv in rows:
+        bridge = np.radians(q) * np.sqrt(np.pi / 6) * np.radians(om) ** -1.5 * 1e3
+        print(f"| {q} | {om} | {sv} | {f:g} | {hv:g} | {level_limit(q, om, sv, f, hv):.2f} | {bridge:.2f} |")
 
 
 def speed() -> None:
@@ -216,10 +290,15 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=None)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--speed", action="store_true")
+    ap.add_argument("--limit", action="store_true", help="the idealised limit of the accelerometer bias")
+    ap.add_argument("--factor", action="append", default=[], help="only the base and this axis's cells (repeat)")
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
     args = ap.parse_args()
     if args.speed:
         speed()
+        return
+    if args.limit:
+        limits()
         return
     overrides = {}
     for item in args.param:
@@ -227,7 +306,7 @@ def main() -> None:
         d = getattr(EkfParams(), k)
         overrides[k] = v in ("1", "true") if isinstance(d, bool) else type(d)(v)
     seeds = range(args.seeds if args.seeds is not None else (1 if args.quick else 3))
-    grid = cells(args.quick)
+    grid = cells(args.quick, args.factor)
     jobs = [(c, s, args.quick, overrides) for c in grid for s in seeds]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("fork")) as pool:
@@ -238,9 +317,9 @@ def main() -> None:
     )
     print(
         "| cell | roll after turn | pitch after turn | roll before turn | 2σ before | 2σ all | bias error x/y/z mg "
-        "| bias σ x/y/z mg | innovation ratio |"
+        "| bias σ x/y/z mg | σ roll / pitch after | innovation ratio |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for c in grid:
         runs = [r for r in results if r["cell"] == c]
         cb = [r["before"]["cover"] for r in runs if "before" in r]
@@ -249,10 +328,12 @@ def main() -> None:
         bs = [r["bias_std_mg"] for r in runs if "bias_std_mg" in r]
         bss = "/".join(f"{x:.2f}" for x in np.mean(bs, axis=0)) if bs else "–"
         before = f"{100 * min(cb):.0f} %" if cb else "–"
+        sa = [(r["after"]["roll_sigma"], r["after"]["pitch_sigma"]) for r in runs if "after" in r]
+        sig = "{:.3f} / {:.3f}".format(*np.mean(sa, axis=0)) if sa else "–"
         cover = f"{100 * min(r['cover'] for r in runs):.0f}–{100 * max(r['cover'] for r in runs):.0f} %"
         print(
             f"| {label(c)} | {fmt(runs, 'after', 'roll')} | {fmt(runs, 'after', 'pitch')} "
-            f"| {fmt(runs, 'before', 'roll')} | {before} | {cover} | {bes} | {bss} "
+            f"| {fmt(runs, 'before', 'roll')} | {before} | {cover} | {bes} | {bss} | {sig} "
             f"| {max(r['ratio'] or 0 for r in runs):.2f} |"
         )
     print(f"\n{len(jobs)} runs in {time.perf_counter() - t0:.0f} s on {args.jobs} processes")

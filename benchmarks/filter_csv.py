@@ -22,6 +22,8 @@ Usage::
     python benchmarks/filter_csv.py --repeat 8 --baseline ../main   # A/B: another clone in the same rounds
     python benchmarks/filter_csv.py --repeat 0 --stages --baseline ../main   # the stages of both
     python benchmarks/filter_csv.py --repeat 0 --day      # the day: streamed imutool against the peer, once each
+
+imutool's children keep their modules' bytecode (``--no-bytecode``: not, as before 2026-12-06; see :func:`tree_env`).
 """
 
 from __future__ import annotations
@@ -66,7 +68,9 @@ heading = np.degrees(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))) %
 pl.DataFrame({"time": t, "roll": roll, "pitch": pitch, "heading": heading, "q_w": w, "q_x": x, "q_y": y, "q_z": z}
              ).write_csv(sys.argv[2])
 """
-FILTER = "from imutool.cli import main; main()"
+# what the `imutool` executable runs: its console script (pyproject: imutool.cli:run, which ends the process without
+# Python's module teardown; a clone from before it has main only)
+FILTER = "from imutool import cli; getattr(cli, 'run', cli.main)()"
 
 
 def make_csv(path: Path, rows: int) -> None:
@@ -81,13 +85,28 @@ def make_csv(path: Path, rows: int) -> None:
     formats.write(keep, path)
 
 
+BYTECODE = {"on": True}  # imutool's children with their bytecode (--no-bytecode: compiled from source each run)
+
+
+def tree_env(tree: Path, cwd: Path) -> dict[str, str]:
+    """The environment of a child running the clone ``tree``: it first on the path and, unless --no-bytecode, its
+    modules' bytecode kept (in ``cwd``/pycache, outside the clone) as an installed package has it. Where
+    ``PYTHONDONTWRITEBYTECODE`` is set (this project's sessions set it) a clone without ``__pycache__`` compiles its
+    ~60 modules from source at every start: 0.24 s of CPU that no installed imutool spends (`-X importtime`: our
+    modules' self time 314 against 73 ms), while the peers' libraries come with their bytecode."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    if BYTECODE["on"]:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
+        env["PYTHONPYCACHEPREFIX"] = str(cwd / "pycache")
+    return env
+
+
 def timed(cmd: list[str], cwd: Path, tree: Path | None = None) -> tuple[float, float, float]:
     """(wall s, CPU s, peak RSS MB) of one command's child process, run in ``cwd`` (``python -c`` puts the working
     folder first on the path: never the folder holding a clone), with ``tree`` (a clone of imutool) first on its
-    path. The peak is the child's own ``ru_maxrss`` (from ``wait4``, not the maximum over all children so far)."""
-    env = dict(os.environ)
-    if tree is not None:
-        env["PYTHONPATH"] = str(tree)
+    path (:func:`tree_env`). The peak is the child's own ``ru_maxrss`` (from ``wait4``, not the maximum over all
+    children so far)."""
+    env = dict(os.environ) if tree is None else tree_env(tree, cwd)
     t0 = time.perf_counter()
     for arg in cmd:  # the previous run's output (filter refuses to overwrite a file)
         if arg.endswith(".csv") and Path(arg).name.startswith(("est_", "peer_", "polars")):
@@ -227,7 +246,7 @@ def stage_run(src: str, out: str) -> None:
 def stages(src: Path, out: Path, tree: Path = ROOT) -> None:
     """Where the time goes: :func:`stage_run` in a fresh process (its imports and kernel loads as a user's), with
     ``tree`` (a clone of imutool) on its path."""
-    env = dict(os.environ, PYTHONPATH=str(tree), IMUTOOL_BENCH_TREE=str(tree))
+    env = dict(tree_env(tree, out.parent), IMUTOOL_BENCH_TREE=str(tree))
     print(f"stages of {tree}:", flush=True)
     subprocess.run([sys.executable, __file__, "--stage-run", str(src), str(out)], check=True, cwd=out.parent, env=env)
 
@@ -330,8 +349,12 @@ def main() -> None:
     ap.add_argument("--baseline", help="another clone of imutool (e.g. main's) run in the same rounds, for an A/B")
     ap.add_argument("--day", action="store_true", help="a day at 200 Hz: streamed imutool vs the peer, once each")
     ap.add_argument("--keep", action="store_true", help="keep the day's CSV (3 GB) for another run")
+    ap.add_argument(
+        "--no-bytecode", action="store_true", help="imutool's modules compiled from source at each start (as before)"
+    )
     ap.add_argument("--stage-run", nargs=2, metavar=("SRC", "OUT"), help=argparse.SUPPRESS)
     a = ap.parse_args()
+    BYTECODE["on"] = not a.no_bytecode
     if a.stage_run:
         stage_run(*a.stage_run)
         return

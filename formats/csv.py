@@ -21,7 +21,7 @@ import queue
 import shutil
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
@@ -840,7 +840,11 @@ def format_array(data: np.ndarray, sep: str = ",", decimals: np.ndarray | None =
     return b"".join(parts)
 
 
-def _format_block(data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.ndarray | None = None) -> bytes:
+def _format_block(
+    data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.ndarray | None = None
+) -> bytes | memoryview:
+    """Rows data[r0:r1] as CSV lines: a view of the formatted bytes (written or joined as they are, not copied
+    into a ``bytes`` first: 160 bytes a row of an estimate, a copy of the whole output otherwise)."""
     n = r1 - r0
     if decimals is None:
         decimals = np.full(data.shape[1], -1, np.int64)
@@ -849,7 +853,7 @@ def _format_block(data: np.ndarray, r0: int, r1: int, sep: str, decimals: np.nda
     nbytes, nfail = _eng.format_block(data, data.view(np.uint64), r0, r1, ord(sep), out, fails, decimals)
     if nfail:  # never seen; Python's repr is exact too
         return "".join(sep.join("" if v != v else repr(v) for v in row) + "\n" for row in data[r0:r1].tolist()).encode()
-    return out[:nbytes].tobytes()
+    return memoryview(out)[:nbytes]
 
 
 DECIMALS_KEY = "csv_decimals"
@@ -878,13 +882,18 @@ def _threads() -> int:
     return max(1, min(4, thread_budget()))
 
 
-def _write_rows(f: Any, rec: Recording) -> None:
+def _write_rows(f: Any, rec: Recording, before: Callable[[], Any] | None = None) -> None:
+    """Write ``rec``'s rows to ``f``; or, with ``before``, to the file it returns, called once the rows' formatting
+    has started on the format threads and before the first row is written (:meth:`CsvWriter._write_chunk`: the
+    copy of the earlier rows behind a new header runs while the chunk is formatted)."""
     if not len(rec):
+        if before is not None:
+            before()
         return
     blocks = _canonicalised(rec)
     decimals = column_decimals(rec)
 
-    def one(r0: int) -> bytes:
+    def one(r0: int) -> bytes | memoryview:
         r1 = min(r0 + _WRITE_BLOCK_ROWS, len(rec))
         data = np.ascontiguousarray(np.hstack([b[r0:r1] for b in blocks]), dtype=np.float64)
         return _format_block(data, 0, r1 - r0, ",", decimals)
@@ -892,11 +901,16 @@ def _write_rows(f: Any, rec: Recording) -> None:
     starts = range(0, len(rec), _WRITE_BLOCK_ROWS)
     nthreads = _threads()
     if nthreads == 1 or len(starts) < 2:
+        if before is not None:
+            f = before()
         for r0 in starts:
             f.write(one(r0))
         return
     with ThreadPoolExecutor(nthreads) as pool:  # blocks formatted in parallel, written in order
-        for text in pool.map(one, starts):
+        texts = pool.map(one, starts)  # (every block submitted now)
+        if before is not None:
+            f = before()
+        for text in texts:
             f.write(text)
 
 
@@ -987,9 +1001,9 @@ class CsvWriter(AtomicChunkWriter):
         self._f.write(head)
         self._head_bytes = head
 
-    def _rewrite(self, head: bytes) -> None:
+    def _rewrite(self, head: bytes) -> Any:
         """Start a new file with ``head`` and the current file's rows copied behind it; it becomes the current
-        file (open for more rows) and the old one is removed."""
+        file (open for more rows, returned) and the old one is removed."""
         self._f.close()
         old = self._cur
         self._cur = str(self._tmp) + (".meta" if old == str(self._tmp) else "")
@@ -1000,13 +1014,15 @@ class CsvWriter(AtomicChunkWriter):
         self._head_bytes = head
         if old != str(self._tmp):  # the temporary file itself stays: atomic_path renames or removes it
             os.unlink(old)
+        return self._f
 
     def _write_chunk(self, rec: Recording) -> None:
         final = self.final_meta  # one version (set_final_meta replaces the dict)
         if final:
             head = self._header(final)
-            if head != self._head_bytes:
-                self._rewrite(head)
+            if head != self._head_bytes:  # the earlier rows copied behind it while this chunk is formatted
+                _write_rows(self._f, rec, before=lambda: self._rewrite(head))
+                return
         _write_rows(self._f, rec)
 
     def _finish(self) -> None:

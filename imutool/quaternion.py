@@ -16,11 +16,14 @@ def qmul(a0, a1, a2, a3, b0, b1, b2, b3):
     )
 
 
+SERIES_ANGLE2 = 4e-4  # rad²: below this squared angle a rotation vector's exponential is its series (rotvec_quat)
+
+
 @njit(inline="always")  # small and on the per-sample path: compiled into each caller
 def rotvec_quat(x, y, z):
     """Unit quaternion of the rotation vector (x, y, z) rad (exact exponential)."""
     a2 = x * x + y * y + z * z
-    if a2 < 4e-4:  # |a| < 0.02 rad: Taylor series, truncation < 1e-15 (no sin/cos per sample)
+    if a2 < SERIES_ANGLE2:  # |a| < 0.02 rad: Taylor series, truncation < 1e-15 (no sin/cos per sample)
         s = 0.5 - a2 * (1.0 / 48.0) + a2 * a2 * (1.0 / 3840.0)
         return 1.0 - a2 * 0.125 + a2 * a2 * (1.0 / 384.0), s * x, s * y, s * z
     a = np.sqrt(a2)
@@ -98,3 +101,19 @@ def rmat(q0, q1, q2, q3, r):
     r[2, 0] = 2 * (q1 * q3 - q0 * q2)
     r[2, 1] = 2 * (q2 * q3 + q0 * q1)
     r[2, 2] = 1 - 2 * (q1 * q1 + q2 * q2)
+
+
+@njit(inline="always")  # small and on the per-sample path: compiled into each caller
+def rotate(q0, q1, q2, q3, f0, f1, f2):
+    """R(q) f: the body vector f in the world frame, for q body→NED; the same operations as :func:`rmat` and the
+    product row by row, without the matrix in memory."""
+    r00 = 1 - 2 * (q2 * q2 + q3 * q3)
+    r01 = 2 * (q1 * q2 - q0 * q3)
+    r02 = 2 * (q1 * q3 + q0 * q2)
+    r10 = 2 * (q1 * q2 + q0 * q3)
+    r11 = 1 - 2 * (q1 * q1 + q3 * q3)
+    r12 = 2 * (q2 * q3 - q0 * q1)
+    r20 = 2 * (q1 * q3 - q0 * q2)
+    r21 = 2 * (q2 * q3 + q0 * q1)
+    r22 = 1 - 2 * (q1 * q1 + q2 * q2)
+    return r00 * f0 + r01 * f1 + r02 * f2, r10 * f0 + r11 * f1 + r12 * f2, r20 * f0 + r21 * f1 + r22 * f2

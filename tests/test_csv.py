@@ -79,6 +79,53 @@ def test_parser_bit_identical_to_float_on_random_decimals():
     assert np.array_equal(_bits(got), _bits(ref))
 
 
+def test_the_power_of_five_table_is_the_definitions():
+    """The Eisel–Lemire table (built at import: now one shift to 128 bits where it was one bit a step, 14 → 1 ms of
+    every start) is T = 5^q in 128 bits, or floor(2^b / 5^-q) + 1 cut to 128 bits, for every q of its range."""
+    for i, q in enumerate(range(eng._W_MIN, eng._W_MAX + 1)):
+        if q >= 0:
+            p = 5**q
+            n = p.bit_length()
+            c, t = (p << (128 - n), n - 128) if n <= 128 else (p >> (n - 128), n - 128)
+        else:
+            z = (5**-q).bit_length()
+            b = z + 127 if q >= -27 else 2 * z + 128
+            c, t = (1 << b) // 5**-q + 1, -b
+            while c >= 1 << 128:
+                c, t = c >> 1, t + 1
+        assert (int(eng.T_HI[i]), int(eng.T_LO[i]), int(eng.T_EXP[i])) == (c >> 64, c & (2**64 - 1), t), q
+
+
+def test_fraction_digits_read_four_at_a_time_are_exact_at_every_length():
+    """The reader takes a fraction's digits four at a time where four follow: every fraction length 0–24 (the
+    groups, the single digits after them, the long-token path beyond 19 digits), with an exponent, a row of several
+    fields and a token at the very end of the buffer, gives float()'s double; a letter inside a group is refused."""
+    rng = np.random.default_rng(52)
+    toks = []
+    for nf in range(25):
+        for ni in (0, 1, 3):
+            for _ in range(20):
+                digs = "".join(rng.choice(list("0123456789"), ni + nf))
+                tok = ("-" if rng.random() < 0.3 else "") + (digs[:ni] or "0") + "." + digs[ni:]
+                toks.append(tok + (f"e{int(rng.integers(-30, 30))}" if rng.random() < 0.3 else ""))
+    got = _parse_tokens(toks)
+    assert np.array_equal(_bits(got), _bits(np.array([float(t) for t in toks])))
+    for tail in ("", "\n"):  # the last token ends the buffer, with and without its newline
+        data = ("1.25,0.123456789012,3.14159265\n2.5,-0.00000001,7." + "1234" * 3 + tail).encode()
+        buf = np.frombuffer(data, np.uint8)
+        out = np.empty((3, 3))
+        fb, bad = np.empty((8, 4), np.int64), np.empty((8, 3), np.int64)
+        res = eng.parse_block(buf, 0, buf.size, 3, 44, 46, out, 0, False, fb, bad, eng.T_HI, eng.T_LO)
+        assert res[1] == 2 and res[3] == 0, res
+        assert out[:2].tolist() == [[1.25, 0.123456789012, 3.14159265], [2.5, -0.00000001, 7.123412341234]]
+    data = b"1.12x45678,2.0\n0.5,0.25\n"
+    buf = np.frombuffer(data, np.uint8)
+    out = np.empty((3, 2))
+    fb, bad = np.empty((8, 4), np.int64), np.empty((8, 3), np.int64)
+    res = eng.parse_block(buf, 0, buf.size, 2, 44, 46, out, 0, False, fb, bad, eng.T_HI, eng.T_LO)
+    assert res[1] == 1 and res[3] == 1 and bad[0, 1] == 2 and out[0].tolist() == [0.5, 0.25], (res, bad[:1])
+
+
 def test_writer_round_trips_random_bit_patterns_and_is_short():
     rng = np.random.default_rng(4)
     x = rng.integers(0, 2**64 - 1, 50000, dtype=np.uint64, endpoint=True).view(np.float64)
@@ -628,6 +675,36 @@ def test_background_writer_equals_foreground_and_reports_disk_errors(tmp_path):
             w.write(c)
         w.close()
     assert not (tmp_path / "full.csv").exists()
+
+
+def _fixed_reference(x: float, d: int) -> str:
+    """The fixed-decimals field as the engine defines it, in Python: |x|·10^d (one float product) + 0.5 truncated,
+    integer and fraction, the fraction's trailing zeros dropped; a value that rounds to 0 is ``0``."""
+    ax = abs(x)
+    if ax == 0.0:
+        return "-0" if math.copysign(1.0, x) < 0 else "0"
+    v = int(ax * float(f"1e{d}") + 0.5)
+    if v == 0:
+        return "0"
+    ip, fp = divmod(v, 10**d)
+    frac = f"{fp:0{d}d}".rstrip("0") if d else ""
+    return ("-" if x < 0 else "") + str(ip) + ("." + frac if frac else "")
+
+
+def test_fixed_decimals_every_digit_against_a_reference():
+    """Every decimal count 0–MAX_DECIMALS, values from 1e-12 to 1e8 of either sign (the fraction written two digits
+    a step, the common counts 6 and 9 divided by constants): the same text as the engine's definition in Python."""
+    rng = np.random.default_rng(52)
+    n = 4000
+    x = rng.uniform(-1, 1, n) * 10.0 ** rng.uniform(-12, 8, n)
+    x[:40] = np.round(x[:40], 3)  # trailing zeros
+    x[40:50] = rng.integers(-1000, 1000, 10)  # whole numbers
+    for d in range(eng.MAX_DECIMALS + 1):
+        keep = np.abs(x) * 10.0**d < 9e15  # beyond that the exact form (tested elsewhere)
+        col = x[keep][:, None]
+        got = format_array(col, decimals=np.array([d])).decode().splitlines()
+        want = [_fixed_reference(float(v), d) for v in col[:, 0]]
+        assert got == want, [(g, w) for g, w in zip(got, want, strict=True) if g != w][:5]
 
 
 def test_fixed_decimals_columns(tmp_path):

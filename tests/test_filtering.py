@@ -406,8 +406,8 @@ def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
     """SelfCheck carries the gyro-scale check's last complete window (and the open one) into the next chunk: where
     that window starts is where the check's kernel cuts it (windows from the first sample, each starting at the
     first sample `window` s or more after the last start), whatever the sample spacing, so no pair is lost or
-    counted twice at a chunk edge."""
-    from imutool.attitude.selfcheck import _last_pair_start
+    counted twice at a chunk edge. The kernel returns that index (it cuts the windows anyway)."""
+    from imutool.gyro_check import CANDIDATES, pair_discrepancy_kernel
 
     def kernel_cut(t, window):
         starts = [0]
@@ -416,12 +416,18 @@ def test_scale_check_carry_starts_at_the_kernels_last_complete_window():
                 starts.append(k)
         return starts[-2] if len(starts) >= 2 else 0
 
+    def last_start(t, window, budget=0):
+        z = np.zeros((len(t), 3))
+        sums, counts = np.zeros(len(CANDIDATES)), np.zeros(len(CANDIDATES))
+        return pair_discrepancy_kernel(t, z, z, z + 1.0, window, 1.0, CANDIDATES, 9.8, budget, sums, counts)[1]
+
     rng = np.random.default_rng(3)
     for _ in range(200):
         t = 1e5 + np.cumsum(rng.uniform(0.001, 0.5, rng.integers(1, 300)))
         for window in (0.0, 0.01, 2.0, 7.3):
-            assert _last_pair_start(t, window) == kernel_cut(t, window)
-    assert _last_pair_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12
+            assert last_start(t, window) == kernel_cut(t, window)
+        assert last_start(t, 2.0, budget=10**6) == kernel_cut(t, 2.0)
+    assert last_start(np.arange(0.0, 10.0, 0.5), 2.0) == 12  # starts 0, 4, 8, 12, 16: the last complete is 12
 
 
 def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_path, monkeypatch, copy_sizes):
@@ -438,6 +444,12 @@ def test_a_stream_writes_its_last_chunk_behind_the_final_header(roll_csv, tmp_pa
     assert len(rows) == 6001
     assert copied == [len(b"".join(rows[:5000]))]  # the first two chunks, once; the last one written in place
     # the same file when the metadata are given at the end (the writer then copies every row)
+    # the last chunk formatted on two threads in blocks of 300 rows while the rows before it are copied: the same
+    monkeypatch.setattr(fcsv, "_WRITE_BLOCK_ROWS", 300)
+    monkeypatch.setattr(fcsv, "_threads", lambda: 2)
+    overlapped = tmp_path / "overlapped.csv"
+    run_filter(roll_csv, overlapped, stream_mb=0, chunk_rows=2500)
+    assert overlapped.read_bytes() == text and copied[-1] == copied[0]
     monkeypatch.setattr(fcsv.CsvWriter, "set_final_meta", _set_at_close)
     late = tmp_path / "late.csv"
     run_filter(roll_csv, late, stream_mb=0, chunk_rows=2500)

@@ -178,3 +178,108 @@ def test_a_streams_checked_pairs_spread_over_the_run_as_in_one_call():
             assert abs(chk.checked - whole.checked) <= 400 * len(per_chunk) // 10, (chk.checked, whole.checked)
         else:
             assert per_chunk[0] >= 10_000, per_chunk  # every pair of the chunk (a sample counts in two pairs)
+
+
+def _reference_kernel():
+    """The check's kernel as it was before the candidates were interleaved (one candidate's whole pair after
+    another's, the rotation matrix in memory): the sums the interleaved kernel must give bit for bit."""
+    from numba import njit
+
+    from imutool.quaternion import qturn, rmat
+
+    @njit(cache=False)
+    def reference(t, gyro, bias, force, window, gap_dt, factors, g, max_samples, sums, counts):
+        n = t.shape[0]
+        starts = np.empty(n + 1, dtype=np.int64)
+        m = 0
+        starts[0] = 0
+        for k in range(1, n):
+            if t[k] - t[starts[m]] >= window:
+                m += 1
+                starts[m] = k
+        n_pairs = m - 1
+        if n_pairs <= 0 or max_samples <= 0:
+            return 0
+        used = 0
+        stride = max(1, int(np.ceil(n_pairs * (2.0 * n / (m + 1.0)) / max_samples)))
+        R = np.empty((3, 3))
+        for p in range(0, n_pairs, stride):
+            i0, i1, i2 = starts[p], starts[p + 1], starts[p + 2]
+            ok = True
+            for k in range(i0 + 1, i2):
+                if not t[k] - t[k - 1] <= gap_dt:
+                    ok = False
+                    break
+            if not ok:
+                continue
+            used += i2 - i0
+            for si in range(factors.shape[0]):
+                s0, s1, s2 = factors[si, 0], factors[si, 1], factors[si, 2]
+                a0, a1, a2, a3 = 1.0, 0.0, 0.0, 0.0
+                ma0 = ma1 = ma2 = mb0 = mb1 = mb2 = 0.0
+                ca = 0
+                cb = 0
+                for k in range(i0, i2):
+                    if k > i0:
+                        dt = t[k] - t[k - 1]
+                        w0 = s0 * (gyro[k, 0] - bias[k, 0]) * dt
+                        w1 = s1 * (gyro[k, 1] - bias[k, 1]) * dt
+                        w2 = s2 * (gyro[k, 2] - bias[k, 2]) * dt
+                        if np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2):
+                            a0, a1, a2, a3 = qturn(a0, a1, a2, a3, w0, w1, w2)
+                    f0, f1, f2 = force[k, 0], force[k, 1], force[k, 2]
+                    if not (np.isfinite(f0) and np.isfinite(f1) and np.isfinite(f2)):
+                        continue
+                    rmat(a0, a1, a2, a3, R)
+                    v0 = R[0, 0] * f0 + R[0, 1] * f1 + R[0, 2] * f2
+                    v1 = R[1, 0] * f0 + R[1, 1] * f1 + R[1, 2] * f2
+                    v2 = R[2, 0] * f0 + R[2, 1] * f1 + R[2, 2] * f2
+                    if k < i1:
+                        ma0 += v0
+                        ma1 += v1
+                        ma2 += v2
+                        ca += 1
+                    else:
+                        mb0 += v0
+                        mb1 += v1
+                        mb2 += v2
+                        cb += 1
+                if 2 * ca < i1 - i0 or 2 * cb < i2 - i1:
+                    continue
+                d0, d1, d2 = ma0 / ca - mb0 / cb, ma1 / ca - mb1 / cb, ma2 / ca - mb2 / cb
+                sums[si] += (d0 * d0 + d1 * d1 + d2 * d2) / (g * g)
+                counts[si] += 1.0
+        return used
+
+    return reference
+
+
+def test_the_interleaved_kernel_gives_the_sums_bit_for_bit():
+    """The kernel turns every candidate at each sample before the next (3× faster: vector instructions over the
+    candidates): the same operations per candidate in the same order, so the same sums, bit for bit, as one candidate
+    after another — on a rolling ship (fast and slow candidates: the exponential's series and its sin/cos), a foot
+    in gait (fast turns), with missing forces, a missing gyro sample, a gap, and the budget spent or not."""
+    from imutool.gyro_check import CANDIDATES, pair_discrepancy_kernel
+
+    reference = _reference_kernel()
+    cases = []
+    for kind, seed in (("ship-roll", 3), ("walk", 1)):
+        rec = simulate(kind, duration=90, seed=seed)
+        gyro = np.ascontiguousarray(rec["gyro"], dtype=float)
+        force = np.ascontiguousarray(rec["accel"], dtype=float)
+        t = np.array(rec.time, dtype=float)
+        force[400:700] = np.nan  # more than half of a window without a force: pairs dropped
+        force[2000:2010, 1] = np.nan  # a few rows without: skipped
+        gyro[3000:3003, 2] = np.nan  # a missing rate: no turn there
+        t[5000:] += 1.0  # a gap: the pairs across it dropped
+        bias = np.full_like(gyro, 2e-3)
+        cases += [(t, gyro, bias, force, budget) for budget in (3000, 10**9)]
+    for t, gyro, bias, force, budget in cases:
+        got, want = [], []
+        for kernel, out in ((pair_discrepancy_kernel, got), (reference, want)):
+            sums, counts = np.zeros(len(CANDIDATES)), np.zeros(len(CANDIDATES))
+            used = kernel(t, gyro, bias, force, 2.0, 0.05, CANDIDATES, 9.80665, budget, sums, counts)
+            out += [used[0] if isinstance(used, tuple) else used, sums, counts]
+        assert got[0] == want[0] > 0
+        assert np.array_equal(got[2], want[2]) and want[2].min() > 0
+        assert np.array_equal(got[1], want[1]), np.abs(got[1] - want[1]).max()

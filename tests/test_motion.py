@@ -127,3 +127,34 @@ def test_the_motion_of_a_long_recording_is_that_of_its_first_ten_minutes():
     g2 = g.copy()
     g2[later] *= 50.0  # rows after the span change nothing
     assert motion_statistics(t, g2) == whole
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_turns_evaluated_every_step_are_those_of_every_sample(seed, monkeypatch):
+    """The turn check evaluates its 20-s rate every TURN_STEP_S and at every sample only between two evaluations
+    that disagree and around the largest: the same spans (to the sample, unrounded) and the same largest rate as
+    the rate evaluated at every sample (TURN_STEP_S = 0, the check before issue 52), in one chunk and in chunks of
+    7 001 rows, on ships turning at 3 °/s with waves, a missing gyro sample, and a gap."""
+    from imutool.attitude import selfcheck as sc
+    from imutool.sim import simulate
+
+    rec = simulate("ship-at-sea", duration=900.0, seed=seed, turn_start=60.0 + 150 * seed, speed_source="none")
+    t = np.array(rec.time, dtype=float)
+    t[60_000:] += 2.0  # a gap
+    q, gyro = np.asarray(rec["ref_q"]), np.array(rec["gyro"], dtype=float)
+    gyro[500:510, 1] = np.nan
+    bias = np.full_like(gyro, 1e-3)
+    found = {}
+    step_s = sc.TURN_STEP_S
+    for step in (0.0, step_s):
+        monkeypatch.setattr(sc, "TURN_STEP_S", step)
+        for chunk in (len(t), 7001):
+            check = sc.SelfCheck(EkfParams(), 0.01)
+            for i in range(0, len(t), chunk):
+                check._add_turns(t[i : i + chunk], q[i : i + chunk], gyro[i : i + chunk], bias[i : i + chunk])
+            found[step, chunk] = ([tuple(s) for s in check.turns.spans], check.turn_rate_max)
+    every = found[0.0, len(t)]
+    assert any(b - a >= sc.TURN_MIN_S for a, b in every[0]) and every[1] > 2.0, every  # a turn, at ~3 °/s
+    for chunk in (len(t), 7001):  # (chunks add the angle up in another order: the rate's last bits differ)
+        assert found[step_s, chunk] == found[0.0, chunk], found
+        assert found[0.0, chunk][0] == every[0] and found[0.0, chunk][1] == pytest.approx(every[1], rel=1e-12)

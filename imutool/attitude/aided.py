@@ -51,9 +51,13 @@ A_NIS = 174  # the velocity fixes' mean NIS per degree of freedom (running, over
 A_T0 = 175  # the time of the first row (s)
 A_NRESTART = 176  # restarts after a divergence
 A_NNODE = 177  # nodes recorded for the smoother in this call (its capacity exceeded: −1)
-A_SIZE = 178
+A_RW_SCALE = 178  # the gyro bias instability used, as a multiple of aided_gyro_bias_rw (widened after divergence)
+A_SIZE = 179
 RESTART_RATIO = 3.0  # the running innovation ratio beyond which the filter restarts from the first pass
 MAX_RESTARTS = 2  # more restarts than this over a run (or a streamed chunk): its output is not used
+# a pass that restarted is run again with the gyro's bias instability × WIDEN_FACTOR (at most WIDEN_TRIES times) and
+# the one that restarts least kept: a gyro whose bias wanders more than stated (the commonest cause) is then followed
+WIDEN_FACTOR, WIDEN_TRIES = 4.0, 2
 NIS_FIXES = 30.0
 # ---- its parameter vector ----
 (
@@ -456,6 +460,7 @@ def aided_initial_state(params) -> np.ndarray:
     ast[A_TFIX] = ast[A_THDG] = ast[A_TSTART] = -np.inf
     ast[A_NIS] = 1.0
     ast[A_T0] = np.nan
+    ast[A_RW_SCALE] = 1.0
     return ast
 
 
@@ -497,10 +502,12 @@ def run_aided(
 
     start = ast.copy()
     inputs = (t, c(gyro), c(accel), c(velocity_ne), c(ekf_q), c(ekf_bias), c(ekf_std), arm)
-    aided_kernel(*inputs, aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes)
+    prm = aided_vector(params, dt_nominal)
+    prm[Q_GYRO_RW] *= ast[A_RW_SCALE]  # widened after a divergence (aided_result); 1 otherwise
+    aided_kernel(*inputs, prm, ast, q, std, ba, bas, nodes)
     if ast[A_NNODE] < 0:  # more nodes than the bound allowed (never expected): the forward pass, unsmoothed
         ast, nodes = start, nodes[:0]
-        aided_kernel(*inputs, aided_vector(params, dt_nominal), ast, q, std, ba, bas, nodes)
+        aided_kernel(*inputs, prm, ast, q, std, ba, bas, nodes)
     summary = {
         "started_s": None if not np.isfinite(ast[A_TSTART]) else round(float(ast[A_TSTART] - ast[A_T0]), 3),
         "velocity_fixes": int(ast[A_NFIX]),
@@ -514,6 +521,8 @@ def run_aided(
         "velocity_innovation_ratio": round(float(ast[A_NIS]), 3),
         "restarts": int(ast[A_NRESTART]),
     }
+    if ast[A_RW_SCALE] != 1.0:  # widened after a divergence (aided_result)
+        summary["gyro_bias_rw_used"] = float(params.aided_gyro_bias_rw * ast[A_RW_SCALE])
     result = AidedResult(q, std, ba, bas, summary)
     if smooth:
         summary["smoothed"] = smooth_aided(t, nodes, int(ast[A_NNODE]) if len(nodes) else 0, result)
@@ -548,16 +557,35 @@ def aided_result(
     :class:`~imutool.attitude.run.AttitudeResult`; the arms (3,) m body FRD from the centre of rotation (None: 0)."""
     lever = np.zeros(3) if lever_arm is None else np.asarray(lever_arm, dtype=np.float64)
     ant = np.zeros(3) if antenna_arm is None else np.asarray(antenna_arm, dtype=np.float64)
-    aided, ast = run_aided(
-        time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant, dt_nominal, state, smooth
-    )
+    state = aided_initial_state(params) if state is None else np.array(state, dtype=np.float64)
+    before = state[A_NRESTART]
+    best = None
+    for attempt in range(WIDEN_TRIES + 1):
+        aided, ast = run_aided(
+            time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant, dt_nominal, state, smooth
+        )
+        restarts = ast[A_NRESTART] - before
+        if best is None or restarts < best[0]:  # the widest that is needed: fewer restarts than a narrower one
+            best = (restarts, aided, ast)
+        if restarts == 0 or attempt == WIDEN_TRIES:
+            break
+        # restarted: the same input, the width × 4 (a smoothed track, which is not the hull's velocity, diverges at
+        # any width and is left to the EKF below)
+        state[A_RW_SCALE] *= WIDEN_FACTOR  # (run_aided copies the state)
+    restarts, aided, ast = best
+    if "gyro_bias_rw_used" in aided.summary and restarts <= MAX_RESTARTS:
+        used, told = aided.summary["gyro_bias_rw_used"], params.aided_gyro_bias_rw
+        aided.summary["note"] = (
+            f"aided pass diverged with aided_gyro_bias_rw {told:g}, ran with {used:g} rad/s/√s: state the gyro's figure"
+        )
     va = aided.std[:, 0] ** 2 + aided.std[:, 1] ** 2
     # the EKF's σ leaves out the accelerometer's bias (its tilt, b/g per axis): compared with it added
     vb = 2.0 * (params.accel_bias_sigma / params.gravity) ** 2
     use = np.isfinite(aided.q[:, 0]) & (va <= res.std[:, 0] ** 2 + res.std[:, 1] ** 2 + vb)
     if aided.summary["restarts"] > MAX_RESTARTS:  # the velocity is not the hull's (a smoothed track) or the gyro
         use[:] = False  # is worse than stated: the EKF's velocity aiding is the safer estimate
-        aided.summary["not_used"] = f"diverged {aided.summary['restarts']} times: the EKF's estimate is output"
+        wider = f", also with the gyro bias instability × {ast[A_RW_SCALE]:g}" if ast[A_RW_SCALE] != 1.0 else ""
+        aided.summary["not_used"] = f"diverged {aided.summary['restarts']} times{wider}: the EKF's estimate is output"
     q, std = res.q.copy(), res.std.copy()
     # the aided pass's attitude turned about the world's down axis onto the EKF's heading (the one that holds the
     # magnetometer or the gyrocompass: the aided pass takes it as a measurement and lags it after a start or a

@@ -240,6 +240,8 @@ def ekf_recording(
             smooth=params.aided_smoother,
         )  # fmt: skip
         summary["aided"] = aided.summary
+        if "note" in aided.summary:  # the gyro's bias instability widened after a divergence
+            warnings = [*warnings, aided.summary["note"]]
     if lever_est is not None:
         summary["lever_arm_estimate"] = lever_est.summary()
         warnings = [m for m in (lever_est.message(),) if m] + warnings

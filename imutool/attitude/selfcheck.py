@@ -96,6 +96,9 @@ def inconsistency_report(
 # a ship's sustained turn, said when no speed is given: the heading's rate over TURN_SMOOTH_S s beyond TURN_RATE
 # deg/s for at least TURN_MIN_S s (a seaway's yaw, ±1.5° at 12 s, stays below; a course change at 1 °/s is a turn)
 TURN_RATE, TURN_SMOOTH_S, TURN_MIN_S = 0.5, 20.0, 30.0
+# the smoothed rate is evaluated every TURN_STEP_S (its spans are reported to 0.1 s) and at every sample between two
+# evaluations that disagree, so a turn's start and end are those of the sample-by-sample rate (0 s: every sample)
+TURN_STEP_S = 0.05
 
 
 class FlagSpans:
@@ -316,6 +319,7 @@ class SelfCheck:
             gap_dt=params.gap_factor * dt_nominal, gravity=params.gravity, samples_expected=samples_expected
         )
         self._scale_tail: tuple[np.ndarray, ...] | None = None  # what the next chunk's scale check starts from
+        self._scale_buf: tuple[np.ndarray, ...] | None = None  # the tail and the next chunk, joined
         self.totals: dict[str, Any] = {}  # the filter's cumulative counters, from the last chunk
         self.t_first = self.t_last = np.nan
         self.motion = "handheld"  # the motion model's choice (imutool/attitude/motion.py): set by the caller
@@ -329,16 +333,20 @@ class SelfCheck:
     def _add_turns(self, time: np.ndarray, q: np.ndarray, gyro: np.ndarray, bias: np.ndarray) -> None:
         """The rate of turn (deg/s): the bias-corrected gyro about the world vertical (a magnetic disturbance that
         drags the heading is no turn), averaged over TURN_SMOOTH_S; beyond TURN_RATE it is a turn (kept as spans;
-        chunks joined by the last TURN_SMOOTH_S of the integrated angle)."""
+        chunks joined by the last TURN_SMOOTH_S of the integrated angle).
+
+        The angle is integrated at every sample; its average rate is evaluated every TURN_STEP_S and, between two
+        evaluations on either side of TURN_RATE, at every sample (:func:`_turning`): the spans' ends and the
+        largest rate are those of the rate at every sample (tests/test_selfcheck.py), at a fifth of the cost."""
         t = np.asarray(time, dtype=np.float64)
-        w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-        r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)  # R's third row
         om = np.asarray(gyro, dtype=np.float64) - bias
         if not np.isfinite(om).all():  # (nan_to_num itself, on every row, cost more than the rest of this check)
             om = np.nan_to_num(om)
-        wz = r20 * om[:, 0] + r21 * om[:, 1] + r22 * om[:, 2]  # rad/s about the world vertical (NED: + clockwise)
+        psi = _vertical_rate(q, om)  # rad/s about the world vertical (NED: + clockwise)
         step = np.diff(t, prepend=t[0] if self._turn_tail is None else self._turn_tail[0][-1])
-        psi = np.cumsum(np.degrees(wz) * np.clip(step, 0.0, None))
+        np.degrees(psi, out=psi)
+        psi *= np.clip(step, 0.0, None, out=step)
+        np.cumsum(psi, out=psi)
         if self._turn_tail is not None:
             psi += self._turn_tail[1][-1]
             t = np.concatenate([self._turn_tail[0], t])
@@ -346,14 +354,10 @@ class SelfCheck:
         n_tail = 0 if self._turn_tail is None else len(self._turn_tail[0])
         if len(t) < 2:
             return
-        j = np.searchsorted(t, t - TURN_SMOOTH_S, side="left")  # the rate over the last TURN_SMOOTH_S
-        span = t - t[j]
-        full = span >= 0.9 * TURN_SMOOTH_S  # the first seconds have no rate yet
-        rate = np.where(full, (psi - psi[j]) / np.where(full, span, 1.0), 0.0)
-        turning = np.abs(rate) >= TURN_RATE
-        if turning[n_tail:].any():
-            self.turn_rate_max = max(self.turn_rate_max, float(np.abs(rate[n_tail:][turning[n_tail:]]).max()))
-        self.turns.add(t[n_tail:], turning[n_tail:])
+        turning, rate_max = _turning(t, psi, n_tail)
+        if rate_max is not None:
+            self.turn_rate_max = max(self.turn_rate_max, rate_max)
+        self.turns.add(t[n_tail:], turning)
         keep = t >= t[-1] - TURN_SMOOTH_S
         self._turn_tail = (t[keep], psi[keep])
 
@@ -413,13 +417,21 @@ class SelfCheck:
         that followed it, still open), which the check pairs again from there (its windows are cut from the first
         sample of what it is given, each ``window`` s long: :func:`imutool.gyro_check.pair_discrepancy_kernel`)."""
         overlap = 0
-        if self._scale_tail is not None:
+        if self._scale_tail is not None:  # behind the tail, in buffers kept from chunk to chunk (no new pages)
             overlap = len(self._scale_tail[0])
-            arrays = tuple(np.concatenate([a, b]) for a, b in zip(self._scale_tail, arrays, strict=True))
+            n = overlap + len(arrays[0])
+            if self._scale_buf is None or len(self._scale_buf[0]) < n:
+                self._scale_buf = tuple(np.empty((n, *np.shape(a)[1:])) for a in arrays)
+            joined = []
+            for buf, a, b in zip(self._scale_buf, self._scale_tail, arrays, strict=True):
+                buf[:overlap] = a
+                buf[overlap:n] = b
+                joined.append(buf[:n])
+            arrays = tuple(joined)
         self.scale.add(*arrays)
         self.scale.seen -= overlap  # the samples carried over were counted with their own chunk
-        i = _last_pair_start(np.asarray(arrays[0], float), self.scale.window)
-        self._scale_tail = tuple(np.array(a[i:]) for a in arrays)
+        i = self.scale.last_window_start  # where the kernel's last complete window starts
+        self._scale_tail = tuple(np.array(a[i:], dtype=np.float64) for a in arrays)
 
     def heading_source(self) -> str:
         """Where the heading comes from, as far as the run has gone (final after the last chunk)."""
@@ -491,22 +503,73 @@ class SelfCheck:
         return SelfCheckReport(summary, warnings, meta)
 
 
-def _last_pair_start(t: np.ndarray, window: float) -> int:
-    """The index where the last complete window starts, of those the gyro-scale check cuts from ``t[0]`` (s): each
-    starts at the first sample ``window`` s or more after the start of the one before (the same subtraction as
-    its kernel); 0 where fewer than two windows start."""
-    starts = [0]
-    while True:
-        s0 = starts[-1]
-        k = max(int(np.searchsorted(t, t[s0] + window, side="left")), s0 + 1)
-        while k > s0 + 1 and t[k - 1] - t[s0] >= window:
-            k -= 1
-        while k < len(t) and t[k] - t[s0] < window:
-            k += 1
-        if k >= len(t):
-            break
-        starts.append(k)
-    return starts[-2] if len(starts) >= 2 else 0
+def _vertical_rate(q: np.ndarray, om: np.ndarray) -> np.ndarray:
+    """(R(q) ω)_z per sample: the rate (rad/s) about the world vertical of the body rates ``om`` (N,3) for q (N,4)
+    body→NED, R's third row (2(xz − wy), 2(yz + wx), 1 − 2(x² + y²)) times ω, row by row, in place (the same
+    operations as the row's products and sums in one expression: the same bits)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    out = x * z
+    out -= w * y
+    out *= 2.0
+    out *= om[:, 0]
+    part = y * z
+    part += w * x
+    part *= 2.0
+    part *= om[:, 1]
+    out += part
+    np.multiply(x, x, out=part)
+    part += y * y
+    part *= 2.0
+    np.subtract(1.0, part, out=part)
+    part *= om[:, 2]
+    out += part
+    return out
+
+
+def _turn_rate(t: np.ndarray, psi: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The heading's rate (deg/s) over the TURN_SMOOTH_S before each sample ``at`` (indices into t, s, and psi, the
+    integrated angle, deg); 0 where less than 0.9 TURN_SMOOTH_S of samples lie before it."""
+    ta = t[at]
+    j = np.searchsorted(t, ta - TURN_SMOOTH_S, side="left")  # the rate over the last TURN_SMOOTH_S
+    span = ta - t[j]
+    full = span >= 0.9 * TURN_SMOOTH_S  # the first seconds have no rate yet
+    return np.where(full, (psi[at] - psi[j]) / np.where(full, span, 1.0), 0.0)
+
+
+def _turning(t: np.ndarray, psi: np.ndarray, start: int) -> tuple[np.ndarray, float | None]:
+    """Per sample from ``start`` on: is the rate of :func:`_turn_rate` beyond TURN_RATE; and the largest such rate
+    (deg/s; None where none is). The rate is evaluated every TURN_STEP_S; between two evaluations that disagree, at
+    every sample; around the largest evaluated rate, at every sample within a step. A crossing there and back
+    between two evaluations that agree (within TURN_STEP_S, of a rate averaged over TURN_SMOOTH_S) is not seen."""
+    n = len(t) - start
+    if n <= 0:
+        return np.zeros(0, dtype=bool), None
+    mean_dt = (t[-1] - t[start]) / max(1, n - 1)
+    d = max(1, int(TURN_STEP_S / mean_dt)) if mean_dt > 0 else 1
+    at = np.arange(start, len(t), d)
+    if at[-1] != len(t) - 1:
+        at = np.append(at, len(t) - 1)
+    rate = _turn_rate(t, psi, at)
+    hit = np.abs(rate) >= TURN_RATE
+    turning = np.repeat(hit[:-1], np.diff(at))  # each evaluation holds to the next
+    turning = np.append(turning, hit[-1])
+    refine = np.flatnonzero(hit[:-1] != hit[1:])  # the rate crossed TURN_RATE between at[i] and at[i + 1]
+    best = None
+    if hit.any():
+        i = int(np.argmax(np.where(hit, np.abs(rate), -1.0)))
+        best = float(abs(rate[i]))
+        near = np.arange(max(start, at[i] - d), min(len(t), at[i] + d + 1))
+        r_near = np.abs(_turn_rate(t, psi, near))
+        if (r_near >= TURN_RATE).any():
+            best = max(best, float(r_near[r_near >= TURN_RATE].max()))
+    if len(refine):
+        inside = np.concatenate([np.arange(at[i] + 1, at[i + 1]) for i in refine])
+        if len(inside):
+            r_in = np.abs(_turn_rate(t, psi, inside))
+            turning[inside - start] = r_in >= TURN_RATE
+            if (r_in >= TURN_RATE).any():
+                best = max(best or 0.0, float(r_in[r_in >= TURN_RATE].max()))
+    return turning, best
 
 
 LEVER_ARM_FRAME = "body FRD, sensor relative to the centre of rotation"
