@@ -50,10 +50,10 @@ from imutool.attitude.recording import (
     heading_channel,
     ship_lever_arm,
 )
-from imutool.attitude.warm import warm_filter_kernels
 from imutool.baseline import lpf_attitude
 from imutool.compass import CompassParams, compass_recording
 from imutool.convert import STREAMABLE, chunk_writer, expected_rows
+from imutool.filter_warm import warm_filter_kernels
 from imutool.loading import LOAD_OPTIONS, ChunkChecks, load_recording, mapping_options, one_clock, read_input
 from imutool.metrics import attitude_rmse
 from imutool.progress import Progress, report
@@ -187,7 +187,9 @@ def run_filter(
         params = params if params is not None else EkfParams()
         if isinstance(source, Recording) or os.path.isfile(source):  # not for an input that will be refused
             csv_out = output is not None and os.fspath(output).lower().endswith(".csv")
-            warm_filter_kernels(smooth, csv_out)  # a cold cache: later kernels compile beside (formats.jit.warm)
+            warm_filter_kernels(
+                smooth, csv_out, heading is not None
+            )  # a cold cache: later kernels compile beside (formats.jit.warm)
     if (
         not isinstance(source, Recording)
         and not load_options.get("with_files")  # merged in memory

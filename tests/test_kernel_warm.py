@@ -1,7 +1,7 @@
 """A cold first run compiles on two cores: the filter's helpers in a second process (formats/jit/warm.py).
 
 The slow test records what a cold ``imutool filter --smooth`` really compiles (numba's compile events, in a
-subprocess with an empty cache and no warming) and checks that :mod:`imutool.attitude.warm` lists every cached
+subprocess with an empty cache and no warming) and checks that :mod:`imutool.filter_warm` lists every cached
 function of it with the argument types it was called with: a helper added to the EKF without its entry, or a
 changed argument list, names itself here. The quick tests check the process's own work: what it compiles is
 loaded, not compiled again, by the next process.
@@ -20,9 +20,10 @@ import pytest
 from conftest import EKF_KERNEL_ASM, normalized_asm
 
 import formats.jit.warm as kw
+from formats.jit import claims
 from formats.jit.warm import CSV_WRITER
 from imutool.attitude.kernel import ekf_kernel
-from imutool.attitude.warm import AFTER_THE_EKF, EKF_SECTIONS, SMOOTH_KERNELS
+from imutool.filter_warm import AFTER_THE_EKF, EKF_SECTIONS, HEADING_SECTION, SMOOTH_KERNELS
 
 ALL = AFTER_THE_EKF + (CSV_WRITER,) + SMOOTH_KERNELS
 
@@ -31,6 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _env(tmp_path: Path, **extra: str) -> dict:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "IMUTOOL_KERNEL_TIMES")}
+    env["PYTHONPATH"] = str(ROOT)  # this tree's packages in every subprocess, whatever its working folder
     env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba")
     env.update(extra)
     return env
@@ -69,6 +71,8 @@ def test_once_per_process_and_never_in_a_pool_worker(monkeypatch):
     started = []
 
     class FakePopen:
+        pid = -1
+
         def __init__(self, args, **kw):
             started.append(args)
             self.stdin = open(os.devnull, "wb")  # noqa: SIM115 - closed by warm_in_background
@@ -88,6 +92,7 @@ def test_once_per_process_and_never_in_a_pool_worker(monkeypatch):
     assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is not None
     assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None  # a cache that stays cold: not again
     assert len(started) == 1 and started[0][1] == "-c"  # our packages first on sys.path, not `-m` from a cwd
+    claims.stop_sharing()  # the fake second process shares nothing
 
 
 def test_the_second_process_stops_once_its_command_is_gone(monkeypatch):
@@ -106,7 +111,7 @@ ORPHAN = textwrap.dedent(
     import os
     from formats.jit.warm import warm_in_background
     from imutool.attitude.kernel import ekf_kernel
-    from imutool.attitude.warm import EKF_SECTIONS
+    from imutool.filter_warm import EKF_SECTIONS
     proc = warm_in_background(ekf_kernel, tuple(reversed(EKF_SECTIONS)), splits_probe=True)
     assert proc is not None
     print(proc.pid, flush=True)
@@ -143,7 +148,7 @@ START = textwrap.dedent(
     """
     from formats.jit.warm import warm_in_background
     from imutool.attitude.kernel import ekf_kernel
-    from imutool.attitude.warm import AFTER_THE_EKF
+    from imutool.filter_warm import AFTER_THE_EKF
     proc = warm_in_background(ekf_kernel, AFTER_THE_EKF[:1])
     assert proc is not None
     assert proc.wait() == 0
@@ -170,7 +175,7 @@ WAIT = textwrap.dedent(
     import subprocess, sys
     from formats.jit.warm import argument_types, is_cached, wait_for, warm_in_background
     from imutool.gyro_check import pair_discrepancy_kernel as kernel
-    from imutool.attitude.warm import AFTER_THE_EKF
+    from imutool.filter_warm import AFTER_THE_EKF
     assert not is_cached(kernel)
     proc = warm_in_background(kernel, AFTER_THE_EKF[:1])  # the second process compiles the kernel
     assert proc is not None
@@ -267,15 +272,45 @@ def test_the_lists_are_what_a_cold_filter_compiles(tmp_path):
     own = {e for e in top if e[1] in ("parse_block", "ekf_kernel")}  # the command's own: first and probe
     assert {e[1] for e in own} == {"parse_block", "ekf_kernel"}, sorted(top)
     listed = set(ALL)
-    assert top - own - listed == set(), "compiled but not listed (add to imutool/attitude/warm.py)"
+    assert top - own - listed == set(), "compiled but not listed (add to imutool/filter_warm.py)"
     assert listed - top == set(), "listed but not compiled as listed (remove or correct the types)"
     sections = [row[1:4] for row in rows if row[0] == "ekf_kernel"]
+    # no GNSS nor external heading in the input: their sections are left out of the kernel (kernel.py)
     assert sections == list(EKF_SECTIONS), "the EKF's sections, in the order it calls them, with their types"
     # every cached function the kernel reaches (its sections and their helpers) states the flags numba would
     # otherwise take from its caller: compiled alone by the second process, it is the code the kernel would compile
     inside = [row for row in rows if row[0] != "-"]
     assert len(inside) > len(sections), inside
     assert [row[2] for row in inside if row[4] != "yes"] == []
+
+
+HEADING_FILE = textwrap.dedent(
+    """
+    import sys
+    import formats
+    rec = formats.read(sys.argv[1])
+    with open(sys.argv[2], "w") as f:
+        f.write("time,heading_true\\n")
+        for t, h in zip(rec.time[::20], rec["ref_heading"][::20]):
+            f.write(f"{float(t)!r},{float(h)!r}\\n")
+    """
+)
+
+
+@pytest.mark.slow
+def test_the_heading_section_is_what_a_cold_filter_with_heading_compiles(tmp_path):
+    """~40 s: with --heading the kernel has the external heading's section (left out of the default kernel), called
+    with the types listed, between the magnetometer's and the outputs."""
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
+    sim = ["-c", "from imutool.cli import main; main()", "simulate", "ship-roll", "--duration", "20", "-o", "r.csv"]
+    sim_env = dict(env, NUMBA_CACHE_DIR=str(tmp_path / "numba-sim"))
+    assert _python(sim, tmp_path, sim_env).returncode == 0
+    assert _python(["-c", HEADING_FILE, "r.csv", "h.csv"], tmp_path, sim_env).returncode == 0
+    r = _python(["-c", RECORD, "filter", "r.csv", "-o", "est.csv", "--heading", "h.csv", "-q"], tmp_path, env)
+    assert r.returncode == 0, r.stderr
+    rows = [tuple(line.split("\t")) for line in r.stdout.splitlines()]
+    sections = [row[1:4] for row in rows if row[0] == "ekf_kernel"]
+    assert sections == [*EKF_SECTIONS[:-2], HEADING_SECTION, *EKF_SECTIONS[-2:]]
 
 
 @pytest.mark.slow

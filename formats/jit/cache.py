@@ -46,11 +46,12 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numba
 from numba.core import caching, config, event
 
-from formats.jit import blas_probe, typing_memo
+from formats.jit import blas_probe, claims, typing_memo
 
 typing_memo.install()  # numba's call typing asked once per distinct question (formats/jit/typing_memo.py)
 blas_probe.install()  # numba's start-up without importing scipy.linalg (formats/jit/blas_probe.py)
@@ -382,13 +383,8 @@ def _write_memo(memo: Path | None, tree: str, files: list[str]) -> None:
                 pass
 
 
-def source_version(memo: Path | None = None) -> str:
-    """12 hex digits that change with the files that can reach a compiled kernel and numba's and Python's version.
-
-    The set of files is :func:`kernel_sources`; ``memo`` (a JSON file) keeps that answer per hash of every library
-    file, so only the first process after a change of any file pays for the scan (~0.3 s; reading and hashing the
-    files ~15 ms).
-    """
+def _source_tree() -> tuple[bytes, dict[Path, bytes], Any]:
+    """(numba's, Python's versions; every library file's text; their hash)."""
     head = f"numba {numba.__version__} python {sys.version_info[:3]} {sys.implementation.cache_tag}".encode()
     texts: dict[Path, bytes] = {}
     tree = hashlib.blake2b(head, digest_size=16)
@@ -398,6 +394,27 @@ def source_version(memo: Path | None = None) -> str:
         except OSError:
             texts[path] = b"<unreadable>"
         tree.update(path.relative_to(_SITE).as_posix().encode() + b"\0" + texts[path] + b"\0")
+    return head, texts, tree
+
+
+def new_source_tree() -> bool:
+    """True when no process has used these library files with this cache yet (the source scan's memo has no
+    answer for them, :func:`source_version`): a first run, whose kernels are not cached (~15 ms, no scan)."""
+    if _State.folder is not None:
+        return False
+    _State.tree = _source_tree()  # kept for this process's source_version, read next
+    return _read_memo(user_cache_root() / MEMO_NAME, _State.tree[2].hexdigest()) is None
+
+
+def source_version(memo: Path | None = None) -> str:
+    """12 hex digits that change with the files that can reach a compiled kernel and numba's and Python's version.
+
+    The set of files is :func:`kernel_sources`; ``memo`` (a JSON file) keeps that answer per hash of every library
+    file, so only the first process after a change of any file pays for the scan (~0.3 s; reading and hashing the
+    files ~15 ms).
+    """
+    head, texts, tree = _State.tree or _source_tree()
+    _State.tree = None
     files = _read_memo(memo, tree.hexdigest())
     if files is None:
         files = [p.relative_to(_SITE).as_posix() for p in kernel_sources(_SITE, texts)]
@@ -441,6 +458,7 @@ class _State:
     persistent = True  # False: a folder that lives only as long as this process
     version = ""
     shared: set[str] = set()  # the groups whose kernel a second process compiles half of (formats.jit.warm)
+    tree = None  # (versions, library files' texts, their hash) read by new_source_tree for source_version
 
 
 def compiling_in_two_processes(module: str) -> None:
@@ -610,9 +628,39 @@ def _tolerant_save(numba_save):
             locator = getattr(getattr(self, "_impl", None), "locator", None)
             if not isinstance(locator, KernelCacheLocator):
                 raise
+        finally:
+            if claims.sharing():
+                path = _claim_file(self, sig)
+                if path is not None:
+                    claims.release(path)  # saved (or not savable): a process waiting for it loads or compiles it
 
     save_overload._imutool_tolerant = True  # type: ignore[attr-defined]
     return save_overload
+
+
+def _claim_file(cache, sig) -> Path | None:
+    """The claim file of ``sig`` of one of our cached functions (formats.jit.claims), None for another library's."""
+    if not isinstance(getattr(getattr(cache, "_impl", None), "locator", None), KernelCacheLocator):
+        return None
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    return claims.claim_path(index, sig) if index else None
+
+
+def _shared_load(numba_load):
+    """numba's ``Cache.load_overload``, except that while two processes share a cold compile
+    (formats.jit.claims), a miss of one of our functions claims it, or waits for the other process's copy."""
+
+    def load_overload(self, sig, target_context):
+        data = numba_load(self, sig, target_context)
+        if data is not None or not claims.sharing():
+            return data
+        path = _claim_file(self, sig)
+        if path is None:
+            return data
+        return claims.claim_or_wait(path, lambda: numba_load(self, sig, target_context))
+
+    load_overload._imutool_shared = True  # type: ignore[attr-defined]
+    return load_overload
 
 
 def _install() -> None:
@@ -620,6 +668,9 @@ def _install() -> None:
     save = getattr(cache_cls, "save_overload", None)
     if save is not None and not getattr(save, "_imutool_tolerant", False):
         cache_cls.save_overload = _tolerant_save(save)  # type: ignore[union-attr]
+    load = getattr(cache_cls, "load_overload", None)
+    if load is not None and not getattr(load, "_imutool_shared", False):
+        cache_cls.load_overload = _shared_load(load)  # type: ignore[union-attr]
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     locators = getattr(impl, "_locator_classes", None)
     if isinstance(locators, list):

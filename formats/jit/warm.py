@@ -1,13 +1,15 @@
 """A cold first run on two cores: a second process compiles part of what a command needs into the same cache.
 
 numba compiles in one thread (a process-wide lock), and most of a first run's time is numba's own Python passes
-(type inference, lowering; LLVM ~10 %), so a cold cache cannot be compiled much faster in one process. It can be
+(type inference, lowering; LLVM a third), so a cold cache cannot be compiled much faster in one process. It can be
 split across processes: while a command compiles its parser and its main kernel, a second process compiles the
-kernels the command calls later (the gyro check's, the CSV writer's, the smoother's), then the main kernel's parts
-from the last one backwards (the EKF's sections, :mod:`imutool.attitude.warm`), into the same cache. The command
+main kernel's parts from the last one backwards (the EKF's sections, :mod:`imutool.filter_warm`), then the kernels
+the command calls later (the CSV writer's, the smoother's, the gyro check's), into the same cache. The command
 loads each part it reaches that the second process has finished, and compiles the others itself; the two meet in
-the middle. numba links a part loaded from the cache as LLVM bitcode, so the kernel is the same machine code as
-when it compiles everything itself (`tests/test_kernel_warm.py` compares them).
+the middle, each function compiled once: while they share the work, a process claims a function before compiling
+it and the other waits for a claimed one instead of compiling it too (:mod:`formats.jit.claims`). numba links a
+part loaded from the cache as LLVM bitcode, so the kernel is the same machine code as when it compiles everything
+itself (`tests/test_kernel_warm.py` compares them).
 
 A part compiled on its own must be the code its caller would have compiled: numba takes ``fastmath``,
 ``error_model``, ``_nrt`` and ``forceinline`` from the caller for a function that does not set them, and its cache
@@ -41,6 +43,7 @@ from pathlib import Path
 from numba.core import sigutils, types
 
 from formats.jit import cache as kernel_cache
+from formats.jit import claims
 from formats.jit.threads import thread_budget
 
 ENV_SWITCH = "IMUTOOL_KERNEL_WARM"  # "0": never start a warming process (set inside one); "1": even on a busy machine
@@ -85,12 +88,28 @@ def _index_file(dispatcher) -> Path | None:
 
 
 def is_cached(dispatcher) -> bool:
-    """True if ``dispatcher`` has an entry in the kernel cache (any signature), or its cache cannot be located."""
+    """True if ``dispatcher`` has an entry in the kernel cache (any signature), or its cache cannot be located.
+    ``dispatcher`` may also be an :data:`Entry` (its module not imported: the index file is looked for by name)."""
+    if isinstance(dispatcher, tuple):
+        folder = kernel_cache.cache_folder()
+        module, name = dispatcher[0], dispatcher[1]
+        if folder is None or module.split(".")[0] not in kernel_cache.PACKAGES:
+            return True
+        package, _, base = module.rpartition(".")
+        return any((folder / package.replace(".", "/")).glob(f"{base}.{name}-*.nbi"))
     index = _index_file(dispatcher)
     return index is None or index.exists()
 
 
-def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = False) -> subprocess.Popen | None:
+def _probe_key(probe) -> str:
+    if isinstance(probe, tuple):
+        return f"{probe[0]}.{probe[1]}"
+    return f"{getattr(probe, '__module__', '')}.{getattr(probe, '__qualname__', probe)}"
+
+
+def warm_in_background(
+    probe, entries: Sequence[Entry], splits_probe: bool = False, meanwhile: Sequence[Entry] = ()
+) -> subprocess.Popen | None:
     """Start the warming process for ``entries`` (in order) if ``probe`` (the command's main kernel) is not cached.
 
     ``splits_probe``: the entries end with the probe's own parts, from its last (the EKF's sections), so the command
@@ -107,16 +126,20 @@ def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = Fal
         return None
     if getattr(sys, "frozen", False) or multiprocessing.parent_process() is not None:
         return None  # a frozen program has no `python -c`; a pool worker (batch) never runs atexit
-    key = f"{getattr(probe, '__module__', '')}.{getattr(probe, '__qualname__', probe)}"
+    key = _probe_key(probe)
     if key in _STARTED:
         return None  # once per process: a cache that cannot be written stays cold, and is not compiled twice
     if os.environ.get(ENV_SWITCH, "") != "1" and _busy_cores() > budget:
         return None  # every core busy: a second process would only take the command's share
-    folder = kernel_cache.cache_folder()
-    if folder is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
-        return None
+    env = dict(os.environ, **{ENV_SWITCH: "0"})
+    if not kernel_cache.new_source_tree():
+        folder = kernel_cache.cache_folder()
+        if folder is None or not kernel_cache.cache_is_persistent() or is_cached(probe):
+            return None
+        env[kernel_cache.FOLDER_ENV] = str(folder.resolve())
+    # else a first run of these files: cold, and the second process starts now, not after this one's source scan
+    # (~0.4 s, formats.jit.cache.source_version); it finds the same folder itself
     _STARTED.add(key)
-    env = dict(os.environ, **{ENV_SWITCH: "0", kernel_cache.FOLDER_ENV: str(folder.resolve())})
     path = kernel_cache.PACKAGES_FOLDER
     # the command's pid in the start line: a command killed while the second process imports numba is noticed
     start = f"import sys; sys.path.insert(0, {path!r}); from formats.jit.warm import _main; _main({os.getpid()})"
@@ -136,12 +159,29 @@ def warm_in_background(probe, entries: Sequence[Entry], splits_probe: bool = Fal
     except (OSError, ValueError):
         return None
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
+    claims.share_with(proc.pid, lambda: proc.poll() is None)  # each function compiled once (formats.jit.claims)
+    if meanwhile:
+        claims.while_waiting(_one_at_a_time(meanwhile))
     if splits_probe:
-        kernel_cache.compiling_in_two_processes(getattr(probe, "__module__", ""))
+        kernel_cache.compiling_in_two_processes(probe[0] if isinstance(probe, tuple) else probe.__module__)
     return proc
 
 
 _STARTED: set[str] = set()  # the probes this process has started a warming process for
+
+
+def _one_at_a_time(entries: Sequence[Entry]):
+    """For :func:`formats.jit.claims.while_waiting`: each call compiles the next of ``entries`` that is neither
+    cached nor claimed by the other process; False once none is left."""
+    left = list(entries)
+
+    def work() -> bool:
+        while left:
+            if compile_entries([left.pop(0)]):
+                return True
+        return False
+
+    return work
 
 
 def _busy_cores() -> float:
@@ -166,10 +206,16 @@ def compile_entries(entries: Sequence[Entry], parent: int | None = None) -> int:
     for module, name, text in entries:
         if parent is not None and os.getppid() != parent:
             break
+        before = claims.held()  # (the command's, when it compiles an entry while it waits: its kernel's claim)
         try:
             fn = getattr(importlib.import_module(module), name)
-            fn.compile(argument_types(text))
+            args = argument_types(text)
+            index = _index_file(fn)
+            if claims.sharing() and index is not None and claims.claimed_by_other(claims.claim_path(str(index), args)):
+                continue  # the other process is compiling it (where the two meet): the next one
+            fn.compile(args)
         except Exception:  # noqa: BLE001 - a kernel this process cannot compile is left to the command
+            claims.release_all(keep=before)  # what it had claimed for it: the other process may compile that
             continue
         done += 1
     return done
@@ -214,6 +260,8 @@ def _main(parent: int | None = None) -> None:
     if announcer is not None:
         announcer.silent = True  # the command says what compiles; this process has no one to tell
     entries = [tuple(line.split("\t")) for line in sys.stdin.read().splitlines() if line.count("\t") == 2]
+    if parent is not None:
+        claims.share_with(parent, lambda: os.getppid() == parent)
     compile_entries(entries, parent)  # type: ignore[arg-type]
 
 

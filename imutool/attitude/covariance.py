@@ -221,7 +221,7 @@ def _add_rrt(P, i0, j0, s, r0, r1, r2):
 
     Called by the EKF's sections and by the RTS pass: its flags are its own (numba would otherwise give it the
     flags of whichever caller compiles first in a process, and the RTS pass may compile in another process, see
-    imutool/attitude/warm.py) — the ones the EKF's sections pass down."""
+    imutool/filter_warm.py) — the ones the EKF's sections pass down."""
     r = (r0, r1, r2)
     for i in range(3):
         for j in range(3):

@@ -63,6 +63,12 @@ filter.)
   measured specific force (f = Rᵀ(a_ned − g_ned)). A low-pass longer than LP_TAU_START starts at it and lengthens
   by LP_TAU_GROWTH s per s (its lag learned while short).
 - NaN rows: a NaN gyro sample is replaced by the last good one (counted); NaN accel/mag skip that update.
+
+Inputs not given: ``sog``, ``vel`` and ``hdg`` are None (not empty arrays) when the input has no GNSS speed, no
+GNSS velocity or no external heading, and numba prunes a branch on ``x is not None`` for an argument typed None
+before it types the branch: the default kernel has no GNSS turn, velocity aiding or heading input compiled in
+(~1.7 s of a first run's ~20 s CPU, issue 52). A run with one of them compiles its own kernel once (its sections are
+cached apart); the outputs are the same bits.
 """
 
 from __future__ import annotations
@@ -80,6 +86,7 @@ from imutool.attitude.layout import (
     F_HDG_INCONSISTENT,
     F_HDG_USED,
     F_INCONSISTENT,
+    FALSE,
     INLINED,
     P_ACC_LAG,
     P_ACC_TAU,
@@ -211,14 +218,15 @@ def ekf_kernel(
     section per sensor in this order — predict, accelerometer noise level, rest, kinematic compensation,
     accelerometer gate, low-pass and update, magnetometer, external heading, outputs and self-check.
 
-    t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s, cog (N,) rad, sogdot (N,) m/s² (use_gnss: 0 not used, 1 the turn's
-    centripetal term along the course, 2 along the bow, where no heading is held); vel (N,2) or empty: the GNSS
+    t (N,) s; gyro/acc/mag (N,3); sog (N,) m/s or None, cog (N,) rad, sogdot (N,) m/s² (use_gnss: 0 not used, 1 the
+    turn's centripetal term along the course, 2 along the bow, where no heading is held); vel (N,2) or None: the GNSS
     antenna's north/east velocity (m/s) for velocity aiding (compensation.py), arm_sa (3,) m body FRD the sensor's
     position from the antenna's; outputs q_out (N,4), b_out (N,3), std_out (N,3) roll/pitch/heading σ rad,
     flags_out (N,) bit mask, p_store (N,6,6) or empty: posterior P per sample (for the smoother); acc_meas (N,3)
     or empty: the smoother's compensated, low-passed force (m/s² body; NaN: no update) in place of the causal
-    low-pass; f_out (N,3) or empty: the compensated force fed to the low-pass (NaN where none); hdg (N,) or empty:
-    an external true heading (rad, NED; NaN: none; heading_input.py).
+    low-pass; f_out (N,3) or empty: the compensated force fed to the low-pass (NaN where none); hdg (N,) or None:
+    an external true heading (rad, NED; NaN: none; heading_input.py). None leaves that input's section out of the
+    compiled kernel (see the module's docstring, "Inputs not given").
     """
     n = t.shape[0]
     ext_meas, keep_f, store = acc_meas.shape[0] == n, f_out.shape[0] == n, p_store.shape[0] == n
@@ -230,7 +238,9 @@ def ekf_kernel(
     gate[0], gate[1] = np.cos(prm[P_MAG_DIP_GATE]), np.sin(prm[P_MAG_DIP_GATE])
     gate[2], gate[3], gate[4] = _dip_gate(st[S_MREF + 2], gate[0], gate[1])
     use_lever = lever[0] != 0.0 or lever[1] != 0.0 or lever[2] != 0.0  # once per chunk, not per sample
-    use_va = vel.shape[0] == n and use_lp and not ext_meas
+    use_va = FALSE  # not False: a literal would reach the sections as a type of its own (layout.py)
+    if vel is not None:
+        use_va = vel.shape[0] == n and use_lp and not ext_meas
     for k in range(n):
         gk0, gk1, gk2, dt, w0, w1, w2, gap = _predict(
             st, P, prm, t[k], gyro[k, 0], gyro[k, 1], gyro[k, 2], cov_every_sample
@@ -243,15 +253,16 @@ def ekf_kernel(
             _accel_white_noise(st, prm, ax, ay, az, dt)
         if prm[P_REST_TIME] > 0 and acc_ok:
             flag |= _rest(st, P, prm, dx, R, gk0, gk1, gk2, ax, ay, az, dt, update_every)
-        ri_now = False  # RI = R(q_I) computed for this sample
-        if use_va:  # kinematic compensation (compensation.py): velocity aiding, lever arm, the GNSS turn
+        ri_now = FALSE  # RI = R(q_I) computed for this sample
+        if vel is not None and use_va:  # kinematic compensation (compensation.py): velocity aiding, lever, GNSS turn
             ri_now = _velocity_aiding(
                 st, R, RI, t[k], vel[k, 0], vel[k, 1], w0, w1, w2, arm_sa, ax, ay, az, dt, gap, acc_ok
             )
         if use_lever:
             ax, ay, az = _lever_arm(st, prm, lever, gk0, gk1, gk2, dt, ax, ay, az, acc_ok)
-        if acc_ok and use_gnss > 0 and not use_va and np.isfinite(sog[k]) and (use_gnss == 2 or np.isfinite(cog[k])):
-            ax, ay, az = _gnss_force(st, R, gk0, gk1, gk2, sog[k], cog[k], sogdot[k], use_gnss == 2, ax, ay, az)
+        if sog is not None and acc_ok and use_gnss > 0 and not use_va:
+            if np.isfinite(sog[k]) and (use_gnss == 2 or np.isfinite(cog[k])):
+                ax, ay, az = _gnss_force(st, R, gk0, gk1, gk2, sog[k], cog[k], sogdot[k], use_gnss == 2, ax, ay, az)
         rej, force, na, dev_a, fed = False, False, 0.0, 0.0, False
         if acc_ok:  # the accelerometer (accel.py): gate and tilt window, quasi-inertial low-pass, update
             rej, force, na, dev_a = _accel_gate(st, prm, R, ax, ay, az, dt, gap)
@@ -283,7 +294,7 @@ def ekf_kernel(
             flag |= flag_m
             if not rej_m and st[S_CNT_M] >= update_every:
                 flag |= _mag_update(st, P, prm, R, dx, dev_m, w0, w1, w2, dt, mag_mode, gate)
-        if hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
+        if hdg is not None and hdg.shape[0] > 0 and np.isfinite(hdg[k]) and t[k] - st[S_HLAST] >= prm[P_HDG_EVERY]:
             if _heading_input(st, P, prm, R, dx, t[k], hdg[k]):
                 flag |= F_HDG_USED
         v0, v1 = _outputs(st, P, k, q_out, b_out, std_out)  # outputs, then the per-sample self-check

@@ -111,7 +111,7 @@ _FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 # numba takes fastmath, error_model, _nrt and forceinline from the caller when a function does not set them, and its
 # cache does not key on flags. So every section and helper the kernel reaches states all four (the values it took
 # from its callers before) and is cached on its own: compiled alone, by the second process of a cold run
-# (imutool/attitude/warm.py), or inside the kernel, it is the same code, and the kernel links it from the cache
+# (imutool/filter_warm.py), or inside the kernel, it is the same code, and the kernel links it from the cache
 # as LLVM bitcode, so forceinline still inlines it.
 INLINED = dict(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True, cache=True)
 CALLED = dict(INLINED, forceinline=False)  # the option-only sections: called, not inlined

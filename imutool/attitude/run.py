@@ -353,11 +353,11 @@ class EkfStepper:
         cov_flag = bool(self.cov_each or every == 1)
         # one kernel call, or blocks of ~0.26 M samples when progress is reported (the state carries over exactly)
         for i0, i1 in [(0, n)] if progress is None else chunk_ranges(n, 1 << 18, progress):
-            ekf_kernel(
-                t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1], cg[i0:i1], sd[i0:i1],
-                vel[i0:i1] if len(vel) else vel, prm, every, mode, cov_flag, gnss_code, self.lever, self.arm_sa, st,
+            ekf_kernel(  # None for an input not given: its section is not compiled in (kernel.py)
+                t[i0:i1], g[i0:i1], a[i0:i1], m[i0:i1], sg[i0:i1] if gnss_code else None, cg[i0:i1], sd[i0:i1],
+                vel[i0:i1] if len(vel) else None, prm, every, mode, cov_flag, gnss_code, self.lever, self.arm_sa, st,
                 q_out[i0:i1], b_out[i0:i1], std_out[i0:i1], flags[i0:i1], p_store[i0:i1] if keep_cov else p_store,
-                meas[i0:i1] if len(meas) else meas, f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else hdg,
+                meas[i0:i1] if len(meas) else meas, f_out[i0:i1] if keep_f else f_out, hdg[i0:i1] if len(hdg) else None,
             )  # fmt: skip
         self.samples += n
         self._flags = (

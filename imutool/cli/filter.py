@@ -7,6 +7,7 @@ Option parsing and printing here; :func:`filter_route` maps the parsed options o
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import click
@@ -209,6 +210,11 @@ def filter_route(
     """Parsed options → :func:`imutool.filtering.run_filter` (the same for the command and ``imutool batch``):
     the EKF's parameters from --params/--param (the file's migration notes on stderr unless ``quiet``), the
     lever arm, the compass model, --save-params written."""
+    if method == "ekf" and os.path.isfile(input_path):
+        from imutool.filter_warm import warm_filter_kernels  # light: numba, not the filter
+
+        # a cold cache: the second process starts before the filter's modules are imported here (~1 s), not after
+        warm_filter_kernels(smooth, output.lower().endswith(".csv"), heading_path is not None)
     from imutool.attitude.params import params_from_options  # here, not at the top: `--help` loads no numba
     from imutool.compass import CompassParams
     from imutool.filtering import parse_speed, run_filter
