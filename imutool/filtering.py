@@ -589,6 +589,8 @@ def stream_ekf(
         summary.update(self_checks.totals)  # the filter's cumulative counters after the last chunk, then the checks
         summary.update(checked.summary)  # (the order of an in-memory run's summary)
         warnings = checked.warnings
+        if "note" in summary.get("aided", {}):  # the gyro's bias instability widened (as an in-memory run says)
+            warnings = [*warnings, summary["aided"]["note"]]
         if lever_est is not None:
             summary["lever_arm_estimate"] = lever_est.summary()
             warnings = [m for m in (lever_est.message(),) if m] + warnings

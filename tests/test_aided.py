@@ -255,7 +255,37 @@ def test_a_streamed_run_carries_the_widened_instability(poor_gyro, tmp_path):
     streamed = run_filter(src, tmp_path / "s.csv", lever_arm=lever, params=prm, stream_mb=0.0, chunk_rows=20000)
     assert streamed.summary["aided"]["gyro_bias_rw_used"] == mem.summary["aided"]["gyro_bias_rw_used"]
     assert "not_used" not in streamed.summary["aided"]
+    assert any("state the gyro's figure" in w for w in streamed.summary["warnings"])  # said as in memory
     np.testing.assert_allclose(read(tmp_path / "s.csv")["roll"], mem.recording["roll"], atol=1e-5)
+
+
+def test_a_streamed_run_widens_at_most_as_far_as_one_run(tmp_path):
+    """A track-smoothed velocity diverges at every width; streamed in chunks, each chunk that restarts used to widen
+    the carried width again (× 64 after three chunks): at most × 16 over the run, as in memory, and no note that it
+    was used beside the summary's "not used"."""
+    from formats import write
+
+    rec = simulate(
+        "ship-at-sea",
+        duration=600.0,
+        seed=0,
+        lever_arm=(-12.0, 0.0, -20.0),
+        roll_significant_deg=20.0,
+        sway_m=1.0,
+        heave_period=7.5,
+        turn_start=180.0,
+        gnss_vel_noise_mps=0.03,
+        speed_source="smoothed",
+        gnss_columns="vel",
+    )
+    src = tmp_path / "smoothed.csv"
+    write(rec, src)
+    prm = EkfParams(gnss_velocity_noise=0.03, aided_smoother=False)
+    lever = np.array(rec.meta["lever_arm_m"])
+    a = run_filter(src, tmp_path / "s.csv", lever_arm=lever, params=prm, stream_mb=0.0, chunk_rows=20000).summary
+    a = a["aided"]
+    assert a["gyro_bias_rw_used"] <= 16 * prm.aided_gyro_bias_rw * (1 + 1e-12), a
+    assert "not_used" in a and "note" not in a, a
 
 
 def test_held_and_nan_separated_fixes_aid_alike():

@@ -567,17 +567,12 @@ def aided_result(
         restarts = ast[A_NRESTART] - before
         if best is None or restarts < best[0]:  # the widest that is needed: fewer restarts than a narrower one
             best = (restarts, aided, ast)
-        if restarts == 0 or attempt == WIDEN_TRIES:
-            break
+        if restarts == 0 or state[A_RW_SCALE] >= WIDEN_FACTOR**WIDEN_TRIES:
+            break  # (a streamed run carries the width: widened at most WIDEN_TRIES times over the whole run)
         # restarted: the same input, the width × 4 (a smoothed track, which is not the hull's velocity, diverges at
         # any width and is left to the EKF below)
         state[A_RW_SCALE] *= WIDEN_FACTOR  # (run_aided copies the state)
     restarts, aided, ast = best
-    if "gyro_bias_rw_used" in aided.summary and restarts <= MAX_RESTARTS:
-        used, told = aided.summary["gyro_bias_rw_used"], params.aided_gyro_bias_rw
-        aided.summary["note"] = (
-            f"aided pass diverged with aided_gyro_bias_rw {told:g}, ran with {used:g} rad/s/√s: state the gyro's figure"
-        )
     va = aided.std[:, 0] ** 2 + aided.std[:, 1] ** 2
     # the EKF's σ leaves out the accelerometer's bias (its tilt, b/g per axis): compared with it added
     vb = 2.0 * (params.accel_bias_sigma / params.gravity) ** 2
@@ -586,6 +581,12 @@ def aided_result(
         use[:] = False  # is worse than stated: the EKF's velocity aiding is the safer estimate
         wider = f", also with the gyro bias instability × {ast[A_RW_SCALE]:g}" if ast[A_RW_SCALE] != 1.0 else ""
         aided.summary["not_used"] = f"diverged {aided.summary['restarts']} times{wider}: the EKF's estimate is output"
+    elif "gyro_bias_rw_used" in aided.summary:  # widened, and used
+        used, told = aided.summary["gyro_bias_rw_used"], params.aided_gyro_bias_rw
+        aided.summary["note"] = (
+            f"the aided pass restarted with aided_gyro_bias_rw {told:g} and ran with {used:g} rad/s/√s (a gyro whose"
+            " bias wanders more than stated is the commonest cause): state the gyro's figure"
+        )
     q, std = res.q.copy(), res.std.copy()
     # the aided pass's attitude turned about the world's down axis onto the EKF's heading (the one that holds the
     # magnetometer or the gyrocompass: the aided pass takes it as a measurement and lags it after a start or a
