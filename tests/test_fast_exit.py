@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data" / "ship_imu.csv"
 
@@ -38,6 +40,8 @@ def _imutool(entry: str, args: list[str], mark: Path, fast: str = "1") -> subpro
 
 def test_run_gives_mains_outputs_status_and_exit_work(tmp_path):
     found = {}
+    # once first: a kernel compiled on this run (an edited source, a cold cache) is announced on stderr
+    _imutool("main", ["filter", str(SAMPLE), "-o", str(tmp_path / "warm.csv")], tmp_path / "warm.mark")
     for entry in ("main", "run"):
         out = tmp_path / f"{entry}.csv"
         mark = tmp_path / f"{entry}.mark"
@@ -66,3 +70,13 @@ def test_run_keeps_the_exit_status_of_an_error_and_can_be_switched_off(tmp_path)
 def test_the_console_script_is_run():
     text = (ROOT / "pyproject.toml").read_text()
     assert 'imutool = "imutool.cli:run"' in text
+
+
+def test_a_standard_output_that_cannot_be_written_is_no_success(tmp_path):
+    # stdout on /dev/full (a full disk): Python's exit says so with status 120; the fast exit too, not 0
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full on this system")
+    code = "import sys\nsys.stdout = open('/dev/full', 'w', buffering=4096)\nfrom imutool.cli import run\nrun()\n"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), IMUTOOL_FAST_EXIT="1")
+    done = subprocess.run([sys.executable, "-c", code, "--help"], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode != 0, done

@@ -10,8 +10,10 @@ every command's start on the project's 2-core machine (``python -X importtime``:
 :func:`install` (from :mod:`formats.jit.cache`, before any kernel runs) wraps numba's CPU context's first
 ``load_additional_registries`` so that, just before numba imports ``numba.np.arraymath``, ``ensure_blas`` becomes
 :func:`_ensure_blas_found`: the same question answered by finding ``scipy/linalg/cython_blas`` among scipy's
-files (an ``ImportError`` where it is not there, as numba's), followed by numba's own check that scipy's BLAS integer
-width is the one numba was built for. Nothing else changes: a kernel that uses ``np.linalg`` is compiled as before
+files — where it is not found there (no scipy, or a scipy that an import hook supplies) numba's own import decides,
+its ``ImportError`` included — followed by numba's own check that scipy's BLAS integer width is the one numba was
+built for. (A ``cython_blas`` file that is there but cannot load is found by the first kernel that calls BLAS, not at
+start-up.) Nothing else changes: a kernel that uses ``np.linalg`` is compiled as before
 (numba's LAPACK probe still imports), and numba's compiled BLAS/LAPACK wrappers import ``scipy.linalg.cython_blas``
 themselves at their first call, so ``scipy.linalg`` is imported when a kernel needs it and not before.
 Where ``scipy.linalg`` is already imported the probe imports as numba's does (it costs nothing then).
@@ -62,8 +64,11 @@ def _ensure_blas_found() -> None:
 
     if "scipy.linalg" in sys.modules:
         import scipy.linalg.cython_blas  # noqa: F401  (imported already: free)
-    elif not cython_blas_found():
-        raise ImportError("scipy 0.16+ is required for linear algebra")
+    elif not cython_blas_found():  # not among scipy's files (none, or a scipy another finder supplies): numba's probe
+        try:
+            import scipy.linalg.cython_blas  # noqa: F401
+        except ImportError:
+            raise ImportError("scipy 0.16+ is required for linear algebra") from None
     width_check = getattr(linalg, "_check_lapack_int_width", None)
     if width_check is not None:
         width_check()

@@ -182,8 +182,15 @@ def _exit_now(code: object) -> None:
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
-        except (OSError, ValueError):  # a closed pipe (`imutool ... | head`): nothing more to say
+        except (BrokenPipeError, ValueError):  # a closed pipe (`imutool ... | head`): nothing more to say
             pass
+        except OSError as e:  # (a full disk): not a success, as Python's own exit says (status 120)
+            status = status or 120
+            if stream is sys.stdout:
+                try:
+                    print(f"imutool: the standard output could not be written: {e}", file=sys.stderr, flush=True)
+                except (OSError, ValueError):
+                    pass
     os._exit(status & 0xFF)  # (as the system keeps it: sys.exit(-1) is 255)
 
 
