@@ -612,6 +612,8 @@ def format_block(
             else:
                 ax = x
             if ax == 0.0:
+                if decimals[j] >= 0 and (b != bits[r, j]):
+                    p -= 1  # −0 in a fixed-decimals column: written 0, as a value that rounds to zero
                 out[p] = 48
                 p += 1
                 continue

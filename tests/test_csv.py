@@ -681,8 +681,6 @@ def _fixed_reference(x: float, d: int) -> str:
     """The fixed-decimals field as the engine defines it, in Python: |x|·10^d (one float product) + 0.5 truncated,
     integer and fraction, the fraction's trailing zeros dropped; a value that rounds to 0 is ``0``."""
     ax = abs(x)
-    if ax == 0.0:
-        return "-0" if math.copysign(1.0, x) < 0 else "0"
     v = int(ax * float(f"1e{d}") + 0.5)
     if v == 0:
         return "0"
@@ -712,6 +710,8 @@ def test_fixed_decimals_columns(tmp_path):
     x = np.array([[1.23456789, -4e-7, 359.99999949, np.nan, -2.5e-3, 1e20]])
     assert format_array(x, decimals=np.array([6, 6, 6, 6, 6, 6])) == b"1.234568,0,359.999999,,-0.0025,1e+20\n"
     assert format_array(x[:, :2], decimals=np.array([0, -1])) == b"1,-4e-07\n"
+    # −0 itself: 0 in a fixed column (as −4e-07 at 6 decimals), −0 where exact (its bits kept)
+    assert format_array(np.array([[-0.0, -0.0, -4e-7]]), decimals=np.array([6, -1, 6])) == b"0,-0,0\n"
     t = np.array([0.005, 0.01])
     rec = Recording(
         t,
