@@ -183,11 +183,10 @@ def test_heave_tells_tilt_from_bias_and_the_sigma_says_so():
     assert sig[0.0][0] < 2.1  # the turn alone (the idealised limit of a level platform: 1.7 mg)
 
 
-@pytest.fixture(scope="module")
-def poor_gyro():
-    """The issue's voyage with the poor gyro (bias wandering 0.01 °/s/√s), 5 mg per axis, 1 Hz at 3 cm/s."""
-    rec = simulate(
-        "ship-at-sea",
+def _issue_voyage(**changes):
+    """The issue's 600-s voyage (bridge 20 m up, 12 m aft; roll 20°; sway 1 m; heave at 7.5 s; a turn from 180 s;
+    1 Hz GNSS velocity at 3 cm/s), with ``changes`` to the simulator's settings."""
+    settings = dict(
         duration=600.0,
         seed=0,
         lever_arm=(-12.0, 0.0, -20.0),
@@ -195,11 +194,16 @@ def poor_gyro():
         sway_m=1.0,
         heave_period=7.5,
         turn_start=180.0,
-        accel_bias_mg=0.0,
-        gyro_bias_rw_deg_s=0.01,
         gnss_vel_noise_mps=0.03,
         gnss_columns="vel",
     )
+    return simulate("ship-at-sea", **{**settings, **changes})
+
+
+@pytest.fixture(scope="module")
+def poor_gyro():
+    """The issue's voyage with the poor gyro (bias wandering 0.01 °/s/√s), 5 mg per axis, 1 Hz at 3 cm/s."""
+    rec = _issue_voyage(accel_bias_mg=0.0, gyro_bias_rw_deg_s=0.01)
     rec.channels["accel"] = rec["accel"] + np.array([0.05, -0.05, 0.05])
     return rec
 
@@ -221,22 +225,16 @@ def test_a_gyro_worse_than_stated_widens_its_bias_instability_instead_of_giving_
         assert np.sqrt(np.mean((out[ch] - rec[f"ref_{ch}"])[after] ** 2)) < 0.2, ch
 
 
-def test_a_track_smoothed_velocity_still_falls_back_to_the_ekf():
-    """The receiver's track-smoothed velocity (no sway, no yaw: not the hull's) diverges at every width: the EKF's
-    output, as before the widening (the MRU grid's "SOG/COG smoothed" cell)."""
-    rec = simulate(
-        "ship-at-sea",
-        duration=600.0,
-        seed=0,
-        lever_arm=(-12.0, 0.0, -20.0),
-        roll_significant_deg=20.0,
-        sway_m=1.0,
-        heave_period=7.5,
-        turn_start=180.0,
-        gnss_vel_noise_mps=0.03,
-        speed_source="smoothed",
-        gnss_columns="vel",
-    )
+@pytest.fixture(scope="module")
+def smoothed_track():
+    """The issue's voyage with the receiver's track-smoothed velocity (no sway, no yaw: not the hull's)."""
+    return _issue_voyage(speed_source="smoothed")
+
+
+def test_a_track_smoothed_velocity_still_falls_back_to_the_ekf(smoothed_track):
+    """The receiver's track-smoothed velocity diverges at every width: the EKF's output, as before the widening (the
+    MRU grid's "SOG/COG smoothed" cell)."""
+    rec = smoothed_track
     a = run_filter(rec, params=EkfParams(gnss_velocity_noise=0.03), lever_arm=np.array(rec.meta["lever_arm_m"]))
     a = a.summary["aided"]
     assert a["rows_used"] == 0 and "also with the gyro bias instability × 16" in a["not_used"], a
@@ -259,25 +257,13 @@ def test_a_streamed_run_carries_the_widened_instability(poor_gyro, tmp_path):
     np.testing.assert_allclose(read(tmp_path / "s.csv")["roll"], mem.recording["roll"], atol=1e-5)
 
 
-def test_a_streamed_run_widens_at_most_as_far_as_one_run(tmp_path):
+def test_a_streamed_run_widens_at_most_as_far_as_one_run(smoothed_track, tmp_path):
     """A track-smoothed velocity diverges at every width; streamed in chunks, each chunk that restarts used to widen
     the carried width again (× 64 after three chunks): at most × 16 over the run, as in memory, and no note that it
     was used beside the summary's "not used"."""
     from formats import write
 
-    rec = simulate(
-        "ship-at-sea",
-        duration=600.0,
-        seed=0,
-        lever_arm=(-12.0, 0.0, -20.0),
-        roll_significant_deg=20.0,
-        sway_m=1.0,
-        heave_period=7.5,
-        turn_start=180.0,
-        gnss_vel_noise_mps=0.03,
-        speed_source="smoothed",
-        gnss_columns="vel",
-    )
+    rec = smoothed_track
     src = tmp_path / "smoothed.csv"
     write(rec, src)
     prm = EkfParams(gnss_velocity_noise=0.03, aided_smoother=False)

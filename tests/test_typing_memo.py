@@ -99,9 +99,9 @@ def test_the_same_machine_code_with_and_without_the_memo(tmp_path):
 
 def test_off_by_the_switch_and_on_an_unchecked_numba(monkeypatch):
     assert typing_memo.install() is typing_memo.is_installed()
-    monkeypatch.setattr(typing_memo, "_numba_version", lambda: (0, 99))
+    monkeypatch.setattr(typing_memo, "numba_version", lambda: (0, 99))
     assert not typing_memo.supported()
-    monkeypatch.setattr(typing_memo, "_numba_version", lambda: (0, 57))
+    monkeypatch.setattr(typing_memo, "numba_version", lambda: (0, 57))
     assert not typing_memo.supported()
     env = dict(os.environ, **{typing_memo.ENV: "0"})
     check = (

@@ -29,19 +29,11 @@ import os
 import sys
 from pathlib import Path
 
-import numba
+from formats.jit.typing_memo import numba_version
 
 ENV = "IMUTOOL_BLAS_PROBE"
 CHECKED_NUMBA = ((0, 58), (0, 68))  # numba (major, minor) whose arraymath._check_blas / linalg.ensure_blas were read
 _installed: list[bool] = []
-
-
-def _numba_version() -> tuple[int, int]:
-    parts = numba.__version__.split(".")
-    try:
-        return int(parts[0]), int(parts[1])
-    except (IndexError, ValueError):
-        return (0, 0)
 
 
 def cython_blas_found() -> bool:
@@ -79,7 +71,7 @@ def install() -> bool:
     or too late (``numba.np.arraymath`` imported already)."""
     if _installed:
         return True
-    if os.environ.get(ENV, "1").strip() == "0" or not (CHECKED_NUMBA[0] <= _numba_version() <= CHECKED_NUMBA[1]):
+    if os.environ.get(ENV, "1").strip() == "0" or not (CHECKED_NUMBA[0] <= numba_version() <= CHECKED_NUMBA[1]):
         return False
     if "numba.np.arraymath" in sys.modules:
         return False

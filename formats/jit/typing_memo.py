@@ -42,7 +42,8 @@ _memo: dict[tuple, tuple[Any, Any, Any, Any]] = {}
 _installed: list[Any] = []  # [the original get_call_type] once installed
 
 
-def _numba_version() -> tuple[int, int]:
+def numba_version() -> tuple[int, int]:
+    """This numba's (major, minor); (0, 0) where its version string is not numbers."""
     parts = numba.__version__.split(".")
     try:
         return int(parts[0]), int(parts[1])
@@ -52,7 +53,7 @@ def _numba_version() -> tuple[int, int]:
 
 def supported() -> bool:
     """True when this numba's ``BaseFunction.get_call_type`` is the one the memo was checked against."""
-    if not (CHECKED_NUMBA[0] <= _numba_version() <= CHECKED_NUMBA[1]):
+    if not (CHECKED_NUMBA[0] <= numba_version() <= CHECKED_NUMBA[1]):
         return False
     try:
         from numba.core import targetconfig
