@@ -117,3 +117,26 @@ def rotate(q0, q1, q2, q3, f0, f1, f2):
     r21 = 2 * (q2 * q3 + q0 * q1)
     r22 = 1 - 2 * (q1 * q1 + q2 * q2)
     return r00 * f0 + r01 * f1 + r02 * f2, r10 * f0 + r11 * f1 + r12 * f2, r20 * f0 + r21 * f1 + r22 * f2
+
+
+def vertical_rate(q: np.ndarray, om: np.ndarray) -> np.ndarray:
+    """(R(q) ω)_z per sample: the rate (rad/s) about the world vertical of the body rates ``om`` (N,3) for q (N,4)
+    body→NED, R's third row (2(xz − wy), 2(yz + wx), 1 − 2(x² + y²)) times ω, row by row, in place (the same
+    operations as the row's products and sums in one expression: the same bits)."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    out = x * z
+    out -= w * y
+    out *= 2.0
+    out *= om[:, 0]
+    part = y * z
+    part += w * x
+    part *= 2.0
+    part *= om[:, 1]
+    out += part
+    np.multiply(x, x, out=part)
+    part += y * y
+    part *= 2.0
+    np.subtract(1.0, part, out=part)
+    part *= om[:, 2]
+    out += part
+    return out

@@ -560,7 +560,7 @@ def aided_result(
     state = aided_initial_state(params) if state is None else np.array(state, dtype=np.float64)
     before = state[A_NRESTART]
     best = None
-    for attempt in range(WIDEN_TRIES + 1):
+    for _ in range(WIDEN_TRIES + 1):
         aided, ast = run_aided(
             time, gyro, accel, velocity_ne, res.q, res.bias, res.std, params, lever - ant, dt_nominal, state, smooth
         )
@@ -569,8 +569,7 @@ def aided_result(
             best = (restarts, aided, ast)
         if restarts == 0 or state[A_RW_SCALE] >= WIDEN_FACTOR**WIDEN_TRIES:
             break  # (a streamed run carries the width: widened at most WIDEN_TRIES times over the whole run)
-        # restarted: the same input, the width × 4 (a smoothed track, which is not the hull's velocity, diverges at
-        # any width and is left to the EKF below)
+        # restarted: the same input, the width × 4 (a smoothed track diverges at any width: left to the EKF below)
         state[A_RW_SCALE] *= WIDEN_FACTOR  # (run_aided copies the state)
     restarts, aided, ast = best
     va = aided.std[:, 0] ** 2 + aided.std[:, 1] ** 2

@@ -29,6 +29,7 @@ from imutool.attitude.layout import (
 from imutool.attitude.params import EkfParams
 from imutool.gyro_check import GyroScaleCheck
 from imutool.heading_lag import HeadingLagTrack, heading_lag_check
+from imutool.quaternion import vertical_rate
 
 
 class SampleFlag(enum.IntFlag):
@@ -343,7 +344,7 @@ class SelfCheck:
         om = np.asarray(gyro, dtype=np.float64) - bias
         if not np.isfinite(om).all():  # (nan_to_num itself, on every row, cost more than the rest of this check)
             om = np.nan_to_num(om)
-        psi = _vertical_rate(q, om)  # rad/s about the world vertical (NED: + clockwise)
+        psi = vertical_rate(q, om)  # rad/s about the world vertical (NED: + clockwise)
         step = np.diff(t, prepend=t[0] if self._turn_tail is None else self._turn_tail[0][-1])
         np.degrees(psi, out=psi)
         psi *= np.clip(step, 0.0, None, out=step)
@@ -502,29 +503,6 @@ class SelfCheck:
                 )
         meta = output_metadata(self.lever_arm, summary)
         return SelfCheckReport(summary, warnings, meta)
-
-
-def _vertical_rate(q: np.ndarray, om: np.ndarray) -> np.ndarray:
-    """(R(q) ω)_z per sample: the rate (rad/s) about the world vertical of the body rates ``om`` (N,3) for q (N,4)
-    body→NED, R's third row (2(xz − wy), 2(yz + wx), 1 − 2(x² + y²)) times ω, row by row, in place (the same
-    operations as the row's products and sums in one expression: the same bits)."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    out = x * z
-    out -= w * y
-    out *= 2.0
-    out *= om[:, 0]
-    part = y * z
-    part += w * x
-    part *= 2.0
-    part *= om[:, 1]
-    out += part
-    np.multiply(x, x, out=part)
-    part += y * y
-    part *= 2.0
-    np.subtract(1.0, part, out=part)
-    part *= om[:, 2]
-    out += part
-    return out
 
 
 def _turn_window(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
