@@ -26,12 +26,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
 from scipy.optimize import nnls
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.jit.decorators import njit
 
 BI_FACTOR = 0.6643  # √(2 ln 2 / π)
 

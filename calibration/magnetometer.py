@@ -39,12 +39,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
 from scipy.optimize import least_squares
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.atomic import atomic_path
 from formats.errors import ImutoolError
+from formats.jit.decorators import njit
 
 KINDS = ("offset", "diag", "full", "auto")
 # coverage needed for each kind (fraction of the equal-area sphere grid); below: refused

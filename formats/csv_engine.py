@@ -26,9 +26,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numba import uint64 as _u64
 from numba.cpython.unsafe.numbers import leading_zeros
+
+from formats.jit.decorators import njit
 
 from .jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 
@@ -122,7 +123,7 @@ _S60 = np.uint64(60)
 _S62 = np.uint64(62)
 
 
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     """Full 64×64 → 128-bit product (hi, lo)."""
     a0 = a & _M32
@@ -139,7 +140,7 @@ def _mul128(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     return hi, lo
 
 
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def decimal_to_double(w: np.uint64, q: int) -> float:
     """The double nearest to w·10^q (ties to even), w < 2^64; exact (Clinger fast path, else Eisel–Lemire)."""
     if w == _U0:
@@ -219,7 +220,7 @@ _INFINITY = np.frombuffer(b"infinity", np.uint8)
 _INF = np.frombuffer(b"inf", np.uint8)
 
 
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def _lower(c: np.uint8) -> int:
     c = int(c)
     if 65 <= c <= 90:
@@ -227,7 +228,7 @@ def _lower(c: np.uint8) -> int:
     return c
 
 
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def _match_word(buf: np.ndarray, p: int, end: int, word: np.ndarray) -> int:
     """Length of ``word`` (lower-case ASCII bytes) if buf[p:] starts with it (case-insensitive), else 0."""
     n = len(word)
@@ -473,7 +474,7 @@ def parse_block(
 
 
 # -- writer -------------------------------------------------------------------------------------------------
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     """round((hi·2^64 + lo) / 2^s) for 1 ≤ s ≤ 127 (result assumed < 2^64)."""
     s1 = s - 1
@@ -486,7 +487,7 @@ def _round_shift(hi: np.uint64, lo: np.uint64, s: int) -> np.uint64:
     return (r + _U1) >> _U1
 
 
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     """≈ round(m·2^e2 · 10^(16 - e10)) (within ±1) for an integer m < 2^53."""
     k = 16 - e10
@@ -505,7 +506,7 @@ def _digits17(m: np.uint64, e2: int, e10: int) -> np.uint64:
     return _round_shift(hi, lo, s)
 
 
-@njit
+@njit(no_cpython_wrapper=True)  # only the blocks' kernels call it
 def shortest_digits(ax: float, b: np.uint64) -> tuple[np.uint64, int, int]:
     """(digits, n digits, decimal exponent E) with ax = d1.d2d3… × 10^E exactly on parsing; n = 0: failed.
 

@@ -50,9 +50,9 @@ chunks: at most two windows per chunk are left out).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.quaternion import SERIES_ANGLE2, qmul, qturn, rotate
 
 WINDOW_S = 2.0  # s: long against vibration and short jerks, short enough that fast hand motion does not alias

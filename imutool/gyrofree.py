@@ -31,13 +31,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 import formats
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_euler
+from formats.jit.decorators import njit
 from formats.units import convert, lookup
 from imutool.loading import input_notes
 

@@ -37,7 +37,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
 from scipy import signal
 from scipy.interpolate import CubicSpline
 from scipy.linalg import expm
@@ -47,6 +46,7 @@ import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never
 from formats import Recording
 from formats.errors import ImutoolError
 from formats.frames import quat_to_matrix
+from formats.jit.decorators import njit
 from formats.jit.warm import Entry
 from imutool.loading import input_notes
 from imutool.metrics import best_lag, error_stats, interp_to

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from formats.jit.decorators import njit
 
 
 @njit(inline="always")  # small and on the per-sample path: compiled into each caller

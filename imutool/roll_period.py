@@ -43,9 +43,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 
 MIN_CYCLES = 3
 NFFT_MAX = 2**20  # zero-padding stops here (a day at 50 Hz is 4.3 M samples)

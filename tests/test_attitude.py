@@ -1368,8 +1368,15 @@ def test_heading_recovers_within_seconds_after_a_magnet_is_taken_away():
 def test_projected_accel_update_is_the_joseph_form_of_its_gain():
     """_drop_vertical turns the optimal update into K' = T K (T = I − diag(r rᵀ, r rᵀ)); its covariance must equal
     the Joseph form (I − K'H) P (I − K'H)ᵀ + K' R K'ᵀ computed densely, and δx must equal K' y."""
+    from formats.jit.decorators import njit
     from imutool.attitude.covariance import _drop_vertical, _vertical_forms
     from imutool.attitude.updates import _vec_update
+
+    @njit  # the three are compiled without a Python entry: called here from a compiled function, as the kernel does
+    def projected_update(P, h, y, sig2, r, drop_att, drop_bias, dx):
+        fa, fx, fb = _vertical_forms(P, r[0], r[1], r[2])
+        _vec_update(P, h[0], h[1], h[2], y[0], y[1], y[2], sig2, 0.0, True, dx, False)
+        _drop_vertical(P, fa, fx, fb, r[0], r[1], r[2], drop_att, drop_bias, dx)
 
     rng = np.random.default_rng(4)
     a = rng.normal(size=(6, 6))
@@ -1382,9 +1389,7 @@ def test_projected_accel_update_is_the_joseph_form_of_its_gain():
         P = P0.copy()
         dx = np.zeros(6)
         r = -h
-        fa, fx, fb = _vertical_forms(P, *r)
-        _vec_update(P, *h, *y, sig2, 0.0, True, dx, False)
-        _drop_vertical(P, fa, fx, fb, *r, drop_att, drop_bias, dx)
+        projected_update(P, h, y, sig2, r, drop_att, drop_bias, dx)
         hx = np.array([[0, -h[2], h[1]], [h[2], 0, -h[0]], [-h[1], h[0], 0]])
         H = np.hstack([hx, np.zeros((3, 3))])
         K = P0 @ H.T @ np.linalg.inv(H @ P0 @ H.T + sig2 * np.eye(3))

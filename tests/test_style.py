@@ -55,6 +55,27 @@ def test_imports_only_go_downward(pkg, forbidden):
     assert not bad, bad
 
 
+def test_kernels_take_njit_from_formats_jit_decorators():
+    """A kernel takes ``njit`` from :mod:`formats.jit.decorators` (no wrappers numba would build and never use, and
+    the cache's source scan counts it), not from numba; numba's other names may be imported from numba."""
+    bad = []
+    for pkg in ("imutool", "calibration", "formats"):
+        for f in (ROOT / pkg).rglob("*.py"):
+            if f == ROOT / "formats" / "jit" / "decorators.py":
+                continue
+            for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "numba":
+                    bad += [
+                        f"{f.relative_to(ROOT)}: from {node.module} import {a.name}"
+                        for a in node.names
+                        if a.name in ("njit", "jit")
+                    ]
+                elif isinstance(node, ast.Attribute) and node.attr in ("njit", "jit"):
+                    if isinstance(node.value, ast.Name) and node.value.id in ("numba", "nb"):
+                        bad.append(f"{f.relative_to(ROOT)}: {node.value.id}.{node.attr}")
+    assert not bad, bad
+
+
 def test_no_shared_data_copied_into_repo():
     shared = ROOT.parent / "shared" / "data"
     if not shared.exists():

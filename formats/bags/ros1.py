@@ -14,7 +14,8 @@ import struct
 from typing import Any
 
 import numpy as np
-from numba import njit
+
+from formats.jit.decorators import njit
 
 from ..errors import ImutoolError
 from ..jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)

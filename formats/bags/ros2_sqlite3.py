@@ -13,7 +13,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
-from numba import njit
+
+from formats.jit.decorators import njit
 
 from ..jit import cache as kernel_cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from .protocol import BagBackend, RawMessages, Topic, message_errors

@@ -12,19 +12,19 @@ install works. ``<root>`` is ``$NUMBA_CACHE_DIR/imutool`` when ``NUMBA_CACHE_DIR
 per-user cache folder (:func:`user_cache_root`). If that cannot be written (a read-only home), a private folder
 in the temporary directory is used, and failing that a folder that lives only as long as the process.
 
-``<version>`` is a short hash of the library files whose content can reach a compiled kernel, and of the numba
-and Python versions. numba keys a kernel's cache on its own file only, so a kernel that calls a helper in another
-file, or freezes a constant imported from one, would keep the old value after that file changed; with the version
-in the path such a change starts a fresh cache. The files are found by a static scan (:func:`kernel_sources`,
-``ast`` only, nothing imported): the kernel files (a function decorated, or a statement wrapped, with one of
-numba's decorators imported from ``numba``: ``njit``, ``jit``, ``vectorize``...) and every file that a name a
-kernel mentions leads to, followed through the module-level statements that define it and through
-``import``/``from ... import`` of the three packages, transitively. A file no kernel name leads to (a route, a
-report, the CLI) can be edited without recompiling anything. The scan takes ~0.4 s; its answer is kept per hash of
-every library file in ``<root>/kernel-sources.json``, so a process whose sources did not change pays only for
-reading and hashing them (~10 ms). Not seen by the scan: a kernel that reads a non-Python file at import, or a
-module that takes numba's decorators from another of our modules instead of from ``numba`` (neither exists). The
-newest :data:`KEEP_VERSIONS` version folders are kept, older ones are removed when a new one is made.
+``<version>`` is a short hash of the library files whose content can reach a compiled kernel, and of the numba and
+Python versions. numba keys a kernel's cache on its own file only, so a kernel that calls a helper in another file, or
+freezes a constant imported from one, would keep the old value after that file changed; with the version in the path
+such a change starts a fresh cache. The files are found by a static scan (:func:`kernel_sources`, ``ast`` only, nothing
+imported): the kernel files (a function decorated, or a statement wrapped, with one of numba's decorators imported from
+``numba`` or :mod:`formats.jit.decorators`: ``njit``, ``jit``, ``vectorize``...) and every file that a name a kernel
+mentions leads to, followed through the module-level statements that define it and through ``import``/``from ...
+import`` of the three packages, transitively. A file no kernel name leads to (a route, a report, the CLI) can be edited
+without recompiling anything. The scan takes ~0.4 s; its answer is kept per hash of every library file in
+``<root>/kernel-sources.json``, so a process whose sources did not change pays only for reading and hashing them (~10
+ms). Not seen by the scan: a kernel that reads a non-Python file at import, or a module that takes numba's decorators
+from another of our modules than ``formats.jit.decorators`` (none does). The newest :data:`KEEP_VERSIONS` version
+folders are kept, older ones are removed when a new one is made.
 
 A kernel that is not in the cache yet is announced once per kernel group on stderr before it compiles
 ("imutool: compiling the filter's kernels (first run only, ~N s)"), from numba's own ``numba:compile`` event,
@@ -141,6 +141,7 @@ _NUMBA_DECORATORS = frozenset(
         "intrinsic",
     }
 )
+DECORATORS_MODULE = "formats.jit.decorators"  # numba's njit with imutool's defaults: counted as numba's own
 _ALL = ("*",)  # a reference to a whole module (``import m`` used as ``m``, ``from m import *``)
 
 
@@ -182,7 +183,10 @@ class _Scan:
         else:
             module = node.module or ""
         for a in node.names:
-            if module.split(".")[0] == "numba":
+            if module == DECORATORS_MODULE and a.name in _NUMBA_DECORATORS:  # a decorator, and a file that counts
+                self._numba.add(a.asname or a.name)
+                self.imports.setdefault(a.asname or a.name, []).append((module, a.name))
+            elif module.split(".")[0] == "numba":
                 if a.name in _NUMBA_DECORATORS:
                     self._numba.add(a.asname or a.name)
             elif a.name == "*":
@@ -276,10 +280,10 @@ def _module_file(site: Path, module: str) -> Path | None:
 def kernel_sources(site: Path | None = None, texts: dict[Path, bytes] | None = None) -> list[Path]:
     """The library files whose content can reach a compiled kernel, found by a static scan (sorted).
 
-    A kernel file uses one of numba's decorators (imported from ``numba``); from each kernel, every name it
-    mentions is followed: to the module-level statement that defines it in its file (a constant, a helper, a
-    table built at import), or through an ``import``/``from ... import`` into another module of the three
-    packages, and on from there. A file is in the set as soon as one followed name lies in it.
+    A kernel file uses one of numba's decorators (from ``numba`` or ``formats.jit.decorators``); from each kernel, every
+    name it mentions is followed: to the module-level statement that defines it in its file (a constant, a helper, a
+    table built at import), or through an ``import``/``from ... import`` into another module of the three packages, and
+    on from there. A file is in the set as soon as one followed name lies in it.
     """
     site = _SITE if site is None else site
     texts = {} if texts is None else texts
@@ -299,7 +303,7 @@ def kernel_sources(site: Path | None = None, texts: dict[Path, bytes] | None = N
         text = texts.get(path)
         if text is None:
             text = texts[path] = path.read_bytes()
-        if b"numba" in text:
+        if b"numba" in text or DECORATORS_MODULE.encode() in text:
             work.extend((path, (name,)) for name in scan(path).roots)
     seen: set[tuple[Path, tuple[str, ...]]] = set()
     reached: set[Path] = set()

@@ -8,9 +8,9 @@ on z at rest), rates rad/s, time s. R = R(q) body→NED and RI = R(q_I) are 3×3
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _drop_vertical, _propagate_pending, _reset_cov, _shear_cov, _vertical_forms
 from imutool.attitude.layout import (
     F_ACC_REJ,

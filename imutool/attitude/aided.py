@@ -32,10 +32,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.frames import quat_multiply, quat_to_euler
+from formats.jit.decorators import njit
 from imutool.attitude.aided_layout import IBA, IBG, IV, N_COLS, N_DX, N_PHI, N_PP, N_PQ, N_ROW, N_START, NX, euler_std
 from imutool.attitude.aided_rts import node_capacity, smooth_aided
 from imutool.attitude.layout import _FASTMATH, CALLED, INLINED

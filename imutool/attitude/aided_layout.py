@@ -4,9 +4,9 @@ a smoother node's columns, and the roll/pitch/heading σ of a world-frame attitu
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.layout import INLINED
 
 NX = 11  # error state: ψ (0-2), δv_NE (3-4), δb_g (5-7), δb_a (8-10)

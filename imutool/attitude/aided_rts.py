@@ -18,9 +18,9 @@ rad, m/s, rad/s, m/s².
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.aided_layout import IBA, N_DX, N_PHI, N_PP, N_PQ, N_ROW, N_START, NX, euler_std
 from imutool.attitude.layout import _FASTMATH, CALLED
 from imutool.quaternion import qmul, rmat

@@ -13,9 +13,9 @@ option is on (a lever arm, a GNSS speed and course, a GNSS velocity), so the def
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.layout import (
     CALLED,
     P_LEVER_TAU,

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from numba import njit
-
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.layout import (
     ATT,
     BIAS,

@@ -8,9 +8,9 @@ s; a fix beyond HEADING_GATE_SIGMA σ is a glitch, skipped for at most HEADING_R
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _propagate_pending, _vertical_forms
 from imutool.attitude.layout import (
     CALLED,

@@ -74,9 +74,9 @@ cached apart); the outputs are the same bits.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.accel import _accel_gate, _accel_low_pass, _accel_update, _accel_white_noise, _age_low_pass
 from imutool.attitude.compensation import _gnss_force, _lever_arm, _velocity_aiding
 from imutool.attitude.heading_input import _heading_input

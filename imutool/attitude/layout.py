@@ -113,7 +113,16 @@ _FASTMATH = {"contract", "reassoc", "arcp", "nsz"}
 # from its callers before) and is cached on its own: compiled alone, by the second process of a cold run
 # (imutool/filter_warm.py), or inside the kernel, it is the same code, and the kernel links it from the cache
 # as LLVM bitcode, so forceinline still inlines it.
-INLINED = dict(fastmath=_FASTMATH, nogil=True, error_model="numpy", _nrt=False, forceinline=True, cache=True)
+# They are compiled only into the kernel, never called from Python: no Python entry (formats/jit/decorators.py).
+INLINED = dict(
+    fastmath=_FASTMATH,
+    nogil=True,
+    error_model="numpy",
+    _nrt=False,
+    forceinline=True,
+    cache=True,
+    no_cpython_wrapper=True,
+)
 CALLED = dict(INLINED, forceinline=False)  # the option-only sections: called, not inlined
 
 # ---- constant arguments of the compiled helpers ----------------------------------------------------------------

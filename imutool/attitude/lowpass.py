@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from numba import njit
-
+from formats.jit.decorators import njit
 from imutool.attitude.layout import LP_MEAN_MAX, LP_MEAN_START
 
 

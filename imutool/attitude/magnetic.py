@@ -9,9 +9,9 @@ angles rad, rates rad/s, time s. R = R(q) body→NED is the kernel's 3×3 scratc
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _propagate_pending, _reset_cov, _vertical_forms
 from imutool.attitude.layout import (
     F_MAG_NEW,

@@ -9,9 +9,9 @@ multi-rate scheme: P is propagated only before an update), and a step longer tha
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _propagate_pending
 from imutool.attitude.layout import (
     INLINED,

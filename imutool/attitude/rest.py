@@ -8,9 +8,9 @@ update is a measurement of the bias b (rad/s), per axis, of σ ``rest_noise`` pe
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _propagate_pending, _reset_cov
 from imutool.attitude.layout import (
     F_REST,

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _add_rrt, _propagate_cov
 from imutool.attitude.layout import _FASTMATH, ATT
 from imutool.attitude.params import EkfParams

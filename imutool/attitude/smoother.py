@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
 from formats.frames import quat_conjugate, quat_multiply
+from formats.jit.decorators import njit
 from imutool.attitude.layout import _FASTMATH
 from imutool.attitude.lowpass import _butterworth_gains, _butterworth_step
 from imutool.attitude.params import EkfParams

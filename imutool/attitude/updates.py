@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
+from formats.jit.decorators import njit
 from imutool.attitude.covariance import _add_rrt
 from imutool.attitude.layout import ATT, INLINED, S_BIASMAX
 from imutool.quaternion import qmul

@@ -23,10 +23,10 @@ import struct
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 import formats.jit.cache  # noqa: F401  (compiled kernels cached per user, never in the package)
 from formats.errors import ImutoolError
+from formats.jit.decorators import njit
 from formats.nmea import checksum_value
 from formats.units import STANDARD_GRAVITY
 
