@@ -5,20 +5,21 @@ kernel and the CSV writer's (and, with ``--smooth``, the RTS pass and the zero-p
 a second process as soon as it knows what it will run (``imutool/cli/filter.py``, before it imports the filter;
 ``run_filter`` for a library caller), which compiles, in this order:
 
-1. the EKF's sections (:data:`EKF_SECTIONS`) from the last to the first, while the command compiles the parser and
+1. (with a CSV output, the CSV writer's kernel first, see 2.) the EKF's sections (:data:`EKF_SECTIONS`) from the
+   last to the first, while the command compiles the parser and
    then types the kernel from the first section on. Each section is cached on its own with the flags it states
    itself (:data:`imutool.attitude.layout.INLINED`), so the command loads what the second process has finished,
    as LLVM bitcode that its kernel inlines as before, and compiles the rest; the two meet in the middle, where
    each waits for a section the other is compiling instead of compiling it too (:mod:`formats.jit.claims`);
-2. the kernels the command calls after the EKF, in the order it calls them (:data:`AFTER_THE_EKF`,
-   :data:`SMOOTH_KERNELS` with ``--smooth``, ``CSV_WRITER`` for a CSV output), while the command finishes the EKF
-   kernel itself (its own typing and the whole loop's LLVM, ~2 s, after the last section). The command, while it
-   waits for a section or a kernel the second process is compiling, compiles one of those from the last it calls
-   (:func:`formats.jit.claims.while_waiting`). Taken the other way round (the command the gyro check first), the
-   command compiled the gyro check (~2.5 s) where it met the second process a fraction of a second before the last
-   section was done, and the EKF kernel's own ~2 s came after it on the command's path: 13.1–13.2 s against
-   10.6–10.7 s of work in the second process (2026-12-06, traced cold runs); this way the EKF kernel's own part
-   runs while the second process compiles the gyro check.
+2. the kernels the command calls after the EKF: the CSV writer's (for a CSV output) before the sections, the
+   others after them in the order the command calls them (:data:`AFTER_THE_EKF`, :data:`SMOOTH_KERNELS` with
+   ``--smooth``). Where the two meet among the sections the command is left with the EKF kernel's own part (its
+   typing and the whole loop's LLVM, ~2 s), which it compiles while the second process compiles the gyro check
+   (~2 s). The command compiles a later kernel itself only after the EKF kernel, while it waits for one the second
+   process is compiling (from the last it calls, :func:`formats.jit.claims.while_waiting`). Before (the later
+   kernels all after the sections, and the command compiling one where it met the second process), one of them
+   came before the EKF kernel's own part on the command's path while the second process had nothing left to do:
+   10.3–13.2 s against 8.7–10.6 s of the second process's (2026-12-06, traced cold runs).
 
 The sections of inputs a first run usually has not (GNSS speed or velocity, an external heading) are not compiled
 into the default kernel (None arguments, ``imutool/attitude/kernel.py``); an external heading's is listed when
@@ -91,13 +92,14 @@ SMOOTH_KERNELS: tuple[Entry, ...] = (
 def warm_filter_kernels(
     smooth: bool = False, csv_output: bool = False, heading: bool = False
 ) -> subprocess.Popen | None:
-    """On a cold cache, compile in a second process the EKF's sections from the last (with ``heading``, an external
-    heading's too), then what the filter needs after the EKF in the order it needs it (the gyro check's, the
-    smoother's with ``smooth``, the CSV writer's with a CSV output)."""
+    """On a cold cache, compile in a second process the CSV writer's kernel with a CSV output, the EKF's sections
+    from the last (with ``heading``, an external heading's too), then what the filter needs after the EKF in the
+    order it needs it (the gyro check's, the smoother's with ``smooth``)."""
     sections = EKF_SECTIONS[:-2] + ((HEADING_SECTION,) if heading else ()) + EKF_SECTIONS[-2:]
-    later = AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ()) + ((CSV_WRITER,) if csv_output else ())
-    # the command, while it waits for a section or kernel the second process is compiling, compiles what it needs
-    # later from the last it needs (formats.jit.claims): the two take those kernels from opposite ends
+    first = (CSV_WRITER,) if csv_output else ()
+    later = AFTER_THE_EKF + (SMOOTH_KERNELS if smooth else ())
+    # the command, while it waits for a kernel the second process is compiling (after its EKF kernel), compiles
+    # what it needs later from the last it needs (formats.jit.claims): the two take those from opposite ends
     return warm_in_background(
-        EKF_KERNEL, tuple(reversed(sections)) + later, splits_probe=True, meanwhile=tuple(reversed(later))
+        EKF_KERNEL, first + tuple(reversed(sections)) + later, splits_probe=True, meanwhile=tuple(reversed(later))
     )

@@ -34,13 +34,15 @@ class _Sharing:
     peer: int | None = None  # the other process's pid while two processes share the compile
     alive: Callable[[], bool] = staticmethod(lambda: False)  # is the other process still running
     mine: set[Path] = set()  # the claims this process holds
-    meanwhile: Callable[[], bool] | None = None  # compiles one more thing this process needs later; False: none left
+    # compiles one more thing this process needs later: True done, None nothing yet (asked again), False none left
+    meanwhile: Callable[[], bool | None] | None = None
     busy = False  # in meanwhile (a wait inside it waits)
 
 
-def while_waiting(work: Callable[[], bool] | None) -> None:
+def while_waiting(work: Callable[[], bool | None] | None) -> None:
     """What this process does instead of idling while it waits for the other's function: ``work()`` compiles one
-    function it will need later (claimed, so the other skips it) and returns False when there is none left."""
+    function it will need later (claimed, so the other skips it) and returns True, None when it has nothing to do
+    yet (asked again at the next wait) or False when there is none left."""
     _Sharing.meanwhile = work
 
 
@@ -182,5 +184,6 @@ def claim_or_wait(path: Path, load: Callable[[], object]) -> object:
             if more:
                 deadline = time.monotonic() + WAIT_S  # the wait starts again after that compile
                 continue
-            _Sharing.meanwhile = None
+            if more is False:
+                _Sharing.meanwhile = None
         time.sleep(POLL_S)

@@ -112,8 +112,9 @@ def warm_in_background(
 ) -> subprocess.Popen | None:
     """Start the warming process for ``entries`` (in order) if ``probe`` (the command's main kernel) is not cached.
 
-    ``splits_probe``: the entries end with the probe's own parts, from its last (the EKF's sections), so the command
-    compiles only about half of the probe's group and announces that share of its time.
+    ``splits_probe``: the entries hold the probe's own parts, from its last (the EKF's sections), so the command
+    compiles only about half of the probe's group and announces that share of its time; and ``meanwhile`` (what
+    the command compiles while it waits for the other process) waits until the probe is cached.
 
     Returns the process (not waited for; killed if still running when this one ends), or None: cached already,
     a thread budget of one (one core, or a batch worker's share, :func:`formats.jit.threads.thread_budget`), a
@@ -161,7 +162,7 @@ def warm_in_background(
     atexit.register(_stop, proc)  # a command that ends first leaves no process behind
     claims.share_with(proc.pid, lambda: proc.poll() is None)  # each function compiled once (formats.jit.claims)
     if meanwhile:
-        claims.while_waiting(_one_at_a_time(meanwhile))
+        claims.while_waiting(_one_at_a_time(meanwhile, after=probe if splits_probe else None))
     if splits_probe:
         kernel_cache.compiling_in_two_processes(probe[0] if isinstance(probe, tuple) else probe.__module__)
     return proc
@@ -170,12 +171,17 @@ def warm_in_background(
 _STARTED: set[str] = set()  # the probes this process has started a warming process for
 
 
-def _one_at_a_time(entries: Sequence[Entry]):
+def _one_at_a_time(entries: Sequence[Entry], after=None):
     """For :func:`formats.jit.claims.while_waiting`: each call compiles the next of ``entries`` that is neither
-    cached nor claimed by the other process; False once none is left."""
+    cached nor claimed by the other process; False once none is left. With ``after`` (the probe, whose parts the
+    two processes share): nothing (None) until it is cached — where the command meets the second process among
+    the probe's parts, the part it waits for is nearly done, and a kernel compiled there would put its time
+    before the probe's own on the command's path."""
     left = list(entries)
 
-    def work() -> bool:
+    def work() -> bool | None:
+        if after is not None and not is_cached(after):
+            return None
         while left:
             if compile_entries([left.pop(0)]):
                 return True
