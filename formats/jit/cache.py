@@ -639,17 +639,25 @@ def announce_compile(module: str) -> None:
         announcer.announce(group)
 
 
+TYPE_ANNOTATION_NOT_KEPT = "(numba's type annotation is not kept in imutool's kernel cache)"
+
+
 def _tolerant_save(numba_save):
     """numba's ``Cache.save_overload``, except that for our kernels a cache entry that cannot be written (a full
     disk, a file-size limit, a folder gone read-only) is skipped: the kernel is compiled and runs; the next run
-    compiles it again. Another library's cache behaves as numba decides."""
+    compiles it again; and the entry keeps no type annotation. Another library's cache behaves as numba decides."""
 
     def save_overload(self, sig, data):
+        locator = getattr(getattr(self, "_impl", None), "locator", None)
+        ours = isinstance(locator, KernelCacheLocator)
+        if ours and hasattr(data, "_replace") and hasattr(data, "type_annotation"):
+            # numba saves the annotated source (its inspect_types text) with every entry: building that text was ~1 %
+            # of a cold first filter; our entries keep a note instead (the in-memory result keeps its annotation)
+            data = data._replace(type_annotation=TYPE_ANNOTATION_NOT_KEPT)
         try:
             numba_save(self, sig, data)
         except OSError:
-            locator = getattr(getattr(self, "_impl", None), "locator", None)
-            if not isinstance(locator, KernelCacheLocator):
+            if not ours:
                 raise
         finally:
             if claims.sharing():
