@@ -51,9 +51,10 @@ from typing import Any
 import numba
 from numba.core import caching, config, event
 
-from formats.jit import blas_probe, claims, typing_memo
+from formats.jit import blas_probe, claims, pipeline_memo, typing_memo
 
 typing_memo.install()  # numba's call typing asked once per distinct question (formats/jit/typing_memo.py)
+pipeline_memo.install()  # numba's pass-dependency analysis once per pass list (formats/jit/pipeline_memo.py)
 blas_probe.install()  # numba's start-up without importing scipy.linalg (formats/jit/blas_probe.py)
 
 PACKAGES = ("imutool", "calibration", "formats")
@@ -70,8 +71,10 @@ FOLDER_ENV = "IMUTOOL_KERNEL_FOLDER"  # set by formats.jit.warm for its second p
 # the zero-phase low-pass 1.4 s with --smooth), the gyro check 1.5 s, CSV 6 s, INS 7.5 s, heave 2.5 s, bags 5.6 s.
 # 2026-11-28, with numba's call typing memoised (formats/jit/typing_memo.py): the EKF 18-23 s CPU alone, CSV reader
 # 2.5-3.5 s + writer 2.1-3.4 s, INS 5.2-5.4 s, heave 1.7 s; the others not re-timed (~25 % less).
+# 2026-12-06, without numba's unused wrappers (formats/jit/decorators.py), one process: the EKF 11-14 s, the CSV
+# reader 1.6-2.9 s and writer 1.6-1.9 s.
 KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
-    ("imutool.attitude", "the filter's kernels", 20.0),
+    ("imutool.attitude", "the filter's kernels", 14.0),
     ("imutool.gyro_check", "the filter's kernels", 2.0),
     ("imutool.compass", "the compass filter's kernel", 2.0),
     ("imutool.heave", "the heave filter's kernels", 2.0),
@@ -82,7 +85,7 @@ KERNEL_GROUPS: tuple[tuple[str, str, float], ...] = (
     ("imutool.capture", "the bridge-frame decoder", 3.0),
     ("calibration.magnetometer", "the magnetometer calibration kernel", 2.0),
     ("calibration.allan", "the Allan deviation kernel", 2.0),
-    ("formats.csv_engine", "the CSV reader and writer", 6.0),
+    ("formats.csv_engine", "the CSV reader and writer", 4.0),
     ("formats.bags", "the ROS bag kernels", 6.0),
 )
 # the share of a group's time a command waits when formats.jit.warm's second process compiles the other half of

@@ -231,7 +231,11 @@ def ekf_kernel(
     n = t.shape[0]
     ext_meas, keep_f, store = acc_meas.shape[0] == n, f_out.shape[0] == n, p_store.shape[0] == n
     P = st[S_P : S_P + 36].reshape((6, 6))
-    R, RI, MLAG, X33, dx = np.empty((3, 3)), np.empty((3, 3)), np.zeros((3, 3)), np.empty((3, 3)), np.zeros(6)
+    # np.empty in two shapes and zeros written in (np.zeros compiles np.empty with a dtype and a fill of its own:
+    # six small functions more on a first run)
+    R, RI, MLAG, X33, dx = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty(6)
+    MLAG[:] = 0.0
+    dx[:] = 0.0
     use_lp = prm[P_ACC_TAU] > 0
     lag = prm[P_ACC_LAG] > 0 and use_lp and not ext_meas  # the low-pass's lag term ages every row
     gate = np.empty(5)  # the magnetometer's dip gate: cos, sin of the gate; the reference dip, its bounds (magnetic.py)
