@@ -67,6 +67,19 @@ def test_no_second_process_when_switched_off_cached_or_one_thread(monkeypatch):
     assert kw.warm_in_background(ekf_kernel, AFTER_THE_EKF) is None
 
 
+def test_busy_cores_is_the_lower_of_the_mean_and_the_processes_running_now(monkeypatch, tmp_path):
+    """The 1-minute mean lags behind a command that just ended; the running count (this process left out) does
+    not. A machine busy now stays busy by both."""
+    monkeypatch.setattr(kw.os, "getloadavg", lambda: (2.4, 1.0, 0.5))
+    just_ended = tmp_path / "loadavg"
+    just_ended.write_text("2.40 1.00 0.50 1/345 6789\n")  # only this process runs now
+    assert kw._busy_cores(str(just_ended)) == 0.0
+    busy = tmp_path / "busy"
+    busy.write_text("2.40 1.00 0.50 4/345 6789\n")  # three others running: busy by both
+    assert kw._busy_cores(str(busy)) == 2.4
+    assert kw._busy_cores(str(tmp_path / "absent")) == 2.4  # no /proc: the mean
+
+
 def test_once_per_process_and_never_in_a_pool_worker(monkeypatch):
     started = []
 
