@@ -177,6 +177,37 @@ def test_the_scan_finds_the_kernel_files_and_what_their_kernels_reach(tmp_path):
     ]
 
 
+def test_the_scan_counts_formats_jit_decorators_as_numbas_decorator_in_every_spelling(tmp_path):
+    """A kernel decorated with formats.jit.decorators' njit is a kernel file however the module is imported (a
+    file that never writes "numba" was skipped by the first version of the text filter), and the decorators'
+    own file is in the version (its defaults decide which wrappers a cached entry holds)."""
+    tree = {k: v for k, v in SMALL.items() if not k.startswith("imutool/")}
+    tree.update(
+        {
+            "imutool/__init__.py": "",
+            "formats/jit/__init__.py": "",
+            "formats/jit/decorators.py": "import numba\ndef njit(*a, **k):\n    return numba.njit(*a, **k)\n",
+            "formats/rel.py": "from .jit.decorators import njit\nfrom .deep import DEEP\n@njit\ndef r():\n"
+            "    return DEEP\n",
+            "imutool/absolute.py": "from formats.jit.decorators import njit\n@njit(cache=True)\ndef a():\n"
+            "    return 1\n",
+            "imutool/module.py": "from formats.jit import decorators\nfrom formats.units import G\n"
+            "@decorators.njit\ndef m():\n    return G\n",
+            "imutool/plain2.py": "from formats.jit import decorators  # no kernel\nX = 1\n",
+        }
+    )
+    _tree(tmp_path, tree)
+    found = [p.relative_to(tmp_path).as_posix() for p in kc.kernel_sources(tmp_path)]
+    assert found == [
+        "formats/deep.py",
+        "formats/jit/decorators.py",
+        "formats/rel.py",
+        "formats/units.py",
+        "imutool/absolute.py",
+        "imutool/module.py",
+    ]
+
+
 def test_version_follows_only_what_a_kernel_can_reach(monkeypatch, tmp_path):
     _tree(tmp_path, SMALL)
     monkeypatch.setattr(kc, "_SITE", tmp_path)

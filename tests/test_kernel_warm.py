@@ -80,6 +80,21 @@ def test_busy_cores_is_the_lower_of_the_mean_and_the_processes_running_now(monke
     assert kw._busy_cores(str(tmp_path / "absent")) == 2.4  # no /proc: the mean
 
 
+def test_the_commands_meanwhile_waits_until_the_probe_is_cached(monkeypatch):
+    """Where the command meets the second process among the probe's parts it compiles no later kernel (that would
+    put its time before the probe's own): the meanwhile answers None until the probe is cached, then compiles."""
+    cached = {"probe": False}
+    compiled = []
+    monkeypatch.setattr(kw, "is_cached", lambda entry: cached["probe"] if entry == ("m", "probe", "") else False)
+    monkeypatch.setattr(kw, "compile_entries", lambda entries, parent=None: compiled.extend(entries) or 1)
+    work = kw._one_at_a_time([("m", "a", ""), ("m", "b", "")], after=("m", "probe", ""))
+    assert work() is None and not compiled
+    cached["probe"] = True
+    assert work() is True and compiled == [("m", "a", "")]
+    assert work() is True and work() is False
+    assert kw._one_at_a_time([("m", "a", "")])() is True  # without a probe: at once
+
+
 def test_once_per_process_and_never_in_a_pool_worker(monkeypatch):
     started = []
 

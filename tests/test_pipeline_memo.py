@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from numba.core.compiler import DefaultPassBuilder, Flags, StateDict
 from numba.core.compiler_machinery import PassManager
 
@@ -19,13 +20,15 @@ def _fresh_answer(pm: PassManager) -> dict:
 
 
 def test_the_memo_gives_numbas_own_answer_once_per_pass_list():
+    if not pipeline_memo.install():
+        pytest.skip("the memo is off here (IMUTOOL_PIPELINE_MEMO=0, or a numba it was not read against)")
     state = StateDict(func_ir=None, flags=Flags())
     pm = DefaultPassBuilder.define_nopython_pipeline(state)  # finalised: asked once already
     again = DefaultPassBuilder.define_nopython_pipeline(state)
     assert again._analysis is pm._analysis  # the second pipeline reused the first's answer
     fresh = _fresh_answer(pm)
     assert fresh == pm._analysis and fresh is not pm._analysis
-    assert fresh[next(iter(fresh))] is not None
+    assert any(fresh.values())  # some pass depends on another: a real answer, not an empty one
 
 
 def test_kernels_compile_and_run_with_the_memo():

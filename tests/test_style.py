@@ -56,23 +56,30 @@ def test_imports_only_go_downward(pkg, forbidden):
 
 
 def test_kernels_take_njit_from_formats_jit_decorators():
-    """A kernel takes ``njit`` from :mod:`formats.jit.decorators` (no wrappers numba would build and never use, and
-    the cache's source scan counts it), not from numba; numba's other names may be imported from numba."""
+    """A kernel takes ``njit`` as ``from formats.jit.decorators import njit`` (no wrappers numba would build and
+    never use; the cache's source scan looks for that module's name), not from numba under any name."""
     bad = []
     for pkg in ("imutool", "calibration", "formats"):
         for f in (ROOT / pkg).rglob("*.py"):
             if f == ROOT / "formats" / "jit" / "decorators.py":
                 continue
-            for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
-                if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "numba":
-                    bad += [
-                        f"{f.relative_to(ROOT)}: from {node.module} import {a.name}"
-                        for a in node.names
-                        if a.name in ("njit", "jit")
-                    ]
+            tree = ast.parse(f.read_text(encoding="utf-8"))
+            numba_names = {"numba"}  # local names of numba itself (``import numba as nb``)
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Import):
+                    numba_names |= {a.asname or a.name for a in node.names if a.name == "numba"}
+            for node in ast.walk(tree):
+                where = f"{f.relative_to(ROOT)}:{getattr(node, 'lineno', 0)}"
+                if isinstance(node, ast.ImportFrom):
+                    names = {a.name for a in node.names}
+                    if (node.module or "").split(".")[0] == "numba" and names & {"njit", "jit"}:
+                        bad.append(f"{where}: from {node.module} import njit/jit")
+                    elif "decorators" in (node.module or "") or "decorators" in names:
+                        if node.level or node.module != "formats.jit.decorators":
+                            bad.append(f"{where}: take it as `from formats.jit.decorators import njit`")
                 elif isinstance(node, ast.Attribute) and node.attr in ("njit", "jit"):
-                    if isinstance(node.value, ast.Name) and node.value.id in ("numba", "nb"):
-                        bad.append(f"{f.relative_to(ROOT)}: {node.value.id}.{node.attr}")
+                    if isinstance(node.value, ast.Name) and node.value.id in numba_names:
+                        bad.append(f"{where}: {node.value.id}.{node.attr}")
     assert not bad, bad
 
 

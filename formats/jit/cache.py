@@ -206,6 +206,9 @@ class _Scan:
             elif module.split(".")[0] == "numba":
                 if a.name in _NUMBA_DECORATORS:
                     self._numba.add(a.asname or a.name)
+            elif f"{module}.{a.name}" == DECORATORS_MODULE:  # ``from formats.jit import decorators``: its njit
+                self._numba_modules.add(a.asname or a.name)
+                self.imports.setdefault(a.asname or a.name, []).append((DECORATORS_MODULE, None))
             elif a.name == "*":
                 self.star.append(module)
             else:
@@ -325,7 +328,7 @@ def kernel_sources(site: Path | None = None, texts: dict[Path, bytes] | None = N
         text = texts.get(path)
         if text is None:
             text = texts[path] = path.read_bytes()
-        if b"numba" in text or DECORATORS_MODULE.encode() in text:
+        if b"numba" in text or b"decorators" in text:  # (relative imports of formats.jit.decorators too)
             work.extend((path, (name,)) for name in scan(path).roots)
     seen: set[tuple[Path, tuple[str, ...]]] = set()
     reached: set[Path] = set()

@@ -7,7 +7,8 @@ into machine code: a Python entry (unboxes the arguments, calls, boxes the resul
 and 2.7 % (C entry) of the compile, and their LLVM passes and machine code about as much again.
 
 - :func:`njit` leaves out the C entry by default (``no_cfunc_wrapper=True``): no kernel here passes a compiled
-  function as a value.
+  function as a value (a library user who passes one of ours to their own numba code as a first-class function
+  gets numba's "wrapper address ... got 0" error).
 - numba's own ``@overload`` implementations that a kernel calls (``np.empty``, ``min``, ``int``...: ~25 small
   functions compiled on their own on a first ``filter``) are built without their C entry too (numba already
   leaves out their Python entry): :func:`install`, run when this module is imported.
@@ -23,6 +24,7 @@ checks), so a new kernel gets the same defaults; :func:`formats.jit.cache.kernel
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from typing import Any
 
@@ -32,10 +34,20 @@ from numba.core.registry import CPUDispatcher
 
 import formats.jit.cache  # noqa: F401  (a kernel decorated here is cached in imutool's folder)
 
+CHECKED_NUMBA = ((0, 58), (0, 68))  # numba (major, minor) range whose overload templates were read
+
 
 def install() -> None:
     """Build numba's ``@overload`` implementations without the C entry (``no_cfunc_wrapper``) in this process:
-    they are only called by compiled code. Once; where numba's internals differ, nothing changes."""
+    they are only called by compiled code. Process-wide: a user's own ``@overload`` in the same process is built
+    so too (an overload's implementation is never a first-class value). Once; only over the numba versions this
+    was read against (:data:`CHECKED_NUMBA`); where numba's internals differ, nothing changes."""
+    try:
+        version = tuple(int(p) for p in numba.__version__.split(".")[:2])
+    except ValueError:
+        return
+    if not CHECKED_NUMBA[0] <= version <= CHECKED_NUMBA[1]:
+        return
     template = getattr(numba.core.typing.templates, "_OverloadFunctionTemplate", None)
     get_jitter = getattr(template, "_get_jit_decorator", None)
     if get_jitter is None or getattr(get_jitter, "_imutool_no_cfunc", False):
@@ -69,12 +81,16 @@ def njit(*args: Any, **options: Any) -> Any:
     """``numba.njit`` with ``no_cfunc_wrapper=True`` unless given; ``no_cpython_wrapper=True`` makes a
     :class:`CompiledOnlyDispatcher`. Used as ``@njit`` or ``@njit(cache=True, ...)``, as numba's."""
     options.setdefault("no_cfunc_wrapper", True)
-    if not options.get("no_cpython_wrapper", False):
-        return numba.njit(*args, **options)
+    if not options.get("no_cpython_wrapper", False) or numba.config.DISABLE_JIT:
+        return numba.njit(*args, **options)  # (NUMBA_DISABLE_JIT=1: numba gives the Python function back)
     cache = options.pop("cache", False)
+    if "locals" in options or "pipeline_class" in options:
+        raise TypeError("formats.jit.decorators.njit takes no locals or pipeline_class with no_cpython_wrapper")
     options["nopython"] = True
 
     def wrap(func: Callable) -> CompiledOnlyDispatcher:
+        if not inspect.isfunction(func):
+            raise TypeError(f"njit decorates a function, not {type(func).__name__}")
         dispatcher = CompiledOnlyDispatcher(py_func=func, locals={}, targetoptions=options)
         if cache:
             dispatcher.enable_caching()

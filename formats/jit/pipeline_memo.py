@@ -6,9 +6,10 @@ answer depends only on the list of passes, which is the same for every function 
 pipeline, its untyped pipeline for inlining), yet it was 1.8 % of a cold first ``filter``'s samples (py-spy, one
 process, 2026-12-06): ~60 functions and their inlining pipelines each asked again.
 
-:func:`install` keeps the answer per tuple of pass classes; the answer is only read by numba (which analyses to
-invalidate after a pass changed the IR). Installed only over the numba versions whose ``PassManager`` it was
-checked against; for any other it stays off and numba works as shipped. ``IMUTOOL_PIPELINE_MEMO=0`` switches it off.
+:func:`install` keeps the answer per tuple of pass classes. numba only hands the answer to each pass (in numba 0.68
+nothing changes it, and only one pass reads it, for show), so one dict serves every pipeline of the same passes.
+Installed only over the numba versions whose ``PassManager`` it was checked against; for any other it stays off and
+numba works as shipped. ``IMUTOOL_PIPELINE_MEMO=0`` switches it off.
 """
 
 from __future__ import annotations

@@ -3,8 +3,9 @@
 numba compiles in one thread (a process-wide lock), and most of a first run's time is numba's own Python passes
 (type inference, lowering; LLVM a third), so a cold cache cannot be compiled much faster in one process. It can be
 split across processes: while a command compiles its parser and its main kernel, a second process compiles the
-main kernel's parts from the last one backwards (the EKF's sections, :mod:`imutool.filter_warm`), then the kernels
-the command calls later (the CSV writer's, the smoother's, the gyro check's), into the same cache. The command
+main kernel's parts from the last one backwards (the EKF's sections, :mod:`imutool.filter_warm`) and the kernels
+the command calls later (the CSV writer's before the sections, the gyro check's and the smoother's after them),
+into the same cache. The command
 loads each part it reaches that the second process has finished, and compiles the others itself; the two meet in
 the middle, each function compiled once: while they share the work, a process claims a function before compiling
 it and the other waits for a claimed one instead of compiling it too (:mod:`formats.jit.claims`). numba links a
