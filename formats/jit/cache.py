@@ -51,10 +51,9 @@ from typing import Any
 import numba
 from numba.core import caching, config, event
 
-from formats.jit import blas_probe, claims, pipeline_memo, typing_memo
+from formats.jit import blas_probe, claims, typing_memo
 
 typing_memo.install()  # numba's call typing asked once per distinct question (formats/jit/typing_memo.py)
-pipeline_memo.install()  # numba's pass-dependency analysis once per pass list (formats/jit/pipeline_memo.py)
 blas_probe.install()  # numba's start-up without importing scipy.linalg (formats/jit/blas_probe.py)
 
 PACKAGES = ("imutool", "calibration", "formats")
