@@ -52,6 +52,11 @@ NFFT_MAX = 2**20  # zero-padding stops here (a day at 50 Hz is 4.3 M samples)
 """Zero-up-crossing intervals (and same-side periods) needed before a period estimate is reported."""
 
 
+# the roll statistics' kernel with the types a command calls it with (formats.jit.warm: a second process compiles it
+# on a cold cache, for `report inclinometer`)
+ROLL_KERNEL = ("imutool.roll_period", "excursions", "float64[::1], float64[::1]")
+
+
 @njit(cache=True)
 def excursions(v: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Schmitt-trigger excursions of v (heel − centre, deg) with hysteresis h (deg, per sample).

@@ -21,11 +21,12 @@ from conftest import EKF_KERNEL_ASM, normalized_asm
 
 import formats.jit.warm as kw
 from formats.jit import claims
-from formats.jit.warm import CSV_WRITER
+from formats.jit.warm import CSV_READER, CSV_WRITER
 from imutool.attitude.kernel import ekf_kernel
 from imutool.filter_warm import AFTER_THE_EKF, EKF_SECTIONS, HEADING_SECTION, SMOOTH_KERNELS
+from imutool.roll_period import ROLL_KERNEL
 
-ALL = AFTER_THE_EKF + (CSV_WRITER,) + SMOOTH_KERNELS
+ALL = AFTER_THE_EKF + (CSV_WRITER,) + SMOOTH_KERNELS  # the filter's, beside its sections
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -45,7 +46,7 @@ def _python(args: list[str], cwd: Path, env: dict, stdin: str | None = None) -> 
 
 
 def test_every_entry_is_in_signature_syntax():
-    for module, name, text in ALL:
+    for module, name, text in (*ALL, *EKF_SECTIONS, HEADING_SECTION, CSV_READER, ROLL_KERNEL):
         types = kw.argument_types(text)
         assert ", ".join(kw.type_text(t) for t in types) == text, (module, name)
     assert kw.type_text(kw.argument_types("float64[:, :, ::1]")[0]) == "float64[:, :, ::1]"
@@ -368,6 +369,23 @@ def test_the_heave_kernel_entries_are_what_a_cold_heave_compiles(tmp_path):
     assert r.returncode == 0, r.stderr
     top = {tuple(line.split("\t"))[1:4] for line in r.stdout.splitlines() if line.startswith("-\t")}
     assert set(HEAVE_KERNELS) <= top, sorted(top)
+
+
+@pytest.mark.slow
+def test_the_report_entries_are_what_a_cold_inclinometer_report_compiles(tmp_path):
+    """~15 s: the README's first command, cold; the CSV reader's and the roll statistics' kernels are listed
+    (formats/jit/warm.py:CSV_READER, imutool/roll_period.py:ROLL_KERNEL) with the types it calls them with."""
+    from imutool.roll_period import ROLL_KERNEL
+
+    env = _env(tmp_path, **{kw.ENV_SWITCH: "0"})
+    s = ROOT / "sample_data"
+    args = ["report", "inclinometer", str(s / "inclinometer_dut.nmea"), "--reference"]
+    args += [str(s / "inclinometer_reference.csv"), "--static-steps", str(s / "inclinometer_steps.csv")]
+    args += ["--test-info", str(s / "test_info.toml"), "-o", "evidence.pdf", "-q"]
+    r = _python(["-c", RECORD, *args], tmp_path, env)
+    assert r.returncode in (0, 1), r.stderr  # 1: the device FAILs the test; the kernels compiled all the same
+    top = {tuple(line.split("\t"))[1:4] for line in r.stdout.splitlines() if line.startswith("-\t")}
+    assert {kw.CSV_READER, ROLL_KERNEL} <= top, sorted(top)
 
 
 @pytest.mark.slow

@@ -57,6 +57,13 @@ CSV_WRITER: Entry = (
     "format_block",
     "float64[:, ::1], uint64[:, ::1], int64, int64, int64, uint8[::1], int64[:, ::1], int64[::1]",
 )
+# the CSV reader's kernel, as every command that reads a CSV calls it
+CSV_READER: Entry = (
+    "formats.csv_engine",
+    "parse_block",
+    "uint8[::1], int64, int64, int64, int64, int64, float64[:, ::1], int64, boolean, int64[:, ::1], int64[:, ::1], "
+    "uint64[::1], uint64[::1]",
+)
 
 
 def type_text(t: types.Type) -> str:
