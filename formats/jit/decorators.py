@@ -33,6 +33,7 @@ import numba.core.typing.templates
 from numba.core.registry import CPUDispatcher
 
 import formats.jit.cache  # noqa: F401  (a kernel decorated here is cached in imutool's folder)
+from formats.jit.typing_memo import numba_version
 
 CHECKED_NUMBA = ((0, 58), (0, 68))  # numba (major, minor) range whose overload templates were read
 
@@ -42,11 +43,7 @@ def install() -> None:
     they are only called by compiled code. Process-wide: a user's own ``@overload`` in the same process is built
     so too (an overload's implementation is never a first-class value). Once; only over the numba versions this
     was read against (:data:`CHECKED_NUMBA`); where numba's internals differ, nothing changes."""
-    try:
-        version = tuple(int(p) for p in numba.__version__.split(".")[:2])
-    except ValueError:
-        return
-    if not CHECKED_NUMBA[0] <= version <= CHECKED_NUMBA[1]:
+    if not CHECKED_NUMBA[0] <= numba_version() <= CHECKED_NUMBA[1]:
         return
     template = getattr(numba.core.typing.templates, "_OverloadFunctionTemplate", None)
     get_jitter = getattr(template, "_get_jit_decorator", None)
